@@ -1,0 +1,28 @@
+"""Run every ``bench/bench_*.py`` module's ``main()`` in turn and print its figures."""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import sys
+import time
+
+import bench
+
+
+def main() -> int:
+    modules = pkgutil.iter_modules(bench.__path__)
+    names = sorted(m.name for m in modules if m.name.startswith("bench_"))
+    only = set(sys.argv[1:])
+    for name in names:
+        if only and name not in only and name.removeprefix("bench_") not in only:
+            continue
+        print(f"== {name} ==", flush=True)
+        t0 = time.perf_counter()
+        importlib.import_module(f"bench.{name}").main()
+        print(f"({name} took {time.perf_counter() - t0:.1f} s)\n", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

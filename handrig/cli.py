@@ -1,0 +1,54 @@
+"""The ``handrig`` command line.
+
+Subcommands live in :mod:`handrig.commands`: every module there has a
+``register(subparsers)`` function that adds its parser and sets ``func`` (a
+callable taking the parsed namespace and returning an exit status). Errors
+handrig raises on purpose print one line and exit 2; never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from collections.abc import Sequence
+
+from handrig import __version__, commands
+from handrig.errors import HandrigError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="handrig",
+        description="Realtime hand driver: glove -> two full hands with sag -> servos or sim.",
+    )
+    parser.add_argument("--version", action="version", version=f"handrig {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{commands.__name__}.{info.name}")
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0 if args.command is None else 2
+    try:
+        status = args.func(args)
+    except HandrigError as exc:
+        print(f"handrig: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("handrig: interrupted", file=sys.stderr)
+        return 130
+    return int(status or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of the ``handrig`` CLI; each module provides ``register(subparsers)``."""

@@ -1,0 +1,80 @@
+"""The one error hierarchy of handrig.
+
+Every error handrig raises on purpose derives from :class:`HandrigError`; the
+command line prints its message (never a traceback) and exits with status 2.
+Messages say what failed, where, how many attempts were made and what to do.
+"""
+
+from __future__ import annotations
+
+
+class HandrigError(Exception):
+    """Root of every error handrig raises on purpose."""
+
+
+class ConfigError(HandrigError):
+    """A configuration file is missing, malformed or holds a value that is not allowed."""
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        file: str | None = None,
+        key: str | None = None,
+        value: object = None,
+        allowed: str | None = None,
+    ) -> None:
+        self.file = file
+        self.key = key
+        self.value = value
+        self.allowed = allowed
+        self.detail = message
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        where = self.file or "<config>"
+        if self.key is not None:
+            text = f"{where}: key '{self.key}'"
+            if self.value is not None:
+                text += f" = {self.value!r}"
+            text += f": {self.detail}"
+        else:
+            text = f"{where}: {self.detail}"
+        if self.allowed:
+            text += f" (allowed: {self.allowed})"
+        return text
+
+    def located(self, file: str) -> ConfigError:
+        """The same error, naming ``file`` as where it happened."""
+        return ConfigError(
+            self.detail, file=file, key=self.key, value=self.value, allowed=self.allowed
+        )
+
+
+class DataError(HandrigError):
+    """Input data (motion capture, recordings, grids, maps) is malformed or implausible."""
+
+
+class ProtocolError(HandrigError):
+    """Bytes on a wire do not form a valid packet or frame (bad CRC, length, header)."""
+
+
+class DeviceError(HandrigError):
+    """A device (servo bus, glove port) cannot be opened, does not answer, or went away."""
+
+
+class DeviceTimeoutError(DeviceError):
+    """A device did not answer before its deadline, after the stated number of attempts."""
+
+
+class ServoFault(DeviceError):
+    """A servo reported a hardware error (overload, overheating, ...) or a protocol error."""
+
+    def __init__(self, message: str, *, servo_id: int | None = None, bits: int = 0) -> None:
+        self.servo_id = servo_id
+        self.bits = bits
+        super().__init__(message)
+
+
+class SafetyStop(HandrigError):
+    """The realtime loop stopped on purpose for safety (e-stop, lost port, glove silent)."""
