@@ -1,0 +1,157 @@
+"""The rig config: which servo drives which joint, and how (``config/rig.toml``).
+
+Shared by the servo driver (degrees -> goal ticks) and the bus emulator (ticks ->
+the simulated joint), so both sides of the loopback use one calibration.
+
+A servo's position in ticks relates to the joint angle in degrees
+(vocabulary convention, flexion positive) by::
+
+    ticks = zero_ticks + direction * deg * gear_ratio * 4096 / 360
+
+``gear_ratio`` is servo turns per joint turn (a tendon or gear reduction); a
+servo never receives a goal outside ``[min_deg, max_deg]`` nor outside the
+servo's own 0..4095 position range.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from handrig.config import CONFIG_DIR, check_joint_name, load
+from handrig.errors import ConfigError
+from handrig.hand import anatomical_limits_deg
+
+TICKS_PER_TURN = 4096
+TICKS_PER_DEG = TICKS_PER_TURN / 360.0
+POSITION_TICKS_MIN = 0
+POSITION_TICKS_MAX = 4095
+
+# Model numbers of the X-series servos we know (REFERENCE.md section 2).
+MODEL_NUMBERS: dict[str, int] = {"XL330-M288": 1200, "XC330-T288": 1220, "XM430-W350": 1020}
+# Baud rates the X series and dynamixel-sdk both accept.
+BAUD_RATES: tuple[int, ...] = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000)
+
+
+@dataclass(frozen=True)
+class ServoCalibration:
+    """One servo: its bus ID, the joint it drives, and the mapping between them."""
+
+    id: int
+    joint: str
+    model: Literal["XL330-M288", "XC330-T288", "XM430-W350"] = "XL330-M288"
+    zero_ticks: int = 2048
+    direction: Literal[1, -1] = 1
+    gear_ratio: float = 1.0
+    min_deg: float = -90.0
+    max_deg: float = 90.0
+
+    def check(self) -> None:
+        if not 0 <= self.id <= 252:
+            raise ConfigError("servo ID out of range", key="id", value=self.id, allowed="0..252")
+        check_joint_name(self.joint, "joint")
+        if not POSITION_TICKS_MIN <= self.zero_ticks <= POSITION_TICKS_MAX:
+            raise ConfigError(
+                "zero outside the position range", key="zero_ticks", value=self.zero_ticks,
+                allowed=f"{POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}",
+            )
+        if not 0.1 <= self.gear_ratio <= 20.0:
+            raise ConfigError(
+                "implausible gear ratio", key="gear_ratio", value=self.gear_ratio,
+                allowed="0.1..20 servo turns per joint turn",
+            )
+        if self.min_deg >= self.max_deg:
+            raise ConfigError(
+                "inverted limit: min_deg must be below max_deg", key="min_deg",
+                value=[self.min_deg, self.max_deg], allowed="min_deg < max_deg",
+            )
+        for bound in (self.min_deg, self.max_deg):
+            tick = self.deg_to_ticks_exact(bound)
+            if not POSITION_TICKS_MIN <= tick <= POSITION_TICKS_MAX:
+                raise ConfigError(
+                    f"limit {bound} deg maps to {tick:.0f} ticks, outside the servo's range",
+                    key="min_deg" if bound == self.min_deg else "max_deg", value=bound,
+                    allowed=f"limits whose ticks lie in {POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}",
+                )
+        low, high = anatomical_limits_deg(self.joint)
+        if self.min_deg < low or self.max_deg > high:
+            raise ConfigError(
+                f"servo limits exceed the anatomical range of {self.joint}",
+                key="min_deg", value=[self.min_deg, self.max_deg], allowed=f"[{low}, {high}]",
+            )
+
+    def deg_to_ticks_exact(self, deg: float) -> float:
+        return self.zero_ticks + self.direction * deg * self.gear_ratio * TICKS_PER_DEG
+
+    def deg_to_ticks(self, deg: float) -> int:
+        """Goal ticks for a joint angle, clamped to ``[min_deg, max_deg]`` first."""
+        clamped = min(max(deg, self.min_deg), self.max_deg)
+        return round(self.deg_to_ticks_exact(clamped))
+
+    def ticks_to_deg(self, ticks: float) -> float:
+        """Joint angle in degrees for a servo position in ticks (not clamped)."""
+        return (ticks - self.zero_ticks) / (self.direction * self.gear_ratio * TICKS_PER_DEG)
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """The serial bus: port path (or ``"sim"``), baud rate, timing."""
+
+    port: str = "sim"
+    baud: int = 1_000_000
+    read_every: int = 4  # read present state every N cycles (Fast Sync Read)
+    watchdog_ms: int = 100  # Bus Watchdog (units of 20 ms on the wire); 0 disables
+
+    def check(self) -> None:
+        if self.baud not in BAUD_RATES:
+            raise ConfigError(
+                "unsupported baud rate", key="baud", value=self.baud,
+                allowed=", ".join(str(b) for b in BAUD_RATES),
+            )
+        if self.read_every < 1:
+            raise ConfigError("must be at least 1", key="read_every", value=self.read_every)
+        if not 0 <= self.watchdog_ms <= 127 * 20:
+            raise ConfigError(
+                "watchdog out of range", key="watchdog_ms", value=self.watchdog_ms,
+                allowed="0 (off) or 20..2540 ms",
+            )
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """The whole rig file: ``[bus]`` and ``[[servos]]``."""
+
+    bus: BusConfig = BusConfig()
+    servos: tuple[ServoCalibration, ...] = ()
+
+    def check(self) -> None:
+        seen_ids: dict[int, int] = {}
+        seen_joints: dict[str, int] = {}
+        for i, s in enumerate(self.servos):
+            if s.id in seen_ids:
+                raise ConfigError(
+                    f"servo ID used twice (also servos[{seen_ids[s.id]}])",
+                    key=f"servos[{i}].id", value=s.id,
+                )
+            if s.joint in seen_joints:
+                raise ConfigError(
+                    f"joint driven twice (also servos[{seen_joints[s.joint]}])",
+                    key=f"servos[{i}].joint", value=s.joint,
+                )
+            seen_ids[s.id] = i
+            seen_joints[s.joint] = i
+
+    def servo(self, servo_id: int) -> ServoCalibration:
+        for s in self.servos:
+            if s.id == servo_id:
+                return s
+        raise KeyError(servo_id)
+
+
+DEFAULT_RIG = CONFIG_DIR / "rig.toml"
+
+
+def load_rig_config(path: str | Path | None = None) -> RigConfig:
+    """Load the rig file (default ``config/rig.toml``)."""
+    return load(path or DEFAULT_RIG, RigConfig)

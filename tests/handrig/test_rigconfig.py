@@ -1,0 +1,42 @@
+import pytest
+
+from handrig.config import build
+from handrig.errors import ConfigError
+from handrig.rigconfig import RigConfig, ServoCalibration, load_rig_config
+
+
+def test_shipped_rig_has_twenty_servos():
+    rig = load_rig_config()
+    assert len(rig.servos) == 20
+    assert rig.servo(7).joint == "riIndexMCPy"
+
+
+@pytest.mark.parametrize("direction", [1, -1])
+@pytest.mark.parametrize("gear", [1.0, 2.5])
+def test_degrees_to_ticks_and_back_with_signs(direction, gear):
+    s = ServoCalibration(id=1, joint="riIndexPIPy", zero_ticks=2000, direction=direction,
+                         gear_ratio=gear, min_deg=0.0, max_deg=60.0)
+    s.check()
+    assert s.deg_to_ticks(0.0) == 2000
+    t = s.deg_to_ticks(45.0)
+    assert t == 2000 + direction * round(45.0 * gear * 4096 / 360)
+    assert s.ticks_to_deg(t) == pytest.approx(45.0, abs=360 / 4096 / gear)
+    # Outside the limits: clamped before conversion, whatever the caller asks
+    assert s.deg_to_ticks(500.0) == s.deg_to_ticks(60.0)
+    assert s.deg_to_ticks(-30.0) == s.deg_to_ticks(0.0)
+
+
+def test_bad_servo_entries_are_named():
+    with pytest.raises(ConfigError, match=r"servos\[1\].id.*used twice"):
+        build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0},
+                                     {"id": 1, "joint": "riRingPIPy", "min_deg": 0}]})
+    with pytest.raises(ConfigError, match=r"servos\[0\].min_deg.*inverted"):
+        build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIPy",
+                                      "min_deg": 50, "max_deg": 10}]})
+    with pytest.raises(ConfigError, match=r"servos\[0\].joint.*unknown joint"):
+        build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIP"}]})
+    with pytest.raises(ConfigError, match=r"bus.baud.*allowed"):
+        build(RigConfig, {"bus": {"baud": 4_500_000}})
+    with pytest.raises(ConfigError, match="outside the servo's range"):
+        build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0,
+                                      "gear_ratio": 10.0}]})
