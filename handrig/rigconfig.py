@@ -119,10 +119,44 @@ class BusConfig:
 
 
 @dataclass(frozen=True)
+class LoopConfig:
+    """The realtime loop: rate, safety timings, slew limit, sag and the files it uses.
+
+    Paths are relative to the rig file's folder unless absolute; empty means the
+    shipped default (``config/maps/default.toml``, ``config/sag_grid.npz``,
+    ``config/glove.toml``).
+    """
+
+    rate_hz: float = 200.0
+    glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
+    relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
+    slew_deg_s: float = 720.0  # max joint speed commanded in normal running
+    sag_gain: float = 1.0  # 0 = no passive sag, 1 = the full baked sag
+    left_hand: Literal["mirror", "map", "relaxed"] = "map"
+    left_forearm_deg: tuple[float, float] = (-90.0, 0.0)  # no IMU there: assumed hanging
+    map: str = ""
+    sag_grid: str = ""
+    glove: str = ""
+
+    def check(self) -> None:
+        if not 10.0 <= self.rate_hz <= 2000.0:
+            raise ConfigError("loop rate out of range", key="rate_hz", value=self.rate_hz,
+                              allowed="10..2000 Hz")
+        for name in ("glove_timeout_s", "relax_time_s", "slew_deg_s"):
+            value = getattr(self, name)
+            if value <= 0:
+                raise ConfigError("must be positive", key=name, value=value)
+        if not 0.0 <= self.sag_gain <= 2.0:
+            raise ConfigError("sag gain out of range", key="sag_gain", value=self.sag_gain,
+                              allowed="0..2")
+
+
+@dataclass(frozen=True)
 class RigConfig:
-    """The whole rig file: ``[bus]`` and ``[[servos]]``."""
+    """The whole rig file: ``[bus]``, ``[loop]`` and ``[[servos]]``."""
 
     bus: BusConfig = BusConfig()
+    loop: LoopConfig = LoopConfig()
     servos: tuple[ServoCalibration, ...] = ()
 
     def check(self) -> None:

@@ -1,0 +1,217 @@
+"""The pose pipeline, pure numpy: controls -> full pose with sag -> servo targets.
+
+One step per loop cycle::
+
+    control degrees (k,) --filter--> --expand--> 50 curves
+        + passive sag at the forearm orientation (23 DOFs per hand, wrist included)
+        -> clamp to joint limits -> slew limit -> the servos' joints (n,)
+
+The full pose is a 54-vector laid out as :data:`handrig.hand.ALL_JOINT_NAMES`
+(the 50 curves, then ``riWristFlexion, riWristDeviation, leWristFlexion,
+leWristDeviation``), degrees in the vocabulary convention. Every array is
+preallocated; :meth:`PosePipeline.step` allocates nothing.
+
+This module imports no device code (no serial, dynamixel_sdk or mujoco).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from handrig import hand
+from handrig.config import JointLimits
+from handrig.errors import ConfigError
+
+FloatArray = NDArray[np.float64]
+POSE_NAMES: tuple[str, ...] = hand.ALL_JOINT_NAMES
+POSE_SIZE = len(POSE_NAMES)
+_POSE_INDEX = {n: i for i, n in enumerate(POSE_NAMES)}
+
+
+def pose_index(name: str) -> int:
+    """Index of a curve or wrist DOF in the 54-vector full pose."""
+    try:
+        return _POSE_INDEX[name]
+    except KeyError:
+        hand.curve(name)  # raises UnknownJointError with a suggestion
+        raise
+
+
+class ExpanderLike(Protocol):
+    controls: tuple[str, ...]
+
+    def expand(self, controls_deg: FloatArray, out: FloatArray | None = None) -> FloatArray: ...
+
+
+class SagLike(Protocol):
+    dof_names: Sequence[str]
+    rest_deg: FloatArray
+
+    def lookup(
+        self, inclination_deg: float, rotation_deg: float, out: FloatArray | None = None
+    ) -> FloatArray: ...
+
+
+class PosePipeline:
+    """Turns control angles and a forearm orientation into servo joint targets.
+
+    ``servo_joints`` names the joint each servo drives, in bus order;
+    ``servo_limits_deg`` (n, 2) are the servos' own limits, intersected with the
+    joint limits. ``left_hand``: ``"map"`` takes the left hand from the map,
+    ``"mirror"`` copies the right hand's curves to the left (vocabulary values
+    are hand-independent), ``"relaxed"`` holds the left hand at its relaxed pose.
+    ``left_forearm_deg`` (inclination, rotation) is where the left forearm is
+    taken to be for its sag (default: hanging at rest).
+    """
+
+    def __init__(
+        self,
+        expander: ExpanderLike,
+        sag: SagLike | None,
+        servo_joints: Sequence[str],
+        *,
+        servo_limits_deg: FloatArray | None = None,
+        limits: JointLimits | None = None,
+        slew_deg_s: float = 720.0,
+        sag_gain: float = 1.0,
+        left_hand: Literal["map", "mirror", "relaxed"] = "map",
+        control_means_deg: FloatArray | None = None,
+        left_forearm_deg: tuple[float, float] = (-90.0, 0.0),
+    ) -> None:
+        self.expander = expander
+        self.sag = sag
+        self.servo_joints = tuple(servo_joints)
+        self.slew_deg_s = float(slew_deg_s)
+        self.sag_gain = float(sag_gain)
+        self.left_hand = left_hand
+        self.left_forearm_deg = left_forearm_deg
+        limits = limits or JointLimits()
+        self.servo_index = np.array([pose_index(j) for j in self.servo_joints], dtype=np.intp)
+        n = len(self.servo_joints)
+        lim = np.array([limits.of(name) for name in POSE_NAMES], dtype=np.float64)
+        self.pose_low, self.pose_high = lim[:, 0].copy(), lim[:, 1].copy()
+        self.servo_low = self.pose_low[self.servo_index].copy()
+        self.servo_high = self.pose_high[self.servo_index].copy()
+        if servo_limits_deg is not None:
+            sl = np.asarray(servo_limits_deg, dtype=np.float64)
+            if sl.shape != (n, 2):
+                raise ConfigError(f"servo limits must be ({n}, 2), got {sl.shape}")
+            self.servo_low = np.maximum(self.servo_low, sl[:, 0])
+            self.servo_high = np.minimum(self.servo_high, sl[:, 1])
+        if np.any(self.servo_low >= self.servo_high):
+            bad = self.servo_joints[int(np.argmax(self.servo_low >= self.servo_high))]
+            raise ConfigError(f"servo limits of {bad} do not overlap its joint limits")
+        # Where each hand's 23 sag DOFs live in the full pose.
+        self.sag_index: dict[str, NDArray[np.intp]] = {}
+        if sag is not None:
+            names = list(sag.dof_names)
+            if len(names) != hand.DOFS_PER_HAND:
+                raise ConfigError(f"sag grid has {len(names)} DOFs, expected 23")
+            for h in hand.HANDS:
+                mapped = [h + name[2:] for name in names]
+                self.sag_index[h] = np.array([pose_index(m) for m in mapped], dtype=np.intp)
+        k = len(expander.controls)
+        self.control_means_deg = (
+            np.zeros(k) if control_means_deg is None
+            else np.asarray(control_means_deg, dtype=np.float64).copy()
+        )
+        # Preallocated work arrays.
+        self.curves = np.zeros(hand.CURVES_PER_HAND * 2)
+        self.pose = np.zeros(POSE_SIZE)
+        self.relaxed = np.zeros(POSE_SIZE)
+        self._sag_values = np.zeros(hand.DOFS_PER_HAND)
+        self._sag_offsets = np.zeros(hand.DOFS_PER_HAND)
+        self._clamped_pose = np.zeros(POSE_SIZE)
+        self._raw_targets = np.zeros(n)
+        self._step = np.zeros(n)
+        self.targets = np.zeros(n)
+        self._has_targets = False
+        self.clamps = 0  # pose values clamped to limits, cumulative
+        self.slewed = 0  # servo targets held back by the slew limit, cumulative
+
+    # -- pieces ---------------------------------------------------------------------------
+    def _sag_for(self, h: str) -> SagLike | None:
+        if self.sag is None:
+            return None
+        view = getattr(self.sag, "for_hand", None)
+        return view(h) if callable(view) else self.sag
+
+    def _add_sag(self, pose: FloatArray, h: str, inclination_deg: float,
+                 rotation_deg: float, *, absolute: bool) -> None:
+        grid = self._sag_for(h)
+        if grid is None:
+            return
+        grid.lookup(inclination_deg, rotation_deg, out=self._sag_values)
+        np.subtract(self._sag_values, grid.rest_deg, out=self._sag_offsets)
+        self._sag_offsets *= self.sag_gain
+        idx = self.sag_index[h]
+        if absolute:
+            pose[idx] = grid.rest_deg
+        pose[idx] += self._sag_offsets
+
+    def full_pose(
+        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float
+    ) -> FloatArray:
+        """The 54-vector pose (the map's active pose plus passive sag), not yet clamped.
+
+        The glove's forearm orientation gives the right hand's sag; the left forearm
+        has no IMU, so the left hand sags as at ``left_forearm_deg``.
+        """
+        self.expander.expand(controls_deg, out=self.curves)
+        pose = self.pose
+        pose[:50] = self.curves
+        pose[50:] = 0.0  # no active wrist sensor: the wrist is the passive model's
+        if self.left_hand == "mirror":
+            pose[25:50] = pose[0:25]
+        self._add_sag(pose, "ri", inclination_deg, rotation_deg, absolute=False)
+        left_incl, left_rot = (
+            (inclination_deg, rotation_deg) if self.left_hand == "mirror"
+            else self.left_forearm_deg
+        )
+        self._add_sag(pose, "le", left_incl, left_rot, absolute=self.left_hand == "relaxed")
+        return pose
+
+    def relaxed_pose(self, inclination_deg: float, rotation_deg: float) -> FloatArray:
+        """The relaxed hands at this orientation: the passive model's pose for every DOF,
+        the map's value at the mean controls for curves the model lacks (finger twist)."""
+        self.expander.expand(self.control_means_deg, out=self.curves)
+        self.relaxed[:50] = self.curves
+        self.relaxed[50:] = 0.0
+        self._add_sag(self.relaxed, "ri", inclination_deg, rotation_deg, absolute=True)
+        self._add_sag(self.relaxed, "le", *self.left_forearm_deg, absolute=True)
+        return self.relaxed
+
+    # -- the per-cycle step ----------------------------------------------------------------
+    def targets_from_pose(self, pose: FloatArray, dt_s: float) -> FloatArray:
+        """Clamp ``pose`` to the limits, pick the servos' joints, slew-limit them."""
+        np.clip(pose, self.pose_low, self.pose_high, out=self._clamped_pose)
+        self.clamps += int(np.count_nonzero(self._clamped_pose != pose))
+        np.take(self._clamped_pose, self.servo_index, out=self._raw_targets)
+        np.clip(self._raw_targets, self.servo_low, self.servo_high, out=self._raw_targets)
+        if not self._has_targets:
+            self.targets[:] = self._raw_targets
+            self._has_targets = True
+            return self.targets
+        max_step = self.slew_deg_s * max(dt_s, 0.0)
+        np.subtract(self._raw_targets, self.targets, out=self._step)
+        self.slewed += int(np.count_nonzero(np.abs(self._step) > max_step))
+        np.clip(self._step, -max_step, max_step, out=self._step)
+        self.targets += self._step
+        return self.targets
+
+    def step(
+        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, dt_s: float
+    ) -> FloatArray:
+        """One cycle: controls and orientation in, servo targets (degrees, bus order) out."""
+        return self.targets_from_pose(
+            self.full_pose(controls_deg, inclination_deg, rotation_deg), dt_s
+        )
+
+    def seed(self, targets_deg: FloatArray) -> None:
+        """Start slew limiting from where the servos are (e.g. their present positions)."""
+        self.targets[:] = np.clip(targets_deg, self.servo_low, self.servo_high)
+        self._has_targets = True

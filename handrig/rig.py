@@ -1,0 +1,293 @@
+"""The live rig: a fixed-rate loop from glove to servos, with its safety behaviour.
+
+``Rig(glove, bus, pipeline, clock, ...)`` runs cycles at ``rate_hz`` on the
+injected :class:`~handrig.clock.Clock`. Each cycle it takes the newest glove
+sample without blocking, turns it into servo targets through the
+:class:`~handrig.pipeline.PosePipeline`, hands one Sync Write to the bus, and
+every ``read_every`` cycles reads the servos' present state back.
+
+Safety (what a puppeteer relies on during a show):
+
+* glove silent or garbled for longer than ``glove_timeout_s``: the puppet eases
+  to the relaxed pose over ``relax_time_s`` and the rig says so; it resumes when
+  good frames come back;
+* the glove's e-stop button, Ctrl-C or SIGTERM: ease to the relaxed pose, then
+  stop (the bus's torque context then disables torque); a second signal stops
+  at once;
+* a lost servo port: stop cleanly with the device's message;
+* nothing outside the limits: the pipeline clamps to joint and servo limits, and
+  the bus clamps again to each servo's configured range.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from handrig.clock import Clock
+from handrig.errors import DeviceError
+from handrig.pipeline import PosePipeline
+
+FloatArray = NDArray[np.float64]
+
+
+class SampleLike(Protocol):
+    raw: FloatArray
+    quat: FloatArray | None
+    estop: bool
+    host_time_s: float
+
+
+class GloveLike(Protocol):
+    def latest(self) -> Any: ...
+
+
+class ControlsFromRaw(Protocol):
+    def __call__(self, raw: FloatArray, t_s: float, out: FloatArray) -> FloatArray: ...
+
+
+class OrientationLike(Protocol):
+    def __call__(self, sample: Any) -> tuple[float, float]: ...
+
+
+class BusLike(Protocol):
+    def write_goals_deg(self, goals_deg: FloatArray) -> int: ...
+
+    def read_state(self) -> Any: ...
+
+
+class Mode(enum.Enum):
+    RUNNING = "running"
+    RELAXING = "relaxing"  # glove lost: easing to relaxed, resumes when the glove is back
+    STOPPING = "stopping"  # e-stop or stop request: easing to relaxed, then the loop ends
+
+
+@dataclass
+class RunStats:
+    """What a run measured. Times in seconds unless the name says otherwise."""
+
+    frames: int = 0
+    duration_s: float = 0.0
+    glove_samples: int = 0
+    latencies_s: list[float] = field(default_factory=list)
+    periods_s: list[float] = field(default_factory=list)
+    overruns: int = 0
+    overrun_max_s: float = 0.0
+    missed_cycles: int = 0
+    clamps: int = 0
+    slewed: int = 0
+    bus_clamps: int = 0
+    reads: int = 0
+    stale_reads: int = 0
+    tracking_sq_sum: float = 0.0
+    tracking_n: int = 0
+    tracking_max_deg: float = 0.0
+    relax_events: int = 0
+    estop: bool = False
+    stop_reason: str = ""
+    events: list[str] = field(default_factory=list)
+
+    @property
+    def rate_hz(self) -> float:
+        return self.frames / self.duration_s if self.duration_s > 0 else 0.0
+
+    def latency_us(self, q: float) -> float:
+        if not self.latencies_s:
+            return math.nan
+        return float(np.percentile(np.asarray(self.latencies_s), q) * 1e6)
+
+    @property
+    def jitter_us(self) -> float:
+        """Standard deviation of the cycle period."""
+        if len(self.periods_s) < 2:
+            return math.nan
+        return float(np.std(np.asarray(self.periods_s)) * 1e6)
+
+    @property
+    def tracking_rms_deg(self) -> float:
+        return math.sqrt(self.tracking_sq_sum / self.tracking_n) if self.tracking_n else math.nan
+
+
+class Rig:
+    """The realtime loop. Dependencies are passed in; nothing here opens a device."""
+
+    def __init__(
+        self,
+        glove: GloveLike,
+        bus: BusLike,
+        pipeline: PosePipeline,
+        clock: Clock,
+        *,
+        controls_from_raw: ControlsFromRaw,
+        orientation: OrientationLike,
+        rate_hz: float = 200.0,
+        read_every: int = 4,
+        glove_timeout_s: float = 0.25,
+        relax_time_s: float = 1.0,
+        outputs: Sequence[Callable[[float, FloatArray], None]] = (),
+        log: Callable[[str], None] = print,
+    ) -> None:
+        self.glove = glove
+        self.bus = bus
+        self.pipeline = pipeline
+        self.clock = clock
+        self.controls_from_raw = controls_from_raw
+        self.orientation = orientation
+        self.period_s = 1.0 / rate_hz
+        self.read_every = max(1, int(read_every))
+        self.glove_timeout_s = glove_timeout_s
+        self.relax_time_s = relax_time_s
+        self.outputs = tuple(outputs)
+        self.log = log
+        self.stats = RunStats()
+        self.mode = Mode.RUNNING
+        self._stop_requests = 0
+        self._controls = np.zeros(len(pipeline.expander.controls))
+        self._orientation = (0.0, 0.0)
+        self._blend_from = np.zeros(len(pipeline.servo_joints))
+        self._blend_t0 = 0.0
+        self._last_state: Any = None
+
+    # -- control from outside (signal handlers, UI) --------------------------------------------
+    def request_stop(self, reason: str = "stop requested") -> None:
+        """Ease to the relaxed pose, then end the run. A second request ends it at once."""
+        self._stop_requests += 1
+        if self._stop_requests == 1:
+            self._start_relax(Mode.STOPPING, reason)
+        else:
+            self.stats.stop_reason = f"{reason} (immediate)"
+
+    # -- internals -------------------------------------------------------------------------
+    def _event(self, text: str) -> None:
+        self.stats.events.append(text)
+        self.log(text)
+
+    def _start_relax(self, mode: Mode, reason: str) -> None:
+        if self.mode is Mode.STOPPING:
+            return
+        if self.mode is Mode.RUNNING:
+            self.stats.relax_events += 1
+        self.mode = mode
+        self._blend_from[:] = self.pipeline.targets
+        self._blend_t0 = self.clock.now()
+        self._event(f"{reason}: easing to the relaxed pose over {self.relax_time_s:.2f} s")
+
+    def _relax_targets(self, now: float, dt: float) -> tuple[FloatArray, bool]:
+        relaxed = self.pipeline.relaxed_pose(*self._orientation)
+        np.clip(relaxed, self.pipeline.pose_low, self.pipeline.pose_high, out=relaxed)
+        goal = relaxed[self.pipeline.servo_index]
+        a = min(1.0, (now - self._blend_t0) / self.relax_time_s)
+        s = a * a * (3.0 - 2.0 * a)  # smoothstep: no jerk at either end
+        self.pipeline.targets[:] = self._blend_from + s * (goal - self._blend_from)
+        np.clip(self.pipeline.targets, self.pipeline.servo_low, self.pipeline.servo_high,
+                out=self.pipeline.targets)
+        return self.pipeline.targets, a >= 1.0
+
+    def _track(self, state: Any, goals: FloatArray) -> None:
+        self.stats.reads += 1
+        positions = getattr(state, "positions_deg", None)
+        stale = getattr(state, "stale", None)
+        if positions is None:
+            return
+        fresh = ~np.asarray(stale, dtype=bool) if stale is not None else np.ones(len(goals), bool)
+        if not fresh.all():
+            self.stats.stale_reads += 1
+        if fresh.any():
+            err = np.asarray(positions)[fresh] - goals[fresh]
+            self.stats.tracking_sq_sum += float(np.dot(err, err))
+            self.stats.tracking_n += int(fresh.sum())
+            self.stats.tracking_max_deg = max(self.stats.tracking_max_deg,
+                                              float(np.abs(err).max()))
+
+    # -- the loop --------------------------------------------------------------------------
+    def run(self, frames: int | None = None, duration_s: float | None = None) -> RunStats:
+        """Run until ``frames`` cycles, ``duration_s`` seconds, an e-stop or a stop request."""
+        stats = self.stats
+        clock = self.clock
+        period = self.period_s
+        t0 = clock.now()
+        last_good = t0
+        last_cycle = t0
+        goals_prev = np.array(self.pipeline.targets)  # what the servos were last sent
+        k = 0
+        try:
+            while True:
+                if frames is not None and stats.frames >= frames:
+                    stats.stop_reason = stats.stop_reason or f"{frames} frames done"
+                    break
+                if duration_s is not None and clock.now() - t0 >= duration_s:
+                    stats.stop_reason = stats.stop_reason or f"{duration_s:g} s done"
+                    break
+                if self._stop_requests > 1:
+                    break
+                deadline = t0 + k * period
+                clock.sleep_until(deadline)
+                now = clock.now()
+                late = now - deadline
+                if late > period:
+                    stats.overruns += 1
+                    stats.overrun_max_s = max(stats.overrun_max_s, late)
+                    skipped = int(late / period)
+                    stats.missed_cycles += skipped
+                    k += skipped
+                if stats.frames:
+                    stats.periods_s.append(now - last_cycle)
+                last_cycle = now
+                dt = period
+
+                sample = self.glove.latest()
+                if sample is not None:
+                    last_good = now
+                    stats.glove_samples += 1
+                    if getattr(sample, "estop", False) and self.mode is not Mode.STOPPING:
+                        stats.estop = True
+                        self._start_relax(Mode.STOPPING, "e-stop pressed on the glove")
+                    self.controls_from_raw(sample.raw, now, self._controls)
+                    self._orientation = self.orientation(sample)
+                    if self.mode is Mode.RELAXING:
+                        self.mode = Mode.RUNNING
+                        self._event("glove is back: following it again")
+                elif self.mode is Mode.RUNNING and now - last_good > self.glove_timeout_s:
+                    self._start_relax(
+                        Mode.RELAXING,
+                        f"glove silent or garbled for {now - last_good:.2f} s",
+                    )
+
+                if self.mode is Mode.RUNNING:
+                    goals = self.pipeline.step(self._controls, *self._orientation, dt)
+                else:
+                    goals, done = self._relax_targets(now, dt)
+                    if done and self.mode is Mode.STOPPING:
+                        stats.stop_reason = stats.stop_reason or (
+                            "e-stop" if stats.estop else "stop requested"
+                        )
+                        self.bus.write_goals_deg(goals)
+                        stats.frames += 1
+                        break
+                stats.bus_clamps += int(self.bus.write_goals_deg(goals))
+                if sample is not None:
+                    stats.latencies_s.append(clock.now() - sample.host_time_s)
+                for out in self.outputs:
+                    out(now - t0, self.pipeline.pose)
+                if k % self.read_every == 0:
+                    state = self.bus.read_state()
+                    self._last_state = state
+                    self._track(state, goals_prev)
+                goals_prev[:] = goals
+                stats.frames += 1
+                k += 1
+        except DeviceError as exc:
+            stats.stop_reason = f"device error: {exc}"
+            self._event(f"stopping: {exc}")
+            raise
+        finally:
+            stats.duration_s = clock.now() - t0
+            stats.clamps = self.pipeline.clamps
+            stats.slewed = self.pipeline.slewed
+        return stats
