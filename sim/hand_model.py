@@ -1,0 +1,435 @@
+"""The one MJCF hand: passive relaxed-hand model and servo-driven puppet share it.
+
+Geometry (``hand_model_xml``)
+-----------------------------
+* **Forearm frame** (the world frame of the model; the forearm body is fixed to
+  the world): x distal along the forearm, z dorsal (palm down = z up), y = z × x.
+  For the right hand y points radial (toward the thumb); the left hand is the
+  mirror image (positions y -> -y, joint axes (ax, ay, az) -> (-ax, ay, -az)), so
+  in its frame y points ulnar. The frame stays right-handed for both hands.
+* Gravity is not applied by moving bodies: the forearm orientation goes into
+  ``opt.gravity`` as gravity expressed in the forearm frame
+  (:func:`gravity_in_forearm`, REFERENCE.md section 4).
+* Bodies: forearm (fixed) -> hand (wrist flexion, then wrist deviation; palm
+  mass) -> per finger MCP (abduction, then flexion) -> PIP -> DIP; thumb CMC
+  (abduction, flexion, twist) -> MCP -> IP. Every body frame is axis-aligned with
+  the forearm frame at zero joint angles; at zero all digits point along +x.
+* 23 hinge joints named exactly as ``handrig.hand.DOF_NAMES[hand]``. Axes are
+  chosen so that a positive joint angle is the vocabulary's positive direction
+  (flexion positive, abduction/deviation radial positive):
+  wrist flexion +y (hand moves palmar, -z), wrist deviation +z (radial, +y);
+  finger MCP flexion, PIP, DIP +y; finger MCP abduction +z; thumb CMC abduction
+  (0, cos 45°, sin 45°) (thumb moves radial and palmar, away from the index),
+  thumb flexion (CMC, MCP, IP) (0, sin 45°, -cos 45°) (tip moves ulnar and
+  palmar, across the palm), thumb CMC twist -x (pronation-like for the right
+  hand). tests/sim/test_hand_model.py checks each sign with gravity.
+* Segment lengths are fractions of the hand length HL (REFERENCE.md section 4,
+  Buchholz et al. 1992); digit bases sit at the carpus, ``CARPUS_FRAC`` x HL distal
+  of the wrist axis, so wrist-to-middle-fingertip = HL. Lateral offsets use the
+  hand breadth HB = ``BREADTH_PER_LENGTH`` x HL (0.085 m at HL 0.19 m).
+  Phalanx masses are the table's (cylinders at 1.1 g/cm^3, HL 0.19 m) scaled by
+  (HL / 0.19)^3; each segment is a cylinder with an explicit ``<inertial>``
+  (radius from mass and length). The thumb metacarpal (no mass in the table) is
+  a cylinder with the thumb proximal phalanx's radius (assumed). The palm takes
+  the remainder of 0.45 kg x (HL / 0.19)^3, with its centre of mass placed so that
+  the straight hand's centre of mass lies at 0.506 of the wrist-to-middle-MCP
+  distance.
+* Joint ranges come from ``handrig.hand.dof_limits_deg`` (or the ``limits_deg``
+  argument). With ``mujoco_limits=True`` they are MuJoCo joint limits
+  (constraints, for the puppet); with ``False`` the joints are unlimited and the
+  caller applies the relaxed-hand paper's limit terms (equations 2-3, see
+  ``sim.passive``).
+* Contacts are disabled (REFERENCE.md: with contacts on, static and dynamic
+  answers disagreed by 31 deg); integrator ``implicitfast``; angles in radians.
+
+Springs and actuators
+---------------------
+``passive`` gives each joint a spring ``stiffness=ks springref=rest damping=kd``,
+which MuJoCo applies as exactly tau = ks (rest - q) - kd qdot (equation 1 of the
+paper). ``actuated`` adds a MuJoCo ``position`` actuator on each named joint
+(``kp``, ``kv``, ``forcerange``); such a joint loses its spring (a servo holds
+it) but keeps ``passive`` damping = 0 and gets the actuator's ``armature``.
+MuJoCo has no speed limit for position actuators: the caller limits speed by
+moving ``data.ctrl`` toward the goal at most ``max_speed_rad_s`` x dt per step,
+like a servo's profile velocity (:func:`ramp_ctrl`). Stability: keep
+sqrt(kp / (armature + link inertia)) x timestep well below 1.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from handrig.hand import DIGITS, DOF_NAMES, FINGERS, Hand, dof_limits_deg
+
+G_MPS2 = 9.81
+DENSITY_KG_M3 = 1100.0  # REFERENCE.md section 4: cylinders at 1.1 g/cm^3
+REFERENCE_HAND_LENGTH_M = 0.19
+HAND_MASS_KG = 0.45  # about 0.6 % of body mass at HL 0.19 m (REFERENCE.md)
+HAND_COM_FRAC = 0.506  # of wrist axis -> middle MCP (REFERENCE.md)
+BREADTH_PER_LENGTH = 0.085 / 0.19  # HB about 0.085 m at HL 0.19 m
+CARPUS_FRAC = 1.0 - (0.373 + 0.266 + 0.170 + 0.108)  # wrist axis -> digit bases, of HL
+
+# Segment lengths as fractions of HL: metacarpal, proximal, middle, distal
+# (REFERENCE.md section 4; the thumb has no middle phalanx).
+SEGMENT_FRAC: dict[str, tuple[float, float, float | None, float]] = {
+    "Thumb": (0.251, 0.196, None, 0.158),
+    "Index": (0.374, 0.245, 0.143, 0.097),
+    "Middle": (0.373, 0.266, 0.170, 0.108),
+    "Ring": (0.336, 0.244, 0.165, 0.107),
+    "Pinky": (0.295, 0.204, 0.117, 0.093),
+}
+# Phalanx masses in grams at HL 0.19 m: proximal, middle, distal.
+PHALANX_MASS_G: dict[str, tuple[float, float | None, float]] = {
+    "Thumb": (12.2, None, 8.4),
+    "Index": (15.2, 6.6, 3.5),
+    "Middle": (14.7, 7.8, 4.1),
+    "Ring": (11.9, 6.5, 3.6),
+    "Pinky": (8.1, 3.8, 2.4),
+}
+# MCP lateral offsets from the third metacarpal axis, fractions of HB, radial positive.
+LATERAL_FRAC: dict[str, float] = {
+    "Thumb": 0.196, "Index": 0.126, "Middle": 0.0, "Ring": -0.129, "Pinky": -0.223,
+}
+THUMB_CMC_PALMAR_FRAC = 0.08  # thumb CMC sits palmar of the palm mid-plane, of HL (assumed)
+PALM_THICKNESS_FRAC = 0.15  # of HL (assumed, for the palm's inertia only)
+
+_C45 = math.cos(math.radians(45.0))
+# Joint axes in the right hand's forearm frame (bodies are axis-aligned at zero).
+_AXES_RI: dict[str, tuple[float, float, float]] = {
+    "WristFlexion": (0.0, 1.0, 0.0),
+    "WristDeviation": (0.0, 0.0, 1.0),
+    "FingerMCPx": (0.0, 0.0, 1.0),
+    "FingerFlex": (0.0, 1.0, 0.0),
+    "ThumbCMCy": (0.0, _C45, _C45),
+    "ThumbFlex": (0.0, _C45, -_C45),
+    "ThumbCMCx": (-1.0, 0.0, 0.0),
+}
+
+
+@dataclass(frozen=True)
+class PassiveParams:
+    """Per-DOF spring parameters keyed by the ``ri`` DOF names (``riIndexMCPy``); the
+    left hand uses the same values (the vocabulary convention is anatomical).
+
+    ``rest_deg``: set point (equation 1), vocabulary convention.
+    ``ks_nm_per_rad``: stiffness; ``kd_nms_per_rad``: damping.
+    """
+
+    rest_deg: Mapping[str, float]
+    ks_nm_per_rad: Mapping[str, float]
+    kd_nms_per_rad: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class ActuatorParams:
+    """A position servo on one joint (MuJoCo ``position`` actuator).
+
+    ``kp_nm_per_rad``: proportional gain; ``kv_nms_per_rad``: velocity gain (damping
+    from the actuator, handled implicitly by ``implicitfast``); ``force_limit_nm``:
+    torque saturation (``forcerange``); ``max_speed_rad_s``: the speed limit the
+    caller enforces with :func:`ramp_ctrl` (not part of the MJCF); ``armature_kgm2``:
+    reflected rotor inertia added to the joint (keeps stiff servos stable on tiny
+    distal links).
+    """
+
+    kp_nm_per_rad: float = 1.0
+    kv_nms_per_rad: float = 0.02
+    force_limit_nm: float = 0.5
+    max_speed_rad_s: float = 6.0
+    armature_kgm2: float = 1e-4
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One rigid segment of the model: the body it belongs to, its length and mass."""
+
+    body: str
+    length_m: float
+    mass_kg: float
+    radius_m: float
+
+
+@dataclass(frozen=True)
+class HandGeometry:
+    """Lengths, masses and positions for one hand length (right hand, forearm frame)."""
+
+    hand_length_m: float
+    breadth_m: float
+    segments: dict[str, list[Segment]] = field(default_factory=dict)
+    base_pos_m: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    palm_mass_kg: float = 0.0
+    palm_com_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    palm_size_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def total_mass_kg(self) -> float:
+        return self.palm_mass_kg + sum(s.mass_kg for segs in self.segments.values() for s in segs)
+
+
+def _radius(mass_kg: float, length_m: float) -> float:
+    return math.sqrt(mass_kg / (DENSITY_KG_M3 * math.pi * length_m))
+
+
+def hand_geometry(hand_length_m: float = REFERENCE_HAND_LENGTH_M) -> HandGeometry:
+    """Segment lengths and masses scaled from the anthropometric table to ``hand_length_m``."""
+    if not (0.10 <= hand_length_m <= 0.30):
+        raise ValueError(f"hand_length_m={hand_length_m} outside 0.10..0.30 m (adult ~0.19 m)")
+    hl = hand_length_m
+    hb = BREADTH_PER_LENGTH * hl
+    mscale = (hl / REFERENCE_HAND_LENGTH_M) ** 3
+    segments: dict[str, list[Segment]] = {}
+    base: dict[str, tuple[float, float, float]] = {}
+    for digit in DIGITS:
+        meta, prox, mid, dist = SEGMENT_FRAC[digit]
+        mp, mm, md = PHALANX_MASS_G[digit]
+        segs: list[Segment] = []
+        if digit == "Thumb":
+            lp = prox * hl
+            r_p = _radius(mp * 1e-3 * mscale, lp)
+            lmc = meta * hl
+            m_mc = DENSITY_KG_M3 * math.pi * r_p**2 * lmc
+            segs.append(Segment("CMC", lmc, m_mc, r_p))
+            segs.append(Segment("MCP", lp, mp * 1e-3 * mscale, r_p))
+            ld = dist * hl
+            segs.append(Segment("IP", ld, md * 1e-3 * mscale, _radius(md * 1e-3 * mscale, ld)))
+            base[digit] = (CARPUS_FRAC * hl, LATERAL_FRAC[digit] * hb, -THUMB_CMC_PALMAR_FRAC * hl)
+        else:
+            assert mid is not None and mm is not None  # fingers have a middle phalanx
+            for body, frac, mass_g in (("MCP", prox, mp), ("PIP", mid, mm), ("DIP", dist, md)):
+                length, mass = frac * hl, mass_g * 1e-3 * mscale
+                segs.append(Segment(body, length, mass, _radius(mass, length)))
+            base[digit] = ((CARPUS_FRAC + meta) * hl, LATERAL_FRAC[digit] * hb, 0.0)
+        segments[digit] = segs
+    digit_mass = sum(s.mass_kg for segs in segments.values() for s in segs)
+    total = HAND_MASS_KG * mscale
+    palm_mass = total - digit_mass
+    # Straight hand: centre of mass at HAND_COM_FRAC of wrist -> middle MCP.
+    moment = 0.0
+    for digit, segs in segments.items():
+        x = base[digit][0]
+        for s in segs:
+            moment += s.mass_kg * (x + s.length_m / 2)
+            x += s.length_m
+    d_mcp3 = base["Middle"][0]
+    palm_x = (HAND_COM_FRAC * d_mcp3 * total - moment) / palm_mass
+    return HandGeometry(
+        hand_length_m=hl, breadth_m=hb, segments=segments, base_pos_m=base,
+        palm_mass_kg=palm_mass, palm_com_m=(palm_x, 0.0, 0.0),
+        palm_size_m=(d_mcp3, hb, PALM_THICKNESS_FRAC * hl),
+    )
+
+
+def gravity_in_forearm(
+    inclination_deg: float, rotation_deg: float, hand: Hand = "ri", g_mps2: float = G_MPS2
+) -> NDArray[np.float64]:
+    """Gravity (3,) in m/s^2 expressed in ``hand``'s forearm frame (``opt.gravity``).
+
+    ``inclination_deg``: forearm axis above the horizontal, -90 hanging straight down,
+    +90 pointing up. ``rotation_deg``: about the forearm axis, anatomical and the same
+    for both hands: 0 palm down, +90 palm vertical thumb up, 180 palm up. World up in
+    the right forearm frame is (sin i, cos i sin r, cos i cos r); the left hand's y
+    axis points ulnar, so there thumb up is -y and the y component flips.
+    """
+    inc, rot = math.radians(inclination_deg), math.radians(rotation_deg)
+    up_y = math.cos(inc) * math.sin(rot)
+    if hand == "le":
+        up_y = -up_y
+    up = np.array([math.sin(inc), up_y, math.cos(inc) * math.cos(rot)])
+    return -g_mps2 * up
+
+
+def gravity_grid_in_forearm(
+    inclination_deg: NDArray[np.float64], rotation_deg: NDArray[np.float64], hand: Hand = "ri"
+) -> NDArray[np.float64]:
+    """Vectorised :func:`gravity_in_forearm`: arrays broadcast, result (..., 3)."""
+    inc, rot = np.radians(inclination_deg), np.radians(rotation_deg)
+    inc, rot = np.broadcast_arrays(inc, rot)
+    sign = -1.0 if hand == "le" else 1.0
+    up = np.stack([np.sin(inc), sign * np.cos(inc) * np.sin(rot), np.cos(inc) * np.cos(rot)], -1)
+    return np.asarray(-G_MPS2 * up, dtype=np.float64)
+
+
+def _mirror_pos(p: Sequence[float], hand: Hand) -> tuple[float, float, float]:
+    return (p[0], -p[1], p[2]) if hand == "le" else (p[0], p[1], p[2])
+
+
+def _mirror_axis(a: Sequence[float], hand: Hand) -> tuple[float, float, float]:
+    # A rotation axis is a pseudovector: under y -> -y it maps to (-ax, ay, -az).
+    return (-a[0], a[1], -a[2]) if hand == "le" else (a[0], a[1], a[2])
+
+
+def _fmt(v: Sequence[float]) -> str:
+    return " ".join(f"{x:.9g}" for x in v)
+
+
+def _cyl_inertial(seg: Segment) -> str:
+    m, r, length = seg.mass_kg, seg.radius_m, seg.length_m
+    axial = 0.5 * m * r * r
+    perp = m * (3 * r * r + length * length) / 12.0
+    return (f'<inertial pos="{length / 2:.9g} 0 0" mass="{m:.9g}" '
+            f'diaginertia="{axial:.9g} {perp:.9g} {perp:.9g}"/>')
+
+
+def joint_axis(name: str, hand: Hand = "ri") -> tuple[float, float, float]:
+    """The joint axis of DOF ``name`` (e.g. ``riIndexMCPy``) in its body frame."""
+    stem = name[2:]
+    if stem in ("WristFlexion", "WristDeviation"):
+        key = stem
+    elif stem.startswith("Thumb"):
+        key = {"CMCx": "ThumbCMCx", "CMCy": "ThumbCMCy"}.get(stem[5:], "ThumbFlex")
+    else:
+        key = "FingerMCPx" if stem.endswith("MCPx") else "FingerFlex"
+    return _mirror_axis(_AXES_RI[key], hand)
+
+
+def default_passive() -> PassiveParams:
+    """The tuned relaxed-hand springs from ``config/passive_hand.toml`` (``sim.passive``)."""
+    from sim.passive import load_passive_params  # sim.passive imports this module
+
+    return load_passive_params().springs()
+
+
+def hand_model_xml(
+    hand: Literal["ri", "le"] = "ri",
+    hand_length_m: float = REFERENCE_HAND_LENGTH_M,
+    *,
+    passive: PassiveParams | None = None,
+    actuated: Mapping[str, ActuatorParams] | None = None,
+    limits_deg: NDArray[np.float64] | None = None,
+    mujoco_limits: bool = True,
+    timestep_s: float = 0.001,
+    gravity: Sequence[float] = (0.0, 0.0, -G_MPS2),
+) -> str:
+    """MJCF text of one hand (see the module docstring for frames, axes and masses).
+
+    ``passive``: springs per DOF (keys: ``ri`` DOF names, used for both hands); None
+    loads the tuned defaults from ``config/passive_hand.toml`` via
+    ``sim.passive.load_passive_params``. ``actuated``: DOF name (of ``hand``) ->
+    :class:`ActuatorParams`; the actuator is named like its joint. ``limits_deg``:
+    (23, 2) ranges in DOF order (default ``handrig.hand.dof_limits_deg``).
+    ``gravity``: initial ``opt.gravity`` (forearm frame), default palm down horizontal.
+    """
+    if hand not in ("ri", "le"):
+        raise ValueError(f"hand must be 'ri' or 'le', got {hand!r}")
+    if passive is None:
+        passive = default_passive()
+    actuated = dict(actuated or {})
+    names = DOF_NAMES[hand]
+    unknown = sorted(set(actuated) - set(names))
+    if unknown:
+        raise ValueError(f"actuated names not DOFs of hand {hand!r}: {unknown}")
+    lim = dof_limits_deg(hand) if limits_deg is None else np.asarray(limits_deg, float)
+    if lim.shape != (23, 2):
+        raise ValueError(f"limits_deg must be (23, 2), got {lim.shape}")
+    lim_by_name = {n: (float(lim[i, 0]), float(lim[i, 1])) for i, n in enumerate(names)}
+    geo = hand_geometry(hand_length_m)
+
+    def joint(name: str) -> str:
+        ri_name = "ri" + name[2:]
+        lo, hi = (math.radians(v) for v in lim_by_name[name])
+        attrs = [f'name="{name}"', 'type="hinge"', 'pos="0 0 0"',
+                 f'axis="{_fmt(joint_axis(name, hand))}"', f'range="{lo:.9g} {hi:.9g}"',
+                 f'limited="{"true" if mujoco_limits else "false"}"']
+        if name in actuated:
+            attrs.append(f'armature="{actuated[name].armature_kgm2:.9g}"')
+        else:
+            rest = math.radians(passive.rest_deg[ri_name])
+            attrs += [f'stiffness="{passive.ks_nm_per_rad[ri_name]:.9g}"',
+                      f'springref="{rest:.9g}"',
+                      f'damping="{passive.kd_nms_per_rad[ri_name]:.9g}"']
+        return f'<joint {" ".join(attrs)}/>'
+
+    def seg_geom(seg: Segment, rgba: str) -> str:
+        return (f'<geom type="cylinder" fromto="0 0 0 {seg.length_m:.9g} 0 0" '
+                f'size="{seg.radius_m:.9g}" rgba="{rgba}" contype="0" conaffinity="0" '
+                f'mass="0"/>')
+
+    skin = "0.85 0.68 0.58 1"
+    out: list[str] = []
+    for digit in DIGITS:
+        segs = geo.segments[digit]
+        pos = _mirror_pos(geo.base_pos_m[digit], hand)
+        if digit == "Thumb":
+            jnames = [[f"{hand}ThumbCMCy", f"{hand}ThumbCMCz", f"{hand}ThumbCMCx"],
+                      [f"{hand}ThumbMCPz"], [f"{hand}ThumbIPz"]]
+        else:
+            p = f"{hand}{digit}"
+            jnames = [[f"{p}MCPx", f"{p}MCPy"], [f"{p}PIPy"], [f"{p}DIPy"]]
+        chain = ""
+        for k in range(len(segs) - 1, -1, -1):
+            seg = segs[k]
+            bpos = pos if k == 0 else (segs[k - 1].length_m, 0.0, 0.0)
+            joints = "".join(joint(j) for j in jnames[k])
+            chain = (f'<body name="{hand}{digit}{seg.body}" pos="{_fmt(bpos)}">'
+                     f"{_cyl_inertial(seg)}{joints}{seg_geom(seg, skin)}{chain}</body>")
+        out.append(chain)
+    px, py, pz = geo.palm_size_m
+    palm_i = [geo.palm_mass_kg / 12.0 * (b * b + c * c)
+              for b, c in ((py, pz), (px, pz), (px, py))]
+    palm = (f'<body name="{hand}Palm" pos="0 0 0">'
+            f'<inertial pos="{_fmt(geo.palm_com_m)}" mass="{geo.palm_mass_kg:.9g}" '
+            f'diaginertia="{_fmt(palm_i)}"/>'
+            f"{joint(f'{hand}WristFlexion')}{joint(f'{hand}WristDeviation')}"
+            f'<geom type="box" pos="{px / 2:.9g} 0 0" size="{px / 2:.9g} {py / 2:.9g} '
+            f'{pz / 4:.9g}" rgba="{skin}" contype="0" conaffinity="0" mass="0"/>'
+            + "".join(out) + "</body>")
+    acts = []
+    for name, a in actuated.items():
+        lo, hi = (math.radians(v) for v in lim_by_name[name])
+        acts.append(
+            f'<position name="{name}" joint="{name}" kp="{a.kp_nm_per_rad:.9g}" '
+            f'kv="{a.kv_nms_per_rad:.9g}" forcelimited="true" '
+            f'forcerange="{-a.force_limit_nm:.9g} {a.force_limit_nm:.9g}" '
+            f'ctrllimited="true" ctrlrange="{lo:.9g} {hi:.9g}"/>'
+        )
+    fl = 0.25 * hand_length_m / REFERENCE_HAND_LENGTH_M
+    fr = 0.03 * hand_length_m / REFERENCE_HAND_LENGTH_M
+    return (
+        f'<mujoco model="handrig_{hand}_hand">'
+        '<compiler angle="radian" autolimits="false"/>'
+        f'<option timestep="{timestep_s:.9g}" integrator="implicitfast" '
+        f'gravity="{_fmt(gravity)}"><flag contact="disable"/></option>'
+        "<worldbody>"
+        f'<body name="{hand}Forearm" pos="0 0 0">'
+        f'<geom type="capsule" fromto="{-fl:.9g} 0 0 0 0 0" size="{fr:.9g}" '
+        f'rgba="{skin}" contype="0" conaffinity="0"/>'
+        f"{palm}</body></worldbody>"
+        f"<actuator>{''.join(acts)}</actuator></mujoco>"
+    )
+
+
+def dof_qpos_indices(model: object, hand: Hand = "ri") -> NDArray[np.intp]:
+    """For each of the 23 DOFs of ``hand`` (vocabulary order), its ``qpos``/``qvel`` index.
+
+    ``model`` is an ``mujoco.MjModel`` built from :func:`hand_model_xml` (hinges only, so
+    qpos and qvel indices coincide)."""
+    import mujoco
+
+    out = np.empty(23, dtype=np.intp)
+    for i, name in enumerate(DOF_NAMES[hand]):
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if jid < 0:
+            raise ValueError(f"model has no joint {name!r}")
+        out[i] = model.jnt_qposadr[jid]  # type: ignore[attr-defined]
+    return out
+
+
+def ramp_ctrl(
+    ctrl: NDArray[np.float64], goal: NDArray[np.float64], max_step: NDArray[np.float64] | float
+) -> NDArray[np.float64]:
+    """Move ``ctrl`` toward ``goal`` in place by at most ``max_step`` (= max_speed x dt).
+
+    The servo speed limit for :class:`ActuatorParams` (``max_speed_rad_s``): call once per
+    physics step with ``max_step = max_speed_rad_s * timestep_s``."""
+    delta = np.clip(goal - ctrl, -np.asarray(max_step), np.asarray(max_step))
+    ctrl += delta
+    return ctrl
+
+
+FINGER_NAMES: tuple[str, ...] = FINGERS
