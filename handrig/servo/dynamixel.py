@@ -1,0 +1,877 @@
+"""``DynamixelBus``: X-series servos on one Protocol 2.0 bus, through dynamixel-sdk.
+
+What this adds to the SDK (REFERENCE.md section 1): deadlines on the injected
+monotonic clock instead of the 34 ms busy-wait; each servo's ERR byte kept from
+a Fast Sync Read, whose per-servo running CRCs are checked so a truncated or
+partly corrupted reply still yields the servos before the damage; no crash on a
+malformed or short reply; a lock instead of the ``is_using`` flag; stale
+readings marked; faults counted, decoded and handled by a :class:`FaultPolicy`;
+torque only inside :meth:`DynamixelBus.torque`, with the Bus Watchdog armed.
+
+Units: see :mod:`handrig.servo.bus`. Goal positions go out as ticks
+(``RigConfig`` calibration) and are clamped to each servo's ``[min_deg, max_deg]``
+and to 0..4095 ticks whatever the caller asks.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+from collections.abc import Callable
+from types import FrameType, TracebackType
+from typing import Literal
+
+import numpy as np
+
+from handrig.clock import Clock, MonotonicClock
+from handrig.errors import DeviceError, DeviceTimeoutError, ProtocolError, SafetyStop, ServoFault
+from handrig.rigconfig import MODEL_NUMBERS, POSITION_TICKS_MAX, TICKS_PER_DEG, RigConfig
+from handrig.servo.bus import BusStats, FaultPolicy, ServoBus, ServoState
+from handrig.servo.packets import (
+    BROADCAST_ID,
+    HEADER,
+    INST_FAST_SYNC_READ,
+    INST_PING,
+    INST_READ,
+    INST_REBOOT,
+    INST_SYNC_READ,
+    INST_SYNC_WRITE,
+    INST_WRITE,
+    StatusPacket,
+    build_instruction,
+    crc16,
+    fast_sync_valid,
+    packet_length,
+    parse_status,
+    u16,
+)
+from handrig.servo.registers import (
+    BUS_WATCHDOG_UNIT_MS,
+    CURRENT_MA_PER_UNIT,
+    ERR_ALERT,
+    OPERATING_MODE_POSITION,
+    STATUS_RETURN_ALL,
+    VELOCITY_DPS_PER_UNIT,
+    Reg,
+    describe_hardware_error,
+    describe_status_error,
+)
+from handrig.servo.transport import SerialTransport
+
+log = logging.getLogger("handrig.servo")
+
+BITS_PER_BYTE = 10  # 8N1 on the wire
+COMMAND_TIMEOUT_S = 0.05  # a single command's reply: RDT 0.5 ms + a 16 ms latency timer, ample
+COMMAND_ATTEMPTS = 3
+
+ReadFields = Literal["position", "motion"]
+# Contiguous control-table spans read each cycle: position only, or current+velocity+position.
+_READ_SPANS: dict[str, tuple[int, int]] = {
+    "position": (Reg.PRESENT_POSITION.address, 4),
+    "motion": (Reg.PRESENT_CURRENT.address, 10),
+}
+
+
+def wire_time_s(n_bytes: int, baud: int) -> float:
+    """Time ``n_bytes`` take on the wire at ``baud`` (10 bits per byte)."""
+    return n_bytes * BITS_PER_BYTE / baud
+
+
+def cycle_bytes(n_servos: int, data_len: int = 4) -> int:
+    """Bytes per write + Fast Sync Read cycle (REFERENCE.md section 3).
+
+    Sync Write of Goal Position 14 + 5N, Fast Sync Read instruction 14 + N, its
+    reply 8 + (data_len + 4) N (8 + 8N for the 4-byte position).
+    """
+    return (14 + 5 * n_servos) + (14 + n_servos) + (8 + (data_len + 4) * n_servos)
+
+
+class DynamixelBus(ServoBus):
+    """The servos of ``rig`` on the serial port ``port`` (a path such as ``/dev/ttyUSB0``).
+
+    ``baud`` defaults to ``rig.bus.baud``; ``clock`` to :class:`MonotonicClock`.
+    ``read_fields`` picks what each read fetches: ``"motion"`` (current, velocity
+    and position, 10 bytes per servo) or ``"position"`` (4 bytes: the shortest
+    cycle). ``temperature_every`` adds a temperature read every that many state
+    reads (0: never). ``reply_timeout_s`` bounds the wait for one reply (default:
+    twice its wire time plus 2 ms).
+    """
+
+    def __init__(
+        self,
+        port: str,
+        rig: RigConfig,
+        *,
+        baud: int | None = None,
+        clock: Clock | None = None,
+        fault_policy: FaultPolicy | None = None,
+        read_fields: ReadFields = "motion",
+        temperature_every: int = 0,
+        reply_timeout_s: float | None = None,
+    ) -> None:
+        if not rig.servos:
+            raise DeviceError("the rig config lists no servos: add [[servos]] to config/rig.toml")
+        if read_fields not in _READ_SPANS:
+            raise ValueError(f"read_fields must be one of {sorted(_READ_SPANS)}")
+        self.port = port
+        self.rig = rig
+        self.baud = int(baud if baud is not None else rig.bus.baud)
+        self.clock = clock or MonotonicClock()
+        self.policy = fault_policy or FaultPolicy()
+        self.temperature_every = int(temperature_every)
+        self._transport = SerialTransport(port, self.baud, self.clock)
+        self._lock = threading.RLock()
+
+        servos = rig.servos
+        n = len(servos)
+        self._n = n
+        self.ids: tuple[int, ...] = tuple(s.id for s in servos)
+        self._names: tuple[str, ...] = tuple(s.joint for s in servos)
+        self._index_of_id = {s.id: i for i, s in enumerate(servos)}
+        self._min_deg = np.array([s.min_deg for s in servos], np.float64)
+        self._max_deg = np.array([s.max_deg for s in servos], np.float64)
+        self._zero_ticks = np.array([s.zero_ticks for s in servos], np.float64)
+        # ticks per joint degree, signed by direction
+        self._ticks_per_deg = np.array(
+            [s.direction * s.gear_ratio * TICKS_PER_DEG for s in servos], np.float64
+        )
+        self._expected_models = tuple(MODEL_NUMBERS[s.model] for s in servos)
+        self._current_ma_per_unit = np.array(
+            [CURRENT_MA_PER_UNIT.get(m, 1.0) for m in self._expected_models], np.float64
+        )
+        self._hold_deg = np.clip(0.0, self._min_deg, self._max_deg)
+
+        # -- goal Sync Write: constant prefix, CRC resumed after it each cycle
+        body_len = 5 * n
+        length = 1 + 4 + body_len + 2
+        self._sw_prefix = HEADER + bytes((BROADCAST_ID, length & 0xFF, length >> 8)) + bytes(
+            (INST_SYNC_WRITE,)
+        ) + u16(Reg.GOAL_POSITION.address) + u16(4)
+        self._sw_prefix_crc = crc16(self._sw_prefix)
+        self._sw_body = np.zeros((n, 5), np.uint8)
+        self._sw_body[:, 0] = self.ids
+        self._goal_deg = np.zeros(n, np.float64)
+        self._goal_ticks = np.zeros(n, np.int32)
+        self._last_goal_deg = np.full(n, np.nan)
+        self._scratch = np.zeros(n, np.float64)
+        self._finite = np.zeros(n, bool)
+
+        # -- present-state read
+        self.read_fields: ReadFields = read_fields
+        self._read_addr, self._read_len = _READ_SPANS[read_fields]
+        self._fsr_full = build_instruction(
+            BROADCAST_ID, INST_FAST_SYNC_READ,
+            u16(self._read_addr) + u16(self._read_len) + bytes(self.ids),
+        )
+        self._reply_len_full = 8 + (self._read_len + 4) * n
+        if reply_timeout_s is None:
+            wire = wire_time_s(len(self._fsr_full) + self._reply_len_full, self.baud)
+            reply_timeout_s = 2.0 * wire + 0.002
+        self.reply_timeout_s = float(reply_timeout_s)
+        self.use_fast_sync_read = True
+        self._fast_fail_run = 0
+        self._all_indices = np.arange(n)
+        self._valid = [False] * n
+
+        # -- latest readings (rig order)
+        self._pos_deg = np.full(n, np.nan)
+        self._vel_dps = np.full(n, np.nan)
+        self._cur_ma = np.full(n, np.nan)
+        self._temp_c = np.full(n, np.nan)
+        self._status_err = np.zeros(n, np.uint8)
+        self._hw_err = np.zeros(n, np.uint8)
+        self._fresh = np.zeros(n, bool)
+        self._read_time = np.full(n, -np.inf)
+        self._stale_run = np.zeros(n, np.int64)
+        self._stats = BusStats(n)
+
+        self.commissioning: list[str] = []  # what connect() found and did, one line each
+        self.models: dict[int, int] = {}
+        self.firmware: dict[int, int] = {}
+        self._connected = False
+        self._torque_on = False
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self._names
+
+    @property
+    def stats(self) -> BusStats:
+        return self._stats
+
+    @property
+    def torque_enabled(self) -> bool:
+        return self._torque_on
+
+    @property
+    def last_goals_deg(self) -> np.ndarray:
+        """The goals last sent, after clamping (NaN before the first write)."""
+        return self._last_goal_deg.copy()
+
+    def describe(self, index: int) -> str:
+        """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""
+        return f"servo {self.ids[index]} ({self._names[index]})"
+
+    def _where(self) -> str:
+        return f"on {self.port} at {self.baud} baud"
+
+    # ------------------------------------------------------------------ low level
+    def _transact(
+        self, packet: bytes, servo_id: int, *, timeout_s: float = COMMAND_TIMEOUT_S,
+        attempts: int = COMMAND_ATTEMPTS,
+    ) -> StatusPacket | None:
+        """Send ``packet`` and return ``servo_id``'s status reply, or None after ``attempts``."""
+        t = self._transport
+        for attempt in range(attempts):
+            if attempt:
+                self._stats.retries += 1
+            t.discard_input()
+            t.write(packet)
+            deadline = self.clock.now() + timeout_s
+            while True:
+                raw = t.read_packet(deadline)
+                if raw is None:
+                    self._stats.timeouts += 1
+                    break
+                try:
+                    status = parse_status(raw)
+                except ProtocolError:
+                    self._stats.crc_errors += 1
+                    continue
+                if status.servo_id != servo_id:
+                    self._stats.malformed += 1
+                    continue
+                return status
+        return None
+
+    def _command(self, index: int, instruction: int, params: bytes, what: str) -> StatusPacket:
+        """One instruction to servo ``index`` that must be answered without an error number."""
+        sid = self.ids[index]
+        status = self._transact(build_instruction(sid, instruction, params), sid)
+        if status is None:
+            raise DeviceTimeoutError(
+                f"{self.describe(index)} did not answer {what} {self._where()} after "
+                f"{COMMAND_ATTEMPTS} attempts: check power, cable and ID"
+            )
+        if status.error & 0x7F:
+            raise ServoFault(
+                f"{self.describe(index)} refused {what}: {describe_status_error(status.error)}",
+                servo_id=sid, bits=status.error,
+            )
+        if status.error & ERR_ALERT:
+            self._hw_alert(index)
+        return status
+
+    def read_register(self, index: int, reg: Reg) -> int:
+        """Read one control-table item of servo ``index`` (rig order)."""
+        status = self._command(
+            index, INST_READ, u16(reg.address) + u16(reg.size), f"a read of {reg.name}"
+        )
+        if len(status.params) < reg.size:
+            self._stats.malformed += 1
+            raise ProtocolError(
+                f"{self.describe(index)} sent {len(status.params)} bytes for {reg.name} "
+                f"({reg.size} expected) {self._where()}"
+            )
+        return reg.decode(status.params)
+
+    def write_register(self, index: int, reg: Reg, value: int) -> None:
+        """Write one control-table item of servo ``index`` and check the reply."""
+        self._command(
+            index, INST_WRITE, u16(reg.address) + reg.encode(value),
+            f"a write of {reg.name} = {value}",
+        )
+
+    def _sync_write(self, reg: Reg, values: list[int]) -> None:
+        params = u16(reg.address) + u16(reg.size) + b"".join(
+            bytes((sid,)) + reg.encode(v) for sid, v in zip(self.ids, values, strict=True)
+        )
+        self._transport.write(build_instruction(BROADCAST_ID, INST_SYNC_WRITE, params))
+
+    def _hw_alert(self, index: int) -> None:
+        """Remember that servo ``index`` raised its Alert bit (handled after the read)."""
+        self._status_err[index] |= ERR_ALERT
+
+    # ------------------------------------------------------------------ connect
+    def connect(self) -> None:
+        """Open the port and commission every servo.
+
+        Pings each configured servo and checks its model; sets Return Delay Time 0,
+        position mode and Status Return Level 2 (torque off while doing so); clears
+        the Bus Watchdog; checks or sets the USB latency timer; probes Fast Sync
+        Read. Raises DeviceError listing every servo that is missing or wrong.
+        """
+        with self._lock:
+            if self._connected:
+                return
+            self._transport.open()
+            try:
+                self._commission()
+            except BaseException:
+                self._transport.close()
+                raise
+            self._connected = True
+
+    def _commission(self) -> None:
+        notes = self.commissioning
+        notes.clear()
+        notes.append(self._transport.latency_timer().note)
+        problems: list[str] = []
+        missing = 0
+        for i, sid in enumerate(self.ids):
+            status = self._transact(build_instruction(sid, INST_PING), sid)
+            if status is None or len(status.params) < 3:
+                missing += 1
+                problems.append(
+                    f"{self.describe(i)} did not answer {self._where()}: check power and ID"
+                )
+                continue
+            model = status.params[0] | status.params[1] << 8
+            self.models[sid] = model
+            self.firmware[sid] = status.params[2]
+            want = self._expected_models[i]
+            if model != want:
+                names = {v: k for k, v in MODEL_NUMBERS.items()}
+                problems.append(
+                    f"{self.describe(i)} is model {model} ({names.get(model, 'unknown')}), "
+                    f"the rig says {self.rig.servos[i].model} ({want}): fix config/rig.toml "
+                    "or the servo"
+                )
+        if problems:
+            if missing == self._n:
+                problems.append(
+                    f"no configured servo answered: check the power supply, the adapter and "
+                    f"that the servos are set to {self.baud} baud (register 8)"
+                )
+            elif missing:
+                found = sorted(self._broadcast_ping())
+                problems.append(f"IDs answering {self._where()}: {found or 'none'}")
+            raise DeviceError("; ".join(problems))
+        notes.append(f"{self._n} servos answered {self._where()} with the expected models")
+
+        for i in range(self._n):
+            self.write_register(i, Reg.TORQUE_ENABLE, 0)
+            for reg, want, why in (
+                (Reg.RETURN_DELAY_TIME, 0, "return delay 0 us"),
+                (Reg.OPERATING_MODE, OPERATING_MODE_POSITION, "position control mode"),
+                (Reg.STATUS_RETURN_LEVEL, STATUS_RETURN_ALL, "status for every instruction"),
+            ):
+                value = self.read_register(i, reg)
+                if value != want:
+                    self.write_register(i, reg, want)
+                    notes.append(f"{self.describe(i)}: {reg.name} {value} -> {want} ({why})")
+            self.write_register(i, Reg.BUS_WATCHDOG, 0)
+            hw = self.read_register(i, Reg.HARDWARE_ERROR_STATUS)
+            if hw:
+                self._hw_err[i] = hw
+                self._stats.hardware_errors[i] += 1
+                self._on_hardware_error(i, hw)
+        notes.append("return delay 0, position mode, status level 2, watchdog cleared: done")
+
+        state = self._read_attempt(self._all_indices, self.clock.now() + COMMAND_TIMEOUT_S)
+        if not state:
+            self._fast_fail_run = 0
+            self._switch_to_sync_read("no valid Fast Sync Read reply at connect")
+        notes.append(
+            "present state by " + ("Fast Sync Read" if self.use_fast_sync_read else "Sync Read")
+        )
+        reading = self.read_state(self.clock.now() + 4 * COMMAND_TIMEOUT_S)
+        if reading.stale.any():
+            bad = [self.describe(int(i)) for i in np.flatnonzero(reading.stale)]
+            raise DeviceError(
+                f"no valid present position from {', '.join(bad)} {self._where()}"
+            )
+
+    def _broadcast_ping(self, wait_s: float = 0.1) -> dict[int, int]:
+        t = self._transport
+        t.discard_input()
+        t.write(build_instruction(BROADCAST_ID, INST_PING))
+        deadline = self.clock.now() + wait_s
+        found: dict[int, int] = {}
+        while (raw := t.read_packet(deadline)) is not None:
+            try:
+                status = parse_status(raw)
+            except ProtocolError:
+                continue
+            if len(status.params) >= 2:
+                found[status.servo_id] = status.params[0] | status.params[1] << 8
+        return found
+
+    def _switch_to_sync_read(self, why: str) -> None:
+        if self.use_fast_sync_read:
+            self.use_fast_sync_read = False
+            self._stats.fallbacks += 1
+            msg = f"falling back from Fast Sync Read to Sync Read {self._where()}: {why}"
+            self.commissioning.append(msg)
+            log.warning(msg)
+
+    # ------------------------------------------------------------------ goals
+    def write_goals_deg(self, goals_deg: np.ndarray) -> int:
+        """Send one goal per servo (joint degrees, rig order) in one Sync Write.
+
+        Each goal is clamped to the servo's ``[min_deg, max_deg]``; a non-finite
+        goal is replaced by the last goal sent (or the servo's zero clamped into its
+        limits). Returns how many goals were changed that way (also counted in
+        ``stats.clamps``). No reply is expected.
+        """
+        g = np.asarray(goals_deg, dtype=np.float64)
+        if g.shape != (self._n,):
+            raise ValueError(f"goals_deg must have shape ({self._n},), got {g.shape}")
+        goal = self._goal_deg
+        np.clip(g, self._min_deg, self._max_deg, out=goal)
+        np.isfinite(g, out=self._finite)
+        if not self._finite.all():
+            fallback = np.where(np.isnan(self._last_goal_deg), self._hold_deg, self._last_goal_deg)
+            np.copyto(goal, fallback, where=~self._finite)
+        clamped = int(np.count_nonzero(goal != g))
+        self._send_goals(goal)
+        self._stats.clamps += clamped
+        return clamped
+
+    def _send_goals(self, goal_deg: np.ndarray) -> None:
+        ticks = self._scratch
+        np.multiply(goal_deg, self._ticks_per_deg, out=ticks)
+        ticks += self._zero_ticks
+        np.rint(ticks, out=ticks)
+        np.clip(ticks, 0, POSITION_TICKS_MAX, out=ticks)
+        self._goal_ticks[:] = ticks
+        self._sw_body[:, 1:5] = self._goal_ticks.view(np.uint8).reshape(self._n, 4)
+        # Ticks in 0..4095 and IDs <= 252 never form FF FF FD: no stuffing needed.
+        body = self._sw_body.tobytes()
+        crc = crc16(body, self._sw_prefix_crc)
+        packet = self._sw_prefix + body + bytes((crc & 0xFF, crc >> 8))
+        with self._lock:
+            self._transport.write(packet)
+            self._stats.writes += 1
+        self._last_goal_deg[:] = goal_deg
+
+    # ------------------------------------------------------------------ present state
+    def read_state(self, deadline_s: float | None = None) -> ServoState:
+        """Read present state (Fast Sync Read, or Sync Read after a fallback).
+
+        ``deadline_s`` is a time on the bus clock by which the read must end
+        (default: ``fault_policy.read_budget_s`` from now); failed servos are
+        retried up to ``fault_policy.read_retries`` times while time remains.
+        Servos without a valid reply are marked stale, never passed off as fresh.
+        A servo raising its Alert bit is handled per policy (reboot or
+        ServoFault); a servo stale ``max_stale_reads`` times in a row raises
+        DeviceTimeoutError naming it.
+        """
+        with self._lock:
+            now = self.clock.now()
+            if deadline_s is None:
+                deadline_s = now + self.policy.read_budget_s
+            self._stats.reads += 1
+            fresh = self._fresh
+            fresh[:] = False
+            self._status_err[:] = 0
+            pending = self._all_indices
+            for attempt in range(self.policy.read_retries + 1):
+                if attempt:
+                    if self.clock.now() >= deadline_s:
+                        break
+                    self._stats.retries += 1
+                self._read_attempt(pending, deadline_s)
+                if fresh.all():
+                    break
+                pending = np.flatnonzero(~fresh)
+            now = self.clock.now()
+            stale = ~fresh
+            self._stale_run[stale] += 1
+            self._stale_run[fresh] = 0
+            self._stats.stale_readings[stale] += 1
+            self._read_time[fresh] = now
+            alerts = np.flatnonzero(self._status_err & ERR_ALERT)
+            for i in alerts:
+                self._hardware_alert(int(i))
+            if self.temperature_every and self._stats.reads % self.temperature_every == 0:
+                self._read_temperatures(deadline_s)
+            worst = int(np.argmax(self._stale_run))
+            if self._stale_run[worst] >= self.policy.max_stale_reads:
+                raise DeviceTimeoutError(
+                    f"{self.describe(worst)} gave no valid reading in "
+                    f"{int(self._stale_run[worst])} reads in a row {self._where()} "
+                    f"({self._stats.summary()}): check its cable, power and ID"
+                )
+            return ServoState(
+                positions_deg=self._pos_deg.copy(),
+                velocities_dps=self._vel_dps.copy(),
+                currents_ma=self._cur_ma.copy(),
+                temperatures_c=self._temp_c.copy(),
+                status_errors=self._status_err.copy(),
+                hardware_errors=self._hw_err.copy(),
+                stale=stale,
+                age_s=now - self._read_time,
+                timestamp_s=now,
+                stats=self._stats.copy(),
+            )
+
+    def _read_attempt(self, indices: np.ndarray, deadline_s: float) -> bool:
+        """One read of ``indices``; updates readings of servos that answered validly."""
+        deadline = min(deadline_s, self.clock.now() + self.reply_timeout_s)
+        if self.use_fast_sync_read:
+            got = self._fast_sync_read(indices, deadline)
+            if got:
+                self._fast_fail_run = 0
+            else:
+                self._fast_fail_run += 1
+                if self._fast_fail_run >= self.policy.fast_failures_before_fallback:
+                    self._fast_fail_run = 0
+                    deadline = min(deadline_s, self.clock.now() + self.reply_timeout_s)
+                    if self._sync_read(indices, deadline):
+                        self._switch_to_sync_read(
+                            f"{self.policy.fast_failures_before_fallback} Fast Sync Reads "
+                            "failed in a row while Sync Read works"
+                        )
+                        return True
+            return got
+        return self._sync_read(indices, deadline)
+
+    def _fast_sync_read(self, indices: np.ndarray, deadline: float) -> bool:
+        t = self._transport
+        n_req = len(indices)
+        if n_req == self._n:
+            packet = self._fsr_full
+            ids = self.ids
+        else:
+            ids = tuple(self.ids[int(i)] for i in indices)
+            packet = build_instruction(
+                BROADCAST_ID, INST_FAST_SYNC_READ,
+                u16(self._read_addr) + u16(self._read_len) + bytes(ids),
+            )
+        block = self._read_len + 4
+        expected = 8 + block * n_req
+        t.discard_input()
+        t.write(packet)
+        head = t.read_exact(7, deadline)
+        if len(head) < 7:
+            self._stats.timeouts += 1
+            return False
+        if head[:4] != HEADER:
+            self._stats.malformed += 1
+            return False
+        total = packet_length(head)
+        if head[4] != BROADCAST_ID:
+            # a single servo's status: an error report (e.g. instruction error) or a wrong reply
+            rest = t.read_exact(total - 7, deadline) if total <= 1024 else b""
+            try:
+                status = parse_status(head + rest)
+            except ProtocolError:
+                self._stats.crc_errors += 1
+                return False
+            self._stats.malformed += 1
+            if status.error & 0x7F == 2:  # instruction error: Fast Sync Read unsupported
+                self._switch_to_sync_read(
+                    f"servo {status.servo_id} answered 'instruction error' to Fast Sync Read"
+                )
+            return False
+        if total != expected:
+            self._stats.malformed += 1
+        raw = head + t.read_exact(min(total, expected) - 7, deadline)
+        if len(raw) < expected:
+            self._stats.timeouts += 1
+        valid = self._valid
+        fast_sync_valid(raw, ids, self._read_len, valid)
+        m = min(n_req, (len(raw) - 8) // block)
+        ok = np.array(valid[:m], dtype=bool)
+        n_ok = int(ok.sum())
+        if n_ok < m:
+            self._stats.crc_errors += m - n_ok
+        if n_ok == 0:
+            return False
+        target = indices[:m][ok]
+        blocks = np.frombuffer(raw, np.uint8, count=m * block, offset=8).reshape(m, block)
+        self._status_err[target] = blocks[ok, 0]
+        self._decode(blocks[ok, 2 : 2 + self._read_len], target)
+        self._fresh[target] = True
+        return True
+
+    def _sync_read(self, indices: np.ndarray, deadline: float) -> bool:
+        t = self._transport
+        ids = [self.ids[int(i)] for i in indices]
+        t.discard_input()
+        t.write(build_instruction(
+            BROADCAST_ID, INST_SYNC_READ,
+            u16(self._read_addr) + u16(self._read_len) + bytes(ids),
+        ))
+        want = {sid: int(i) for sid, i in zip(ids, indices, strict=True)}
+        rows = np.zeros((len(ids), self._read_len), np.uint8)
+        got: list[int] = []
+        while len(got) < len(ids):
+            raw = t.read_packet(deadline)
+            if raw is None:
+                self._stats.timeouts += 1
+                break
+            try:
+                status = parse_status(raw)
+            except ProtocolError:
+                self._stats.crc_errors += 1
+                continue
+            index = want.pop(status.servo_id, None)
+            if index is None or len(status.params) < self._read_len:
+                self._stats.malformed += 1
+                continue
+            rows[len(got)] = np.frombuffer(status.params[: self._read_len], np.uint8)
+            self._status_err[index] = status.error
+            got.append(index)
+        if not got:
+            return False
+        target = np.array(got, dtype=np.intp)
+        self._decode(rows[: len(got)], target)
+        self._fresh[target] = True
+        return True
+
+    def _decode(self, data: np.ndarray, target: np.ndarray) -> None:
+        """Turn raw little-endian rows (k, read_len) into readings for rig indices ``target``."""
+        rows = np.ascontiguousarray(data)
+        if self.read_fields == "position":
+            pos = rows.view("<i4")[:, 0]
+        else:
+            cur = rows[:, 0:2].copy().view("<i2")[:, 0]
+            vel = rows[:, 2:6].copy().view("<i4")[:, 0]
+            pos = rows[:, 6:10].copy().view("<i4")[:, 0]
+            self._cur_ma[target] = cur * self._current_ma_per_unit[target]
+            self._vel_dps[target] = vel * VELOCITY_DPS_PER_UNIT / self._ticks_per_deg[target] * (
+                4096.0 / 360.0
+            )
+        self._pos_deg[target] = (pos - self._zero_ticks[target]) / self._ticks_per_deg[target]
+
+    def _read_temperatures(self, deadline_s: float) -> None:
+        deadline = max(deadline_s, self.clock.now() + self.reply_timeout_s)
+        t = self._transport
+        reg = Reg.PRESENT_TEMPERATURE
+        t.discard_input()
+        t.write(build_instruction(
+            BROADCAST_ID, INST_SYNC_READ, u16(reg.address) + u16(1) + bytes(self.ids)
+        ))
+        for _ in range(self._n):
+            raw = t.read_packet(deadline)
+            if raw is None:
+                self._stats.timeouts += 1
+                return
+            try:
+                status = parse_status(raw)
+            except ProtocolError:
+                self._stats.crc_errors += 1
+                continue
+            index = self._index_of_id.get(status.servo_id)
+            if index is not None and status.params:
+                self._temp_c[index] = status.params[0]
+
+    # ------------------------------------------------------------------ faults
+    def _hardware_alert(self, index: int) -> None:
+        try:
+            bits = self.read_register(index, Reg.HARDWARE_ERROR_STATUS)
+        except DeviceError as exc:
+            log.warning("%s raised Alert but its Hardware Error Status is unreadable: %s",
+                        self.describe(index), exc)
+            return
+        if not bits:
+            return
+        self._hw_err[index] = bits
+        self._stats.hardware_errors[index] += 1
+        self._on_hardware_error(index, bits)
+
+    def _on_hardware_error(self, index: int, bits: int) -> None:
+        what = (
+            f"{self.describe(index)} hardware error 0x{bits:02x}: "
+            f"{describe_hardware_error(bits)} {self._where()}"
+        )
+        if self.policy.on_hardware_error == "stop":
+            raise ServoFault(f"{what}; policy: stop", servo_id=self.ids[index], bits=bits)
+        if self._stats.reboots[index] >= self.policy.max_reboots:
+            raise ServoFault(
+                f"{what}; still there after {int(self._stats.reboots[index])} reboots: "
+                "stopping (check the load, supply voltage and temperature)",
+                servo_id=self.ids[index], bits=bits,
+            )
+        log.warning("%s; rebooting it", what)
+        self.reboot(index)
+
+    def reboot(self, index: int) -> None:
+        """Reboot servo ``index`` (clears a hardware error), then restore its settings.
+
+        If torque is on, the servo gets its last goal and torque back, and the Bus
+        Watchdog is re-armed. Raises ServoFault if it does not come back within
+        ``fault_policy.reboot_wait_s``.
+        """
+        with self._lock:
+            sid = self.ids[index]
+            self._command(index, INST_REBOOT, b"", "a reboot")
+            self._stats.reboots[index] += 1
+            deadline = self.clock.now() + self.policy.reboot_wait_s
+            while True:
+                status = self._transact(build_instruction(sid, INST_PING), sid, attempts=1)
+                if status is not None:
+                    break
+                if self.clock.now() >= deadline:
+                    raise ServoFault(
+                        f"{self.describe(index)} did not come back within "
+                        f"{self.policy.reboot_wait_s} s of a reboot {self._where()}",
+                        servo_id=sid,
+                    )
+            self._hw_err[index] = self.read_register(index, Reg.HARDWARE_ERROR_STATUS)
+            self.write_register(index, Reg.RETURN_DELAY_TIME, 0)
+            self.write_register(index, Reg.STATUS_RETURN_LEVEL, STATUS_RETURN_ALL)
+            if self._torque_on:
+                goal = self._last_goal_deg[index]
+                if not np.isfinite(goal):
+                    goal = self._hold_deg[index]
+                ticks = int(np.clip(
+                    round(self._zero_ticks[index] + goal * self._ticks_per_deg[index]),
+                    0, POSITION_TICKS_MAX,
+                ))
+                self.write_register(index, Reg.GOAL_POSITION, ticks)
+                self.write_register(index, Reg.TORQUE_ENABLE, 1)
+                self._arm_watchdog()
+
+    # ------------------------------------------------------------------ torque
+    def torque(
+        self, *, handle_signals: bool = True, on_signal: Callable[[str], None] | None = None
+    ) -> _TorqueContext:
+        """Context manager: torque on inside, off on every way out.
+
+        On entry every servo gets its present position (clamped) as goal, then
+        torque on, then the Bus Watchdog (``rig.bus.watchdog_ms``). On exit, normal
+        or by exception, torque goes off on every servo and the watchdog is
+        cleared. With ``handle_signals`` (main thread only) SIGTERM and SIGINT are
+        caught while inside: the first calls ``on_signal(name)`` if given (e.g. a
+        loop's graceful stop) or else raises SafetyStop (SIGTERM) /
+        KeyboardInterrupt (SIGINT); a second signal raises at once; signals during
+        the torque-off are ignored until it is done.
+        """
+        return _TorqueContext(self, handle_signals, on_signal)
+
+    def _arm_watchdog(self) -> None:
+        units = self.rig.bus.watchdog_ms // BUS_WATCHDOG_UNIT_MS
+        for i in range(self._n):
+            self.write_register(i, Reg.BUS_WATCHDOG, 0)  # clears a tripped watchdog (-1)
+            if units:
+                self.write_register(i, Reg.BUS_WATCHDOG, units)
+
+    def _enable_torque(self) -> None:
+        with self._lock:
+            if not self._connected:
+                raise DeviceError(f"servo bus {self.port} is not connected: call connect()")
+            state = self.read_state(self.clock.now() + 4 * COMMAND_TIMEOUT_S)
+            if state.stale.any():
+                bad = [self.describe(int(i)) for i in np.flatnonzero(state.stale)]
+                raise DeviceError(
+                    f"cannot enable torque: no present position from {', '.join(bad)} "
+                    f"{self._where()}"
+                )
+            # hold where they are (clamped into the limits): no jump on torque-on
+            self.write_goals_deg(state.positions_deg)
+            self._torque_on = True
+            for i in range(self._n):
+                self.write_register(i, Reg.TORQUE_ENABLE, 1)
+            self._arm_watchdog()
+
+    def disable_torque(self) -> list[str]:
+        """Torque off on every servo and watchdog cleared; returns the servos that failed.
+
+        A broadcast Sync Write first (reaches every servo at once), then a checked
+        write per servo. Never raises for a servo that does not answer.
+        """
+        failed: list[str] = []
+        with self._lock:
+            if not self._transport.is_open:
+                self._torque_on = False
+                return [f"all servos: port {self.port} is closed"]
+            try:
+                self._sync_write(Reg.TORQUE_ENABLE, [0] * self._n)
+            except DeviceError as exc:
+                return [f"all servos: {exc}"]
+            for i in range(self._n):
+                try:
+                    self.write_register(i, Reg.TORQUE_ENABLE, 0)
+                    self.write_register(i, Reg.BUS_WATCHDOG, 0)
+                except DeviceError as exc:
+                    failed.append(f"{self.describe(i)}: {exc}")
+            self._torque_on = False
+        for f in failed:
+            log.error("torque off failed: %s", f)
+        return failed
+
+    # ------------------------------------------------------------------ close
+    def close(self) -> None:
+        """Torque off (if on) and close the port. Safe to call more than once."""
+        with self._lock:
+            try:
+                if self._torque_on:
+                    self.disable_torque()
+            finally:
+                self._transport.close()
+                self._connected = False
+
+    def __enter__(self) -> DynamixelBus:
+        self.connect()
+        return self
+
+
+class _TorqueContext:
+    """What :meth:`DynamixelBus.torque` returns (see there)."""
+
+    def __init__(
+        self, bus: DynamixelBus, handle_signals: bool, on_signal: Callable[[str], None] | None
+    ) -> None:
+        self.bus = bus
+        self.handle_signals = handle_signals
+        self.on_signal = on_signal
+        self.signals_seen = 0
+        self._cleaning = False
+        self._saved: dict[int, object] = {}
+        self.failed: list[str] = []
+
+    def _handler(self, signum: int, frame: FrameType | None) -> None:
+        name = signal.Signals(signum).name
+        if self._cleaning:
+            log.warning("%s during torque-off: finishing the torque-off first", name)
+            return
+        self.signals_seen += 1
+        if self.on_signal is not None and self.signals_seen == 1:
+            self.on_signal(name)
+            return
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise SafetyStop(f"{name} received: stopping the servos with torque off")
+
+    def _install(self) -> None:
+        if not self.handle_signals or threading.current_thread() is not threading.main_thread():
+            return
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            self._saved[sig] = signal.signal(sig, self._handler)
+
+    def _restore(self) -> None:
+        for sig, old in self._saved.items():
+            signal.signal(sig, old)  # type: ignore[arg-type]
+        self._saved.clear()
+
+    def __enter__(self) -> DynamixelBus:
+        if self.bus.torque_enabled:
+            raise DeviceError("torque is already on: torque() contexts do not nest")
+        self._install()
+        try:
+            self.bus._enable_torque()
+        except BaseException:
+            self._off()
+            raise
+        return self.bus
+
+    def _off(self) -> None:
+        self._cleaning = True
+        try:
+            self.failed = self.bus.disable_torque()
+        finally:
+            self._restore()
+            self._cleaning = False
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._off()
+        if self.failed and exc_type is None:
+            raise DeviceError("torque off failed: " + "; ".join(self.failed))

@@ -1,0 +1,228 @@
+"""The serial transport: bytes in and out of a Dynamixel adapter, with deadlines.
+
+The port is opened with dynamixel-sdk's ``PortHandler`` (pyserial underneath, the
+SDK's list of baud rates); reading and waiting are done here on the port's file
+descriptor with ``select``, against deadlines on the injected :class:`Clock`, in
+place of the SDK's 34 ms busy-wait on wall time.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import select
+from dataclasses import dataclass
+
+from dynamixel_sdk.port_handler import PortHandler
+
+from handrig.clock import Clock
+from handrig.errors import DeviceError
+from handrig.servo.packets import HEADER, MAX_PACKET_LEN, packet_length
+
+# FTDI adapters' default latency timer is 16 ms; 1 ms is the usual setting (REFERENCE.md 1).
+LATENCY_TIMER_WANTED_MS = 1
+_SYSFS_LATENCY = "/sys/bus/usb-serial/devices/{name}/latency_timer"
+
+
+@dataclass(frozen=True)
+class LatencyReport:
+    """What was found and done about the USB adapter's latency timer."""
+
+    path: str | None  # the sysfs file, or None when the port has none
+    before_ms: int | None
+    after_ms: int | None
+    note: str
+
+
+class SerialTransport:
+    """Bytes to and from one serial port, read against deadlines on ``clock``.
+
+    ``open()`` raises :class:`DeviceError` naming the port and the fix.
+    ``read_packet(deadline_s)`` returns one framed packet (header, LEN-sized body)
+    or ``None`` when the deadline passes; garbage before a header is skipped and
+    counted in ``skipped_bytes``. Not thread-safe on its own: the bus holds a lock.
+    """
+
+    def __init__(self, port: str, baud: int, clock: Clock) -> None:
+        self.port = port
+        self.baud = baud
+        self.clock = clock
+        self._handler: PortHandler | None = None
+        self._fd = -1
+        self._buf = bytearray()
+        self.skipped_bytes = 0
+        self.bytes_written = 0
+        self.bytes_read = 0
+
+    @property
+    def is_open(self) -> bool:
+        return self._handler is not None
+
+    def open(self) -> None:
+        """Open the port at ``baud`` (SDK PortHandler); DeviceError if impossible."""
+        handler = PortHandler(self.port)
+        try:
+            ok = handler.setBaudRate(self.baud)
+        except Exception as exc:  # pyserial raises SerialException, OSError, ValueError
+            raise DeviceError(
+                f"cannot open servo port {self.port}: {exc} (check the cable, the path and "
+                "that you may use it: e.g. add yourself to the 'dialout' group)"
+            ) from None
+        if not ok:
+            raise DeviceError(
+                f"dynamixel-sdk refuses baud {self.baud} on {self.port} "
+                "(allowed: 9600 ... 4000000 from the SDK's list)"
+            )
+        self._handler = handler
+        self._fd = handler.ser.fileno()
+        os.set_blocking(self._fd, False)
+        self._buf.clear()
+
+    def close(self) -> None:
+        if self._handler is not None:
+            try:
+                self._handler.closePort()
+            finally:
+                self._handler = None
+                self._fd = -1
+
+    def _check_open(self) -> None:
+        if self._handler is None:
+            raise DeviceError(f"servo port {self.port} is not open (call connect() first)")
+
+    def write(self, data: bytes) -> None:
+        """Send ``data`` completely; DeviceError if the port went away."""
+        self._check_open()
+        view = memoryview(data)
+        try:
+            while view:
+                try:
+                    n = os.write(self._fd, view)
+                except BlockingIOError:
+                    select.select([], [self._fd], [], 0.01)
+                    continue
+                view = view[n:]
+        except OSError as exc:
+            raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
+        self.bytes_written += len(data)
+
+    def _fill(self, deadline_s: float) -> bool:
+        """Wait until bytes arrive (appended to the buffer) or the deadline; True if some did."""
+        fd = self._fd
+        while True:
+            remaining = deadline_s - self.clock.now()
+            if remaining <= 0:
+                return False
+            try:
+                ready, _, _ = select.select([fd], [], [], remaining)
+            except InterruptedError:
+                continue
+            if not ready:
+                # No bytes for `remaining` seconds: let a fake clock know that time passed.
+                self.clock.sleep_until(deadline_s)
+                return False
+            try:
+                chunk = os.read(fd, 4096)
+            except BlockingIOError:
+                continue
+            except OSError as exc:
+                raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
+            if not chunk:
+                raise DeviceError(f"servo port {self.port} closed (adapter unplugged?)")
+            self.bytes_read += len(chunk)
+            self._buf += chunk
+            return True
+
+    def discard_input(self) -> int:
+        """Drop everything already received (buffered and pending); return how many bytes."""
+        self._check_open()
+        n = len(self._buf)
+        self._buf.clear()
+        while True:
+            try:
+                chunk = os.read(self._fd, 4096)
+            except BlockingIOError:
+                break
+            except OSError as exc:
+                raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
+            if not chunk:
+                break
+            n += len(chunk)
+        return n
+
+    def read_exact(self, n: int, deadline_s: float) -> bytes:
+        """Up to ``n`` bytes: all ``n`` unless the deadline passed first (then fewer)."""
+        self._check_open()
+        buf = self._buf
+        while len(buf) < n:
+            if not self._fill(deadline_s):
+                break
+        out = bytes(buf[:n])
+        del buf[:n]
+        return out
+
+    def read_packet(self, deadline_s: float) -> bytes | None:
+        """The next framed packet (not CRC-checked), or None at the deadline.
+
+        Bytes before a ``FF FF FD 00`` header are skipped; a LEN beyond the
+        protocol's maximum is taken as a false header and skipped too. A packet cut
+        short by the deadline is left in the buffer and None is returned.
+        """
+        self._check_open()
+        buf = self._buf
+        while True:
+            start = buf.find(HEADER)
+            if start < 0:
+                keep = min(len(buf), 3)
+                self.skipped_bytes += len(buf) - keep
+                del buf[: len(buf) - keep]
+            elif start > 0:
+                self.skipped_bytes += start
+                del buf[:start]
+                continue
+            elif len(buf) >= 7:
+                total = packet_length(buf)
+                if total > MAX_PACKET_LEN or total < 10:
+                    self.skipped_bytes += 1
+                    del buf[:1]
+                    continue
+                if len(buf) >= total:
+                    out = bytes(buf[:total])
+                    del buf[:total]
+                    return out
+            if not self._fill(deadline_s):
+                return None
+
+    def latency_timer(self, *, set_to_ms: int = LATENCY_TIMER_WANTED_MS) -> LatencyReport:
+        """Check the USB adapter's latency timer in sysfs and set it to ``set_to_ms``.
+
+        Only FTDI-style adapters (``/dev/ttyUSBn``) have one; a pseudo-terminal or
+        an ACM device does not, which the report says.
+        """
+        real = os.path.realpath(self.port)
+        name = os.path.basename(real)
+        if not re.fullmatch(r"ttyUSB\d+", name):
+            kind = "a pseudo-terminal" if real.startswith("/dev/pts/") else f"{real}"
+            return LatencyReport(
+                None, None, None, f"no USB latency timer on {kind}: skipped"
+            )
+        path = _SYSFS_LATENCY.format(name=name)
+        try:
+            with open(path) as f:
+                before = int(f.read().strip())
+        except (OSError, ValueError) as exc:
+            return LatencyReport(path, None, None, f"cannot read {path}: {exc}: skipped")
+        if before <= set_to_ms:
+            return LatencyReport(path, before, before, f"latency timer {before} ms: ok")
+        try:
+            with open(path, "w") as f:
+                f.write(f"{set_to_ms}\n")
+        except OSError as exc:
+            return LatencyReport(
+                path, before, before,
+                f"latency timer is {before} ms and could not be set ({exc}): every read "
+                f"waits up to {before} ms; fix: echo {set_to_ms} | sudo tee {path}",
+            )
+        return LatencyReport(
+            path, before, set_to_ms, f"latency timer set from {before} to {set_to_ms} ms"
+        )
