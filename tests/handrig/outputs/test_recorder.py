@@ -1,0 +1,237 @@
+"""Recorder (CSV, BVH), load_performance and Playback: round trips, bad files, timing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from handrig import hand, mocap
+from handrig.bvh import read_bvh
+from handrig.clock import FakeClock
+from handrig.errors import DataError
+from handrig.outputs import recorder
+from handrig.outputs.recorder import Playback, Recorder, load_performance
+
+
+def _performance(n: int, seed: int = 0, rate_hz: float = 200.0) -> tuple[np.ndarray, ...]:
+    rng = np.random.default_rng(seed)
+    lim = hand.curve_limits_deg()
+    poses = rng.uniform(lim[:, 0], lim[:, 1], (n, 50))
+    wrist = rng.uniform([-70, -30, -70, -30], [80, 20, 80, 20], (n, 4))
+    t_s = 3.0 + np.arange(n) / rate_hz
+    return t_s, poses, wrist
+
+
+def _record(path: Path, t_s: np.ndarray, poses: np.ndarray, wrist: np.ndarray | None,
+            rate_hz: float = 200.0, chunk_frames: int = 16) -> Path:
+    with Recorder(path, rate_hz=rate_hz, chunk_frames=chunk_frames) as rec:
+        for i in range(len(t_s)):
+            rec.add(t_s[i], poses[i], None if wrist is None else wrist[i])
+        assert rec.n_frames == len(t_s)
+    return path
+
+
+@pytest.mark.parametrize("with_wrist", [True, False])
+def test_csv_round_trip_within_1e6(tmp_path: Path, with_wrist: bool) -> None:
+    t_s, poses, wrist = _performance(53)  # > 3 chunks of 16
+    path = _record(tmp_path / "take.csv", t_s, poses, wrist if with_wrist else None)
+    header = path.read_text().splitlines()[0].split(",")
+    assert header[:3] == ["t_s", "riThumbCMCx", "riThumbCMCy"]
+    assert len(header) == (55 if with_wrist else 51)
+    t2, p2, w2 = load_performance(path)
+    np.testing.assert_allclose(t2, t_s, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(p2, poses, atol=1e-6, rtol=0)
+    if with_wrist:
+        assert w2 is not None
+        np.testing.assert_allclose(w2, wrist, atol=1e-6, rtol=0)
+    else:
+        assert w2 is None
+
+
+def test_csv_columns_are_found_by_name(tmp_path: Path) -> None:
+    t_s, poses, _ = _performance(5)
+    names = ["t_s", *reversed(hand.CURVE_NAMES)]
+    rows = np.column_stack([t_s, poses[:, ::-1]])
+    path = tmp_path / "reordered.csv"
+    np.savetxt(path, rows, fmt="%.6f", delimiter=",", header=",".join(names), comments="")
+    _, p2, _ = load_performance(path)
+    np.testing.assert_allclose(p2, poses, atol=1e-6, rtol=0)
+
+
+def test_bvh_round_trip_within_1e4_deg(tmp_path: Path) -> None:
+    t_s, poses, wrist = _performance(41, seed=1, rate_hz=60.0)
+    path = _record(tmp_path / "take.bvh", t_s, poses, wrist, rate_hz=60.0)
+    t2, p2, w2 = load_performance(path)
+    np.testing.assert_allclose(p2, poses, atol=1e-4, rtol=0)
+    assert w2 is not None
+    np.testing.assert_allclose(w2, wrist, atol=1e-4, rtol=0)
+    np.testing.assert_allclose(t2, np.arange(41) / 60.0, atol=1e-6)
+
+
+def test_bvh_skeleton_channels_and_frame_time(tmp_path: Path) -> None:
+    t_s, poses, wrist = _performance(4)
+    bvh = read_bvh(_record(tmp_path / "take.bvh", t_s, poses, wrist, rate_hz=200.0))
+    assert bvh.frame_time_s == pytest.approx(0.005)
+    for side in ("Right", "Left"):
+        for digit in hand.DIGITS:
+            for k in (1, 2, 3):
+                j = bvh.joint(f"{side}Hand{digit}{k}")
+                assert j.channels == ("Zrotation", "Xrotation", "Yrotation")
+                assert np.linalg.norm(j.offset) > 0.5  # cm: plausible, never zero
+    # index MCP flexion is the Zrotation of <S>HandIndex1, right sign +1, left -1
+    col = bvh.column("RightHandIndex1", "Zrotation")
+    np.testing.assert_allclose(bvh.motion[:, col], poses[:, hand.curve_index("riIndexMCPy")],
+                               atol=1e-6)
+    col = bvh.column("LeftHandIndex1", "Zrotation")
+    np.testing.assert_allclose(bvh.motion[:, col], -poses[:, hand.curve_index("leIndexMCPy")],
+                               atol=1e-6)
+    # mirrored skeleton: right hand bones along -X, left along +X
+    assert bvh.joint("RightHandMiddle2").offset[0] < 0 < bvh.joint("LeftHandMiddle2").offset[0]
+
+
+def test_bvh_reads_back_through_the_mocap_profile(tmp_path: Path) -> None:
+    t_s, poses, wrist = _performance(12, seed=2)
+    path = _record(tmp_path / "take.bvh", t_s, poses, wrist)
+    curves = mocap.load_curves(path, recorder.BVH_PROFILE)
+    np.testing.assert_allclose(curves.curves, poses, atol=1e-4, rtol=0)
+
+
+def test_reference_capture_loads_as_a_performance() -> None:
+    t_s, poses, wrist = load_performance(mocap.REFERENCE_BVH)
+    ref = mocap.load_reference()
+    np.testing.assert_array_equal(poses, ref.curves)
+    assert wrist is not None and wrist.shape == (ref.n_frames, 4)
+    assert t_s[1] == pytest.approx(1 / 24, rel=1e-4)
+
+
+def test_nothing_is_written_before_close(tmp_path: Path) -> None:
+    t_s, poses, _ = _performance(3)
+    path = tmp_path / "take.csv"
+    rec = Recorder(path)
+    rec.add(t_s[0], poses[0])
+    assert not path.exists()
+    assert (tmp_path / "take.csv.partial").stat().st_size == 0
+    rec.close()
+    assert path.exists() and not (tmp_path / "take.csv.partial").exists()
+    rec.close()  # idempotent
+
+
+def test_wrist_must_stay_consistent(tmp_path: Path) -> None:
+    t_s, poses, wrist = _performance(2)
+    with Recorder(tmp_path / "w.csv") as rec:
+        rec.add(t_s[0], poses[0], wrist[0])
+        with pytest.raises(ValueError, match="wrist"):
+            rec.add(t_s[1], poses[1])
+
+
+def test_bad_path_and_suffix_fail_before_recording(tmp_path: Path) -> None:
+    with pytest.raises(DataError, match="cannot create"):
+        Recorder(tmp_path / "missing_dir" / "take.csv")
+    with pytest.raises(DataError, match=r"unknown recording suffix '\.txt'"):
+        Recorder(tmp_path / "take.txt")
+    assert recorder.format_of(tmp_path / "take.dat", "bvh") == "bvh"
+
+
+def _csv_lines(tmp_path: Path, n: int = 6) -> list[str]:
+    t_s, poses, wrist = _performance(n)
+    return _record(tmp_path / "good.csv", t_s, poses, wrist).read_text().splitlines()
+
+
+def _write(path: Path, lines: list[str], tail: str = "\n") -> Path:
+    path.write_text("\n".join(lines) + tail)
+    return path
+
+
+def test_truncated_csv_names_file_and_line(tmp_path: Path) -> None:
+    lines = _csv_lines(tmp_path)
+    text = "\n".join(lines)
+    path = tmp_path / "cut.csv"
+    path.write_text(text[: len(text) - 200])  # cut inside the last row
+    with pytest.raises(DataError, match=r"cut\.csv: line 7: \d+ values, expected 55 .*truncated"):
+        load_performance(path)
+
+
+def test_corrupt_csv_value_names_line_and_column(tmp_path: Path) -> None:
+    lines = _csv_lines(tmp_path)
+    fields = lines[3].split(",")
+    fields[10] = "1.2.3"
+    lines[3] = ",".join(fields)
+    with pytest.raises(DataError, match=r"bad\.csv: line 4, column 11: '1\.2\.3' is not a number"):
+        load_performance(_write(tmp_path / "bad.csv", lines))
+
+
+def test_csv_nan_time_going_backwards_and_bad_header(tmp_path: Path) -> None:
+    lines = _csv_lines(tmp_path)
+    nan = [*lines]
+    nan[2] = nan[2].replace(nan[2].split(",")[5], "nan", 1)
+    with pytest.raises(DataError, match=r"nan\.csv: line 3: value nan is not finite"):
+        load_performance(_write(tmp_path / "nan.csv", nan))
+    back = [lines[0], lines[2], lines[1], *lines[3:]]
+    with pytest.raises(DataError, match=r"back\.csv: line 3: time goes backwards"):
+        load_performance(_write(tmp_path / "back.csv", back))
+    with pytest.raises(DataError, match=r"hdr\.csv: line 1: unknown column 'riIndexMCPq'"):
+        load_performance(_write(tmp_path / "hdr.csv",
+                                [lines[0].replace("riIndexMCPy", "riIndexMCPq"), *lines[1:]]))
+    with pytest.raises(DataError, match=r"empty\.csv: empty file"):
+        load_performance(_write(tmp_path / "empty.csv", [], tail=""))
+
+
+def test_truncated_bvh_names_file_and_frame(tmp_path: Path) -> None:
+    t_s, poses, wrist = _performance(10)
+    text = _record(tmp_path / "good.bvh", t_s, poses, wrist).read_text()
+    path = tmp_path / "cut.bvh"
+    path.write_text(text[: len(text) - 700])
+    with pytest.raises(DataError, match=r"cut\.bvh: MOTION is truncated at frame 9"):
+        load_performance(path)
+    path.write_text(text[: text.index("MOTION") // 2])
+    with pytest.raises(DataError, match=r"cut\.bvh: no MOTION block"):
+        load_performance(path)
+
+
+def test_bvh_of_another_skeleton_is_rejected(tmp_path: Path) -> None:
+    text = "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n"
+    text += "End Site\n{\nOFFSET 0 1 0\n}\n}\nMOTION\nFrames: 1\nFrame Time: 0.04\n0 0 0\n"
+    path = tmp_path / "body.bvh"
+    path.write_text(text)
+    with pytest.raises(DataError, match=r"body\.bvh: joint 'LeftHandIndex1' not found"):
+        load_performance(path)
+    with pytest.raises(DataError, match="not found"):
+        load_performance(tmp_path / "nope.csv")
+
+
+def test_playback_iterates_at_recorded_times(tmp_path: Path) -> None:
+    t_s, poses, wrist = _performance(20, rate_hz=50.0)
+    t_s[7:] += 0.013  # a late frame: playback keeps the recorded spacing
+    path = _record(tmp_path / "take.csv", t_s, poses, wrist)
+    clock = FakeClock(100.0)
+    seen = []
+    for t, pose, w in Playback(path, clock):
+        seen.append((clock.now() - 100.0, t))
+        assert w is not None
+        np.testing.assert_allclose(pose, poses[len(seen) - 1], atol=1e-6)
+    played, recorded = np.array(seen).T
+    np.testing.assert_allclose(played, recorded - recorded[0], atol=1e-9)
+    assert len(seen) == 20
+
+
+def test_playback_sample_is_nonblocking_and_ends(tmp_path: Path) -> None:
+    t_s, poses, _ = _performance(10, rate_hz=10.0)
+    path = _record(tmp_path / "take.csv", t_s, poses, None)
+    clock = FakeClock()
+    pb = Playback(path, clock, speed=2.0)
+    pb.start()
+    clock.advance(0.26)  # 0.52 s of performance at 2x: frame 5
+    got = pb.sample()
+    assert got is not None and got[1] is None
+    np.testing.assert_allclose(got[0], poses[5], atol=1e-6)
+    assert clock.sleeps == 0
+    clock.advance(0.3)  # 1.12 s: past the end (1.0 s incl. the last frame's period)
+    assert pb.sample() is None
+    looped = Playback(path, clock, loop=True)
+    looped.start()
+    clock.advance(1.05)  # wraps to 0.05 s: frame 0
+    again = looped.sample()
+    assert again is not None
+    np.testing.assert_allclose(again[0], poses[0], atol=1e-6)
