@@ -1,0 +1,405 @@
+"""One emulated X-series Dynamixel servo: control-table memory and instruction semantics.
+
+The servo knows nothing about bytes on a wire or time on a bus (that is
+:mod:`sim.dxl_bus`); it answers ``ping``/``read``/``write``/... with the ERR
+byte a real servo would put in its status packet, and the data.
+
+Rules modelled (ROBOTIS e-manual, X-series control table and protocol 2.0):
+
+- EEPROM items (address < 64) are writable only with torque off (else Access Error).
+- Read-only items refuse writes (Access Error); a write that cuts an item
+  is a Data Length Error; an undefined address is an Access Error.
+- A value outside an item's range is a Data Range Error; a Goal Position outside
+  the position limits (position mode) or a Goal Current above the Current
+  Limit is a Data Limit Error.
+- A hardware error (e.g. overload) turns torque off, keeps it off, sets the
+  Alert bit (0x80) in every status, and only a reboot clears it.
+- Bus Watchdog: with torque on and the watchdog armed, silence for longer than
+  the watchdog stops the servo, sets Bus Watchdog to -1 and refuses goal
+  writes with a Data Range Error until 0 is written to it.
+- Present Position = direction * motor position + Homing Offset (Drive Mode bit 0
+  reverses direction); the motor position is what moves the joint.
+
+Without a physics model attached (see :mod:`sim.puppet`), :meth:`advance` moves
+the motor toward the goal at the Velocity Limit (or Profile Velocity) so the
+servo still moves.
+"""
+
+from __future__ import annotations
+
+import math
+
+from firmware_protocol.dynamixel import (
+    BUS_WATCHDOG_UNIT_S,
+    CONTROL_TABLE_BYTES,
+    ERROR_ALERT,
+    INDEX_BY_BAUD,
+    ITEM_AT,
+    MODELS,
+    RETURN_DELAY_UNIT_S,
+    TICKS_PER_TURN,
+    VELOCITY_UNIT_RPM,
+    X_SERIES_TABLE,
+    Access,
+    Area,
+    ErrorCode,
+    HardwareError,
+    Item,
+    ModelInfo,
+    Reg,
+)
+
+# Addresses above the modelled table up to the end of the XL330 table (661) read as 0.
+READABLE_BYTES = 662
+# Time a servo is silent after REBOOT or FACTORY RESET. An assumption of this
+# emulator, not a datasheet figure.
+REBOOT_S = 0.1
+POSITION_MODES = (3, 4, 5)
+OPERATING_MODES = (0, 1, 3, 4, 5, 16)
+# Present Temperature / Input Voltage reported while nothing heats the servo.
+AMBIENT_TEMPERATURE_C = 30
+
+
+def _defaults(info: ModelInfo, servo_id: int, baud: int) -> dict[Reg, int]:
+    return {
+        Reg.MODEL_NUMBER: info.model_number,
+        Reg.MODEL_INFORMATION: 0,
+        Reg.FIRMWARE_VERSION: info.firmware_version,
+        Reg.ID: servo_id,
+        Reg.BAUD_RATE: INDEX_BY_BAUD.get(baud, 1),
+        Reg.RETURN_DELAY_TIME: 250,
+        Reg.DRIVE_MODE: 0,
+        Reg.OPERATING_MODE: 3,
+        Reg.SECONDARY_ID: 255,
+        Reg.PROTOCOL_TYPE: 2,
+        Reg.HOMING_OFFSET: 0,
+        Reg.MOVING_THRESHOLD: 10,
+        Reg.TEMPERATURE_LIMIT: 70,
+        Reg.MAX_VOLTAGE_LIMIT: 70,
+        Reg.MIN_VOLTAGE_LIMIT: 35,
+        Reg.PWM_LIMIT: 885,
+        Reg.CURRENT_LIMIT: info.current_limit,
+        Reg.VELOCITY_LIMIT: round(info.no_load_speed_rpm / VELOCITY_UNIT_RPM),
+        Reg.MAX_POSITION_LIMIT: 4095,
+        Reg.MIN_POSITION_LIMIT: 0,
+        Reg.STARTUP_CONFIGURATION: 0,
+        Reg.SHUTDOWN: 53,  # overload, electrical shock, overheating, input voltage
+        Reg.STATUS_RETURN_LEVEL: 2,
+        Reg.POSITION_P_GAIN: info.position_p_gain,
+        Reg.POSITION_D_GAIN: info.position_d_gain,
+        Reg.VELOCITY_P_GAIN: 180,
+        Reg.VELOCITY_I_GAIN: 1600,
+        Reg.PRESENT_INPUT_VOLTAGE: info.nominal_voltage_dv,
+        Reg.PRESENT_TEMPERATURE: AMBIENT_TEMPERATURE_C,
+    }
+
+
+class EmulatedServo:
+    """An X-series servo's control table and instruction semantics.
+
+    ``baud`` sets the Baud Rate item (the emulated bus does not enforce it).
+    ``motor_ticks`` is the physical motor position (before Homing Offset and
+    Drive Mode), initially ``start_ticks``.
+    """
+
+    def __init__(
+        self,
+        servo_id: int = 1,
+        model: str = "XL330-M288",
+        *,
+        baud: int = 1_000_000,
+        start_ticks: float = 2048.0,
+    ) -> None:
+        if model not in MODELS:
+            raise ValueError(f"unknown servo model {model!r}; known: {', '.join(MODELS)}")
+        if not 0 <= servo_id <= 252:
+            raise ValueError(f"servo ID {servo_id} out of range 0..252")
+        self.info = MODELS[model]
+        self.mem = bytearray(READABLE_BYTES)
+        self.motor_ticks = float(start_ticks)
+        self.motor_velocity_rpm = 0.0
+        self.motor_current_ma = 0.0
+        self.silent_until = 0.0
+        self.last_heard = 0.0
+        self.tick_ms = 0.0
+        self.injected_hardware_error = 0
+        self._baud = baud
+        self._registered: tuple[int, bytes] | None = None
+        self._set_all(_defaults(self.info, servo_id, baud))
+        self._reset_ram()
+        self.counters = {"writes": 0, "reads": 0, "errors": 0, "reboots": 0}
+
+    # ------------------------------------------------------------------ registers
+
+    def get(self, reg: Reg) -> int:
+        """The value of one control-table item."""
+        item = X_SERIES_TABLE[reg]
+        return item.decode(self.mem[item.address : item.address + item.size])
+
+    def set(self, reg: Reg, value: int) -> None:
+        """Set an item directly (no access checks: the emulator's own hand)."""
+        item = X_SERIES_TABLE[reg]
+        self.mem[item.address : item.address + item.size] = item.encode(value)
+
+    def _set_all(self, values: dict[Reg, int]) -> None:
+        for reg, value in values.items():
+            self.set(reg, value)
+
+    def _reset_ram(self) -> None:
+        """RAM as after power-on: defaults, torque off, goal = present position."""
+        defaults = _defaults(self.info, self.id, self._baud)
+        self.mem[64:CONTROL_TABLE_BYTES] = bytes(CONTROL_TABLE_BYTES - 64)
+        for reg, value in defaults.items():
+            if X_SERIES_TABLE[reg].area is Area.RAM:
+                self.set(reg, value)
+        self._registered = None
+        self._publish_present()
+        self.set(Reg.GOAL_POSITION, self.get(Reg.PRESENT_POSITION))
+
+    @property
+    def id(self) -> int:
+        return self.mem[7]
+
+    @property
+    def torque_enabled(self) -> bool:
+        return self.mem[64] == 1
+
+    @property
+    def goal(self) -> int:
+        """Goal Position register, ticks."""
+        return self.get(Reg.GOAL_POSITION)
+
+    @property
+    def present(self) -> int:
+        """Present Position register, ticks."""
+        return self.get(Reg.PRESENT_POSITION)
+
+    @property
+    def hardware_error(self) -> int:
+        """Hardware Error Status bits (see :class:`HardwareError`)."""
+        return self.mem[70]
+
+    @property
+    def status_return_level(self) -> int:
+        return self.mem[68]
+
+    @property
+    def return_delay_s(self) -> float:
+        return self.mem[9] * RETURN_DELAY_UNIT_S
+
+    @property
+    def direction(self) -> int:
+        return -1 if self.mem[10] & 1 else 1
+
+    def error_byte(self, code: int = 0) -> int:
+        """ERR byte of a status: ``code`` plus the Alert bit while a hardware error stands."""
+        return code | (ERROR_ALERT if self.mem[70] else 0)
+
+    # ---------------------------------------------------------- motion interface
+
+    def goal_motor_ticks(self) -> float:
+        """The goal as a motor position (undoing Homing Offset and Drive Mode)."""
+        return self.direction * (self.goal - self.get(Reg.HOMING_OFFSET))
+
+    def set_motion(self, motor_ticks: float, velocity_rpm: float, current_ma: float) -> None:
+        """Physics writes the motor's state; Present Position/Velocity/Current follow."""
+        self.motor_ticks = motor_ticks
+        self.motor_velocity_rpm = velocity_rpm
+        self.motor_current_ma = current_ma
+        self._publish_present()
+
+    def _publish_present(self) -> None:
+        d = self.direction
+        position = round(d * self.motor_ticks) + self.get(Reg.HOMING_OFFSET)
+        self.mem[132:136] = position.to_bytes(4, "little", signed=True)
+        velocity = round(d * self.motor_velocity_rpm / VELOCITY_UNIT_RPM)
+        self.mem[128:132] = velocity.to_bytes(4, "little", signed=True)
+        current = round(d * self.motor_current_ma / self.info.current_unit_ma)
+        current = max(-32768, min(32767, current))
+        self.mem[126:128] = current.to_bytes(2, "little", signed=True)
+        self.mem[122] = 1 if abs(velocity) > self.get(Reg.MOVING_THRESHOLD) else 0
+
+    def speed_limit_ticks_per_s(self) -> float:
+        """Motor speed limit: Profile Velocity if set, else Velocity Limit."""
+        profile = self.get(Reg.PROFILE_VELOCITY)
+        limit = self.get(Reg.VELOCITY_LIMIT)
+        units = min(profile, limit) if profile else limit
+        return units * VELOCITY_UNIT_RPM * TICKS_PER_TURN / 60.0
+
+    def advance(self, dt_s: float) -> None:
+        """Kinematic motion without physics: toward the goal at the speed limit."""
+        self.tick_ms = (self.tick_ms + dt_s * 1000.0) % 32768.0
+        self.mem[120:122] = int(self.tick_ms).to_bytes(2, "little")
+        if dt_s <= 0:
+            return
+        if not self.torque_enabled:
+            if self.motor_velocity_rpm or self.motor_current_ma:
+                self.set_motion(self.motor_ticks, 0.0, 0.0)
+            return
+        error = self.goal_motor_ticks() - self.motor_ticks
+        step = self.speed_limit_ticks_per_s() * dt_s
+        moved = math.copysign(min(abs(error), step), error)
+        rpm = moved / dt_s * 60.0 / TICKS_PER_TURN
+        self.set_motion(self.motor_ticks + moved, rpm, 0.0)
+
+    # ------------------------------------------------------------------ faults
+
+    def inject_hardware_error(self, bits: int = HardwareError.OVERLOAD) -> None:
+        """A hardware error (overload by default): torque off until a reboot."""
+        self.injected_hardware_error |= int(bits)
+        self.mem[70] |= int(bits)
+        self.mem[64] = 0
+
+    def clear_injected_fault(self) -> None:
+        """Remove the cause of an injected fault (the status stays until a reboot)."""
+        self.injected_hardware_error = 0
+
+    def check_watchdog(self, now: float) -> bool:
+        """Trip the Bus Watchdog if the bus has been quiet too long; True when it tripped."""
+        wd = self.mem[98]
+        if wd == 0 or wd == 0xFF or not self.torque_enabled:
+            return False
+        if now - self.last_heard > wd * BUS_WATCHDOG_UNIT_S:
+            self.mem[98] = 0xFF
+            # The servo stops where it is.
+            self.set(Reg.GOAL_POSITION, self.present)
+            return True
+        return False
+
+    # ------------------------------------------------------------ instructions
+
+    def ping(self) -> tuple[int, bytes]:
+        """ERR and the ping data: model number (LE16) and firmware version."""
+        return self.error_byte(), bytes(self.mem[0:2]) + bytes(self.mem[6:7])
+
+    def read(self, address: int, length: int) -> tuple[int, bytes]:
+        """ERR and ``length`` bytes from ``address`` (no data on error)."""
+        self.counters["reads"] += 1
+        if length == 0 or address + length > READABLE_BYTES:
+            self.counters["errors"] += 1
+            return self.error_byte(ErrorCode.ACCESS), b""
+        return self.error_byte(), bytes(self.mem[address : address + length])
+
+    def check_write(self, address: int, data: bytes) -> int:
+        """The error code a write would get (0 when it is accepted)."""
+        end = address + len(data)
+        if not data:
+            return ErrorCode.DATA_LENGTH
+        pos = address
+        torque = self.torque_enabled
+        while pos < end:
+            item = ITEM_AT.get(pos)
+            if item is None:
+                inside = any(i.address < pos < i.address + i.size for i in ITEM_AT.values())
+                return ErrorCode.DATA_LENGTH if inside else ErrorCode.ACCESS
+            if pos + item.size > end:
+                return ErrorCode.DATA_LENGTH
+            if item.access is Access.R or (item.area is Area.EEPROM and torque):
+                return ErrorCode.ACCESS
+            offset = pos - address
+            value = item.decode(data[offset : offset + item.size])
+            code = self._check_value(pos, item, value)
+            if code:
+                return code
+            pos += item.size
+        return ErrorCode.NONE
+
+    def _check_value(self, pos: int, item: Item, value: int) -> int:
+        low, high = item.min_value, item.max_value
+        if low is not None and high is not None and not low <= value <= high:
+            return ErrorCode.DATA_RANGE
+        if pos == Reg.OPERATING_MODE and value not in OPERATING_MODES:
+            return ErrorCode.DATA_RANGE
+        goals = (Reg.GOAL_POSITION, Reg.GOAL_VELOCITY, Reg.GOAL_CURRENT, Reg.GOAL_PWM)
+        if pos in goals and self.mem[98] == 0xFF:  # Bus Watchdog error stands
+            return ErrorCode.DATA_RANGE
+        if pos == Reg.GOAL_POSITION and self.mem[11] == 3:
+            low = self.get(Reg.MIN_POSITION_LIMIT)
+            high = self.get(Reg.MAX_POSITION_LIMIT)
+            if not low <= value <= high:
+                return ErrorCode.DATA_LIMIT
+        if pos == Reg.GOAL_CURRENT and abs(value) > self.get(Reg.CURRENT_LIMIT):
+            return ErrorCode.DATA_LIMIT
+        if pos == Reg.GOAL_VELOCITY and abs(value) > self.get(Reg.VELOCITY_LIMIT):
+            return ErrorCode.DATA_LIMIT
+        return ErrorCode.NONE
+
+    def write(self, address: int, data: bytes) -> int:
+        """Write ``data`` at ``address``; returns the ERR byte (0 or an error, plus Alert)."""
+        self.counters["writes"] += 1
+        # Hot path: Goal Position in position mode, torque on or off.
+        if address == 116 and len(data) == 4 and self.mem[11] == 3 and self.mem[98] != 0xFF:
+            value = int.from_bytes(data, "little", signed=True)
+            if self.get(Reg.MIN_POSITION_LIMIT) <= value <= self.get(Reg.MAX_POSITION_LIMIT):
+                self.mem[116:120] = data
+                return self.error_byte()
+            self.counters["errors"] += 1
+            return self.error_byte(ErrorCode.DATA_LIMIT)
+        code = self.check_write(address, data)
+        if code:
+            self.counters["errors"] += 1
+            return self.error_byte(code)
+        end = address + len(data)
+        self.mem[address:end] = data
+        if address <= Reg.TORQUE_ENABLE < end and self.mem[64] and self.mem[70]:
+            # A standing hardware error keeps torque off until a reboot.
+            self.mem[64] = 0
+        if address <= Reg.HOMING_OFFSET < end or address <= Reg.DRIVE_MODE < end:
+            self._publish_present()
+        return self.error_byte()
+
+    def reg_write(self, address: int, data: bytes) -> int:
+        """Check and hold a write until ACTION (Registered Instruction = 1)."""
+        code = self.check_write(address, data)
+        if code:
+            self.counters["errors"] += 1
+            return self.error_byte(code)
+        self._registered = (address, bytes(data))
+        self.mem[69] = 1
+        return self.error_byte()
+
+    def action(self) -> int:
+        """Run the registered write; an Instruction Error when none is registered."""
+        if self._registered is None:
+            self.counters["errors"] += 1
+            return self.error_byte(ErrorCode.INSTRUCTION)
+        address, data = self._registered
+        self._registered = None
+        self.mem[69] = 0
+        return self.write(address, data)
+
+    def reboot(self, now: float) -> int:
+        """Reboot: RAM to defaults, torque off, hardware error cleared unless its cause
+        stands; silent for :data:`REBOOT_S`. Returns the ERR byte of the status sent first."""
+        err = self.error_byte()
+        self.counters["reboots"] += 1
+        self._reset_ram()
+        self.mem[70] = self.injected_hardware_error & 0xFF
+        self.silent_until = now + REBOOT_S
+        return err
+
+    def factory_reset(self, option: int, now: float) -> int:
+        """FACTORY RESET: 0xFF all, 0x01 all but ID, 0x02 all but ID and baud rate."""
+        if option not in (0xFF, 0x01, 0x02):
+            self.counters["errors"] += 1
+            return self.error_byte(ErrorCode.DATA_RANGE)
+        err = self.error_byte()
+        keep_id = self.id if option in (0x01, 0x02) else 1
+        keep_baud = self.mem[8] if option == 0x02 else 1
+        self.mem[0:64] = bytes(64)
+        self._set_all({r: v for r, v in _defaults(self.info, keep_id, self._baud).items()
+                       if X_SERIES_TABLE[r].area is Area.EEPROM})
+        self.mem[8] = keep_baud
+        self._reset_ram()
+        self.mem[70] = self.injected_hardware_error & 0xFF
+        self.silent_until = now + REBOOT_S
+        return err
+
+    def available(self, now: float) -> bool:
+        """False while rebooting."""
+        return now >= self.silent_until
+
+    def __repr__(self) -> str:
+        return (f"EmulatedServo(id={self.id}, {self.info.name}, torque={int(self.torque_enabled)}, "
+                f"goal={self.goal}, present={self.present}, hw_error={self.hardware_error:#04x})")
+
