@@ -395,6 +395,10 @@ class Playback:
         """Start the performance now (on the clock)."""
         self._start_s = self.clock.now()
 
+    def elapsed_s(self) -> float:
+        """Performance time since :meth:`start` (scaled by ``speed``), seconds."""
+        return (self.clock.now() - self._start_s) * self.speed
+
     def index_at(self, now_s: float) -> int | None:
         """Index of the frame due at clock time ``now_s``; None after the end (no loop)."""
         rel = (now_s - self._start_s) * self.speed
