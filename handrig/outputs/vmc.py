@@ -152,16 +152,41 @@ _BASIS_INV = _BASIS.inv()
 _SLOTS = np.array([[b.flex, b.abd, b.twist] for b in BONES], dtype=np.intp)
 
 
+_BASIS_MATRIX = _BASIS.as_matrix()
+
+
 def bone_quaternions(values_deg: NDArray[np.float64]) -> NDArray[np.float64]:
     """Local Unity quaternions (n_bones, 4) as (qx, qy, qz, qw) for one frame.
 
     ``values_deg`` is the 55-slot vector: 50 curves, 4 wrist DOFs (:data:`WRIST_NAMES`
-    order), and a zero; vocabulary convention.
+    order), and a zero; vocabulary convention. Closed-form numpy (about 10x faster
+    than composing scipy Rotations); :func:`bone_quaternions_reference` is the scipy
+    version it is tested against.
     """
+    half = np.radians(values_deg[_SLOTS] * _DET[:, None]) * 0.5
+    c = np.cos(half)
+    s = np.sin(half)
+    c1, c2, c3 = c[:, 0], c[:, 1], c[:, 2]
+    s1, s2, s3 = s[:, 0], s[:, 1], s[:, 2]
+    # intrinsic X-Y-Z: q = qx(a1) qy(a2) qz(a3), Hamilton products expanded
+    v = np.empty((len(BONES), 3))
+    v[:, 0] = s1 * c2 * c3 + c1 * s2 * s3
+    v[:, 1] = c1 * s2 * c3 - s1 * c2 * s3
+    v[:, 2] = c1 * c2 * s3 + s1 * s2 * c3
+    q = np.empty((len(BONES), 4))
+    q[:, 3] = c1 * c2 * c3 - s1 * s2 * s3
+    # conjugation b q b^-1 keeps w and rotates the vector part by b
+    np.einsum("bij,bj->bi", _BASIS_MATRIX, v, out=q[:, :3])
+    q[:, 0:2] *= -1.0  # right-handed -> Unity: q = (-qx, -qy, qz, qw)
+    return q
+
+
+def bone_quaternions_reference(values_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`bone_quaternions` by composing scipy Rotations (slow; for tests)."""
     ang = values_deg[_SLOTS] * _DET[:, None]
     rot = _BASIS * Rotation.from_euler("XYZ", ang, degrees=True) * _BASIS_INV
     q = rot.as_quat()
-    q[:, 0:2] *= -1.0  # right-handed -> Unity: q = (-qx, -qy, qz, qw)
+    q[:, 0:2] *= -1.0
     return q
 
 

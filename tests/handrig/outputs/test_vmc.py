@@ -197,3 +197,14 @@ def test_parse_host_port_defaults() -> None:
 def test_bad_rate_is_a_config_error() -> None:
     with pytest.raises(ConfigError, match="rate"):
         vmc.VmcSender("127.0.0.1", 9, rate_hz=0)
+
+
+def test_closed_form_quaternions_equal_scipy_composition() -> None:
+    for seed in range(5):
+        pose, wrist = _random_pose(seed)
+        v = np.concatenate([pose, wrist, [0.0]])
+        fast = vmc.bone_quaternions(v)
+        ref = vmc.bone_quaternions_reference(v)
+        dots = np.abs(np.sum(fast * ref, axis=1))  # q and -q are the same rotation
+        np.testing.assert_allclose(dots, 1.0, atol=1e-12)
+        np.testing.assert_allclose(np.linalg.norm(fast, axis=1), 1.0, atol=1e-12)
