@@ -1,0 +1,411 @@
+"""Glove sources: where the realtime loop gets raw glove samples.
+
+:class:`GloveSource` is the abstract device. The loop calls :meth:`~GloveSource.latest`
+once per cycle: it returns the newest sample not handed out before, or ``None``
+when nothing new has arrived, and never blocks. Concrete sources:
+
+* :class:`SerialGlove`: a serial port (or pty) read by a background thread, in
+  the handrig frame format (``firmware_protocol/SPEC.md``) or the OpenGloves
+  alpha line format;
+* :class:`ReplayGlove`: a :class:`~handrig.glove_recording.GloveRecording`
+  played against the injected clock (no thread, deterministic with a FakeClock).
+
+Each source keeps :class:`GloveStats` (good frames, CRC and other errors,
+resyncs, garbage bytes, sequence gaps, time since the last good frame). A port
+that goes away sets :attr:`GloveSource.failure` to a :class:`DeviceError` with a
+clear message; ``latest()`` then simply returns ``None`` (the loop's glove
+timeout eases the puppet to the relaxed pose) and :meth:`GloveSource.check`
+raises it for callers that prefer to stop.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import select
+import threading
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from firmware_protocol.glove import BUTTON_RELAX, FrameDecoder
+from firmware_protocol.opengloves import BUTTON_LETTERS, LineDecoder
+from handrig.clock import Clock
+from handrig.errors import DeviceError
+from handrig.glove_recording import GloveRecording
+
+FloatArray = NDArray[np.float64]
+GloveFormat = Literal["frames", "opengloves"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GloveSample:
+    """One glove sample as the loop sees it.
+
+    ``raw`` (k,) float64: raw channel counts in the glove's channel order (for
+    OpenGloves the 13 channels of ``firmware_protocol.opengloves.CHANNEL_KEYS``).
+    ``quat`` (4,) float64: forearm IMU orientation x, y, z, w (scalar last, ENU
+    world frame, IMU body to world), or ``None`` when the glove has no valid IMU
+    reading. ``buttons``: bitfield, bit 0 = relax / e-stop (``estop``).
+    ``seq``: the glove's sequence number (wraps at 65536; for OpenGloves, lines
+    received). ``sensor_time_us``: the glove's timestamp (wraps at 2**32; 0 for
+    OpenGloves). ``host_time_s``: Clock time at which the read that delivered the
+    frame's last byte returned (glove-to-servo latency is measured from it).
+    ``count``: 1-based running count of samples from this source.
+    """
+
+    raw: FloatArray
+    quat: FloatArray | None
+    buttons: int
+    estop: bool
+    seq: int
+    sensor_time_us: int
+    host_time_s: float
+    count: int
+
+
+@dataclass(frozen=True)
+class GloveStats:
+    """A snapshot of a source's counters (monotonic since it was opened).
+
+    For :class:`ReplayGlove`, ``frames_lost`` counts recorded samples that came
+    due but were superseded before the loop asked (the loop ran slower than the
+    recording).
+    """
+
+    frames_ok: int = 0
+    crc_errors: int = 0
+    decode_errors: int = 0
+    """Rejected frames other than CRC mismatches (bad stuffing, length, version,
+    malformed or cut OpenGloves lines, overlong runs)."""
+    resyncs: int = 0
+    garbage_bytes: int = 0
+    seq_gaps: int = 0
+    frames_lost: int = 0
+    bytes_read: int = 0
+    reconnects: int = 0
+    time_since_last_good_s: float = math.inf
+    failure: str = ""
+
+    @property
+    def errors(self) -> int:
+        """Rejected frames of every kind."""
+        return self.crc_errors + self.decode_errors
+
+
+class GloveSource(ABC):
+    """A glove: raw samples in, without ever blocking the loop.
+
+    Use as a context manager (``with SerialGlove(...) as glove:``), which calls
+    :meth:`start` and :meth:`close`.
+    """
+
+    def __init__(self) -> None:
+        self._newest: GloveSample | None = None
+        self._taken = 0
+        self._failure: DeviceError | None = None
+
+    def start(self) -> None:  # noqa: B027 - optional hook
+        """Begin reading (open the port, start the thread). Idempotent."""
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Stop reading and release the device. Idempotent."""
+
+    def latest(self) -> GloveSample | None:
+        """The newest sample not returned before, or ``None`` if nothing new. Never blocks."""
+        s = self._newest
+        if s is None or s.count == self._taken:
+            return None
+        self._taken = s.count
+        return s
+
+    def peek(self) -> GloveSample | None:
+        """The newest sample so far (new or not), without marking it taken."""
+        return self._newest
+
+    @abstractmethod
+    def stats(self) -> GloveStats:
+        """A snapshot of the counters."""
+
+    @property
+    def failure(self) -> DeviceError | None:
+        """Why the device stopped delivering (port gone, unreadable), or ``None``."""
+        return self._failure
+
+    def check(self) -> None:
+        """Raise :attr:`failure` if the device has failed."""
+        if self._failure is not None:
+            raise self._failure
+
+    def __enter__(self) -> GloveSource:
+        self.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class SerialGlove(GloveSource):
+    """A glove on a serial port (USB CDC, UART, or a pty from the glove emulator).
+
+    ``fmt`` is ``"frames"`` (handrig frames, ``firmware_protocol/SPEC.md``) or
+    ``"opengloves"`` (alpha lines; ``analog_max`` 1023 or 4095; the button letter
+    ``estop_letter`` becomes buttons bit 0, the letters H..O bits 1..8). A
+    background thread reads whatever bytes arrive, stamps them with ``clock.now()``
+    and decodes them. If the port goes away the source records a
+    :class:`DeviceError` and, with ``reconnect_s`` > 0, tries to reopen the same
+    path every ``reconnect_s`` seconds (a replugged USB glove usually returns there).
+    """
+
+    def __init__(
+        self,
+        port: str,
+        fmt: GloveFormat = "frames",
+        *,
+        clock: Clock,
+        baud: int = 115200,
+        analog_max: int = 4095,
+        estop_letter: str = "N",
+        reconnect_s: float = 0.5,
+        poll_s: float = 0.05,
+    ) -> None:
+        super().__init__()
+        if fmt not in ("frames", "opengloves"):
+            raise DeviceError(f"glove format {fmt!r} unknown: use 'frames' or 'opengloves'")
+        if estop_letter not in BUTTON_LETTERS:
+            raise DeviceError(f"e-stop letter {estop_letter!r} is not an OpenGloves button "
+                              f"(one of {BUTTON_LETTERS})")
+        self.port = port
+        self.fmt: GloveFormat = fmt
+        self.clock = clock
+        self.baud = baud
+        self.analog_max = analog_max
+        self.reconnect_s = reconnect_s
+        self.poll_s = poll_s
+        self._estop_bit = 1 << BUTTON_LETTERS.index(estop_letter)
+        self._frames = FrameDecoder()
+        self._lines = LineDecoder(analog_max)
+        self._serial: Any = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._count = 0
+        self._bytes = 0
+        self._reconnects = 0
+        self._last_good_s = -math.inf
+        self._lock = threading.Lock()
+
+    def _open(self) -> Any:
+        import serial  # adapter module: the only place the glove side touches pyserial
+
+        try:
+            return serial.Serial(self.port, self.baud, timeout=0, exclusive=False)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise DeviceError(
+                f"cannot open glove port {self.port}: {exc}; is the glove plugged in? "
+                "(pass the right port with --glove PORT; on Linux add your user to 'dialout')"
+            ) from None
+
+    def start(self) -> None:
+        if self._thread is not None:
+            return
+        self._serial = self._open()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=f"glove:{self.port}",
+                                        daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._serial is not None:
+            with contextlib.suppress(Exception):  # the port may already be gone
+                self._serial.close()
+            self._serial = None
+
+    def stats(self) -> GloveStats:
+        with self._lock:
+            since = self.clock.now() - self._last_good_s
+            failure = str(self._failure) if self._failure else ""
+            if self.fmt == "frames":
+                f = self._frames.stats
+                return GloveStats(
+                    frames_ok=f.frames_ok, crc_errors=f.crc_errors,
+                    decode_errors=f.errors - f.crc_errors, resyncs=f.resyncs,
+                    garbage_bytes=f.garbage_bytes, seq_gaps=f.seq_gaps,
+                    frames_lost=f.frames_lost, bytes_read=self._bytes,
+                    reconnects=self._reconnects, time_since_last_good_s=since,
+                    failure=failure,
+                )
+            g = self._lines.stats
+            return GloveStats(
+                frames_ok=g.lines_ok, decode_errors=g.errors, resyncs=g.errors,
+                garbage_bytes=g.garbage_bytes, bytes_read=self._bytes,
+                reconnects=self._reconnects, time_since_last_good_s=since, failure=failure,
+            )
+
+    def _run(self) -> None:
+        feed: Callable[[bytes, float], None] = (
+            self._feed_frames if self.fmt == "frames" else self._feed_lines
+        )
+        while not self._stop.is_set():
+            ser = self._serial
+            if ser is None:
+                if not self._try_reopen():
+                    continue
+                ser = self._serial
+            try:
+                fd = ser.fileno()
+                ready, _, _ = select.select([fd], [], [], self.poll_s)
+                if not ready:
+                    continue
+                data = os.read(fd, 4096)
+                if not data:
+                    raise OSError("device reports readiness to read but returned no data")
+            except (OSError, ValueError, TypeError) as exc:
+                if self._stop.is_set():
+                    return
+                self._lost(exc)
+                continue
+            now = self.clock.now()
+            with self._lock:
+                self._bytes += len(data)
+                feed(data, now)
+
+    def _lost(self, exc: BaseException) -> None:
+        self._failure = DeviceError(
+            f"glove port {self.port} went away ({exc}); "
+            + ("retrying every " + f"{self.reconnect_s:g} s" if self.reconnect_s > 0
+               else "check the cable and restart")
+        )
+        with contextlib.suppress(Exception):  # the port is already gone
+            self._serial.close()
+        self._serial = None
+
+    def _try_reopen(self) -> bool:
+        if self.reconnect_s <= 0:
+            self._stop.wait(self.poll_s)
+            return False
+        if self._stop.wait(self.reconnect_s):
+            return False
+        try:
+            self._serial = self._open()
+        except DeviceError:
+            return False
+        self._frames.reset()
+        self._reconnects += 1
+        self._failure = None
+        return True
+
+    def _feed_frames(self, data: bytes, now: float) -> None:
+        for fr in self._frames.feed(data):
+            self._count += 1
+            q = fr.quat_xyzw
+            self._newest = GloveSample(
+                raw=np.array(fr.channels, dtype=np.float64),
+                quat=None if q is None else np.array(q, dtype=np.float64),
+                buttons=fr.buttons, estop=bool(fr.buttons & BUTTON_RELAX), seq=fr.seq,
+                sensor_time_us=fr.timestamp_us, host_time_s=now, count=self._count,
+            )
+            self._last_good_s = now
+
+    def _feed_lines(self, data: bytes, now: float) -> None:
+        for line in self._lines.feed(data):
+            self._count += 1
+            bits = line.button_bits()
+            estop = bool(bits & self._estop_bit)
+            self._newest = GloveSample(
+                raw=np.array(line.channels(self.analog_max), dtype=np.float64), quat=None,
+                buttons=int(estop) | (bits << 1), estop=estop, seq=self._count & 0xFFFF,
+                sensor_time_us=0, host_time_s=now, count=self._count,
+            )
+            self._last_good_s = now
+
+
+class ReplayGlove(GloveSource):
+    """A recording played against the injected clock.
+
+    :meth:`start` (or the first :meth:`latest`) pins recording time ``t_s[0]`` to
+    ``clock.now()``; from then ``latest()`` returns the newest recorded sample at or
+    before the current time, once. Its ``host_time_s`` is the clock time at which
+    that sample was due, so latency measured from it includes how late the loop
+    picked it up. With ``loop=True`` the recording repeats (one median sample
+    period between the last and the first sample); otherwise :attr:`finished`
+    turns true after the last sample and ``latest()`` returns ``None``.
+    """
+
+    def __init__(self, recording: GloveRecording, clock: Clock, *, loop: bool = False) -> None:
+        super().__init__()
+        if len(recording) == 0:
+            raise DeviceError("glove recording is empty: nothing to replay")
+        self.recording = recording
+        self.clock = clock
+        self.loop = loop
+        t = recording.t_s
+        gap = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
+        self._period_s = float(t[-1] - t[0]) + gap
+        self._t_rel = t - t[0]
+        self._t0: float | None = None
+        self._served = 0
+        self._skipped = 0
+
+    def start(self) -> None:
+        if self._t0 is None:
+            self._t0 = self.clock.now()
+
+    @property
+    def finished(self) -> bool:
+        """Not looping and the last sample has been due."""
+        if self.loop or self._t0 is None:
+            return False
+        return self.clock.now() - self._t0 >= self._t_rel[-1]
+
+    def latest(self) -> GloveSample | None:
+        if self._t0 is None:
+            self._t0 = self.clock.now()
+        t0 = self._t0
+        elapsed = self.clock.now() - t0
+        lap, n = 0, len(self._t_rel)
+        if self.loop:
+            lap = int(elapsed // self._period_s)
+            elapsed -= lap * self._period_s
+        i = int(np.searchsorted(self._t_rel, elapsed, side="right")) - 1
+        if i < 0:
+            return None
+        count = lap * n + i + 1
+        if count <= self._taken:
+            return None
+        rec = self.recording
+        q = None if rec.quat_xyzw is None else rec.quat_xyzw[i]
+        if q is not None and np.isnan(q).any():
+            q = None
+        b = int(rec.buttons[i])
+        sample = GloveSample(
+            raw=rec.raw[i], quat=q, buttons=b, estop=bool(b & BUTTON_RELAX),
+            seq=(count - 1) & 0xFFFF, sensor_time_us=int(self._t_rel[i] * 1e6) & 0xFFFFFFFF,
+            host_time_s=t0 + lap * self._period_s + float(self._t_rel[i]), count=count,
+        )
+        self._skipped += count - self._taken - 1
+        self._newest = sample
+        self._taken = count
+        self._served += 1
+        return sample
+
+    def stats(self) -> GloveStats:
+        since = math.inf
+        if self._newest is not None:
+            since = self.clock.now() - self._newest.host_time_s
+        return GloveStats(frames_ok=self._served, time_since_last_good_s=since,
+                          frames_lost=self._skipped)

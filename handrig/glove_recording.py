@@ -1,0 +1,206 @@
+"""Glove recordings: a CSV file of raw glove samples over time.
+
+Format (UTF-8 text)::
+
+    # handrig glove recording 1
+    # rate_hz: 100
+    t_s,thumb_cmc_x,thumb_cmc_y,thumb_cmc_z,index_mcp,pinky_mcp,qx,qy,qz,qw,buttons
+    0.000000,2048,1900,1500,800,700,0.0,0.0,0.0,1.0,0
+    0.010000,2050,1902,1510,820,705,0.0,0.0,0.0,1.0,0
+
+* The first line names the format and version; further ``# key: value`` lines
+  are metadata (``rate_hz`` is the glove's nominal rate; others are kept).
+* The header: ``t_s`` first (seconds from the start, strictly increasing), then
+  one column per raw channel (any names, in the glove's channel order), then
+  optionally ``qx,qy,qz,qw`` (the forearm IMU quaternion, scalar last, ENU world
+  frame, as in ``firmware_protocol/SPEC.md``; empty cells = no IMU reading), then
+  ``buttons`` (integer bitfield, bit 0 = relax / e-stop).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from handrig.errors import DataError
+
+MAGIC = "# handrig glove recording 1"
+QUAT_COLUMNS = ("qx", "qy", "qz", "qw")
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+@dataclass(frozen=True, eq=False)
+class GloveRecording:
+    """Raw glove samples over time.
+
+    ``t_s`` (n,) seconds, strictly increasing; ``raw`` (n, k) raw channel counts;
+    ``quat_xyzw`` (n, 4) or ``None`` when the recording has no IMU (a row of NaN
+    is a sample without a valid reading); ``buttons`` (n,) bitfields.
+    """
+
+    t_s: FloatArray
+    raw: FloatArray
+    buttons: IntArray
+    channel_names: tuple[str, ...]
+    quat_xyzw: FloatArray | None = None
+    rate_hz: float = 0.0
+    meta: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self.t_s)
+        if self.raw.ndim != 2 or self.raw.shape[0] != n:
+            raise DataError(f"raw has shape {self.raw.shape}, expected ({n}, k)")
+        if self.raw.shape[1] != len(self.channel_names):
+            raise DataError(f"{self.raw.shape[1]} raw columns but "
+                            f"{len(self.channel_names)} channel names")
+        if self.buttons.shape != (n,):
+            raise DataError(f"buttons has shape {self.buttons.shape}, expected ({n},)")
+        if self.quat_xyzw is not None and self.quat_xyzw.shape != (n, 4):
+            raise DataError(f"quat_xyzw has shape {self.quat_xyzw.shape}, expected ({n}, 4)")
+        if n and (not np.all(np.isfinite(self.t_s)) or np.any(np.diff(self.t_s) <= 0)):
+            raise DataError("t_s must be finite and strictly increasing")
+        if not np.all(np.isfinite(self.raw)):
+            raise DataError("raw channels must be finite numbers")
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def n_channels(self) -> int:
+        """Raw channels per sample (k)."""
+        return self.raw.shape[1]
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last sample."""
+        return float(self.t_s[-1] - self.t_s[0]) if len(self) else 0.0
+
+    @property
+    def nominal_rate_hz(self) -> float:
+        """``rate_hz`` from the file, else the median sample rate."""
+        if self.rate_hz > 0:
+            return self.rate_hz
+        if len(self) < 2:
+            return 0.0
+        return float(1.0 / np.median(np.diff(self.t_s)))
+
+
+def write_glove_recording(path: str | Path, rec: GloveRecording) -> None:
+    """Write ``rec`` to ``path`` in the format of this module."""
+    p = Path(path)
+    header = ["t_s", *rec.channel_names]
+    if rec.quat_xyzw is not None:
+        header += QUAT_COLUMNS
+    header.append("buttons")
+    with p.open("w", newline="", encoding="utf-8") as f:
+        f.write(MAGIC + "\n")
+        rate = rec.nominal_rate_hz
+        if rate > 0:
+            f.write(f"# rate_hz: {rate:g}\n")
+        for k, v in rec.meta.items():
+            if k != "rate_hz":
+                f.write(f"# {k}: {v}\n")
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(header)
+        for i in range(len(rec)):
+            row = [f"{rec.t_s[i]:.6f}", *(f"{v:.10g}" for v in rec.raw[i])]
+            if rec.quat_xyzw is not None:
+                q = rec.quat_xyzw[i]
+                row += ["" if math.isnan(v) else f"{v:.6f}" for v in q]
+            row.append(str(int(rec.buttons[i])))
+            w.writerow(row)
+
+
+def read_glove_recording(path: str | Path) -> GloveRecording:
+    """Read a glove recording; any problem is a DataError naming the file and line."""
+    p = Path(path)
+    try:
+        lines = p.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        raise DataError(f"{p}: glove recording not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{p}: cannot read glove recording: {exc}") from None
+    if not lines or lines[0].strip() != MAGIC:
+        raise DataError(f"{p}:1: not a glove recording (the first line must be {MAGIC!r})")
+    meta: dict[str, str] = {}
+    lineno = 1
+    while lineno < len(lines) and lines[lineno].startswith("#"):
+        key, sep, value = lines[lineno][1:].partition(":")
+        if sep:
+            meta[key.strip()] = value.strip()
+        lineno += 1
+    if lineno >= len(lines):
+        raise DataError(f"{p}: no header line (t_s,...,buttons)")
+    header = [h.strip() for h in next(csv.reader([lines[lineno]]))]
+    if len(header) < 2 or header[0] != "t_s" or header[-1] != "buttons":
+        raise DataError(f"{p}:{lineno + 1}: header must start with t_s and end with buttons,"
+                        f" got {','.join(header)}")
+    has_quat = tuple(header[-5:-1]) == QUAT_COLUMNS
+    names = tuple(header[1:-5] if has_quat else header[1:-1])
+    rows = list(csv.reader(lines[lineno + 1:]))
+    n = sum(1 for r in rows if r)
+    t = np.empty(n)
+    raw = np.empty((n, len(names)))
+    quat = np.full((n, 4), np.nan) if has_quat else None
+    buttons = np.zeros(n, dtype=np.int64)
+    i = 0
+    for j, row in enumerate(rows):
+        if not row:
+            continue
+        where = f"{p}:{lineno + 2 + j}"
+        if len(row) != len(header):
+            raise DataError(f"{where}: {len(row)} columns, the header has {len(header)}")
+        try:
+            t[i] = float(row[0])
+            raw[i] = [float(v) for v in row[1:1 + len(names)]]
+            if quat is not None:
+                cells = row[-5:-1]
+                if all(c.strip() for c in cells):
+                    quat[i] = [float(c) for c in cells]
+                elif any(c.strip() for c in cells):
+                    raise ValueError("quaternion cells must be all filled or all empty")
+            buttons[i] = int(row[-1])
+        except ValueError as exc:
+            raise DataError(f"{where}: {exc}") from None
+        i += 1
+    try:
+        rate = float(meta.get("rate_hz", "0") or 0)
+    except ValueError:
+        raise DataError(f"{p}: rate_hz {meta['rate_hz']!r} is not a number") from None
+    try:
+        return GloveRecording(t, raw, buttons, names, quat, rate, meta)
+    except DataError as exc:
+        raise DataError(f"{p}: {exc}") from None
+
+
+def sweep_recording(
+    duration_s: float = 2.0,
+    rate_hz: float = 100.0,
+    n_channels: int = 5,
+    *,
+    low: float = 500.0,
+    high: float = 3500.0,
+    with_imu: bool = True,
+) -> GloveRecording:
+    """A synthetic recording for tests and benchmarks: each channel a slow sine
+    between ``low`` and ``high`` counts (period 1 s + 0.25 s per channel index), the
+    IMU tilting about the east axis by +-45 degrees over 2 s, no buttons."""
+    n = max(1, round(duration_s * rate_hz))
+    t = np.arange(n) / rate_hz
+    periods = 1.0 + 0.25 * np.arange(n_channels)
+    mid, amp = (low + high) / 2, (high - low) / 2
+    raw = mid + amp * np.sin(2 * np.pi * t[:, None] / periods[None, :])
+    quat = None
+    if with_imu:
+        half = np.radians(45.0) * np.sin(2 * np.pi * t / 2.0) / 2
+        quat = np.stack([np.sin(half), np.zeros(n), np.zeros(n), np.cos(half)], axis=1)
+    names = tuple(f"ch{i}" for i in range(n_channels))
+    return GloveRecording(t, np.rint(raw), np.zeros(n, dtype=np.int64), names, quat, rate_hz,
+                          {"source": "sweep_recording"})

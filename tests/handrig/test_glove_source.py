@@ -1,0 +1,178 @@
+"""Glove sources: replay against a fake clock; serial against the pty glove emulator."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from firmware_protocol.opengloves import CHANNEL_KEYS
+from handrig.clock import FakeClock, MonotonicClock
+from handrig.errors import DeviceError
+from handrig.glove import GloveSample, GloveSource, ReplayGlove, SerialGlove
+from handrig.glove_recording import GloveRecording, sweep_recording
+from sim.glove_emulator import GloveEmulator
+
+
+def wait_for(cond: Callable[[], bool], timeout_s: float = 3.0) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.005)
+    return cond()
+
+
+def collect(glove: GloveSource, n: int, timeout_s: float = 3.0) -> list[GloveSample]:
+    got: list[GloveSample] = []
+
+    def more() -> bool:
+        s = glove.latest()
+        if s is not None:
+            got.append(s)
+        return len(got) >= n
+
+    wait_for(more, timeout_s)
+    return got
+
+
+def test_replay_hands_out_each_due_sample_once() -> None:
+    rec = sweep_recording(0.5, 100.0, 5)
+    clock = FakeClock(10.0)
+    glove = ReplayGlove(rec, clock)
+    with glove:
+        s = glove.latest()
+        assert s is not None and s.count == 1 and s.host_time_s == 10.0
+        np.testing.assert_array_equal(s.raw, rec.raw[0])
+        assert glove.latest() is None  # nothing new yet
+        clock.advance(0.005)
+        assert glove.latest() is None
+        clock.advance(0.005)
+        s = glove.latest()
+        assert s is not None and s.count == 2 and s.host_time_s == pytest.approx(10.01)
+        clock.advance(0.05)
+        s = glove.latest()
+        assert s is not None and s.count == 7
+        assert glove.stats().frames_lost == 4 and glove.stats().frames_ok == 3
+        assert glove.stats().time_since_last_good_s == pytest.approx(0.0, abs=1e-9)
+        clock.advance(1.0)
+        s = glove.latest()
+        assert s is not None and s.count == len(rec) and glove.finished
+        assert glove.latest() is None
+        assert glove.stats().time_since_last_good_s > 0.5
+
+
+def test_replay_loops_and_reports_the_button() -> None:
+    rec = sweep_recording(0.1, 100.0, 2, with_imu=False)
+    rec = GloveRecording(rec.t_s, rec.raw, np.array([0] * 9 + [1]), rec.channel_names)
+    clock = FakeClock()
+    glove = ReplayGlove(rec, clock, loop=True)
+    glove.start()
+    clock.advance(0.09)
+    s = glove.latest()
+    assert s is not None and s.estop and s.quat is None
+    clock.advance(0.01)  # one sample period after the last one: the first again
+    s = glove.latest()
+    assert s is not None and s.count == 11 and not s.estop
+    np.testing.assert_array_equal(s.raw, rec.raw[0])
+    assert not glove.finished
+
+
+def test_serial_frames_from_the_emulator() -> None:
+    rec = sweep_recording(2.0, 200.0, 5)
+    clock = MonotonicClock()
+    with GloveEmulator(rec, "frames") as emu, \
+            SerialGlove(emu.port_path, "frames", clock=clock) as glove:
+        got = collect(glove, 20)
+        assert len(got) >= 20
+        s = got[-1]
+        assert s.raw.dtype == np.float64 and s.raw.shape == (5,)
+        assert s.quat is not None and s.quat.shape == (4,)
+        assert s.host_time_s <= clock.now()
+        # each sample is a row of the recording, quaternion to Q14 resolution
+        i = int(np.argmin(np.abs(rec.raw - s.raw).sum(axis=1)))
+        np.testing.assert_array_equal(s.raw, rec.raw[i])
+        np.testing.assert_allclose(s.quat, rec.quat_xyzw[i], atol=1 / 16384)
+        counts = [g.count for g in got]
+        assert counts == sorted(counts) and len(set(counts)) == len(counts)
+        st = glove.stats()
+        assert st.frames_ok >= 20 and st.errors == 0 and st.failure == ""
+
+
+def test_serial_counts_garbage_and_corruption_and_keeps_going() -> None:
+    rec = sweep_recording(3.0, 200.0, 3)
+    with GloveEmulator(rec, "frames", loop=True) as emu, \
+            SerialGlove(emu.port_path, "frames", clock=MonotonicClock()) as glove:
+        assert len(collect(glove, 5)) == 5
+        emu.corrupt_next(3)
+        emu.inject_garbage(100)
+        assert wait_for(lambda: glove.stats().errors >= 4)
+        before = glove.stats().frames_ok
+        assert wait_for(lambda: glove.stats().frames_ok >= before + 10)
+        st = glove.stats()
+        assert st.crc_errors >= 1 and st.resyncs >= 4 and st.garbage_bytes >= 100
+        assert st.seq_gaps >= 1 and st.frames_lost >= 3
+
+
+def test_quiet_glove_returns_none_and_ages() -> None:
+    rec = sweep_recording(3.0, 200.0, 3)
+    clock = MonotonicClock()
+    with GloveEmulator(rec, "frames", loop=True) as emu, \
+            SerialGlove(emu.port_path, "frames", clock=clock) as glove:
+        assert len(collect(glove, 3)) == 3
+        emu.pause()
+        time.sleep(0.05)
+        glove.latest()
+        t0 = time.monotonic()
+        assert glove.latest() is None
+        assert time.monotonic() - t0 < 0.01  # returns at once, nothing new
+        assert wait_for(lambda: glove.stats().time_since_last_good_s > 0.2)
+        emu.resume()
+        assert len(collect(glove, 3)) == 3
+
+
+def test_port_that_disappears_is_a_device_error() -> None:
+    rec = sweep_recording(3.0, 200.0, 3)
+    emu = GloveEmulator(rec, "frames", loop=True).start()
+    glove = SerialGlove(emu.port_path, "frames", clock=MonotonicClock(), reconnect_s=0)
+    with glove:
+        assert len(collect(glove, 3)) == 3
+        emu.hang_up()
+        assert wait_for(lambda: glove.failure is not None)
+        assert emu.port_path in str(glove.failure) and "went away" in str(glove.failure)
+        assert glove.stats().failure
+        with pytest.raises(DeviceError, match="went away"):
+            glove.check()
+    emu.close()
+
+
+def test_opening_a_missing_port_says_what_to_do() -> None:
+    glove = SerialGlove("/dev/does-not-exist", "frames", clock=MonotonicClock())
+    with pytest.raises(DeviceError, match=r"cannot open glove port /dev/does-not-exist.*--glove"):
+        glove.start()
+
+
+def test_serial_opengloves_lines() -> None:
+    rec = sweep_recording(2.0, 200.0, 5, with_imu=False)
+    buttons = np.zeros(len(rec), dtype=np.int64)
+    buttons[:] = 1 | (1 << 3)  # e-stop and the third button letter (J)
+    rec = GloveRecording(rec.t_s, rec.raw, buttons, rec.channel_names)
+    with GloveEmulator(rec, "opengloves", estop_letter="N") as emu, \
+            SerialGlove(emu.port_path, "opengloves", clock=MonotonicClock(),
+                        estop_letter="N") as glove:
+        got = collect(glove, 10)
+        s = got[-1]
+        assert s.raw.shape == (len(CHANNEL_KEYS),) and s.quat is None
+        i = int(np.argmin(np.abs(rec.raw - s.raw[:5]).sum(axis=1)))
+        np.testing.assert_array_equal(s.raw[:5], rec.raw[i])
+        assert s.estop and s.buttons & (1 << 3)
+        assert glove.stats().errors == 0
+
+
+def test_bad_arguments() -> None:
+    with pytest.raises(DeviceError, match="format"):
+        SerialGlove("/dev/null", "csv", clock=MonotonicClock())  # type: ignore[arg-type]
+    with pytest.raises(DeviceError, match="e-stop letter"):
+        SerialGlove("/dev/null", "opengloves", clock=MonotonicClock(), estop_letter="Z")
