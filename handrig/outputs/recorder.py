@@ -137,6 +137,11 @@ class Recorder:
             self._chunk = np.empty((self._chunk_frames, _N))
             self._i = 0
 
+    def __call__(self, t_s: float, pose54_deg: NDArray[np.float64]) -> None:
+        """The rig's output hook: ``pose54_deg`` = 50 curves then the 4 wrist DOFs
+        (:data:`handrig.hand.ALL_JOINT_NAMES` order)."""
+        self.add(t_s, pose54_deg[:50], pose54_deg[50:54])
+
     def frames(self) -> NDArray[np.float64]:
         """All frames so far, (n, 55): t_s, 50 curves, 4 wrist DOFs (undefined if none)."""
         return np.concatenate([*self._chunks, self._chunk[: self._i]])

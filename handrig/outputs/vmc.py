@@ -339,6 +339,11 @@ class VmcSender:
         self.bundles_sent += 1
         return True
 
+    def __call__(self, t_s: float, pose54_deg: NDArray[np.float64]) -> None:
+        """The rig's output hook: ``pose54_deg`` = 50 curves then the 4 wrist DOFs
+        (:data:`handrig.hand.ALL_JOINT_NAMES` order, which :data:`WRIST_NAMES` follows)."""
+        self.send(pose54_deg[:50], pose54_deg[50:54], t_s)
+
     def close(self) -> None:
         """Close the socket; further sends count as errors."""
         self._sock.close()

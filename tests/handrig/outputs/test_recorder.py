@@ -235,3 +235,14 @@ def test_playback_sample_is_nonblocking_and_ends(tmp_path: Path) -> None:
     again = looped.sample()
     assert again is not None
     np.testing.assert_allclose(again[0], poses[0], atol=1e-6)
+
+
+def test_rig_output_hook_records_the_54_pose(tmp_path: Path) -> None:
+    t_s, poses, wrist = _performance(7)
+    with Recorder(tmp_path / "hook.bvh", rate_hz=200.0) as rec:
+        for i in range(7):
+            rec(t_s[i], np.concatenate([poses[i], wrist[i]]))
+    _, p2, w2 = load_performance(tmp_path / "hook.bvh")
+    np.testing.assert_allclose(p2, poses, atol=1e-4)
+    assert w2 is not None
+    np.testing.assert_allclose(w2, wrist, atol=1e-4)

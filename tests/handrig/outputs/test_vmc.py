@@ -208,3 +208,18 @@ def test_closed_form_quaternions_equal_scipy_composition() -> None:
         dots = np.abs(np.sum(fast * ref, axis=1))  # q and -q are the same rotation
         np.testing.assert_allclose(dots, 1.0, atol=1e-12)
         np.testing.assert_allclose(np.linalg.norm(fast, axis=1), 1.0, atol=1e-12)
+
+
+def test_rig_output_hook_takes_the_54_pose() -> None:
+    assert hand.ALL_JOINT_NAMES[50:] == vmc.WRIST_NAMES
+    pose, wrist = _random_pose(13)
+    server, got = _receiver()
+    try:
+        with vmc.VmcSender("127.0.0.1", server.server_address[1], clock=FakeClock()) as sender:
+            sender(0.5, np.concatenate([pose, wrist]))
+            server.handle_request()
+    finally:
+        server.server_close()
+    quats = np.array([a[4:8] for a in got["/VMC/Ext/Bone/Pos"]])
+    back = vmc.decode_bones(quats)
+    np.testing.assert_allclose(back[:54], np.concatenate([pose, wrist]), atol=2e-3)
