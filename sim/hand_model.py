@@ -19,10 +19,15 @@ Geometry (``hand_model_xml``)
   (flexion positive, abduction/deviation radial positive):
   wrist flexion +y (hand moves palmar, -z), wrist deviation +z (radial, +y);
   finger MCP flexion, PIP, DIP +y; finger MCP abduction +z; thumb CMC abduction
-  (0, cos 45°, sin 45°) (thumb moves radial and palmar, away from the index),
-  thumb flexion (CMC, MCP, IP) (0, sin 45°, -cos 45°) (tip moves ulnar and
-  palmar, across the palm), thumb CMC twist -x (pronation-like for the right
-  hand). tests/sim/test_hand_model.py checks each sign with gravity.
+  +z (thumb swings radially in the palm plane, away from the index); thumb CMC
+  flexion +y of the abducted metacarpal (the thumb drops palmar: the paper's
+  "downward rotation of the thumb CMC", tuned palm down); thumb MCP and IP
+  flexion (0, sin 30°, -cos 30°) in their (abducted, flexed) frames (the tip
+  curls across the palm, toward the little finger, and a little palmar: the
+  thumb is rotated about 90° against the fingers); thumb CMC twist -x
+  (pronation-like for the right hand). The thumb's zero pose lies along the index
+  metacarpal; its rest pose (abduction 42°, flexion 28°) puts it out radially and
+  palmar. tests/sim/test_hand_model.py checks each sign with gravity.
 * Segment lengths are fractions of the hand length HL (REFERENCE.md section 4,
   Buchholz et al. 1992); digit bases sit at the carpus, ``CARPUS_FRAC`` x HL distal
   of the wrist axis, so wrist-to-middle-fingertip = HL. Lateral offsets use the
@@ -99,15 +104,18 @@ LATERAL_FRAC: dict[str, float] = {
 THUMB_CMC_PALMAR_FRAC = 0.08  # thumb CMC sits palmar of the palm mid-plane, of HL (assumed)
 PALM_THICKNESS_FRAC = 0.15  # of HL (assumed, for the palm's inertia only)
 
-_C45 = math.cos(math.radians(45.0))
+THUMB_FLEX_TILT_DEG = 30.0  # thumb MCP/IP flexion axis tilt from the palm normal (assumed)
+_SB = math.sin(math.radians(THUMB_FLEX_TILT_DEG))
+_CB = math.cos(math.radians(THUMB_FLEX_TILT_DEG))
 # Joint axes in the right hand's forearm frame (bodies are axis-aligned at zero).
 _AXES_RI: dict[str, tuple[float, float, float]] = {
     "WristFlexion": (0.0, 1.0, 0.0),
     "WristDeviation": (0.0, 0.0, 1.0),
     "FingerMCPx": (0.0, 0.0, 1.0),
     "FingerFlex": (0.0, 1.0, 0.0),
-    "ThumbCMCy": (0.0, _C45, _C45),
-    "ThumbFlex": (0.0, _C45, -_C45),
+    "ThumbCMCy": (0.0, 0.0, 1.0),
+    "ThumbCMCz": (0.0, 1.0, 0.0),
+    "ThumbFlex": (0.0, _SB, -_CB),
     "ThumbCMCx": (-1.0, 0.0, 0.0),
 }
 
@@ -282,7 +290,8 @@ def joint_axis(name: str, hand: Hand = "ri") -> tuple[float, float, float]:
     if stem in ("WristFlexion", "WristDeviation"):
         key = stem
     elif stem.startswith("Thumb"):
-        key = {"CMCx": "ThumbCMCx", "CMCy": "ThumbCMCy"}.get(stem[5:], "ThumbFlex")
+        key = {"CMCx": "ThumbCMCx", "CMCy": "ThumbCMCy", "CMCz": "ThumbCMCz"}.get(
+            stem[5:], "ThumbFlex")
     else:
         key = "FingerMCPx" if stem.endswith("MCPx") else "FingerFlex"
     return _mirror_axis(_AXES_RI[key], hand)

@@ -60,14 +60,19 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
 from handrig.config import CONFIG_DIR, check_joint_name, load
 from handrig.errors import ConfigError
-from handrig.hand import DOF_NAMES
-from sim.hand_model import PassiveParams
+from handrig.hand import DOF_NAMES, Hand, dof_limits_deg
+from sim.hand_model import PassiveParams, dof_qpos_indices, gravity_in_forearm, hand_model_xml
 
 PASSIVE_CONFIG = CONFIG_DIR / "passive_hand.toml"
 MODEL_VERSION = "hand_model 1"  # bump when sim/hand_model.py geometry changes
@@ -246,6 +251,505 @@ def load_passive_params(path: str | Path | None = None) -> PassiveHandConfig:
     return PassiveHandConfig(**{**cfg.__dict__, "source": str(p)})
 
 
-def radians(deg: float) -> float:
-    """Degrees to radians (MuJoCo models here are built with ``angle="radian"``)."""
-    return math.radians(deg)
+# --------------------------------------------------------------------------- model
+
+
+@dataclass
+class StaticSolution:
+    """A static equilibrium: DOF values (23, degrees, vocabulary order) and diagnostics."""
+
+    q_deg: NDArray[np.float64]
+    iterations: int
+    residual_nm: float
+    stable: bool
+    max_eigenvalue: float
+
+
+class PassiveHand:
+    """The tuned relaxed hand as a MuJoCo model with static and dynamic solvers.
+
+    Arrays in vocabulary DOF order (``DOF_NAMES[hand]``) unless named ``*_qpos``.
+    Stiffness/damping can be changed in place with :meth:`set_gains` (used by tuning).
+    """
+
+    def __init__(
+        self,
+        cfg: PassiveHandConfig,
+        hand: Hand = "ri",
+        *,
+        springs: PassiveParams | None = None,
+        timestep_s: float = 0.001,
+        limits_deg: NDArray[np.float64] | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.hand: Hand = hand
+        springs = springs if springs is not None else cfg.springs()
+        self.names = DOF_NAMES[hand]
+        self.model = mujoco.MjModel.from_xml_string(hand_model_xml(
+            hand, cfg.hand_length_m, passive=springs, limits_deg=limits_deg,
+            mujoco_limits=False, timestep_s=timestep_s))
+        self.data = mujoco.MjData(self.model)
+        self.idx = dof_qpos_indices(self.model, hand)
+        lim = dof_limits_deg(hand) if limits_deg is None else np.asarray(limits_deg, float)
+        nv = self.model.nv
+        self.low_qpos = np.empty(nv)
+        self.high_qpos = np.empty(nv)
+        self.low_qpos[self.idx] = np.radians(lim[:, 0])
+        self.high_qpos[self.idx] = np.radians(lim[:, 1])
+        self.rest_deg = np.array([cfg.rest_deg["ri" + n[2:]] for n in self.names])
+        self._dfdq = np.zeros((nv, nv))
+        self._klim_qpos = np.zeros(nv)
+        self.set_gains(
+            np.array([springs.ks_nm_per_rad["ri" + n[2:]] for n in self.names]),
+            np.array([springs.kd_nms_per_rad["ri" + n[2:]] for n in self.names]),
+        )
+
+    # -- parameters
+
+    def set_gains(self, ks: NDArray[np.float64], kd: NDArray[np.float64]) -> None:
+        """Set stiffness (N m/rad) and damping (N m s/rad) per DOF, vocabulary order."""
+        m = self.model
+        jids = m.dof_jntid[self.idx]
+        m.jnt_stiffness[jids] = ks
+        m.dof_damping[self.idx] = kd
+        self._klim_qpos[self.idx] = self.cfg.limit_gain_factor * np.asarray(ks)
+
+    @property
+    def ks(self) -> NDArray[np.float64]:
+        return np.array(self.model.jnt_stiffness[self.model.dof_jntid[self.idx]])
+
+    @property
+    def kd(self) -> NDArray[np.float64]:
+        return np.array(self.model.dof_damping[self.idx])
+
+    def set_orientation(self, inclination_deg: float, rotation_deg: float) -> None:
+        """Put the forearm orientation into ``opt.gravity``."""
+        self.model.opt.gravity[:] = gravity_in_forearm(inclination_deg, rotation_deg, self.hand)
+
+    # -- torques
+
+    def _limit_qpos(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        # equations 2-3: c0 klim (low - q) + c1 klim (high - q)
+        below = np.maximum(self.low_qpos - q, 0.0)
+        above = np.minimum(self.high_qpos - q, 0.0)
+        return self._klim_qpos * (below + above)
+
+    def limit_torque(self, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The limit terms of equations 2-3 (N m) at ``q_deg``, vocabulary order."""
+        q = np.zeros(self.model.nq)
+        q[self.idx] = np.radians(q_deg)
+        return self._limit_qpos(q)[self.idx]
+
+    def gravity_torque(self, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Generalised gravity torque (N m) at ``q_deg``, qvel = 0: ``-qfrc_bias``."""
+        d = self.data
+        d.qpos[self.idx] = np.radians(q_deg)
+        d.qvel[:] = 0.0
+        mujoco.mj_forward(self.model, d)
+        return np.array(-d.qfrc_bias[self.idx])
+
+    def _residual_qpos(self, q: NDArray[np.float64], jac: bool) -> NDArray[np.float64]:
+        m, d = self.model, self.data
+        d.qpos[:] = q
+        d.qvel[:] = 0.0
+        d.qacc[:] = 0.0
+        mujoco.mj_inverse(m, d)
+        # qfrc_inverse = bias - passive: spring + gravity torque = -qfrc_inverse
+        r = -d.qfrc_inverse + self._limit_qpos(q)
+        if jac:
+            mujoco.mjd_inverseFD(m, d, 1e-7, False, self._dfdq, None, None,
+                                 None, None, None, None)
+        return np.asarray(r)
+
+    # -- static equilibrium
+
+    def solve_static(
+        self,
+        inclination_deg: float,
+        rotation_deg: float,
+        q0_deg: NDArray[np.float64] | None = None,
+        *,
+        fixed: Mapping[int, float] | None = None,
+        tol_nm: float = 1e-10,
+        max_iter: int = 50,
+        check_stability: bool = True,
+    ) -> StaticSolution:
+        """Newton on ks (rest - q) + limits + gravity torque = 0, warm-started at ``q0_deg``
+        (default: the rest pose). ``fixed``: DOF index -> value held (degrees), as when the
+        subject holds the wrist straight. Stability: every eigenvalue of the residual's
+        Jacobian (over the free DOFs) must be negative."""
+        self.set_orientation(inclination_deg, rotation_deg)
+        nv = self.model.nv
+        q = np.zeros(nv)
+        q[self.idx] = np.radians(self.rest_deg if q0_deg is None else q0_deg)
+        free = np.ones(nv, dtype=bool)
+        for i, v in (fixed or {}).items():
+            q[self.idx[i]] = math.radians(v)
+            free[self.idx[i]] = False
+        iterations, res = 0, math.inf
+        r = self._residual_qpos(q, jac=True)
+        for _ in range(max_iter):
+            iterations += 1
+            jmat = self._jacobian(q)[np.ix_(free, free)]
+            step = np.linalg.solve(jmat, -r[free])
+            res0 = float(np.max(np.abs(r[free])))
+            alpha = 1.0
+            while True:  # backtracking on the residual norm (limit kinks)
+                qn = q.copy()
+                qn[free] += alpha * step
+                rn = self._residual_qpos(qn, jac=True)
+                if float(np.max(np.abs(rn[free]))) < res0 or alpha < 1e-3:
+                    break
+                alpha *= 0.5
+            q, r = qn, rn
+            res = float(np.max(np.abs(r[free])))
+            if res < tol_nm or float(np.max(np.abs(step))) < 1e-12:
+                break
+        eig = math.nan
+        stable = True
+        if check_stability:
+            jmat = self._jacobian(q)[np.ix_(free, free)]
+            eig = float(np.max(np.linalg.eigvalsh(0.5 * (jmat + jmat.T))))
+            stable = eig < 0.0
+        return StaticSolution(np.degrees(q[self.idx]), iterations, res, stable, eig)
+
+    def _jacobian(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        # d r / d q = -(d qfrc_inverse / d q) + d limit / d q; mjd output is transposed.
+        active = (q < self.low_qpos) | (q > self.high_qpos)
+        return np.asarray(-self._dfdq.T - np.diag(self._klim_qpos * active))
+
+    # -- dynamics
+
+    def simulate(
+        self,
+        inclination_deg: float,
+        rotation_deg: float,
+        q0_deg: NDArray[np.float64],
+        duration_s: float,
+        *,
+        record_every: int = 1,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Release from ``q0_deg`` at rest velocity and integrate (implicitfast; the limit
+        terms through ``qfrc_applied``). Returns times (n,) and DOF values (n, 23) in deg."""
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        self.set_orientation(inclination_deg, rotation_deg)
+        d.qpos[self.idx] = np.radians(q0_deg)
+        steps = round(duration_s / m.opt.timestep)
+        n = steps // record_every + 1
+        ts, qs = np.empty(n), np.empty((n, 23))
+        ts[0], qs[0] = 0.0, q0_deg
+        k = 1
+        for s in range(1, steps + 1):
+            d.qfrc_applied[:] = self._limit_qpos(d.qpos)
+            mujoco.mj_step(m, d)
+            if s % record_every == 0:
+                ts[k] = d.time
+                qs[k] = np.degrees(d.qpos[self.idx])
+                k += 1
+        return ts[:k], qs[:k]
+
+    def settle(
+        self,
+        inclination_deg: float,
+        rotation_deg: float,
+        q0_deg: NDArray[np.float64] | None = None,
+        *,
+        max_s: float = 5.0,
+        vel_tol_deg_s: float = 0.01,
+    ) -> tuple[NDArray[np.float64], float]:
+        """Dynamic settle (the reference for the static solve): integrate from ``q0_deg``
+        (default rest) until every joint is slower than ``vel_tol_deg_s``. Returns the
+        pose (23,) in degrees and the simulated time it took."""
+        m, d = self.model, self.data
+        self.set_orientation(inclination_deg, rotation_deg)
+        d.qpos[self.idx] = np.radians(self.rest_deg if q0_deg is None else q0_deg)
+        d.qvel[:] = 0.0
+        d.time = 0.0
+        tol = math.radians(vel_tol_deg_s)
+        steps = round(max_s / m.opt.timestep)
+        for s in range(steps):
+            d.qfrc_applied[:] = self._limit_qpos(d.qpos)
+            mujoco.mj_step(m, d)
+            if s > 10 and float(np.max(np.abs(d.qvel))) < tol:
+                break
+        return np.degrees(d.qpos[self.idx]), float(d.time)
+
+
+# --------------------------------------------------------------------------- tuning
+
+PROVISIONAL_KS_NM_PER_RAD = 0.05
+PROVISIONAL_KD_PER_KS_S = 0.1
+
+
+def _provisional_springs(cfg: PassiveHandConfig) -> PassiveParams:
+    names = DOF_NAMES["ri"]
+    return PassiveParams(
+        rest_deg=dict(cfg.rest_deg),
+        ks_nm_per_rad=dict.fromkeys(names, PROVISIONAL_KS_NM_PER_RAD),
+        kd_nms_per_rad=dict.fromkeys(names, PROVISIONAL_KS_NM_PER_RAD * PROVISIONAL_KD_PER_KS_S),
+    )
+
+
+def _targets(cfg: PassiveHandConfig) -> dict[str, dict[int, float]]:
+    """Orientation -> {DOF index: target value in degrees} for the tuned DOFs."""
+    out: dict[str, dict[int, float]] = {o: {} for o in ORIENTATIONS}
+    for name, cal in cfg.calibration.items():
+        i = DOF_NAMES["ri"].index(name)
+        out[cal.orientation][i] = cfg.rest_deg[name] + cal.deviation_deg
+    return out
+
+
+def untuned_stiffness(ph: PassiveHand, indices: list[int], max_sag_deg: float) -> dict[int, float]:
+    """ks for DOFs without a calibration: the largest gravity torque at the rest pose over
+    all gravity directions, 9.81 |a_i| with T_i = a_i . g_hat, moves them ``max_sag_deg``."""
+    a = np.empty((23, 3))
+    for k in range(3):
+        ph.model.opt.gravity[:] = 0.0
+        ph.model.opt.gravity[k] = 1.0
+        a[:, k] = ph.gravity_torque(ph.rest_deg)
+    return {i: float(9.81 * np.linalg.norm(a[i]) / math.radians(max_sag_deg)) for i in indices}
+
+
+def tune_stiffness(
+    cfg: PassiveHandConfig, ph: PassiveHand | None = None, *, tol_deg: float = 1e-6
+) -> NDArray[np.float64]:
+    """ks per DOF (23, N m/rad) by equation 4, ks = T / (q - rest) with T the gravity torque
+    at the observed pose in the DOF's calibration orientation. The observed pose fixes the
+    tuned DOFs; the others (e.g. the wrist while the fingers hang) come from the model's own
+    equilibrium, so the tuning is iterated to a fixed point (each tuned DOF then sits at its
+    Table 2 value in the full equilibrium)."""
+    ph = ph if ph is not None else PassiveHand(cfg, springs=_provisional_springs(cfg))
+    targets = _targets(cfg)
+    tuned = {i for t in targets.values() for i in t}
+    untuned = [i for i in range(23) if i not in tuned]
+    ks = ph.ks.copy()
+    for i, k in untuned_stiffness(ph, untuned, cfg.untuned_max_sag_deg).items():
+        ks[i] = k
+    ph.set_gains(ks, ph.kd)
+    wrong: dict[int, str] = {}
+    for _ in range(100):
+        worst = 0.0
+        wrong.clear()
+        for orient in ("palm_down", "thumb_up", "hang"):  # wrist first: it tilts the fingers
+            tgt = targets[orient]
+            sol = ph.solve_static(*ORIENTATIONS[orient], check_stability=False)
+            worst = max(worst, *(abs(sol.q_deg[i] - v) for i, v in tgt.items()))
+            q = sol.q_deg.copy()
+            for i, v in tgt.items():
+                q[i] = v
+            torque = ph.gravity_torque(q) + ph.limit_torque(q)
+            for i, v in tgt.items():
+                k = float(torque[i] / math.radians(v - ph.rest_deg[i]))
+                if k > 0:
+                    ks[i] = k
+                else:
+                    wrong[i] = orient
+            ph.set_gains(ks, ph.kd)
+        if worst < tol_deg and not wrong:
+            break
+    for i, orient in wrong.items():
+        name = DOF_NAMES["ri"][i]
+        raise ConfigError(f"{name}: gravity in orientation {orient!r} pushes against the"
+                          " calibrated deviation; check its sign", key=f"calibration.{name}")
+    return ks
+
+
+def time_to_relaxed(
+    t_s: NDArray[np.float64], x: NDArray[np.float64], final: float, fraction: float = 0.9
+) -> float:
+    """First time after which ``x`` stays within (1 - fraction) of its total change of
+    ``final``: "time to relaxed pose" (90 % of the change done, for good)."""
+    band = (1.0 - fraction) * abs(x[0] - final)
+    outside = np.nonzero(np.abs(x - final) > band)[0]
+    if len(outside) == 0:
+        return 0.0
+    last = int(outside[-1])
+    if last + 1 >= len(t_s):
+        return math.inf
+    return float(t_s[last + 1])
+
+
+FINGER_FLEXION = [i for i, n in enumerate(DOF_NAMES["ri"])
+                  if not n.startswith("riThumb") and n[-4:] in ("MCPy", "PIPy", "DIPy")]
+WRIST_FLEXION = DOF_NAMES["ri"].index("riWristFlexion")
+WRIST_DEVIATION = DOF_NAMES["ri"].index("riWristDeviation")
+
+
+@dataclass(frozen=True)
+class ReleaseResult:
+    """One simulated release test: the time to relaxed pose and the traces."""
+
+    test: str
+    time_s: float
+    t_s: NDArray[np.float64]
+    signal_deg: NDArray[np.float64]
+    start_deg: float
+    final_deg: float
+
+
+def release_test(ph: PassiveHand, test: str, duration_s: float = 2.0) -> ReleaseResult:
+    """Run one of :data:`RELEASE_TESTS` (see the module docstring) in simulation."""
+    if test == "wrist_forward":
+        orient, held = "palm_down", {WRIST_FLEXION: 0.0}
+        watch = [WRIST_FLEXION]
+    elif test == "wrist_side":
+        orient, held = "thumb_up", {WRIST_DEVIATION: 0.0}
+        watch = [WRIST_DEVIATION]
+    elif test == "fingers":
+        orient = "hang"
+        held = {i: LOOSE_FIST_DEG[DOF_NAMES["ri"][i][-4:]] for i in FINGER_FLEXION}
+        watch = FINGER_FLEXION
+    else:
+        raise ValueError(f"unknown release test {test!r}; tests are {', '.join(RELEASE_TESTS)}")
+    inc, rot = ORIENTATIONS[orient]
+    start = ph.solve_static(inc, rot, fixed=held, check_stability=False).q_deg
+    final = ph.solve_static(inc, rot, start, check_stability=False).q_deg
+    t, q = ph.simulate(inc, rot, start, duration_s)
+    signal = q[:, watch].sum(axis=1)
+    f = float(final[watch].sum())
+    return ReleaseResult(test, time_to_relaxed(t, signal, f, ph.cfg.relaxed_fraction),
+                         t, signal, float(signal[0]), f)
+
+
+_TEST_GROUP = {"wrist_forward": "wrist_flexion", "wrist_side": "wrist_deviation",
+               "fingers": "digits"}
+
+
+def tune_damping(
+    cfg: PassiveHandConfig, ph: PassiveHand, ks: NDArray[np.float64], *, rounds: int = 2
+) -> dict[str, float]:
+    """kd / ks factor (seconds) per damping group, by bisection (in log space) so each
+    release test takes Table 1's mean time (``cfg.release_s``)."""
+    factor = dict.fromkeys(DAMPING_GROUPS, PROVISIONAL_KD_PER_KS_S)
+    groups = np.array([DAMPING_GROUPS.index(cfg.group_of(n)) for n in DOF_NAMES["ri"]])
+
+    def apply() -> None:
+        f = np.array([factor[g] for g in DAMPING_GROUPS])[groups]
+        ph.set_gains(ks, f * ks)
+
+    for _ in range(rounds):
+        for test in ("fingers", "wrist_forward", "wrist_side"):
+            group, target = _TEST_GROUP[test], cfg.release_s[test][0]
+            # Overdamped branch: below about 0.1 s the joints oscillate and the time
+            # to relaxed pose rises again, so the bracket starts there.
+            lo, hi = math.log(0.1), math.log(2.0)
+            for _ in range(16):
+                mid = 0.5 * (lo + hi)
+                factor[group] = math.exp(mid)
+                apply()
+                t = release_test(ph, test, duration_s=max(2.0, 4 * target)).time_s
+                if t < target:
+                    lo = mid
+                else:
+                    hi = mid
+            factor[group] = math.exp(0.5 * (lo + hi))
+    apply()
+    return factor
+
+
+def tune(cfg: PassiveHandConfig) -> Tuned:
+    """The tune step: stiffness (equation 4) then damping (Table 1)."""
+    ph = PassiveHand(cfg, springs=_provisional_springs(cfg))
+    ks = tune_stiffness(cfg, ph)
+    factor = tune_damping(cfg, ph, ks)
+    return Tuned(
+        inputs_sha256=cfg.inputs_sha256(),
+        ks_nm_per_rad={n: float(k) for n, k in zip(DOF_NAMES["ri"], ks, strict=True)},
+        kd_per_ks_s=factor,
+    )
+
+
+# --------------------------------------------------------------------------- config file
+
+_PAPER_LABEL = {"ri" + stem: label for label, (stem, _s, _o) in TABLE2_MAP.items()}
+
+
+def render_config(cfg: PassiveHandConfig) -> str:
+    """The TOML text of ``cfg``, commented (what ``handrig passive tune`` writes)."""
+    lines = [
+        "# The relaxed hand (Neff & Seidel, sim/passive.py). Degrees, vocabulary convention:",
+        "# flexion positive, abduction/deviation positive toward the thumb (radial).",
+        "# Edit the inputs, then run `handrig passive tune` to rewrite [tuned]",
+        "# (loading refuses [tuned] values whose inputs_sha256 no longer matches).",
+        "",
+        f"hand_length_m = {cfg.hand_length_m!r}",
+        "# klim = limit_gain_factor x ks (paper eq. 2: 'many times higher than the normal gain')",
+        f"limit_gain_factor = {cfg.limit_gain_factor!r}",
+        "# untuned DOFs (finger MCP abduction, thumb CMC twist): the worst gravity torque",
+        "# at rest moves them at most this far",
+        f"untuned_max_sag_deg = {cfg.untuned_max_sag_deg!r}",
+        "# 'time to relaxed pose' = this fraction of the change done, for good",
+        f"relaxed_fraction = {cfg.relaxed_fraction!r}",
+        "",
+        "# Set point per DOF (paper eq. 1) = Table 2 'Angle'.",
+        "[rest_deg]",
+    ]
+    for n in DOF_NAMES["ri"]:
+        label = _PAPER_LABEL.get(n, "not in Table 2")
+        lines.append(f"{n} = {cfg.rest_deg[n]!r}  # {label}")
+    lines += ["", "# Table 2 'Deviation', sign mapped by the physics (sim/passive.py docstring);",
+              "# orientation: hang = forearm straight down, palm_down / thumb_up = forearm",
+              "# horizontal with the palm down / vertical, thumb up."]
+    for n, c in cfg.calibration.items():
+        paper = TABLE2_PAPER[_PAPER_LABEL[n]][1]
+        lines.append(f"[calibration.{n}]  # paper: {_PAPER_LABEL[n]} {paper:+g}")
+        lines.append(f"deviation_deg = {c.deviation_deg!r}")
+        lines.append(f'orientation = "{c.orientation}"')
+    lines += ["", "# Table 1: time to relaxed pose, [mean, standard deviation] in seconds.",
+              "[release_s]"]
+    for t, (mean, sd) in cfg.release_s.items():
+        lines.append(f"{t} = [{mean!r}, {sd!r}]")
+    if cfg.tuned is not None:
+        lines += ["", "# Written by `handrig passive tune`: ks by equation 4, kd = factor x ks",
+                  "# with one factor per group found by matching Table 1. Do not edit.",
+                  "[tuned]", f'inputs_sha256 = "{cfg.tuned.inputs_sha256}"', "",
+                  "[tuned.kd_per_ks_s]"]
+        for g, f in cfg.tuned.kd_per_ks_s.items():
+            lines.append(f"{g} = {f!r}")
+        lines += ["", "[tuned.ks_nm_per_rad]"]
+        for n, k in cfg.tuned.ks_nm_per_rad.items():
+            lines.append(f"{n} = {k!r}")
+    return "\n".join(lines) + "\n"
+
+
+def default_config(hand_length_m: float = 0.19) -> PassiveHandConfig:
+    """The paper's inputs (Table 2 mapped, Table 1), untuned."""
+    rest, dev = table2_vocabulary()
+    return PassiveHandConfig(
+        hand_length_m=hand_length_m, limit_gain_factor=20.0, untuned_max_sag_deg=3.0,
+        relaxed_fraction=0.9, rest_deg=rest,
+        calibration={n: Calibration(d, o) for n, (d, o) in dev.items()},
+        release_s=dict(TABLE1_S),
+    )
+
+
+def tune_config(cfg: PassiveHandConfig) -> PassiveHandConfig:
+    """``cfg`` with fresh [tuned] values."""
+    import dataclasses
+
+    return dataclasses.replace(cfg, tuned=tune(cfg))
+
+
+def check(cfg: PassiveHandConfig) -> dict[str, dict[str, dict[str, float | str | bool]]]:
+    """Run the calibration poses and the release tests on the tuned model.
+
+    Returns ``{"deviations": {dof: {paper, model, orientation, ok}},
+    "relaxation_s": {test: {paper, std, model, ok}}}``; deviations are sag from rest in
+    degrees (vocabulary convention); ok = within 1 degree / within mean +- std."""
+    ph = PassiveHand(cfg)
+    sols = {o: ph.solve_static(*ORIENTATIONS[o]) for o in ORIENTATIONS}
+    dev: dict[str, dict[str, float | str | bool]] = {}
+    for name, cal in cfg.calibration.items():
+        i = DOF_NAMES["ri"].index(name)
+        model = float(sols[cal.orientation].q_deg[i] - cfg.rest_deg[name])
+        dev[name] = {"paper": cal.deviation_deg, "model": round(model, 4),
+                     "orientation": cal.orientation,
+                     "ok": abs(model - cal.deviation_deg) <= 1.0}
+    rel: dict[str, dict[str, float | str | bool]] = {}
+    for test in RELEASE_TESTS:
+        mean, sd = cfg.release_s[test]
+        t = release_test(ph, test).time_s
+        rel[test] = {"paper": mean, "std": sd, "model": round(t, 4),
+                     "ok": abs(t - mean) <= sd}
+    return {"deviations": dev, "relaxation_s": rel}

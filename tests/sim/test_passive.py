@@ -1,0 +1,113 @@
+"""The relaxed-hand model: Table 2 mapping, tuning (equation 4, Table 1), solvers."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from handrig.errors import ConfigError
+from handrig.hand import DOF_NAMES, dof_limits_deg
+from sim import passive
+from sim.passive import (
+    ORIENTATIONS,
+    Calibration,
+    PassiveHand,
+    check,
+    default_config,
+    load_passive_params,
+    release_test,
+    time_to_relaxed,
+    tune_stiffness,
+)
+
+
+@pytest.fixture(scope="module")
+def cfg() -> passive.PassiveHandConfig:
+    return load_passive_params()
+
+
+@pytest.fixture(scope="module")
+def hand(cfg: passive.PassiveHandConfig) -> PassiveHand:
+    return PassiveHand(cfg)
+
+
+def test_shipped_config_is_table2_mapped_and_tuned(cfg: passive.PassiveHandConfig) -> None:
+    ref = default_config()
+    assert cfg.rest_deg == ref.rest_deg
+    assert cfg.calibration == ref.calibration
+    assert cfg.release_s == ref.release_s
+    assert cfg.is_tuned
+    # the sign flips the physics asks for: only the wrist side deviation changes sign
+    assert cfg.calibration["riWristDeviation"] == Calibration(-29.0, "thumb_up")
+    assert cfg.calibration["riWristFlexion"] == Calibration(22.0, "palm_down")
+    assert cfg.calibration["riIndexDIPy"] == Calibration(-34.0, "hang")
+    assert cfg.calibration["riThumbCMCy"] == Calibration(-2.0, "thumb_up")
+    assert cfg.calibration["riThumbCMCz"] == Calibration(6.0, "palm_down")
+    assert all(k > 0 for k in cfg.springs().ks_nm_per_rad.values())
+
+
+def test_check_reproduces_table2_and_table1(cfg: passive.PassiveHandConfig) -> None:
+    result = check(cfg)
+    assert set(result["deviations"]) == set(cfg.calibration)
+    for name, v in result["deviations"].items():
+        assert abs(float(v["model"]) - float(v["paper"])) <= 1.0, name
+    for test, v in result["relaxation_s"].items():
+        assert abs(float(v["model"]) - float(v["paper"])) <= float(v["std"]), test
+
+
+def test_a_wrong_sign_is_caught_by_the_physics() -> None:
+    ref = default_config()
+    cal = dict(ref.calibration)
+    cal["riWristDeviation"] = Calibration(+29.0, "thumb_up")  # the paper's raw sign
+    with pytest.raises(ConfigError, match="riWristDeviation"):
+        tune_stiffness(dataclasses.replace(ref, calibration=cal))
+
+
+def test_stale_tuned_values_are_refused(cfg: passive.PassiveHandConfig) -> None:
+    rest = dict(cfg.rest_deg)
+    rest["riIndexPIPy"] = 55.0
+    with pytest.raises(ConfigError, match="passive tune"):
+        dataclasses.replace(cfg, rest_deg=rest).springs()
+
+
+def test_static_solve_agrees_with_dynamic_settle_and_is_stable(hand: PassiveHand) -> None:
+    for inc, rot in ((0.0, 0.0), (0.0, 180.0), (-40.0, 120.0), (60.0, -70.0)):
+        sol = hand.solve_static(inc, rot)
+        assert sol.stable and sol.residual_nm < 1e-9
+        settled, _ = hand.settle(inc, rot, vel_tol_deg_s=1e-4, max_s=20.0)
+        np.testing.assert_allclose(sol.q_deg, settled, atol=0.02)
+
+
+def test_limit_terms_hold_the_range(hand: PassiveHand) -> None:
+    lim = dof_limits_deg("ri")
+    for inc, rot in ((0.0, 180.0), (60.0, 180.0), (0.0, -90.0), (-90.0, 0.0), (89.0, 0.0)):
+        q = hand.solve_static(inc, rot).q_deg
+        over = np.maximum(lim[:, 0] - q, 0) + np.maximum(q - lim[:, 1], 0)
+        assert over.max() < 3.0, (inc, rot, DOF_NAMES["ri"][int(over.argmax())])
+    torque = hand.limit_torque(np.array([lim[i, 1] + 10.0 for i in range(23)]))
+    assert np.all(torque < 0)
+    assert np.all(hand.limit_torque(hand.rest_deg) == 0)
+
+
+def test_time_to_relaxed_is_90_percent_of_the_change() -> None:
+    t = np.linspace(0, 3, 3001)
+    x = 10.0 * np.exp(-t / 0.2)
+    assert time_to_relaxed(t, x, 0.0) == pytest.approx(0.2 * math.log(10), abs=2e-3)
+    assert time_to_relaxed(t, 10 - x, 10.0, 0.5) == pytest.approx(0.2 * math.log(2), abs=2e-3)
+
+
+def test_release_moves_the_way_table1_describes(hand: PassiveHand) -> None:
+    r = release_test(hand, "wrist_forward")
+    assert r.start_deg == pytest.approx(0.0) and r.final_deg == pytest.approx(22.0, abs=1e-3)
+    r = release_test(hand, "wrist_side")
+    assert r.final_deg == pytest.approx(-29.0, abs=1e-3)
+    r = release_test(hand, "fingers")
+    assert r.start_deg > r.final_deg  # the loose fist opens
+
+
+def test_orientations_are_the_papers() -> None:
+    assert ORIENTATIONS == {"hang": (-90.0, 0.0), "palm_down": (0.0, 0.0),
+                            "thumb_up": (0.0, 90.0)}
