@@ -217,7 +217,7 @@ _IMMEDIATELY = b"\x00\x00\x00\x00\x00\x00\x00\x01"  # OSC time tag "now"
 class _BundleTemplate:
     """A preallocated VMC bundle; float fields are filled by one numpy assignment."""
 
-    def __init__(self, bones: tuple[Bone, ...]) -> None:
+    def __init__(self, bones: tuple[Bone, ...], scale: float = 1.0) -> None:
         parts: list[bytes] = [b"#bundle\x00", _IMMEDIATELY]
         float_pos: list[int] = []  # byte offsets of the 7 floats of each bone message
         pos = 16
@@ -245,7 +245,7 @@ class _BundleTemplate:
         self._pos_idx = starts[:, None] + np.arange(3)
         self._rot_idx = starts[:, None] + 3 + np.arange(4)
         self._time_idx = self.time_pos // 4
-        self._floats[self._pos_idx] = np.array([b.offset_m for b in bones])
+        self._floats[self._pos_idx] = np.array([b.offset_m for b in bones]) * scale
 
     def fill(self, quats: NDArray[np.float64], t_s: float) -> bytearray:
         self._floats[self._rot_idx] = quats
@@ -273,13 +273,18 @@ class VmcSender:
     """Send the two hands to a VMC receiver at most ``rate_hz`` times a second.
 
     ``send`` is meant to be called every loop tick; it returns at once, without
-    sending, until the next send is due on ``clock``. Counters: ``bundles_sent``,
+    sending, until the next send is due on ``clock``. Bone positions (local, metres)
+    are the anthropometric hand of :mod:`handrig.outputs.skeleton` scaled to
+    ``hand_length_m``; most receivers use only the rotations of finger bones, but one
+    set to apply bone positions too moves the avatar's knuckles there, so match the
+    avatar's hand length or turn that option off in the receiver. Counters: ``bundles_sent``,
     ``skipped`` (rate limit), ``errors`` (the OS refused the datagram: buffer full,
     no route, receiver port closed), ``last_error`` (its text).
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *,
-                 rate_hz: float = 60.0, clock: Clock | None = None) -> None:
+                 rate_hz: float = 60.0, clock: Clock | None = None,
+                 hand_length_m: float = skeleton.HAND_LENGTH_M) -> None:
         if not rate_hz > 0:
             raise ConfigError("VMC send rate must be positive", key="rate_hz", value=rate_hz,
                               allowed="> 0 Hz, e.g. 60")
@@ -288,7 +293,10 @@ class VmcSender:
         self._period_s = 1.0 / self.rate_hz
         self._next_s = -np.inf
         self._values = np.zeros(_NONE + 1)
-        self._template = _BundleTemplate(BONES)
+        if not 0.05 <= hand_length_m <= 0.5:
+            raise ConfigError("implausible hand length", key="hand_length_m",
+                              value=hand_length_m, allowed="0.05 .. 0.5 m (adult about 0.19)")
+        self._template = _BundleTemplate(BONES, hand_length_m / skeleton.HAND_LENGTH_M)
         try:
             infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
         except socket.gaierror as exc:

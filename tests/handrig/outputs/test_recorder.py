@@ -246,3 +246,50 @@ def test_rig_output_hook_records_the_54_pose(tmp_path: Path) -> None:
     np.testing.assert_allclose(p2, poses, atol=1e-4)
     assert w2 is not None
     np.testing.assert_allclose(w2, wrist, atol=1e-4)
+
+
+def _fk_tips(bvh_path: Path, frame: int) -> dict[str, np.ndarray]:
+    """World positions (cm) of every joint and end site, BVH rotations intrinsic ZXY."""
+    from scipy.spatial.transform import Rotation
+
+    bvh = read_bvh(bvh_path)
+    rot: list[np.ndarray] = []
+    pos: list[np.ndarray] = []
+    out: dict[str, np.ndarray] = {}
+    for j in bvh.joints:
+        vals = dict(zip(j.channels, bvh.motion[frame, j.channel_start:], strict=False))
+        local = Rotation.from_euler(
+            "ZXY", [vals.get("Zrotation", 0.0), vals.get("Xrotation", 0.0),
+                    vals.get("Yrotation", 0.0)], degrees=True).as_matrix()
+        if j.parent < 0:
+            p, r = np.asarray(j.offset, dtype=float), local
+        else:
+            p = pos[j.parent] + rot[j.parent] @ np.asarray(j.offset)
+            r = rot[j.parent] @ local
+        pos.append(p)
+        rot.append(r)
+        out[j.name] = p
+    return out
+
+
+def test_bvh_fingers_curl_toward_the_palm_on_both_hands(tmp_path: Path) -> None:
+    """In a BVH viewer the skeleton is palm down (-Y): flexion must lower the fingertips."""
+    rest = np.zeros(50)
+    fist = np.zeros(50)
+    for c in hand.select_curves(motion=hand.Motion.FLEXION):
+        if c.digit != "Thumb":
+            fist[c.index] = 60.0
+    wrist = np.array([[0.0, 0, 0, 0], [0.0, 0, 0, 0], [40.0, 0, 40.0, 0], [0.0, 15, 0.0, 15]])
+    path = tmp_path / "fist.bvh"
+    with Recorder(path, rate_hz=30.0) as rec:
+        rec.add(0.0, rest, wrist[0])
+        rec.add(0.1, fist, wrist[1])
+        rec.add(0.2, rest, wrist[2])
+        rec.add(0.3, rest, wrist[3])
+    r0, r1, r2, r3 = (_fk_tips(path, k) for k in range(4))
+    for side in ("Right", "Left"):
+        # the distal joint of the index: with a fist it drops below the knuckle plane
+        assert r1[f"{side}HandIndex3"][1] < r0[f"{side}HandIndex3"][1] - 2.0
+        # wrist flexion (palmar) lowers the knuckles, radial deviation moves them forward
+        assert r2[f"{side}HandMiddle1"][1] < r0[f"{side}HandMiddle1"][1] - 2.0
+        assert r3[f"{side}HandMiddle1"][2] > r0[f"{side}HandMiddle1"][2] + 1.0

@@ -223,3 +223,19 @@ def test_rig_output_hook_takes_the_54_pose() -> None:
     quats = np.array([a[4:8] for a in got["/VMC/Ext/Bone/Pos"]])
     back = vmc.decode_bones(quats)
     np.testing.assert_allclose(back[:54], np.concatenate([pose, wrist]), atol=2e-3)
+
+
+def test_hand_length_scales_bone_positions() -> None:
+    server, got = _receiver()
+    try:
+        with vmc.VmcSender("127.0.0.1", server.server_address[1], clock=FakeClock(),
+                           hand_length_m=0.095) as sender:
+            sender.send(np.zeros(50), None, 0.0)
+            server.handle_request()
+    finally:
+        server.server_close()
+    offsets = np.array([a[1:4] for a in got["/VMC/Ext/Bone/Pos"]])
+    np.testing.assert_allclose(offsets, 0.5 * np.array([b.offset_m for b in vmc.BONES]),
+                               atol=1e-7)
+    with pytest.raises(ConfigError, match="hand length"):
+        vmc.VmcSender("127.0.0.1", 9, hand_length_m=1.9)
