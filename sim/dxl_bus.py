@@ -259,9 +259,9 @@ class SimBus:
         servos = servos_from_rig(config, ids=ids, model=model)
         the_puppet: MotionModel | None
         if puppet is True:
-            import importlib
+            from sim.puppet import Puppet
 
-            the_puppet = importlib.import_module("sim.puppet").Puppet(config)
+            the_puppet = Puppet(config)
         elif puppet is False:
             the_puppet = None
         else:

@@ -1,0 +1,327 @@
+"""MuJoCo loopback: emulated servos drive the joints of the shared MJCF hand.
+
+Each calibrated servo of the rig (``config/rig.toml``) drives one joint of the
+hand from :mod:`sim.hand_model` through a MuJoCo ``position`` actuator made to
+behave like an X-series servo:
+
+- target: Goal Position (motor ticks, undoing Homing Offset and Drive Mode) ->
+  joint angle by the rig calibration (:meth:`ServoCalibration.ticks_to_deg`);
+- speed: the target moves toward the goal at most at the servo's Profile
+  Velocity (or Velocity Limit), divided by the gear ratio;
+- torque: saturates at the stall torque times the gear ratio (in
+  current-based position mode at the Goal Current, via the datasheet's
+  stall torque / stall current ratio);
+- stiffness from Position P Gain. Model (an assumption, not a datasheet
+  formula): PWM = P/128 x error in ticks, torque = stall torque x PWM / 885, so
+  P = 400 gives 1.2 Nm/rad at the XL330 horn;
+- torque off: no drive, only back-drive damping.
+
+Present Position / Velocity / Current come from the simulation (joint angle,
+joint velocity, actuator force) mapped back through the calibration; the
+servo's current is the actuator torque over the motor's torque constant.
+
+Simulated time follows wall time: a thread steps the model in batches (1 ms
+steps, every ~2 ms of wall time), holding the bus lock only to exchange goals
+and present state. If the simulation falls more than ``max_lag_s`` behind, it
+skips ahead, counts the event in :attr:`Puppet.behind_count` and calls
+``on_behind``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_protocol.dynamixel import MODELS, TICKS_PER_TURN, Reg
+from handrig.errors import ConfigError, HandrigError
+from handrig.hand import DOF_NAMES, Hand
+from handrig.rigconfig import RigConfig, ServoCalibration
+from sim.dxl_servo import EmulatedServo
+from sim.hand_model import ActuatorParams, PassiveParams, hand_model_xml
+
+PWM_LIMIT = 885  # X-series PWM Limit default (= 100 % duty)
+# Reflected rotor inertia at the servo horn (assumed; sim.hand_model's default),
+# scaled by gear_ratio^2 at the joint.
+ARMATURE_KGM2 = 1e-4
+# Back-drive damping of an unpowered servo at the horn, N m s/rad (assumed).
+BACKDRIVE_DAMPING_NMS = 0.01
+TICKS_PER_RAD = TICKS_PER_TURN / (2.0 * math.pi)
+
+
+def kp_from_p_gain(p_gain: int, stall_torque_nm: float) -> float:
+    """Horn stiffness (N m/rad) for a Position P Gain, under this module's PWM model."""
+    return stall_torque_nm * (p_gain / 128.0) / PWM_LIMIT * TICKS_PER_RAD
+
+
+def _fallback_passive() -> PassiveParams:
+    """Weak springs for joints no servo drives, used when the tuned relaxed-hand
+    parameters (config/passive_hand.toml) are not available."""
+    names = DOF_NAMES["ri"]
+    return PassiveParams({n: 0.0 for n in names}, {n: 0.05 for n in names},
+                         {n: 0.005 for n in names})
+
+
+@dataclass
+class _Channel:
+    servo_id: int
+    cal: ServoCalibration
+    actuator: int
+    qpos: int
+    stall_nm: float
+    kt_nm_per_a: float
+    powered: bool = False
+    servo: EmulatedServo | None = None
+
+
+class _HandSim:
+    def __init__(self, hand: Hand, cals: Sequence[ServoCalibration], timestep_s: float) -> None:
+        import mujoco
+
+        self.mujoco = mujoco
+        self.hand = hand
+        try:
+            from sim.hand_model import default_passive
+
+            passive = default_passive()
+        except (HandrigError, OSError, KeyError):
+            passive = _fallback_passive()
+        actuated = {}
+        for c in cals:
+            info = MODELS[c.model]
+            kp = kp_from_p_gain(info.position_p_gain, info.stall_torque_nm) * c.gear_ratio**2
+            armature = ARMATURE_KGM2 * c.gear_ratio**2
+            actuated[c.joint] = ActuatorParams(
+                kp_nm_per_rad=kp,
+                kv_nms_per_rad=2.0 * math.sqrt(kp * armature),
+                force_limit_nm=info.stall_torque_nm * c.gear_ratio,
+                max_speed_rad_s=math.radians(info.no_load_speed_rpm * 6.0) / c.gear_ratio,
+                armature_kgm2=armature,
+            )
+        xml = hand_model_xml(hand, passive=passive, actuated=actuated, timestep_s=timestep_s)
+        self.model = mujoco.MjModel.from_xml_string(xml)
+        self.data = mujoco.MjData(self.model)
+        self.channels: list[_Channel] = []
+        for c in cals:
+            act = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, c.joint)
+            jnt = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, c.joint)
+            info = MODELS[c.model]
+            self.channels.append(_Channel(
+                c.id, c, act, int(self.model.jnt_qposadr[jnt]), info.stall_torque_nm,
+                info.stall_torque_nm / info.stall_current_a))
+        n = len(self.channels)
+        self.act_idx = np.array([ch.actuator for ch in self.channels], dtype=np.intp)
+        self.q_idx = np.array([ch.qpos for ch in self.channels], dtype=np.intp)
+        self.goal_rad = np.zeros(n)
+        self.speed_rad_s = np.zeros(n)
+        for ch in self.channels:
+            self._set_power(ch, False)
+        self.mujoco.mj_forward(self.model, self.data)
+
+    def _set_power(self, ch: _Channel, on: bool) -> None:
+        m = self.model
+        a = ch.actuator
+        g = ch.cal.gear_ratio
+        if on:
+            servo = ch.servo
+            p_gain = servo.get(Reg.POSITION_P_GAIN) if servo else 400
+            kp = kp_from_p_gain(p_gain, ch.stall_nm) * g * g
+            m.actuator_gainprm[a, 0] = kp
+            m.actuator_biasprm[a, 1] = -kp
+            m.actuator_biasprm[a, 2] = -2.0 * math.sqrt(kp * ARMATURE_KGM2 * g * g)
+            self.data.ctrl[a] = self.data.qpos[ch.qpos]
+        else:
+            m.actuator_gainprm[a, 0] = 0.0
+            m.actuator_biasprm[a, 1] = 0.0
+            m.actuator_biasprm[a, 2] = -BACKDRIVE_DAMPING_NMS * g * g
+        ch.powered = on
+
+    def pull(self) -> None:
+        """Read goals, torque and limits from the servos (bus lock held)."""
+        m = self.model
+        for k, ch in enumerate(self.channels):
+            s = ch.servo
+            if s is None:
+                continue
+            on = s.torque_enabled
+            if on != ch.powered:
+                self._set_power(ch, on)
+            if not on:
+                continue
+            g = ch.cal.gear_ratio
+            self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
+            self.speed_rad_s[k] = s.speed_limit_ticks_per_s() / TICKS_PER_RAD / g
+            limit = ch.stall_nm
+            if s.mem[11] == 5:  # current-based position: Goal Current bounds torque
+                amps = abs(s.get(Reg.GOAL_CURRENT)) * s.info.current_unit_ma / 1000.0
+                limit = min(limit, amps * ch.kt_nm_per_a)
+            limit *= g * min(1.0, s.get(Reg.PWM_LIMIT) / PWM_LIMIT)
+            m.actuator_forcerange[ch.actuator] = (-limit, limit)
+
+    def step(self, n: int) -> None:
+        """``n`` physics steps with the target ramped at the speed limit."""
+        lo = self.model.actuator_ctrlrange[self.act_idx, 0]
+        hi = self.model.actuator_ctrlrange[self.act_idx, 1]
+        goal = np.clip(self.goal_rad, lo, hi)
+        powered = np.array([ch.powered for ch in self.channels])
+        max_step = self.speed_rad_s * self.model.opt.timestep
+        ctrl = self.data.ctrl
+        for _ in range(n):
+            cur = ctrl[self.act_idx]
+            new = cur + np.clip(goal - cur, -max_step, max_step)
+            ctrl[self.act_idx] = np.where(powered, new, cur)
+            self.mujoco.mj_step(self.model, self.data)
+
+    def push(self) -> None:
+        """Write present state to the servos (bus lock held)."""
+        d = self.data
+        for ch in self.channels:
+            s = ch.servo
+            if s is None:
+                continue
+            c = ch.cal
+            q_deg = math.degrees(float(d.qpos[ch.qpos]))
+            ticks = c.deg_to_ticks_exact(q_deg)
+            qdot = float(d.qvel[ch.qpos])
+            rpm = c.direction * c.gear_ratio * qdot * 60.0 / (2.0 * math.pi)
+            torque_horn = float(d.actuator_force[ch.actuator]) / c.gear_ratio
+            current_ma = c.direction * torque_horn / ch.kt_nm_per_a * 1000.0
+            s.set_motion(ticks, rpm, current_ma)
+
+
+class Puppet:
+    """A MuJoCo hand driven by emulated servos, stepped in wall-clock time.
+
+    ``rig``: which servo drives which joint (joints of one or both hands).
+    ``timestep_s``: physics step; ``period_s``: how often the thread exchanges state
+    with the servos; ``max_lag_s``: how far simulated time may trail wall time before
+    the puppet skips ahead and reports it.
+    """
+
+    def __init__(
+        self,
+        rig: RigConfig,
+        *,
+        timestep_s: float = 0.001,
+        period_s: float = 0.002,
+        max_lag_s: float = 0.05,
+        on_behind: Callable[[float], None] | None = None,
+    ) -> None:
+        if not 0 < timestep_s <= period_s:
+            raise ConfigError("need 0 < timestep_s <= period_s", key="timestep_s",
+                              value=(timestep_s, period_s))
+        by_hand: dict[Hand, list[ServoCalibration]] = {}
+        for cal in rig.servos:
+            hand: Hand = "ri" if cal.joint in DOF_NAMES["ri"] else "le"
+            if cal.joint not in DOF_NAMES[hand]:
+                continue  # a curve with no joint in the 23-DOF model
+            by_hand.setdefault(hand, []).append(cal)
+        self.hands: dict[Hand, _HandSim] = {
+            h: _HandSim(h, cals, timestep_s) for h, cals in by_hand.items()
+        }
+        self.timestep_s = timestep_s
+        self.period_s = period_s
+        self.max_lag_s = max_lag_s
+        self.on_behind = on_behind
+        self.sim_time_s = 0.0
+        self.lag_s = 0.0
+        self.behind_count = 0
+        self.behind_total_s = 0.0
+        self.steps = 0
+        self._lock: threading.RLock = threading.RLock()
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.error: BaseException | None = None
+
+    @property
+    def driven_ids(self) -> list[int]:
+        """Servo IDs whose motion comes from the simulation."""
+        return [ch.servo_id for h in self.hands.values() for ch in h.channels]
+
+    def attach(self, servos: Sequence[EmulatedServo], lock: threading.RLock) -> None:
+        """Bind the emulated servos (by ID) and the bus lock."""
+        by_id = {s.id: s for s in servos}
+        for h in self.hands.values():
+            for ch in h.channels:
+                ch.servo = by_id.get(ch.servo_id)
+        self._lock = lock
+        with lock:
+            for h in self.hands.values():
+                h.push()
+
+    def joint_deg(self, name: str) -> float:
+        """A joint's simulated angle in degrees (vocabulary convention)."""
+        import mujoco
+
+        for h in self.hands.values():
+            jid = mujoco.mj_name2id(h.model, mujoco.mjtObj.mjOBJ_JOINT, name)
+            if jid >= 0:
+                with self._lock:
+                    return math.degrees(float(h.data.qpos[h.model.jnt_qposadr[jid]]))
+        raise KeyError(f"no simulated joint {name!r}")
+
+    def step(self, n: int = 1) -> None:
+        """Advance the simulation by ``n`` steps now (tests; the thread does this live)."""
+        with self._lock:
+            for h in self.hands.values():
+                h.pull()
+        for h in self.hands.values():
+            h.step(n)
+        with self._lock:
+            for h in self.hands.values():
+                h.push()
+        self.steps += n
+        self.sim_time_s += n * self.timestep_s
+
+    def start(self) -> None:
+        if self._thread is not None or not self.hands:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="puppet-physics", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def _run(self) -> None:
+        try:
+            t0 = time.perf_counter() - self.sim_time_s
+            dt = self.timestep_s
+            max_batch = max(1, int(self.max_lag_s / dt))
+            while not self._stop.is_set():
+                wall = time.perf_counter() - t0
+                n = int((wall - self.sim_time_s) / dt)
+                self.lag_s = wall - self.sim_time_s
+                if n <= 0:
+                    self._stop.wait(self.period_s)
+                    continue
+                if n > max_batch:
+                    skipped = (n - max_batch) * dt
+                    self.behind_count += 1
+                    self.behind_total_s += skipped
+                    self.sim_time_s += skipped
+                    if self.on_behind is not None:
+                        self.on_behind(skipped)
+                    n = max_batch
+                self.step(n)
+        except BaseException as exc:  # reported through .error
+            self.error = exc
+            raise
+
+    def joint_angles_deg(self) -> dict[str, float]:
+        """All simulated joint angles, degrees."""
+        out: dict[str, float] = {}
+        with self._lock:
+            for hand, h in self.hands.items():
+                for name in DOF_NAMES[hand]:
+                    jid = h.mujoco.mj_name2id(h.model, h.mujoco.mjtObj.mjOBJ_JOINT, name)
+                    out[name] = math.degrees(float(h.data.qpos[h.model.jnt_qposadr[jid]]))
+        return out
+
