@@ -239,3 +239,19 @@ def test_hand_length_scales_bone_positions() -> None:
                                atol=1e-7)
     with pytest.raises(ConfigError, match="hand length"):
         vmc.VmcSender("127.0.0.1", 9, hand_length_m=1.9)
+
+
+@pytest.mark.parametrize("side", ["Right", "Left"])
+def test_thumb_flexion_crosses_the_palm_and_abduction_leaves_it(side: str) -> None:
+    prefix = "ri" if side == "Right" else "le"
+    out = 1.0 if side == "Right" else -1.0
+    rest_tip = np.array([out, 0.0, 1.0]) / np.sqrt(2.0)  # Unity: out and forward
+    bone = vmc.BONE_NAMES.index(f"{side}ThumbProximal")
+    v = np.zeros(55)
+    v[hand.curve_index(f"{prefix}ThumbCMCz")] = 30.0
+    tip = Rotation.from_quat(vmc.bone_quaternions(v)[bone]).apply(rest_tip)
+    assert tip[2] < rest_tip[2] - 0.1 and tip[1] < -0.1  # toward the little finger, palmar
+    v[:] = 0.0
+    v[hand.curve_index(f"{prefix}ThumbCMCy")] = 30.0
+    tip = Rotation.from_quat(vmc.bone_quaternions(v)[bone]).apply(rest_tip)
+    assert tip[1] < -0.3 and abs(tip[0]) < abs(rest_tip[0])  # out of the palm plane
