@@ -88,8 +88,10 @@ class Recorder:
     """Collect frames in memory and write them as CSV or BVH on :meth:`close`.
 
     ``add`` costs a row copy into a preallocated chunk (``chunk_frames`` rows, float64);
-    a full chunk is kept and a new one allocated. ``with_wrist``: record the 4 wrist
-    DOFs; None decides on the first frame. Use as a context manager or call ``close``.
+    a full chunk is kept and a new one allocated. Memory is 440 bytes per frame (5.3 MB
+    per minute at 200 Hz, 320 MB per hour). ``with_wrist``: record the 4 wrist DOFs;
+    None decides on the first frame. Use as a context manager or call ``close`` in a
+    ``finally``: frames not yet closed are lost if the process dies.
     """
 
     def __init__(self, path: str | Path, fmt: str | None = None, rate_hz: float = 200.0, *,
@@ -100,11 +102,15 @@ class Recorder:
             raise DataError(f"{self.path}: rate_hz must be a positive number, got {rate_hz}")
         self.rate_hz = float(rate_hz)
         self.with_wrist = with_wrist
+        if chunk_frames < 1:
+            raise ValueError(f"chunk_frames must be >= 1, got {chunk_frames}")
         self._chunk_frames = int(chunk_frames)
         self._chunks: list[NDArray[np.float64]] = []
         self._chunk = np.empty((self._chunk_frames, _N))
         self._i = 0
         self._closed = False
+        # the channel table is read now, so a broken profile fails before the show
+        self._table = _bvh_table(load_profile(BVH_PROFILE)) if self.fmt == "bvh" else []
         self._tmp = self.path.with_name(self.path.name + ".partial")
         try:
             self._file = open(self._tmp, "w", encoding="ascii", newline="\n")  # noqa: SIM115
@@ -122,6 +128,8 @@ class Recorder:
     def add(self, t_s: float, pose50_deg: NDArray[np.float64],
             wrist_deg: NDArray[np.float64] | None = None) -> None:
         """Append one frame: time (s), (50,) curves and (4,) wrist DOFs or None (degrees)."""
+        if self._closed:
+            raise ValueError(f"{self.path}: the recording is closed")
         if self.with_wrist is None:
             self.with_wrist = wrist_deg is not None
         row = self._chunk[self._i]
@@ -157,7 +165,7 @@ class Recorder:
                 if self.fmt == "csv":
                     _write_csv(f, data, bool(self.with_wrist))
                 else:
-                    _write_bvh(f, data, self.rate_hz, bool(self.with_wrist))
+                    _write_bvh(f, data, self.rate_hz, bool(self.with_wrist), self._table)
             os.replace(self._tmp, self.path)
         except OSError as exc:
             raise DataError(f"{self.path}: writing the recording failed: {exc}") from None
@@ -212,7 +220,8 @@ def _bvh_joints() -> list[tuple[str, int, tuple[float, float, float], tuple[floa
     return out
 
 
-def _write_bvh(f: TextIO, data: NDArray[np.float64], rate_hz: float, with_wrist: bool) -> None:
+def _write_bvh(f: TextIO, data: NDArray[np.float64], rate_hz: float, with_wrist: bool,
+               table: list[tuple[str, str, float, float]]) -> None:
     joints = _bvh_joints()
     names = [j[0] for j in joints]
     children: dict[int, list[int]] = {}
@@ -244,7 +253,7 @@ def _write_bvh(f: TextIO, data: NDArray[np.float64], rate_hz: float, with_wrist:
     motion = np.zeros((n, len(_ROOT_CHANNELS) + 3 * (len(names) - 1)))
     values = data[:, 1:] if with_wrist else np.concatenate(
         [data[:, 1:51], np.zeros((n, len(WRIST_NAMES)))], axis=1)
-    for k, (joint, channel, sign, offset) in enumerate(_bvh_table(load_profile(BVH_PROFILE))):
+    for k, (joint, channel, sign, offset) in enumerate(table):
         motion[:, start[joint] + BVH_CHANNELS.index(channel)] = sign * (values[:, k] - offset)
     f.write("\n".join(lines) + "\n")
     np.savetxt(f, motion, fmt="%.6f", delimiter=" ")

@@ -116,6 +116,8 @@ def test_nothing_is_written_before_close(tmp_path: Path) -> None:
     rec.close()
     assert path.exists() and not (tmp_path / "take.csv.partial").exists()
     rec.close()  # idempotent
+    with pytest.raises(ValueError, match="closed"):
+        rec.add(t_s[1], poses[1])
 
 
 def test_wrist_must_stay_consistent(tmp_path: Path) -> None:
