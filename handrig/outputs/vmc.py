@@ -347,6 +347,12 @@ class VmcSender:
         self.bundles_sent += 1
         return True
 
+    def stats(self) -> dict[str, object]:
+        """Counters for a panel or a JSON summary."""
+        return {"vmc": f"{self.address[0]}:{self.address[1]}", "rate_hz": self.rate_hz,
+                "bundles_sent": self.bundles_sent, "skipped": self.skipped,
+                "errors": self.errors, "last_error": self.last_error}
+
     def __call__(self, t_s: float, pose54_deg: NDArray[np.float64]) -> None:
         """The rig's output hook: ``pose54_deg`` = 50 curves then the 4 wrist DOFs
         (:data:`handrig.hand.ALL_JOINT_NAMES` order, which :data:`WRIST_NAMES` follows)."""

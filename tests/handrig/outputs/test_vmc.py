@@ -165,6 +165,7 @@ def test_rate_limit_on_injected_clock() -> None:
             clock.advance(0.005)
         assert sent == 60
         assert sender.skipped == 140
+        assert sender.stats()["bundles_sent"] == 60 and sender.stats()["vmc"] == "127.0.0.1:9"
         # after a stall the sender does not burst to catch up
         clock.advance(1.0)
         assert sender.send(pose, None, clock.now())
