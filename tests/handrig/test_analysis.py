@@ -108,3 +108,74 @@ def test_analyze_cli_reports_bad_input_in_one_line(
     assert main(["analyze", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "bad.bvh" in err and "MOTION" in err and "Traceback" not in err
+
+
+def _naive_counts(x: np.ndarray) -> tuple[list[int], dict[str, dict[str, int]]]:
+    """Sections 4-5 written out pair by pair from the definitions (slow, obvious)."""
+    n, k = x.shape
+    rng = x.max(axis=0) - x.min(axis=0)
+    std = np.array([np.sqrt(np.mean((x[:, i] - x[:, i].mean()) ** 2)) for i in range(k)])
+    z = np.zeros_like(x)
+    for i in range(k):
+        if rng[i] > 0:
+            z[:, i] = (x[:, i] - x[:, i].mean()) / std[i]
+
+    def rmsd(a: int, b: int, sign: float) -> float:
+        return float(np.sqrt(np.sum((z[:, a] + sign * z[:, b]) ** 2) / n))
+
+    def dofs(range_min: float, t: float) -> int:
+        keep = [i for i in range(k) if rng[i] >= range_min]
+        dependent = set()
+        for a in keep:
+            for b in keep:
+                larger = std[b] > std[a] or (std[b] == std[a] and b < a)
+                if a != b and larger and min(rmsd(a, b, -1), rmsd(a, b, 1)) < t:
+                    dependent.add(a)
+        return len(keep) - len(dependent)
+
+    keep1 = [i for i in range(k) if rng[i] >= 1]
+    pairs = {}
+    for t in (0.3, 0.5):
+        c1 = sum(rmsd(a, b, -1) < t for i, a in enumerate(keep1) for b in keep1[i + 1:])
+        c2 = sum(rmsd(a, b, 1) < t for i, a in enumerate(keep1) for b in keep1[i + 1:])
+        pairs[f"{t:g}"] = {"rmsd1": c1, "rmsd2": c2}
+    stages = [k, len(keep1), dofs(1, 0.3), int((rng >= 5).sum()), dofs(5, 0.5)]
+    return stages, pairs
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_agrees_with_a_naive_pairwise_implementation(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    ref = mocap.load_reference("raw").curves
+    if seed == 0:
+        x = ref
+    else:  # random mixtures of the real curves, some tiny, some copies, some constant
+        x = ref[:300] @ rng.normal(0, 0.3, size=(50, 50))
+        x[:, :10] *= rng.uniform(0.001, 0.3, size=10)
+        x[:, 10] = x[:, 11] * 0.5
+        x[:, 12] = 4.2
+    stages, pairs = _naive_counts(x)
+    an = analysis.analyze(x)
+    assert [s.dofs_left for s in an.stages] == stages
+    assert an.pairs_below == pairs
+
+
+def test_analyze_reports_glitches_and_despikes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from handrig.bvh import Bvh, format_bvh, read_bvh
+
+    b = read_bvh(mocap.REFERENCE_BVH)
+    motion = b.motion[:120].copy()
+    motion[60, b.column("RightHandRing2", "Zrotation")] += 130.0
+    p = tmp_path / "g.bvh"
+    p.write_text(format_bvh(Bvh(b.joints, b.frame_time_s, motion)))
+    assert main(["analyze", str(p), "--json"]) == 0
+    cap = capsys.readouterr()
+    obj = json.loads(cap.out)
+    assert obj["glitches"][0]["curve"] == "riRingPIPy" and obj["glitches"][0]["frame"] == 60
+    assert "--despike" in cap.err
+    assert main(["analyze", str(p), "--json", "--despike"]) == 0
+    fixed = json.loads(capsys.readouterr().out)
+    assert fixed["glitches"][0]["repaired"] is True
+    assert fixed["ranges_deg"]["riRingPIPy"] < obj["ranges_deg"]["riRingPIPy"] - 100

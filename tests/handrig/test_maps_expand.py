@@ -177,3 +177,20 @@ def test_fitting_refuses_glitches_until_despiked(
     assert "riThumbIPz frame 50" in err and "--despike" in err
     assert main(["fit-map", str(p), "--out", str(out), "--despike"]) == 0
     assert main(["expand", "--map", str(out), str(p), "--out", "-"]) == 0
+
+
+def test_evaluate_compares_methods_on_held_out_blocks(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    b = read_bvh(mocap.REFERENCE_BVH)
+    p = tmp_path / "part.bvh"
+    p.write_text(format_bvh(Bvh(b.joints, b.frame_time_s, b.motion[300:700])))
+    assert main(["evaluate", str(p), "--json", "--folds", "4"]) == 0
+    obj = json.loads(capsys.readouterr().out)
+    assert obj["in_sample"] is False
+    assert "4 contiguous blocks" in obj["held_out"]["scheme"]
+    meth = obj["held_out"]["methods"]
+    assert set(meth) == {"ridge", "huber", "paper", "mean"}
+    assert meth["ridge"]["ri_rms_deg"] < meth["mean"]["ri_rms_deg"]
+    assert main(["evaluate", str(p), "--folds", "1"]) == 2
+    assert "folds" in capsys.readouterr().err
