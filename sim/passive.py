@@ -361,6 +361,17 @@ class PassiveHand:
                                  None, None, None, None)
         return np.asarray(r)
 
+    def _energy_qpos(self, q: NDArray[np.float64]) -> float:
+        """Potential energy whose negative gradient is the residual: springs, limit
+        penalties and gravity (valid right after :meth:`_residual_qpos` at ``q``)."""
+        m, d = self.model, self.data
+        ks = m.jnt_stiffness[m.dof_jntid]
+        viol = np.maximum(self.low_qpos - q, 0.0) + np.maximum(q - self.high_qpos, 0.0)
+        spring = 0.5 * float(np.sum(ks * (q - m.qpos_spring) ** 2))
+        limit = 0.5 * float(np.sum(self._klim_qpos * viol**2))
+        gravity = -float(np.sum(m.body_mass[:, None] * d.xipos * m.opt.gravity))
+        return spring + limit + gravity
+
     # -- static equilibrium
 
     def solve_static(
@@ -371,13 +382,19 @@ class PassiveHand:
         *,
         fixed: Mapping[int, float] | None = None,
         tol_nm: float = 1e-10,
-        max_iter: int = 50,
+        max_iter: int = 60,
         check_stability: bool = True,
     ) -> StaticSolution:
-        """Newton on ks (rest - q) + limits + gravity torque = 0, warm-started at ``q0_deg``
-        (default: the rest pose). ``fixed``: DOF index -> value held (degrees), as when the
-        subject holds the wrist straight. Stability: every eigenvalue of the residual's
-        Jacobian (over the free DOFs) must be negative."""
+        """Static equilibrium ks (rest - q) + limits + gravity torque = 0, warm-started at
+        ``q0_deg`` (default: the rest pose).
+
+        The equilibrium is a stationary point of the potential energy (springs, limit
+        penalties, gravity), so the solver is Newton's method on that energy with an
+        Armijo line search and a Levenberg shift where the Hessian is not positive
+        definite: it always descends, so it ends in a local minimum near the warm start,
+        the one the dynamics would also settle in. ``fixed``: DOF index -> value held
+        (degrees), as when the subject holds the wrist straight. Stability: every
+        eigenvalue of the residual's Jacobian (over the free DOFs) must be negative."""
         self.set_orientation(inclination_deg, rotation_deg)
         nv = self.model.nv
         q = np.zeros(nv)
@@ -386,24 +403,37 @@ class PassiveHand:
         for i, v in (fixed or {}).items():
             q[self.idx[i]] = math.radians(v)
             free[self.idx[i]] = False
-        iterations, res = 0, math.inf
+        iterations = 0
         r = self._residual_qpos(q, jac=True)
-        for _ in range(max_iter):
+        energy = self._energy_qpos(q)
+        res = float(np.max(np.abs(r[free])))
+        while res >= tol_nm and iterations < max_iter:
             iterations += 1
-            jmat = self._jacobian(q)[np.ix_(free, free)]
-            step = np.linalg.solve(jmat, -r[free])
-            res0 = float(np.max(np.abs(r[free])))
+            hess = -self._jacobian(q)[np.ix_(free, free)]
+            hess = 0.5 * (hess + hess.T)
+            shift = 0.0
+            scale = float(np.max(np.abs(np.diag(hess))))
+            while True:
+                try:
+                    chol = np.linalg.cholesky(hess + shift * np.eye(len(hess)))
+                    break
+                except np.linalg.LinAlgError:
+                    shift = max(2.0 * shift, 1e-6 * scale)
+            step = np.linalg.solve(chol.T, np.linalg.solve(chol, r[free]))
+            slope = -float(r[free] @ step)  # directional derivative of the energy (< 0)
             alpha = 1.0
-            while True:  # backtracking on the residual norm (limit kinks)
+            while True:
                 qn = q.copy()
                 qn[free] += alpha * step
-                rn = self._residual_qpos(qn, jac=True)
-                if float(np.max(np.abs(rn[free]))) < res0 or alpha < 1e-3:
+                self._residual_qpos(qn, jac=False)
+                en = self._energy_qpos(qn)
+                if en <= energy + 1e-4 * alpha * slope or alpha < 1e-6:
                     break
                 alpha *= 0.5
-            q, r = qn, rn
+            q, energy = qn, en
+            r = self._residual_qpos(q, jac=True)
             res = float(np.max(np.abs(r[free])))
-            if res < tol_nm or float(np.max(np.abs(step))) < 1e-12:
+            if float(np.max(np.abs(alpha * step))) < 1e-13:
                 break
         eig = math.nan
         stable = True
