@@ -148,11 +148,12 @@ class Rig:
         self.stats = RunStats()
         self.mode = Mode.RUNNING
         self._stop_requests = 0
+        self.started_at = 0.0
         self._controls = np.zeros(len(pipeline.expander.controls))
         self._orientation = (0.0, 0.0)
         self._blend_from = np.zeros(len(pipeline.servo_joints))
         self._blend_t0 = 0.0
-        self._last_state: Any = None
+        self.last_state: Any = None  # the newest ServoState read back
 
     # -- control from outside (signal handlers, UI) --------------------------------------------
     def request_stop(self, reason: str = "stop requested") -> None:
@@ -212,6 +213,7 @@ class Rig:
         clock = self.clock
         period = self.period_s
         t0 = clock.now()
+        self.started_at = t0
         last_good = t0
         last_cycle = t0
         goals_prev = np.array(self.pipeline.targets)  # what the servos were last sent
@@ -277,7 +279,7 @@ class Rig:
                     out(now - t0, self.pipeline.pose)
                 if k % self.read_every == 0:
                     state = self.bus.read_state()
-                    self._last_state = state
+                    self.last_state = state
                     self._track(state, goals_prev)
                 goals_prev[:] = goals
                 stats.frames += 1
