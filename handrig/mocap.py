@@ -201,13 +201,16 @@ class MocapCurves:
 
 
 def find_glitches(
-    raw: NDArray[np.float64], *, spike_deg: float = SPIKE_DEG, absurd_deg: float = ABSURD_DEG
+    raw: NDArray[np.float64], *, spike_deg: float = SPIKE_DEG, absurd_deg: float = ABSURD_DEG,
+    max_run: int = 3,
 ) -> list[Glitch]:
-    """NaN/inf, absurd values and single-frame spikes in ``raw`` (frames x 50) curves.
+    """NaN/inf, absurd values and short spikes in ``raw`` (frames x 50) curves.
 
     A spike is a frame that differs from both neighbours by at least ``spike_deg`` in
     the same direction (first and last frames are checked against their one neighbour
-    and the next one: they spike if they jump ``spike_deg`` while the next step is small).
+    and the next one: they spike if they jump ``spike_deg`` while the next step is small),
+    or a run of up to ``max_run`` frames that jumps away by at least ``spike_deg`` and
+    comes back to within ``spike_deg / 2`` of where it left.
     """
     out: list[Glitch] = []
     bad = ~np.isfinite(raw)
@@ -232,10 +235,27 @@ def find_glitches(
         spikes[1:-1] = mid
         spikes[0] = first
         spikes[-1] = last
+        _mark_runs(x, spikes, spike_deg, max_run)
         for f, c in zip(*np.nonzero(spikes), strict=True):
             out.append(Glitch(hand.CURVE_NAMES[c], int(f), float(raw[f, c]), "spike"))
     out.sort(key=lambda g: (g.frame, hand.curve_index(g.curve)))
     return out
+
+
+def _mark_runs(x: NDArray[np.float64], spikes: NDArray[np.bool_], spike_deg: float,
+               max_run: int) -> None:
+    """Mark runs of 2..max_run frames that leave by a jump and come back (see find_glitches)."""
+    with np.errstate(invalid="ignore"):
+        jumps = np.abs(np.diff(x, axis=0)) >= spike_deg
+    n = x.shape[0]
+    for i, c in zip(*np.nonzero(jumps), strict=True):  # jump between frames i and i + 1
+        before = x[i, c]
+        for end in range(i + 2, min(i + 1 + max_run, n - 1) + 1):  # run = i+1 .. end-1
+            if abs(x[end, c] - before) < spike_deg / 2 and np.all(
+                np.abs(x[i + 1:end, c] - before) >= spike_deg
+            ):
+                spikes[i + 1:end, c] = True
+                break
 
 
 def repair(raw: NDArray[np.float64], glitches: list[Glitch]) -> NDArray[np.float64]:

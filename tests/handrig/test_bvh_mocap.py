@@ -171,3 +171,15 @@ def test_profile_errors_name_file_and_key(tmp_path: Path) -> None:
         mocap.load_profile(bad)
     with pytest.raises(ConfigError, match=r"no profile 'nope'.*perception_neuron"):
         mocap.load_profile("nope")
+
+
+def test_short_runs_of_spikes_are_found_but_real_steps_are_not() -> None:
+    raw = np.tile(np.linspace(0, 10, 60)[:, None], (1, 50))
+    raw[10:13, 4] += 110.0  # a 3-frame glitch on riThumbIPz
+    raw[30:, 7] += 60.0  # a step that stays: a clip boundary, not a glitch
+    raw[45:47, 20] -= 150.0  # 2 frames
+    found = {(g.curve, g.frame) for g in mocap.find_glitches(raw)}
+    assert found == {("riThumbIPz", 10), ("riThumbIPz", 11), ("riThumbIPz", 12),
+                     ("riPinkyMCPx", 45), ("riPinkyMCPx", 46)}
+    fixed = mocap.repair(raw, mocap.find_glitches(raw))
+    np.testing.assert_allclose(fixed[:, 4], np.linspace(0, 10, 60))
