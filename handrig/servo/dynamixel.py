@@ -41,10 +41,12 @@ from handrig.servo.packets import (
     StatusPacket,
     build_instruction,
     crc16,
+    fast_sync_intact,
     fast_sync_valid,
     packet_length,
     parse_status,
     u16,
+    warm_up,
 )
 from handrig.servo.registers import (
     BUS_WATCHDOG_UNIT_MS,
@@ -109,6 +111,7 @@ class DynamixelBus(ServoBus):
         read_fields: ReadFields = "motion",
         temperature_every: int = 0,
         reply_timeout_s: float | None = None,
+        spin_s: float = 0.0,
     ) -> None:
         if not rig.servos:
             raise DeviceError("the rig config lists no servos: add [[servos]] to config/rig.toml")
@@ -141,6 +144,8 @@ class DynamixelBus(ServoBus):
             [CURRENT_MA_PER_UNIT.get(m, 1.0) for m in self._expected_models], np.float64
         )
         self._hold_deg = np.clip(0.0, self._min_deg, self._max_deg)
+        # joint deg/s per Present Velocity unit: servo deg/s over (direction * gear ratio)
+        self._dps_per_unit = VELOCITY_DPS_PER_UNIT * TICKS_PER_DEG / self._ticks_per_deg
 
         # -- goal Sync Write: constant prefix, CRC resumed after it each cycle
         body_len = 5 * n
@@ -148,6 +153,7 @@ class DynamixelBus(ServoBus):
         self._sw_prefix = HEADER + bytes((BROADCAST_ID, length & 0xFF, length >> 8)) + bytes(
             (INST_SYNC_WRITE,)
         ) + u16(Reg.GOAL_POSITION.address) + u16(4)
+        warm_up()
         self._sw_prefix_crc = crc16(self._sw_prefix)
         self._sw_body = np.zeros((n, 5), np.uint8)
         self._sw_body[:, 0] = self.ids
@@ -169,10 +175,15 @@ class DynamixelBus(ServoBus):
             wire = wire_time_s(len(self._fsr_full) + self._reply_len_full, self.baud)
             reply_timeout_s = 2.0 * wire + 0.002
         self.reply_timeout_s = float(reply_timeout_s)
+        self.spin_s = float(spin_s)
+        self._byte_s = BITS_PER_BYTE / self.baud
+        self._bus_free_at = -np.inf  # when the wire is expected to be quiet again
         self.use_fast_sync_read = True
         self._fast_fail_run = 0
         self._all_indices = np.arange(n)
         self._valid = [False] * n
+        self._ids_bytes = bytes(self.ids)
+        self._all_fresh = np.ones(n, bool)
 
         # -- latest readings (rig order)
         self._pos_deg = np.full(n, np.nan)
@@ -445,6 +456,9 @@ class DynamixelBus(ServoBus):
         with self._lock:
             self._transport.write(packet)
             self._stats.writes += 1
+            self._bus_free_at = (
+                max(self.clock.now(), self._bus_free_at) + len(packet) * self._byte_s
+            )
         self._last_goal_deg[:] = goal_deg
 
     # ------------------------------------------------------------------ present state
@@ -476,19 +490,25 @@ class DynamixelBus(ServoBus):
                 self._read_attempt(pending, deadline_s)
                 if fresh.all():
                     break
-                pending = np.flatnonzero(~fresh)
+                # A Fast Sync Read reply stops at the first servo that does not answer:
+                # ask the rest first, the one where it stopped last.
+                pending = np.roll(np.flatnonzero(~fresh), -1)
             now = self.clock.now()
             stale = ~fresh
-            self._stale_run[stale] += 1
-            self._stale_run[fresh] = 0
-            self._stats.stale_readings[stale] += 1
-            self._read_time[fresh] = now
-            alerts = np.flatnonzero(self._status_err & ERR_ALERT)
-            for i in alerts:
-                self._hardware_alert(int(i))
+            if fresh.all():
+                self._stale_run[:] = 0
+                self._read_time[:] = now
+            else:
+                self._stale_run[stale] += 1
+                self._stale_run[fresh] = 0
+                self._stats.stale_readings[stale] += 1
+                self._read_time[fresh] = now
+            if self._status_err.any():
+                for i in np.flatnonzero(self._status_err & ERR_ALERT):
+                    self._hardware_alert(int(i))
             if self.temperature_every and self._stats.reads % self.temperature_every == 0:
                 self._read_temperatures(deadline_s)
-            worst = int(np.argmax(self._stale_run))
+            worst = int(self._stale_run.argmax())
             if self._stale_run[worst] >= self.policy.max_stale_reads:
                 raise DeviceTimeoutError(
                     f"{self.describe(worst)} gave no valid reading in "
@@ -545,7 +565,13 @@ class DynamixelBus(ServoBus):
         expected = 8 + block * n_req
         t.discard_input()
         t.write(packet)
-        head = t.read_exact(7, deadline)
+        # the reply cannot end before the wire has carried the request and the reply
+        spin_from = None
+        if self.spin_s > 0:
+            arrival = max(self.clock.now(), self._bus_free_at) + (
+                len(packet) + expected) * self._byte_s
+            spin_from = arrival - self.spin_s
+        head = t.read_exact(7, deadline, spin_from)
         if len(head) < 7:
             self._stats.timeouts += 1
             return False
@@ -569,7 +595,12 @@ class DynamixelBus(ServoBus):
             return False
         if total != expected:
             self._stats.malformed += 1
-        raw = head + t.read_exact(min(total, expected) - 7, deadline)
+        raw = head + t.read_exact(min(total, expected) - 7, deadline, spin_from)
+        if n_req == self._n and fast_sync_intact(raw, self._ids_bytes, self._read_len):
+            self._status_err[:] = np.frombuffer(raw[8:expected:block], np.uint8)
+            self._decode_whole(raw)
+            self._fresh[:] = True
+            return True
         if len(raw) < expected:
             self._stats.timeouts += 1
         valid = self._valid
@@ -623,6 +654,23 @@ class DynamixelBus(ServoBus):
         self._fresh[target] = True
         return True
 
+    def _decode_whole(self, raw: bytes) -> None:
+        """Readings of every servo from an intact Fast Sync Read reply (strided views)."""
+        block = self._read_len + 4
+        n = self._n
+
+        def field(offset: int, dtype: str) -> np.ndarray:
+            return np.ndarray((n,), dtype, raw, 10 + offset, (block,))
+
+        if self.read_fields == "position":
+            pos = field(0, "<i4")
+        else:
+            np.multiply(field(0, "<i2"), self._current_ma_per_unit, out=self._cur_ma)
+            np.multiply(field(2, "<i4"), self._dps_per_unit, out=self._vel_dps)
+            pos = field(6, "<i4")
+        np.subtract(pos, self._zero_ticks, out=self._pos_deg)
+        np.divide(self._pos_deg, self._ticks_per_deg, out=self._pos_deg)
+
     def _decode(self, data: np.ndarray, target: np.ndarray) -> None:
         """Turn raw little-endian rows (k, read_len) into readings for rig indices ``target``."""
         rows = np.ascontiguousarray(data)
@@ -633,9 +681,7 @@ class DynamixelBus(ServoBus):
             vel = rows[:, 2:6].copy().view("<i4")[:, 0]
             pos = rows[:, 6:10].copy().view("<i4")[:, 0]
             self._cur_ma[target] = cur * self._current_ma_per_unit[target]
-            self._vel_dps[target] = vel * VELOCITY_DPS_PER_UNIT / self._ticks_per_deg[target] * (
-                4096.0 / 360.0
-            )
+            self._vel_dps[target] = vel * self._dps_per_unit[target]
         self._pos_deg[target] = (pos - self._zero_ticks[target]) / self._ticks_per_deg[target]
 
     def _read_temperatures(self, deadline_s: float) -> None:

@@ -21,6 +21,7 @@ from handrig.servo.packets import HEADER, MAX_PACKET_LEN, packet_length
 
 # FTDI adapters' default latency timer is 16 ms; 1 ms is the usual setting (REFERENCE.md 1).
 LATENCY_TIMER_WANTED_MS = 1
+MAX_POLLS = 100_000  # bounds a poll loop even on a clock that does not move
 _SYSFS_LATENCY = "/sys/bus/usb-serial/devices/{name}/latency_timer"
 
 
@@ -106,27 +107,51 @@ class SerialTransport:
             raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
         self.bytes_written += len(data)
 
-    def _fill(self, deadline_s: float) -> bool:
-        """Wait until bytes arrive (appended to the buffer) or the deadline; True if some did."""
+    def _fill(self, deadline_s: float, spin_from_s: float | None = None) -> bool:
+        """Wait until bytes arrive (appended to the buffer) or the deadline; True if some did.
+
+        From ``spin_from_s`` on (clock time), poll without sleeping: a wake-up from
+        ``select`` costs tens of microseconds, which a cycle near the wire-time
+        limit notices. The poll is bounded by ``MAX_POLLS`` as well as the deadline.
+        """
         fd = self._fd
+        polls = 0
         while True:
-            remaining = deadline_s - self.clock.now()
+            now = self.clock.now()
+            remaining = deadline_s - now
             if remaining <= 0:
                 return False
-            try:
-                ready, _, _ = select.select([fd], [], [], remaining)
-            except InterruptedError:
-                continue
-            if not ready:
-                # No bytes for `remaining` seconds: let a fake clock know that time passed.
-                self.clock.sleep_until(deadline_s)
-                return False
-            try:
-                chunk = os.read(fd, 4096)
-            except BlockingIOError:
-                continue
-            except OSError as exc:
-                raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
+            if spin_from_s is not None and now >= spin_from_s:
+                try:
+                    chunk = os.read(fd, 4096)
+                except BlockingIOError:
+                    chunk = b""
+                except OSError as exc:
+                    raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
+                if not chunk:  # nothing yet (termios VMIN=0 reads return empty)
+                    polls += 1
+                    if polls >= MAX_POLLS:
+                        spin_from_s = None
+                    continue
+            else:
+                wait = remaining if spin_from_s is None else min(remaining, spin_from_s - now)
+                try:
+                    ready, _, _ = select.select([fd], [], [], wait)
+                except InterruptedError:
+                    continue
+                if not ready:
+                    # No bytes for `wait` seconds: let a fake clock know that time passed.
+                    if wait < remaining:
+                        self.clock.sleep_until(now + wait)
+                        continue
+                    self.clock.sleep_until(deadline_s)
+                    return False
+                try:
+                    chunk = os.read(fd, 4096)
+                except BlockingIOError:
+                    continue
+                except OSError as exc:
+                    raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
             if not chunk:
                 raise DeviceError(f"servo port {self.port} closed (adapter unplugged?)")
             self.bytes_read += len(chunk)
@@ -150,12 +175,15 @@ class SerialTransport:
             n += len(chunk)
         return n
 
-    def read_exact(self, n: int, deadline_s: float) -> bytes:
-        """Up to ``n`` bytes: all ``n`` unless the deadline passed first (then fewer)."""
+    def read_exact(self, n: int, deadline_s: float, spin_from_s: float | None = None) -> bytes:
+        """Up to ``n`` bytes: all ``n`` unless the deadline passed first (then fewer).
+
+        ``spin_from_s``: poll instead of sleeping from that clock time on (see ``_fill``).
+        """
         self._check_open()
         buf = self._buf
         while len(buf) < n:
-            if not self._fill(deadline_s):
+            if not self._fill(deadline_s, spin_from_s):
                 break
         out = bytes(buf[:n])
         del buf[:n]

@@ -113,3 +113,25 @@ def test_register_codec_and_words() -> None:
     assert describe_hardware_error(0x05) == "input voltage (bit 0), overheating (bit 2)"
     assert describe_status_error(0x84).startswith("alert")
     assert describe_status_error(0x04) == "data range error"
+
+
+@given(st.lists(st.binary(min_size=3, max_size=3), min_size=1, max_size=6))
+def test_fast_sync_valid_odd_data_length(datas: list[bytes]) -> None:
+    # odd data length takes the byte-wise path; every block must verify
+    ids = tuple(range(1, len(datas) + 1))
+    raw = fast_reply([(0, i, d) for i, d in zip(ids, datas, strict=True)])
+    out = [False] * len(ids)
+    fast_sync_valid(raw, ids, 3, out)
+    assert all(out)
+
+
+@given(st.lists(st.binary(min_size=10, max_size=10), min_size=1, max_size=6),
+       st.integers(0, 200))
+def test_fast_sync_valid_prefix_on_truncation(datas: list[bytes], cut: int) -> None:
+    ids = tuple(range(1, len(datas) + 1))
+    raw = fast_reply([(0, i, d) for i, d in zip(ids, datas, strict=True)])
+    cut = min(cut, len(raw))
+    out = [True] * len(ids)
+    fast_sync_valid(raw[:cut], ids, 10, out)
+    complete = max(0, (cut - 8) // 14)
+    assert out == [i < complete for i in range(len(ids))]
