@@ -73,6 +73,20 @@ BITS_PER_BYTE = 10  # start + 8 data + stop
 STALE_PARTIAL_S = 0.1
 # Servos without physics move kinematically; their state is advanced at most this often.
 KINEMATIC_STEP_S = 0.002
+# Replies are timed by sleeping, then spinning for the last SPIN_S (with the thread's
+# timer slack cut to 1 us, Linux sleeps overshoot by tens of microseconds).
+SPIN_S = 60e-6
+
+
+def _tighten_timer_slack() -> None:
+    """Linux prctl(PR_SET_TIMERSLACK, 1000 ns) for the calling thread; no-op elsewhere."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(29, 1000, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
 
 
 def _baud_table() -> dict[int, int]:
@@ -217,7 +231,7 @@ class SimBus:
         self.wire_timing = wire_timing
         self.faults = faults or FaultSpec()
         self.puppet = puppet
-        self.clock = clock or MonotonicClock()
+        self.clock = clock or MonotonicClock(spin_s=SPIN_S)
         self.lock = threading.RLock()
         self.fault_counts: Counter[str] = Counter()
         self.stats = BusStats()
@@ -343,6 +357,7 @@ class SimBus:
     # ------------------------------------------------------------- serving
 
     def _serve(self) -> None:
+        _tighten_timer_slack()
         buf = bytearray()
         last_rx = 0.0
         fd = self._master

@@ -330,7 +330,9 @@ class EmulatedServo:
         # Hot path: Goal Position in position mode, torque on or off.
         if address == 116 and len(data) == 4 and self.mem[11] == 3 and self.mem[98] != 0xFF:
             value = int.from_bytes(data, "little", signed=True)
-            if self.get(Reg.MIN_POSITION_LIMIT) <= value <= self.get(Reg.MAX_POSITION_LIMIT):
+            mem = self.mem
+            low = int.from_bytes(mem[52:56], "little", signed=True)
+            if low <= value <= int.from_bytes(mem[48:52], "little", signed=True):
                 self.mem[116:120] = data
                 return self.error_byte()
             self.counters["errors"] += 1

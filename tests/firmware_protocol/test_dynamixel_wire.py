@@ -130,3 +130,19 @@ def test_parsers_never_crash_on_garbage(data: bytes) -> None:
     for parse in (dx.parse_instruction, dx.parse_status):
         with contextlib.suppress(dx.PacketError):
             parse(data)
+
+
+def _crc_bitwise(data: bytes) -> int:
+    crc = 0
+    for b in data:
+        crc ^= b << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x8005) if crc & 0x8000 else crc << 1
+            crc &= 0xFFFF
+    return crc
+
+
+@given(st.binary(max_size=80), st.binary(max_size=9))
+def test_crc16_matches_bitwise_definition_and_continues(a: bytes, b: bytes) -> None:
+    assert dx.crc16(a) == _crc_bitwise(a)
+    assert dx.crc16(b, dx.crc16(a)) == _crc_bitwise(a + b)
