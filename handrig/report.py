@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from handrig import hand
 from handrig.analysis import Analysis, FloatArray, Stage, rebuild
 from handrig.errors import DataError
 
@@ -63,19 +64,28 @@ def _links_table(an: Analysis, stage: Stage, title: str) -> str:
 def strongest_pairs(an: Analysis, count: int = 4) -> list[tuple[int, int, int, float]]:
     """(a, b, slope, rmsd) of the most linear pairs among curves left after range<1.
 
-    Exact copies (rmsd below 1e-3) are left out: they are the device's coupling, not news.
+    Only pairs across digits, like the paper's ring/pinky MCP pair (fig. 2): within a
+    digit a capture device may copy one joint to another (PIP = DIP, see the mocap README).
     """
     active = an.range_deg >= an.thresholds.range_small_deg
     k = len(an.names)
     best = np.minimum(an.rmsd1, an.rmsd2)
     iu = np.triu_indices(k, 1)
-    keep = active[iu[0]] & active[iu[1]] & (best[iu] > 1e-3)
-    order = np.argsort(best[iu][keep])[:count]
-    out = []
-    for o in order:
+    digit = np.array([(c.hand + c.digit) if hand.is_joint_name(n) and (c := hand.curve(n))
+                      else n for n in an.names])
+    keep = active[iu[0]] & active[iu[1]] & (digit[iu[0]] != digit[iu[1]])
+    order = np.argsort(best[iu][keep])
+    out: list[tuple[int, int, int, float]] = []
+    seen: set[tuple[str, str]] = set()
+    for o in order:  # one pair per pair of digits, the strongest
         a, b = int(iu[0][keep][o]), int(iu[1][keep][o])
+        if (digit[a], digit[b]) in seen:
+            continue
+        seen.add((digit[a], digit[b]))
         slope = 1 if an.rmsd1[a, b] <= an.rmsd2[a, b] else -1
         out.append((a, b, slope, float(best[a, b])))
+        if len(out) == count:
+            break
     return out
 
 
