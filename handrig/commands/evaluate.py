@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from handrig import mocap
+from handrig import hand, mocap
 from handrig.commands import _mapio
 from handrig.evaluation import Errors, contiguous_folds, cross_validate, predict, rms_errors
 from handrig.expand import DEFAULT_MAP
@@ -40,10 +40,14 @@ def run(args: argparse.Namespace) -> int:
     m = _mapio.load(args.file, args)
     m.require_clean("evaluation")
     own = rms_errors(predict(lm, m.curves), m.curves)
+    lim = hand.curve_limits_deg()
+    outside = ((m.curves < lim[:, 0]) | (m.curves > lim[:, 1])).mean(axis=0)
     in_sample = any(Path(t).name == Path(args.file).name for t in lm.trained_on)
     result: dict[str, Any] = {
         "file": args.file, "map": args.map, "method": lm.method, "controls": list(lm.controls),
         "frames": m.n_frames, "in_sample": in_sample, "map_errors": own.to_json(),
+        "truth_outside_limits": {n: round(float(f), 4) for n, f in zip(
+            m.names, outside, strict=True) if f > 0},
     }
     cv: dict[str, Errors] = {}
     if not args.no_compare:
@@ -65,6 +69,10 @@ def run(args: argparse.Namespace) -> int:
           f" overall {own.overall:.2f} deg")
     worst = sorted(zip(own.per_curve, m.names, strict=True), reverse=True)[:5]
     print("  worst curves: " + ", ".join(f"{n} {v:.1f}" for v, n in worst))
+    far = sorted(zip(outside, m.names, strict=True), reverse=True)[:3]
+    if far[0][0] > 0:
+        print("  the file itself leaves the joint limits (outputs are clamped, so this counts"
+              " as error): " + ", ".join(f"{n} {f:.0%} of frames" for f, n in far if f > 0))
     if cv:
         print(f"unseen motion, {result['held_out']['scheme']}:")
         print(f"  {'method':<8} {'right (deg)':>12} {'left (deg)':>11} {'overall':>8}")
