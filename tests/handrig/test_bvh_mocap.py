@@ -183,3 +183,20 @@ def test_short_runs_of_spikes_are_found_but_real_steps_are_not() -> None:
                      ("riPinkyMCPx", 45), ("riPinkyMCPx", 46)}
     fixed = mocap.repair(raw, mocap.find_glitches(raw))
     np.testing.assert_allclose(fixed[:, 4], np.linspace(0, 10, 60))
+
+
+def test_a_user_profile_with_a_prefix(tmp_path: Path) -> None:
+    joints, motion = _synthetic()
+    named = [j if j == "Hips" else f"mixamorig:{j}" for j in joints]
+    p = _write(tmp_path, format_bvh(make_bvh(named, motion)))
+    src = (mocap.PROFILE_DIR / "common.toml").read_text()
+    prof = _write(tmp_path, src.replace('prefix = ""', 'prefix = "mixamorig:"')
+                  .replace('name = "common"', 'name = "mixamo"'), "mixamo.toml")
+    m = mocap.load_curves(p, prof, "vocabulary")
+    assert m.profile == "mixamo"
+    col = 3 * joints.index("LeftHandRing2")  # Zrotation; left flexion sign -1
+    np.testing.assert_allclose(m.curves[:, hand.curve_index("leRingPIPy")], -motion[:, col],
+                               atol=1e-5)
+    with pytest.raises(DataError, match=r"'mixamorig:RightHandThumb1'.*'mixamo'"):
+        mocap.load_curves(_write(tmp_path, format_bvh(make_bvh(joints, motion)), "plain.bvh"),
+                          prof)
