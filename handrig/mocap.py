@@ -298,7 +298,7 @@ def extract_raw(bvh: Bvh, profile: Profile) -> NDArray[np.float64]:
     """The 50 curves (frames x 50) as raw channel angles; DataError names missing joints."""
     table = profile.resolve()
     names = set(bvh.joint_names)
-    missing = sorted({j for j, *_ in table if j not in names})
+    missing = list(dict.fromkeys(j for j, *_ in table if j not in names))  # curve order
     if missing:
         example = next(c for c, (j, *_) in zip(hand.CURVE_NAMES, table, strict=True)
                        if j == missing[0])
