@@ -1,0 +1,138 @@
+"""One emulated X-series servo: control-table rules and instruction semantics."""
+
+from __future__ import annotations
+
+from firmware_protocol.dynamixel import ERROR_ALERT, ErrorCode, HardwareError, Reg
+from sim.dxl_servo import REBOOT_S, EmulatedServo
+
+
+def _w(servo: EmulatedServo, reg: Reg, value: int, size: int, signed: bool = False) -> int:
+    return servo.write(int(reg), value.to_bytes(size, "little", signed=signed))
+
+
+def test_ping_and_identity() -> None:
+    s = EmulatedServo(7, "XM430-W350")
+    err, data = s.ping()
+    assert err == 0 and data == (1020).to_bytes(2, "little") + bytes((46,))
+    assert s.get(Reg.ID) == 7 and s.id == 7
+    assert s.get(Reg.RETURN_DELAY_TIME) == 250 and s.return_delay_s == 250 * 2e-6
+
+
+def test_eeprom_needs_torque_off_and_read_only_refuses() -> None:
+    s = EmulatedServo(1)
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
+    assert _w(s, Reg.OPERATING_MODE, 4, 1) == ErrorCode.ACCESS
+    assert _w(s, Reg.TORQUE_ENABLE, 0, 1) == 0
+    assert _w(s, Reg.OPERATING_MODE, 4, 1) == 0
+    assert s.get(Reg.OPERATING_MODE) == 4
+    assert _w(s, Reg.PRESENT_POSITION, 0, 4) == ErrorCode.ACCESS
+    assert _w(s, Reg.MODEL_NUMBER, 1, 2) == ErrorCode.ACCESS
+    assert s.write(66, b"\x00") == ErrorCode.ACCESS  # undefined address
+    assert s.write(117, b"\x00\x00") == ErrorCode.DATA_LENGTH  # inside Goal Position
+    assert _w(s, Reg.OPERATING_MODE, 2, 1) == ErrorCode.DATA_RANGE
+    assert _w(s, Reg.TORQUE_ENABLE, 2, 1) == ErrorCode.DATA_RANGE
+
+
+def test_goal_position_limits_and_multi_item_write() -> None:
+    s = EmulatedServo(1)
+    assert _w(s, Reg.MIN_POSITION_LIMIT, 1000, 4) == 0
+    assert _w(s, Reg.MAX_POSITION_LIMIT, 3000, 4) == 0
+    assert _w(s, Reg.GOAL_POSITION, 999, 4) == ErrorCode.DATA_LIMIT
+    assert _w(s, Reg.GOAL_POSITION, 3001, 4) == ErrorCode.DATA_LIMIT
+    assert _w(s, Reg.GOAL_POSITION, 2500, 4) == 0 and s.goal == 2500
+    # Profile Acceleration + Profile Velocity in one write (8 bytes at 108)
+    assert s.write(108, (10).to_bytes(4, "little") + (50).to_bytes(4, "little")) == 0
+    assert s.get(Reg.PROFILE_VELOCITY) == 50
+    # in extended position mode the limits do not apply
+    assert _w(s, Reg.OPERATING_MODE, 4, 1) == 0
+    assert _w(s, Reg.GOAL_POSITION, -5000, 4, signed=True) == 0
+
+
+def test_kinematic_motion_at_speed_limit_and_only_with_torque() -> None:
+    s = EmulatedServo(1)
+    assert _w(s, Reg.GOAL_POSITION, 3048, 4) == 0
+    s.advance(0.05)
+    assert s.present == 2048  # torque off: no motion
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
+    s.advance(0.05)
+    speed = round(103.0 / 0.229) * 0.229 * 4096 / 60  # Velocity Limit default, ticks/s
+    assert 2048 + 0.05 * speed - 2 <= s.present <= 2048 + 0.05 * speed + 2
+    assert s.get(Reg.PRESENT_VELOCITY) > 0 and s.get(Reg.MOVING) == 1
+    s.advance(1.0)
+    assert s.present == 3048
+
+
+def test_homing_offset_and_reverse_drive_mode() -> None:
+    s = EmulatedServo(1, start_ticks=1000)
+    assert s.present == 1000
+    assert _w(s, Reg.HOMING_OFFSET, -200, 4, signed=True) == 0
+    assert s.present == 800
+    assert _w(s, Reg.DRIVE_MODE, 1, 1) == 0
+    assert s.present == -1000 - 200
+    # the goal is read back through the same mapping: motor position 1500
+    assert _w(s, Reg.OPERATING_MODE, 4, 1) == 0
+    assert _w(s, Reg.GOAL_POSITION, -1700, 4, signed=True) == 0
+    assert s.goal_motor_ticks() == 1500
+
+
+def test_overload_sets_alert_keeps_torque_off_until_reboot() -> None:
+    s = EmulatedServo(1)
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
+    s.inject_hardware_error(HardwareError.OVERLOAD)
+    assert not s.torque_enabled
+    assert s.hardware_error == HardwareError.OVERLOAD
+    err, _ = s.ping()
+    assert err == ERROR_ALERT
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == ERROR_ALERT and not s.torque_enabled
+    s.reboot(now=10.0)  # cause still there: the error comes back
+    assert s.hardware_error == HardwareError.OVERLOAD
+    s.clear_injected_fault()
+    s.reboot(now=10.0)
+    assert s.hardware_error == 0 and not s.available(10.0) and s.available(10.0 + REBOOT_S)
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
+
+
+def test_reg_write_action_and_instruction_error() -> None:
+    s = EmulatedServo(1)
+    assert s.action() == ErrorCode.INSTRUCTION
+    assert s.reg_write(int(Reg.GOAL_POSITION), (3000).to_bytes(4, "little")) == 0
+    assert s.goal == 2048 and s.get(Reg.REGISTERED_INSTRUCTION) == 1
+    assert s.action() == 0
+    assert s.goal == 3000 and s.get(Reg.REGISTERED_INSTRUCTION) == 0
+
+
+def test_reboot_resets_ram_and_factory_reset_options() -> None:
+    s = EmulatedServo(5)
+    assert _w(s, Reg.RETURN_DELAY_TIME, 0, 1) == 0
+    assert _w(s, Reg.STATUS_RETURN_LEVEL, 1, 1) == 0
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
+    s.reboot(now=0.0)
+    assert s.status_return_level == 2 and not s.torque_enabled
+    assert s.get(Reg.RETURN_DELAY_TIME) == 0  # EEPROM survives a reboot
+    assert s.factory_reset(0x02, now=0.0) == 0
+    assert s.id == 5 and s.get(Reg.RETURN_DELAY_TIME) == 250
+    assert s.factory_reset(0xFF, now=0.0) == 0
+    assert s.id == 1 and s.get(Reg.BAUD_RATE) == 1
+    assert s.factory_reset(0x07, now=0.0) == ErrorCode.DATA_RANGE
+
+
+def test_bus_watchdog_stops_servo_and_refuses_goals_until_cleared() -> None:
+    s = EmulatedServo(1)
+    assert _w(s, Reg.BUS_WATCHDOG, 5, 1) == 0  # 100 ms
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
+    s.last_heard = 0.0
+    assert not s.check_watchdog(0.09)
+    assert s.check_watchdog(0.11)
+    assert s.get(Reg.BUS_WATCHDOG) == -1
+    assert _w(s, Reg.GOAL_POSITION, 2100, 4) == ErrorCode.DATA_RANGE
+    assert _w(s, Reg.BUS_WATCHDOG, 0, 1) == 0
+    assert _w(s, Reg.GOAL_POSITION, 2100, 4) == 0
+
+
+def test_reads() -> None:
+    s = EmulatedServo(1)
+    err, data = s.read(132, 4)
+    assert err == 0 and int.from_bytes(data, "little") == 2048
+    err, data = s.read(0, 147)  # the whole table in one read
+    assert err == 0 and len(data) == 147
+    assert s.read(600, 100) == (ErrorCode.ACCESS, b"")
