@@ -141,12 +141,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _open_viewer(puppet: Any) -> Any:
-    if puppet is None or not puppet.hands:
-        print("viewer: unavailable (no puppet to show)", file=sys.stderr, flush=True)
-        return None
     if not _has_display():
         print("viewer: unavailable (no display: DISPLAY and WAYLAND_DISPLAY are unset); "
               "serving without it", file=sys.stderr, flush=True)
+        return None
+    if puppet is None or not puppet.hands:
+        print("viewer: unavailable (no puppet to show)", file=sys.stderr, flush=True)
         return None
     try:
         import mujoco.viewer

@@ -105,3 +105,53 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: tuple[subprocess.Popen[str]
     out, err = proc.communicate(timeout=10)
     assert proc.returncode == 0, err
     assert "packets" in out
+
+
+def test_faults_viewer_without_display_and_summary() -> None:
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handrig.cli", "sim-bus", "--ids", "1-3", "--no-puppet",
+         "--faults", "missing=2,drop=1,seed=1", "--viewer"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first.startswith("port: /dev/"), first
+        port = PortHandler(first.split()[1])
+        assert port.openPort()
+        ph = PacketHandler(2.0)
+        for i in (1, 2, 3):
+            assert ph.ping(port, i)[1] != COMM_SUCCESS
+        port.closePort()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    assert "viewer: unavailable (no display" in err
+    assert "dropped 2" in out and "missing 1" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--ids", "1-x"], "--ids"),
+        (["--ids", "300"], "out of range"),
+        (["--servos", "0"], "servo count"),
+        (["--model", "AX-12"], "unknown servo model"),
+        (["--faults", "explode=1"], "unknown fault"),
+        (["--faults", "drop=2"], "out of range"),
+    ],
+)
+def test_bad_arguments_one_line_exit_2(
+    args: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from handrig.cli import main
+
+    assert main(["sim-bus", *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
