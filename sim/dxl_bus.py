@@ -248,6 +248,7 @@ class SimBus:
         self._bus_free_at = 0.0
         self._last_advance = 0.0
         self._kinematic: list[EmulatedServo] = []
+        self._partial_since: float | None = None
         self.error: BaseException | None = None
 
     # --------------------------------------------------------------- building
@@ -384,20 +385,34 @@ class SimBus:
             raise
 
     def _drain(self, buf: bytearray, now: float) -> None:
+        """Handle every complete frame in ``buf``; keep a partial one for later.
+
+        A partial frame that stays incomplete for ``STALE_PARTIAL_S`` while bytes keep
+        coming (a corrupted LEN) is given up: its header is skipped and framing
+        resumes at the next header."""
         pos = 0
         while True:
             found = find_frame(buf, pos)
             if found is None:
                 head = buf.find(b"\xff\xff\xfd\x00", pos)
                 if head < 0:
-                    keep = 3 if len(buf) >= 3 else len(buf)  # a header may be split
-                    self.stats.noise_bytes += max(0, len(buf) - keep - pos)
+                    keep = min(3, len(buf) - pos)  # the start of a header may be there
+                    self.stats.noise_bytes += len(buf) - keep - pos
                     del buf[: len(buf) - keep]
-                else:
-                    self.stats.noise_bytes += head - pos
-                    del buf[:head]
+                    self._partial_since = None
+                    return
+                self.stats.noise_bytes += head - pos
+                del buf[:head]
+                if self._partial_since is None:
+                    self._partial_since = now
+                elif now - self._partial_since > STALE_PARTIAL_S:
+                    self.stats.noise_bytes += 1
+                    self._partial_since = None
+                    pos = 1
+                    continue
                 return
             begin, end = found
+            self._partial_since = None
             self.stats.noise_bytes += begin - pos
             self._handle_frame(bytes(buf[begin:end]), now)
             pos = end

@@ -202,3 +202,20 @@ def test_wire_timing_reply_never_early(servos: list[EmulatedServo]) -> None:
         assert [s.id for s in c.statuses(data)] == [1, 2, 3]
         assert elapsed >= (len(packet) + len(data)) * byte_s + 200e-6
         assert bus.baud() == 57600
+
+
+def test_framing_survives_noise_and_a_corrupted_len(raw: tuple[SimBus, RawClient]) -> None:
+    bus, c = raw
+    ping = dx.build_instruction(3, INST.PING)
+    c.ser.write(b"\x00\x01\xff" + ping)
+    assert [s.id for s in c.statuses(c.collect(14))] == [3]
+    # a header announcing 900 bytes that never come: after STALE_PARTIAL_S of waiting
+    # while bytes keep arriving, the bus gives it up and answers the next packet
+    c.ser.write(bytes.fromhex("ff ff fd 00 01 84 03 02"))
+    answered = False
+    end = time.monotonic() + 2.0
+    while not answered and time.monotonic() < end:
+        c.send(2, INST.PING)
+        answered = bool(c.statuses(c.collect(14, 0.05)))
+    assert answered
+    assert bus.stats.noise_bytes >= 3
