@@ -31,7 +31,7 @@ class ServoState:
     currents_ma: np.ndarray  # (n,) float64, motor current (signed)
     temperatures_c: np.ndarray  # (n,) float64, last temperature read (NaN if never)
     status_errors: np.ndarray  # (n,) uint8, ERR byte of the servo's last status
-    hardware_errors: np.ndarray  # (n,) uint8, Hardware Error Status last read (0 = none)
+    hardware_errors: np.ndarray  # (n,) uint8, Hardware Error Status read in this read (0 = none)
     stale: np.ndarray  # (n,) bool
     age_s: np.ndarray  # (n,) float64, time since that servo's reading was taken
     timestamp_s: float  # clock time of this read

@@ -112,6 +112,7 @@ class DynamixelBus(ServoBus):
         temperature_every: int = 0,
         reply_timeout_s: float | None = None,
         spin_s: float = 0.0,
+        reply_gap_s: float | None = None,
     ) -> None:
         if not rig.servos:
             raise DeviceError("the rig config lists no servos: add [[servos]] to config/rig.toml")
@@ -175,6 +176,12 @@ class DynamixelBus(ServoBus):
             wire = wire_time_s(len(self._fsr_full) + self._reply_len_full, self.baud)
             reply_timeout_s = 2.0 * wire + 0.002
         self.reply_timeout_s = float(reply_timeout_s)
+        # a reply that stops flowing this long is cut short (USB adapters deliver in
+        # chunks at most a latency-timer period apart: 1 ms when set as commissioning asks)
+        self.reply_gap_s = (
+            float(reply_gap_s) if reply_gap_s is not None
+            else 0.0015 + wire_time_s(32, self.baud)
+        )
         self.spin_s = float(spin_s)
         self._byte_s = BITS_PER_BYTE / self.baud
         self._bus_free_at = -np.inf  # when the wire is expected to be quiet again
@@ -481,6 +488,7 @@ class DynamixelBus(ServoBus):
             fresh = self._fresh
             fresh[:] = False
             self._status_err[:] = 0
+            self._hw_err[:] = 0
             pending = self._all_indices
             for attempt in range(self.policy.read_retries + 1):
                 if attempt:
@@ -595,7 +603,7 @@ class DynamixelBus(ServoBus):
             return False
         if total != expected:
             self._stats.malformed += 1
-        raw = head + t.read_exact(min(total, expected) - 7, deadline, spin_from)
+        raw = head + t.read_exact(min(total, expected) - 7, deadline, spin_from, self.reply_gap_s)
         if n_req == self._n and fast_sync_intact(raw, self._ids_bytes, self._read_len):
             self._status_err[:] = np.frombuffer(raw[8:expected:block], np.uint8)
             self._decode_whole(raw)
@@ -749,6 +757,9 @@ class DynamixelBus(ServoBus):
             self._stats.reboots[index] += 1
             deadline = self.clock.now() + self.policy.reboot_wait_s
             while True:
+                if self._torque_on and not np.isnan(self._last_goal_deg).any():
+                    # keep the other servos' Bus Watchdogs fed while this one restarts
+                    self._send_goals(self._last_goal_deg.copy())
                 status = self._transact(build_instruction(sid, INST_PING), sid, attempts=1)
                 if status is not None:
                     break
@@ -758,7 +769,10 @@ class DynamixelBus(ServoBus):
                         f"{self.policy.reboot_wait_s} s of a reboot {self._where()}",
                         servo_id=sid,
                     )
-            self._hw_err[index] = self.read_register(index, Reg.HARDWARE_ERROR_STATUS)
+            remaining = self.read_register(index, Reg.HARDWARE_ERROR_STATUS)
+            if remaining:
+                log.warning("%s still reports hardware error 0x%02x after a reboot: %s",
+                            self.describe(index), remaining, describe_hardware_error(remaining))
             self.write_register(index, Reg.RETURN_DELAY_TIME, 0)
             self.write_register(index, Reg.STATUS_RETURN_LEVEL, STATUS_RETURN_ALL)
             if self._torque_on:

@@ -175,16 +175,26 @@ class SerialTransport:
             n += len(chunk)
         return n
 
-    def read_exact(self, n: int, deadline_s: float, spin_from_s: float | None = None) -> bytes:
+    def read_exact(
+        self, n: int, deadline_s: float, spin_from_s: float | None = None,
+        gap_s: float | None = None,
+    ) -> bytes:
         """Up to ``n`` bytes: all ``n`` unless the deadline passed first (then fewer).
 
-        ``spin_from_s``: poll instead of sleeping from that clock time on (see ``_fill``).
+        ``spin_from_s``: poll instead of sleeping from that clock time on (see
+        ``_fill``). ``gap_s``: once bytes flow, give up when none arrive for this
+        long, counting from the call (for the rest of a reply whose start has come:
+        a reply cut short then ends early instead of at the deadline).
         """
         self._check_open()
         buf = self._buf
+        if gap_s is not None and len(buf) < n:
+            deadline_s = min(deadline_s, self.clock.now() + gap_s)
         while len(buf) < n:
             if not self._fill(deadline_s, spin_from_s):
                 break
+            if gap_s is not None:
+                deadline_s = min(deadline_s, self.clock.now() + gap_s)
         out = bytes(buf[:n])
         del buf[:n]
         return out
