@@ -32,7 +32,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 from firmware_protocol.dynamixel import (
     BROADCAST_ID,
@@ -202,6 +202,14 @@ class BusStats:
     def late_mean_s(self) -> float:
         """Mean time a reply left after its wire-time instant (wire timing on)."""
         return self.late_total_s / self.replies if self.replies else 0.0
+
+
+class _Reply(NamedTuple):
+    """Bytes a servo sends, after its Return Delay Time (and a fault's extra delay)."""
+
+    data: bytes
+    return_delay_s: float
+    fault_delay_s: float = 0.0
 
 
 class SimBus:
@@ -442,7 +450,7 @@ class SimBus:
             try:
                 packet = parse_instruction(frame)
             except PacketError as exc:
-                replies: list[tuple[bytes, float]] = []
+                replies: list[_Reply] = []
                 if exc.kind == "crc":
                     self.stats.bad_crc += 1
                     servo = self._by_id.get(frame[4])
@@ -458,23 +466,23 @@ class SimBus:
         self.stats.overhead_max_s = max(self.stats.overhead_max_s, overhead)
         self._send(replies, len(frame), t_rx)
 
-    def _send(self, replies: list[tuple[bytes, float]], frame_len: int, t_rx: float) -> None:
+    def _send(self, replies: list[_Reply], frame_len: int, t_rx: float) -> None:
         """Write replies; with wire timing, each when its last byte would arrive."""
         if not self.wire_timing:
-            for data, extra in replies:
-                if extra > 0.001:  # a delayed-reply fault still delays
-                    self.clock.sleep(extra)
-                if data:
-                    os.write(self._master, data)
+            for r in replies:
+                if r.fault_delay_s:
+                    self.clock.sleep(r.fault_delay_s)
+                if r.data:
+                    os.write(self._master, r.data)
                     self.stats.replies += 1
             return
         byte_s = BITS_PER_BYTE / self.baud()
         t = max(t_rx, self._bus_free_at) + frame_len * byte_s
-        for data, wait in replies:
-            t += wait + len(data) * byte_s
-            if data:
+        for r in replies:
+            t += r.return_delay_s + r.fault_delay_s + len(r.data) * byte_s
+            if r.data:
                 self.clock.sleep_until(t)
-                os.write(self._master, data)
+                os.write(self._master, r.data)
                 late = self.clock.now() - t
                 self.stats.replies += 1
                 self.stats.late_total_s += late
@@ -483,15 +491,14 @@ class SimBus:
 
     # ------------------------------------------------------------ dispatch
 
-    def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"") -> tuple[bytes, float]:
-        """One status packet with faults applied: (bytes, wait before it starts)."""
+    def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"") -> _Reply:
+        """One status packet, with faults applied."""
         packet = build_status(servo.id, error, data)
-        wait = servo.return_delay_s
+        extra = 0.0
         if self.faults.any_reply_fault:
             packet, extra = self._apply_faults(
                 packet, servo.id, lambda other: build_status(other, error, data))
-            wait += extra
-        return packet, wait
+        return _Reply(packet, servo.return_delay_s, extra)
 
     def _apply_faults(
         self, packet: bytes, servo_id: int, rebuild: Callable[[int], bytes]
@@ -531,7 +538,7 @@ class SimBus:
 
     def _dispatch(
         self, target: int, inst: int, params: bytes, now: float
-    ) -> list[tuple[bytes, float]]:
+    ) -> list[_Reply]:
         if target == BROADCAST_ID:
             for s in self._by_id.values():
                 s.last_heard = now
@@ -580,10 +587,10 @@ class SimBus:
         except PacketError:
             return self._error(servo, ErrorCode.DATA_LENGTH, True)
 
-    def _error(self, servo: EmulatedServo, code: int, reply: bool) -> list[tuple[bytes, float]]:
+    def _error(self, servo: EmulatedServo, code: int, reply: bool) -> list[_Reply]:
         return [self._reply(servo, servo.error_byte(code))] if reply else []
 
-    def _broadcast(self, inst: int, params: bytes, now: float) -> list[tuple[bytes, float]]:
+    def _broadcast(self, inst: int, params: bytes, now: float) -> list[_Reply]:
         try:
             if inst == Instruction.SYNC_WRITE:
                 address, length, items = split_sync_write(params)
@@ -599,7 +606,7 @@ class SimBus:
                 return self._fast_read([(i, address, length) for i in ids], now)
             if inst == Instruction.SYNC_READ:
                 address, length, ids = split_sync_read(params)
-                out: list[tuple[bytes, float]] = []
+                out: list[_Reply] = []
                 for servo_id in ids:
                     servo = self._servo_for(servo_id, now)
                     if servo is not None and servo.status_return_level >= 1:
@@ -640,11 +647,15 @@ class SimBus:
                 for servo in self._by_id.values():
                     servo.reboot(now)
                 return []
-            if inst == Instruction.WRITE and len(params) >= 3:
+            if inst in (Instruction.WRITE, Instruction.REG_WRITE) and len(params) >= 3:
                 address = params[0] | params[1] << 8
                 for servo in self._by_id.values():
-                    if servo.available(now):
+                    if not servo.available(now):
+                        continue
+                    if inst == Instruction.WRITE:
                         servo.write(address, params[2:])
+                    else:
+                        servo.reg_write(address, params[2:])
                 self._rebuild_ids()
                 return []
         except PacketError:
@@ -653,7 +664,7 @@ class SimBus:
 
     def _fast_read(
         self, requests: Sequence[tuple[int, int, int]], now: float
-    ) -> list[tuple[bytes, float]]:
+    ) -> list[_Reply]:
         """One combined reply; it stops short at the first servo that does not answer."""
         chunks: list[tuple[int, int, bytes]] = []
         complete = True
@@ -683,7 +694,7 @@ class SimBus:
         extra = 0.0
         if self.faults.any_reply_fault:
             packet, extra = self._apply_faults(packet, chunks[0][0], build)
-        return [(packet, first_delay + extra)]
+        return [_Reply(packet, first_delay, extra)]
 
 
 def servos_from_rig(

@@ -42,7 +42,12 @@ from handrig.errors import ConfigError, HandrigError
 from handrig.hand import DOF_NAMES, Hand
 from handrig.rigconfig import RigConfig, ServoCalibration
 from sim.dxl_servo import EmulatedServo
-from sim.hand_model import ActuatorParams, PassiveParams, hand_model_xml
+from sim.hand_model import (
+    REFERENCE_HAND_LENGTH_M,
+    ActuatorParams,
+    PassiveParams,
+    hand_model_xml,
+)
 
 PWM_LIMIT = 885  # X-series PWM Limit default (= 100 % duty)
 # Reflected rotor inertia at the servo horn (assumed; sim.hand_model's default),
@@ -79,7 +84,10 @@ class _Channel:
 
 
 class _HandSim:
-    def __init__(self, hand: Hand, cals: Sequence[ServoCalibration], timestep_s: float) -> None:
+    def __init__(
+        self, hand: Hand, cals: Sequence[ServoCalibration], timestep_s: float,
+        hand_length_m: float,
+    ) -> None:
         import mujoco
 
         self.mujoco = mujoco
@@ -102,7 +110,8 @@ class _HandSim:
                 max_speed_rad_s=math.radians(info.no_load_speed_rpm * 6.0) / c.gear_ratio,
                 armature_kgm2=armature,
             )
-        xml = hand_model_xml(hand, passive=passive, actuated=actuated, timestep_s=timestep_s)
+        xml = hand_model_xml(hand, hand_length_m, passive=passive, actuated=actuated,
+                             timestep_s=timestep_s)
         self.model = mujoco.MjModel.from_xml_string(xml)
         self.data = mujoco.MjData(self.model)
         self.channels: list[_Channel] = []
@@ -209,6 +218,7 @@ class Puppet:
         timestep_s: float = 0.001,
         period_s: float = 0.002,
         max_lag_s: float = 0.05,
+        hand_length_m: float = REFERENCE_HAND_LENGTH_M,
         on_behind: Callable[[float], None] | None = None,
     ) -> None:
         if not 0 < timestep_s <= period_s:
@@ -221,7 +231,7 @@ class Puppet:
                 continue  # a curve with no joint in the 23-DOF model
             by_hand.setdefault(hand, []).append(cal)
         self.hands: dict[Hand, _HandSim] = {
-            h: _HandSim(h, cals, timestep_s) for h, cals in by_hand.items()
+            h: _HandSim(h, cals, timestep_s, hand_length_m) for h, cals in by_hand.items()
         }
         self.timestep_s = timestep_s
         self.period_s = period_s
@@ -252,6 +262,16 @@ class Puppet:
         with lock:
             for h in self.hands.values():
                 h.push()
+
+    def set_gravity(self, gravity_mps2: Sequence[float], hand: Hand | None = None) -> None:
+        """Gravity in the forearm frame (``sim.hand_model.gravity_in_forearm``), m/s^2,
+        for one hand or all; the default model has the palm down, forearm level."""
+        if len(gravity_mps2) != 3:
+            raise ValueError(f"gravity must have 3 components, got {len(gravity_mps2)}")
+        with self._lock:
+            for h, sim in self.hands.items():
+                if hand is None or h == hand:
+                    sim.model.opt.gravity[:] = gravity_mps2
 
     def joint_deg(self, name: str) -> float:
         """A joint's simulated angle in degrees (vocabulary convention)."""

@@ -102,3 +102,11 @@ def test_realtime_thread_never_runs_ahead_and_reports_falling_behind() -> None:
     assert 0.0 < puppet.sim_time_s <= elapsed
     assert puppet.behind_count == len(behind) > 0
     assert puppet.behind_total_s == pytest.approx(sum(behind))
+
+
+def test_gravity_direction_changes_the_sag() -> None:
+    cal = ServoCalibration(id=4, joint="riWristFlexion", min_deg=-60.0, max_deg=60.0)
+    puppet, _ = _setup(RigConfig(servos=(cal,)))
+    puppet.set_gravity((0.0, 0.0, 9.81))  # palm up: the unpowered hand falls into extension
+    puppet.step(500)
+    assert puppet.joint_deg("riWristFlexion") < -20.0
