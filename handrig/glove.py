@@ -16,6 +16,11 @@ that goes away sets :attr:`GloveSource.failure` to a :class:`DeviceError` with a
 clear message; ``latest()`` then simply returns ``None`` (the loop's glove
 timeout eases the puppet to the relaxed pose) and :meth:`GloveSource.check`
 raises it for callers that prefer to stop.
+
+``SerialGlove(reader="poll")`` reads without a thread instead: each ``latest()``
+does one non-blocking read and decodes what is there (a few microseconds, no
+GIL hand-over between threads); the frame's ``host_time_s`` is then the time of
+that read.
 """
 
 from __future__ import annotations
@@ -26,7 +31,6 @@ import os
 import select
 import threading
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Literal
@@ -166,6 +170,9 @@ class SerialGlove(GloveSource):
     and decodes them. If the port goes away the source records a
     :class:`DeviceError` and, with ``reconnect_s`` > 0, tries to reopen the same
     path every ``reconnect_s`` seconds (a replugged USB glove usually returns there).
+
+    ``reader="thread"`` (default) reads on a background thread; ``reader="poll"``
+    reads inside :meth:`latest` with non-blocking reads (no thread).
     """
 
     def __init__(
@@ -179,6 +186,7 @@ class SerialGlove(GloveSource):
         estop_letter: str = "N",
         reconnect_s: float = 0.5,
         poll_s: float = 0.05,
+        reader: Literal["thread", "poll"] = "thread",
     ) -> None:
         super().__init__()
         if fmt not in ("frames", "opengloves"):
@@ -193,6 +201,10 @@ class SerialGlove(GloveSource):
         self.analog_max = analog_max
         self.reconnect_s = reconnect_s
         self.poll_s = poll_s
+        if reader not in ("thread", "poll"):
+            raise DeviceError(f"glove reader {reader!r} unknown: use 'thread' or 'poll'")
+        self.reader = reader
+        self._next_reopen_s = -math.inf
         self._estop_bit = 1 << BUTTON_LETTERS.index(estop_letter)
         self._frames = FrameDecoder()
         self._lines = LineDecoder(analog_max)
@@ -217,9 +229,12 @@ class SerialGlove(GloveSource):
             ) from None
 
     def start(self) -> None:
-        if self._thread is not None:
+        if self._thread is not None or self._serial is not None:
             return
         self._serial = self._open()
+        os.set_blocking(self._serial.fileno(), False)
+        if self.reader == "poll":
+            return
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name=f"glove:{self.port}",
                                         daemon=True)
@@ -234,6 +249,45 @@ class SerialGlove(GloveSource):
             with contextlib.suppress(Exception):  # the port may already be gone
                 self._serial.close()
             self._serial = None
+
+    def latest(self) -> GloveSample | None:
+        if self.reader == "poll":
+            self._poll()
+        return super().latest()
+
+    def _feed(self, data: bytes, now: float) -> None:
+        with self._lock:
+            self._bytes += len(data)
+            if self.fmt == "frames":
+                self._feed_frames(data, now)
+            else:
+                self._feed_lines(data, now)
+
+    def _poll(self) -> None:
+        ser = self._serial
+        if ser is None:
+            now = self.clock.now()
+            if self.reconnect_s > 0 and now >= self._next_reopen_s:
+                self._next_reopen_s = now + self.reconnect_s
+                self._reopen_now()
+            return
+        try:
+            fd = ser.fileno()
+            for _ in range(8):  # bounded: at most 32 KiB per call
+                ready, _, _ = select.select([fd], [], [], 0.0)
+                if not ready:
+                    return
+                data = os.read(fd, 4096)
+                if not data:  # readable yet empty: hung up (as pyserial reads it)
+                    raise OSError("device reports readiness to read but returned no data")
+                self._feed(data, self.clock.now())
+                if len(data) < 4096:
+                    return
+        except BlockingIOError:
+            return
+        except (OSError, ValueError, TypeError) as exc:
+            self._lost(exc)
+            self._next_reopen_s = self.clock.now() + self.reconnect_s
 
     def stats(self) -> GloveStats:
         with self._lock:
@@ -257,9 +311,6 @@ class SerialGlove(GloveSource):
             )
 
     def _run(self) -> None:
-        feed: Callable[[bytes, float], None] = (
-            self._feed_frames if self.fmt == "frames" else self._feed_lines
-        )
         while not self._stop.is_set():
             ser = self._serial
             if ser is None:
@@ -274,15 +325,14 @@ class SerialGlove(GloveSource):
                 data = os.read(fd, 4096)
                 if not data:
                     raise OSError("device reports readiness to read but returned no data")
+            except BlockingIOError:
+                continue
             except (OSError, ValueError, TypeError) as exc:
                 if self._stop.is_set():
                     return
                 self._lost(exc)
                 continue
-            now = self.clock.now()
-            with self._lock:
-                self._bytes += len(data)
-                feed(data, now)
+            self._feed(data, self.clock.now())
 
     def _lost(self, exc: BaseException) -> None:
         self._failure = DeviceError(
@@ -300,10 +350,15 @@ class SerialGlove(GloveSource):
             return False
         if self._stop.wait(self.reconnect_s):
             return False
+        return self._reopen_now()
+
+    def _reopen_now(self) -> bool:
         try:
-            self._serial = self._open()
-        except DeviceError:
+            ser = self._open()
+            os.set_blocking(ser.fileno(), False)
+        except (DeviceError, OSError):
             return False
+        self._serial = ser
         self._frames.reset()
         self._reconnects += 1
         self._failure = None

@@ -65,13 +65,14 @@ def test_high_beta_tracks_fast_motion() -> None:
     assert lag_high < 0.2 * lag_low
 
 
-def test_matches_the_scalar_algorithm_per_channel() -> None:
+@pytest.mark.parametrize("n", [3, 40])  # the plain-float path and the numpy path
+def test_matches_the_scalar_algorithm_per_channel(n: int) -> None:
     rng = np.random.default_rng(3)
     ts = np.cumsum(rng.uniform(0.003, 0.012, 300))
-    xs = np.cumsum(rng.normal(0, 2, (300, 3)), axis=0)
-    params = ([0.5, 1.0, 3.0], [0.0, 0.05, 0.5], [1.0, 2.0, 0.5])
-    y = run(OneEuroFilter(3, *params), xs, ts)
-    for c in range(3):
+    xs = np.cumsum(rng.normal(0, 2, (300, n)), axis=0)
+    params = (rng.uniform(0.3, 3.0, n), rng.uniform(0.0, 0.5, n), rng.uniform(0.5, 2.0, n))
+    y = run(OneEuroFilter(n, *params), xs, ts)
+    for c in range(n):
         ref = scalar_one_euro(list(xs[:, c]), list(ts), params[0][c], params[1][c], params[2][c])
         np.testing.assert_allclose(y[:, c], ref, rtol=1e-12, atol=1e-9)
 

@@ -80,11 +80,13 @@ def test_replay_loops_and_reports_the_button() -> None:
     assert not glove.finished
 
 
-def test_serial_frames_from_the_emulator() -> None:
+@pytest.mark.parametrize("reader", ["thread", "poll"])
+def test_serial_frames_from_the_emulator(reader: str) -> None:
     rec = sweep_recording(2.0, 200.0, 5)
     clock = MonotonicClock()
     with GloveEmulator(rec, "frames") as emu, \
-            SerialGlove(emu.port_path, "frames", clock=clock) as glove:
+            SerialGlove(emu.port_path, "frames", clock=clock,
+                        reader=reader) as glove:  # type: ignore[arg-type]
         got = collect(glove, 20)
         assert len(got) >= 20
         s = got[-1]
@@ -133,14 +135,16 @@ def test_quiet_glove_returns_none_and_ages() -> None:
         assert len(collect(glove, 3)) == 3
 
 
-def test_port_that_disappears_is_a_device_error() -> None:
+@pytest.mark.parametrize("reader", ["thread", "poll"])
+def test_port_that_disappears_is_a_device_error(reader: str) -> None:
     rec = sweep_recording(3.0, 200.0, 3)
     emu = GloveEmulator(rec, "frames", loop=True).start()
-    glove = SerialGlove(emu.port_path, "frames", clock=MonotonicClock(), reconnect_s=0)
+    glove = SerialGlove(emu.port_path, "frames", clock=MonotonicClock(), reconnect_s=0,
+                        reader=reader)  # type: ignore[arg-type]
     with glove:
         assert len(collect(glove, 3)) == 3
         emu.hang_up()
-        assert wait_for(lambda: glove.failure is not None)
+        assert wait_for(lambda: glove.latest() is None and glove.failure is not None)
         assert emu.port_path in str(glove.failure) and "went away" in str(glove.failure)
         assert glove.stats().failure
         with pytest.raises(DeviceError, match="went away"):
@@ -176,3 +180,22 @@ def test_bad_arguments() -> None:
         SerialGlove("/dev/null", "csv", clock=MonotonicClock())  # type: ignore[arg-type]
     with pytest.raises(DeviceError, match="e-stop letter"):
         SerialGlove("/dev/null", "opengloves", clock=MonotonicClock(), estop_letter="Z")
+
+
+@pytest.mark.parametrize("reader", ["thread", "poll"])
+def test_a_replugged_glove_is_picked_up_again(reader: str) -> None:
+    rec = sweep_recording(3.0, 200.0, 3)
+    first = GloveEmulator(rec, "frames", loop=True).start()
+    path = first.port_path
+    glove = SerialGlove(path, "frames", clock=MonotonicClock(), reconnect_s=0.05,
+                        reader=reader)  # type: ignore[arg-type]
+    with glove:
+        assert len(collect(glove, 3)) == 3
+        first.hang_up()
+        assert wait_for(lambda: glove.latest() is None and glove.failure is not None)
+        with GloveEmulator(rec, "frames", loop=True) as second:
+            if second.port_path != path:
+                pytest.skip(f"the kernel gave the new pty another name ({second.port_path})")
+            assert len(collect(glove, 3)) == 3
+            assert glove.failure is None and glove.stats().reconnects >= 1
+    first.close()
