@@ -244,14 +244,19 @@ class EmulatedServo:
 
     # ------------------------------------------------------------------ faults
 
-    def inject_hardware_error(self, bits: int = HardwareError.OVERLOAD) -> None:
-        """A hardware error (overload by default): torque off until a reboot."""
-        self.injected_hardware_error |= int(bits)
+    def inject_hardware_error(
+        self, bits: int = HardwareError.OVERLOAD, *, persistent: bool = False
+    ) -> None:
+        """A hardware error (overload by default): torque off, Alert bit set, until a
+        reboot clears it. ``persistent``: the cause stays, so it comes back after every
+        reboot until :meth:`clear_injected_fault`."""
+        if persistent:
+            self.injected_hardware_error |= int(bits)
         self.mem[70] |= int(bits)
         self.mem[64] = 0
 
     def clear_injected_fault(self) -> None:
-        """Remove the cause of an injected fault (the status stays until a reboot)."""
+        """Remove the cause of a persistent injected fault (the status stays until a reboot)."""
         self.injected_hardware_error = 0
 
     def check_watchdog(self, now: float) -> bool:

@@ -123,7 +123,6 @@ def test_overload_only_a_reboot_clears() -> None:
             assert error & 0x80
             assert ph.write1ByteTxRx(port, 2, 64, 1)[1] & 0x80
             assert not bus.servo(2).torque_enabled
-            bus.servo(2).clear_injected_fault()
             assert ph.reboot(port, 2)[0] == COMM_SUCCESS
             time.sleep(0.15)
             assert ph.read1ByteTxRx(port, 2, 70) == (0, COMM_SUCCESS, 0)

@@ -78,7 +78,7 @@ def test_homing_offset_and_reverse_drive_mode() -> None:
 def test_overload_sets_alert_keeps_torque_off_until_reboot() -> None:
     s = EmulatedServo(1)
     assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
-    s.inject_hardware_error(HardwareError.OVERLOAD)
+    s.inject_hardware_error(HardwareError.OVERLOAD, persistent=True)
     assert not s.torque_enabled
     assert s.hardware_error == HardwareError.OVERLOAD
     err, _ = s.ping()
@@ -136,3 +136,12 @@ def test_reads() -> None:
     err, data = s.read(0, 147)  # the whole table in one read
     assert err == 0 and len(data) == 147
     assert s.read(600, 100) == (ErrorCode.ACCESS, b"")
+
+
+def test_one_shot_overload_is_cleared_by_reboot() -> None:
+    s = EmulatedServo(1)
+    s.inject_hardware_error()
+    assert s.hardware_error == HardwareError.OVERLOAD
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == ERROR_ALERT
+    s.reboot(now=0.0)
+    assert s.hardware_error == 0 and s.ping()[0] == 0
