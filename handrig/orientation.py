@@ -13,7 +13,8 @@ Frames and conventions
   ``v_imu = mount.apply(v_forearm)``; identity when the IMU's axes are the forearm
   frame's. So forearm -> world is ``R = R_imu * mount``.
 * World up in the forearm frame: ``up = R.inv().apply(up_world)``;
-  ``inclination = asin(up.x)`` (-90 hanging down, +90 pointing up);
+  ``inclination = asin(up.x)`` (-90 hanging down, +90 pointing up; computed as
+  ``atan2(up.x, hypot(up.y, up.z))``, which keeps full precision near +-90);
   ``rotation = atan2(up.y, up.z)`` (0 palm down, +90 thumb up, 180 palm up) for the
   right hand, ``atan2(-up.y, up.z)`` for the left (its y axis points ulnar), so the
   rotation is anatomical and the same sag grid serves both hands. Near vertical
@@ -143,9 +144,10 @@ class ForearmOrientation:
         up0 = m[0][0] * u0 + m[0][1] * u1 + m[0][2] * u2
         up1 = m[1][0] * u0 + m[1][1] * u1 + m[1][2] * u2
         up2 = m[2][0] * u0 + m[2][1] * u1 + m[2][2] * u2
-        inc = math.degrees(math.asin(max(-1.0, min(1.0, up0))))
         y, z = self._sign_y * up1, up2
-        rot = 0.0 if math.hypot(y, z) < self.vertical_eps else math.degrees(math.atan2(y, z))
+        horizontal = math.hypot(y, z)
+        inc = math.degrees(math.atan2(up0, horizontal))  # = asin(up.x), better conditioned
+        rot = 0.0 if horizontal < self.vertical_eps else math.degrees(math.atan2(y, z))
         self._last = (inc, rot)
         return inc, rot
 
@@ -155,8 +157,8 @@ class ForearmOrientation:
         r = Rotation.from_quat(np.asarray(quat, dtype=np.float64),
                                scalar_first=self.scalar_first) * self.mount
         up = r.inv().apply(self._up)
-        inc = math.degrees(math.asin(max(-1.0, min(1.0, float(up[0])))))
         y, z = self._sign_y * float(up[1]), float(up[2])
+        inc = math.degrees(math.atan2(float(up[0]), math.hypot(y, z)))
         rot = 0.0 if math.hypot(y, z) < self.vertical_eps else math.degrees(math.atan2(y, z))
         return inc, rot
 

@@ -17,9 +17,10 @@ Gravity is set exactly (``opt.gravity``), so the stored "actual" coordinates equ
 the nominal ones; they are stored anyway, as the paper does.
 
 File (``.npz``): ``inclination_deg`` (n_inc, n_rot), ``rotation_deg`` (n_inc, n_rot),
-``dofs_deg`` (n_inc, n_rot, 23) in vocabulary order and convention, ``dof_names`` (23,),
-``rest_deg`` (23,), ``limits_deg`` (23, 2), ``metadata`` (a JSON string: model
-parameters, gains, hand length, step, model hash, solver statistics).
+``dofs_deg`` (n_inc, n_rot, 23; float32, 1e-5 deg is plenty) in vocabulary order and
+convention, ``dof_names`` (23,), ``rest_deg`` (23,), ``limits_deg`` (23, 2),
+``metadata`` (a JSON string: model parameters, gains, hand length, step, model hash,
+solver statistics).
 """
 
 from __future__ import annotations
@@ -64,7 +65,7 @@ class BakedGrid:
         p.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(
             p, inclination_deg=self.inclination_deg, rotation_deg=self.rotation_deg,
-            dofs_deg=self.dofs_deg, dof_names=np.array(DOF_NAMES["ri"]),
+            dofs_deg=self.dofs_deg.astype(np.float32), dof_names=np.array(DOF_NAMES["ri"]),
             rest_deg=self.rest_deg, limits_deg=self.limits_deg,
             metadata=np.array(json.dumps(self.metadata, sort_keys=True)),
         )
@@ -247,6 +248,6 @@ def plot(grid: BakedGrid, path: str | Path) -> Path:
     meta = grid.metadata
     fig.suptitle(f"Relaxed-hand sag grid ({meta.get('solver')}, step {meta.get('step_deg')} deg,"
                  f" hand length {meta.get('hand_length_m')} m)")
-    fig.savefig(p, dpi=70)
+    fig.savefig(p, dpi=55)
     plt.close(fig)
     return p
