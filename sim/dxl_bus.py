@@ -35,6 +35,7 @@ from types import TracebackType
 from typing import NamedTuple, Protocol
 
 from firmware_protocol.dynamixel import (
+    BAUD_BY_INDEX,
     BROADCAST_ID,
     ErrorCode,
     HardwareError,
@@ -215,8 +216,17 @@ class _Reply(NamedTuple):
 class SimBus:
     """Emulated servos behind a pty. Use as a context manager::
 
-        with SimBus.from_rig(load_rig_config(), wire_timing=True) as bus:
+        with SimBus.from_rig(load_rig_config(), puppet=True, wire_timing=True) as bus:
             port = PortHandler(bus.port_path)
+            bus.servo(3).torque_enabled, bus.fault_counts, bus.stats
+
+    ``servos``: the emulated servos (or a rig config: one servo per calibrated ID).
+    ``wire_timing``: hold replies until their wire time at the client's baud rate.
+    ``faults``: fault switches (:class:`FaultSpec`). ``puppet``: what moves the motors
+    (:class:`sim.puppet.Puppet`); without one servos move kinematically.
+    ``clock``: times replies (default: :class:`MonotonicClock` with a 60 us spin).
+    ``check_baud``: a servo hears only packets sent at its Baud Rate item (off by
+    default: servos follow whatever baud the client sets).
     """
 
     def __init__(
@@ -227,6 +237,7 @@ class SimBus:
         faults: FaultSpec | None = None,
         puppet: MotionModel | None = None,
         clock: Clock | None = None,
+        check_baud: bool = False,
     ) -> None:
         if isinstance(servos, RigConfig):
             servos = servos_from_rig(servos)
@@ -237,6 +248,8 @@ class SimBus:
             raise ConfigError("servo ID used twice on the emulated bus", key="servos", value=ids)
         self.servos: list[EmulatedServo] = list(servos)
         self.wire_timing = wire_timing
+        self.check_baud = check_baud
+        self._packet_baud = 0
         self.faults = faults or FaultSpec()
         self.puppet = puppet
         self.clock = clock or MonotonicClock(spin_s=SPIN_S)
@@ -445,6 +458,8 @@ class SimBus:
 
     def _handle_frame(self, frame: bytes, t_rx: float) -> None:
         self.stats.packets += 1
+        if self.check_baud:
+            self._packet_baud = self.baud()
         with self.lock:
             self._housekeeping(t_rx)
             try:
@@ -453,8 +468,8 @@ class SimBus:
                 replies: list[_Reply] = []
                 if exc.kind == "crc":
                     self.stats.bad_crc += 1
-                    servo = self._by_id.get(frame[4])
-                    if servo is not None and servo.available(t_rx):
+                    servo = self._servo_for(frame[4], t_rx)
+                    if servo is not None:
                         err = servo.error_byte(ErrorCode.CRC)
                         replies = [self._reply(servo, err)]
             else:
@@ -531,17 +546,27 @@ class SimBus:
             if servo_id in self.faults.missing:
                 self.fault_counts["missing"] += 1
             return None
-        if not servo.available(now):
+        if not servo.available(now) or not self._hears(servo):
             return None
         servo.last_heard = now
         return servo
+
+    def _hears(self, servo: EmulatedServo) -> bool:
+        """With ``check_baud``, a servo hears only packets at its Baud Rate item."""
+        return not self.check_baud or BAUD_BY_INDEX.get(servo.mem[8]) == self._packet_baud
+
+    def _listening(self, now: float) -> list[EmulatedServo]:
+        """Servos that hear a broadcast now, in ID order."""
+        return sorted((s for s in self._by_id.values() if s.available(now) and self._hears(s)),
+                      key=lambda s: s.id)
 
     def _dispatch(
         self, target: int, inst: int, params: bytes, now: float
     ) -> list[_Reply]:
         if target == BROADCAST_ID:
             for s in self._by_id.values():
-                s.last_heard = now
+                if self._hears(s):
+                    s.last_heard = now
             return self._broadcast(inst, params, now)
         servo = self._servo_for(target, now)
         if servo is None:
@@ -630,28 +655,24 @@ class SimBus:
                 return []
             if inst == Instruction.PING:
                 out = []
-                for servo in sorted(self._by_id.values(), key=lambda s: s.id):
-                    if servo.available(now):
-                        out.append(self._reply(servo, *servo.ping()))
+                for servo in self._listening(now):
+                    out.append(self._reply(servo, *servo.ping()))
                 for servo_id in sorted(self.faults.missing):
                     self.fault_counts["missing"] += 1
                     _ = servo_id
                 return out
             if inst == Instruction.ACTION:
-                for servo in self._by_id.values():
-                    if servo.available(now):
-                        servo.action()
+                for servo in self._listening(now):
+                    servo.action()
                 self._rebuild_ids()
                 return []
             if inst == Instruction.REBOOT:
-                for servo in self._by_id.values():
+                for servo in self._listening(now):
                     servo.reboot(now)
                 return []
             if inst in (Instruction.WRITE, Instruction.REG_WRITE) and len(params) >= 3:
                 address = params[0] | params[1] << 8
-                for servo in self._by_id.values():
-                    if not servo.available(now):
-                        continue
+                for servo in self._listening(now):
                     if inst == Instruction.WRITE:
                         servo.write(address, params[2:])
                     else:

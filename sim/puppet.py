@@ -243,6 +243,8 @@ class Puppet:
         self.behind_total_s = 0.0
         self.steps = 0
         self._lock: threading.RLock = threading.RLock()
+        # Held while MuJoCo steps; hold it to read model/data consistently (viewers).
+        self.physics_lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self.error: BaseException | None = None
@@ -280,7 +282,7 @@ class Puppet:
         for h in self.hands.values():
             jid = mujoco.mj_name2id(h.model, mujoco.mjtObj.mjOBJ_JOINT, name)
             if jid >= 0:
-                with self._lock:
+                with self.physics_lock:
                     return math.degrees(float(h.data.qpos[h.model.jnt_qposadr[jid]]))
         raise KeyError(f"no simulated joint {name!r}")
 
@@ -289,8 +291,9 @@ class Puppet:
         with self._lock:
             for h in self.hands.values():
                 h.pull()
-        for h in self.hands.values():
-            h.step(n)
+        with self.physics_lock:
+            for h in self.hands.values():
+                h.step(n)
         with self._lock:
             for h in self.hands.values():
                 h.push()
@@ -338,7 +341,7 @@ class Puppet:
     def joint_angles_deg(self) -> dict[str, float]:
         """All simulated joint angles, degrees."""
         out: dict[str, float] = {}
-        with self._lock:
+        with self.physics_lock:
             for hand, h in self.hands.items():
                 for name in DOF_NAMES[hand]:
                     jid = h.mujoco.mj_name2id(h.model, h.mujoco.mjtObj.mjOBJ_JOINT, name)

@@ -122,8 +122,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"sim-bus: physics fell behind wall time {len(behind)} times "
                       f"({sum(behind) * 1000:.0f} ms skipped in all)", file=sys.stderr)
                 reported = len(behind)
-            if viewer is not None:
-                with bus.lock:
+            if viewer is not None and puppet is not None:
+                with puppet.physics_lock:
                     viewer.sync()
                 if not viewer.is_running():
                     viewer = None

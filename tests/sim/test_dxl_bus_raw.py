@@ -219,3 +219,13 @@ def test_framing_survives_noise_and_a_corrupted_len(raw: tuple[SimBus, RawClient
         answered = bool(c.statuses(c.collect(14, 0.05)))
     assert answered
     assert bus.stats.noise_bytes >= 3
+
+
+def test_check_baud_servo_hears_only_its_baud_rate() -> None:
+    servos = [EmulatedServo(1, baud=1_000_000), EmulatedServo(2, baud=57_600)]
+    for _, c in _bus(servos, check_baud=True):
+        c.send(dx.BROADCAST_ID, INST.PING)
+        assert [s.id for s in c.statuses(c.collect(28, 0.1))] == [1]
+        c.ser.baudrate = 57_600
+        c.send(dx.BROADCAST_ID, INST.PING)
+        assert [s.id for s in c.statuses(c.collect(28, 0.1))] == [2]
