@@ -3,8 +3,11 @@ frame's last byte read to the sample being visible to the loop (over a real pty)
 
 from __future__ import annotations
 
-import time
+import subprocess
+import sys
+import tempfile
 import timeit
+from pathlib import Path
 
 import numpy as np
 
@@ -14,8 +17,7 @@ from handrig.clock import MonotonicClock
 from handrig.filters import OneEuroFilter
 from handrig.glove import SerialGlove
 from handrig.glove_calibration import GloveControls, load_glove_config
-from handrig.glove_recording import sweep_recording
-from sim.glove_emulator import GloveEmulator
+from handrig.glove_recording import sweep_recording, write_glove_recording
 
 
 def _per_call_us(fn: object, number: int) -> float:
@@ -60,19 +62,53 @@ def main() -> None:
 
     print(f"OneEuroFilter step, 5 channels:                 {_per_call_us(fstep, n):.2f} us")
 
-    # last byte read -> sample visible to latest(), over a pty, glove at 200 Hz
-    clock = MonotonicClock()
-    rec = sweep_recording(3.0, 200.0, 5)
-    delays = []
-    with GloveEmulator(rec, "frames") as emu, \
-            SerialGlove(emu.port_path, "frames", clock=clock) as glove:
-        end = time.perf_counter() + 2.5
-        while time.perf_counter() < end:
-            s = glove.latest()
-            if s is not None:
-                delays.append(clock.now() - s.host_time_s)
-        st = glove.stats()
-    d = np.array(delays[5:]) * 1e6
-    print(f"read -> visible to latest() over a pty (n={d.size}, busy-polling loop): "
-          f"p50 {np.percentile(d, 50):.1f} us, p99 {np.percentile(d, 99):.1f} us "
-          f"(frames {st.frames_ok}, errors {st.errors})")
+    cal = ctl.calibration
+    print(f"GloveCalibration.calibrate, 5 channels:         "
+          f"{_per_call_us(lambda: cal.calibrate(raw, out), n):.2f} us")
+
+    # A 200 Hz loop (MonotonicClock.sleep_until) takes the newest sample each cycle; the
+    # glove emulator streams at 200 Hz over a pty from another process (as a USB glove
+    # would: no GIL shared with it). "age" = now - host_time_s when the loop picks a
+    # sample up; "latest() cost" = time spent inside latest() on cycles that got one.
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "sweep.csv"
+        write_glove_recording(path, sweep_recording(5.0, 200.0, 5))
+        for reader in ("thread", "poll"):
+            _loop_figures(path, reader)
+
+
+def _loop_figures(path: Path, reader: str) -> None:
+    code = ("import sys\n"
+            "from handrig.glove_recording import read_glove_recording\n"
+            "from sim.glove_emulator import GloveEmulator\n"
+            "with GloveEmulator(read_glove_recording(sys.argv[1])) as e:\n"
+            "    print(e.port_path, flush=True)\n"
+            "    e.done.wait(30)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(path)], stdout=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout is not None
+        port = proc.stdout.readline().strip()
+        clock = MonotonicClock()
+        ages, costs = [], []
+        with SerialGlove(port, "frames", clock=clock, reader=reader) as glove:  # type: ignore[arg-type]
+            period = 1 / 200.0
+            t0 = clock.now() + 0.1
+            for k in range(700):
+                clock.sleep_until(t0 + k * period)
+                a = clock.now()
+                s = glove.latest()
+                b = clock.now()
+                if s is not None:
+                    ages.append(b - s.host_time_s)
+                    costs.append(b - a)
+            st = glove.stats()
+    finally:
+        proc.kill()
+        proc.wait()
+    age = np.array(ages[10:]) * 1e6
+    cost = np.array(costs[10:]) * 1e6
+    print(f"200 Hz loop, reader={reader:<6}: latest() cost p50 {np.percentile(cost, 50):.1f}"
+          f" us, p99 {np.percentile(cost, 99):.1f} us; sample age at pickup p50 "
+          f"{np.percentile(age, 50):.0f} us, p99 {np.percentile(age, 99):.0f} us "
+          f"(samples {len(ages)}, frames {st.frames_ok}, errors {st.errors})")

@@ -29,6 +29,7 @@ import contextlib
 import math
 import os
 import select
+import termios
 import threading
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -232,7 +233,7 @@ class SerialGlove(GloveSource):
         if self._thread is not None or self._serial is not None:
             return
         self._serial = self._open()
-        os.set_blocking(self._serial.fileno(), False)
+        _nonblocking(self._serial.fileno())
         if self.reader == "poll":
             return
         self._stop.clear()
@@ -274,12 +275,9 @@ class SerialGlove(GloveSource):
         try:
             fd = ser.fileno()
             for _ in range(8):  # bounded: at most 32 KiB per call
-                ready, _, _ = select.select([fd], [], [], 0.0)
-                if not ready:
-                    return
-                data = os.read(fd, 4096)
-                if not data:  # readable yet empty: hung up (as pyserial reads it)
-                    raise OSError("device reports readiness to read but returned no data")
+                data = os.read(fd, 4096)  # EAGAIN when empty (VMIN 1, O_NONBLOCK)
+                if not data:
+                    raise OSError("end of file: the device hung up")
                 self._feed(data, self.clock.now())
                 if len(data) < 4096:
                     return
@@ -355,7 +353,7 @@ class SerialGlove(GloveSource):
     def _reopen_now(self) -> bool:
         try:
             ser = self._open()
-            os.set_blocking(ser.fileno(), False)
+            _nonblocking(ser.fileno())
         except (DeviceError, OSError):
             return False
         self._serial = ser
@@ -387,6 +385,19 @@ class SerialGlove(GloveSource):
                 sensor_time_us=0, host_time_s=now, count=self._count,
             )
             self._last_good_s = now
+
+
+def _nonblocking(fd: int) -> None:
+    """O_NONBLOCK and VMIN 1, VTIME 0: a read of an empty port fails with EAGAIN and
+    only a hang-up reads as end of file (pyserial leaves VMIN 0, where both read b"")."""
+    os.set_blocking(fd, False)
+    try:
+        attrs = termios.tcgetattr(fd)
+        attrs[6][termios.VMIN] = 1
+        attrs[6][termios.VTIME] = 0
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    except termios.error:
+        pass  # not a terminal (a pipe or socket): O_NONBLOCK alone does it
 
 
 class ReplayGlove(GloveSource):
