@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_protocol.dynamixel import MODELS, TICKS_PER_TURN, Reg
+from firmware_protocol.dynamixel import MODELS, TICKS_PER_TURN, HardwareError, Reg
 from handrig.errors import ConfigError, HandrigError
 from handrig.hand import DOF_NAMES, Hand
 from handrig.rigconfig import RigConfig, ServoCalibration
@@ -81,6 +81,8 @@ class _Channel:
     kt_nm_per_a: float
     powered: bool = False
     servo: EmulatedServo | None = None
+    p_gain: int = -1
+    saturated_s: float = 0.0
 
 
 class _HandSim:
@@ -136,18 +138,25 @@ class _HandSim:
         a = ch.actuator
         g = ch.cal.gear_ratio
         if on:
-            servo = ch.servo
-            p_gain = servo.get(Reg.POSITION_P_GAIN) if servo else 400
-            kp = kp_from_p_gain(p_gain, ch.stall_nm) * g * g
-            m.actuator_gainprm[a, 0] = kp
-            m.actuator_biasprm[a, 1] = -kp
-            m.actuator_biasprm[a, 2] = -2.0 * math.sqrt(kp * ARMATURE_KGM2 * g * g)
+            self._set_gain(ch, ch.servo.get(Reg.POSITION_P_GAIN) if ch.servo else 400)
             self.data.ctrl[a] = self.data.qpos[ch.qpos]
         else:
             m.actuator_gainprm[a, 0] = 0.0
             m.actuator_biasprm[a, 1] = 0.0
             m.actuator_biasprm[a, 2] = -BACKDRIVE_DAMPING_NMS * g * g
+            ch.p_gain = -1
         ch.powered = on
+        ch.saturated_s = 0.0
+
+    def _set_gain(self, ch: _Channel, p_gain: int) -> None:
+        m = self.model
+        a = ch.actuator
+        g = ch.cal.gear_ratio
+        kp = kp_from_p_gain(p_gain, ch.stall_nm) * g * g
+        m.actuator_gainprm[a, 0] = kp
+        m.actuator_biasprm[a, 1] = -kp
+        m.actuator_biasprm[a, 2] = -2.0 * math.sqrt(kp * ARMATURE_KGM2 * g * g)
+        ch.p_gain = p_gain
 
     def pull(self) -> None:
         """Read goals, torque and limits from the servos (bus lock held)."""
@@ -161,6 +170,9 @@ class _HandSim:
                 self._set_power(ch, on)
             if not on:
                 continue
+            p_gain = s.get(Reg.POSITION_P_GAIN)
+            if p_gain != ch.p_gain:
+                self._set_gain(ch, p_gain)
             g = ch.cal.gear_ratio
             self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
             self.speed_rad_s[k] = s.speed_limit_ticks_per_s() / TICKS_PER_RAD / g
@@ -185,9 +197,11 @@ class _HandSim:
             ctrl[self.act_idx] = np.where(powered, new, cur)
             self.mujoco.mj_step(self.model, self.data)
 
-    def push(self) -> None:
-        """Write present state to the servos (bus lock held)."""
+    def push(self, dt_s: float = 0.0, overload_s: float | None = None) -> None:
+        """Write present state to the servos (bus lock held). With ``overload_s``, a
+        servo held at its torque limit that long reports an overload error."""
         d = self.data
+        m = self.model
         for ch in self.channels:
             s = ch.servo
             if s is None:
@@ -200,6 +214,13 @@ class _HandSim:
             torque_horn = float(d.actuator_force[ch.actuator]) / c.gear_ratio
             current_ma = c.direction * torque_horn / ch.kt_nm_per_a * 1000.0
             s.set_motion(ticks, rpm, current_ma)
+            if overload_s is not None and ch.powered:
+                force = abs(float(d.actuator_force[ch.actuator]))
+                limit = float(m.actuator_forcerange[ch.actuator, 1])
+                ch.saturated_s = ch.saturated_s + dt_s if force >= 0.98 * limit else 0.0
+                if ch.saturated_s > overload_s:
+                    s.inject_hardware_error(HardwareError.OVERLOAD)
+                    ch.saturated_s = 0.0
 
 
 class Puppet:
@@ -208,7 +229,9 @@ class Puppet:
     ``rig``: which servo drives which joint (joints of one or both hands).
     ``timestep_s``: physics step; ``period_s``: how often the thread exchanges state
     with the servos; ``max_lag_s``: how far simulated time may trail wall time before
-    the puppet skips ahead and reports it.
+    the puppet skips ahead and reports it. ``overload_s``: if set, a servo held at its
+    torque limit for that long reports an overload hardware error (torque off until
+    a reboot), as an X-series servo does under a persistent load.
     """
 
     def __init__(
@@ -219,6 +242,7 @@ class Puppet:
         period_s: float = 0.002,
         max_lag_s: float = 0.05,
         hand_length_m: float = REFERENCE_HAND_LENGTH_M,
+        overload_s: float | None = None,
         on_behind: Callable[[float], None] | None = None,
     ) -> None:
         if not 0 < timestep_s <= period_s:
@@ -237,6 +261,7 @@ class Puppet:
         self.period_s = period_s
         self.max_lag_s = max_lag_s
         self.on_behind = on_behind
+        self.overload_s = overload_s
         self.sim_time_s = 0.0
         self.lag_s = 0.0
         self.behind_count = 0
@@ -296,7 +321,7 @@ class Puppet:
                 h.step(n)
         with self._lock:
             for h in self.hands.values():
-                h.push()
+                h.push(n * self.timestep_s, self.overload_s)
         self.steps += n
         self.sim_time_s += n * self.timestep_s
 

@@ -110,3 +110,20 @@ def test_gravity_direction_changes_the_sag() -> None:
     puppet.set_gravity((0.0, 0.0, 9.81))  # palm up: the unpowered hand falls into extension
     puppet.step(500)
     assert puppet.joint_deg("riWristFlexion") < -20.0
+
+
+def test_held_at_torque_limit_reports_overload_only_when_enabled() -> None:
+    cal = ServoCalibration(id=4, joint="riWristFlexion", min_deg=-60.0, max_deg=60.0)
+    for overload_s, expect in ((None, 0), (0.3, 0x20)):
+        puppet = Puppet(RigConfig(servos=(cal,)), overload_s=overload_s)
+        (s,) = servos_from_rig(RigConfig(servos=(cal,)))
+        puppet.attach([s], threading.RLock())
+        # 20 mA of Goal Current cannot lift the sagging hand: the servo sits at its limit
+        assert s.write(int(Reg.POSITION_P_GAIN), (4000).to_bytes(2, "little")) == 0
+        assert s.write(int(Reg.OPERATING_MODE), b"\x05") == 0
+        assert s.write(int(Reg.GOAL_CURRENT), (20).to_bytes(2, "little")) == 0
+        puppet.step(300)
+        _enable(s, cal.deg_to_ticks(-50.0))
+        puppet.step(600)
+        assert s.hardware_error == expect
+        assert s.torque_enabled == (expect == 0)
