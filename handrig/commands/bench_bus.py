@@ -46,7 +46,7 @@ import signal, sys
 from handrig.commands.bench_bus import bench_rig
 from sim.dxl_bus import SimBus
 rig = bench_rig(int(sys.argv[1]), int(sys.argv[2]))
-bus = SimBus.from_rig(rig, wire_timing=True).start()
+bus = SimBus.from_rig(rig, wire_timing=sys.argv[3] == "1").start()
 print("port:", bus.port_path, flush=True)
 signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
 try:
@@ -63,9 +63,9 @@ finally:
 class EmulatorProcess:
     """The emulated bus in a child process; ``port`` is its pty path."""
 
-    def __init__(self, n_servos: int, baud: int) -> None:
+    def __init__(self, n_servos: int, baud: int, wire_timing: bool = True) -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", _EMULATOR, str(n_servos), str(baud)],
+            [sys.executable, "-c", _EMULATOR, str(n_servos), str(baud), str(int(wire_timing))],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
         )
         assert self.proc.stdout is not None
@@ -95,6 +95,7 @@ class Result:
     wall_s: float
     cpu_s: float
     failed: int  # cycles whose read did not return every servo
+    median_s: float  # median cycle time
 
     @property
     def hz(self) -> float:
@@ -120,6 +121,7 @@ def run_ours(port: str, rig: RigConfig, baud: int, seconds: float) -> Result:
         goals = [_goals(rig, k) for k in range(64)]
         failed = 0
         cycles = 0
+        stamps = np.zeros(int(seconds * 20_000) + 64)
         t_end = time.perf_counter() + seconds
         c0 = time.process_time()
         t0 = time.perf_counter()
@@ -127,14 +129,16 @@ def run_ours(port: str, rig: RigConfig, baud: int, seconds: float) -> Result:
             bus.write_goals_deg(goals[cycles & 63])
             state = bus.read_state()
             failed += bool(state.stale.any())
+            stamps[cycles] = time.perf_counter()
             cycles += 1
-            if cycles & 15 == 0 and time.perf_counter() >= t_end:
+            if cycles & 15 == 0 and (stamps[cycles - 1] >= t_end or cycles >= len(stamps) - 16):
                 break
         wall = time.perf_counter() - t0
         cpu = time.process_time() - c0
     finally:
         bus.close()
-    return Result("handrig DynamixelBus (Fast Sync Read)", cycles, wall, cpu, failed)
+    return Result("handrig DynamixelBus (Fast Sync Read)", cycles, wall, cpu, failed,
+                  float(np.median(np.diff(stamps[:cycles]))))
 
 
 def run_sdk(port: str, rig: RigConfig, baud: int, seconds: float, fast: bool) -> Result:
@@ -155,6 +159,7 @@ def run_sdk(port: str, rig: RigConfig, baud: int, seconds: float, fast: bool) ->
     goals = [_goals(rig, k) for k in range(64)]
     failed = 0
     cycles = 0
+    stamps = np.zeros(int(seconds * 20_000) + 64)
     t_end = time.perf_counter() + seconds
     c0 = time.process_time()
     t0 = time.perf_counter()
@@ -171,8 +176,9 @@ def run_sdk(port: str, rig: RigConfig, baud: int, seconds: float, fast: bool) ->
             else:
                 for sid in ids:
                     reader.getData(sid, 132, 4)
+            stamps[cycles] = time.perf_counter()
             cycles += 1
-            if cycles & 15 == 0 and time.perf_counter() >= t_end:
+            if cycles & 15 == 0 and (stamps[cycles - 1] >= t_end or cycles >= len(stamps) - 16):
                 break
         wall = time.perf_counter() - t0
         cpu = time.process_time() - c0
@@ -181,7 +187,7 @@ def run_sdk(port: str, rig: RigConfig, baud: int, seconds: float, fast: bool) ->
     name = "plain SDK GroupSyncWrite + " + (
         "GroupSyncRead.fastSyncRead" if fast else "GroupSyncRead (Sync Read)"
     )
-    return Result(name, cycles, wall, cpu, failed)
+    return Result(name, cycles, wall, cpu, failed, float(np.median(np.diff(stamps[:cycles]))))
 
 
 def wire_limit_hz(n_servos: int, baud: int) -> tuple[int, float]:
@@ -213,15 +219,25 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
             results.append(run_sdk(emu.port, rig, baud, seconds, fast=True))
     finally:
         closing = emu.close()
-    write(f"{'way':<52} {'cycles/s':>9} {'of wire':>8} {'CPU us/cycle':>13} {'failed':>7}\n")
+    write(f"{'way (wire timing on)':<52} {'cycles/s':>9} {'of wire':>8} {'median us':>10} "
+          f"{'CPU us/cycle':>13} {'failed':>7}\n")
     for r in results:
-        write(f"{r.name:<52} {r.hz:>9.0f} {r.hz / limit:>8.2f} {r.cpu_us:>13.0f} "
-              f"{r.failed:>7}\n")
+        write(f"{r.name:<52} {r.hz:>9.0f} {r.hz / limit:>8.2f} {r.median_s * 1e6:>10.0f} "
+              f"{r.cpu_us:>13.0f} {r.failed:>7}\n")
     if plain:
         write("(plain ways run after handrig commissioned the servos: Return Delay Time 0; "
               f"{PLAIN_TIMEOUT_NOTE}; Sync Read's replies are 15N bytes, not in the limit)\n")
     if closing:
         write(closing + "\n")
+    # where the time goes: the same cycle with the wire taking no time
+    emu = EmulatorProcess(n_servos, baud, wire_timing=False)
+    try:
+        host = run_ours(emu.port, rig, baud, min(seconds, 1.0))
+    finally:
+        closing = emu.close()
+    write(f"host round trip, wire timing off: handrig cycle median {host.median_s * 1e6:.0f} us "
+          f"(this process {host.cpu_us:.0f} us CPU/cycle; the rest is the emulator and pty "
+          f"wake-ups); {closing}\n")
     return results
 
 

@@ -13,6 +13,7 @@ import re
 import select
 from dataclasses import dataclass
 
+import numpy as np
 from dynamixel_sdk.port_handler import PortHandler
 
 from handrig.clock import Clock
@@ -107,12 +108,15 @@ class SerialTransport:
             raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
         self.bytes_written += len(data)
 
-    def _fill(self, deadline_s: float, spin_from_s: float | None = None) -> bool:
+    def _fill(
+        self, deadline_s: float, spin_from_s: float | None = None, spin_until_s: float = np.inf
+    ) -> bool:
         """Wait until bytes arrive (appended to the buffer) or the deadline; True if some did.
 
-        From ``spin_from_s`` on (clock time), poll without sleeping: a wake-up from
-        ``select`` costs tens of microseconds, which a cycle near the wire-time
-        limit notices. The poll is bounded by ``MAX_POLLS`` as well as the deadline.
+        From ``spin_from_s`` until ``spin_until_s`` (clock times), poll without
+        sleeping: a wake-up from ``select`` costs tens of microseconds, which a
+        cycle near the wire-time limit notices. The poll is bounded by that window
+        and by ``MAX_POLLS`` as well as the deadline.
         """
         fd = self._fd
         polls = 0
@@ -121,6 +125,8 @@ class SerialTransport:
             remaining = deadline_s - now
             if remaining <= 0:
                 return False
+            if spin_from_s is not None and now >= spin_until_s:
+                spin_from_s = None
             if spin_from_s is not None and now >= spin_from_s:
                 try:
                     chunk = os.read(fd, 4096)
@@ -177,7 +183,7 @@ class SerialTransport:
 
     def read_exact(
         self, n: int, deadline_s: float, spin_from_s: float | None = None,
-        gap_s: float | None = None,
+        gap_s: float | None = None, spin_until_s: float = np.inf,
     ) -> bytes:
         """Up to ``n`` bytes: all ``n`` unless the deadline passed first (then fewer).
 
@@ -191,7 +197,7 @@ class SerialTransport:
         if gap_s is not None and len(buf) < n:
             deadline_s = min(deadline_s, self.clock.now() + gap_s)
         while len(buf) < n:
-            if not self._fill(deadline_s, spin_from_s):
+            if not self._fill(deadline_s, spin_from_s, spin_until_s):
                 break
             if gap_s is not None:
                 deadline_s = min(deadline_s, self.clock.now() + gap_s)
