@@ -53,6 +53,7 @@ from handrig import hand
 from handrig.config import CONFIG_DIR, load
 from handrig.errors import ConfigError, DataError
 from handrig.filters import OneEuroFilter
+from handrig.glove_recording import GloveRecording
 
 FloatArray = NDArray[np.float64]
 DEFAULT_GLOVE_PATH = CONFIG_DIR / "glove.toml"
@@ -357,6 +358,44 @@ class GloveControls:
         """Restart the filter (e.g. after the glove was lost and came back)."""
         if self.filter is not None:
             self.filter.reset()
+
+
+def recording_from_degrees(
+    calibration: GloveCalibration,
+    t_s: FloatArray,
+    degrees: FloatArray,
+    *,
+    quat_xyzw: FloatArray | None = None,
+    buttons: NDArray[np.int64] | None = None,
+    full_scale: float = 4095.0,
+    meta: dict[str, str] | None = None,
+) -> GloveRecording:
+    """The glove recording that ``calibration`` would read as ``degrees`` (n, k) in
+    :attr:`GloveCalibration.curves` order: the inverse map, rounded and clipped to
+    0..``full_scale`` counts. E.g. control curves from mocap -> a demo glove stream.
+    When several curves share a raw channel, the first one sets it."""
+    deg = np.asarray(degrees, dtype=np.float64)
+    n = len(t_s)
+    if deg.shape != (n, len(calibration)):
+        raise DataError(f"degrees has shape {deg.shape}, expected ({n}, {len(calibration)})")
+    raw_k = np.clip(np.rint(calibration.to_raw(deg)), 0.0, full_scale)
+    raw = np.zeros((n, calibration.n_raw_needed))
+    done: set[int] = set()
+    for j, k in enumerate(calibration.raw_index.tolist()):
+        if k not in done:
+            raw[:, k] = raw_k[:, j]
+            done.add(k)
+    names = tuple(
+        next((c for c, i in zip(calibration.curves, calibration.raw_index.tolist(),
+                                strict=True) if i == k), f"ch{k}")
+        for k in range(calibration.n_raw_needed)
+    )
+    return GloveRecording(
+        np.asarray(t_s, dtype=np.float64), raw,
+        np.zeros(n, dtype=np.int64) if buttons is None else np.asarray(buttons, np.int64),
+        names, None if quat_xyzw is None else np.asarray(quat_xyzw, dtype=np.float64),
+        0.0, dict(meta or {}),
+    )
 
 
 def _qmul(a: FloatArray, b: FloatArray) -> FloatArray:

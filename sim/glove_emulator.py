@@ -25,7 +25,7 @@ from typing import Literal
 
 import numpy as np
 
-from firmware_protocol.glove import GloveFrame, encode_frame
+from firmware_protocol.glove import MAX_CHANNELS, GloveFrame, encode_frame
 from firmware_protocol.opengloves import BUTTON_LETTERS, OpenGlovesLine, encode_line
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import DataError
@@ -65,6 +65,12 @@ class GloveEmulator:
         if fmt == "opengloves" and recording.n_channels < 5:
             raise DataError(f"OpenGloves needs 5 finger channels, the recording has "
                             f"{recording.n_channels}")
+        if fmt == "frames" and recording.n_channels > MAX_CHANNELS:
+            raise DataError(f"a frame carries at most {MAX_CHANNELS} channels, the recording "
+                            f"has {recording.n_channels}")
+        if estop_letter not in BUTTON_LETTERS:
+            raise DataError(f"e-stop letter {estop_letter!r} is not an OpenGloves button "
+                            f"(one of {BUTTON_LETTERS})")
         if rate_hz is not None and not 1.0 <= rate_hz <= 5000.0:
             raise DataError(f"glove rate {rate_hz} Hz out of range 1..5000")
         self.recording = recording
@@ -179,7 +185,7 @@ class GloveEmulator:
             q = None if rec.quat_xyzw is None else rec.quat_xyzw[i]
             quat = None if q is None or np.isnan(q).any() else (
                 float(q[0]), float(q[1]), float(q[2]), float(q[3]))
-            channels = tuple(int(v) for v in np.clip(np.rint(raw[:16]), 0, 65535))
+            channels = tuple(int(v) for v in np.clip(np.rint(raw), 0, 65535))
             frame = GloveFrame(seq, t_us & 0xFFFFFFFF, channels, quat, b & 0xFF)
             return encode_frame(frame)
         vals = [int(v) for v in np.clip(np.rint(raw), 0, self.analog_max)]

@@ -21,6 +21,7 @@ from handrig.glove_calibration import (
     forearm_quat_enu,
     glove_config_to_toml,
     load_glove_config,
+    recording_from_degrees,
 )
 
 DEFAULT_CONTROLS = ("riThumbCMCx", "riThumbCMCy", "riThumbCMCz", "riIndexMCPy", "riPinkyMCPy")
@@ -144,3 +145,20 @@ def test_forearm_quaternion_conventions() -> None:
 def test_glove_config_defaults_need_channels() -> None:
     with pytest.raises(ConfigError):
         GloveConfig().check()
+
+
+def test_recording_from_degrees_reads_back_as_the_same_degrees() -> None:
+    cfg = load_glove_config()
+    cal = GloveCalibration.from_config(cfg)
+    t = np.arange(50) / 100.0
+    lo = np.array([min(c.open_deg, c.closed_deg) for c in cfg.channels])
+    hi = np.array([max(c.open_deg, c.closed_deg) for c in cfg.channels])
+    deg = lo + (hi - lo) * (0.5 + 0.4 * np.sin(t[:, None] * 7 + np.arange(5)))
+    rec = recording_from_degrees(cal, t, deg)
+    assert rec.channel_names == DEFAULT_CONTROLS and rec.quat_xyzw is None
+    back = np.array([cal.calibrate(r) for r in rec.raw])
+    gains = np.abs([(c.closed_deg - c.open_deg) / (c.raw_closed - c.raw_open)
+                    for c in cfg.channels])
+    np.testing.assert_allclose(back, deg, atol=float(gains.max()) * 0.5 + 1e-9)
+    with pytest.raises(DataError, match="shape"):
+        recording_from_degrees(cal, t, deg[:, :3])

@@ -121,6 +121,10 @@ def test_bad_input_is_refused() -> None:
         GloveEmulator(rec, "opengloves")
     with pytest.raises(DataError, match="rate"):
         GloveEmulator(rec, "frames", rate_hz=0.1)
+    with pytest.raises(DataError, match="e-stop letter"):
+        GloveEmulator(sweep_recording(0.1, 100.0, 5), "opengloves", estop_letter="Z")
+    with pytest.raises(DataError, match="at most 16 channels"):
+        GloveEmulator(sweep_recording(0.1, 100.0, 17), "frames")
 
 
 def test_sim_glove_command_prints_the_port_first(tmp_path: Path) -> None:
