@@ -392,6 +392,7 @@ class SimBus:
                     if buf and now - last_rx > STALE_PARTIAL_S:
                         self.stats.noise_bytes += len(buf)
                         buf.clear()
+                        self._partial_since = None
                     continue
                 try:
                     chunk = os.read(fd, 65536)
