@@ -7,12 +7,13 @@ that path. Serves until SIGINT or SIGTERM, then prints a summary and exits 0.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
 import threading
 from types import FrameType
-from typing import Any
+from typing import Any, TextIO
 
 from handrig.errors import ConfigError, HandrigError
 from handrig.rigconfig import load_rig_config
@@ -109,18 +110,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"port: {bus.port_path}", flush=True)
         driven = set(puppet.driven_ids) if puppet is not None else set()
         models = sorted({s.info.name for s in bus.servos})
-        print(f"servos: {len(bus.servos)} ({', '.join(models)}), IDs "
-              f"{','.join(str(s.id) for s in bus.servos)}; puppet drives {len(driven)}; "
-              f"wire timing {'on' if args.wire_timing else 'off'}; "
-              f"faults {args.faults or 'none'}", flush=True)
+        _say(f"servos: {len(bus.servos)} ({', '.join(models)}), IDs "
+             f"{','.join(str(s.id) for s in bus.servos)}; puppet drives {len(driven)}; "
+             f"wire timing {'on' if args.wire_timing else 'off'}; "
+             f"faults {args.faults or 'none'}")
         viewer = _open_viewer(puppet) if args.viewer else None
         reported = 0
         while not stop.wait(1.0 / 30.0 if viewer is not None else 0.25):
             if bus.error is not None:
                 raise HandrigError(f"emulated bus stopped: {bus.error!r}")
             if len(behind) > reported:
-                print(f"sim-bus: physics fell behind wall time {len(behind)} times "
-                      f"({sum(behind) * 1000:.0f} ms skipped in all)", file=sys.stderr)
+                _say(f"sim-bus: physics fell behind wall time {len(behind)} times "
+                     f"({sum(behind) * 1000:.0f} ms skipped in all)", sys.stderr)
                 reported = len(behind)
             if viewer is not None and puppet is not None:
                 with puppet.physics_lock:
@@ -133,11 +134,17 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(s, h)
     st = bus.stats
     faults_seen = ", ".join(f"{k} {v}" for k, v in sorted(bus.fault_counts.items())) or "none"
-    print(f"sim-bus: {st.packets} packets, {st.replies} replies, {st.bad_crc} bad CRC; "
-          f"host overhead mean {st.overhead_mean_s * 1e6:.0f} us, max "
-          f"{st.overhead_max_s * 1e6:.0f} us; replies late by mean {st.late_mean_s * 1e6:.0f} us, "
-          f"max {st.late_max_s * 1e6:.0f} us; faults: {faults_seen}", flush=True)
+    _say(f"sim-bus: {st.packets} packets, {st.replies} replies, {st.bad_crc} bad CRC; "
+         f"host overhead mean {st.overhead_mean_s * 1e6:.0f} us, max "
+         f"{st.overhead_max_s * 1e6:.0f} us; replies late by mean {st.late_mean_s * 1e6:.0f} us, "
+         f"max {st.late_max_s * 1e6:.0f} us; faults: {faults_seen}")
     return 0
+
+
+def _say(text: str, stream: TextIO | None = None) -> None:
+    """Print and flush; a reader that stopped listening (closed pipe) is not an error."""
+    with contextlib.suppress(BrokenPipeError, ValueError):
+        print(text, file=stream or sys.stdout, flush=True)
 
 
 def _open_viewer(puppet: Any) -> Any:
