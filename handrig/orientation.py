@@ -100,23 +100,26 @@ class ForearmOrientation:
         self.last_error = ""
         self._last: tuple[float, float] | None = None
 
-    def _check(self, quat: ArrayLike) -> NDArray[np.float64] | None:
-        q = np.asarray(quat, dtype=np.float64)
-        if q.shape != (4,):
-            self.last_error = f"quaternion must have 4 components, got shape {q.shape}"
+    def _check(self, quat: ArrayLike) -> tuple[float, float, float, float] | None:
+        try:
+            a, b, c, d = (float(v) for v in quat)  # type: ignore[arg-type,union-attr]
+        except (TypeError, ValueError):
+            self.last_error = (f"quaternion must have 4 components, got shape"
+                               f" {np.shape(quat)}")
             return None
-        if not np.all(np.isfinite(q)):
-            self.last_error = f"quaternion {q.tolist()} has NaN or infinite components"
+        if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)
+                and math.isfinite(d)):
+            self.last_error = f"quaternion {[a, b, c, d]} has NaN or infinite components"
             return None
-        norm = float(np.sqrt(q @ q))
+        norm = math.sqrt(a * a + b * b + c * c + d * d)
         if not self.min_norm <= norm <= self.max_norm:
-            self.last_error = (f"quaternion {q.tolist()} has norm {norm:.3g}, outside"
+            self.last_error = (f"quaternion {[a, b, c, d]} has norm {norm:.3g}, outside"
                                f" {self.min_norm}..{self.max_norm} (zero or corrupted)")
             return None
         if abs(norm - 1.0) > 1e-6:
             self.repaired += 1
-            q = q / norm
-        return q
+            a, b, c, d = a / norm, b / norm, c / norm, d / norm
+        return a, b, c, d
 
     def angles(self, quat: ArrayLike) -> tuple[float, float]:
         """(inclination_deg, rotation_deg) for one IMU quaternion; a rejected quaternion
@@ -131,12 +134,12 @@ class ForearmOrientation:
                             f" order (scalar_first={self.scalar_first})")
         self.accepted += 1
         if self.scalar_first:
-            w, x, y, z = (float(v) for v in q)
+            w, x, y, z = q
         else:
-            x, y, z, w = (float(v) for v in q)
+            x, y, z, w = q
         # World up in the IMU frame = R_imu^T up_world: the world-z row of R_imu
         # (scipy's quaternion-to-matrix formula), negated for NED.
-        s = self._up[2]
+        s = float(self._up[2])
         u0 = s * 2.0 * (x * z - w * y)
         u1 = s * 2.0 * (y * z + w * x)
         u2 = s * (1.0 - 2.0 * (x * x + y * y))

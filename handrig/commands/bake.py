@@ -17,8 +17,9 @@ from typing import Any
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "bake", help="bake the passive-sag grid (23 DOFs over forearm inclination x rotation)")
-    p.add_argument("--step-deg", type=float, default=5.0,
-                   help="grid step in degrees, dividing 90 (default 5: 37 x 72 samples)")
+    p.add_argument("--step-deg", type=float, default=2.5,
+                   help="grid step in degrees, dividing 90 (default 2.5: 73 x 144 samples,"
+                        " the shipped grid; 5 gives 37 x 72)")
     p.add_argument("--out", default=None, help="output .npz (default config/sag_grid.npz)")
     p.add_argument("--config", default=None, help="passive-hand TOML (default config/)")
     p.add_argument("--dynamic", action="store_true",
