@@ -278,7 +278,7 @@ def test_overload_then_reboot_policy(sim: SimBus, bus: DynamixelBus) -> None:
         bus.write_goals_deg(np.zeros(6))
         servo = sim.servo(5)
         servo.inject_hardware_error(HardwareError.OVERLOAD)
-        servo.clear_injected_fault()  # the load is gone; the status stays until a reboot
+        # one-shot (the default): the status stays until a reboot clears it
         assert not servo.torque_enabled
         state = bus.read_state(bus.clock.now() + 0.5)
         assert state.hardware_errors[4] == 0x20
@@ -315,7 +315,7 @@ def test_overload_that_stays_stops_after_max_reboots(sim: SimBus) -> None:
     b.connect()
     try:
         with pytest.raises(ServoFault, match="still there after 2 reboots"), b.torque():
-            sim.servo(6).inject_hardware_error(HardwareError.OVERLOAD)  # cause stays
+            sim.servo(6).inject_hardware_error(HardwareError.OVERLOAD, persistent=True)
             for _ in range(10):
                 b.read_state(b.clock.now() + 0.5)
         assert b.stats.reboots[5] == 2
