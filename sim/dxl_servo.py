@@ -56,8 +56,11 @@ READABLE_BYTES = 662
 REBOOT_S = 0.1
 POSITION_MODES = (3, 4, 5)
 OPERATING_MODES = (0, 1, 3, 4, 5, 16)
-# Present Temperature / Input Voltage reported while nothing heats the servo.
+# Thermal model: winding resistance from the datasheet's stall current at nominal
+# voltage (R = V / I_stall); thermal resistance and time constant are assumptions.
 AMBIENT_TEMPERATURE_C = 30
+THERMAL_RESISTANCE_K_PER_W = 20.0
+THERMAL_TIME_CONSTANT_S = 300.0
 
 
 def _defaults(info: ModelInfo, servo_id: int, baud: int) -> dict[Reg, int]:
@@ -122,6 +125,7 @@ class EmulatedServo:
         self.silent_until = 0.0
         self.last_heard = 0.0
         self.tick_ms = 0.0
+        self.temperature_c = float(AMBIENT_TEMPERATURE_C)
         self.injected_hardware_error = 0
         self._baud = baud
         self._registered: tuple[int, bytes] | None = None
@@ -219,6 +223,22 @@ class EmulatedServo:
         self.mem[126:128] = current.to_bytes(2, "little", signed=True)
         self.mem[122] = 1 if abs(velocity) > self.get(Reg.MOVING_THRESHOLD) else 0
 
+    def heat(self, dt_s: float) -> None:
+        """Warm the motor by I^2 R at the present current and cool it toward ambient;
+        above the Temperature Limit the servo reports overheating (torque off)."""
+        if dt_s <= 0:
+            return
+        volts = self.mem[144] / 10.0
+        resistance = volts / self.info.stall_current_a if volts else 1.0
+        amps = self.motor_current_ma / 1000.0
+        rise = amps * amps * resistance * THERMAL_RESISTANCE_K_PER_W
+        target = AMBIENT_TEMPERATURE_C + rise
+        alpha = min(1.0, dt_s / THERMAL_TIME_CONSTANT_S)
+        self.temperature_c += (target - self.temperature_c) * alpha
+        self.mem[146] = max(0, min(255, round(self.temperature_c)))
+        if self.mem[146] > self.mem[31] and not self.mem[70] & HardwareError.OVERHEATING:
+            self.inject_hardware_error(HardwareError.OVERHEATING)
+
     def speed_limit_ticks_per_s(self) -> float:
         """Motor speed limit: Profile Velocity if set, else Velocity Limit."""
         profile = self.get(Reg.PROFILE_VELOCITY)
@@ -232,6 +252,7 @@ class EmulatedServo:
         self.mem[120:122] = int(self.tick_ms).to_bytes(2, "little")
         if dt_s <= 0:
             return
+        self.heat(dt_s)
         if not self.torque_enabled:
             if self.motor_velocity_rpm or self.motor_current_ma:
                 self.set_motion(self.motor_ticks, 0.0, 0.0)

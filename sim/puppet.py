@@ -214,6 +214,7 @@ class _HandSim:
             torque_horn = float(d.actuator_force[ch.actuator]) / c.gear_ratio
             current_ma = c.direction * torque_horn / ch.kt_nm_per_a * 1000.0
             s.set_motion(ticks, rpm, current_ma)
+            s.heat(dt_s)
             if overload_s is not None and ch.powered:
                 force = abs(float(d.actuator_force[ch.actuator]))
                 limit = float(m.actuator_forcerange[ch.actuator, 1])

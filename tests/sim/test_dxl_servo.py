@@ -145,3 +145,18 @@ def test_one_shot_overload_is_cleared_by_reboot() -> None:
     assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == ERROR_ALERT
     s.reboot(now=0.0)
     assert s.hardware_error == 0 and s.ping()[0] == 0
+
+
+def test_current_heats_the_motor_and_overheating_stops_it() -> None:
+    s = EmulatedServo(1)
+    assert s.get(Reg.PRESENT_TEMPERATURE) == 30
+    assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
+    s.set_motion(2048.0, 0.0, 1000.0)  # 1 A: 3.4 ohm x 1 A^2 x 20 K/W = 68 K above ambient
+    for _ in range(100):
+        s.heat(60.0)
+    assert s.hardware_error & HardwareError.OVERHEATING
+    assert not s.torque_enabled and s.get(Reg.PRESENT_TEMPERATURE) > 70
+    s.set_motion(2048.0, 0.0, 0.0)
+    for _ in range(100):
+        s.heat(60.0)
+    assert s.get(Reg.PRESENT_TEMPERATURE) == 30
