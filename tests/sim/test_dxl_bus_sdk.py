@@ -87,6 +87,10 @@ def test_sync_write_then_fast_sync_read_sync_read_bulk_read(bus: SimBus) -> None
         assert br.getData(1, 132, 4) == 2058
         assert br.getData(3, 0, 2) == 1200
         assert br.getData(5, 64, 1) == 1
+        assert br.fastBulkRead() == COMM_SUCCESS  # Fast Bulk Read: one combined reply
+        assert br.getData(1, 132, 4) == 2058
+        assert br.getData(3, 0, 2) == 1200
+        assert br.getData(5, 64, 1) == 1
     finally:
         port.closePort()
 
