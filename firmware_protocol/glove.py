@@ -237,8 +237,12 @@ class FrameDecoder:
         """Frames completed by ``chunk`` (possibly none)."""
         out: list[GloveFrame] = []
         data = bytes(chunk)
-        start = 0
         end = len(data)
+        if (not self._buf and not self._discarding and 1 < end <= MAX_ENCODED + 1
+                and data.find(b"\x00") == end - 1):
+            self._segment(data[:-1], out)  # the usual read: exactly one whole frame
+            return out
+        start = 0
         while start < end:
             z = data.find(b"\x00", start)
             if z < 0:
@@ -269,6 +273,9 @@ class FrameDecoder:
             return
         seg = bytes(self._buf)
         self._buf.clear()
+        self._segment(seg, out)
+
+    def _segment(self, seg: bytes, out: list[GloveFrame]) -> None:
         try:
             frame = decode_frame(seg)
         except FrameError as exc:
