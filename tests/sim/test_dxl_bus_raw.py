@@ -229,3 +229,20 @@ def test_check_baud_servo_hears_only_its_baud_rate() -> None:
         c.ser.baudrate = 57_600
         c.send(dx.BROADCAST_ID, INST.PING)
         assert [s.id for s in c.statuses(c.collect(28, 0.1))] == [2]
+
+
+def test_bus_watchdog_trips_when_the_host_goes_quiet(raw: tuple[SimBus, RawClient]) -> None:
+    bus, c = raw
+    c.send(1, INST.WRITE, dx.write_params(98, b"\x02"))  # 40 ms
+    c.collect(11)
+    c.send(1, INST.WRITE, dx.write_params(64, b"\x01"))
+    c.collect(11)
+    c.send(1, INST.WRITE, dx.write_params(116, (3000).to_bytes(4, "little")))
+    assert c.statuses(c.collect(11))[0].error == 0
+    end = time.monotonic() + 2.0
+    while bus.servo(1).get(dx.Reg.BUS_WATCHDOG) != -1 and time.monotonic() < end:
+        time.sleep(0.01)
+    assert bus.servo(1).get(dx.Reg.BUS_WATCHDOG) == -1
+    assert bus.servo(1).goal == bus.servo(1).present  # stopped where it was
+    c.send(1, INST.WRITE, dx.write_params(116, (3000).to_bytes(4, "little")))
+    assert c.statuses(c.collect(11))[0].error_code == dx.ErrorCode.DATA_RANGE
