@@ -409,3 +409,52 @@ def test_torque_off_after_signal_to_a_driver_process(sim: SimBus, sig: int) -> N
     assert ("SafetyStop" if sig == signal.SIGTERM else "KeyboardInterrupt") in err
     assert not any(sim.servo(s.id).torque_enabled for s in small_rig().servos)
     assert all(sim.servo(s.id).get(SimReg.BUS_WATCHDOG) == 0 for s in small_rig().servos)
+
+
+def test_signs_direction_gear_and_zero_read_back() -> None:
+    base = small_rig(3).servos
+    servos = (
+        dataclasses.replace(base[0], direction=-1, gear_ratio=1.5, zero_ticks=2500),
+        dataclasses.replace(base[1], direction=1, gear_ratio=2.0, zero_ticks=1500),
+        dataclasses.replace(base[2], direction=-1, gear_ratio=1.0, zero_ticks=2048),
+    )
+    rig = dataclasses.replace(RIG, servos=servos)
+    goals = np.array([30.0, -20.0, 25.0])
+    with SimBus.from_rig(rig) as sim:
+        b = DynamixelBus(sim.port_path, rig, baud=1_000_000)
+        b.connect()
+        try:
+            with b.torque():
+                b.write_goals_deg(goals)
+                b.read_state()
+                want = [2500 - round(30 * 1.5 * 4096 / 360), 1500 - round(20 * 2 * 4096 / 360),
+                        2048 - round(25 * 4096 / 360)]
+                assert goals_received(sim, rig).tolist() == want
+                for _ in range(100):
+                    time.sleep(0.002)
+                    moving = b.read_state()
+                    if np.all(moving.velocities_dps != 0):
+                        break
+                # on the way, each joint moves toward its goal whatever the servo's direction
+                assert np.all(np.sign(moving.velocities_dps) == np.sign(goals))
+                for _ in range(300):
+                    b.write_goals_deg(goals)
+                    state = b.read_state()
+                    if np.allclose(state.positions_deg, goals, atol=0.1):
+                        break
+                    time.sleep(0.005)
+                np.testing.assert_allclose(state.positions_deg, goals, atol=0.1)
+        finally:
+            b.close()
+
+
+def test_temperatures_read_when_asked(sim: SimBus) -> None:
+    b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, temperature_every=2)
+    b.connect()
+    try:
+        state = b.read_state()
+        state = b.read_state()
+        assert np.all(np.isfinite(state.temperatures_c))
+        assert np.all((state.temperatures_c > 0) & (state.temperatures_c < 100))
+    finally:
+        b.close()
