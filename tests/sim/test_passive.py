@@ -111,3 +111,30 @@ def test_release_moves_the_way_table1_describes(hand: PassiveHand) -> None:
 def test_orientations_are_the_papers() -> None:
     assert ORIENTATIONS == {"hang": (-90.0, 0.0), "palm_down": (0.0, 0.0),
                             "thumb_up": (0.0, 90.0)}
+
+
+def test_left_hand_sags_like_the_right_at_the_same_anatomical_orientation(
+    cfg: passive.PassiveHandConfig, hand: PassiveHand,
+) -> None:
+    left = PassiveHand(cfg, hand="le")
+    for inc, rot in ((0.0, 90.0), (20.0, -60.0), (-50.0, 150.0)):
+        np.testing.assert_allclose(left.solve_static(inc, rot).q_deg,
+                                   hand.solve_static(inc, rot).q_deg, atol=1e-6)
+
+
+def test_energy_gradient_is_the_residual(hand: PassiveHand) -> None:
+    hand.set_orientation(25.0, -140.0)
+    rng = np.random.default_rng(3)
+    q = np.zeros(23)
+    q[hand.idx] = np.radians(hand.rest_deg + rng.uniform(-30, 30, 23))
+    r = hand._residual_qpos(q, jac=False)
+    grad = np.empty(23)
+    for k in range(23):
+        dq = np.zeros(23)
+        dq[k] = 1e-6
+        hand._residual_qpos(q + dq, jac=False)
+        e1 = hand._energy_qpos(q + dq)
+        hand._residual_qpos(q - dq, jac=False)
+        e0 = hand._energy_qpos(q - dq)
+        grad[k] = (e1 - e0) / 2e-6
+    np.testing.assert_allclose(-grad, r, atol=1e-8)
