@@ -53,6 +53,7 @@ class BusStats:
     timeouts: int = 0  # replies (or parts of replies) missing at the deadline
     crc_errors: int = 0  # replies or per-servo blocks failing their CRC
     malformed: int = 0  # replies with a wrong id, length or header
+    status_errors: int = 0  # readings refused with an error number (range, access, ...)
     clamps: int = 0  # goal values clamped into a servo's limits (incl. NaN replaced)
     fallbacks: int = 0  # switches from Fast Sync Read to plain Sync Read
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -67,7 +68,7 @@ class BusStats:
     def copy(self) -> BusStats:
         return BusStats(
             self.n_servos, self.writes, self.reads, self.retries, self.timeouts,
-            self.crc_errors, self.malformed, self.clamps, self.fallbacks,
+            self.crc_errors, self.malformed, self.status_errors, self.clamps, self.fallbacks,
             self.stale_readings.copy(), self.hardware_errors.copy(), self.reboots.copy(),
         )
 
@@ -76,7 +77,8 @@ class BusStats:
         return (
             f"writes {self.writes}, reads {self.reads}, retries {self.retries}, "
             f"timeouts {self.timeouts}, crc errors {self.crc_errors}, malformed "
-            f"{self.malformed}, clamps {self.clamps}, stale readings "
+            f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
+            f"fallbacks {self.fallbacks}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )

@@ -182,6 +182,10 @@ class DynamixelBus(ServoBus):
             wire = wire_time_s(len(self._fsr_full) + self._reply_len_full, self.baud)
             reply_timeout_s = 2.0 * wire + 0.002
         self.reply_timeout_s = float(reply_timeout_s)
+        # a read's default budget is never shorter than one reply on the wire plus slack
+        self._min_read_budget_s = 1.5 * wire_time_s(
+            len(self._fsr_full) + self._reply_len_full, self.baud
+        ) + 0.001
         # a reply that stops flowing this long is cut short (USB adapters deliver in
         # chunks at most a latency-timer period apart: 1 ms when set as commissioning asks)
         self.reply_gap_s = (
@@ -394,10 +398,13 @@ class DynamixelBus(ServoBus):
                 self._on_hardware_error(i, hw)
         notes.append("return delay 0, position mode, status level 2, watchdog cleared: done")
 
-        state = self._read_attempt(self._all_indices, self.clock.now() + COMMAND_TIMEOUT_S)
-        if not state:
-            self._fast_fail_run = 0
-            self._switch_to_sync_read("no valid Fast Sync Read reply at connect")
+        if not any(
+            self._fast_sync_read(self._all_indices, self.clock.now() + COMMAND_TIMEOUT_S)
+            for _ in range(COMMAND_ATTEMPTS)
+        ):
+            self._switch_to_sync_read(
+                f"no valid Fast Sync Read reply in {COMMAND_ATTEMPTS} attempts at connect"
+            )
         notes.append(
             "present state by " + ("Fast Sync Read" if self.use_fast_sync_read else "Sync Read")
         )
@@ -443,15 +450,18 @@ class DynamixelBus(ServoBus):
         g = np.asarray(goals_deg, dtype=np.float64)
         if g.shape != (self._n,):
             raise ValueError(f"goals_deg must have shape ({self._n},), got {g.shape}")
-        goal = self._goal_deg
-        np.clip(g, self._min_deg, self._max_deg, out=goal)
-        np.isfinite(g, out=self._finite)
-        if not self._finite.all():
-            fallback = np.where(np.isnan(self._last_goal_deg), self._hold_deg, self._last_goal_deg)
-            np.copyto(goal, fallback, where=~self._finite)
-        clamped = int(np.count_nonzero(goal != g))
-        self._send_goals(goal)
-        self._stats.clamps += clamped
+        with self._lock:
+            goal = self._goal_deg
+            np.clip(g, self._min_deg, self._max_deg, out=goal)
+            np.isfinite(g, out=self._finite)
+            if not self._finite.all():
+                fallback = np.where(
+                    np.isnan(self._last_goal_deg), self._hold_deg, self._last_goal_deg
+                )
+                np.copyto(goal, fallback, where=~self._finite)
+            clamped = int(np.count_nonzero(goal != g))
+            self._send_goals(goal)
+            self._stats.clamps += clamped
         return clamped
 
     def _send_goals(self, goal_deg: np.ndarray) -> None:
@@ -479,7 +489,8 @@ class DynamixelBus(ServoBus):
         """Read present state (Fast Sync Read, or Sync Read after a fallback).
 
         ``deadline_s`` is a time on the bus clock by which the read must end
-        (default: ``fault_policy.read_budget_s`` from now); failed servos are
+        (default: ``fault_policy.read_budget_s`` from now, at least 1.5 times the
+        reply's wire time plus 1 ms); failed servos are
         retried up to ``fault_policy.read_retries`` times while time remains.
         Servos without a valid reply are marked stale, never passed off as fresh.
         A servo raising its Alert bit is handled per policy (reboot or
@@ -489,7 +500,7 @@ class DynamixelBus(ServoBus):
         with self._lock:
             now = self.clock.now()
             if deadline_s is None:
-                deadline_s = now + self.policy.read_budget_s
+                deadline_s = now + max(self.policy.read_budget_s, self._min_read_budget_s)
             self._stats.reads += 1
             fresh = self._fresh
             fresh[:] = False
@@ -615,10 +626,12 @@ class DynamixelBus(ServoBus):
             min(total, expected) - 7, deadline, spin_from, self.reply_gap_s, spin_until
         )
         if n_req == self._n and fast_sync_intact(raw, self._ids_bytes, self._read_len):
-            self._status_err[:] = np.frombuffer(raw[8:expected:block], np.uint8)
-            self._decode_whole(raw)
-            self._fresh[:] = True
-            return True
+            errs = np.frombuffer(raw[8:expected:block], np.uint8)
+            if not (errs & 0x7F).any():
+                self._status_err[:] = errs
+                self._decode_whole(raw)
+                self._fresh[:] = True
+                return True
         if len(raw) < expected:
             self._stats.timeouts += 1
         valid = self._valid
@@ -627,11 +640,18 @@ class DynamixelBus(ServoBus):
         ok = np.array(valid[:m], dtype=bool)
         n_ok = int(ok.sum())
         if n_ok < m:
-            self._stats.crc_errors += m - n_ok
+            self._stats.crc_errors += m - n_ok  # a bad CRC or a block naming the wrong servo
+        blocks = np.frombuffer(raw, np.uint8, count=m * block, offset=8).reshape(m, block)
+        refused = ok & (blocks[:, 0] & 0x7F != 0)
+        if refused.any():
+            # an error number (range, access, ...): its data bytes are filler, not a reading
+            self._stats.status_errors += int(refused.sum())
+            self._status_err[indices[:m][refused]] = blocks[refused, 0]
+            ok &= ~refused
+            n_ok = int(ok.sum())
         if n_ok == 0:
             return False
         target = indices[:m][ok]
-        blocks = np.frombuffer(raw, np.uint8, count=m * block, offset=8).reshape(m, block)
         self._status_err[target] = blocks[ok, 0]
         self._decode(blocks[ok, 2 : 2 + self._read_len], target)
         self._fresh[target] = True
@@ -659,6 +679,10 @@ class DynamixelBus(ServoBus):
                 self._stats.crc_errors += 1
                 continue
             index = want.pop(status.servo_id, None)
+            if index is not None and status.error & 0x7F:
+                self._stats.status_errors += 1
+                self._status_err[index] = status.error
+                continue
             if index is None or len(status.params) < self._read_len:
                 self._stats.malformed += 1
                 continue
@@ -848,8 +872,8 @@ class DynamixelBus(ServoBus):
         failed: list[str] = []
         with self._lock:
             if not self._transport.is_open:
-                self._torque_on = False
-                return [f"all servos: port {self.port} is closed"]
+                was_on, self._torque_on = self._torque_on, False
+                return [f"all servos: port {self.port} is closed"] if was_on else []
             try:
                 self._sync_write(Reg.TORQUE_ENABLE, [0] * self._n)
             except DeviceError as exc:

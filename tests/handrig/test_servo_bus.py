@@ -458,3 +458,29 @@ def test_temperatures_read_when_asked(sim: SimBus) -> None:
         assert np.all((state.temperatures_c > 0) & (state.temperatures_c < 100))
     finally:
         b.close()
+
+
+def test_falls_back_to_sync_read_without_fast_sync_read() -> None:
+    rig = small_rig()
+    with SimBus.from_rig(rig) as sim:
+        # servos whose firmware ignores Fast Sync Read (a broadcast gets no error status);
+        # the emulator has no switch for it, so its fast-read handler is replaced
+        sim._fast_read = lambda requests, now: []  # type: ignore[method-assign]
+        b = DynamixelBus(sim.port_path, rig, baud=1_000_000)
+        b.connect()
+        try:
+            assert not b.use_fast_sync_read
+            assert b.stats.fallbacks == 1
+            assert any("falling back from Fast Sync Read to Sync Read" in line
+                       for line in b.commissioning)
+            assert b.read_state().all_fresh
+        finally:
+            b.close()
+
+
+def test_falls_back_at_runtime_after_failed_fast_reads(sim: SimBus, bus: DynamixelBus) -> None:
+    assert bus.use_fast_sync_read
+    sim._fast_read = lambda requests, now: []  # type: ignore[method-assign]
+    states = [bus.read_state(bus.clock.now() + 0.02) for _ in range(12)]
+    assert not bus.use_fast_sync_read and bus.stats.fallbacks == 1
+    assert states[-1].all_fresh
