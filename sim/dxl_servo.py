@@ -28,6 +28,7 @@ servo still moves.
 from __future__ import annotations
 
 import math
+import struct
 
 from firmware_protocol.dynamixel import (
     BUS_WATCHDOG_UNIT_S,
@@ -56,6 +57,8 @@ READABLE_BYTES = 662
 REBOOT_S = 0.1
 POSITION_MODES = (3, 4, 5)
 OPERATING_MODES = (0, 1, 3, 4, 5, 16)
+# Present Current (126, int16), Present Velocity (128, int32), Present Position (132, int32).
+_PRESENT = struct.Struct("<hii")
 # Thermal model: winding resistance from the datasheet's stall current at nominal
 # voltage (R = V / I_stall); thermal resistance and time constant are assumptions.
 AMBIENT_TEMPERATURE_C = 30
@@ -203,7 +206,10 @@ class EmulatedServo:
 
     def goal_motor_ticks(self) -> float:
         """The goal as a motor position (undoing Homing Offset and Drive Mode)."""
-        return self.direction * (self.goal - self.get(Reg.HOMING_OFFSET))
+        mem = self.mem
+        goal = int.from_bytes(mem[116:120], "little", signed=True)
+        homing = int.from_bytes(mem[20:24], "little", signed=True)
+        return (homing - goal) if mem[10] & 1 else (goal - homing)
 
     def set_motion(self, motor_ticks: float, velocity_rpm: float, current_ma: float) -> None:
         """Physics writes the motor's state; Present Position/Velocity/Current follow."""
@@ -213,15 +219,14 @@ class EmulatedServo:
         self._publish_present()
 
     def _publish_present(self) -> None:
-        d = self.direction
-        position = round(d * self.motor_ticks) + self.get(Reg.HOMING_OFFSET)
-        self.mem[132:136] = position.to_bytes(4, "little", signed=True)
+        mem = self.mem
+        d = -1 if mem[10] & 1 else 1
+        position = round(d * self.motor_ticks) + int.from_bytes(mem[20:24], "little", signed=True)
         velocity = round(d * self.motor_velocity_rpm / VELOCITY_UNIT_RPM)
-        self.mem[128:132] = velocity.to_bytes(4, "little", signed=True)
         current = round(d * self.motor_current_ma / self.info.current_unit_ma)
         current = max(-32768, min(32767, current))
-        self.mem[126:128] = current.to_bytes(2, "little", signed=True)
-        self.mem[122] = 1 if abs(velocity) > self.get(Reg.MOVING_THRESHOLD) else 0
+        _PRESENT.pack_into(mem, 126, current, velocity, position)
+        mem[122] = 1 if abs(velocity) > int.from_bytes(mem[24:28], "little") else 0
 
     def heat(self, dt_s: float) -> None:
         """Warm the motor by I^2 R at the present current and cool it toward ambient;
@@ -241,8 +246,8 @@ class EmulatedServo:
 
     def speed_limit_ticks_per_s(self) -> float:
         """Motor speed limit: Profile Velocity if set, else Velocity Limit."""
-        profile = self.get(Reg.PROFILE_VELOCITY)
-        limit = self.get(Reg.VELOCITY_LIMIT)
+        profile = int.from_bytes(self.mem[112:116], "little")
+        limit = int.from_bytes(self.mem[44:48], "little")
         units = min(profile, limit) if profile else limit
         return units * VELOCITY_UNIT_RPM * TICKS_PER_TURN / 60.0
 

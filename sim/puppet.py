@@ -56,6 +56,7 @@ ARMATURE_KGM2 = 1e-4
 # Back-drive damping of an unpowered servo at the horn, N m s/rad (assumed).
 BACKDRIVE_DAMPING_NMS = 0.01
 TICKS_PER_RAD = TICKS_PER_TURN / (2.0 * math.pi)
+HEAT_EVERY_S = 0.05
 
 
 def kp_from_p_gain(p_gain: int, stall_torque_nm: float) -> float:
@@ -83,6 +84,8 @@ class _Channel:
     servo: EmulatedServo | None = None
     p_gain: int = -1
     saturated_s: float = 0.0
+    limits_key: tuple[bytes, bytes, bytes, int] | None = None
+    force_limit_nm: float = 0.0
 
 
 class _HandSim:
@@ -129,6 +132,17 @@ class _HandSim:
         self.q_idx = np.array([ch.qpos for ch in self.channels], dtype=np.intp)
         self.goal_rad = np.zeros(n)
         self.speed_rad_s = np.zeros(n)
+        self.heat_pending_s = 0.0
+        # calibration as arrays: ticks = zero + direction * gear * deg * ticks/deg
+        cal_list = [ch.cal for ch in self.channels]
+        self.zero_ticks = np.array([c.zero_ticks for c in cal_list], dtype=float)
+        self.ticks_per_deg = np.array(
+            [c.direction * c.gear_ratio * TICKS_PER_TURN / 360.0 for c in cal_list])
+        self.rpm_per_rad_s = np.array(
+            [c.direction * c.gear_ratio * 60.0 / (2.0 * math.pi) for c in cal_list])
+        self.ma_per_nm = np.array(
+            [c.direction * 1000.0 / (c.gear_ratio * ch.kt_nm_per_a)
+             for c, ch in zip(cal_list, self.channels, strict=True)])
         for ch in self.channels:
             self._set_power(ch, False)
         self.mujoco.mj_forward(self.model, self.data)
@@ -145,6 +159,7 @@ class _HandSim:
             m.actuator_biasprm[a, 1] = 0.0
             m.actuator_biasprm[a, 2] = -BACKDRIVE_DAMPING_NMS * g * g
             ch.p_gain = -1
+            ch.limits_key = None
         ch.powered = on
         ch.saturated_s = 0.0
 
@@ -160,28 +175,37 @@ class _HandSim:
 
     def pull(self) -> None:
         """Read goals, torque and limits from the servos (bus lock held)."""
-        m = self.model
         for k, ch in enumerate(self.channels):
             s = ch.servo
             if s is None:
                 continue
-            on = s.torque_enabled
+            mem = s.mem
+            on = mem[64] == 1
             if on != ch.powered:
                 self._set_power(ch, on)
             if not on:
                 continue
-            p_gain = s.get(Reg.POSITION_P_GAIN)
-            if p_gain != ch.p_gain:
-                self._set_gain(ch, p_gain)
             g = ch.cal.gear_ratio
             self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
             self.speed_rad_s[k] = s.speed_limit_ticks_per_s() / TICKS_PER_RAD / g
-            limit = ch.stall_nm
-            if s.mem[11] == 5:  # current-based position: Goal Current bounds torque
-                amps = abs(s.get(Reg.GOAL_CURRENT)) * s.info.current_unit_ma / 1000.0
-                limit = min(limit, amps * ch.kt_nm_per_a)
-            limit *= g * min(1.0, s.get(Reg.PWM_LIMIT) / PWM_LIMIT)
-            m.actuator_forcerange[ch.actuator] = (-limit, limit)
+            # P gain, Goal Current, PWM Limit, Operating Mode: act only on a change
+            key = (bytes(mem[84:86]), bytes(mem[102:104]), bytes(mem[36:38]), mem[11])
+            if key != ch.limits_key:
+                self._apply_limits(ch, s)
+                ch.limits_key = key
+
+    def _apply_limits(self, ch: _Channel, s: EmulatedServo) -> None:
+        p_gain = s.get(Reg.POSITION_P_GAIN)
+        if p_gain != ch.p_gain:
+            self._set_gain(ch, p_gain)
+        g = ch.cal.gear_ratio
+        limit = ch.stall_nm
+        if s.mem[11] == 5:  # current-based position: Goal Current bounds torque
+            amps = abs(s.get(Reg.GOAL_CURRENT)) * s.info.current_unit_ma / 1000.0
+            limit = min(limit, amps * ch.kt_nm_per_a)
+        limit *= g * min(1.0, s.get(Reg.PWM_LIMIT) / PWM_LIMIT)
+        self.model.actuator_forcerange[ch.actuator] = (-limit, limit)
+        ch.force_limit_nm = limit
 
     def step(self, n: int) -> None:
         """``n`` physics steps with the target ramped at the speed limit."""
@@ -201,24 +225,26 @@ class _HandSim:
         """Write present state to the servos (bus lock held). With ``overload_s``, a
         servo held at its torque limit that long reports an overload error."""
         d = self.data
-        m = self.model
-        for ch in self.channels:
+        # temperature changes over minutes: update it every HEAT_EVERY_S
+        self.heat_pending_s += dt_s
+        heat_dt_s = 0.0
+        if self.heat_pending_s >= HEAT_EVERY_S:
+            heat_dt_s, self.heat_pending_s = self.heat_pending_s, 0.0
+        q_deg = np.degrees(d.qpos[self.q_idx])
+        ticks = self.zero_ticks + self.ticks_per_deg * q_deg
+        rpm = self.rpm_per_rad_s * d.qvel[self.q_idx]
+        force = d.actuator_force[self.act_idx]
+        current_ma = self.ma_per_nm * force
+        for k, ch in enumerate(self.channels):
             s = ch.servo
             if s is None:
                 continue
-            c = ch.cal
-            q_deg = math.degrees(float(d.qpos[ch.qpos]))
-            ticks = c.deg_to_ticks_exact(q_deg)
-            qdot = float(d.qvel[ch.qpos])
-            rpm = c.direction * c.gear_ratio * qdot * 60.0 / (2.0 * math.pi)
-            torque_horn = float(d.actuator_force[ch.actuator]) / c.gear_ratio
-            current_ma = c.direction * torque_horn / ch.kt_nm_per_a * 1000.0
-            s.set_motion(ticks, rpm, current_ma)
-            s.heat(dt_s)
+            s.set_motion(float(ticks[k]), float(rpm[k]), float(current_ma[k]))
+            if heat_dt_s:
+                s.heat(heat_dt_s)
             if overload_s is not None and ch.powered:
-                force = abs(float(d.actuator_force[ch.actuator]))
-                limit = float(m.actuator_forcerange[ch.actuator, 1])
-                ch.saturated_s = ch.saturated_s + dt_s if force >= 0.98 * limit else 0.0
+                saturated = abs(float(force[k])) >= 0.98 * ch.force_limit_nm
+                ch.saturated_s = ch.saturated_s + dt_s if saturated else 0.0
                 if ch.saturated_s > overload_s:
                     s.inject_hardware_error(HardwareError.OVERLOAD)
                     ch.saturated_s = 0.0
