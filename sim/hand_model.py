@@ -52,8 +52,9 @@ Springs and actuators
 ``passive`` gives each joint a spring ``stiffness=ks springref=rest damping=kd``,
 which MuJoCo applies as exactly tau = ks (rest - q) - kd qdot (equation 1 of the
 paper). ``actuated`` adds a MuJoCo ``position`` actuator on each named joint
-(``kp``, ``kv``, ``forcerange``); such a joint loses its spring (a servo holds
-it) but keeps ``passive`` damping = 0 and gets the actuator's ``armature``.
+(``kp``, ``kv``, ``forcerange``); such a joint has no spring and no joint damping
+(the servo holds it; its damping is the actuator's ``kv``) and gets the actuator's
+``armature``.
 MuJoCo has no speed limit for position actuators: the caller limits speed by
 moving ``data.ctrl`` toward the goal at most ``max_speed_rad_s`` x dt per step,
 like a servo's profile velocity (:func:`ramp_ctrl`). Stability: keep

@@ -41,6 +41,9 @@ Damping (Table 1) and "time to relaxed pose"
 ``kd = factor x ks`` with one factor (in seconds) per group: wrist flexion,
 wrist deviation, digits (fingers and thumb), as the paper does. The factors are
 found by bisection so that the simulated release tests take Table 1's mean time.
+The paper's "kd about 5-7 ks" does not carry over (SI units, radians): the tuned
+factors are about 0.21-0.28 s; below about 0.1 s the joints oscillate and the
+time to relaxed pose rises again, so the search stays on the overdamped side.
 **Time to relaxed pose** = the first time after which the DOF (for the fingers,
 the sum of the 12 finger flexion DOFs) stays within 10 % of the total change of
 its start-to-equilibrium distance (i.e. 90 % of the change is done and stays so).
