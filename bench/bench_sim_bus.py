@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable
 
 import numpy as np
@@ -107,11 +108,14 @@ def wire_timed_cycles(seconds: float = 1.5) -> None:
                 fsr.addParam(s.id)
             bus.stats.late_total_s = bus.stats.late_max_s = 0.0
             bus.stats.replies = 0
-            cycles = failed = 0
+            cycles = 0
+            failed: Counter[str] = Counter()
             t0 = time.perf_counter()
             while time.perf_counter() - t0 < seconds:
                 sw.txPacket()
-                failed += fsr.fastSyncRead() != 0
+                result = fsr.fastSyncRead()
+                if result != 0:
+                    failed[ph.getTxRxResult(result)] += 1
                 cycles += 1
             hz = cycles / (time.perf_counter() - t0)
             port.closePort()
@@ -119,7 +123,9 @@ def wire_timed_cycles(seconds: float = 1.5) -> None:
             limit_hz = baud / (10 * wire_bytes)
             st = bus.stats
             print(f"  {baud / 1e6:.0f} Mbps: {hz:6.0f} cycles/s, wire limit {limit_hz:6.0f} "
-                  f"({hz / limit_hz:4.2f}), failed {failed}; replies late by mean "
+                  f"({hz / limit_hz:4.2f}), failed {sum(failed.values())}"
+                  f"{' ' + str(dict(failed)) if failed else ''}; "
+                  f"replies late by mean "
                   f"{st.late_mean_s * 1e6:.0f} us, max {st.late_max_s * 1e6:.0f} us")
 
 
