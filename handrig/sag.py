@@ -31,6 +31,7 @@ from __future__ import annotations
 import bisect
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -100,7 +101,7 @@ class SagGrid:
         if rest.shape != (23,):
             raise DataError(f"{where}: rest_deg must have 23 values, got {rest.shape}")
         self.hand: Hand = hand
-        self.dof_names: tuple[str, ...] = DOF_NAMES[hand]
+        self.dof_names: Sequence[str] = DOF_NAMES[hand]  # a tuple
         self.rest_deg = rest
         self.limits_deg = (np.asarray(limits_deg, dtype=np.float64) if limits_deg is not None
                            else dof_limits_deg(hand))
