@@ -146,3 +146,14 @@ def test_shipped_grid_stays_inside_the_joint_ranges(shipped: SagGrid) -> None:
         assert key in meta
     np.testing.assert_array_equal(shipped.rest_deg,
                                   [meta["rest_deg"][n] for n in DOF_NAMES["ri"]])
+
+
+def test_runtime_modules_do_not_import_mujoco() -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys, handrig.sag, handrig.orientation;"
+            " print(sorted(m for m in ('mujoco', 'sim') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"
