@@ -270,6 +270,7 @@ class SimBus:
         self._last_advance = 0.0
         self._kinematic: list[EmulatedServo] = []
         self._partial_since: float | None = None
+        self._feed_buf = bytearray()
         self.error: BaseException | None = None
 
     # --------------------------------------------------------------- building
@@ -489,7 +490,7 @@ class SimBus:
                 if r.fault_delay_s:
                     self.clock.sleep(r.fault_delay_s)
                 if r.data:
-                    os.write(self._master, r.data)
+                    self._emit(r.data)
                     self.stats.replies += 1
             return
         byte_s = BITS_PER_BYTE / self.baud()
@@ -498,12 +499,22 @@ class SimBus:
             t += r.return_delay_s + r.fault_delay_s + len(r.data) * byte_s
             if r.data:
                 self.clock.sleep_until(t)
-                os.write(self._master, r.data)
+                self._emit(r.data)
                 late = self.clock.now() - t
                 self.stats.replies += 1
                 self.stats.late_total_s += late
                 self.stats.late_max_s = max(self.stats.late_max_s, late)
         self._bus_free_at = t
+
+    def _emit(self, data: bytes) -> None:
+        """Put bytes on the line (the pty master)."""
+        os.write(self._master, data)
+
+    def feed(self, data: bytes, now: float | None = None) -> None:
+        """Handle bytes as if they had arrived on the line (no pty, no thread needed);
+        replies go through :meth:`_emit`."""
+        self._feed_buf += data
+        self._drain(self._feed_buf, self.clock.now() if now is None else now)
 
     # ------------------------------------------------------------ dispatch
 
