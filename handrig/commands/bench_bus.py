@@ -112,7 +112,10 @@ def _goals(rig: RigConfig, k: int) -> np.ndarray:
     return lo + (hi - lo) * (0.5 + 0.4 * np.sin(0.01 * k))
 
 
-def run_ours(port: str, rig: RigConfig, baud: int, seconds: float) -> Result:
+def run_ours(
+    port: str, rig: RigConfig, baud: int, seconds: float, combined: bool = False
+) -> Result:
+    """``write_goals_deg`` + ``read_state`` per cycle (``combined``: ``write_and_read``)."""
     from handrig.servo import DynamixelBus
 
     bus = DynamixelBus(port, rig, baud=baud, read_fields="position")
@@ -126,8 +129,11 @@ def run_ours(port: str, rig: RigConfig, baud: int, seconds: float) -> Result:
         c0 = time.process_time()
         t0 = time.perf_counter()
         while True:
-            bus.write_goals_deg(goals[cycles & 63])
-            state = bus.read_state()
+            if combined:
+                _, state = bus.write_and_read(goals[cycles & 63])
+            else:
+                bus.write_goals_deg(goals[cycles & 63])
+                state = bus.read_state()
             failed += bool(state.stale.any())
             stamps[cycles] = time.perf_counter()
             cycles += 1
@@ -137,7 +143,9 @@ def run_ours(port: str, rig: RigConfig, baud: int, seconds: float) -> Result:
         cpu = time.process_time() - c0
     finally:
         bus.close()
-    return Result("handrig DynamixelBus (Fast Sync Read)", cycles, wall, cpu, failed,
+    name = "handrig write_and_read (one port write)" if combined else (
+        "handrig write_goals_deg + read_state (FSR)")
+    return Result(name, cycles, wall, cpu, failed,
                   float(np.median(np.diff(stamps[:cycles]))))
 
 
@@ -214,6 +222,7 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
     results: list[Result] = []
     try:
         results.append(run_ours(emu.port, rig, baud, seconds))
+        results.append(run_ours(emu.port, rig, baud, seconds, combined=True))
         if plain:
             results.append(run_sdk(emu.port, rig, baud, seconds, fast=False))
             results.append(run_sdk(emu.port, rig, baud, seconds, fast=True))

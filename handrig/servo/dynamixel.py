@@ -195,6 +195,7 @@ class DynamixelBus(ServoBus):
         self.spin_s = float(spin_s)
         self._byte_s = BITS_PER_BYTE / self.baud
         self._bus_free_at = -np.inf  # when the wire is expected to be quiet again
+        self._pending_tx = b""  # a goal Sync Write to send with the next request
         self.use_fast_sync_read = True
         self._fast_fail_run = 0
         self._all_indices = np.arange(n)
@@ -447,24 +448,55 @@ class DynamixelBus(ServoBus):
         limits). Returns how many goals were changed that way (also counted in
         ``stats.clamps``). No reply is expected.
         """
+        with self._lock:
+            clamped = self._clamp_goals(goals_deg)
+            self._send_goals(self._goal_deg)
+        return clamped
+
+    def write_and_read(
+        self, goals_deg: np.ndarray, deadline_s: float | None = None
+    ) -> tuple[int, ServoState]:
+        """``write_goals_deg`` then ``read_state``, both requests in one write to the port.
+
+        The same bytes go on the wire in the same order; the host saves a system
+        call and the adapter (or emulator) one wake-up. Returns (clamped, state).
+        """
+        with self._lock:
+            clamped = self._clamp_goals(goals_deg)
+            self._pending_tx = self._goal_packet(self._goal_deg)
+            self._last_goal_deg[:] = self._goal_deg
+            self._stats.writes += 1
+            try:
+                state = self.read_state(deadline_s)
+            finally:
+                if self._pending_tx:  # not sent by the read: send it on its own
+                    self._send_request(b"")
+        return clamped, state
+
+    def _clamp_goals(self, goals_deg: np.ndarray) -> int:
+        """Goals clamped into ``self._goal_deg``; returns (and counts) how many changed."""
         g = np.asarray(goals_deg, dtype=np.float64)
         if g.shape != (self._n,):
             raise ValueError(f"goals_deg must have shape ({self._n},), got {g.shape}")
-        with self._lock:
-            goal = self._goal_deg
-            np.clip(g, self._min_deg, self._max_deg, out=goal)
-            np.isfinite(g, out=self._finite)
-            if not self._finite.all():
-                fallback = np.where(
-                    np.isnan(self._last_goal_deg), self._hold_deg, self._last_goal_deg
-                )
-                np.copyto(goal, fallback, where=~self._finite)
-            clamped = int(np.count_nonzero(goal != g))
-            self._send_goals(goal)
-            self._stats.clamps += clamped
+        goal = self._goal_deg
+        np.clip(g, self._min_deg, self._max_deg, out=goal)
+        np.isfinite(g, out=self._finite)
+        if not self._finite.all():
+            fallback = np.where(np.isnan(self._last_goal_deg), self._hold_deg, self._last_goal_deg)
+            np.copyto(goal, fallback, where=~self._finite)
+        clamped = int(np.count_nonzero(goal != g))
+        self._stats.clamps += clamped
         return clamped
 
-    def _send_goals(self, goal_deg: np.ndarray) -> None:
+    def _send_request(self, packet: bytes) -> None:
+        """Write ``packet`` after any goal Sync Write held back by ``write_and_read``."""
+        data = self._pending_tx + packet if self._pending_tx else packet
+        self._pending_tx = b""
+        self._transport.write(data)
+        self._bus_free_at = max(self.clock.now(), self._bus_free_at) + len(data) * self._byte_s
+
+    def _goal_packet(self, goal_deg: np.ndarray) -> bytes:
+        """The goal Sync Write for ``goal_deg`` (already clamped), as ticks."""
         ticks = self._scratch
         np.multiply(goal_deg, self._ticks_per_deg, out=ticks)
         ticks += self._zero_ticks
@@ -475,14 +507,13 @@ class DynamixelBus(ServoBus):
         # Ticks in 0..4095 and IDs <= 252 never form FF FF FD: no stuffing needed.
         body = self._sw_body.tobytes()
         crc = crc16(body, self._sw_prefix_crc)
-        packet = self._sw_prefix + body + bytes((crc & 0xFF, crc >> 8))
+        return self._sw_prefix + body + bytes((crc & 0xFF, crc >> 8))
+
+    def _send_goals(self, goal_deg: np.ndarray) -> None:
         with self._lock:
-            self._transport.write(packet)
+            self._send_request(self._goal_packet(goal_deg))
             self._stats.writes += 1
-            self._bus_free_at = (
-                max(self.clock.now(), self._bus_free_at) + len(packet) * self._byte_s
-            )
-        self._last_goal_deg[:] = goal_deg
+            self._last_goal_deg[:] = goal_deg
 
     # ------------------------------------------------------------------ present state
     def read_state(self, deadline_s: float | None = None) -> ServoState:
@@ -589,13 +620,12 @@ class DynamixelBus(ServoBus):
         block = self._read_len + 4
         expected = 8 + block * n_req
         t.discard_input()
-        t.write(packet)
+        self._send_request(packet)
         # the reply cannot end before the wire has carried the request and the reply
         spin_from = None
         spin_until = np.inf
         if self.spin_s > 0:
-            arrival = max(self.clock.now(), self._bus_free_at) + (
-                len(packet) + expected) * self._byte_s
+            arrival = self._bus_free_at + expected * self._byte_s
             spin_from = arrival - self.spin_s
             spin_until = arrival + self.spin_s
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until)
@@ -661,7 +691,7 @@ class DynamixelBus(ServoBus):
         t = self._transport
         ids = [self.ids[int(i)] for i in indices]
         t.discard_input()
-        t.write(build_instruction(
+        self._send_request(build_instruction(
             BROADCAST_ID, INST_SYNC_READ,
             u16(self._read_addr) + u16(self._read_len) + bytes(ids),
         ))

@@ -484,3 +484,18 @@ def test_falls_back_at_runtime_after_failed_fast_reads(sim: SimBus, bus: Dynamix
     states = [bus.read_state(bus.clock.now() + 0.02) for _ in range(12)]
     assert not bus.use_fast_sync_read and bus.stats.fallbacks == 1
     assert states[-1].all_fresh
+
+
+def test_write_and_read_sends_goals_with_the_read(sim: SimBus, bus: DynamixelBus) -> None:
+    rig = small_rig()
+    goals = np.array([s.max_deg + 50.0 for s in rig.servos])  # all beyond the limits
+    clamped, state = bus.write_and_read(goals)
+    assert clamped == 6 and state.all_fresh
+    _, hi = tick_limits(rig)
+    for _ in range(100):
+        if goals_received(sim, rig).tolist() == hi.tolist():
+            break
+        time.sleep(0.01)
+    assert goals_received(sim, rig).tolist() == hi.tolist()
+    assert bus.stats.writes == 1
+    np.testing.assert_array_equal(bus.last_goals_deg, [s.max_deg for s in rig.servos])
