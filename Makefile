@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean render-deps
 
 # Re-install only when pyproject.toml is newer than the last install.
 $(STAMP): pyproject.toml
@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/handrig joints
+	$(BIN)/handrig demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
@@ -28,3 +28,7 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+
+# Offscreen rendering (handrig demo --render) needs EGL or OSMesa; Debian packages.
+render-deps:
+	apt-get install -y --no-install-recommends libegl1 libgl1-mesa-dri libosmesa6

@@ -114,6 +114,12 @@ class PosePipeline:
             for h in hand.HANDS:
                 mapped = [h + name[2:] for name in names]
                 self.sag_index[h] = np.array([pose_index(m) for m in mapped], dtype=np.intp)
+        # One grid view per hand, made once (views rename the DOFs; values are shared).
+        self._grids: dict[str, SagLike] = {}
+        if sag is not None:
+            view = getattr(sag, "for_hand", None)
+            for h in hand.HANDS:
+                self._grids[h] = view(h) if callable(view) else sag
         k = len(expander.controls)
         self.control_means_deg = (
             np.zeros(k) if control_means_deg is None
@@ -130,19 +136,15 @@ class PosePipeline:
         self._step = np.zeros(n)
         self.targets = np.zeros(n)
         self._has_targets = False
-        self.clamps = 0  # pose values clamped to limits, cumulative
+        self.clamps = 0  # pose values (all 54) clamped to joint limits, cumulative
+        self.servo_clamps = 0  # servo targets that needed clamping, cumulative
         self.slewed = 0  # servo targets held back by the slew limit, cumulative
+        self.rejected = 0  # non-finite targets replaced by the last good one, cumulative
 
     # -- pieces ---------------------------------------------------------------------------
-    def _sag_for(self, h: str) -> SagLike | None:
-        if self.sag is None:
-            return None
-        view = getattr(self.sag, "for_hand", None)
-        return view(h) if callable(view) else self.sag
-
     def _add_sag(self, pose: FloatArray, h: str, inclination_deg: float,
                  rotation_deg: float, *, absolute: bool) -> None:
-        grid = self._sag_for(h)
+        grid = self._grids.get(h)
         if grid is None:
             return
         grid.lookup(inclination_deg, rotation_deg, out=self._sag_values)
@@ -190,8 +192,17 @@ class PosePipeline:
         """Clamp ``pose`` to the limits, pick the servos' joints, slew-limit them."""
         np.clip(pose, self.pose_low, self.pose_high, out=self._clamped_pose)
         self.clamps += int(np.count_nonzero(self._clamped_pose != pose))
+        np.take(pose, self.servo_index, out=self._raw_targets)
+        self.servo_clamps += int(np.count_nonzero(
+            (self._raw_targets < self.servo_low) | (self._raw_targets > self.servo_high)))
         np.take(self._clamped_pose, self.servo_index, out=self._raw_targets)
         np.clip(self._raw_targets, self.servo_low, self.servo_high, out=self._raw_targets)
+        bad = ~np.isfinite(self._raw_targets)
+        if bad.any():  # a NaN never reaches a servo: hold the last target (or the middle)
+            self.rejected += int(bad.sum())
+            fallback = self.targets if self._has_targets else 0.5 * (
+                self.servo_low + self.servo_high)
+            np.copyto(self._raw_targets, fallback, where=bad)
         if not self._has_targets:
             self.targets[:] = self._raw_targets
             self._has_targets = True

@@ -80,7 +80,8 @@ class RunStats:
     overruns: int = 0
     overrun_max_s: float = 0.0
     missed_cycles: int = 0
-    clamps: int = 0
+    clamps: int = 0  # full-pose values clamped to joint limits (both hands)
+    servo_clamps: int = 0  # servo targets clamped to joint or servo limits
     slewed: int = 0
     bus_clamps: int = 0
     reads: int = 0
@@ -291,5 +292,6 @@ class Rig:
         finally:
             stats.duration_s = clock.now() - t0
             stats.clamps = self.pipeline.clamps
+            stats.servo_clamps = self.pipeline.servo_clamps
             stats.slewed = self.pipeline.slewed
         return stats

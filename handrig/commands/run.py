@@ -1,0 +1,55 @@
+"""``handrig run``: the live rig, glove in, servos (or the simulated puppet) out."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from handrig.app import build_parts
+from handrig.live import LiveOptions, format_summary, run_live
+
+
+def register(sub: Any) -> None:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "run", help="run the live rig: glove -> full hands with sag -> servos",
+        description="Run the live rig. Ctrl-C or SIGTERM eases the puppet to its relaxed "
+        "pose, then disables torque; a second Ctrl-C stops at once.",
+    )
+    p.add_argument("--config", default=None, metavar="FILE",
+                   help="rig file (default config/rig.toml)")
+    p.add_argument("--glove-config", default=None, metavar="FILE",
+                   help="glove file (default: the rig file's [loop] glove, else config/glove.toml)")
+    p.add_argument("--glove", default=None, metavar="SPEC",
+                   help="PORT (handrig frames), opengloves:PORT, or replay:FILE.csv")
+    p.add_argument("--bus", default=None, metavar="PORT",
+                   help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
+    p.add_argument("--viewer", action="store_true",
+                   help="with --bus sim: show the simulated puppet (needs a display)")
+    p.add_argument("--vmc", default=None, metavar="HOST:PORT",
+                   help="also send the hands to a VMC receiver (VSeeFace, Unity, Blender)")
+    p.add_argument("--record", default=None, metavar="FILE",
+                   help="record the performance (.csv or .bvh)")
+    p.add_argument("--frames", type=int, default=None, metavar="N", help="stop after N cycles")
+    p.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S s")
+    p.add_argument("--no-wire-timing", action="store_true",
+                   help="with --bus sim: answer instantly instead of at the wire's speed")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    parts = build_parts(args.config, args.glove_config)
+    opts = LiveOptions(
+        glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
+        wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
+        record=args.record, panel=sys.stdout.isatty() and not args.json,
+        verbose=not args.json,
+    )
+    result = run_live(parts, opts)
+    if args.json:
+        print(json.dumps(result.summary))
+    else:
+        print(format_summary(result.summary))
+    return 1 if "error" in result.summary or result.summary["torque_off"] is False else 0

@@ -1,0 +1,96 @@
+"""The live rig end to end: glove emulator on a pty -> SerialGlove -> pipeline ->
+DynamixelBus (real dynamixel-sdk) -> ``handrig sim-bus`` (MuJoCo puppet)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from handrig.app import build_parts
+from handrig.glove_recording import read_glove_recording
+from handrig.live import LiveOptions, run_live
+from sim.demo_recording import DEMO_RECORDING
+from sim.glove_emulator import GloveEmulator
+
+CLI = [sys.executable, "-m", "handrig.cli"]
+
+
+def test_demo_reports_its_figures_and_ends_with_torque_off():
+    out = subprocess.run([*CLI, "demo", "--frames", "300", "--json"], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout)
+    assert summary["frames"] == 300
+    assert summary["rate_hz"] > 0 and summary["overruns"] >= 0
+    assert summary["latency_us"]["p50"] > 0
+    assert summary["latency_us"]["p99"] >= summary["latency_us"]["p50"]
+    assert summary["torque_off"] is True
+    assert summary["glove"]["frames_ok"] > 100 and summary["glove"]["crc_errors"] == 0
+    # the simulated joints follow their goals (present positions come from MuJoCo)
+    assert summary["reads"] > 20 and 0 < summary["tracking_rms_deg"] < 8.0
+
+
+def test_sigterm_mid_run_relaxes_then_turns_torque_off(tmp_path):
+    proc = subprocess.Popen(
+        [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        # wait until the loop runs (the panel is off with --json: watch stderr for the bus)
+        assert proc.stderr is not None
+        while time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if "commissioned" in line:
+                break
+        time.sleep(1.5)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    summary = json.loads(out)
+    assert "SIGTERM" in summary["stop_reason"] or "stop requested" in summary["stop_reason"]
+    assert any("SIGTERM" in e and "relaxed pose" in e for e in summary["events"])
+    assert summary["torque_off"] is True
+    assert summary["frames"] > 200  # ran, then eased over relax_time_s before stopping
+
+
+def test_glove_going_quiet_or_garbled_relaxes_the_puppet_and_recovers():
+    rec = read_glove_recording(DEMO_RECORDING)
+    parts = build_parts()
+    events: list[str] = []
+    with GloveEmulator(rec, "frames", rate_hz=200.0) as emu:
+        def script() -> None:
+            time.sleep(0.8)
+            emu.inject_garbage(300)
+            emu.corrupt_next(20)
+            time.sleep(0.4)
+            emu.pause()
+            time.sleep(0.8)
+            emu.resume()
+        t = threading.Thread(target=script)
+        t.start()
+        result = run_live(parts, LiveOptions(glove=emu.port_path, bus="sim", frames=800,
+                                             log=events.append))
+        t.join()
+    s = result.summary
+    assert s["torque_off"] is True and "error" not in s
+    assert s["glove"]["crc_errors"] >= 1 and s["glove"]["resyncs"] >= 1
+    assert s["relax_events"] >= 1
+    assert any("silent or garbled" in e for e in events)
+    assert any("glove is back" in e for e in events)
+
+
+def test_bad_config_is_one_line(tmp_path):
+    bad = tmp_path / "rig.toml"
+    bad.write_text("[loop]\nrate_hz = 5\n")
+    out = subprocess.run([*CLI, "run", "--config", str(bad), "--bus", "sim", "--frames", "1"],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert "loop.rate_hz" in out.stderr and "Traceback" not in out.stderr

@@ -1,0 +1,225 @@
+"""The realtime loop on a fake clock: rate, safety (silence, e-stop, stop), limits.
+
+The glove and the bus here are fakes that subclass the real ABCs (GloveSource,
+ServoBus); the pipeline, map, sag grid and calibration are the real shipped ones.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from handrig.app import build_parts
+from handrig.clock import FakeClock
+from handrig.errors import DeviceError
+from handrig.glove import GloveSample, GloveSource, GloveStats
+from handrig.rig import Mode, Rig
+from handrig.servo.bus import BusStats, ServoBus, ServoState
+
+
+class ScriptedGlove(GloveSource):
+    """Emits one sample per call while ``raw_at(t)`` returns counts; None = silence."""
+
+    def __init__(self, clock: FakeClock, raw_at: Callable[[float], np.ndarray | None],
+                 estop_at: float | None = None) -> None:
+        super().__init__()
+        self.clock = clock
+        self.raw_at = raw_at
+        self.estop_at = estop_at
+        self.n = 0
+
+    def latest(self) -> GloveSample | None:
+        t = self.clock.now()
+        raw = self.raw_at(t)
+        if raw is None:
+            return None
+        self.n += 1
+        estop = self.estop_at is not None and t >= self.estop_at
+        quat = np.array([0.0, 0.0, 0.0, 1.0])  # palm down, forearm horizontal
+        return GloveSample(np.asarray(raw, float), quat, int(estop), estop, self.n, 0,
+                           t, self.n)
+
+    def stats(self) -> GloveStats:
+        return GloveStats(frames_ok=self.n)
+
+
+class RecordingBus(ServoBus):
+    """Remembers every goal vector; present position follows the goal one read late."""
+
+    def __init__(self, names: tuple[str, ...], clock: FakeClock,
+                 write_cost_s: float = 0.0, fail_after: int | None = None) -> None:
+        self._names = names
+        self.clock = clock
+        self.write_cost_s = write_cost_s
+        self.fail_after = fail_after
+        self.goals: list[np.ndarray] = []
+        self._stats = BusStats(len(names))
+        self.torque_on = False
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self._names
+
+    @property
+    def stats(self) -> BusStats:
+        return self._stats
+
+    def connect(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self.torque_on = False
+
+    @contextlib.contextmanager
+    def torque(self) -> Iterator[ServoBus]:  # type: ignore[override]
+        self.torque_on = True
+        try:
+            yield self
+        finally:
+            self.torque_on = False
+
+    def write_goals_deg(self, goals_deg: np.ndarray) -> int:
+        if self.fail_after is not None and len(self.goals) >= self.fail_after:
+            raise DeviceError("servo port /dev/ttyUSB0 went away (test)")
+        self.goals.append(np.array(goals_deg))
+        self.clock.advance(self.write_cost_s)
+        return 0
+
+    def read_state(self, deadline_s: float | None = None) -> ServoState:
+        n = len(self._names)
+        pos = self.goals[-1] if self.goals else np.zeros(n)
+        z = np.zeros(n)
+        return ServoState(pos.copy(), z, z, z, np.zeros(n, np.uint8), np.zeros(n, np.uint8),
+                          np.zeros(n, bool), z, self.clock.now(), self._stats.copy())
+
+
+@pytest.fixture(scope="module")
+def parts_factory():
+    return lambda: build_parts()
+
+
+def make_rig(parts, glove, bus, clock, **kw):
+    return Rig(glove, bus, parts.pipeline, clock, controls_from_raw=parts.controls,
+               orientation=parts.orientation, rate_hz=200.0, read_every=4,
+               glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None, **kw)
+
+
+MID = np.array([2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
+
+
+def test_loop_holds_its_rate_and_measures_latency(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock(100.0)
+    glove = ScriptedGlove(clock, lambda t: MID)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+                       write_cost_s=50e-6)
+    rig = make_rig(parts, glove, bus, clock)
+    stats = rig.run(frames=400)
+    assert stats.frames == 400 and len(bus.goals) == 400
+    assert stats.rate_hz == pytest.approx(200.0, rel=0.01)
+    assert stats.overruns == 0
+    assert stats.latency_us(50) == pytest.approx(50.0, abs=1.0)  # the write's cost
+    assert stats.reads == 100 and stats.tracking_n > 0
+
+
+def test_never_a_goal_outside_the_servo_limits(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    rng = np.random.default_rng(1)
+    wild = lambda t: rng.choice([0.0, 4095.0, 1e9, -1e9, np.nan], size=5)  # noqa: E731
+    glove = ScriptedGlove(clock, wild)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    make_rig(parts, glove, bus, clock).run(frames=300)
+    goals = np.array(bus.goals)
+    low = np.array([s.min_deg for s in parts.rig_config.servos])
+    high = np.array([s.max_deg for s in parts.rig_config.servos])
+    assert np.isfinite(goals).all()
+    assert (goals >= low - 1e-9).all() and (goals <= high + 1e-9).all()
+
+
+def test_glove_silence_eases_to_relaxed_then_resumes(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    fist = np.array([2800.0, 1300.0, 3000.0, 3200.0, 3200.0])
+    glove = ScriptedGlove(clock, lambda t: None if 0.5 <= t < 2.0 else fist)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    events: list[str] = []
+    rig = make_rig(parts, glove, bus, clock)
+    rig.log = events.append
+    rig.run(frames=500)  # 2.5 s
+    assert rig.stats.relax_events == 1
+    assert any("silent" in e and "relaxed pose" in e for e in events)
+    assert any("glove is back" in e for e in events)
+    relaxed = parts.pipeline.relaxed_pose(0.0, 0.0)[parts.pipeline.servo_index]
+    relaxed = np.clip(relaxed, parts.pipeline.servo_low, parts.pipeline.servo_high)
+    at_end_of_silence = bus.goals[int(1.95 * 200)]
+    np.testing.assert_allclose(at_end_of_silence, relaxed, atol=1e-6)
+    # the fist before the silence is far from relaxed
+    assert np.abs(bus.goals[90] - relaxed).max() > 10.0
+    assert rig.mode is Mode.RUNNING
+
+
+def test_estop_relaxes_then_ends_the_run(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    glove = ScriptedGlove(clock, lambda t: MID, estop_at=0.3)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock)
+    stats = rig.run(frames=10_000)
+    assert stats.estop and stats.stop_reason == "e-stop"
+    assert 0.3 + 0.5 <= stats.duration_s <= 0.3 + 0.5 + 0.02  # relax_time_s = 0.5
+    relaxed = parts.pipeline.relaxed_pose(0.0, 0.0)[parts.pipeline.servo_index]
+    relaxed = np.clip(relaxed, parts.pipeline.servo_low, parts.pipeline.servo_high)
+    np.testing.assert_allclose(bus.goals[-1], relaxed, atol=1e-6)
+
+
+def test_stop_request_relaxes_and_a_second_one_stops_at_once(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    glove = ScriptedGlove(clock, lambda t: MID)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock)
+    calls = {"n": 0}
+
+    def stopper(t_s: float, pose: np.ndarray) -> None:
+        calls["n"] += 1
+        if calls["n"] == 20:
+            rig.request_stop("SIGTERM received")
+    rig.outputs = (stopper,)
+    stats = rig.run(frames=10_000)
+    assert stats.stop_reason == "stop requested"
+    assert 100 <= stats.frames <= 125  # 20 frames, then 0.5 s of easing at 200 Hz
+
+    clock2 = FakeClock()
+    bus2 = RecordingBus(bus.joint_names, clock2)
+    rig2 = make_rig(build_parts(), ScriptedGlove(clock2, lambda t: MID), bus2, clock2)
+    def twice(t_s: float, pose: np.ndarray) -> None:
+        if len(bus2.goals) == 10:
+            rig2.request_stop("SIGINT received")
+            rig2.request_stop("SIGINT received")
+    rig2.outputs = (twice,)
+    assert rig2.run(frames=10_000).frames <= 11
+
+
+def test_overruns_are_counted_with_their_size(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+                       write_cost_s=0.012)  # longer than two 5 ms periods
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)
+    stats = rig.run(frames=50)
+    assert stats.overruns > 0 and stats.missed_cycles >= stats.overruns
+    assert stats.overrun_max_s >= 0.005
+
+
+def test_lost_servo_port_stops_with_the_message(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock, fail_after=30)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)
+    with pytest.raises(DeviceError, match="went away"):
+        rig.run(frames=100)
+    assert rig.stats.frames == 30 and "went away" in rig.stats.stop_reason
