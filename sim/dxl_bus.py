@@ -37,6 +37,7 @@ from typing import NamedTuple, Protocol
 from firmware_protocol.dynamixel import (
     BAUD_BY_INDEX,
     BROADCAST_ID,
+    MAX_PACKET_LEN,
     ErrorCode,
     HardwareError,
     Instruction,
@@ -53,7 +54,7 @@ from firmware_protocol.dynamixel import (
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import ConfigError
 from handrig.rigconfig import RigConfig, load_rig_config
-from sim.dxl_servo import EmulatedServo
+from sim.dxl_servo import READABLE_BYTES, EmulatedServo
 
 
 class MotionModel(Protocol):
@@ -698,7 +699,14 @@ class SimBus:
     def _fast_read(
         self, requests: Sequence[tuple[int, int, int]], now: float
     ) -> list[_Reply]:
-        """One combined reply; it stops short at the first servo that does not answer."""
+        """One combined reply; it stops short at the first servo that does not answer.
+
+        A request the reply cannot carry (a range beyond the control table, a reply
+        longer than a packet) gets no reply at all."""
+        total = 8 + sum(n + 4 for _, _, n in requests)
+        if total > MAX_PACKET_LEN or any(n == 0 or a + n > READABLE_BYTES
+                                         for _, a, n in requests):
+            return []
         chunks: list[tuple[int, int, bytes]] = []
         complete = True
         first_delay = 0.0

@@ -26,11 +26,15 @@ class CapturingBus(SimBus):
 
 def _check_sent(bus: CapturingBus) -> None:
     for data in bus.sent:
-        assert dx.find_frame(data) == (0, len(data))
-        if data[4] == dx.BROADCAST_ID:  # a fast read reply: status instruction, valid CRC
-            assert data[7] == dx.STATUS_INSTRUCTION
-            assert dx.crc16(data[:-2]) == data[-2] | data[-1] << 8
+        assert data[:4] == dx.HEADER
+        announced = 7 + (data[5] | data[6] << 8)
+        if data[4] == dx.BROADCAST_ID:  # a fast read reply, cut short at a missing servo
+            assert data[7] == dx.STATUS_INSTRUCTION and len(data) <= announced
+            if len(data) == announced:
+                assert dx.find_frame(data) == (0, len(data))
+                assert dx.crc16(data[:-2]) == data[-2] | data[-1] << 8
         else:
+            assert len(data) == announced
             dx.parse_status(data)
 
 
@@ -56,6 +60,32 @@ def test_garbage_never_breaks_framing(data: bytes) -> None:
     bus.feed(dx.build_instruction(2, dx.Instruction.PING), now=10.0)  # stale partials give up
     bus.feed(dx.build_instruction(2, dx.Instruction.PING), now=10.0)
     assert any(dx.parse_status(d).id == 2 for d in bus.sent if d[4] == 2)
+
+
+fast_inst = st.sampled_from([dx.Instruction.FAST_SYNC_READ, dx.Instruction.SYNC_READ])
+
+
+@settings(max_examples=300, deadline=None)
+@given(fast_inst, st.integers(0, 800), st.integers(0, 70000),
+       st.lists(st.integers(0, 5), max_size=6))
+def test_sync_reads_of_any_range(inst: int, address: int, length: int, ids: list[int]) -> None:
+    bus = CapturingBus()
+    bus.feed(dx.build_instruction(dx.BROADCAST_ID, inst,
+                                  dx.sync_read_params(address, min(length, 0xFFFF), ids),
+                                  do_stuff=False))
+    _check_sent(bus)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 5), st.integers(0, 800), st.integers(0, 2000)),
+                min_size=1, max_size=5))
+def test_fast_bulk_reads_of_any_range(items: list[tuple[int, int, int]]) -> None:
+    bus = CapturingBus()
+    bus.feed(dx.build_instruction(dx.BROADCAST_ID, dx.Instruction.FAST_BULK_READ,
+                                  dx.bulk_read_params(items), do_stuff=False))
+    bus.feed(dx.build_instruction(dx.BROADCAST_ID, dx.Instruction.BULK_READ,
+                                  dx.bulk_read_params(items), do_stuff=False))
+    _check_sent(bus)
 
 
 def test_sync_write_then_fast_sync_read_without_a_pty() -> None:
