@@ -520,8 +520,9 @@ class DynamixelBus(ServoBus):
         """Read present state (Fast Sync Read, or Sync Read after a fallback).
 
         ``deadline_s`` is a time on the bus clock by which the read must end
-        (default: ``fault_policy.read_budget_s`` from now, at least 1.5 times the
-        reply's wire time plus 1 ms); failed servos are
+        (default: ``fault_policy.read_budget_s``, at least 1.5 times the reply's
+        wire time plus 1 ms, from when the wire is free of the last goal write);
+        failed servos are
         retried up to ``fault_policy.read_retries`` times while time remains.
         Servos without a valid reply are marked stale, never passed off as fresh.
         A servo raising its Alert bit is handled per policy (reboot or
@@ -531,7 +532,10 @@ class DynamixelBus(ServoBus):
         with self._lock:
             now = self.clock.now()
             if deadline_s is None:
-                deadline_s = now + max(self.policy.read_budget_s, self._min_read_budget_s)
+                # from when the wire is free of the goal Sync Write just sent
+                deadline_s = max(now, self._bus_free_at) + max(
+                    self.policy.read_budget_s, self._min_read_budget_s
+                )
             self._stats.reads += 1
             fresh = self._fresh
             fresh[:] = False
@@ -586,7 +590,7 @@ class DynamixelBus(ServoBus):
 
     def _read_attempt(self, indices: np.ndarray, deadline_s: float) -> bool:
         """One read of ``indices``; updates readings of servos that answered validly."""
-        deadline = min(deadline_s, self.clock.now() + self.reply_timeout_s)
+        deadline = min(deadline_s, self._reply_deadline())
         if self.use_fast_sync_read:
             got = self._fast_sync_read(indices, deadline)
             if got:
@@ -595,7 +599,7 @@ class DynamixelBus(ServoBus):
                 self._fast_fail_run += 1
                 if self._fast_fail_run >= self.policy.fast_failures_before_fallback:
                     self._fast_fail_run = 0
-                    deadline = min(deadline_s, self.clock.now() + self.reply_timeout_s)
+                    deadline = min(deadline_s, self._reply_deadline())
                     if self._sync_read(indices, deadline):
                         self._switch_to_sync_read(
                             f"{self.policy.fast_failures_before_fallback} Fast Sync Reads "
@@ -604,6 +608,10 @@ class DynamixelBus(ServoBus):
                         return True
             return got
         return self._sync_read(indices, deadline)
+
+    def _reply_deadline(self) -> float:
+        """When a reply to a request sent now is overdue (the wire may still be busy)."""
+        return max(self.clock.now(), self._bus_free_at) + self.reply_timeout_s
 
     def _fast_sync_read(self, indices: np.ndarray, deadline: float) -> bool:
         t = self._transport
