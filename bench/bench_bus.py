@@ -11,7 +11,7 @@ from handrig.commands.bench_bus import bench
 
 def main() -> None:
     for baud in (4_000_000, 1_000_000):
-        bench(20, baud, seconds=3.0)
+        bench(20, baud, seconds=2.0)
         print()
 
 
