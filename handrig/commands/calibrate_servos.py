@@ -1,0 +1,187 @@
+"""``handrig calibrate servos``: find each servo's zero and write it to the rig file.
+
+For every servo in the rig, the joint is brought to its zero pose (finger
+straight, wrist neutral: 0 deg in the vocabulary convention) and the servo's
+present position becomes ``zero_ticks``:
+
+* by hand (default): torque stays off; move the joint, press Enter;
+* ``--jog``: torque on; type ``+2`` / ``-0.5`` (joint degrees) to jog the servo,
+  Enter to accept; ``s`` skips a servo, ``q`` stops (nothing is written);
+* ``--yes``: accept every servo's present position without asking (scripts, tests).
+
+The rig file is rewritten in place, keeping its comments; only the
+``zero_ticks`` lines change, and the new file is checked before it is written
+(a zero whose limits fall outside the servo's range is refused with the reason).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import re
+import sys
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from handrig.app import port_process
+from handrig.commands.calibrate_glove import calibrate_subparsers
+from handrig.config import CONFIG_DIR, build
+from handrig.errors import ConfigError, HandrigError
+from handrig.rigconfig import RigConfig, load_rig_config
+from handrig.servo import DynamixelBus
+from handrig.servo.registers import Reg
+
+
+def register(sub: Any) -> None:
+    p: argparse.ArgumentParser = calibrate_subparsers(sub).add_parser(
+        "servos", help="set each servo's zero (by hand, or jogging) and save it to rig.toml",
+        description=__doc__,
+    )
+    p.add_argument("--config", default=None, metavar="FILE",
+                   help="rig file to update (default config/rig.toml)")
+    p.add_argument("--bus", default=None, metavar="PORT",
+                   help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
+    p.add_argument("--ids", default=None, metavar="LIST", help="only these servo IDs, e.g. 1,2,7")
+    p.add_argument("--jog", action="store_true", help="torque on and jog each servo to zero")
+    p.add_argument("--yes", action="store_true",
+                   help="accept every present position without asking")
+    p.add_argument("--out", default=None, metavar="FILE",
+                   help="write here instead of rewriting the rig file")
+    p.set_defaults(func=run)
+
+
+def update_zero_ticks(text: str, zeros: dict[int, int]) -> str:
+    """``text`` of a rig file with ``zero_ticks`` of the given servo IDs replaced.
+
+    Works on the ``[[servos]]`` blocks line by line so comments and layout stay.
+    """
+    lines = text.splitlines(keepends=True)
+    block_id: int | None = None
+    in_servo = False
+    zero_line: dict[int, int] = {}
+    ids_seen: list[int] = []
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        if stripped.startswith("["):
+            in_servo = stripped == "[[servos]]"
+            block_id = None
+            continue
+        if not in_servo:
+            continue
+        m = re.match(r"id\s*=\s*(\d+)", stripped)
+        if m:
+            block_id = int(m.group(1))
+            ids_seen.append(block_id)
+        if re.match(r"zero_ticks\s*=", stripped):
+            zero_line[block_id if block_id is not None else -1 - i] = i
+    # a zero_ticks line before its block's id line: bind it to that block's id
+    for servo_id in zeros:
+        if servo_id not in ids_seen:
+            raise ConfigError("no [[servos]] block with this id", key="servos.id", value=servo_id)
+    for servo_id, ticks in zeros.items():
+        if servo_id in zero_line:
+            i = zero_line[servo_id]
+            indent = lines[i][: len(lines[i]) - len(lines[i].lstrip())]
+            comment = ""
+            if "#" in lines[i]:
+                comment = "  " + lines[i][lines[i].index("#"):].rstrip("\n")
+            lines[i] = f"{indent}zero_ticks = {ticks}{comment}\n"
+        else:  # no zero_ticks line: add one after the id line
+            for i, line in enumerate(lines):
+                if re.match(rf"\s*id\s*=\s*{servo_id}\b", line):
+                    lines.insert(i + 1, f"zero_ticks = {ticks}\n")
+                    break
+    return "".join(lines)
+
+
+def _ask(prompt: str) -> str:
+    print(prompt, end="", flush=True)
+    line = sys.stdin.readline()
+    if not line:
+        raise HandrigError("calibration aborted: no more input (nothing was written)")
+    return line.strip()
+
+
+def calibrate(
+    bus: DynamixelBus, rig: RigConfig, ids: list[int], *, jog: bool, yes: bool,
+    ask: Callable[[str], str] = _ask, say: Callable[[str], None] = print,
+) -> dict[int, int]:
+    """Walk through the servos and return {id: new zero_ticks}."""
+    zeros: dict[int, int] = {}
+    for servo_id in ids:
+        index = bus.ids.index(servo_id)
+        cal = rig.servo(servo_id)
+        name = bus.describe(index)
+        while True:
+            ticks = bus.read_register(index, Reg.PRESENT_POSITION)
+            deg = cal.ticks_to_deg(ticks)
+            if yes:
+                answer = ""
+            else:
+                hint = ("+N/-N jog degrees, " if jog else "move the joint by hand, ") + \
+                    "Enter accepts, s skips, q quits"
+                answer = ask(f"{name}: present {ticks} ticks ({deg:+.1f} deg from the "
+                             f"current zero {cal.zero_ticks}); bring it to 0 deg [{hint}]: ")
+            if answer == "":
+                ticks = bus.read_register(index, Reg.PRESENT_POSITION)  # where it is now
+                zeros[servo_id] = int(ticks)
+                say(f"{name}: zero_ticks {cal.zero_ticks} -> {ticks}")
+                break
+            if answer.lower() == "s":
+                say(f"{name}: skipped (zero_ticks stays {cal.zero_ticks})")
+                break
+            if answer.lower() == "q":
+                raise HandrigError("calibration stopped: nothing was written")
+            if jog:
+                try:
+                    step_deg = float(answer)
+                except ValueError:
+                    say(f"not understood: {answer!r}; type e.g. +2 or -0.5")
+                    continue
+                goal = round(ticks + cal.direction * cal.gear_ratio * step_deg * 4096 / 360)
+                bus.write_register(index, Reg.GOAL_POSITION, max(0, min(4095, goal)))
+            else:
+                say("torque is off: move the joint by hand, then press Enter")
+    return zeros
+
+
+def run(args: argparse.Namespace) -> int:
+    rig_path = Path(args.config) if args.config else CONFIG_DIR / "rig.toml"
+    rig = load_rig_config(rig_path)
+    ids = [s.id for s in rig.servos]
+    if args.ids:
+        try:
+            wanted = [int(x) for x in args.ids.split(",") if x.strip()]
+        except ValueError:
+            raise ConfigError("not a list of servo IDs", key="--ids", value=args.ids) from None
+        unknown = sorted(set(wanted) - set(ids))
+        if unknown:
+            raise ConfigError("servo IDs not in the rig file", key="--ids", value=unknown,
+                              allowed=", ".join(map(str, ids)))
+        ids = wanted
+    bus_spec = args.bus or rig.bus.port
+    with contextlib.ExitStack() as stack:
+        if bus_spec == "sim":
+            _, bus_spec = stack.enter_context(
+                port_process(["sim-bus", "--rig", str(rig_path)], "the simulated servo bus"))
+        bus = DynamixelBus(bus_spec, rig)
+        stack.callback(bus.close)
+        bus.connect()
+        if args.jog:
+            with bus.torque():
+                zeros = calibrate(bus, rig, ids, jog=True, yes=args.yes)
+        else:
+            bus.disable_torque()
+            zeros = calibrate(bus, rig, ids, jog=False, yes=args.yes)
+    text = update_zero_ticks(rig_path.read_text(), zeros)
+    try:
+        build(RigConfig, tomllib.loads(text))
+    except ConfigError as exc:
+        raise ConfigError(f"the new zeros do not fit: {exc.detail}", key=exc.key,
+                          value=exc.value, allowed=exc.allowed) from None
+    out = Path(args.out) if args.out else rig_path
+    out.write_text(text)
+    print(f"wrote {len(zeros)} zero(s) to {out}")
+    return 0
