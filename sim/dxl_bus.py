@@ -251,14 +251,14 @@ class SimBus:
         self.wire_timing = wire_timing
         self.check_baud = check_baud
         self._packet_baud = 0
-        self.faults = faults or FaultSpec()
+        self._faults = faults or FaultSpec()
         self.puppet = puppet
         self.clock = clock or MonotonicClock(spin_s=SPIN_S)
         self.lock = threading.RLock()
         self.fault_counts: Counter[str] = Counter()
         self.stats = BusStats()
         self.port_path = ""
-        self._rng = random.Random(self.faults.seed)
+        self._rng = random.Random(self._faults.seed)
         self._by_id: dict[int, EmulatedServo] = {}
         self._rebuild_ids()
         self._master = -1
@@ -306,6 +306,20 @@ class SimBus:
             the_puppet = puppet
         return cls(servos, wire_timing=wire_timing, faults=faults, puppet=the_puppet,
                    clock=clock)
+
+    @property
+    def faults(self) -> FaultSpec:
+        """The fault switches; assigning new ones (at any time) reseeds their random
+        source and applies ``missing`` at once (``overload`` only counts from start)."""
+        return self._faults
+
+    @faults.setter
+    def faults(self, spec: FaultSpec) -> None:
+        with self.lock:
+            self._faults = spec
+            self._rng = random.Random(spec.seed)
+            self._overload_done = False
+            self._rebuild_ids()
 
     def servo(self, servo_id: int) -> EmulatedServo:
         """The emulated servo with this ID (missing ones included)."""

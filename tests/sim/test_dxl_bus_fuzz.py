@@ -108,3 +108,16 @@ def test_wrong_id_fault_in_a_fast_read_keeps_the_crcs_valid() -> None:
     parts = dx.parse_fast_read_reply(reply, [4, 4])
     assert parts[0].id != 1 and parts[1].id == 2
     assert bus.fault_counts["wrong_id"] == 1
+
+
+def test_faults_switched_at_runtime() -> None:
+    bus = CapturingBus()
+    ping = dx.build_instruction(2, dx.Instruction.PING)
+    bus.feed(ping)
+    assert len(bus.sent) == 1
+    bus.faults = FaultSpec(missing=frozenset({2}))
+    bus.feed(ping)
+    assert len(bus.sent) == 1 and bus.fault_counts["missing"] == 1
+    bus.faults = FaultSpec()
+    bus.feed(ping)
+    assert len(bus.sent) == 2
