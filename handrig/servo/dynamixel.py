@@ -381,11 +381,11 @@ class DynamixelBus(ServoBus):
         notes.append(f"{self._n} servos answered {self._where()} with the expected models")
 
         for i in range(self._n):
+            self._ensure_status_return_level(i)
             self.write_register(i, Reg.TORQUE_ENABLE, 0)
             for reg, want, why in (
                 (Reg.RETURN_DELAY_TIME, 0, "return delay 0 us"),
                 (Reg.OPERATING_MODE, OPERATING_MODE_POSITION, "position control mode"),
-                (Reg.STATUS_RETURN_LEVEL, STATUS_RETURN_ALL, "status for every instruction"),
             ):
                 value = self.read_register(i, reg)
                 if value != want:
@@ -415,6 +415,40 @@ class DynamixelBus(ServoBus):
             raise DeviceError(
                 f"no valid present position from {', '.join(bad)} {self._where()}"
             )
+
+    def _ensure_status_return_level(self, index: int) -> None:
+        """Status Return Level 2 (a status for every instruction), which the driver needs.
+
+        At level 1 a write gets no reply and at level 0 neither does a read, so the
+        item is written without waiting for a reply, then read back.
+        """
+        reg = Reg.STATUS_RETURN_LEVEL
+        try:
+            level: int | None = self.read_register(index, reg)
+        except DeviceTimeoutError:
+            level = None  # level 0: only pings are answered
+        if level == STATUS_RETURN_ALL:
+            return
+        sid = self.ids[index]
+        self._transport.write(build_instruction(
+            sid, INST_WRITE, u16(reg.address) + reg.encode(STATUS_RETURN_ALL)
+        ))
+        self.clock.sleep(COMMAND_TIMEOUT_S / 5)
+        self._transport.discard_input()
+        try:
+            now = self.read_register(index, reg)
+        except DeviceTimeoutError:
+            now = None
+        if now != STATUS_RETURN_ALL:
+            raise DeviceError(
+                f"{self.describe(index)} answers ping but keeps Status Return Level {now} "
+                f"{self._where()}: set it to 2 (e.g. with DYNAMIXEL Wizard)"
+            )
+        was = "0 (reads unanswered)" if level is None else str(level)
+        self.commissioning.append(
+            f"{self.describe(index)}: STATUS_RETURN_LEVEL {was} -> 2 (status for every "
+            "instruction)"
+        )
 
     def _broadcast_ping(self, wait_s: float = 0.1) -> dict[int, int]:
         t = self._transport

@@ -499,3 +499,20 @@ def test_write_and_read_sends_goals_with_the_read(sim: SimBus, bus: DynamixelBus
     assert goals_received(sim, rig).tolist() == hi.tolist()
     assert bus.stats.writes == 1
     np.testing.assert_array_equal(bus.last_goals_deg, [s.max_deg for s in rig.servos])
+
+
+@pytest.mark.parametrize("level", [0, 1])
+def test_status_return_level_raised_to_two(level: int) -> None:
+    rig = small_rig(2)
+    with SimBus.from_rig(rig) as sim:
+        sim.servo(2).set(SimReg.STATUS_RETURN_LEVEL, level)
+        b = DynamixelBus(sim.port_path, rig, baud=1_000_000)
+        b.connect()
+        try:
+            assert sim.servo(2).status_return_level == 2
+            assert any(f"STATUS_RETURN_LEVEL {level}" in line and "-> 2" in line
+                       for line in b.commissioning)
+            with b.torque():
+                assert sim.servo(2).torque_enabled
+        finally:
+            b.close()
