@@ -1,15 +1,22 @@
 """The servo bus: an abstract :class:`ServoBus` and the Dynamixel adapter on dynamixel-sdk.
 
 This package is the one adapter that imports ``dynamixel_sdk`` and ``serial``;
-pipeline code talks to :class:`ServoBus` only.
+pipeline code talks to :class:`ServoBus` only. Layers: ``transport`` (bytes in
+and out of the SDK's PortHandler, deadlines on the injected Clock), ``packets``
+(Protocol 2.0 framing with the SDK's CRC table), ``registers`` (the X-series
+control table as data), ``bus`` (the ABC, ServoState, BusStats, FaultPolicy),
+``dynamixel`` (DynamixelBus).
 
     from handrig.servo import DynamixelBus
-    bus = DynamixelBus("/dev/ttyUSB0", load_rig_config())
-    bus.connect()
-    with bus.torque():
-        bus.write_goals_deg(goals_deg)  # (n,) joint degrees, rig order
-        state = bus.read_state()        # ServoState, stale readings marked
+    bus = DynamixelBus("/dev/ttyUSB0", load_rig_config())  # baud from the rig file
+    bus.connect()                        # DeviceError says which servo is missing/wrong
+    with bus.torque():                   # torque off on every way out, SIGTERM included
+        n_clamped = bus.write_goals_deg(goals_deg)  # (n,) joint degrees, rig order
+        state = bus.read_state()         # ServoState: positions_deg, stale mask, ...
     bus.close()
+
+Units: joint degrees (flexion positive, radial positive), degrees per second,
+milliamperes, degrees Celsius, seconds on the bus clock.
 """
 
 from handrig.servo.bus import BusStats, FaultPolicy, ServoBus, ServoState

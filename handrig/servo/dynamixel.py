@@ -165,7 +165,7 @@ class DynamixelBus(ServoBus):
         self._sw_body = np.zeros((n, 5), np.uint8)
         self._sw_body[:, 0] = self.ids
         self._goal_deg = np.zeros(n, np.float64)
-        self._goal_ticks = np.zeros(n, np.int32)
+        self._goal_ticks = np.zeros(n, np.dtype("<i4"))  # little-endian, as on the wire
         self._last_goal_deg = np.full(n, np.nan)
         self._scratch = np.zeros(n, np.float64)
         self._finite = np.zeros(n, bool)
@@ -556,8 +556,8 @@ class DynamixelBus(ServoBus):
         ``deadline_s`` is a time on the bus clock by which the read must end
         (default: ``fault_policy.read_budget_s``, at least 1.5 times the reply's
         wire time plus 1 ms, from when the wire is free of the last goal write);
-        failed servos are
-        retried up to ``fault_policy.read_retries`` times while time remains.
+        failed servos are retried up to ``fault_policy.read_retries`` times while
+        time remains.
         Servos without a valid reply are marked stale, never passed off as fresh.
         A servo raising its Alert bit is handled per policy (reboot or
         ServoFault); a servo stale ``max_stale_reads`` times in a row raises
