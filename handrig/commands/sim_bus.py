@@ -12,11 +12,14 @@ import os
 import signal
 import sys
 import threading
+import time
 from types import FrameType
 from typing import Any, TextIO
 
 from handrig.errors import ConfigError, HandrigError
 from handrig.rigconfig import load_rig_config
+
+REPORT_EVERY_S = 10.0
 
 
 def register(sub: Any) -> None:
@@ -115,14 +118,16 @@ def run(args: argparse.Namespace) -> int:
              f"wire timing {'on' if args.wire_timing else 'off'}; "
              f"faults {args.faults or 'none'}")
         viewer = _open_viewer(puppet) if args.viewer else None
-        reported = 0
+        reported, reported_at = 0, -REPORT_EVERY_S
         while not stop.wait(1.0 / 30.0 if viewer is not None else 0.25):
             if bus.error is not None:
                 raise HandrigError(f"emulated bus stopped: {bus.error!r}")
-            if len(behind) > reported:
+            now = time.monotonic()
+            if len(behind) > reported and now - reported_at >= REPORT_EVERY_S:
+                # rate-limited: a parent that never reads stderr must not fill the pipe
                 _say(f"sim-bus: physics fell behind wall time {len(behind)} times "
                      f"({sum(behind) * 1000:.0f} ms skipped in all)", sys.stderr)
-                reported = len(behind)
+                reported, reported_at = len(behind), now
             if viewer is not None and puppet is not None:
                 with puppet.physics_lock:
                     viewer.sync()
