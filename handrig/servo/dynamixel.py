@@ -65,7 +65,9 @@ log = logging.getLogger("handrig.servo")
 
 BITS_PER_BYTE = 10  # 8N1 on the wire
 COMMAND_TIMEOUT_S = 0.05  # a single command's reply: RDT 0.5 ms + a 16 ms latency timer, ample
-COMMAND_ATTEMPTS = 3
+# Commissioning sends ~6 commands per servo: with 20 servos and one reply in five
+# lost, 3 attempts would fail a connect more often than not; 8 make it rare.
+COMMAND_ATTEMPTS = 8
 
 ReadFields = Literal["position", "motion"]
 # Contiguous control-table spans read each cycle: position only, or current+velocity+position.
@@ -376,7 +378,15 @@ class DynamixelBus(ServoBus):
                 )
             elif missing:
                 found = sorted(self._broadcast_ping())
-                problems.append(f"IDs answering {self._where()}: {found or 'none'}")
+                problems.append(f"IDs answering a broadcast ping {self._where()}: "
+                                f"{found or 'none'}")
+                flaky = [sid for sid in self.ids if sid in found and sid not in self.models]
+                if flaky:
+                    problems.append(
+                        f"servo(s) {flaky} answered the broadcast ping but not "
+                        f"{COMMAND_ATTEMPTS} pings of their own: the bus is unreliable "
+                        "(cable, termination, power, or a baud rate the adapter barely holds)"
+                    )
             raise DeviceError("; ".join(problems))
         notes.append(f"{self._n} servos answered {self._where()} with the expected models")
 
@@ -859,7 +869,14 @@ class DynamixelBus(ServoBus):
         """
         with self._lock:
             sid = self.ids[index]
-            self._command(index, INST_REBOOT, b"", "a reboot")
+            # One attempt only: a lost status must not send a second reboot to a
+            # servo that is already restarting (it would not answer that one either).
+            status = self._transact(build_instruction(sid, INST_REBOOT), sid, attempts=1)
+            if status is not None and status.error & 0x7F:
+                raise ServoFault(
+                    f"{self.describe(index)} refused a reboot: "
+                    f"{describe_status_error(status.error)}", servo_id=sid, bits=status.error,
+                )
             self._stats.reboots[index] += 1
             deadline = self.clock.now() + self.policy.reboot_wait_s
             while True:

@@ -89,7 +89,7 @@ def test_missing_servo_is_named_at_connect() -> None:
         msg = str(info.value)
         assert (f"servo 4 (riThumbMCPz) did not answer on {sim.port_path} at 1000000 baud: "
                 "check power and ID") in msg
-        assert "IDs answering" in msg and "[1, 2, 3, 5, 6]" in msg
+        assert "IDs answering a broadcast ping" in msg and "[1, 2, 3, 5, 6]" in msg
         assert "servo 3" not in msg
 
 
