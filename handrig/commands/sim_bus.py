@@ -47,6 +47,8 @@ def register(sub: Any) -> None:
     p.add_argument("--no-puppet", action="store_true",
                    help="no MuJoCo hand: servos move kinematically at their speed limit")
     p.add_argument("--viewer", action="store_true", help="show the puppet (needs a display)")
+    p.add_argument("--no-realtime", action="store_true",
+                   help="do not ask for SCHED_FIFO priority for the bus thread")
     p.set_defaults(func=run)
 
 
@@ -107,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
 
         puppet = Puppet(rig, on_behind=behind.append)
     bus = SimBus.from_rig(rig, ids=ids, model=args.model, puppet=puppet or False,
-                          wire_timing=args.wire_timing, faults=faults)
+                          wire_timing=args.wire_timing, faults=faults,
+                          realtime=not args.no_realtime)
     try:
         bus.start()
         print(f"port: {bus.port_path}", flush=True)

@@ -113,7 +113,7 @@ def test_faults_viewer_without_display_and_summary() -> None:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     proc = subprocess.Popen(
         [sys.executable, "-m", "handrig.cli", "sim-bus", "--ids", "1-3", "--no-puppet",
-         "--faults", "missing=2,drop=1,seed=1", "--viewer"],
+         "--faults", "missing=2,drop=1,seed=1", "--viewer", "--no-realtime"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )
     try:
