@@ -165,8 +165,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         "(glove frame read -> Sync Write handed to the OS)",
         f"overruns          {summary['overruns']} (max {summary['overrun_max_us']} us late, "
         f"{summary['missed_cycles']} cycles missed)",
-        f"limit clamps      {summary['limit_clamps']} servo targets held at their limits "
-        f"({summary['pose_clamps']} values of the full two-hand pose), "
+        f"limit clamps      {summary['limit_clamps']} servo targets held at a joint limit "
+        f"(end stop), {summary['pose_clamps']} values of the full two-hand pose; "
         f"{summary['bus_clamps']} goals clamped by the driver; slew-limited "
         f"{summary['slew_limited']}",
         f"glove             {glove.get('frames_ok', '-')} frames ok, "
