@@ -94,3 +94,35 @@ def test_bad_config_is_one_line(tmp_path):
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2
     assert "loop.rate_hz" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_run_sends_vmc_and_records_the_performance(tmp_path):
+    import socket
+
+    from handrig.outputs.recorder import load_performance
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(0.05)
+    port = rx.getsockname()[1]
+    take = tmp_path / "take.csv"
+    proc = subprocess.Popen(
+        [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim",
+         "--frames", "300", "--vmc", f"127.0.0.1:{port}", "--record", str(take), "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    bundles = 0
+    deadline = time.monotonic() + 90
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            data = rx.recv(65536)
+            bundles += data.startswith(b"#bundle")
+        except TimeoutError:
+            pass
+    out, err = proc.communicate(timeout=30)
+    rx.close()
+    assert proc.returncode == 0, err
+    assert json.loads(out)["torque_off"] is True
+    assert bundles > 30  # 1.5 s at the sender's 60 Hz
+    t, poses, wrist = load_performance(take)
+    assert len(t) == 300 and poses.shape == (300, 50) and wrist is not None
