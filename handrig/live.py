@@ -21,6 +21,7 @@ from handrig.app import RigParts, open_glove, port_process, summary_dict
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import DeviceError, HandrigError
 from handrig.glove import GloveSource
+from handrig.realtime import realtime_priority
 from handrig.rig import Rig
 from handrig.servo import DynamixelBus
 from handrig.servo.registers import Reg
@@ -136,7 +137,7 @@ def run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None = None) -> 
 
                 panel = LivePanel(rig)  # type: ignore[assignment]
             try:
-                with panel:
+                with panel, realtime_priority(rig_cfg.loop.realtime_priority, opts.log):
                     rig.run(frames=opts.frames, duration_s=opts.duration_s)
             except DeviceError as exc:
                 error = exc

@@ -134,6 +134,7 @@ class LoopConfig:
     sag_gain: float = 1.0  # 0 = no passive sag, 1 = the full baked sag
     left_hand: Literal["mirror", "map", "relaxed"] = "map"
     left_forearm_deg: tuple[float, float] = (-90.0, 0.0)  # no IMU there: assumed hanging
+    realtime_priority: int = 20  # SCHED_FIFO priority of the loop thread; 0 = normal
     map: str = ""
     sag_grid: str = ""
     glove: str = ""
@@ -146,6 +147,9 @@ class LoopConfig:
             value = getattr(self, name)
             if value <= 0:
                 raise ConfigError("must be positive", key=name, value=value)
+        if not 0 <= self.realtime_priority <= 99:
+            raise ConfigError("out of range", key="realtime_priority",
+                              value=self.realtime_priority, allowed="0 (off) or 1..99")
         if not 0.0 <= self.sag_gain <= 2.0:
             raise ConfigError("sag gain out of range", key="sag_gain", value=self.sag_gain,
                               allowed="0..2")
