@@ -21,6 +21,7 @@ an overload hardware error on chosen servos; every fault is counted in
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import random
 import select
@@ -32,12 +33,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import NamedTuple, Protocol
+from typing import Literal, NamedTuple, Protocol, cast
 
 from firmware_protocol.dynamixel import (
     BAUD_BY_INDEX,
     BROADCAST_ID,
     MAX_PACKET_LEN,
+    MODELS,
     ErrorCode,
     HardwareError,
     Instruction,
@@ -317,6 +319,8 @@ class SimBus:
         the calibrated servos drive; IDs without a calibration move kinematically.
         """
         config = rig if isinstance(rig, RigConfig) else load_rig_config(rig)
+        if model is not None:
+            config = with_model(config, model)
         servos = servos_from_rig(config, ids=ids, model=model)
         the_puppet: MotionModel | None
         if puppet is True:
@@ -775,6 +779,16 @@ class SimBus:
         if self.faults.any_reply_fault:
             packet, extra = self._apply_faults(packet, chunks[0][0], build)
         return [_Reply(packet, first_delay, extra)]
+
+
+def with_model(config: RigConfig, model: str) -> RigConfig:
+    """The rig with every servo of model ``model`` (servos and puppet must agree)."""
+    if model not in MODELS:
+        raise ConfigError("unknown servo model", key="model", value=model,
+                          allowed=", ".join(MODELS))
+    name = cast(Literal["XL330-M288", "XC330-T288", "XM430-W350"], model)
+    return dataclasses.replace(config, servos=tuple(
+        dataclasses.replace(s, model=name) for s in config.servos))
 
 
 def servos_from_rig(

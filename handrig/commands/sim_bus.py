@@ -80,7 +80,7 @@ def _has_display() -> bool:
 
 def run(args: argparse.Namespace) -> int:
     from firmware_protocol.dynamixel import MODELS
-    from sim.dxl_bus import FaultSpec, SimBus
+    from sim.dxl_bus import FaultSpec, SimBus, with_model
 
     rig = load_rig_config(args.rig)
     ids: list[int] | None = None
@@ -91,9 +91,11 @@ def run(args: argparse.Namespace) -> int:
         ids = list(range(1, args.servos + 1))
     elif args.ids:
         ids = parse_ids(args.ids)
-    if args.model is not None and args.model not in MODELS:
-        raise ConfigError("unknown servo model", file="--model", value=args.model,
-                          allowed=", ".join(MODELS))
+    if args.model is not None:
+        if args.model not in MODELS:
+            raise ConfigError("unknown servo model", file="--model", value=args.model,
+                              allowed=", ".join(MODELS))
+        rig = with_model(rig, args.model)
     faults = FaultSpec.parse(args.faults) if args.faults else None
 
     stop = threading.Event()

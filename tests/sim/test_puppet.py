@@ -127,3 +127,27 @@ def test_held_at_torque_limit_reports_overload_only_when_enabled() -> None:
         puppet.step(600)
         assert s.hardware_error == expect
         assert s.torque_enabled == (expect == 0)
+
+
+def test_from_rig_extra_ids_move_kinematically_and_model_override_reaches_the_puppet() -> None:
+    import time
+
+    from sim.dxl_bus import SimBus
+
+    rig = load_rig_config()
+    ids = [s.id for s in rig.servos] + [30]
+    with SimBus.from_rig(rig, ids=ids, model="XM430-W350", puppet=True) as bus:
+        assert bus.puppet is not None
+        assert sorted(bus.puppet.driven_ids) == sorted(s.id for s in rig.servos)
+        assert {s.info.name for s in bus.servos} == {"XM430-W350"}
+        assert isinstance(bus.puppet, Puppet)
+        hand = bus.puppet.hands["ri"]
+        # XM430-W350 stall torque 4.1 N m sets the actuators' force range
+        assert max(hand.model.actuator_forcerange[:, 1]) == pytest.approx(4.1)
+        extra = bus.servo(30)
+        with bus.lock:
+            _enable(extra, 2500)
+        end = time.monotonic() + 2.0
+        while extra.present != 2500 and time.monotonic() < end:
+            time.sleep(0.01)
+        assert extra.present == 2500
