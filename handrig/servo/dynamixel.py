@@ -97,8 +97,9 @@ class DynamixelBus(ServoBus):
     ``baud`` defaults to ``rig.bus.baud``; ``clock`` to :class:`MonotonicClock`.
     ``read_fields`` picks what each read fetches: ``"motion"`` (current, velocity
     and position, 10 bytes per servo) or ``"position"`` (4 bytes: the shortest
-    cycle). ``temperature_every`` adds a temperature read every that many state
-    reads (0: never). ``reply_timeout_s`` bounds the wait for one reply (default:
+    cycle). ``temperature_every`` adds a temperature read (one more Fast Sync
+    Read) every that many state reads, when the read's deadline leaves time for
+    it (0: never). ``reply_timeout_s`` bounds the wait for one reply (default:
     twice its wire time plus 2 ms); ``reply_gap_s`` ends a reply that stops
     flowing (default 1.5 ms plus 32 byte times). ``spin_s``: poll for a Fast Sync
     Read reply, instead of sleeping, from ``spin_s`` before until ``spin_s`` after
@@ -117,7 +118,7 @@ class DynamixelBus(ServoBus):
         clock: Clock | None = None,
         fault_policy: FaultPolicy | None = None,
         read_fields: ReadFields = "motion",
-        temperature_every: int = 0,
+        temperature_every: int = 100,
         reply_timeout_s: float | None = None,
         spin_s: float = 0.0,
         reply_gap_s: float | None = None,
@@ -132,6 +133,7 @@ class DynamixelBus(ServoBus):
         self.clock = clock or MonotonicClock()
         self.policy = fault_policy or FaultPolicy()
         self.temperature_every = int(temperature_every)
+        self._next_temperature_read = 0
         self._transport = SerialTransport(port, self.baud, self.clock)
         self._lock = threading.RLock()
 
@@ -184,6 +186,8 @@ class DynamixelBus(ServoBus):
             wire = wire_time_s(len(self._fsr_full) + self._reply_len_full, self.baud)
             reply_timeout_s = 2.0 * wire + 0.002
         self.reply_timeout_s = float(reply_timeout_s)
+        # a temperature Fast Sync Read: request 14 + N bytes, reply 8 + 5N
+        self._temperature_wire_s = wire_time_s(22 + 6 * n, self.baud) + 0.0005
         # a read's default budget is never shorter than one reply on the wire plus slack
         self._min_read_budget_s = 1.5 * wire_time_s(
             len(self._fsr_full) + self._reply_len_full, self.baud
@@ -419,12 +423,7 @@ class DynamixelBus(ServoBus):
         notes.append(
             "present state by " + ("Fast Sync Read" if self.use_fast_sync_read else "Sync Read")
         )
-        reading = self.read_state(self.clock.now() + 4 * COMMAND_TIMEOUT_S)
-        if reading.stale.any():
-            bad = [self.describe(int(i)) for i in np.flatnonzero(reading.stale)]
-            raise DeviceError(
-                f"no valid present position from {', '.join(bad)} {self._where()}"
-            )
+        self._read_every_servo("finish commissioning")
 
     def _ensure_status_return_level(self, index: int) -> None:
         """Status Return Level 2 (a status for every instruction), which the driver needs.
@@ -610,7 +609,12 @@ class DynamixelBus(ServoBus):
             if self._status_err.any():
                 for i in np.flatnonzero(self._status_err & ERR_ALERT):
                     self._hardware_alert(int(i))
-            if self.temperature_every and self._stats.reads % self.temperature_every == 0:
+            if (
+                self.temperature_every
+                and self._stats.reads >= self._next_temperature_read
+                and deadline_s - self.clock.now() > self._temperature_wire_s
+            ):
+                self._next_temperature_read = self._stats.reads + self.temperature_every
                 self._read_temperatures(deadline_s)
             worst = int(self._stale_run.argmax())
             if self._stale_run[worst] >= self.policy.max_stale_reads:
@@ -809,26 +813,54 @@ class DynamixelBus(ServoBus):
         self._pos_deg[target] = (pos - self._zero_ticks[target]) / self._ticks_per_deg[target]
 
     def _read_temperatures(self, deadline_s: float) -> None:
-        deadline = max(deadline_s, self.clock.now() + self.reply_timeout_s)
+        """Present Temperature of every servo (Fast Sync Read, or Sync Read after a fallback)."""
+        deadline = min(deadline_s, self._reply_deadline())
         t = self._transport
         reg = Reg.PRESENT_TEMPERATURE
         t.discard_input()
-        t.write(build_instruction(
-            BROADCAST_ID, INST_SYNC_READ, u16(reg.address) + u16(1) + bytes(self.ids)
+        if self.use_fast_sync_read:
+            self._send_request(build_instruction(
+                BROADCAST_ID, INST_FAST_SYNC_READ, u16(reg.address) + u16(1) + self._ids_bytes
+            ))
+            raw = t.read_exact(8 + 5 * self._n, deadline)
+            valid = self._valid
+            fast_sync_valid(raw, self.ids, 1, valid)
+            for i in range(self._n):
+                if valid[i] and not raw[8 + 5 * i] & 0x7F:
+                    self._temp_c[i] = raw[8 + 5 * i + 2]
+            if not all(valid):
+                self._stats.timeouts += 1
+            return
+        self._send_request(build_instruction(
+            BROADCAST_ID, INST_SYNC_READ, u16(reg.address) + u16(1) + self._ids_bytes
         ))
         for _ in range(self._n):
-            raw = t.read_packet(deadline)
-            if raw is None:
+            packet = t.read_packet(deadline)
+            if packet is None:
                 self._stats.timeouts += 1
                 return
             try:
-                status = parse_status(raw)
+                status = parse_status(packet)
             except ProtocolError:
                 self._stats.crc_errors += 1
                 continue
             index = self._index_of_id.get(status.servo_id)
             if index is not None and status.params:
                 self._temp_c[index] = status.params[0]
+
+    def _read_every_servo(self, purpose: str) -> ServoState:
+        """Read until every servo has given a valid reading (up to COMMAND_ATTEMPTS reads)."""
+        seen = np.zeros(self._n, bool)
+        for _ in range(COMMAND_ATTEMPTS):
+            state = self.read_state(self.clock.now() + 4 * COMMAND_TIMEOUT_S)
+            seen |= ~state.stale
+            if seen.all():
+                return state
+        bad = [self.describe(int(i)) for i in np.flatnonzero(~seen)]
+        raise DeviceError(
+            f"cannot {purpose}: no valid present position from {', '.join(bad)} "
+            f"{self._where()} in {COMMAND_ATTEMPTS} reads"
+        )
 
     # ------------------------------------------------------------------ faults
     def _hardware_alert(self, index: int) -> None:
@@ -938,13 +970,7 @@ class DynamixelBus(ServoBus):
         with self._lock:
             if not self._connected:
                 raise DeviceError(f"servo bus {self.port} is not connected: call connect()")
-            state = self.read_state(self.clock.now() + 4 * COMMAND_TIMEOUT_S)
-            if state.stale.any():
-                bad = [self.describe(int(i)) for i in np.flatnonzero(state.stale)]
-                raise DeviceError(
-                    f"cannot enable torque: no present position from {', '.join(bad)} "
-                    f"{self._where()}"
-                )
+            state = self._read_every_servo("enable torque")
             # hold where they are (clamped into the limits): no jump on torque-on
             self.write_goals_deg(state.positions_deg)
             self._torque_on = True

@@ -448,14 +448,21 @@ def test_signs_direction_gear_and_zero_read_back() -> None:
             b.close()
 
 
-def test_temperatures_read_when_asked(sim: SimBus) -> None:
-    b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, temperature_every=2)
+@pytest.mark.parametrize("fast", [True, False], ids=["fast", "sync"])
+def test_temperatures_read_every_so_often(sim: SimBus, fast: bool) -> None:
+    b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, temperature_every=3)
     b.connect()
     try:
-        state = b.read_state()
-        state = b.read_state()
+        b.use_fast_sync_read = fast
+        state = b.read_state(b.clock.now() + 0.05)
         assert np.all(np.isfinite(state.temperatures_c))
         assert np.all((state.temperatures_c > 0) & (state.temperatures_c < 100))
+        inst = 0x8A if fast else 0x82
+        before = sim.stats.by_instruction[inst]
+        for _ in range(3):
+            b.read_state(b.clock.now() + 0.05)
+        # three state reads and one temperature read (every third state read)
+        assert sim.stats.by_instruction[inst] - before == 4
     finally:
         b.close()
 
