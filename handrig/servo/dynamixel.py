@@ -664,7 +664,8 @@ class DynamixelBus(ServoBus):
     def _fast_sync_read(self, indices: np.ndarray, deadline: float) -> bool:
         t = self._transport
         n_req = len(indices)
-        if n_req == self._n:
+        full = indices is self._all_indices  # every servo, in rig order
+        if full:
             packet = self._fsr_full
             ids = self.ids
         else:
@@ -711,7 +712,7 @@ class DynamixelBus(ServoBus):
         raw = head + t.read_exact(
             min(total, expected) - 7, deadline, spin_from, self.reply_gap_s, spin_until
         )
-        if n_req == self._n and fast_sync_intact(raw, self._ids_bytes, self._read_len):
+        if full and fast_sync_intact(raw, self._ids_bytes, self._read_len):
             errs = np.frombuffer(raw[8:expected:block], np.uint8)
             if not (errs & 0x7F).any():
                 self._status_err[:] = errs
@@ -720,9 +721,11 @@ class DynamixelBus(ServoBus):
                 return True
         if len(raw) < expected:
             self._stats.timeouts += 1
+        m = min(n_req, (len(raw) - 8) // block)  # complete blocks received
+        if m <= 0:
+            return False
         valid = self._valid
         fast_sync_valid(raw, ids, self._read_len, valid)
-        m = min(n_req, (len(raw) - 8) // block)
         ok = np.array(valid[:m], dtype=bool)
         n_ok = int(ok.sum())
         if n_ok < m:
