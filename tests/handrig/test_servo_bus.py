@@ -214,7 +214,7 @@ def test_on_signal_callback_gets_first_signal(bus: DynamixelBus) -> None:
         (FaultSpec(corrupt=0.3, seed=2), "crc_errors"),
         (FaultSpec(wrong_id=0.3, seed=3), "stale"),
         (FaultSpec(truncate=0.3, seed=4), "timeouts"),
-        (FaultSpec(delay=0.3, delay_s=0.02, seed=5), "timeouts"),
+        (FaultSpec(delay=0.3, delay_s=0.012, seed=5), "timeouts"),
     ],
     ids=["drop", "corrupt", "wrong_id", "truncate", "delay"],
 )
@@ -241,7 +241,7 @@ def test_reply_faults_counted_marked_stale_never_out_of_limits(
     st = bus.stats
     injected = sum(sim.fault_counts.values())
     assert injected > 10
-    assert fresh_reads > 50
+    assert fresh_reads > 30
     if counter == "stale":
         assert stale_reads > 0 or st.retries > 0
     else:
