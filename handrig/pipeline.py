@@ -16,6 +16,7 @@ This module imports no device code (no serial, dynamixel_sdk or mujoco).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Literal, Protocol
 
@@ -41,8 +42,15 @@ def pose_index(name: str) -> int:
         raise
 
 
+class MapLike(Protocol):
+    gains: FloatArray  # (50, k)
+    curve_means_deg: FloatArray  # (50,)
+    control_means_deg: FloatArray  # (k,)
+
+
 class ExpanderLike(Protocol):
     controls: tuple[str, ...]
+    map: MapLike
 
     def expand(self, controls_deg: FloatArray, out: FloatArray | None = None) -> FloatArray: ...
 
@@ -52,6 +60,10 @@ class SagLike(Protocol):
     rest_deg: FloatArray
 
     def lookup(
+        self, inclination_deg: float, rotation_deg: float, out: FloatArray | None = None
+    ) -> FloatArray: ...
+
+    def offsets(
         self, inclination_deg: float, rotation_deg: float, out: FloatArray | None = None
     ) -> FloatArray: ...
 
@@ -140,6 +152,58 @@ class PosePipeline:
         self.servo_clamps = 0  # servo targets that needed clamping, cumulative
         self.slewed = 0  # servo targets held back by the slew limit, cumulative
         self.rejected = 0  # non-finite targets replaced by the last good one, cumulative
+        self._build_servo_path()
+
+    def _build_servo_path(self) -> None:
+        """Precompose the servo joints' targets as one affine map of the controls, plus the
+        right forearm's sag offsets (the left forearm's are constant: no IMU there).
+
+        ``targets = controls @ A + b + gain * offsets[sag_slot]`` then one clamp to the
+        joint and servo limits. The expander clamps each curve before sag is added; this
+        path clamps once after, which differs only where a curve leaves its limits and
+        sag brings it back: the end result is inside the limits either way.
+        """
+        m = self.expander.map
+        gains = np.asarray(m.gains, dtype=np.float64)
+        bias = np.asarray(m.curve_means_deg, dtype=np.float64) - gains @ np.asarray(
+            m.control_means_deg, dtype=np.float64)
+        n, k = len(self.servo_joints), gains.shape[1]
+        a = np.zeros((k, n))
+        b = np.zeros(n)
+        slot = np.full(n, hand.DOFS_PER_HAND, dtype=np.intp)  # index 23 = a zero offset
+        left_const = np.zeros(hand.DOFS_PER_HAND)
+        left_rest = np.zeros(hand.DOFS_PER_HAND)
+        left_grid = self._grids.get("le")
+        if left_grid is not None and self.left_hand != "mirror":
+            left_grid.offsets(*self.left_forearm_deg, out=left_const)
+            left_rest[:] = left_grid.rest_deg
+        for j, name in enumerate(self.servo_joints):
+            i = pose_index(name)
+            h = hand.hand_of(name)
+            if i < 50:
+                src = i
+                if h == "le" and self.left_hand == "mirror":
+                    src = hand.curve_index(hand.mirror_name(name))
+                if not (h == "le" and self.left_hand == "relaxed"):
+                    a[:, j] = gains[src]
+                    b[j] = bias[src]
+            if h not in self.sag_index:
+                continue
+            hits = np.flatnonzero(self.sag_index[h] == i)
+            if not len(hits):
+                continue  # finger twist: no DOF in the relaxed-hand model
+            d = int(hits[0])
+            if h == "ri" or self.left_hand == "mirror":
+                slot[j] = d
+            else:
+                b[j] += self.sag_gain * left_const[d]
+                if self.left_hand == "relaxed":
+                    b[j] += left_rest[d]
+        self._servo_a = np.ascontiguousarray(a)
+        self._servo_b = b
+        self._servo_slot = slot
+        self._sag24 = np.zeros(hand.DOFS_PER_HAND + 1)
+        self._sag_servo = np.zeros(n)
 
     # -- pieces ---------------------------------------------------------------------------
     def _add_sag(self, pose: FloatArray, h: str, inclination_deg: float,
@@ -213,6 +277,55 @@ class PosePipeline:
         np.clip(self._step, -max_step, max_step, out=self._step)
         self.targets += self._step
         return self.targets
+
+    def servo_targets(
+        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, dt_s: float
+    ) -> FloatArray:
+        """The servo targets only (degrees, bus order): the short path the loop runs
+        between reading a glove frame and handing the Sync Write to the OS. Call
+        :meth:`account` afterwards for the full pose (outputs) and the statistics."""
+        raw = self._raw_targets
+        np.dot(controls_deg, self._servo_a, out=raw)
+        raw += self._servo_b
+        grid = self._grids.get("ri")
+        if grid is not None:
+            grid.offsets(inclination_deg, rotation_deg, out=self._sag24[:23])
+            np.take(self._sag24, self._servo_slot, out=self._sag_servo)
+            if self.sag_gain != 1.0:
+                self._sag_servo *= self.sag_gain
+            raw += self._sag_servo
+        np.clip(raw, self.servo_low, self.servo_high, out=raw)
+        if not math.isfinite(raw.sum()):  # a NaN never reaches a servo
+            bad = ~np.isfinite(raw)
+            self.rejected += int(bad.sum())
+            fallback = self.targets if self._has_targets else 0.5 * (
+                self.servo_low + self.servo_high)
+            np.copyto(raw, fallback, where=bad)
+        if not self._has_targets:
+            self.targets[:] = raw
+            self._has_targets = True
+            return self.targets
+        step = self._step
+        np.subtract(raw, self.targets, out=step)
+        limit = self.slew_deg_s * max(dt_s, 0.0)
+        np.clip(step, -limit, limit, out=step)
+        self.targets += step
+        return self.targets
+
+    def account(
+        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float
+    ) -> FloatArray:
+        """After the write: the full 54-vector pose, clamped (for outputs), and the
+        clamp and slew counters for this cycle."""
+        pose = self.full_pose(controls_deg, inclination_deg, rotation_deg)
+        np.take(pose, self.servo_index, out=self._step)
+        self.servo_clamps += int(np.count_nonzero(
+            (self._step < self.servo_low) | (self._step > self.servo_high)))
+        np.clip(pose, self.pose_low, self.pose_high, out=self._clamped_pose)
+        self.clamps += int(np.count_nonzero(self._clamped_pose != pose))
+        self.slewed += int(np.count_nonzero(np.abs(self._raw_targets - self.targets) > 1e-9))
+        pose[:] = self._clamped_pose
+        return pose
 
     def step(
         self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, dt_s: float

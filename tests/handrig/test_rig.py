@@ -223,3 +223,27 @@ def test_lost_servo_port_stops_with_the_message(parts_factory):
     with pytest.raises(DeviceError, match="went away"):
         rig.run(frames=100)
     assert rig.stats.frames == 30 and "went away" in rig.stats.stop_reason
+
+
+def test_servo_fast_path_equals_the_full_pipeline(parts_factory):
+    """servo_targets (precomposed, before the write) == targets of the full pose."""
+    parts = parts_factory()
+    pl = parts.pipeline
+    rng = np.random.default_rng(3)
+    means = parts.expander.control_means_deg
+    compared = 0
+    for _ in range(200):
+        c = means + rng.normal(scale=4.0, size=len(means))
+        inc, rot = rng.uniform(-89, 89), rng.uniform(-180, 180)
+        pose = pl.full_pose(c, inc, rot).copy()
+        expanded = parts.expander.expand(c)
+        unclamped = parts.expander.map.curve_means_deg + parts.expander.map.gains @ (
+            c - parts.expander.map.control_means_deg)
+        if not np.allclose(expanded, unclamped):
+            continue  # the expander clamped a curve before sag: paths may differ there
+        pl._has_targets = False
+        fast = pl.servo_targets(c, inc, rot, 0.005).copy()
+        want = np.clip(pose[pl.servo_index], pl.servo_low, pl.servo_high)
+        np.testing.assert_allclose(fast, want, atol=1e-9)
+        compared += 1
+    assert compared >= 50
