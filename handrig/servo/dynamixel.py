@@ -49,6 +49,7 @@ from handrig.servo.packets import (
     warm_up,
 )
 from handrig.servo.registers import (
+    BUS_WATCHDOG_TRIPPED,
     BUS_WATCHDOG_UNIT_MS,
     CURRENT_MA_PER_UNIT,
     ERR_ALERT,
@@ -97,9 +98,10 @@ class DynamixelBus(ServoBus):
     ``baud`` defaults to ``rig.bus.baud``; ``clock`` to :class:`MonotonicClock`.
     ``read_fields`` picks what each read fetches: ``"motion"`` (current, velocity
     and position, 10 bytes per servo) or ``"position"`` (4 bytes: the shortest
-    cycle). ``temperature_every`` adds a temperature read (one more Fast Sync
-    Read) every that many state reads, when the read's deadline leaves time for
-    it (0: never). ``reply_timeout_s`` bounds the wait for one reply (default:
+    cycle). ``temperature_every``: every that many state reads, when the read's
+    deadline leaves time, one more Fast Sync Read fetches the temperatures and,
+    with torque on, another checks the Bus Watchdogs and re-arms any that
+    tripped (0: never). ``reply_timeout_s`` bounds the wait for one reply (default:
     twice its wire time plus 2 ms); ``reply_gap_s`` ends a reply that stops
     flowing (default 1.5 ms plus 32 byte times). ``spin_s``: poll for a Fast Sync
     Read reply, instead of sleeping, from ``spin_s`` before until ``spin_s`` after
@@ -323,7 +325,7 @@ class DynamixelBus(ServoBus):
         params = u16(reg.address) + u16(reg.size) + b"".join(
             bytes((sid,)) + reg.encode(v) for sid, v in zip(self.ids, values, strict=True)
         )
-        self._transport.write(build_instruction(BROADCAST_ID, INST_SYNC_WRITE, params))
+        self._send_request(build_instruction(BROADCAST_ID, INST_SYNC_WRITE, params))
 
     def _hw_alert(self, index: int) -> None:
         """Remember that servo ``index`` raised its Alert bit (handled after the read)."""
@@ -615,7 +617,7 @@ class DynamixelBus(ServoBus):
                 and deadline_s - self.clock.now() > self._temperature_wire_s
             ):
                 self._next_temperature_read = self._stats.reads + self.temperature_every
-                self._read_temperatures(deadline_s)
+                self._housekeeping(deadline_s)
             worst = int(self._stale_run.argmax())
             if self._stale_run[worst] >= self.policy.max_stale_reads:
                 raise DeviceTimeoutError(
@@ -815,41 +817,58 @@ class DynamixelBus(ServoBus):
             self._vel_dps[target] = vel * self._dps_per_unit[target]
         self._pos_deg[target] = (pos - self._zero_ticks[target]) / self._ticks_per_deg[target]
 
-    def _read_temperatures(self, deadline_s: float) -> None:
-        """Present Temperature of every servo (Fast Sync Read, or Sync Read after a fallback)."""
+    def _read_byte_register(self, reg: Reg, deadline_s: float) -> list[int | None]:
+        """A one-byte item of every servo (Fast Sync Read, or Sync Read after a fallback);
+        None for a servo without a valid reply."""
         deadline = min(deadline_s, self._reply_deadline())
         t = self._transport
-        reg = Reg.PRESENT_TEMPERATURE
+        out: list[int | None] = [None] * self._n
         t.discard_input()
+        params = u16(reg.address) + u16(1) + self._ids_bytes
         if self.use_fast_sync_read:
-            self._send_request(build_instruction(
-                BROADCAST_ID, INST_FAST_SYNC_READ, u16(reg.address) + u16(1) + self._ids_bytes
-            ))
-            raw = t.read_exact(8 + 5 * self._n, deadline)
+            self._send_request(build_instruction(BROADCAST_ID, INST_FAST_SYNC_READ, params))
+            raw = t.read_exact(8 + 5 * self._n, deadline, gap_s=self.reply_gap_s)
             valid = self._valid
             fast_sync_valid(raw, self.ids, 1, valid)
             for i in range(self._n):
                 if valid[i] and not raw[8 + 5 * i] & 0x7F:
-                    self._temp_c[i] = raw[8 + 5 * i + 2]
-            if not all(valid):
-                self._stats.timeouts += 1
-            return
-        self._send_request(build_instruction(
-            BROADCAST_ID, INST_SYNC_READ, u16(reg.address) + u16(1) + self._ids_bytes
-        ))
-        for _ in range(self._n):
-            packet = t.read_packet(deadline)
-            if packet is None:
-                self._stats.timeouts += 1
-                return
-            try:
-                status = parse_status(packet)
-            except ProtocolError:
-                self._stats.crc_errors += 1
-                continue
-            index = self._index_of_id.get(status.servo_id)
-            if index is not None and status.params:
-                self._temp_c[index] = status.params[0]
+                    out[i] = reg.decode(raw[8 + 5 * i + 2 : 8 + 5 * i + 3])
+        else:
+            self._send_request(build_instruction(BROADCAST_ID, INST_SYNC_READ, params))
+            for _ in range(self._n):
+                packet = t.read_packet(deadline)
+                if packet is None:
+                    break
+                try:
+                    status = parse_status(packet)
+                except ProtocolError:
+                    self._stats.crc_errors += 1
+                    continue
+                index = self._index_of_id.get(status.servo_id)
+                if index is not None and status.params and not status.error & 0x7F:
+                    out[index] = reg.decode(status.params[:1])
+        if None in out:
+            self._stats.timeouts += 1
+        return out
+
+    def _housekeeping(self, deadline_s: float) -> None:
+        """Temperatures and, with torque on, the Bus Watchdogs (re-armed if one tripped)."""
+        for i, value in enumerate(self._read_byte_register(Reg.PRESENT_TEMPERATURE, deadline_s)):
+            if value is not None:
+                self._temp_c[i] = value
+        if self._torque_on and self.rig.bus.watchdog_ms and (
+            deadline_s - self.clock.now() > self._temperature_wire_s
+        ):
+            watchdogs = self._read_byte_register(Reg.BUS_WATCHDOG, deadline_s)
+            tripped = [i for i, v in enumerate(watchdogs) if v == BUS_WATCHDOG_TRIPPED]
+            if tripped:
+                self._stats.watchdog_trips += len(tripped)
+                log.warning(
+                    "Bus Watchdog tripped on %s (the bus was quiet for more than %d ms): "
+                    "re-arming", ", ".join(self.describe(i) for i in tripped),
+                    self.rig.bus.watchdog_ms,
+                )
+                self._arm_watchdog()
 
     def _read_every_servo(self, purpose: str) -> ServoState:
         """Read until every servo has given a valid reading (up to COMMAND_ATTEMPTS reads)."""
@@ -963,11 +982,30 @@ class DynamixelBus(ServoBus):
         return _TorqueContext(self, handle_signals, on_signal)
 
     def _arm_watchdog(self) -> None:
+        """Bus Watchdog to ``rig.bus.watchdog_ms`` on every servo at once, then checked.
+
+        Broadcast Sync Writes reach every servo in one packet (servo by servo, the
+        first ones armed could trip while a lossy bus delays the last); 0 first
+        clears a tripped watchdog (-1). Servos not confirmed get checked writes.
+        """
         units = self.rig.bus.watchdog_ms // BUS_WATCHDOG_UNIT_MS
-        for i in range(self._n):
-            self.write_register(i, Reg.BUS_WATCHDOG, 0)  # clears a tripped watchdog (-1)
-            if units:
-                self.write_register(i, Reg.BUS_WATCHDOG, units)
+        self._sync_write(Reg.BUS_WATCHDOG, [0] * self._n)
+        if units:
+            self._sync_write(Reg.BUS_WATCHDOG, [units] * self._n)
+        for _ in range(COMMAND_ATTEMPTS):
+            values = self._read_byte_register(
+                Reg.BUS_WATCHDOG, self.clock.now() + COMMAND_TIMEOUT_S
+            )
+            if all(v is not None for v in values):
+                break
+        for i, value in enumerate(values):
+            if value != units:
+                if value is not None:  # answered with another value: set it explicitly
+                    self.write_register(i, Reg.BUS_WATCHDOG, 0)
+                    if units:
+                        self.write_register(i, Reg.BUS_WATCHDOG, units)
+                else:
+                    self.write_register(i, Reg.BUS_WATCHDOG, units)
 
     def _enable_torque(self) -> None:
         with self._lock:

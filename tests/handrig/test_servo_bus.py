@@ -548,3 +548,26 @@ def test_fresh_readings_are_true_under_faults() -> None:
             assert fresh > 1000 and b.stats.retries > 10
         finally:
             b.close()
+
+
+def test_tripped_watchdog_found_and_rearmed(sim: SimBus) -> None:
+    rig = small_rig()
+    b = DynamixelBus(sim.port_path, rig, baud=1_000_000, temperature_every=1)
+    b.connect()
+    try:
+        with b.torque():
+            time.sleep(0.3)  # the host "hangs": every servo's watchdog (100 ms) trips
+            assert all(sim.servo(s.id).get(SimReg.BUS_WATCHDOG) in (-1, 0xFF) for s in rig.servos)
+            b.read_state(b.clock.now() + 0.05)
+            assert b.stats.watchdog_trips == 6
+            assert all(sim.servo(s.id).get(SimReg.BUS_WATCHDOG) == 5 for s in rig.servos)
+            goals = np.array([0.5 * s.max_deg for s in rig.servos])
+            b.write_goals_deg(goals)
+            want = [s.deg_to_ticks(float(g)) for s, g in zip(rig.servos, goals, strict=True)]
+            for _ in range(100):
+                if goals_received(sim, rig).tolist() == want:
+                    break
+                time.sleep(0.01)
+            assert goals_received(sim, rig).tolist() == want  # goals accepted again
+    finally:
+        b.close()
