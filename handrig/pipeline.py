@@ -43,14 +43,21 @@ def pose_index(name: str) -> int:
 
 
 class MapLike(Protocol):
-    gains: FloatArray  # (50, k)
-    curve_means_deg: FloatArray  # (50,)
-    control_means_deg: FloatArray  # (k,)
+    @property
+    def gains(self) -> FloatArray: ...  # (50, k)
+
+    @property
+    def curve_means_deg(self) -> FloatArray: ...  # (50,)
+
+    @property
+    def control_means_deg(self) -> FloatArray: ...  # (k,)
 
 
 class ExpanderLike(Protocol):
     controls: tuple[str, ...]
-    map: MapLike
+
+    @property
+    def map(self) -> MapLike: ...
 
     def expand(self, controls_deg: FloatArray, out: FloatArray | None = None) -> FloatArray: ...
 
