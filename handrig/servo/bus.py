@@ -57,6 +57,7 @@ class BusStats:
     clamps: int = 0  # goal values clamped into a servo's limits (incl. NaN replaced)
     fallbacks: int = 0  # switches from Fast Sync Read to plain Sync Read
     watchdog_trips: int = 0  # servos found with a tripped Bus Watchdog (then re-armed)
+    late_replies: int = 0  # intact replies to an earlier read, recognised and dropped
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -70,7 +71,7 @@ class BusStats:
         return BusStats(
             self.n_servos, self.writes, self.reads, self.retries, self.timeouts,
             self.crc_errors, self.malformed, self.status_errors, self.clamps, self.fallbacks,
-            self.watchdog_trips,
+            self.watchdog_trips, self.late_replies,
             self.stale_readings.copy(), self.hardware_errors.copy(), self.reboots.copy(),
         )
 
@@ -80,7 +81,8 @@ class BusStats:
             f"writes {self.writes}, reads {self.reads}, retries {self.retries}, "
             f"timeouts {self.timeouts}, crc errors {self.crc_errors}, malformed "
             f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
-            f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, stale readings "
+            f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
+            f"{self.late_replies}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )

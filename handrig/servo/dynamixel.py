@@ -65,6 +65,7 @@ from handrig.servo.transport import SerialTransport
 log = logging.getLogger("handrig.servo")
 
 BITS_PER_BYTE = 10  # 8N1 on the wire
+ORDERS = 64  # servo orders a Fast Sync Read cycles through (late replies are told apart)
 COMMAND_TIMEOUT_S = 0.05  # a single command's reply: RDT 0.5 ms + a 16 ms latency timer, ample
 # Commissioning sends ~6 commands per servo: with 20 servos and one reply in five
 # lost, 3 attempts would fail a connect more often than not; 8 make it rare.
@@ -179,10 +180,30 @@ class DynamixelBus(ServoBus):
         # -- present-state read
         self.read_fields: ReadFields = read_fields
         self._read_addr, self._read_len = _READ_SPANS[read_fields]
-        self._fsr_full = build_instruction(
-            BROADCAST_ID, INST_FAST_SYNC_READ,
-            u16(self._read_addr) + u16(self._read_len) + bytes(self.ids),
-        )
+        # Each read asks for the servos in another order (up to ORDERS of them, rig
+        # order first): a reply arriving after its read gave up names the servos in
+        # its own order and is recognised as late instead of being taken for a later
+        # read's (Protocol 2.0 has no sequence numbers). Only a reply a multiple of
+        # len(self._orders) reads late could pass.
+        self._orders: list[tuple[np.ndarray, tuple[int, ...], bytes, bytes]] = []
+        seen_orders: set[bytes] = set()
+        rng = np.random.default_rng(0)
+        candidates = [np.roll(np.arange(n), -r) for r in range(n)]
+        for attempt in range(4 * ORDERS):
+            if len(self._orders) >= ORDERS:
+                break
+            idx = candidates[attempt] if attempt < n else rng.permutation(n)
+            ids = tuple(self.ids[int(i)] for i in idx)
+            if bytes(ids) in seen_orders:
+                continue
+            seen_orders.add(bytes(ids))
+            self._orders.append((idx, ids, bytes(ids), build_instruction(
+                BROADCAST_ID, INST_FAST_SYNC_READ,
+                u16(self._read_addr) + u16(self._read_len) + bytes(ids),
+            )))
+        self._order_of = {id(o[0]): k for k, o in enumerate(self._orders)}
+        self._order_ids = {o[2] for o in self._orders}
+        self._fsr_full = self._orders[0][3]
         self._reply_len_full = 8 + (self._read_len + 4) * n
         if reply_timeout_s is None:
             wire = wire_time_s(len(self._fsr_full) + self._reply_len_full, self.baud)
@@ -206,7 +227,7 @@ class DynamixelBus(ServoBus):
         self._pending_tx = b""  # a goal Sync Write to send with the next request
         self.use_fast_sync_read = True
         self._fast_fail_run = 0
-        self._all_indices = np.arange(n)
+        self._all_indices = self._orders[0][0]
         self._valid = [False] * n
         self._ids_bytes = bytes(self.ids)
         self._all_fresh = np.ones(n, bool)
@@ -586,7 +607,7 @@ class DynamixelBus(ServoBus):
             fresh[:] = False
             self._status_err[:] = 0
             self._hw_err[:] = 0
-            pending = self._all_indices
+            pending = self._orders[self._stats.reads % len(self._orders)][0]
             for attempt in range(self.policy.read_retries + 1):
                 if attempt:
                     if self.clock.now() >= deadline_s:
@@ -596,8 +617,8 @@ class DynamixelBus(ServoBus):
                 if fresh.all():
                     break
                 # A Fast Sync Read reply stops at the first servo that does not answer:
-                # ask the rest first, the one where it stopped last.
-                pending = np.roll(np.flatnonzero(~fresh), -1)
+                # ask the rest (in the order just asked) first, the one where it stopped last.
+                pending = np.roll(pending[~fresh[pending]], -1)
             now = self.clock.now()
             stale = ~fresh
             if fresh.all():
@@ -666,15 +687,15 @@ class DynamixelBus(ServoBus):
     def _fast_sync_read(self, indices: np.ndarray, deadline: float) -> bool:
         t = self._transport
         n_req = len(indices)
-        full = indices is self._all_indices  # every servo, in rig order
-        if full:
-            packet = self._fsr_full
-            ids = self.ids
+        order = self._order_of.get(id(indices))  # every servo, in a precomputed order
+        if order is not None:
+            _, ids, ids_bytes, packet = self._orders[order]
         else:
             ids = tuple(self.ids[int(i)] for i in indices)
+            ids_bytes = bytes(ids)
             packet = build_instruction(
                 BROADCAST_ID, INST_FAST_SYNC_READ,
-                u16(self._read_addr) + u16(self._read_len) + bytes(ids),
+                u16(self._read_addr) + u16(self._read_len) + ids_bytes,
             )
         block = self._read_len + 4
         expected = 8 + block * n_req
@@ -714,11 +735,30 @@ class DynamixelBus(ServoBus):
         raw = head + t.read_exact(
             min(total, expected) - 7, deadline, spin_from, self.reply_gap_s, spin_until
         )
-        if full and fast_sync_intact(raw, self._ids_bytes, self._read_len):
+        # A reply whose blocks name other servos, or ours in another order, is not the
+        # reply to this request: an intact one is a late reply to an earlier read
+        # (dropped; the one asked for may follow), anything else is rejected whole.
+        for _ in range(4):
+            m = min(n_req, (len(raw) - 8) // block)
+            named = raw[9 : 8 + m * block : block]
+            if m <= 0 or named == ids_bytes[:m]:
+                break
+            if (
+                len(raw) == expected and sorted(named) == sorted(ids_bytes)
+                and fast_sync_intact(raw, named, self._read_len)
+            ):
+                self._stats.late_replies += 1
+                raw = t.read_exact(expected, deadline, gap_s=self.reply_gap_s)
+                continue
+            self._stats.malformed += 1
+            return False
+        else:
+            return False
+        if order is not None and fast_sync_intact(raw, ids_bytes, self._read_len):
             errs = np.frombuffer(raw[8:expected:block], np.uint8)
             if not (errs & 0x7F).any():
-                self._status_err[:] = errs
-                self._decode_whole(raw)
+                self._status_err[indices] = errs
+                self._decode_whole(raw, order)
                 self._fresh[:] = True
                 return True
         if len(raw) < expected:
@@ -787,14 +827,25 @@ class DynamixelBus(ServoBus):
         self._fresh[target] = True
         return True
 
-    def _decode_whole(self, raw: bytes) -> None:
-        """Readings of every servo from an intact Fast Sync Read reply (strided views)."""
+    def _decode_whole(self, raw: bytes, order: int) -> None:
+        """Readings of every servo from an intact Fast Sync Read reply (strided views);
+        block ``i`` holds servo ``self._orders[order][0][i]``."""
         block = self._read_len + 4
         n = self._n
 
         def field(offset: int, dtype: str) -> np.ndarray:
             return np.ndarray((n,), dtype, raw, 10 + offset, (block,))
 
+        if order:
+            idx = self._orders[order][0]
+            if self.read_fields == "position":
+                pos = field(0, "<i4")
+            else:
+                self._cur_ma[idx] = field(0, "<i2") * self._current_ma_per_unit[idx]
+                self._vel_dps[idx] = field(2, "<i4") * self._dps_per_unit[idx]
+                pos = field(6, "<i4")
+            self._pos_deg[idx] = (pos - self._zero_ticks[idx]) / self._ticks_per_deg[idx]
+            return
         if self.read_fields == "position":
             pos = field(0, "<i4")
         else:

@@ -214,7 +214,7 @@ def test_on_signal_callback_gets_first_signal(bus: DynamixelBus) -> None:
         (FaultSpec(corrupt=0.3, seed=2), "crc_errors"),
         (FaultSpec(wrong_id=0.3, seed=3), "stale"),
         (FaultSpec(truncate=0.3, seed=4), "timeouts"),
-        (FaultSpec(delay=0.3, delay_s=0.012, seed=5), "timeouts"),
+        (FaultSpec(delay=0.1, delay_s=0.012, seed=5), "timeouts"),
     ],
     ids=["drop", "corrupt", "wrong_id", "truncate", "delay"],
 )
@@ -534,8 +534,9 @@ def test_fresh_readings_are_true_under_faults() -> None:
         b.connect()
         try:
             # distinct positions per servo, so a reading given to the wrong servo shows
-            for k, s in enumerate(rig.servos):
-                sim.servo(s.id).set_motion(s.zero_ticks + 7.0 * (k + 1), 0.0, 0.0)
+            with sim.lock:
+                for k, s in enumerate(rig.servos):
+                    sim.servo(s.id).set_motion(s.zero_ticks + 7.0 * (k + 1), 0.0, 0.0)
             sim.faults = spec
             fresh = 0
             for _ in range(200):
@@ -571,3 +572,32 @@ def test_tripped_watchdog_found_and_rearmed(sim: SimBus) -> None:
             assert goals_received(sim, rig).tolist() == want  # goals accepted again
     finally:
         b.close()
+
+
+def test_late_replies_are_never_taken_for_a_later_read() -> None:
+    """A reply delayed past its read's deadline arrives during the next read: dropped."""
+    rig = small_rig()
+    with SimBus.from_rig(rig) as sim:
+        # no retries: one request per read, so the emulator (which answers in turn,
+        # sleeping through each delayed reply) never builds a queue
+        b = DynamixelBus(sim.port_path, rig, baud=1_000_000,
+                         fault_policy=FaultPolicy(read_retries=0))
+        b.connect()
+        try:
+            sim.faults = FaultSpec(delay=0.15, delay_s=0.006, seed=4)
+            fresh = 0
+            for k in range(120):
+                # new, distinct positions before every read: an old reply would show
+                with sim.lock:  # the emulator thread moves its servos under this lock
+                    for j, s in enumerate(rig.servos):
+                        sim.servo(s.id).set_motion(s.zero_ticks + 5.0 * j + (k % 40), 0.0, 0.0)
+                state = b.read_state(b.clock.now() + 0.004)
+                true = np.array([s.ticks_to_deg(sim.servo(s.id).present) for s in rig.servos])
+                ok = ~state.stale
+                np.testing.assert_allclose(state.positions_deg[ok], true[ok], atol=1e-9)
+                fresh += int(ok.any())
+                time.sleep(0.001)  # the next read starts before the late reply arrives
+            sim.faults = FaultSpec()
+            assert b.stats.late_replies > 0 and fresh > 60
+        finally:
+            b.close()
