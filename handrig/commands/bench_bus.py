@@ -2,12 +2,14 @@
 
 Runs the emulated bus (``sim.dxl_bus.SimBus``, wire timing on) in a separate
 process, so its host time does not share this process's interpreter, then runs
-the same cycle three ways on it: :class:`~handrig.servo.DynamixelBus`; the plain
-way most projects write it (dynamixel-sdk ``GroupSyncWrite`` + ``GroupSyncRead``
-with the SDK's default timeouts); and the SDK's own Fast Sync Read. Prints cycles
-per second, the wire-time limit for that baud and servo count (REFERENCE.md
-section 3), their ratio, and host CPU time per cycle (``time.process_time`` of
-this process only).
+the same cycle four ways on it: :class:`~handrig.servo.DynamixelBus` as the loop
+calls it (``write_goals_deg`` + ``read_state``) and with ``write_and_read``; the
+plain way most projects write it (dynamixel-sdk ``GroupSyncWrite`` +
+``GroupSyncRead`` with the SDK's default timeouts); and the SDK's own Fast Sync
+Read. Prints cycles per second, the wire-time limit for that baud and servo
+count (REFERENCE.md section 3), their ratio, the median cycle, and host CPU time
+per cycle (``time.process_time`` of this process only); then the same cycle with
+wire timing off, which is the host's share (driver, emulator, pty wake-ups).
 """
 
 from __future__ import annotations

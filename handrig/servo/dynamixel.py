@@ -5,8 +5,10 @@ monotonic clock instead of the 34 ms busy-wait; each servo's ERR byte kept from
 a Fast Sync Read, whose per-servo running CRCs are checked so a truncated or
 partly corrupted reply still yields the servos before the damage; no crash on a
 malformed or short reply; a lock instead of the ``is_using`` flag; stale
-readings marked; faults counted, decoded and handled by a :class:`FaultPolicy`;
-torque only inside :meth:`DynamixelBus.torque`, with the Bus Watchdog armed.
+readings marked; a reply arriving after its read gave up recognised (each read
+asks for the servos in another order) and never taken for a later read's; faults
+counted, decoded and handled by a :class:`FaultPolicy`; torque only inside
+:meth:`DynamixelBus.torque`, with the Bus Watchdog armed, checked and re-armed.
 
 Units: see :mod:`handrig.servo.bus`. Goal positions go out as ticks
 (``RigConfig`` calibration) and are clamped to each servo's ``[min_deg, max_deg]``
