@@ -227,6 +227,7 @@ class DynamixelBus(ServoBus):
         self._byte_s = BITS_PER_BYTE / self.baud
         self._bus_free_at = -np.inf  # when the wire is expected to be quiet again
         self._pending_tx = b""  # a goal Sync Write to send with the next request
+        self._line_dirty = False  # a reply failed: let the line go quiet before the next
         self.use_fast_sync_read = True
         self._fast_fail_run = 0
         self._all_indices = self._orders[0][0]
@@ -280,36 +281,61 @@ class DynamixelBus(ServoBus):
     # ------------------------------------------------------------------ low level
     def _transact(
         self, packet: bytes, servo_id: int, *, timeout_s: float = COMMAND_TIMEOUT_S,
-        attempts: int = COMMAND_ATTEMPTS,
+        attempts: int = COMMAND_ATTEMPTS, n_params: int | None = None,
     ) -> StatusPacket | None:
-        """Send ``packet`` and return ``servo_id``'s status reply, or None after ``attempts``."""
+        """Send ``packet`` and return ``servo_id``'s status reply, or None after ``attempts``.
+
+        ``n_params``: the reply's parameter count when it succeeds (a status with
+        another count and no error is a reply to something else, e.g. late).
+        """
         t = self._transport
         for attempt in range(attempts):
             if attempt:
                 self._stats.retries += 1
-            t.discard_input()
+            self._quiet_line()
             t.write(packet)
             deadline = self.clock.now() + timeout_s
             while True:
                 raw = t.read_packet(deadline)
                 if raw is None:
                     self._stats.timeouts += 1
+                    self._line_dirty = True
                     break
                 try:
                     status = parse_status(raw)
                 except ProtocolError:
                     self._stats.crc_errors += 1
                     continue
-                if status.servo_id != servo_id:
+                if status.servo_id != servo_id or (
+                    n_params is not None and not status.error & 0x7F
+                    and len(status.params) != n_params
+                ):
                     self._stats.malformed += 1
                     continue
                 return status
         return None
 
-    def _command(self, index: int, instruction: int, params: bytes, what: str) -> StatusPacket:
+    def _quiet_line(self, deadline_s: float | None = None) -> None:
+        """Before a request: drop old input; after a failed reply, wait for the line to
+        go quiet first (a late reply still on the wire would collide with the request),
+        at most ``reply_timeout_s`` and not past ``deadline_s``."""
+        if self._line_dirty:
+            self._line_dirty = False
+            most = self.reply_timeout_s
+            if deadline_s is not None:
+                most = min(most, deadline_s - self.clock.now())
+            self._transport.wait_quiet(self.reply_gap_s, max(0.0, most))
+        else:
+            self._transport.discard_input()
+
+    def _command(
+        self, index: int, instruction: int, params: bytes, what: str, n_params: int = 0
+    ) -> StatusPacket:
         """One instruction to servo ``index`` that must be answered without an error number."""
         sid = self.ids[index]
-        status = self._transact(build_instruction(sid, instruction, params), sid)
+        status = self._transact(
+            build_instruction(sid, instruction, params), sid, n_params=n_params
+        )
         if status is None:
             raise DeviceTimeoutError(
                 f"{self.describe(index)} did not answer {what} {self._where()} after "
@@ -327,7 +353,8 @@ class DynamixelBus(ServoBus):
     def read_register(self, index: int, reg: Reg) -> int:
         """Read one control-table item of servo ``index`` (rig order)."""
         status = self._command(
-            index, INST_READ, u16(reg.address) + u16(reg.size), f"a read of {reg.name}"
+            index, INST_READ, u16(reg.address) + u16(reg.size), f"a read of {reg.name}",
+            n_params=reg.size,
         )
         if len(status.params) < reg.size:
             self._stats.malformed += 1
@@ -380,8 +407,10 @@ class DynamixelBus(ServoBus):
         notes.append(self._transport.latency_timer().note)
         problems: list[str] = []
         missing = 0
+        # traffic of an earlier session (replies still queued) must not pass for answers
+        self._transport.wait_quiet(0.02, 0.5)
         for i, sid in enumerate(self.ids):
-            status = self._transact(build_instruction(sid, INST_PING), sid)
+            status = self._transact(build_instruction(sid, INST_PING), sid, n_params=3)
             if status is None or len(status.params) < 3:
                 missing += 1
                 problems.append(
@@ -486,7 +515,7 @@ class DynamixelBus(ServoBus):
 
     def _broadcast_ping(self, wait_s: float = 0.1) -> dict[int, int]:
         t = self._transport
-        t.discard_input()
+        self._quiet_line()
         t.write(build_instruction(BROADCAST_ID, INST_PING))
         deadline = self.clock.now() + wait_s
         found: dict[int, int] = {}
@@ -701,7 +730,7 @@ class DynamixelBus(ServoBus):
             )
         block = self._read_len + 4
         expected = 8 + block * n_req
-        t.discard_input()
+        self._quiet_line(deadline)
         self._send_request(packet)
         # the reply cannot end before the wire has carried the request and the reply
         spin_from = None
@@ -713,9 +742,11 @@ class DynamixelBus(ServoBus):
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until)
         if len(head) < 7:
             self._stats.timeouts += 1
+            self._line_dirty = True
             return False
         if head[:4] != HEADER:
             self._stats.malformed += 1
+            self._line_dirty = True
             return False
         total = packet_length(head)
         if head[4] != BROADCAST_ID:
@@ -753,6 +784,7 @@ class DynamixelBus(ServoBus):
                 raw = t.read_exact(expected, deadline, gap_s=self.reply_gap_s)
                 continue
             self._stats.malformed += 1
+            self._line_dirty = True
             return False
         else:
             return False
@@ -765,6 +797,7 @@ class DynamixelBus(ServoBus):
                 return True
         if len(raw) < expected:
             self._stats.timeouts += 1
+            self._line_dirty = True
         m = min(n_req, (len(raw) - 8) // block)  # complete blocks received
         if m <= 0:
             return False
@@ -793,7 +826,7 @@ class DynamixelBus(ServoBus):
     def _sync_read(self, indices: np.ndarray, deadline: float) -> bool:
         t = self._transport
         ids = [self.ids[int(i)] for i in indices]
-        t.discard_input()
+        self._quiet_line(deadline)
         self._send_request(build_instruction(
             BROADCAST_ID, INST_SYNC_READ,
             u16(self._read_addr) + u16(self._read_len) + bytes(ids),
@@ -805,6 +838,7 @@ class DynamixelBus(ServoBus):
             raw = t.read_packet(deadline)
             if raw is None:
                 self._stats.timeouts += 1
+                self._line_dirty = True
                 break
             try:
                 status = parse_status(raw)
@@ -876,7 +910,7 @@ class DynamixelBus(ServoBus):
         deadline = min(deadline_s, self._reply_deadline())
         t = self._transport
         out: list[int | None] = [None] * self._n
-        t.discard_input()
+        self._quiet_line(deadline)
         params = u16(reg.address) + u16(1) + self._ids_bytes
         if self.use_fast_sync_read:
             self._send_request(build_instruction(BROADCAST_ID, INST_FAST_SYNC_READ, params))
@@ -902,6 +936,7 @@ class DynamixelBus(ServoBus):
                     out[index] = reg.decode(status.params[:1])
         if None in out:
             self._stats.timeouts += 1
+            self._line_dirty = True
         return out
 
     def _housekeeping(self, deadline_s: float) -> None:
@@ -978,7 +1013,9 @@ class DynamixelBus(ServoBus):
             sid = self.ids[index]
             # One attempt only: a lost status must not send a second reboot to a
             # servo that is already restarting (it would not answer that one either).
-            status = self._transact(build_instruction(sid, INST_REBOOT), sid, attempts=1)
+            status = self._transact(
+                build_instruction(sid, INST_REBOOT), sid, attempts=1, n_params=0
+            )
             if status is not None and status.error & 0x7F:
                 raise ServoFault(
                     f"{self.describe(index)} refused a reboot: "
@@ -990,7 +1027,9 @@ class DynamixelBus(ServoBus):
                 if self._torque_on and not np.isnan(self._last_goal_deg).any():
                     # keep the other servos' Bus Watchdogs fed while this one restarts
                     self._send_goals(self._last_goal_deg.copy())
-                status = self._transact(build_instruction(sid, INST_PING), sid, attempts=1)
+                status = self._transact(
+                    build_instruction(sid, INST_PING), sid, attempts=1, n_params=3
+                )
                 if status is not None:
                     break
                 if self.clock.now() >= deadline:

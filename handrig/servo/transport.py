@@ -181,6 +181,24 @@ class SerialTransport:
             n += len(chunk)
         return n
 
+    def wait_quiet(self, quiet_s: float, max_s: float) -> int:
+        """Discard input until none has come for ``quiet_s`` (at most ``max_s``); return bytes.
+
+        The bus is half duplex: a request sent while a late reply is still coming
+        would collide with it on a real bus (and queue behind it in the emulator).
+        """
+        self._check_open()
+        n = self.discard_input()
+        end = self.clock.now() + max_s
+        while True:
+            now = self.clock.now()
+            if now >= end:
+                return n
+            if not self._fill(min(end, now + quiet_s)):
+                return n
+            n += len(self._buf)
+            self._buf.clear()
+
     def read_exact(
         self, n: int, deadline_s: float, spin_from_s: float | None = None,
         gap_s: float | None = None, spin_until_s: float = np.inf,

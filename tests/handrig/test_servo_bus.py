@@ -601,3 +601,23 @@ def test_late_replies_are_never_taken_for_a_later_read() -> None:
             assert b.stats.late_replies > 0 and fresh > 60
         finally:
             b.close()
+
+
+def test_one_late_reply_does_not_make_every_later_read_late() -> None:
+    """With wire timing, a late reply still on the wire delays the next one (the bus is
+    half duplex); the driver waits for the line to go quiet instead of piling up."""
+    rig = RIG  # 20 servos at 1 Mbps: a cycle takes 3.2 ms of wire, the read budget 4 ms
+    with SimBus.from_rig(rig, wire_timing=True) as sim:
+        b = DynamixelBus(sim.port_path, rig, baud=1_000_000, read_fields="position")
+        b.connect()
+        try:
+            sim.faults = FaultSpec(delay=0.02, delay_s=0.004, seed=8)
+            failed = 0
+            for _ in range(250):
+                b.write_goals_deg(np.zeros(20))
+                failed += int(b.read_state().stale.any())
+            sim.faults = FaultSpec()
+            assert sim.fault_counts["delayed"] >= 2
+            assert failed < 50, (failed, b.stats.summary())
+        finally:
+            b.close()
