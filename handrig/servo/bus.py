@@ -33,7 +33,7 @@ class ServoState:
     status_errors: np.ndarray  # (n,) uint8, ERR byte of the servo's last status
     hardware_errors: np.ndarray  # (n,) uint8, Hardware Error Status read in this read (0 = none)
     stale: np.ndarray  # (n,) bool
-    age_s: np.ndarray  # (n,) float64, time since that servo's reading was taken
+    age_s: np.ndarray  # (n,) float64, time since that servo's reading was taken (inf: never)
     timestamp_s: float  # clock time of this read
     stats: BusStats  # the bus's counters at the time of this read (a copy)
 
