@@ -9,17 +9,20 @@ checks afterwards, by reading every servo's Torque Enable, that torque is off.
 from __future__ import annotations
 
 import contextlib
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import numpy as np
 
 from handrig.app import RigParts, open_glove, port_process, summary_dict
 from handrig.clock import Clock, MonotonicClock
-from handrig.errors import DeviceError, HandrigError
+from handrig.errors import DeviceError, HandrigError, SafetyStop
 from handrig.glove import GloveSource
 from handrig.realtime import realtime_priority
 from handrig.rig import Rig
@@ -60,8 +63,32 @@ def torque_is_off(bus: DynamixelBus) -> bool | None:
         return None
 
 
+@contextlib.contextmanager
+def _sigterm_unwinds() -> Iterator[None]:
+    """SIGTERM before torque is on (opening, commissioning) unwinds like Ctrl-C, so the
+    emulator subprocesses and ptys are closed; inside ``bus.torque()`` the bus's own
+    handler takes over (ease to relaxed, then torque off)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        raise SafetyStop("SIGTERM received before the rig started: stopped, torque was off")
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
 def run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None = None) -> LiveResult:
     """Run the rig once with ``parts`` and ``opts``; returns the summary figures."""
+    with _sigterm_unwinds():
+        return _run_live(parts, opts, clock)
+
+
+def _run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None) -> LiveResult:
     clock = clock or MonotonicClock()
     rig_cfg = parts.rig_config
     bus_spec = opts.bus or rig_cfg.bus.port
@@ -128,9 +155,7 @@ def run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None = None) -> 
 
         error: HandrigError | None = None
         with bus.torque(on_signal=lambda name: rig.request_stop(f"{name} received")):
-            state = bus.read_state()
-            if state.all_fresh:
-                parts.pipeline.seed(state.positions_deg)  # slew from where the servos are
+            # the Rig starts from bus.last_goals_deg: where torque-on holds every servo
             panel = contextlib.nullcontext()
             if opts.panel:
                 from handrig.panel import LivePanel

@@ -301,13 +301,13 @@ class PosePipeline:
             if self.sag_gain != 1.0:
                 self._sag_servo *= self.sag_gain
             raw += self._sag_servo
-        np.clip(raw, self.servo_low, self.servo_high, out=raw)
-        if not math.isfinite(raw.sum()):  # a NaN never reaches a servo
+        if not math.isfinite(raw.sum()):  # NaN or inf never reaches a servo: hold instead
             bad = ~np.isfinite(raw)
             self.rejected += int(bad.sum())
             fallback = self.targets if self._has_targets else 0.5 * (
                 self.servo_low + self.servo_high)
             np.copyto(raw, fallback, where=bad)
+        np.clip(raw, self.servo_low, self.servo_high, out=raw)
         if not self._has_targets:
             self.targets[:] = raw
             self._has_targets = True
@@ -341,6 +341,11 @@ class PosePipeline:
         return self.targets_from_pose(
             self.full_pose(controls_deg, inclination_deg, rotation_deg), dt_s
         )
+
+    @property
+    def has_targets(self) -> bool:
+        """Whether slew limiting has a starting point (a step or :meth:`seed` ran)."""
+        return self._has_targets
 
     def seed(self, targets_deg: FloatArray) -> None:
         """Start slew limiting from where the servos are (e.g. their present positions)."""

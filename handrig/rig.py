@@ -64,6 +64,7 @@ class BusLike(Protocol):
 
 
 class Mode(enum.Enum):
+    WAITING = "waiting"  # no glove frame yet: hold where the servos are
     RUNNING = "running"
     RELAXING = "relaxing"  # glove lost: easing to relaxed, resumes when the glove is back
     STOPPING = "stopping"  # e-stop or stop request: easing to relaxed, then the loop ends
@@ -90,7 +91,7 @@ class RunStats:
     tracking_sq_sum: float = 0.0
     tracking_n: int = 0
     tracking_max_deg: float = 0.0
-    relax_events: int = 0
+    relax_events: int = 0  # times the glove was lost and the puppet eased to relaxed
     estop: bool = False
     stop_reason: str = ""
     events: list[str] = field(default_factory=list)
@@ -149,7 +150,7 @@ class Rig:
         self.outputs = tuple(outputs)
         self.log = log
         self.stats = RunStats()
-        self.mode = Mode.RUNNING
+        self.mode = Mode.WAITING
         self._stop_requests = 0
         self.started_at = 0.0
         self._controls = np.zeros(len(pipeline.expander.controls))
@@ -158,7 +159,8 @@ class Rig:
         self._pose_from = np.zeros(len(pipeline.pose))
         self._blend = 0.0
         self._out_pose = np.zeros(len(pipeline.pose))
-        self._blend_t0 = 0.0
+        self._blend_t0: float | None = None  # set on the first easing cycle
+        self._sent = np.zeros(len(pipeline.servo_joints))  # the goals last written
         self.last_state: Any = None  # the newest ServoState read back
         # Rehearsal: ``warm_s`` before each deadline the critical path runs once on
         # scratch copies (same code, separate state), so the code that handles the next
@@ -194,18 +196,21 @@ class Rig:
     def _start_relax(self, mode: Mode, reason: str) -> None:
         if self.mode is Mode.STOPPING:
             return
-        if self.mode is Mode.RUNNING:
-            self.stats.relax_events += 1
+        if self.mode in (Mode.RUNNING, Mode.WAITING):
+            if mode is Mode.RELAXING:
+                self.stats.relax_events += 1  # the glove was lost (not a planned stop)
+            self._blend_t0 = None  # the easing starts on the next cycle (_relax_targets)
         self.mode = mode
-        self._blend_from[:] = self.pipeline.targets
-        self._pose_from[:] = self.pipeline.pose
-        self._blend_t0 = self.clock.now()
         self._event(f"{reason}: easing to the relaxed pose over {self.relax_time_s:.2f} s")
 
     def _relax_targets(self, now: float, dt: float) -> tuple[FloatArray, bool]:
         relaxed = self.pipeline.relaxed_pose(*self._orientation)
         np.clip(relaxed, self.pipeline.pose_low, self.pipeline.pose_high, out=relaxed)
         goal = relaxed[self.pipeline.servo_index]
+        if self._blend_t0 is None:  # first easing cycle: from what the servos were last sent
+            self._blend_t0 = now
+            self._blend_from[:] = self._sent
+            self._pose_from[:] = self.pipeline.pose
         a = min(1.0, (now - self._blend_t0) / self.relax_time_s)
         s = a * a * (3.0 - 2.0 * a)  # smoothstep: no jerk at either end
         self._blend = s
@@ -246,27 +251,51 @@ class Rig:
                                               float(np.abs(err).max()))
 
     # -- the loop --------------------------------------------------------------------------
+    def _seed(self) -> None:
+        """Start from where the servos are: the goals the bus holds them at, else a read."""
+        held = getattr(self.bus, "last_goals_deg", None)
+        if held is not None and np.all(np.isfinite(held)):
+            self.pipeline.seed(np.asarray(held, dtype=np.float64))
+        elif not self.pipeline.has_targets:
+            state = self.bus.read_state()
+            positions = np.asarray(getattr(state, "positions_deg", []), dtype=np.float64)
+            stale = np.asarray(getattr(state, "stale", []), dtype=bool)
+            if positions.shape == (len(self._sent),) and not stale.any() and np.all(
+                    np.isfinite(positions)):
+                self.pipeline.seed(positions)
+            else:
+                raise DeviceError(
+                    "cannot start the loop: the servos' present positions are unknown "
+                    "(a read came back stale); check the bus, then start again")
+        self._sent[:] = self.pipeline.targets
+
     def run(self, frames: int | None = None, duration_s: float | None = None) -> RunStats:
-        """Run until ``frames`` cycles, ``duration_s`` seconds, an e-stop or a stop request."""
+        """Follow the glove for ``frames`` cycles or ``duration_s`` seconds, then ease to
+        the relaxed pose and return; an e-stop or a stop request eases and returns early.
+
+        Until the first glove frame the servos hold where they are; no frame within
+        ``glove_timeout_s`` eases them to the relaxed pose.
+        """
         stats = self.stats
         clock = self.clock
         period = self.period_s
+        self._seed()
         t0 = clock.now()
         self.started_at = t0
         last_good = t0
         last_cycle = t0
-        goals_prev = np.array(self.pipeline.targets)  # what the servos were last sent
         k = 0
         try:
             while True:
-                if frames is not None and stats.frames >= frames:
-                    stats.stop_reason = stats.stop_reason or f"{frames} frames done"
-                    break
-                if duration_s is not None and clock.now() - t0 >= duration_s:
-                    stats.stop_reason = stats.stop_reason or f"{duration_s:g} s done"
-                    break
                 if self._stop_requests > 1:
                     break
+                if self.mode is not Mode.STOPPING:
+                    if frames is not None and stats.frames >= frames:
+                        stats.stop_reason = f"{frames} frames done"
+                        self._start_relax(Mode.STOPPING, f"{frames} frames done")
+                    elif duration_s is not None and clock.now() - t0 >= duration_s:
+                        stats.stop_reason = f"{duration_s:g} s done"
+                        self._start_relax(Mode.STOPPING, f"{duration_s:g} s done")
                 deadline = t0 + k * period
                 if self.warm_s > 0 and self._last_sample is not None:
                     clock.sleep_until(deadline - self.warm_s)
@@ -292,50 +321,55 @@ class Rig:
                     self._last_sample = sample
                     if getattr(sample, "estop", False) and self.mode is not Mode.STOPPING:
                         stats.estop = True
+                        stats.stop_reason = "e-stop"
                         self._start_relax(Mode.STOPPING, "e-stop pressed on the glove")
                     self.controls_from_raw(sample.raw, now, self._controls)
                     self._orientation = self.orientation(sample)
-                    if self.mode is Mode.RELAXING:
+                    if self.mode is Mode.WAITING:
+                        self.mode = Mode.RUNNING
+                    elif self.mode is Mode.RELAXING:
                         self.mode = Mode.RUNNING
                         self._event("glove is back: following it again")
-                elif self.mode is Mode.RUNNING and now - last_good > self.glove_timeout_s:
-                    self._start_relax(
-                        Mode.RELAXING,
-                        f"glove silent or garbled for {now - last_good:.2f} s",
-                    )
+                elif (self.mode in (Mode.RUNNING, Mode.WAITING)
+                      and now - last_good > self.glove_timeout_s):
+                    what = ("no glove frame yet" if self.mode is Mode.WAITING
+                            else "glove silent or garbled")
+                    self._start_relax(Mode.RELAXING, f"{what} for {now - last_good:.2f} s")
 
-                running = self.mode is Mode.RUNNING
-                if running:
+                done = False
+                if self.mode is Mode.RUNNING:
                     goals = self.pipeline.servo_targets(self._controls, *self._orientation, dt)
+                elif self.mode is Mode.WAITING:
+                    goals = self.pipeline.targets  # hold: keeps the watchdog fed
                 else:
                     goals, done = self._relax_targets(now, dt)
-                    if done and self.mode is Mode.STOPPING:
-                        stats.stop_reason = stats.stop_reason or (
-                            "e-stop" if stats.estop else "stop requested"
-                        )
-                        self.bus.write_goals_deg(goals)
-                        stats.frames += 1
-                        break
                 stats.bus_clamps += int(self.bus.write_goals_deg(goals))
                 if sample is not None:
                     stats.latencies_s.append(clock.now() - sample.host_time_s)
                 # after the write: the full pose for outputs, and the counters
-                if running:
-                    pose = self.pipeline.account(self._controls, *self._orientation)
+                if self.mode is Mode.RUNNING:
+                    pose: FloatArray | None = self.pipeline.account(
+                        self._controls, *self._orientation)
+                elif self.mode is Mode.WAITING:
+                    pose = None
                 else:
                     relaxed = self.pipeline.relaxed  # computed by _relax_targets
                     np.multiply(self._pose_from, 1.0 - self._blend, out=self._out_pose)
                     self._out_pose += self._blend * relaxed
                     pose = self._out_pose
-                for out in self.outputs:
-                    out(now - t0, pose)
+                if pose is not None:
+                    for out in self.outputs:
+                        out(now - t0, pose)
                 if k % self.read_every == 0:
                     state = self.bus.read_state()
                     self.last_state = state
-                    self._track(state, goals_prev)
-                goals_prev[:] = goals
+                    self._track(state, self._sent)
+                self._sent[:] = goals
                 stats.frames += 1
                 k += 1
+                if done and self.mode is Mode.STOPPING:
+                    stats.stop_reason = stats.stop_reason or "stop requested"
+                    break
         except DeviceError as exc:
             stats.stop_reason = f"device error: {exc}"
             self._event(f"stopping: {exc}")

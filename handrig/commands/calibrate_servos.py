@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
+import math
 import re
 import sys
 import tomllib
@@ -55,45 +57,60 @@ def register(sub: Any) -> None:
 def update_zero_ticks(text: str, zeros: dict[int, int]) -> str:
     """``text`` of a rig file with ``zero_ticks`` of the given servo IDs replaced.
 
-    Works on the ``[[servos]]`` blocks line by line so comments and layout stay.
+    Works on the ``[[servos]]`` blocks line by line, so comments and layout stay; a
+    block without a ``zero_ticks`` line gets one after its ``id`` line.
     """
     lines = text.splitlines(keepends=True)
-    block_id: int | None = None
-    in_servo = False
-    zero_line: dict[int, int] = {}
-    ids_seen: list[int] = []
+    # (first line, end line) of every [[servos]] block
+    blocks: list[tuple[int, int]] = []
+    begin: int | None = None
     for i, line in enumerate(lines):
-        stripped = line.strip()
-        if stripped.startswith("["):
-            in_servo = stripped == "[[servos]]"
-            block_id = None
-            continue
-        if not in_servo:
-            continue
-        m = re.match(r"id\s*=\s*(\d+)", stripped)
-        if m:
-            block_id = int(m.group(1))
-            ids_seen.append(block_id)
-        if re.match(r"zero_ticks\s*=", stripped):
-            zero_line[block_id if block_id is not None else -1 - i] = i
-    # a zero_ticks line before its block's id line: bind it to that block's id
+        if line.strip().startswith("["):
+            if begin is not None:
+                blocks.append((begin, i))
+                begin = None
+            if line.strip() == "[[servos]]":
+                begin = i
+    if begin is not None:
+        blocks.append((begin, len(lines)))
+    by_id: dict[int, tuple[int | None, int]] = {}  # id -> (zero line, id line)
+    for first, last in blocks:
+        id_line = zero_at = None
+        servo_id = None
+        for i in range(first + 1, last):
+            stripped = lines[i].strip()
+            m = re.match(r"id\s*=\s*(\d+)", stripped)
+            if m:
+                servo_id, id_line = int(m.group(1)), i
+            elif re.match(r"zero_ticks\s*=", stripped):
+                zero_at = i
+        if servo_id is not None and id_line is not None:
+            by_id[servo_id] = (zero_at, id_line)
     for servo_id in zeros:
-        if servo_id not in ids_seen:
+        if servo_id not in by_id:
             raise ConfigError("no [[servos]] block with this id", key="servos.id", value=servo_id)
+    inserts: list[tuple[int, str]] = []
     for servo_id, ticks in zeros.items():
-        if servo_id in zero_line:
-            i = zero_line[servo_id]
-            indent = lines[i][: len(lines[i]) - len(lines[i].lstrip())]
-            comment = ""
-            if "#" in lines[i]:
-                comment = "  " + lines[i][lines[i].index("#"):].rstrip("\n")
-            lines[i] = f"{indent}zero_ticks = {ticks}{comment}\n"
-        else:  # no zero_ticks line: add one after the id line
-            for i, line in enumerate(lines):
-                if re.match(rf"\s*id\s*=\s*{servo_id}\b", line):
-                    lines.insert(i + 1, f"zero_ticks = {ticks}\n")
-                    break
+        zero_at, id_line = by_id[servo_id]
+        if zero_at is not None:
+            old = lines[zero_at]
+            indent = old[: len(old) - len(old.lstrip())]
+            comment = "  " + old[old.index("#"):].rstrip("\n") if "#" in old else ""
+            lines[zero_at] = f"{indent}zero_ticks = {ticks}{comment}\n"
+        else:
+            inserts.append((id_line + 1, f"zero_ticks = {ticks}\n"))
+    for at, line in sorted(inserts, reverse=True):
+        lines.insert(at, line)
     return "".join(lines)
+
+
+def calibration_rig(rig: RigConfig) -> RigConfig:
+    """The rig as calibration uses it: a person answers the prompts, so no Bus Watchdog
+    (it would trip between two jogs and the servo would refuse the next goal)."""
+    return dataclasses.replace(rig, bus=dataclasses.replace(rig.bus, watchdog_ms=0))
+
+
+MAX_JOG_STEP_DEG = 10.0  # one jog command moves the joint at most this far
 
 
 def _ask(prompt: str) -> str:
@@ -114,6 +131,7 @@ def calibrate(
         index = bus.ids.index(servo_id)
         cal = rig.servo(servo_id)
         name = bus.describe(index)
+        start = bus.read_register(index, Reg.PRESENT_POSITION)
         while True:
             ticks = bus.read_register(index, Reg.PRESENT_POSITION)
             deg = cal.ticks_to_deg(ticks)
@@ -138,10 +156,18 @@ def calibrate(
                 try:
                     step_deg = float(answer)
                 except ValueError:
-                    say(f"not understood: {answer!r}; type e.g. +2 or -0.5")
+                    step_deg = math.nan
+                if not math.isfinite(step_deg) or abs(step_deg) > MAX_JOG_STEP_DEG:
+                    say(f"not a jog: {answer!r}; type degrees between -{MAX_JOG_STEP_DEG:g} "
+                        f"and +{MAX_JOG_STEP_DEG:g}, e.g. +2 or -0.5")
                     continue
-                goal = round(ticks + cal.direction * cal.gear_ratio * step_deg * 4096 / 360)
-                bus.write_register(index, Reg.GOAL_POSITION, max(0, min(4095, goal)))
+                ticks_per_deg = cal.direction * cal.gear_ratio * 4096 / 360
+                base = bus.read_register(index, Reg.GOAL_POSITION)  # jogs add up
+                goal = round(base + ticks_per_deg * step_deg)
+                # never further from where it started than the joint's configured span
+                span = abs(ticks_per_deg) * (cal.max_deg - cal.min_deg)
+                low, high = max(0, start - span), min(4095, start + span)
+                bus.write_register(index, Reg.GOAL_POSITION, int(min(max(goal, low), high)))
             else:
                 say("torque is off: move the joint by hand, then press Enter")
     return zeros
@@ -166,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
         if bus_spec == "sim":
             _, bus_spec = stack.enter_context(
                 port_process(["sim-bus", "--rig", str(rig_path)], "the simulated servo bus"))
-        bus = DynamixelBus(bus_spec, rig)
+        bus = DynamixelBus(bus_spec, calibration_rig(rig))
         stack.callback(bus.close)
         bus.connect()
         if args.jog:

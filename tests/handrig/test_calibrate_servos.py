@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from handrig.commands.calibrate_servos import calibrate, update_zero_ticks
+from handrig.commands.calibrate_servos import calibrate, calibration_rig, update_zero_ticks
 from handrig.config import CONFIG_DIR
 from handrig.errors import ConfigError
 from handrig.rigconfig import load_rig_config
@@ -27,30 +27,43 @@ def test_update_keeps_comments_and_changes_only_zero_ticks():
         update_zero_ticks(text, {99: 1})
 
 
+def test_update_binds_zero_ticks_to_its_block_whatever_the_line_order():
+    text = ("[bus]\nbaud = 1000000\n\n[[servos]]\nzero_ticks = 100  # set by hand\nid = 3\n"
+            "joint = \"riIndexPIPy\"\n\n[[servos]]\nid = 4\njoint = \"riRingPIPy\"\n")
+    new = update_zero_ticks(text, {3: 2000, 4: 2100})
+    assert "zero_ticks = 2000  # set by hand\nid = 3" in new
+    assert "id = 4\nzero_ticks = 2100\njoint" in new
+    assert new.count("zero_ticks") == 2
+
+
 def test_jogging_a_servo_sets_its_zero(tmp_path: Path):
     rig = load_rig_config()
+    two = rig.__class__(bus=rig.bus, loop=rig.loop, servos=(rig.servo(7), rig.servo(8)))
+    said: list[str] = []
     with SimBus.from_rig(rig, ids=[7, 8]) as sim:
-        bus = DynamixelBus(sim.port_path, rig.__class__(
-            bus=rig.bus, loop=rig.loop, servos=(rig.servo(7), rig.servo(8))))
+        bus = DynamixelBus(sim.port_path, calibration_rig(two))
         bus.connect()
         try:
-            answers = iter(["+10", "WAIT", "", "s"])
+            # wild jogs are refused; a person is slow (longer than the 100 ms watchdog)
+            answers = iter(["+1000", "nan", "inf", "WAIT", "+5", "WAIT", "+5", "WAIT", "",
+                            "s"])
 
             def ask(prompt: str) -> str:
                 a = next(answers)
                 if a == "WAIT":
-                    time.sleep(0.5)  # let the emulated servo travel
+                    time.sleep(0.4)  # let the emulated servo travel; a human pause
                     a = next(answers)
                 return a
 
             with bus.torque(handle_signals=False):
                 zeros = calibrate(bus, rig, [7, 8], jog=True, yes=False, ask=ask,
-                                  say=lambda s: None)
+                                  say=said.append)
         finally:
             bus.close()
     # +10 joint degrees at direction +1, gear 1: about 114 ticks above 2048
     assert set(zeros) == {7}
     assert zeros[7] == pytest.approx(2048 + 10 * 4096 / 360, abs=3)
+    assert sum("not a jog" in s for s in said) == 3
 
 
 def test_cli_writes_a_checked_copy_of_the_rig_file(tmp_path: Path):

@@ -10,6 +10,8 @@ import sys
 import threading
 import time
 
+import numpy as np
+
 from handrig.app import build_parts
 from handrig.glove_recording import read_glove_recording
 from handrig.live import LiveOptions, run_live
@@ -24,8 +26,9 @@ def test_demo_reports_its_figures_and_ends_with_torque_off():
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout)
-    assert summary["frames"] == 300
-    assert summary["rate_hz"] > 0 and summary["overruns"] >= 0
+    # 300 cycles following the glove, then relax_time_s (1 s at 200 Hz) easing to relaxed
+    assert summary["frames"] == 300 + 200 + 1
+    assert summary["stop_reason"] == "300 frames done" and summary["relax_events"] == 0
     assert summary["latency_us"]["p50"] > 0
     assert summary["latency_us"]["p99"] >= summary["latency_us"]["p50"]
     assert summary["torque_off"] is True
@@ -125,4 +128,5 @@ def test_run_sends_vmc_and_records_the_performance(tmp_path):
     assert json.loads(out)["torque_off"] is True
     assert bundles > 30  # 1.5 s at the sender's 60 Hz
     t, poses, wrist = load_performance(take)
-    assert len(t) == 300 and poses.shape == (300, 50) and wrist is not None
+    assert len(t) >= 300 and poses.shape == (len(t), 50) and wrist is not None
+    assert np.all(np.diff(t) > 0)

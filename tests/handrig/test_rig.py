@@ -110,6 +110,12 @@ def make_rig(parts, glove, bus, clock, **kw):
 MID = np.array([2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
 
 
+def relaxed_targets(parts, inclination=0.0, rotation=0.0):
+    pl = parts.pipeline
+    relaxed = np.clip(pl.relaxed_pose(inclination, rotation), pl.pose_low, pl.pose_high)
+    return np.clip(relaxed[pl.servo_index], pl.servo_low, pl.servo_high)
+
+
 def test_loop_holds_its_rate_and_measures_latency(parts_factory):
     parts = parts_factory()
     clock = FakeClock(100.0)
@@ -118,11 +124,14 @@ def test_loop_holds_its_rate_and_measures_latency(parts_factory):
                        write_cost_s=50e-6)
     rig = make_rig(parts, glove, bus, clock)
     stats = rig.run(frames=400)
-    assert stats.frames == 400 and len(bus.goals) == 400
+    # 400 cycles following the glove, then relax_time_s (0.5 s) easing to relaxed
+    assert stats.frames == len(bus.goals) == 400 + 100 + 1
+    assert stats.stop_reason == "400 frames done" and stats.relax_events == 0
     assert stats.rate_hz == pytest.approx(200.0, rel=0.01)
     assert stats.overruns == 0
     assert stats.latency_us(50) == pytest.approx(50.0, abs=1.0)  # the write's cost
-    assert stats.reads == 100 and stats.tracking_n > 0
+    assert stats.reads == 126 and stats.tracking_n > 0
+    np.testing.assert_allclose(bus.goals[-1], relaxed_targets(parts), atol=1e-6)
 
 
 def test_never_a_goal_outside_the_servo_limits(parts_factory):
@@ -134,6 +143,7 @@ def test_never_a_goal_outside_the_servo_limits(parts_factory):
     bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     make_rig(parts, glove, bus, clock).run(frames=300)
     goals = np.array(bus.goals)
+    assert len(goals) > 300
     low = np.array([s.min_deg for s in parts.rig_config.servos])
     high = np.array([s.max_deg for s in parts.rig_config.servos])
     assert np.isfinite(goals).all()
@@ -149,7 +159,7 @@ def test_glove_silence_eases_to_relaxed_then_resumes(parts_factory):
     events: list[str] = []
     rig = make_rig(parts, glove, bus, clock)
     rig.log = events.append
-    rig.run(frames=500)  # 2.5 s
+    rig.run(frames=500)  # 2.5 s, then easing to relaxed
     assert rig.stats.relax_events == 1
     assert any("silent" in e and "relaxed pose" in e for e in events)
     assert any("glove is back" in e for e in events)
@@ -159,7 +169,7 @@ def test_glove_silence_eases_to_relaxed_then_resumes(parts_factory):
     np.testing.assert_allclose(at_end_of_silence, relaxed, atol=1e-6)
     # the fist before the silence is far from relaxed
     assert np.abs(bus.goals[90] - relaxed).max() > 10.0
-    assert rig.mode is Mode.RUNNING
+    assert bus.goals[499] is not None and np.abs(bus.goals[480] - relaxed).max() > 10.0
 
 
 def test_estop_relaxes_then_ends_the_run(parts_factory):
@@ -171,6 +181,7 @@ def test_estop_relaxes_then_ends_the_run(parts_factory):
     stats = rig.run(frames=10_000)
     assert stats.estop and stats.stop_reason == "e-stop"
     assert 0.3 + 0.5 <= stats.duration_s <= 0.3 + 0.5 + 0.02  # relax_time_s = 0.5
+    assert rig.mode is Mode.STOPPING
     relaxed = parts.pipeline.relaxed_pose(0.0, 0.0)[parts.pipeline.servo_index]
     relaxed = np.clip(relaxed, parts.pipeline.servo_low, parts.pipeline.servo_high)
     np.testing.assert_allclose(bus.goals[-1], relaxed, atol=1e-6)
@@ -223,6 +234,56 @@ def test_lost_servo_port_stops_with_the_message(parts_factory):
     with pytest.raises(DeviceError, match="went away"):
         rig.run(frames=100)
     assert rig.stats.frames == 30 and "went away" in rig.stats.stop_reason
+
+
+def test_a_silent_glove_at_start_holds_then_relaxes_from_where_the_servos_are(parts_factory):
+    """Never 'all controls 0': before the first frame the servos hold their positions."""
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    start = 0.5 * (parts.pipeline.servo_low + parts.pipeline.servo_high)
+    parts.pipeline.seed(start)
+    events: list[str] = []
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: None), bus, clock)
+    rig.log = events.append
+    rig.run(frames=200)
+    held = np.array(bus.goals[: int(0.25 * 200)])
+    np.testing.assert_allclose(held, np.broadcast_to(start, held.shape))
+    assert any("no glove frame yet" in e for e in events)
+    steps = np.abs(np.diff(np.array(bus.goals), axis=0)).max()
+    assert steps < 5.0  # eased, never a jump
+    np.testing.assert_allclose(bus.goals[-1], relaxed_targets(parts), atol=1e-6)
+
+
+def test_a_stop_before_the_first_frame_eases_from_the_held_pose(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    start = 0.5 * (parts.pipeline.servo_low + parts.pipeline.servo_high)
+    parts.pipeline.seed(start)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: None), bus, clock)
+    rig.request_stop("SIGTERM received")  # e.g. during torque-on, before the loop
+    rig.run(frames=1000)
+    np.testing.assert_allclose(bus.goals[0], start, atol=1e-9)
+    assert np.abs(np.diff(np.array(bus.goals), axis=0)).max() < 5.0
+    np.testing.assert_allclose(bus.goals[-1], relaxed_targets(parts), atol=1e-6)
+
+
+def test_the_loop_refuses_to_start_blind(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+
+    class BlindBus(RecordingBus):
+        def read_state(self, deadline_s=None):
+            state = super().read_state(deadline_s)
+            state.stale[:] = True
+            return state
+
+    bus = BlindBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)
+    with pytest.raises(DeviceError, match="present positions are unknown"):
+        rig.run(frames=10)
+    assert bus.goals == []
 
 
 def test_servo_fast_path_equals_the_full_pipeline(parts_factory):
