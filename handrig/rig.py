@@ -60,7 +60,7 @@ class OrientationLike(Protocol):
 class BusLike(Protocol):
     def write_goals_deg(self, goals_deg: FloatArray) -> int: ...
 
-    def read_state(self) -> Any: ...
+    def read_state(self, deadline_s: float | None = None) -> Any: ...
 
 
 class Mode(enum.Enum):
@@ -297,7 +297,8 @@ class Rig:
                         stats.stop_reason = f"{duration_s:g} s done"
                         self._start_relax(Mode.STOPPING, f"{duration_s:g} s done")
                 deadline = t0 + k * period
-                if self.warm_s > 0 and self._last_sample is not None:
+                if (self.warm_s > 0 and self._last_sample is not None
+                        and clock.now() < deadline - self.warm_s):
                     clock.sleep_until(deadline - self.warm_s)
                     self._rehearse(clock.now())
                 clock.sleep_until(deadline)
@@ -361,7 +362,8 @@ class Rig:
                     for out in self.outputs:
                         out(now - t0, pose)
                 if k % self.read_every == 0:
-                    state = self.bus.read_state()
+                    # a read (and its retries) must leave the next cycle its time
+                    state = self.bus.read_state(deadline + period - 0.0003)
                     self.last_state = state
                     self._track(state, self._sent)
                 self._sent[:] = goals

@@ -193,6 +193,7 @@ def run(args: argparse.Namespace) -> int:
             _, bus_spec = stack.enter_context(
                 port_process(["sim-bus", "--rig", str(rig_path)], "the simulated servo bus"))
         bus = DynamixelBus(bus_spec, calibration_rig(rig))
+        bus.hold_outside_limits = True  # the zero is what is being found
         stack.callback(bus.close)
         bus.connect()
         if args.jog:

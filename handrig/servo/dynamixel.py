@@ -72,6 +72,9 @@ COMMAND_TIMEOUT_S = 0.05  # a single command's reply: RDT 0.5 ms + a 16 ms laten
 # Commissioning sends ~6 commands per servo: with 20 servos and one reply in five
 # lost, 3 attempts would fail a connect more often than not; 8 make it rare.
 COMMAND_ATTEMPTS = 8
+TORQUE_ON_SLACK_DEG = 1.0  # torque-on tolerates this much outside the limits (then clamps)
+MAX_APPROACH_DEG = 20.0  # further out than this at torque-on: refuse (likely a wrong zero)
+APPROACH_DPS = 30.0  # joint speed that brings a servo resting outside its limits back in
 
 ReadFields = Literal["position", "motion"]
 # Contiguous control-table spans read each cycle: position only, or current+velocity+position.
@@ -177,6 +180,14 @@ class DynamixelBus(ServoBus):
         self._goal_ticks = np.zeros(n, np.dtype("<i4"))  # little-endian, as on the wire
         self._last_goal_deg = np.full(n, np.nan)
         self._scratch = np.zeros(n, np.float64)
+        self._rehearsal_goal = np.zeros(n, np.float64)
+        # Profile Velocity units (0.229 rpm of the servo) for APPROACH_DPS of the joint
+        self._approach_units = [
+            max(1, round(APPROACH_DPS * abs(t) / TICKS_PER_DEG / VELOCITY_DPS_PER_UNIT))
+            for t in self._ticks_per_deg]
+        self.hold_outside_limits = False
+        """Torque-on with a servo outside [min_deg, max_deg] holds it where it is instead
+        of refusing (for ``handrig calibrate servos``, where the zero is being found)."""
         self._finite = np.zeros(n, bool)
 
         # -- present-state read
@@ -605,6 +616,14 @@ class DynamixelBus(ServoBus):
         body = self._sw_body.tobytes()
         crc = crc16(body, self._sw_prefix_crc)
         return self._sw_prefix + body + bytes((crc & 0xFF, crc >> 8))
+
+    def rehearse_write(self, goals_deg: np.ndarray) -> None:
+        """Build the goal Sync Write for ``goals_deg`` without sending it, counting or
+        remembering anything: the loop calls it shortly before a deadline so the write
+        path is warm in the CPU's caches when the real goals come (see handrig.rig)."""
+        with self._lock:
+            np.clip(goals_deg, self._min_deg, self._max_deg, out=self._rehearsal_goal)
+            self._goal_packet(self._rehearsal_goal)
 
     def _send_goals(self, goal_deg: np.ndarray) -> None:
         with self._lock:
@@ -1104,12 +1123,55 @@ class DynamixelBus(ServoBus):
             if not self._connected:
                 raise DeviceError(f"servo bus {self.port} is not connected: call connect()")
             state = self._read_every_servo("enable torque")
-            # hold where they are (clamped into the limits): no jump on torque-on
-            self.write_goals_deg(state.positions_deg)
+            pos = state.positions_deg
+            excess = np.maximum(self._min_deg - pos, pos - self._max_deg)
+            outside = excess > TORQUE_ON_SLACK_DEG
+            if outside.any() and self.hold_outside_limits:  # calibration: hold where they are
+                ticks = np.rint(self._zero_ticks + pos * self._ticks_per_deg)
+                for i in range(self._n):
+                    tick = int(min(max(ticks[i], 0), POSITION_TICKS_MAX))
+                    self.write_register(i, Reg.GOAL_POSITION, tick)
+            else:
+                far = excess > MAX_APPROACH_DEG
+                if far.any():
+                    bad = [f"{self.describe(int(i))} is at {pos[i]:.1f} deg, outside its limits "
+                           f"[{self._min_deg[i]:g}, {self._max_deg[i]:g}]"
+                           for i in np.flatnonzero(far)]
+                    raise DeviceError(
+                        f"cannot enable torque {self._where()}: {'; '.join(bad)}. That is "
+                        f"more than {MAX_APPROACH_DEG:g} deg out (a wrong zero?): move the "
+                        "joint into range by hand, or re-zero it with "
+                        "`handrig calibrate servos`")
+                # a joint slightly out (a limp puppet resting on its stop) is brought in slowly
+                for j in np.flatnonzero(outside).tolist():
+                    self.write_register(j, Reg.PROFILE_VELOCITY, self._approach_units[j])
+                # hold where they are, clamped into the limits
+                self.write_goals_deg(pos)
             self._torque_on = True
             for i in range(self._n):
                 self.write_register(i, Reg.TORQUE_ENABLE, 1)
             self._arm_watchdog()
+            if outside.any() and not self.hold_outside_limits:
+                self._finish_approach(np.flatnonzero(outside), float(excess.max()))
+
+    def _finish_approach(self, indices: np.ndarray, excess_deg: float) -> None:
+        """Wait (bounded) for servos brought in slowly to reach their limits, then lift
+        their speed limit again, and say so in the commissioning log."""
+        end = self.clock.now() + excess_deg / APPROACH_DPS * 1.5 + 0.2
+        while self.clock.now() < end:
+            self.write_goals_deg(self._last_goal_deg)  # keeps the watchdog fed
+            state = self.read_state()
+            pos = state.positions_deg[indices]
+            inside = (pos >= self._min_deg[indices] - TORQUE_ON_SLACK_DEG) & (
+                pos <= self._max_deg[indices] + TORQUE_ON_SLACK_DEG)
+            if inside.all():
+                break
+            self.clock.sleep(0.01)
+        for i in indices:
+            self.write_register(int(i), Reg.PROFILE_VELOCITY, 0)
+            self.commissioning.append(
+                f"{self.describe(int(i))} rested outside its limits at torque-on: brought "
+                f"in at {APPROACH_DPS:g} deg/s")
 
     def disable_torque(self) -> list[str]:
         """Torque off on every servo and watchdog cleared; returns the servos that failed.

@@ -28,6 +28,7 @@ class Reg(Enum):
     STATUS_RETURN_LEVEL = (68, 1, False)
     HARDWARE_ERROR_STATUS = (70, 1, False)
     BUS_WATCHDOG = (98, 1, True)
+    PROFILE_VELOCITY = (112, 4, False)
     GOAL_POSITION = (116, 4, True)
     MOVING = (122, 1, False)
     PRESENT_CURRENT = (126, 2, True)
