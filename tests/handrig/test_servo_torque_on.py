@@ -35,7 +35,7 @@ def test_torque_on_brings_a_slightly_outside_servo_in_slowly():
             with bus.torque(handle_signals=False):
                 took = time.monotonic() - t0
                 assert sim.servo(8).goal == 2048  # the limit (0 deg), never beyond
-                assert abs(sim.servo(8).present - 2048) < 10
+                assert abs(sim.servo(8).present - 2048) <= 12  # within the 1 deg slack
                 assert sim.servo(8).get(Reg.PROFILE_VELOCITY) == 0  # speed limit lifted again
             assert took > 5 / 30.0  # 6 deg at 30 deg/s, not at full speed
             assert any("brought in at 30 deg/s" in line for line in bus.commissioning)
