@@ -397,27 +397,3 @@ def recording_from_degrees(
         0.0, dict(meta or {}),
     )
 
-
-def _qmul(a: FloatArray, b: FloatArray) -> FloatArray:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return np.array([
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    ])
-
-
-_NED_TO_ENU = np.array([math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0])  # 180 deg about (1,1,0)
-
-
-def forearm_quat_enu(q: FloatArray, imu: ImuSettings) -> FloatArray:
-    """The forearm's orientation (x, y, z, w; forearm frame to ENU world) from a source
-    quaternion laid out as ``imu.order`` in ``imu.world``, with the mount applied."""
-    q = np.asarray(q, dtype=np.float64)
-    if imu.order == "wxyz":
-        q = np.array([q[1], q[2], q[3], q[0]])
-    if imu.world == "NED":
-        q = _qmul(_NED_TO_ENU, q)
-    return _qmul(q, np.asarray(imu.mount_xyzw, dtype=np.float64))

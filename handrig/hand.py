@@ -222,8 +222,9 @@ def dof_curve_indices(hand: Hand) -> NDArray[np.intp]:
 
 
 # Anatomical ranges in degrees, vocabulary convention (flexion and radial positive).
-# Sources: ../shared/REFERENCE.md section 4 (typical ranges). Marked "assumed" where
-# that table gives nothing; those are conservative guesses, not measurements.
+# Sources: typical active ranges of motion of the wrist, finger and thumb joints from the
+# clinical anthropometry literature (as collected for the Sancho-Bru / Buchholz hand
+# models). Marked "assumed" where no range was found: conservative guesses, not data.
 _RANGE_BY_KIND: dict[tuple[str, str, str], tuple[float, float]] = {
     ("Thumb", "CMC", "x"): (-20.0, 40.0),  # assumed: axial rotation (opposition)
     ("Thumb", "CMC", "y"): (-30.0, 60.0),  # abduction

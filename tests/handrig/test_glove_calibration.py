@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tomli_w
-from scipy.spatial.transform import Rotation
 
 from handrig.config import CONFIG_DIR
 from handrig.errors import ConfigError, DataError
@@ -17,8 +16,6 @@ from handrig.glove_calibration import (
     GloveCalibration,
     GloveConfig,
     GloveControls,
-    ImuSettings,
-    forearm_quat_enu,
     glove_config_to_toml,
     load_glove_config,
     recording_from_degrees,
@@ -120,26 +117,6 @@ def test_bad_configs_name_file_and_key(tmp_path: Path, text: str, match: str) ->
     with pytest.raises(ConfigError, match=match) as e:
         load_glove_config(p)
     assert str(p) in str(e.value)
-
-
-def test_forearm_quaternion_conventions() -> None:
-    rng = np.random.default_rng(1)
-    q_imu = Rotation.random(random_state=rng)
-    mount = Rotation.random(random_state=rng)
-    imu = ImuSettings(mount_xyzw=tuple(mount.as_quat()))  # type: ignore[arg-type]
-    got = Rotation.from_quat(forearm_quat_enu(q_imu.as_quat(), imu))
-    want = q_imu * mount
-    assert (got.inv() * want).magnitude() < 1e-9
-    # scalar-first input gives the same answer
-    wxyz = np.roll(q_imu.as_quat(), 1)
-    got2 = forearm_quat_enu(wxyz, ImuSettings(order="wxyz", mount_xyzw=imu.mount_xyzw))
-    assert (Rotation.from_quat(got2).inv() * want).magnitude() < 1e-9
-    # NED: the body x axis pointing north-east-down maps to ENU (east, north, up) swapped
-    body_to_ned = Rotation.from_euler("z", 30, degrees=True)  # heading 30 deg east of north
-    q = forearm_quat_enu(body_to_ned.as_quat(), ImuSettings(world="NED"))
-    x_world = Rotation.from_quat(q).apply([1.0, 0.0, 0.0])
-    want_enu = [np.sin(np.radians(30)), np.cos(np.radians(30)), 0.0]
-    np.testing.assert_allclose(x_world, want_enu, atol=1e-12)
 
 
 def test_glove_config_defaults_need_channels() -> None:

@@ -1,0 +1,47 @@
+"""The factory: glove.toml's IMU settings reach the forearm angles."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from handrig.app import ForearmAngles
+from handrig.glove import GloveSample
+from handrig.glove_calibration import ImuSettings, load_glove_config
+from handrig.orientation import ForearmOrientation
+
+ENU_TO_NED = Rotation.from_matrix([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def _sample(q: np.ndarray) -> GloveSample:
+    return GloveSample(np.zeros(5), q, 0, False, 1, 0, 0.0, 1)
+
+
+@pytest.mark.parametrize("world,order", [("ENU", "xyzw"), ("NED", "wxyz")])
+def test_forearm_angles_honour_order_world_and_mount(world, order):
+    rng = np.random.default_rng(7)
+    mount = Rotation.random(random_state=rng)  # forearm frame in IMU axes
+    cfg = load_glove_config()
+    cfg = dataclasses.replace(cfg, imu=ImuSettings(
+        order=order, world=world, mount_xyzw=tuple(mount.as_quat())))  # type: ignore[arg-type]
+    angles = ForearmAngles(cfg)
+    for incl, rot in [(0.0, 0.0), (30.0, 90.0), (-45.0, 170.0), (60.0, -100.0)]:
+        forearm_to_enu = Rotation.from_quat(
+            ForearmOrientation().quaternion_for(incl, rot, heading_deg=25.0))
+        imu_to_world = forearm_to_enu * mount.inv()
+        if world == "NED":
+            imu_to_world = ENU_TO_NED * imu_to_world
+        q = imu_to_world.as_quat(scalar_first=order == "wxyz")
+        got = angles(_sample(q))
+        np.testing.assert_allclose(got, (incl, rot), atol=1e-6)
+
+
+def test_a_rejected_quaternion_keeps_the_last_good_angles():
+    angles = ForearmAngles(load_glove_config())
+    good = angles(_sample(ForearmOrientation().quaternion_for(20.0, 45.0)))
+    assert angles(_sample(np.array([0.0, 0.0, 0.0, 0.0]))) == pytest.approx(good)
+    assert angles(_sample(np.array([np.nan, 0.0, 0.0, 1.0]))) == pytest.approx(good)
+    assert angles.orientation.rejected == 2
