@@ -12,8 +12,10 @@ Errors are :class:`~handrig.errors.DataError` naming the file and the line or fr
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +34,7 @@ class BvhJoint:
     offset: tuple[float, float, float]
     channels: tuple[str, ...]
     channel_start: int
+    end_site: tuple[float, float, float] = (0.0, 1.0, 0.0)  # written for a joint with no child
 
 
 @dataclass(frozen=True)
@@ -249,6 +252,13 @@ def read_bvh(path: str | Path) -> Bvh:
 
 def format_bvh(bvh: Bvh, decimals: int = 5) -> str:
     """BVH text for ``bvh`` (joints as a tree, one frame per line); :func:`parse_bvh` reads it."""
+    buf = io.StringIO()
+    write_bvh(buf, bvh, decimals)
+    return buf.getvalue()
+
+
+def write_bvh(f: TextIO, bvh: Bvh, decimals: int = 5) -> None:
+    """Write ``bvh`` to the text stream ``f`` (the motion block with numpy, for long takes)."""
     children: dict[int, list[int]] = {}
     for i, j in enumerate(bvh.joints):
         children.setdefault(j.parent, []).append(i)
@@ -266,16 +276,17 @@ def format_bvh(bvh: Bvh, decimals: int = 5) -> str:
         for k in kids:
             emit(k, depth + 1)
         if not kids:
-            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET 0.0 1.0 0.0",
-                        f"{pad}\t}}"])
+            e = j.end_site
+            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
+                        f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", f"{pad}\t}}"])
         out.append(f"{pad}}}")
 
     for root in children.get(-1, []):
         emit(root, 0)
-    out += ["MOTION", f"Frames: {bvh.n_frames}", f"Frame Time: {bvh.frame_time_s:.7f}"]
-    fmt = f"%.{decimals}f"
-    out.extend(" ".join(fmt % v for v in row) for row in bvh.motion)
-    return "\n".join(out) + "\n"
+    out += ["MOTION", f"Frames: {bvh.n_frames}", f"Frame Time: {bvh.frame_time_s:.10g}"]
+    f.write("\n".join(out) + "\n")
+    if bvh.n_frames:
+        np.savetxt(f, bvh.motion, fmt=f"%.{decimals}f", delimiter=" ")
 
 
 def make_bvh(

@@ -46,7 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig import hand
-from handrig.bvh import read_bvh
+from handrig.bvh import Bvh, BvhJoint, read_bvh, write_bvh
 from handrig.clock import Clock
 from handrig.errors import DataError
 from handrig.mocap import Profile, load_profile
@@ -224,39 +224,19 @@ def _write_bvh(f: TextIO, data: NDArray[np.float64], rate_hz: float, with_wrist:
                table: list[tuple[str, str, float, float]]) -> None:
     joints = _bvh_joints()
     names = [j[0] for j in joints]
-    children: dict[int, list[int]] = {}
-    for i, (_, parent, _, _) in enumerate(joints):
-        children.setdefault(parent, []).append(i)
-    lines = ["HIERARCHY"]
-
-    def emit(i: int, depth: int) -> None:
-        name, parent, off, end = joints[i]
-        pad = "\t" * depth
-        chans = _ROOT_CHANNELS if parent < 0 else BVH_CHANNELS
-        lines.extend([
-            f"{pad}{'ROOT' if parent < 0 else 'JOINT'} {name}", f"{pad}{{",
-            f"{pad}\tOFFSET {off[0]:.6f} {off[1]:.6f} {off[2]:.6f}",
-            f"{pad}\tCHANNELS {len(chans)} {' '.join(chans)}",
-        ])
-        for k in children.get(i, []):
-            emit(k, depth + 1)
-        if i not in children:
-            lines.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
-                          f"{pad}\t\tOFFSET {end[0]:.6f} {end[1]:.6f} {end[2]:.6f}",
-                          f"{pad}\t}}"])
-        lines.append(f"{pad}}}")
-
-    emit(0, 0)
-    n = data.shape[0]
-    lines += ["MOTION", f"Frames: {n}", f"Frame Time: {1.0 / rate_hz:.10g}"]
     start = {name: len(_ROOT_CHANNELS) + 3 * (i - 1) for i, name in enumerate(names) if i}
+    bvh_joints = tuple(
+        BvhJoint(name, parent, off, _ROOT_CHANNELS if parent < 0 else BVH_CHANNELS,
+                 0 if parent < 0 else start[name], end)
+        for name, parent, off, end in joints
+    )
+    n = data.shape[0]
     motion = np.zeros((n, len(_ROOT_CHANNELS) + 3 * (len(names) - 1)))
     values = data[:, 1:] if with_wrist else np.concatenate(
         [data[:, 1:51], np.zeros((n, len(WRIST_NAMES)))], axis=1)
     for k, (joint, channel, sign, offset) in enumerate(table):
         motion[:, start[joint] + BVH_CHANNELS.index(channel)] = sign * (values[:, k] - offset)
-    f.write("\n".join(lines) + "\n")
-    np.savetxt(f, motion, fmt="%.6f", delimiter=" ")
+    write_bvh(f, Bvh(bvh_joints, 1.0 / rate_hz, motion), decimals=6)
 
 
 Performance = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]

@@ -4,8 +4,13 @@ The CRC table is the one in dynamixel-sdk (``Protocol2PacketHandler.updateCRC``)
 taken from the SDK at import so both sides of the wire agree by construction. The
 SDK's own ``txPacket``/``rxPacket`` are not used: they send packets unstuffed,
 clear the input buffer, busy-wait on wall time and crash on short replies
-(REFERENCE.md section 1); here packets are plain ``bytes`` and every check is a
+(Dynamixel SDK notes); here packets are plain ``bytes`` and every check is a
 :class:`~handrig.errors.ProtocolError` or a returned flag.
+
+Deliberately separate from ``firmware_protocol/dynamixel.py``, the emulator's codec:
+the driver and the emulator it is tested against share no protocol code (this side
+takes its CRC from the SDK, that side builds its own from the e-manual), so a
+misreading of the protocol on one side fails a test instead of cancelling out.
 """
 
 from __future__ import annotations
