@@ -27,7 +27,7 @@ def main() -> None:
     baud = parts.rig_config.bus.baud
     with port_process(["sim-glove", str(DEMO_RECORDING), "--rate", "200", "--loop"],
                       "the glove emulator") as (_, glove_port):
-        result = run_live(parts, LiveOptions(glove=glove_port, bus="sim",
+        result = run_live(parts, LiveOptions(glove=glove_port, bus="sim", profile=True,
                                              duration_s=seconds, log=lambda s: None))
     s = result.summary
     lat = s["latency_us"]
@@ -39,6 +39,8 @@ def main() -> None:
           f"{s['missed_cycles']} cycles missed)")
     print(f"  latency         p50 {lat['p50']} us, p99 {lat['p99']} us, max {lat['max']} us "
           f"over {lat['samples']} glove frames (target p50 <= 100, p99 <= 300)")
+    stages = ", ".join(f"{k} {v['p50']}" for k, v in s.get("stages_us", {}).items())
+    print(f"  where (p50 us)  {stages}")
     print(f"  tracking        rms {s['tracking_rms_deg']} deg (present vs goal), "
           f"stale reads {s['stale_reads']}/{s['reads']}")
     print(f"  glove           {s['glove']}")

@@ -46,6 +46,7 @@ class LiveOptions:
     sim_faults: str = ""
     snapshot_every: int = 0  # keep present positions every N frames (for rendering)
     verbose: bool = False  # log every commissioning step
+    profile: bool = False  # record per-stage times of the critical path (bench_rig)
     log: Callable[[str], None] = field(default=lambda text: print(text, file=sys.stderr))
 
 
@@ -153,6 +154,7 @@ def _run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None) -> LiveRe
             rate_hz=rig_cfg.loop.rate_hz, read_every=rig_cfg.bus.read_every,
             glove_timeout_s=rig_cfg.loop.glove_timeout_s,
             relax_time_s=rig_cfg.loop.relax_time_s, outputs=outputs, log=opts.log,
+            profile=opts.profile,
         )
         if opts.snapshot_every > 0:
             every = opts.snapshot_every
@@ -180,6 +182,13 @@ def _run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None) -> LiveRe
                 error = exc
         off = torque_is_off(bus)
         summary = summary_dict(rig, bus.stats, glove.stats(), off)
+        if rig.stage_times:
+            t = np.diff(np.array(rig.stage_times), axis=1) * 1e6
+            names = ("read+decode", "calibrate+filter", "orientation", "targets", "write")
+            summary["stages_us"] = {
+                name: {"p50": round(float(np.percentile(t[:, i], 50)), 1),
+                       "p99": round(float(np.percentile(t[:, i], 99)), 1)}
+                for i, name in enumerate(names)}
         if error is not None:
             summary["error"] = str(error)
     sim_output = ""

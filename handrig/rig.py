@@ -135,7 +135,8 @@ class Rig:
         relax_time_s: float = 1.0,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         log: Callable[[str], None] = print,
-        warm_s: float = 0.0006,
+        warm_s: float = 0.00035,
+        profile: bool = False,
     ) -> None:
         self.glove = glove
         self.bus = bus
@@ -167,6 +168,10 @@ class Rig:
         # glove frame is warm in the CPU caches when the frame is read. On this VM a
         # cold pass cost 4-6x a warm one.
         self.warm_s = max(0.0, float(warm_s))
+        # profile=True: per glove frame, clock times after each stage of the critical path
+        # (read, controls, orientation, targets, write), for bench_rig's breakdown.
+        self.profile = profile
+        self.stage_times: list[tuple[float, ...]] = []
         self._last_sample: Any = None
         if self.warm_s > 0:
             shared: dict[int, Any] = {id(pipeline.expander): pipeline.expander}
@@ -316,6 +321,7 @@ class Rig:
                 dt = period
 
                 sample = self.glove.latest()
+                t_read = clock.now() if self.profile else 0.0
                 if sample is not None:
                     last_good = now
                     stats.glove_samples += 1
@@ -325,7 +331,9 @@ class Rig:
                         stats.stop_reason = "e-stop"
                         self._start_relax(Mode.STOPPING, "e-stop pressed on the glove")
                     self.controls_from_raw(sample.raw, now, self._controls)
+                    t_controls = clock.now() if self.profile else 0.0
                     self._orientation = self.orientation(sample)
+                    t_orientation = clock.now() if self.profile else 0.0
                     if self.mode is Mode.WAITING:
                         self.mode = Mode.RUNNING
                     elif self.mode is Mode.RELAXING:
@@ -340,13 +348,18 @@ class Rig:
                 done = False
                 if self.mode is Mode.RUNNING:
                     goals = self.pipeline.servo_targets(self._controls, *self._orientation, dt)
+                    t_targets = clock.now() if self.profile else 0.0
                 elif self.mode is Mode.WAITING:
                     goals = self.pipeline.targets  # hold: keeps the watchdog fed
                 else:
                     goals, done = self._relax_targets(now, dt)
                 stats.bus_clamps += int(self.bus.write_goals_deg(goals))
                 if sample is not None:
-                    stats.latencies_s.append(clock.now() - sample.host_time_s)
+                    t_write = clock.now()
+                    stats.latencies_s.append(t_write - sample.host_time_s)
+                    if self.profile and self.mode is Mode.RUNNING:
+                        self.stage_times.append((sample.host_time_s, t_read, t_controls,
+                                                 t_orientation, t_targets, t_write))
                 # after the write: the full pose for outputs, and the counters
                 if self.mode is Mode.RUNNING:
                     pose: FloatArray | None = self.pipeline.account(
