@@ -4,7 +4,6 @@ bytes and a stream the host decodes: the spec alone is enough to write a glove."
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -45,19 +44,8 @@ int main(int argc, char **argv) {
 
 
 @pytest.fixture(scope="module")
-def sender(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        pytest.skip("no C compiler on this machine")
-    blocks = re.findall(r"```c\n(.*?)```", SPEC.read_text(), flags=re.S)
-    assert len(blocks) == 3  # cobs_encode, crc16_ccitt_false, glove_frame_build
-    src = "#include <stdint.h>\n#include <stddef.h>\n" + "\n".join(blocks) + MAIN
-    d = tmp_path_factory.mktemp("c")
-    (d / "glove.c").write_text(src)
-    exe = d / "glove"
-    subprocess.run([cc, "-std=c99", "-Wall", "-Werror", "-O1", "-o", str(exe),
-                    str(d / "glove.c")], check=True, capture_output=True)
-    return exe
+def sender(build_spec_c) -> Path:
+    return build_spec_c(MAIN, "glove")
 
 
 def test_the_c_sender_writes_the_golden_bytes(sender: Path) -> None:

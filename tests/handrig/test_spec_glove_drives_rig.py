@@ -9,8 +9,6 @@ must follow.
 from __future__ import annotations
 
 import os
-import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -20,11 +18,10 @@ import pytest
 from handrig.app import build_parts
 from handrig.live import LiveOptions, run_live
 
-SPEC = Path(__file__).resolve().parents[2] / "firmware_protocol" / "SPEC.md"
-
 FIRMWARE = r"""
 #include <stdio.h>
 #include <stdlib.h>
+#include <time.h>
 #include <unistd.h>
 int main(int argc, char **argv) {
     int fd = atoi(argv[1]);
@@ -37,7 +34,8 @@ int main(int argc, char **argv) {
         uint16_t ch[5] = {2000, 2100, 2000, v, v};
         size_t n = glove_frame_build(wire, (uint16_t)k, k * 5000u, 0, 5, ch, palm_down);
         if (write(fd, wire, n) < 0) return 1;
-        usleep(5000);
+        const struct timespec period = {0, 5000000L};  /* 200 Hz */
+        nanosleep(&period, NULL);
     }
     return 0;
 }
@@ -45,18 +43,8 @@ int main(int argc, char **argv) {
 
 
 @pytest.fixture(scope="module")
-def firmware(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        pytest.skip("no C compiler on this machine")
-    blocks = re.findall(r"```c\n(.*?)```", SPEC.read_text(), flags=re.S)
-    src = "#include <stdint.h>\n#include <stddef.h>\n" + "\n".join(blocks) + FIRMWARE
-    d = tmp_path_factory.mktemp("fw")
-    (d / "fw.c").write_text(src)
-    exe = d / "fw"
-    subprocess.run([cc, "-std=c99", "-O1", "-o", str(exe), str(d / "fw.c")], check=True,
-                   capture_output=True)
-    return exe
+def firmware(build_spec_c) -> Path:
+    return build_spec_c(FIRMWARE, "fw", posix=True)
 
 
 def test_a_spec_only_glove_drives_the_puppet(firmware: Path):
