@@ -180,8 +180,12 @@ class Rig:
             for grid in pipeline._grids.values():
                 shared[id(grid)] = grid
             self._r_pipeline = copy.deepcopy(pipeline, shared)
-            self._r_controls = copy.deepcopy(controls_from_raw)
-            self._r_orientation = copy.deepcopy(orientation)
+            # deepcopy hands back functions unchanged: a stateful plain function (or a
+            # closure) would then see the rehearsal's sample; rehearse only true copies
+            r_controls = copy.deepcopy(controls_from_raw)
+            r_orientation = copy.deepcopy(orientation)
+            self._r_controls = None if r_controls is controls_from_raw else r_controls
+            self._r_orientation = None if r_orientation is orientation else r_orientation
             self._r_out = np.zeros(len(pipeline.expander.controls))
 
     # -- control from outside (signal handlers, UI) --------------------------------------------
@@ -232,8 +236,10 @@ class Rig:
         rehearse_glove = getattr(self.glove, "rehearse", None)
         if rehearse_glove is not None:
             rehearse_glove()
-        self._r_controls(sample.raw, now, self._r_out)
-        orientation = self._r_orientation(sample)
+        if self._r_controls is not None:
+            self._r_controls(sample.raw, now, self._r_out)
+        orientation = (self._r_orientation(sample) if self._r_orientation is not None
+                       else self._orientation)
         targets = self._r_pipeline.servo_targets(self._r_out, *orientation, self.period_s)
         rehearse_write = getattr(self.bus, "rehearse_write", None)
         if rehearse_write is not None:

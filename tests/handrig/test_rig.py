@@ -308,3 +308,23 @@ def test_servo_fast_path_equals_the_full_pipeline(parts_factory):
         np.testing.assert_allclose(fast, want, atol=1e-9)
         compared += 1
     assert compared >= 50
+
+
+def test_rehearsal_never_feeds_live_state(parts_factory):
+    """The rehearsal runs on copies: a plain-function control path is not rehearsed,
+    and the live filter sees exactly one sample per glove frame."""
+    parts = parts_factory()
+    clock = FakeClock()
+    seen: list[float] = []
+
+    def controls(raw, t_s, out):  # a plain function: deepcopy returns it unchanged
+        seen.append(t_s)
+        return parts.controls(raw, t_s, out)
+
+    glove = ScriptedGlove(clock, lambda t: MID)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = Rig(glove, bus, parts.pipeline, clock, controls_from_raw=controls,
+              orientation=parts.orientation, rate_hz=200.0, log=lambda s: None)
+    assert rig.warm_s > 0 and rig._r_controls is None
+    stats = rig.run(frames=50)
+    assert len(seen) == stats.glove_samples
