@@ -1157,7 +1157,7 @@ class DynamixelBus(ServoBus):
     def _finish_approach(self, indices: np.ndarray, excess_deg: float) -> None:
         """Wait (bounded) for servos brought in slowly to reach their limits, then lift
         their speed limit again, and say so in the commissioning log."""
-        end = self.clock.now() + excess_deg / APPROACH_DPS * 1.5 + 0.2
+        end = self.clock.now() + excess_deg / APPROACH_DPS * 2.0 + 0.5
         while self.clock.now() < end:
             self.write_goals_deg(self._last_goal_deg)  # keeps the watchdog fed
             state = self.read_state()

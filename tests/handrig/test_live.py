@@ -71,7 +71,7 @@ def test_glove_going_quiet_or_garbled_relaxes_the_puppet_and_recovers():
     events: list[str] = []
     with GloveEmulator(rec, "frames", rate_hz=200.0) as emu:
         def script() -> None:
-            time.sleep(0.8)
+            time.sleep(0.5)
             emu.inject_garbage(300)
             emu.corrupt_next(20)
             time.sleep(0.4)
@@ -79,9 +79,14 @@ def test_glove_going_quiet_or_garbled_relaxes_the_puppet_and_recovers():
             time.sleep(0.8)
             emu.resume()
         t = threading.Thread(target=script)
-        t.start()
+
+        def log(line: str) -> None:
+            events.append(line)
+            if "commissioned" in line:  # the loop starts now: so do the glove's faults
+                t.start()
+
         result = run_live(parts, LiveOptions(glove=emu.port_path, bus="sim", frames=800,
-                                             log=events.append))
+                                             log=log))
         t.join()
     s = result.summary
     assert s["torque_off"] is True and "error" not in s
