@@ -428,12 +428,15 @@ class SimBus:
         buf = bytearray()
         last_rx = 0.0
         fd = self._master
+        clock = self.clock
         try:
             while not self._stop.is_set():
+                # Arrivals are time-stamped before anything else; housekeeping (servos'
+                # kinematics, watchdogs, overload) runs after the replies are out.
                 ready, _, _ = select.select([fd], [], [], 0.01)
-                now = self.clock.now()
-                self._housekeeping(now)
+                now = clock.now()
                 if not ready:
+                    self._housekeeping(now)
                     if buf and now - last_rx > STALE_PARTIAL_S:
                         self.stats.noise_bytes += len(buf)
                         buf.clear()
@@ -443,10 +446,10 @@ class SimBus:
                     chunk = os.read(fd, 65536)
                 except OSError:
                     continue
-                now = self.clock.now()
                 last_rx = now
                 buf += chunk
                 self._drain(buf, now)
+                self._housekeeping(clock.now())
         except BaseException as exc:  # reported through .error; the thread must not vanish
             self.error = exc
             raise

@@ -56,8 +56,8 @@ try:
 finally:
     s = bus.stats
     print(f"emulator: {s.packets} packets, overhead mean {s.overhead_mean_s * 1e6:.0f} us, "
-          f"reply late mean {s.late_mean_s * 1e6:.0f} us max {s.late_max_s * 1e6:.0f} us",
-          flush=True)
+          f"reply late mean {s.late_mean_s * 1e6:.0f} us max {s.late_max_s * 1e6:.0f} us"
+          + (f"; STOPPED: {bus.error!r}" if bus.error is not None else ""), flush=True)
     bus.stop()
 """
 
