@@ -1,15 +1,16 @@
 """The pose pipeline, pure numpy: controls -> full pose with sag -> servo targets.
 
-One step per loop cycle::
+Per loop cycle, :meth:`PosePipeline.servo_targets` (before the Sync Write) and
+:meth:`PosePipeline.account` (after it) compute::
 
-    control degrees (k,) --filter--> --expand--> 50 curves
+    control degrees (k,, calibrated and filtered upstream) --expand--> 50 curves
         + passive sag at the forearm orientation (23 DOFs per hand, wrist included)
-        -> clamp to joint limits -> slew limit -> the servos' joints (n,)
+        -> clamp to joint and servo limits -> slew limit -> the servos' joints (n,)
 
 The full pose is a 54-vector laid out as :data:`handrig.hand.ALL_JOINT_NAMES`
 (the 50 curves, then ``riWristFlexion, riWristDeviation, leWristFlexion,
 leWristDeviation``), degrees in the vocabulary convention. Every array is
-preallocated; :meth:`PosePipeline.step` allocates nothing.
+preallocated; :meth:`PosePipeline.servo_targets` allocates nothing.
 
 This module imports no device code (no serial, dynamixel_sdk or mujoco).
 """
@@ -259,32 +260,6 @@ class PosePipeline:
         return self.relaxed
 
     # -- the per-cycle step ----------------------------------------------------------------
-    def targets_from_pose(self, pose: FloatArray, dt_s: float) -> FloatArray:
-        """Clamp ``pose`` to the limits, pick the servos' joints, slew-limit them."""
-        np.clip(pose, self.pose_low, self.pose_high, out=self._clamped_pose)
-        self.clamps += int(np.count_nonzero(self._clamped_pose != pose))
-        np.take(pose, self.servo_index, out=self._raw_targets)
-        self.servo_clamps += int(np.count_nonzero(
-            (self._raw_targets < self.servo_low) | (self._raw_targets > self.servo_high)))
-        np.take(self._clamped_pose, self.servo_index, out=self._raw_targets)
-        np.clip(self._raw_targets, self.servo_low, self.servo_high, out=self._raw_targets)
-        bad = ~np.isfinite(self._raw_targets)
-        if bad.any():  # a NaN never reaches a servo: hold the last target (or the middle)
-            self.rejected += int(bad.sum())
-            fallback = self.targets if self._has_targets else 0.5 * (
-                self.servo_low + self.servo_high)
-            np.copyto(self._raw_targets, fallback, where=bad)
-        if not self._has_targets:
-            self.targets[:] = self._raw_targets
-            self._has_targets = True
-            return self.targets
-        max_step = self.slew_deg_s * max(dt_s, 0.0)
-        np.subtract(self._raw_targets, self.targets, out=self._step)
-        self.slewed += int(np.count_nonzero(np.abs(self._step) > max_step))
-        np.clip(self._step, -max_step, max_step, out=self._step)
-        self.targets += self._step
-        return self.targets
-
     def servo_targets(
         self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, dt_s: float
     ) -> FloatArray:
@@ -333,14 +308,6 @@ class PosePipeline:
         self.slewed += int(np.count_nonzero(np.abs(self._raw_targets - self.targets) > 1e-9))
         pose[:] = self._clamped_pose
         return pose
-
-    def step(
-        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, dt_s: float
-    ) -> FloatArray:
-        """One cycle: controls and orientation in, servo targets (degrees, bus order) out."""
-        return self.targets_from_pose(
-            self.full_pose(controls_deg, inclination_deg, rotation_deg), dt_s
-        )
 
     @property
     def has_targets(self) -> bool:
