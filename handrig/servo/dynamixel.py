@@ -292,6 +292,21 @@ class DynamixelBus(ServoBus):
         return f"on {self.port} at {self.baud} baud"
 
     # ------------------------------------------------------------------ low level
+    def _next_status(self, deadline: float) -> StatusPacket | None:
+        """The next status packet that passes its CRC before ``deadline``. Packets failing
+        it are counted and skipped; none in time counts a timeout, marks the line dirty
+        (a late reply may still arrive) and returns None."""
+        while True:
+            raw = self._transport.read_packet(deadline)
+            if raw is None:
+                self._stats.timeouts += 1
+                self._line_dirty = True
+                return None
+            try:
+                return parse_status(raw)
+            except ProtocolError:
+                self._stats.crc_errors += 1
+
     def _transact(
         self, packet: bytes, servo_id: int, *, timeout_s: float = COMMAND_TIMEOUT_S,
         attempts: int = COMMAND_ATTEMPTS, n_params: int | None = None,
@@ -308,17 +323,7 @@ class DynamixelBus(ServoBus):
             self._quiet_line()
             t.write(packet)
             deadline = self.clock.now() + timeout_s
-            while True:
-                raw = t.read_packet(deadline)
-                if raw is None:
-                    self._stats.timeouts += 1
-                    self._line_dirty = True
-                    break
-                try:
-                    status = parse_status(raw)
-                except ProtocolError:
-                    self._stats.crc_errors += 1
-                    continue
+            while (status := self._next_status(deadline)) is not None:
                 if status.servo_id != servo_id or (
                     n_params is not None and not status.error & 0x7F
                     and len(status.params) != n_params
@@ -845,7 +850,6 @@ class DynamixelBus(ServoBus):
         return True
 
     def _sync_read(self, indices: np.ndarray, deadline: float) -> bool:
-        t = self._transport
         ids = [self.ids[int(i)] for i in indices]
         self._quiet_line(deadline)
         self._send_request(build_instruction(
@@ -856,16 +860,9 @@ class DynamixelBus(ServoBus):
         rows = np.zeros((len(ids), self._read_len), np.uint8)
         got: list[int] = []
         while len(got) < len(ids):
-            raw = t.read_packet(deadline)
-            if raw is None:
-                self._stats.timeouts += 1
-                self._line_dirty = True
+            status = self._next_status(deadline)
+            if status is None:
                 break
-            try:
-                status = parse_status(raw)
-            except ProtocolError:
-                self._stats.crc_errors += 1
-                continue
             index = want.pop(status.servo_id, None)
             if index is not None and status.error & 0x7F:
                 self._stats.status_errors += 1
