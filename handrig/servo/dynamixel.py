@@ -590,18 +590,22 @@ class DynamixelBus(ServoBus):
 
     def _clamp_goals(self, goals_deg: np.ndarray) -> int:
         """Goals clamped into ``self._goal_deg``; returns (and counts) how many changed."""
+        clamped = self._clamp_into(goals_deg, self._goal_deg)
+        self._stats.clamps += clamped
+        return clamped
+
+    def _clamp_into(self, goals_deg: np.ndarray, goal: np.ndarray) -> int:
+        """``goals_deg`` clamped to the limits into ``goal`` (a non-finite goal becomes the
+        last goal sent, or the hold position); returns how many changed. No counters."""
         g = np.asarray(goals_deg, dtype=np.float64)
         if g.shape != (self._n,):
             raise ValueError(f"goals_deg must have shape ({self._n},), got {g.shape}")
-        goal = self._goal_deg
         np.clip(g, self._min_deg, self._max_deg, out=goal)
         np.isfinite(g, out=self._finite)
         if not self._finite.all():
             fallback = np.where(np.isnan(self._last_goal_deg), self._hold_deg, self._last_goal_deg)
             np.copyto(goal, fallback, where=~self._finite)
-        clamped = int(np.count_nonzero(goal != g))
-        self._stats.clamps += clamped
-        return clamped
+        return int(np.count_nonzero(goal != g))
 
     def _send_request(self, packet: bytes) -> None:
         """Write ``packet`` after any goal Sync Write held back by ``write_and_read``."""
@@ -629,7 +633,7 @@ class DynamixelBus(ServoBus):
         remembering anything: the loop calls it shortly before a deadline so the write
         path is warm in the CPU's caches when the real goals come (see handrig.rig)."""
         with self._lock:
-            np.clip(goals_deg, self._min_deg, self._max_deg, out=self._rehearsal_goal)
+            self._clamp_into(goals_deg, self._rehearsal_goal)
             self._goal_packet(self._rehearsal_goal)
 
     def _send_goals(self, goal_deg: np.ndarray) -> None:
