@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import enum
+import gc
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -291,6 +292,11 @@ class Rig:
         clock = self.clock
         period = self.period_s
         self._seed()
+        # Short cycle-collector passes mid-run: the start-up heap (MuJoCo-free here, but
+        # numpy, scipy, the map and grid) moves to the permanent generation, so a
+        # collection only walks what the run itself allocates.
+        gc.collect()
+        gc.freeze()
         t0 = clock.now()
         self.started_at = t0
         last_good = t0
@@ -396,6 +402,7 @@ class Rig:
             self._event(f"stopping: {exc}")
             raise
         finally:
+            gc.unfreeze()
             stats.duration_s = clock.now() - t0
             stats.clamps = self.pipeline.clamps
             stats.servo_clamps = self.pipeline.servo_clamps
