@@ -200,6 +200,7 @@ def summary_dict(rig: Any, bus_stats: Any, glove_stats: Any, torque_off: bool | 
         "missed_cycles": s.missed_cycles,
         "limit_clamps": s.servo_clamps,
         "pose_clamps": s.clamps,
+        "nonfinite_targets": s.nonfinite,
         "bus_clamps": s.bus_clamps,
         "slew_limited": s.slewed,
         "tracking_rms_deg": num(s.tracking_rms_deg),

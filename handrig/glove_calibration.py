@@ -277,6 +277,10 @@ class GloveCalibration:
         self._lo = np.minimum(open_deg, closed_deg)
         self._hi = np.maximum(open_deg, closed_deg)
         self._raw_open, self._raw_closed = raw_open, raw_closed
+        # what a non-finite reading is replaced by: the channel's last good value (open
+        # hand before any), so it never reaches the filter, whose state it would poison
+        self._last_good = open_deg.copy()
+        self.nonfinite = 0
         self.n_raw_needed = int(self.raw_index.max()) + 1
 
     @classmethod
@@ -301,6 +305,11 @@ class GloveCalibration:
         out *= self._gain
         out += self._offset
         np.clip(out, self._lo, self._hi, out=out)
+        if not math.isfinite(out.sum()):  # a NaN/inf reading: hold the channel's last value
+            bad = ~np.isfinite(out)
+            self.nonfinite += int(bad.sum())
+            np.copyto(out, self._last_good, where=bad)
+        self._last_good[:] = out
         return out
 
     def to_raw(self, degrees: FloatArray) -> FloatArray:

@@ -14,7 +14,6 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 from types import FrameType
 from typing import Any
 
@@ -215,7 +214,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"limit clamps      {summary['limit_clamps']} servo targets held at a joint limit "
         f"(end stop), {summary['pose_clamps']} values of the full two-hand pose; "
         f"{summary['bus_clamps']} goals clamped by the driver; slew-limited "
-        f"{summary['slew_limited']}",
+        f"{summary['slew_limited']}; non-finite targets held {summary['nonfinite_targets']}",
         f"glove             {glove.get('frames_ok', '-')} frames ok, "
         f"{glove.get('crc_errors', 0)} CRC errors, {glove.get('decode_errors', 0)} other "
         f"errors, {glove.get('resyncs', 0)} resyncs, used {glove.get('frames_used', '-')}",
@@ -230,9 +229,3 @@ def format_summary(summary: dict[str, Any]) -> str:
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
     return "\n".join(lines)
-
-
-def repo_path(*parts: str) -> Path:
-    from handrig.config import REPO_ROOT
-
-    return REPO_ROOT.joinpath(*parts)

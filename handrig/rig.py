@@ -85,6 +85,7 @@ class RunStats:
     missed_cycles: int = 0
     clamps: int = 0  # full-pose values clamped to joint limits (both hands)
     servo_clamps: int = 0  # servo targets clamped to joint or servo limits
+    nonfinite: int = 0  # NaN/inf servo targets replaced by the last good target
     slewed: int = 0
     bus_clamps: int = 0
     reads: int = 0
@@ -406,5 +407,6 @@ class Rig:
             stats.duration_s = clock.now() - t0
             stats.clamps = self.pipeline.clamps
             stats.servo_clamps = self.pipeline.servo_clamps
+            stats.nonfinite = self.pipeline.rejected
             stats.slewed = self.pipeline.slewed
         return stats

@@ -139,3 +139,20 @@ def test_recording_from_degrees_reads_back_as_the_same_degrees() -> None:
     np.testing.assert_allclose(back, deg, atol=float(gains.max()) * 0.5 + 1e-9)
     with pytest.raises(DataError, match="shape"):
         recording_from_degrees(cal, t, deg[:, :3])
+
+
+def test_a_nan_reading_holds_the_channel_and_never_poisons_the_filter() -> None:
+    from handrig.glove_calibration import GloveControls
+
+    cfg = load_glove_config()
+    controls = GloveControls.from_config(cfg, cfg.curves)
+    out = np.zeros(len(cfg.curves))
+    good = np.array([2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
+    first = controls(good, 0.0, out).copy()
+    bad = good.copy()
+    bad[0] = np.nan
+    held = controls(bad, 0.005, out).copy()
+    assert np.isfinite(held).all() and held[0] == pytest.approx(first[0])
+    after = controls(good, 0.010, out)
+    assert np.isfinite(after).all()
+    assert controls.calibration.nonfinite == 1
