@@ -304,11 +304,11 @@ class GloveCalibration:
             ) from None
         out *= self._gain
         out += self._offset
-        np.clip(out, self._lo, self._hi, out=out)
         if not math.isfinite(out.sum()):  # a NaN/inf reading: hold the channel's last value
             bad = ~np.isfinite(out)
             self.nonfinite += int(bad.sum())
             np.copyto(out, self._last_good, where=bad)
+        np.clip(out, self._lo, self._hi, out=out)
         self._last_good[:] = out
         return out
 

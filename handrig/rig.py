@@ -164,6 +164,7 @@ class Rig:
         self._out_pose = np.zeros(len(pipeline.pose))
         self._blend_t0: float | None = None  # set on the first easing cycle
         self._sent = np.zeros(len(pipeline.servo_joints))  # the goals last written
+        self._accounted = False  # whether pipeline.pose holds an active pose yet
         self.last_state: Any = None  # the newest ServoState read back
         # Rehearsal: ``warm_s`` before each deadline the critical path runs once on
         # scratch copies (same code, separate state), so the code that handles the next
@@ -195,6 +196,7 @@ class Rig:
         """Ease to the relaxed pose, then end the run. A second request ends it at once."""
         self._stop_requests += 1
         if self._stop_requests == 1:
+            self.stats.stop_reason = self.stats.stop_reason or reason
             self._start_relax(Mode.STOPPING, reason)
         else:
             self.stats.stop_reason = f"{reason} (immediate)"
@@ -221,7 +223,7 @@ class Rig:
         if self._blend_t0 is None:  # first easing cycle: from what the servos were last sent
             self._blend_t0 = now
             self._blend_from[:] = self._sent
-            self._pose_from[:] = self.pipeline.pose
+            self._pose_from[:] = self.pipeline.pose if self._accounted else relaxed
         a = min(1.0, (now - self._blend_t0) / self.relax_time_s)
         s = a * a * (3.0 - 2.0 * a)  # smoothstep: no jerk at either end
         self._blend = s
@@ -292,7 +294,12 @@ class Rig:
         stats = self.stats
         clock = self.clock
         period = self.period_s
-        self._seed()
+        try:
+            self._seed()
+        except DeviceError as exc:
+            stats.stop_reason = f"device error: {exc}"
+            self._event(f"not starting: {exc}")
+            raise
         # Short cycle-collector passes mid-run: the start-up heap (MuJoCo-free here, but
         # numpy, scipy, the map and grid) moves to the permanent generation, so a
         # collection only walks what the run itself allocates.
@@ -328,6 +335,7 @@ class Rig:
                     skipped = int(late / period)
                     stats.missed_cycles += skipped
                     k += skipped
+                    deadline = t0 + k * period  # this cycle's slot, for the read's deadline
                 if stats.frames:
                     stats.periods_s.append(now - last_cycle)
                 last_cycle = now
@@ -359,10 +367,12 @@ class Rig:
                     self._start_relax(Mode.RELAXING, f"{what} for {now - last_good:.2f} s")
 
                 done = False
-                if self.mode is Mode.RUNNING:
+                # one mode for the whole cycle: a signal may call request_stop any time
+                mode = self.mode
+                if mode is Mode.RUNNING:
                     goals = self.pipeline.servo_targets(self._controls, *self._orientation, dt)
                     t_targets = clock.now() if self.profile else 0.0
-                elif self.mode is Mode.WAITING:
+                elif mode is Mode.WAITING:
                     goals = self.pipeline.targets  # hold: keeps the watchdog fed
                 else:
                     goals, done = self._relax_targets(now, dt)
@@ -370,14 +380,15 @@ class Rig:
                 if sample is not None:
                     t_write = clock.now()
                     stats.latencies_s.append(t_write - sample.host_time_s)
-                    if self.profile and self.mode is Mode.RUNNING:
+                    if self.profile and mode is Mode.RUNNING:
                         self.stage_times.append((sample.host_time_s, t_read, t_controls,
                                                  t_orientation, t_targets, t_write))
                 # after the write: the full pose for outputs, and the counters
-                if self.mode is Mode.RUNNING:
+                if mode is Mode.RUNNING:
                     pose: FloatArray | None = self.pipeline.account(
                         self._controls, *self._orientation)
-                elif self.mode is Mode.WAITING:
+                    self._accounted = True
+                elif mode is Mode.WAITING:
                     pose = None
                 else:
                     relaxed = self.pipeline.relaxed  # computed by _relax_targets
@@ -395,7 +406,7 @@ class Rig:
                 self._sent[:] = goals
                 stats.frames += 1
                 k += 1
-                if done and self.mode is Mode.STOPPING:
+                if done and mode is Mode.STOPPING:
                     stats.stop_reason = stats.stop_reason or "stop requested"
                     break
         except DeviceError as exc:

@@ -17,6 +17,7 @@ and to 0..4095 ticks whatever the caller asks.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import signal
 import threading
@@ -1125,53 +1126,70 @@ class DynamixelBus(ServoBus):
         with self._lock:
             if not self._connected:
                 raise DeviceError(f"servo bus {self.port} is not connected: call connect()")
+            # Profile Velocity is RAM: clear what an earlier run that died mid-approach left
+            self._sync_write(Reg.PROFILE_VELOCITY, [0] * self._n)
             state = self._read_every_servo("enable torque")
             pos = state.positions_deg
             excess = np.maximum(self._min_deg - pos, pos - self._max_deg)
             outside = excess > TORQUE_ON_SLACK_DEG
-            if outside.any() and self.hold_outside_limits:  # calibration: hold where they are
-                ticks = np.rint(self._zero_ticks + pos * self._ticks_per_deg)
+            slow: list[int] = []  # servos given an approach speed, to be reset
+            try:
+                if outside.any() and self.hold_outside_limits:  # calibration: hold them
+                    ticks = np.rint(self._zero_ticks + pos * self._ticks_per_deg)
+                    for i in range(self._n):
+                        tick = int(min(max(ticks[i], 0), POSITION_TICKS_MAX))
+                        self.write_register(i, Reg.GOAL_POSITION, tick)
+                    self._last_goal_deg[:] = pos  # a reboot re-sends where they were held
+                else:
+                    far = excess > MAX_APPROACH_DEG
+                    if far.any():
+                        bad = [f"{self.describe(int(i))} is at {pos[i]:.1f} deg, outside its "
+                               f"limits [{self._min_deg[i]:g}, {self._max_deg[i]:g}]"
+                               for i in np.flatnonzero(far)]
+                        raise DeviceError(
+                            f"cannot enable torque {self._where()}: {'; '.join(bad)}. That is "
+                            f"more than {MAX_APPROACH_DEG:g} deg out (a wrong zero?): move the "
+                            "joint into range by hand, or re-zero it with "
+                            "`handrig calibrate servos`")
+                    # a joint slightly out (a limp puppet on its stop) is brought in slowly
+                    for j in np.flatnonzero(outside).tolist():
+                        slow.append(j)
+                        self.write_register(j, Reg.PROFILE_VELOCITY, self._approach_units[j])
+                    # hold where they are, clamped into the limits
+                    self.write_goals_deg(pos)
+                self._torque_on = True
                 for i in range(self._n):
-                    tick = int(min(max(ticks[i], 0), POSITION_TICKS_MAX))
-                    self.write_register(i, Reg.GOAL_POSITION, tick)
-            else:
-                far = excess > MAX_APPROACH_DEG
-                if far.any():
-                    bad = [f"{self.describe(int(i))} is at {pos[i]:.1f} deg, outside its limits "
-                           f"[{self._min_deg[i]:g}, {self._max_deg[i]:g}]"
-                           for i in np.flatnonzero(far)]
-                    raise DeviceError(
-                        f"cannot enable torque {self._where()}: {'; '.join(bad)}. That is "
-                        f"more than {MAX_APPROACH_DEG:g} deg out (a wrong zero?): move the "
-                        "joint into range by hand, or re-zero it with "
-                        "`handrig calibrate servos`")
-                # a joint slightly out (a limp puppet resting on its stop) is brought in slowly
-                for j in np.flatnonzero(outside).tolist():
-                    self.write_register(j, Reg.PROFILE_VELOCITY, self._approach_units[j])
-                # hold where they are, clamped into the limits
-                self.write_goals_deg(pos)
-            self._torque_on = True
-            for i in range(self._n):
-                self.write_register(i, Reg.TORQUE_ENABLE, 1)
-            self._arm_watchdog()
-            if outside.any() and not self.hold_outside_limits:
-                self._finish_approach(np.flatnonzero(outside), float(excess.max()))
+                    self.write_register(i, Reg.TORQUE_ENABLE, 1)
+                self._arm_watchdog()
+                if slow:
+                    self._finish_approach(np.array(slow), float(excess.max()))
+            finally:
+                for j in slow:  # best effort: never leave a servo speed-limited
+                    with contextlib.suppress(DeviceError):
+                        self.write_register(j, Reg.PROFILE_VELOCITY, 0)
 
     def _finish_approach(self, indices: np.ndarray, excess_deg: float) -> None:
-        """Wait (bounded) for servos brought in slowly to reach their limits, then lift
-        their speed limit again, and say so in the commissioning log."""
+        """Wait (bounded) for servos brought in slowly to reach their limits; a servo that
+        does not get there in time (blocked, or not answering) is a DeviceError, so torque
+        goes off rather than the servo finishing the move at full speed."""
         end = self.clock.now() + excess_deg / APPROACH_DPS * 2.0 + 0.5
-        while self.clock.now() < end:
+        while True:
             self.write_goals_deg(self._last_goal_deg)  # keeps the watchdog fed
             state = self.read_state()
             pos = state.positions_deg[indices]
-            inside = (pos >= self._min_deg[indices] - TORQUE_ON_SLACK_DEG) & (
+            inside = ~state.stale[indices] & (
+                pos >= self._min_deg[indices] - TORQUE_ON_SLACK_DEG) & (
                 pos <= self._max_deg[indices] + TORQUE_ON_SLACK_DEG)
             if inside.all():
                 break
+            if self.clock.now() >= end:
+                late = [self.describe(int(i)) for i in indices[~inside]]
+                raise DeviceError(
+                    f"torque-on {self._where()}: {', '.join(late)} did not come into its "
+                    f"limits at {APPROACH_DPS:g} deg/s: blocked or not answering? "
+                    "Torque is off again; free the joint and retry")
             self.clock.sleep(0.01)
         for i in indices:
-            self.write_register(int(i), Reg.PROFILE_VELOCITY, 0)
             self.commissioning.append(
                 f"{self.describe(int(i))} rested outside its limits at torque-on: brought "
                 f"in at {APPROACH_DPS:g} deg/s")

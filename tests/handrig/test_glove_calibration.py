@@ -153,6 +153,9 @@ def test_a_nan_reading_holds_the_channel_and_never_poisons_the_filter() -> None:
     bad[0] = np.nan
     held = controls(bad, 0.005, out).copy()
     assert np.isfinite(held).all() and held[0] == pytest.approx(first[0])
-    after = controls(good, 0.010, out)
+    bad[0] = np.inf  # an inf is held too, not clipped to the range's end
+    held = controls(bad, 0.010, out).copy()
+    assert held[0] == pytest.approx(first[0])
+    after = controls(good, 0.015, out)
     assert np.isfinite(after).all()
-    assert controls.calibration.nonfinite == 1
+    assert controls.calibration.nonfinite == 2

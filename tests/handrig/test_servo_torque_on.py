@@ -89,3 +89,32 @@ def test_rehearse_write_sends_and_counts_nothing():
             np.testing.assert_array_equal(bus.last_goals_deg, last)
         finally:
             bus.close()
+
+
+def test_an_approach_that_does_not_arrive_is_an_error_and_leaves_no_speed_limit():
+    below = 2048 - 6 * 4096 / 360
+    with SimBus(_servos(below)) as sim:
+        sim.servo(8).set(Reg.VELOCITY_LIMIT, 1)  # 0.229 rpm: far too slow to arrive in time
+        bus = DynamixelBus(sim.port_path, _rig())
+        bus.connect()
+        try:
+            with pytest.raises(DeviceError, match=r"servo 8 \(riIndexPIPy\) did not come into"
+                                                  r" its limits"), \
+                    bus.torque(handle_signals=False):
+                pass
+        finally:
+            bus.close()
+        assert not sim.servo(8).torque_enabled
+        assert sim.servo(8).get(Reg.PROFILE_VELOCITY) == 0
+
+
+def test_torque_on_clears_a_speed_limit_left_by_an_earlier_crash():
+    with SimBus(_servos(2048.0)) as sim:
+        sim.servo(7).set(Reg.PROFILE_VELOCITY, 22)  # what a run that died mid-approach leaves
+        bus = DynamixelBus(sim.port_path, _rig())
+        bus.connect()
+        try:
+            with bus.torque(handle_signals=False):
+                assert sim.servo(7).get(Reg.PROFILE_VELOCITY) == 0
+        finally:
+            bus.close()
