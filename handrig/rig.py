@@ -285,8 +285,9 @@ class Rig:
         self._sent[:] = self.pipeline.targets
 
     def run(self, frames: int | None = None, duration_s: float | None = None) -> RunStats:
-        """Follow the glove for ``frames`` cycles or ``duration_s`` seconds, then ease to
-        the relaxed pose and return; an e-stop or a stop request eases and returns early.
+        """Run ``frames`` cycles or ``duration_s`` seconds (counted from the start, waiting
+        for the glove included), then ease to the relaxed pose and return; an e-stop or a
+        stop request eases and returns early.
 
         Until the first glove frame the servos hold where they are; no frame within
         ``glove_timeout_s`` eases them to the relaxed pose.

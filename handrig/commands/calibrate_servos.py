@@ -65,11 +65,12 @@ def update_zero_ticks(text: str, zeros: dict[int, int]) -> str:
     blocks: list[tuple[int, int]] = []
     begin: int | None = None
     for i, line in enumerate(lines):
-        if line.strip().startswith("["):
+        header = line.split("#", 1)[0].strip()
+        if re.fullmatch(r"\[\[?\s*[A-Za-z_][\w.\- ]*\]\]?", header):  # a table header
             if begin is not None:
                 blocks.append((begin, i))
                 begin = None
-            if line.strip() == "[[servos]]":
+            if re.fullmatch(r"\[\[\s*servos\s*\]\]", header):
                 begin = i
     if begin is not None:
         blocks.append((begin, len(lines)))

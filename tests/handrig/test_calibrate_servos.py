@@ -28,7 +28,8 @@ def test_update_keeps_comments_and_changes_only_zero_ticks():
 
 
 def test_update_binds_zero_ticks_to_its_block_whatever_the_line_order():
-    text = ("[bus]\nbaud = 1000000\n\n[[servos]]\nzero_ticks = 100  # set by hand\nid = 3\n"
+    text = ("[bus]\nbaud = 1000000\n\n[[servos]]  # the index PIP\n"
+            "zero_ticks = 100  # set by hand\nid = 3\n"
             "joint = \"riIndexPIPy\"\n\n[[servos]]\nid = 4\njoint = \"riRingPIPy\"\n")
     new = update_zero_ticks(text, {3: 2000, 4: 2100})
     assert "zero_ticks = 2000  # set by hand\nid = 3" in new
