@@ -122,6 +122,14 @@ TABLE1_S: dict[str, tuple[float, float]] = {
     "wrist_forward": (0.48, 0.06), "wrist_side": (0.41, 0.06), "fingers": (0.38, 0.13),
 }
 LOOSE_FIST_DEG: dict[str, float] = {"MCPy": 60.0, "PIPy": 85.0, "DIPy": 55.0}
+# Gain factor with the forearm pointing straight up ("Raised hand" in the module docstring).
+RAISED_STIFFNESS_FACTOR = 3.0
+
+
+def stiffness_scale(inclination_deg: float, raised_factor: float) -> float:
+    """Gain multiplier at a forearm inclination: 1 at and below the horizontal (where Table
+    2 was measured), ``1 + (raised_factor - 1) sin(inclination)`` above it."""
+    return 1.0 + (raised_factor - 1.0) * max(0.0, math.sin(math.radians(inclination_deg)))
 
 
 def table2_vocabulary() -> tuple[dict[str, float], dict[str, tuple[float, Orientation]]]:
@@ -162,6 +170,7 @@ class PassiveHandConfig:
     limit_gain_factor: float
     untuned_max_sag_deg: float
     relaxed_fraction: float
+    raised_stiffness_factor: float
     rest_deg: dict[str, float]
     calibration: dict[str, Calibration]
     release_s: dict[str, tuple[float, float]]
@@ -182,6 +191,10 @@ class PassiveHandConfig:
         if not 0.5 <= self.relaxed_fraction < 1.0:
             raise ConfigError("out of range", key="relaxed_fraction",
                               value=self.relaxed_fraction, allowed="0.5 <= x < 1")
+        if not 1.0 <= self.raised_stiffness_factor <= 20.0:
+            raise ConfigError("out of range", key="raised_stiffness_factor",
+                              value=self.raised_stiffness_factor,
+                              allowed="1 (the fully relaxed hand everywhere) .. 20")
         missing = [n for n in DOF_NAMES["ri"] if n not in self.rest_deg]
         if missing:
             raise ConfigError("rest pose incomplete", key=f"rest_deg.{missing[0]}",
@@ -215,6 +228,7 @@ class PassiveHandConfig:
             "limit_gain_factor": self.limit_gain_factor,
             "untuned_max_sag_deg": self.untuned_max_sag_deg,
             "relaxed_fraction": self.relaxed_fraction,
+            "raised_stiffness_factor": self.raised_stiffness_factor,
             "rest_deg": self.rest_deg, "release_s": self.release_s,
             "calibration": {k: [c.deviation_deg, c.orientation]
                             for k, c in self.calibration.items()},
@@ -302,6 +316,9 @@ class PassiveHand:
         self.rest_deg = np.array([cfg.rest_deg["ri" + n[2:]] for n in self.names])
         self._dfdq = np.zeros((nv, nv))
         self._klim_qpos = np.zeros(nv)
+        self.scale = 1.0
+        self._ks = np.zeros(23)
+        self._kd = np.zeros(23)
         self.set_gains(
             np.array([springs.ks_nm_per_rad["ri" + n[2:]] for n in self.names]),
             np.array([springs.kd_nms_per_rad["ri" + n[2:]] for n in self.names]),
@@ -310,24 +327,36 @@ class PassiveHand:
     # -- parameters
 
     def set_gains(self, ks: NDArray[np.float64], kd: NDArray[np.float64]) -> None:
-        """Set stiffness (N m/rad) and damping (N m s/rad) per DOF, vocabulary order."""
+        """Set the relaxed (calibrated) stiffness (N m/rad) and damping (N m s/rad) per DOF,
+        vocabulary order; the model uses them times the current :attr:`scale`."""
+        self._ks = np.array(ks, dtype=np.float64)
+        self._kd = np.array(kd, dtype=np.float64)
+        self._apply_gains()
+
+    def _apply_gains(self) -> None:
         m = self.model
-        jids = m.dof_jntid[self.idx]
-        m.jnt_stiffness[jids] = ks
-        m.dof_damping[self.idx] = kd
-        self._klim_qpos[self.idx] = self.cfg.limit_gain_factor * np.asarray(ks)
+        m.jnt_stiffness[m.dof_jntid[self.idx]] = self.scale * self._ks
+        m.dof_damping[self.idx] = self.scale * self._kd
+        self._klim_qpos[self.idx] = self.cfg.limit_gain_factor * self.scale * self._ks
 
     @property
     def ks(self) -> NDArray[np.float64]:
-        return np.array(self.model.jnt_stiffness[self.model.dof_jntid[self.idx]])
+        """Relaxed stiffness per DOF (N m/rad), before the raised-hand :attr:`scale`."""
+        return self._ks.copy()
 
     @property
     def kd(self) -> NDArray[np.float64]:
-        return np.array(self.model.dof_damping[self.idx])
+        """Relaxed damping per DOF (N m s/rad), before the raised-hand :attr:`scale`."""
+        return self._kd.copy()
 
     def set_orientation(self, inclination_deg: float, rotation_deg: float) -> None:
-        """Put the forearm orientation into ``opt.gravity``."""
+        """Put the forearm orientation into ``opt.gravity`` and scale the gains by
+        :func:`stiffness_scale` (1 at and below the horizontal)."""
         self.model.opt.gravity[:] = gravity_in_forearm(inclination_deg, rotation_deg, self.hand)
+        scale = stiffness_scale(inclination_deg, self.cfg.raised_stiffness_factor)
+        if scale != self.scale:
+            self.scale = scale
+            self._apply_gains()
 
     # -- torques
 
@@ -714,6 +743,10 @@ def render_config(cfg: PassiveHandConfig) -> str:
         f"untuned_max_sag_deg = {cfg.untuned_max_sag_deg!r}",
         "# 'time to relaxed pose' = this fraction of the change done, for good",
         f"relaxed_fraction = {cfg.relaxed_fraction!r}",
+        "# stiffness (and damping, limit gain) x this with the forearm pointing straight up,",
+        "# 1 + (factor - 1) sin(inclination) above the horizontal, 1 at and below it: the",
+        "# paper's fully relaxed fingers buckle when raised (sim/passive.py docstring)",
+        f"raised_stiffness_factor = {cfg.raised_stiffness_factor!r}",
         "",
         "# Set point per DOF (paper eq. 1) = Table 2 'Angle'.",
         "[rest_deg]",
@@ -751,7 +784,7 @@ def default_config(hand_length_m: float = 0.19) -> PassiveHandConfig:
     rest, dev = table2_vocabulary()
     return PassiveHandConfig(
         hand_length_m=hand_length_m, limit_gain_factor=20.0, untuned_max_sag_deg=3.0,
-        relaxed_fraction=0.9, rest_deg=rest,
+        relaxed_fraction=0.9, raised_stiffness_factor=RAISED_STIFFNESS_FACTOR, rest_deg=rest,
         calibration={n: Calibration(d, o) for n, (d, o) in dev.items()},
         release_s=dict(TABLE1_S),
     )

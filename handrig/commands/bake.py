@@ -18,8 +18,11 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "bake", help="bake the passive-sag grid (23 DOFs over forearm inclination x rotation)")
     p.add_argument("--step-deg", type=float, default=2.5,
-                   help="grid step in degrees, dividing 90 (default 2.5: 73 x 144 samples,"
-                        " the shipped grid; 5 gives 37 x 72)")
+                   help="grid step in degrees, dividing 90 (default 2.5; 5 gives 37 x 72)")
+    p.add_argument("--fine-step-deg", type=float, default=None,
+                   help="step in the palm-up band (inclination 0..45, |rotation| >= 100)"
+                        " where the fingers bend fastest; 0 = no band (default step / 2.5:"
+                        " 1 at step 2.5, 100 x 240 samples, the shipped grid)")
     p.add_argument("--out", default=None, help="output .npz (default config/sag_grid.npz)")
     p.add_argument("--config", default=None, help="passive-hand TOML (default config/)")
     p.add_argument("--dynamic", action="store_true",
@@ -40,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
     from sim import bake
     from sim.passive import load_passive_params
 
-    bake.grid_axes(args.step_deg)  # validates the step before any work
+    fine = args.step_deg / 2.5 if args.fine_step_deg is None else args.fine_step_deg or None
+    bake.grid_axes(args.step_deg, fine)  # validates the steps before any work
     cfg = load_passive_params(args.config)
     out = Path(args.out) if args.out else SAG_GRID
     primary = bake.bake_dynamic if args.dynamic else bake.bake_static
@@ -54,11 +58,11 @@ def run(args: argparse.Namespace) -> int:
         def tick(done: int, total: int) -> None:
             progress.update(task, completed=done, total=total)
 
-        grid = primary(cfg, args.step_deg, progress=tick)
+        grid = primary(cfg, args.step_deg, fine_step_deg=fine, progress=tick)
         cmp: dict[str, Any] | None = None
         if args.compare:
             task = progress.add_task("reference (other solver)", total=None)
-            ref = other(cfg, args.step_deg, progress=tick)
+            ref = other(cfg, args.step_deg, fine_step_deg=fine, progress=tick)
             cmp = {"other_solver": ref.metadata["solver"],
                    "other_seconds": ref.metadata["seconds"], **bake.compare(grid, ref)}
             grid.metadata["comparison"] = cmp

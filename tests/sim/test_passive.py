@@ -15,6 +15,7 @@ from sim.passive import (
     ORIENTATIONS,
     Calibration,
     PassiveHand,
+    StaticSolution,
     check,
     default_config,
     load_passive_params,
@@ -138,3 +139,48 @@ def test_energy_gradient_is_the_residual(hand: PassiveHand) -> None:
         e0 = hand._energy_qpos(q - dq)
         grad[k] = (e1 - e0) / 2e-6
     np.testing.assert_allclose(-grad, r, atol=1e-8)
+
+
+def test_gains_scale_only_above_the_horizontal(cfg: passive.PassiveHandConfig) -> None:
+    factor = cfg.raised_stiffness_factor
+    assert factor > 1.0
+    for inc in (-90.0, -30.0, 0.0):
+        assert passive.stiffness_scale(inc, factor) == 1.0  # Table 2's orientations
+    assert passive.stiffness_scale(30.0, factor) == pytest.approx(1.0 + 0.5 * (factor - 1.0))
+    assert passive.stiffness_scale(90.0, factor) == pytest.approx(factor)
+    ph = PassiveHand(cfg)
+    ks = ph.ks
+    ph.set_orientation(90.0, 0.0)
+    np.testing.assert_allclose(ph.ks, ks)  # the calibrated gains stay as tuned
+    np.testing.assert_allclose(ph.model.jnt_stiffness[ph.model.dof_jntid[ph.idx]], factor * ks)
+    ph.set_orientation(-90.0, 0.0)
+    np.testing.assert_allclose(ph.model.jnt_stiffness[ph.model.dof_jntid[ph.idx]], ks)
+
+
+def _palm_up_poses_at_50(ph: PassiveHand) -> tuple[StaticSolution, StaticSolution]:
+    """The equilibrium at inclination 50, palm up, followed in 2-degree steps from 40
+    (forearm being raised) and from 60 (being lowered)."""
+    sols = []
+    for path in (range(40, 51, 2), range(60, 49, -2)):
+        q = None
+        for inc in path:
+            sol = ph.solve_static(float(inc), 180.0, q)
+            q = sol.q_deg
+        sols.append(sol)
+    return sols[0], sols[1]
+
+
+def test_fully_relaxed_fingers_buckle_when_raised_and_the_raised_gain_cures_it(
+    cfg: passive.PassiveHandConfig, hand: PassiveHand,
+) -> None:
+    """Table 2 makes each finger joint about as stiff as its own weight's moment; at gain
+    factor 1 (the paper's relaxed hand everywhere) a raised palm-up hand has two stable
+    poses, fingers bent back or folded into the palm. The shipped factor leaves one."""
+    relaxed = PassiveHand(dataclasses.replace(cfg, raised_stiffness_factor=1.0),
+                          springs=cfg.springs())
+    below, above = _palm_up_poses_at_50(relaxed)
+    assert below.stable and above.stable
+    assert np.abs(below.q_deg - above.q_deg).max() > 45.0
+    below, above = _palm_up_poses_at_50(hand)
+    assert below.stable and above.stable
+    np.testing.assert_allclose(below.q_deg, above.q_deg, atol=1e-3)
