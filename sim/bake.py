@@ -11,8 +11,14 @@ they differ (``bench/bench_sag.py`` prints both).
 
 Grid: inclination from -90 (hanging down) to +90 (pointing up) inclusive, rotation
 from -180 to 180 - step (anatomical: 0 palm down, +90 thumb up, 180 palm up, the
-same for both hands; it wraps). The rows at +-90 do not depend on rotation (gravity
-along the forearm); they are solved once and copied, so the singularity is exact.
+same for both hands; it wraps). ``fine_step_deg`` refines a band (palm up, forearm
+0..45 deg up: :data:`FINE_BAND_INCLINATION_DEG`, :data:`FINE_BAND_ROTATION_DEG`)
+where the pose bends fastest with orientation; the axes stay rectilinear. The
+shipped grid is step 2.5 with 1 deg in the band (100 x 240 samples). The model has
+one stable equilibrium per orientation (sim/passive.py, "Raised hand"), so the
+static solve, the dynamic settle and a cold solve from the rest pose agree
+everywhere. The rows at +-90 do not depend on rotation (gravity along the forearm);
+they are solved once and copied, so the singularity is exact.
 Gravity is set exactly (``opt.gravity``), so the stored "actual" coordinates equal
 the nominal ones; they are stored anyway, as the paper does.
 

@@ -31,10 +31,49 @@ abduction and deviation radial positive):
 
 ``tests/sim/test_passive.py`` checks each of these with the model: the gravity
 torque in the calibration orientation has the sign of the mapped deviation, so
-every tuned ks comes out positive. Finger MCP abduction and thumb CMC twist
+every tuned ks comes out positive (the paper's own signs are consistent with
+flexion positive for every row but Wrist Side, whose +29 can only be an ulnar
+droop). Finger MCP abduction and thumb CMC twist
 (absent from Table 2: rest 0) are untuned: their ks is set so that the largest
 gravity torque at the rest pose, over all orientations, moves them at most
 ``untuned_max_sag_deg``.
+
+What Table 2 implies for the fingers
+------------------------------------
+The fingers are calibrated per joint, hanging straight down: ks = T / (q - rest)
+with T the gravity moment of the joint's distal chain at the observed pose
+(equation 4). For a distal phalanx T = m g r sin(phi), phi its angle from the
+vertical in that pose (about 37-46 deg: the DIPs end nearly straight), so
+ks / (m g r) = sin(phi) / deviation, whatever the masses. For the distal chain of
+every finger joint, ks over its largest gravity moment (chain straight and
+horizontal) comes out 0.9-1.6 (index MCP 0.92, PIP 1.12, DIP 1.01): each joint is
+about as stiff as its own weight's largest moment.
+
+* **Palm down** (forearm horizontal) the wrist droops 22 deg (Table 2) and the rest
+  pose already curls each distal phalanx past straight down (wrist + MCP + PIP +
+  DIP = 111-130 deg at rest); gravity then turns it back toward the vertical: the
+  DIPs (and the index/middle/ring PIPs) *open*, for any positive stiffness, since
+  flexing them would only carry the phalanx further past the vertical. What flexes
+  is each finger as a whole: the MCP (+8 to +14 deg) and the finger's centre of
+  mass, which swings palmar about the knuckle (+4 to +12 deg). That is what
+  "palm down flexes the fingers" is tested as (tests/sim/test_bake.py). Palm up,
+  every finger joint extends.
+* **Raised hand**: with ks about m g r a finger whose segments point upward is an
+  inverted pendulum at its buckling load. Palm up with the forearm 40-55 deg up, the
+  fully relaxed model has two stable poses about 90 deg apart (fingers bent back on
+  their limits, or folded into the palm) and jumps between them; no grid can be
+  interpolated across that, and a real relaxed hand does not do it. The paper
+  itself finds its relaxed hand "too loose" at head height ("it is rare for a person
+  to have their wrist fully relaxed in this position ... stiffness values should be
+  increased", section 5). So every gain (ks, kd and the limit gain) is multiplied by
+  ``1 + (raised_stiffness_factor - 1) sin(inclination)`` above the horizontal and by
+  1 at and below it (:func:`stiffness_scale`), where all of Table 2 and Table 1 was
+  measured: calibration and release tests are unchanged. With the factor 3 the
+  smallest eigenvalue of K^-1/2 H K^-1/2 (H the Hessian of the potential energy, K
+  the springs; 1 = gravity takes nothing away, 0 = buckling) stays above about 0.24
+  everywhere (0.86 at and below the horizontal); at factor 1 it reaches 0 palm up
+  at 40-55 deg. There is then one equilibrium per orientation (static solves from
+  the rest pose, from the hanging pose and from the previous sample agree).
 
 Damping (Table 1) and "time to relaxed pose"
 --------------------------------------------

@@ -45,6 +45,22 @@ def test_lookup_hits_samples_and_interpolates_bilinearly() -> None:
     np.testing.assert_allclose(g.lookup(-22.5, 30.0), 0.75 * vals[2, 7] + 0.25 * vals[3, 7])
 
 
+def test_lookup_on_non_uniform_axes_uses_the_actual_spacing() -> None:
+    inc = np.array([-90.0, -30.0, 0.0, 1.0, 2.0, 90.0])
+    rot = np.array([-180.0, -179.0, -178.0, 0.0, 178.0, 179.0])
+    ii, rr = np.meshgrid(inc, rot, indexing="ij")
+    rng = np.random.default_rng(1)
+    vals = rng.uniform(-10, 10, (6, 6, 23))
+    vals[0], vals[-1] = vals[0, 0], vals[-1, 0]  # poles flat
+    g = SagGrid(ii, rr, vals, np.zeros(23))
+    np.testing.assert_allclose(g.lookup(0.5, -179.5), vals[2:4, :2].mean(axis=(0, 1)))
+    # a quarter of the way across the 60-degree cell, and of the 178-degree one
+    np.testing.assert_allclose(g.lookup(-75.0, -178.0), 0.75 * vals[0, 2] + 0.25 * vals[1, 2])
+    np.testing.assert_allclose(g.lookup(1.0, -133.5), 0.75 * vals[3, 2] + 0.25 * vals[3, 3])
+    # across the seam: 179 -> 180 (= -180) is 1 degree wide
+    np.testing.assert_allclose(g.lookup(2.0, 179.5), 0.5 * (vals[4, 5] + vals[4, 0]))
+
+
 def test_rotation_wraps_around() -> None:
     g, _, vals = _synthetic()
     np.testing.assert_allclose(g.lookup(30.0, 180.0), vals[4, 0], atol=1e-12)
