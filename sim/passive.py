@@ -49,11 +49,13 @@ every finger joint, ks over its largest gravity moment (chain straight and
 horizontal) comes out 0.9-1.6 (index MCP 0.92, PIP 1.12, DIP 1.01): each joint is
 about as stiff as its own weight's largest moment.
 
-* **Palm down** (forearm horizontal) the wrist droops 22 deg (Table 2) and the rest
-  pose already curls each distal phalanx past straight down (wrist + MCP + PIP +
-  DIP = 111-130 deg at rest); gravity then turns it back toward the vertical: the
-  DIPs (and the index/middle/ring PIPs) *open*, for any positive stiffness, since
-  flexing them would only carry the phalanx further past the vertical. What flexes
+* **Palm down** (forearm horizontal) the wrist droops 22 deg (Table 2), and the rest
+  pose already curls each distal phalanx past straight down (MCP + PIP + DIP =
+  111-130 deg at rest, wrist straight); gravity turns it back toward the vertical,
+  so every DIP *opens*, for any positive stiffness: flexing it would only carry
+  the phalanx further past the vertical. The same holds for the index, middle and
+  ring PIPs (their middle phalanx points straight down at rest, wrist straight);
+  in the model the little finger's PIP opens too (42 -> 33 deg). What flexes
   is each finger as a whole: the MCP (+8 to +14 deg) and the finger's centre of
   mass, which swings palmar about the knuckle (+4 to +12 deg). That is what
   "palm down flexes the fingers" is tested as (tests/sim/test_bake.py). Palm up,
@@ -70,10 +72,11 @@ about as stiff as its own weight's largest moment.
   1 at and below it (:func:`stiffness_scale`), where all of Table 2 and Table 1 was
   measured: calibration and release tests are unchanged. With the factor 3 the
   smallest eigenvalue of K^-1/2 H K^-1/2 (H the Hessian of the potential energy, K
-  the springs; 1 = gravity takes nothing away, 0 = buckling) stays above about 0.24
-  everywhere (0.86 at and below the horizontal); at factor 1 it reaches 0 palm up
-  at 40-55 deg. There is then one equilibrium per orientation (static solves from
-  the rest pose, from the hanging pose and from the previous sample agree).
+  the springs; 1 = gravity takes nothing away, 0 = buckling) stays above 0.2
+  everywhere (lowest 0.215 at inclination 24, palm up; 0.86 at and below the
+  horizontal); at factor 1 it falls to 0 where the pose folds, palm up at 40-55
+  deg. There is then one equilibrium per orientation (static solves from the rest
+  pose, from the hanging pose and from the previous sample agree).
 
 Damping (Table 1) and "time to relaxed pose"
 --------------------------------------------
