@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import selectors
 import subprocess
 import sys
@@ -31,6 +30,7 @@ from handrig.glove_calibration import GloveConfig, GloveControls, load_glove_con
 from handrig.glove_recording import read_glove_recording
 from handrig.orientation import ForearmOrientation
 from handrig.pipeline import PosePipeline
+from handrig.realtime import helper_env
 from handrig.rigconfig import RigConfig, load_rig_config
 from handrig.sag import SagGrid
 
@@ -141,7 +141,7 @@ def port_process(argv: Sequence[str], what: str, timeout_s: float = 30.0
     waited for, so the emulators shut down cleanly.
     """
     cmd = [sys.executable, "-m", "handrig.cli", *argv]
-    env = dict(os.environ)
+    env = helper_env()  # off the loop's CPU
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=env)
     try:

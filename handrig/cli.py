@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 from handrig import __version__, commands
 from handrig.errors import HandrigError
+from handrig.realtime import apply_cpus_from_env
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    apply_cpus_from_env()  # an emulator started by the rig stays off the loop's CPU
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -23,7 +23,7 @@ from handrig.app import RigParts, open_glove, port_process, summary_dict
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import DeviceError, HandrigError, SafetyStop
 from handrig.glove import GloveSource
-from handrig.realtime import realtime_priority
+from handrig.realtime import pinned_loop, realtime_priority
 from handrig.rig import Rig
 from handrig.rigconfig import RigConfig
 from handrig.servo import DynamixelBus
@@ -167,6 +167,7 @@ def _run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None) -> LiveRe
             rig.outputs = (*rig.outputs, snap)
 
         error: HandrigError | None = None
+        rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
         with bus.torque(on_signal=lambda name: rig.request_stop(f"{name} received")):
             # the Rig starts from bus.last_goals_deg: where torque-on holds every servo
             panel = contextlib.nullcontext()
@@ -175,7 +176,8 @@ def _run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None) -> LiveRe
 
                 panel = LivePanel(rig)  # type: ignore[assignment]
             try:
-                with panel, realtime_priority(rig_cfg.loop.realtime_priority, opts.log):
+                with (panel, pinned_loop(rig_cfg.loop.pin_cpu, opts.log),
+                      realtime_priority(rig_cfg.loop.realtime_priority, opts.log)):
                     rig.run(frames=opts.frames, duration_s=opts.duration_s)
             except DeviceError as exc:
                 error = exc

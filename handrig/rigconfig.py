@@ -135,6 +135,7 @@ class LoopConfig:
     left_hand: Literal["mirror", "map", "relaxed"] = "map"
     left_forearm_deg: tuple[float, float] = (-90.0, 0.0)  # no IMU there: assumed hanging
     realtime_priority: int = 20  # SCHED_FIFO priority of the loop thread; 0 = normal
+    pin_cpu: bool = True  # loop thread on the last CPU, emulators it starts on the others
     map: str = ""
     sag_grid: str = ""
     glove: str = ""

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from handrig.errors import ConfigError, DeviceError
+from handrig.realtime import helper_env, pinned_loop
 from handrig.rigconfig import BAUD_RATES, RigConfig, load_rig_config
 
 PLAIN_TIMEOUT_NOTE = "SDK default timeouts"
@@ -52,6 +53,8 @@ def bench_rig(n_servos: int, baud: int, base: RigConfig | None = None) -> RigCon
 
 _EMULATOR = """
 import signal, sys
+from handrig.realtime import apply_cpus_from_env
+apply_cpus_from_env()  # off the driver's CPU, as real servos would be
 from handrig.commands.bench_bus import bench_rig
 from sim.dxl_bus import SimBus
 rig = bench_rig(int(sys.argv[1]), int(sys.argv[2]))
@@ -75,7 +78,7 @@ class EmulatorProcess:
     def __init__(self, n_servos: int, baud: int, wire_timing: bool = True) -> None:
         self.proc = subprocess.Popen(
             [sys.executable, "-c", _EMULATOR, str(n_servos), str(baud), str(int(wire_timing))],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=helper_env(),
         )
         assert self.proc.stdout is not None
         line = self.proc.stdout.readline()
@@ -234,12 +237,13 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
     emu = EmulatorProcess(n_servos, baud)
     results: list[Result] = []
     try:
-        results.append(run_ours(emu.port, rig, baud, seconds))
-        results.append(run_ours(emu.port, rig, baud, seconds, combined=True))
-        results.append(run_ours(emu.port, rig, baud, seconds, spin_s=SPIN_S))
-        if plain:
-            results.append(run_sdk(emu.port, rig, baud, seconds, fast=False))
-            results.append(run_sdk(emu.port, rig, baud, seconds, fast=True))
+        with pinned_loop():  # the driver on its own CPU, the emulator on the others
+            results.append(run_ours(emu.port, rig, baud, seconds))
+            results.append(run_ours(emu.port, rig, baud, seconds, combined=True))
+            results.append(run_ours(emu.port, rig, baud, seconds, spin_s=SPIN_S))
+            if plain:
+                results.append(run_sdk(emu.port, rig, baud, seconds, fast=False))
+                results.append(run_sdk(emu.port, rig, baud, seconds, fast=True))
     finally:
         closing = emu.close()
     write(f"{'way (wire timing on)':<52} {'cycles/s':>9} {'of wire':>8} {'median us':>10} "
@@ -260,7 +264,8 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
     # where the time goes: the same cycle with the wire taking no time
     emu = EmulatorProcess(n_servos, baud, wire_timing=False)
     try:
-        host = run_ours(emu.port, rig, baud, min(seconds, 1.0))
+        with pinned_loop():
+            host = run_ours(emu.port, rig, baud, min(seconds, 1.0))
     finally:
         closing = emu.close()
     write(f"host round trip, wire timing off: handrig cycle median {host.median_s * 1e6:.0f} us "

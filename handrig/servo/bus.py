@@ -58,6 +58,7 @@ class BusStats:
     fallbacks: int = 0  # switches from Fast Sync Read to plain Sync Read
     watchdog_trips: int = 0  # servos found with a tripped Bus Watchdog (then re-armed)
     late_replies: int = 0  # intact replies to an earlier read, recognised and dropped
+    watchdog_gaps: int = 0  # goal writes after a silence near the Bus Watchdog (re-armed)
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -71,7 +72,7 @@ class BusStats:
         return BusStats(
             self.n_servos, self.writes, self.reads, self.retries, self.timeouts,
             self.crc_errors, self.malformed, self.status_errors, self.clamps, self.fallbacks,
-            self.watchdog_trips, self.late_replies,
+            self.watchdog_trips, self.late_replies, self.watchdog_gaps,
             self.stale_readings.copy(), self.hardware_errors.copy(), self.reboots.copy(),
         )
 
@@ -82,7 +83,7 @@ class BusStats:
             f"timeouts {self.timeouts}, crc errors {self.crc_errors}, malformed "
             f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
             f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
-            f"{self.late_replies}, stale readings "
+            f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )

@@ -76,6 +76,9 @@ COMMAND_ATTEMPTS = 8
 TORQUE_ON_SLACK_DEG = 1.0  # torque-on tolerates this much outside the limits (then clamps)
 MAX_APPROACH_DEG = 20.0  # further out than this at torque-on: refuse (likely a wrong zero)
 APPROACH_DPS = 30.0  # joint speed that brings a servo resting outside its limits back in
+# A goal write after a silence this fraction of the Bus Watchdog time re-arms it first
+# (the servo's clock and ours differ; a 200 Hz loop is silent 5 ms, far below).
+WATCHDOG_GAP_FRACTION = 0.8
 
 ReadFields = Literal["position", "motion"]
 # Contiguous control-table spans read each cycle: position only, or current+velocity+position.
@@ -241,6 +244,7 @@ class DynamixelBus(ServoBus):
         self._byte_s = BITS_PER_BYTE / self.baud
         self._bus_free_at = -np.inf  # when the wire is expected to be quiet again
         self._pending_tx = b""  # a goal Sync Write to send with the next request
+        self._last_tx_s = -np.inf  # when the host last put bytes on the bus
         self._line_dirty = False  # a reply failed: let the line go quiet before the next
         self.use_fast_sync_read = True
         self._fast_fail_run = 0
@@ -512,6 +516,7 @@ class DynamixelBus(ServoBus):
         if level == STATUS_RETURN_ALL:
             return
         sid = self.ids[index]
+        self._last_tx_s = self.clock.now()
         self._transport.write(build_instruction(
             sid, INST_WRITE, u16(reg.address) + reg.encode(STATUS_RETURN_ALL)
         ))
@@ -565,6 +570,7 @@ class DynamixelBus(ServoBus):
         ``stats.clamps``). No reply is expected.
         """
         with self._lock:
+            self._rearm_after_silence()
             clamped = self._clamp_goals(goals_deg)
             self._send_goals(self._goal_deg)
         return clamped
@@ -578,6 +584,7 @@ class DynamixelBus(ServoBus):
         call and the adapter (or emulator) one wake-up. Returns (clamped, state).
         """
         with self._lock:
+            self._rearm_after_silence()
             clamped = self._clamp_goals(goals_deg)
             self._pending_tx = self._goal_packet(self._goal_deg)
             self._last_goal_deg[:] = self._goal_deg
@@ -588,6 +595,24 @@ class DynamixelBus(ServoBus):
                 if self._pending_tx:  # not sent by the read: send it on its own
                     self._send_request(b"")
         return clamped, state
+
+    def _rearm_after_silence(self) -> None:
+        """Before goals: if the host was silent longer than the Bus Watchdog (a stalled
+        process, a long pause), the servos' watchdogs have tripped and they refuse goal
+        writes until it is cleared; clear and re-arm it by broadcast first (two Sync
+        Writes, no replies), counted in ``stats.watchdog_gaps``. Housekeeping reads
+        the watchdogs back later."""
+        watchdog_ms = self.rig.bus.watchdog_ms
+        if not self._torque_on or not watchdog_ms:
+            return
+        silent_s = self.clock.now() - self._last_tx_s
+        if silent_s < WATCHDOG_GAP_FRACTION * watchdog_ms / 1000.0:
+            return
+        self._stats.watchdog_gaps += 1
+        log.warning("the bus was silent for %.0f ms (Bus Watchdog %d ms): re-arming the "
+                    "watchdogs before the next goals", silent_s * 1e3, watchdog_ms)
+        self._sync_write(Reg.BUS_WATCHDOG, [0] * self._n)
+        self._sync_write(Reg.BUS_WATCHDOG, [watchdog_ms // BUS_WATCHDOG_UNIT_MS] * self._n)
 
     def _clamp_goals(self, goals_deg: np.ndarray) -> int:
         """Goals clamped into ``self._goal_deg``; returns (and counts) how many changed."""
@@ -613,7 +638,9 @@ class DynamixelBus(ServoBus):
         data = self._pending_tx + packet if self._pending_tx else packet
         self._pending_tx = b""
         self._transport.write(data)
-        self._bus_free_at = max(self.clock.now(), self._bus_free_at) + len(data) * self._byte_s
+        now = self.clock.now()
+        self._last_tx_s = now
+        self._bus_free_at = max(now, self._bus_free_at) + len(data) * self._byte_s
 
     def _goal_packet(self, goal_deg: np.ndarray) -> bytes:
         """The goal Sync Write for ``goal_deg`` (already clamped), as ticks."""
@@ -963,13 +990,9 @@ class DynamixelBus(ServoBus):
         return out
 
     def _housekeeping(self, deadline_s: float) -> None:
-        """Temperatures and, with torque on, the Bus Watchdogs (re-armed if one tripped)."""
-        for i, value in enumerate(self._read_byte_register(Reg.PRESENT_TEMPERATURE, deadline_s)):
-            if value is not None:
-                self._temp_c[i] = value
-        if self._torque_on and self.rig.bus.watchdog_ms and (
-            deadline_s - self.clock.now() > self._temperature_wire_s
-        ):
+        """With torque on, the Bus Watchdogs first (re-armed if one tripped), then the
+        temperatures if the read's deadline leaves time for them."""
+        if self._torque_on and self.rig.bus.watchdog_ms:
             watchdogs = self._read_byte_register(Reg.BUS_WATCHDOG, deadline_s)
             tripped = [i for i, v in enumerate(watchdogs) if v == BUS_WATCHDOG_TRIPPED]
             if tripped:
@@ -980,6 +1003,11 @@ class DynamixelBus(ServoBus):
                     self.rig.bus.watchdog_ms,
                 )
                 self._arm_watchdog()
+            if deadline_s - self.clock.now() <= self._temperature_wire_s:
+                return
+        for i, value in enumerate(self._read_byte_register(Reg.PRESENT_TEMPERATURE, deadline_s)):
+            if value is not None:
+                self._temp_c[i] = value
 
     def _read_every_servo(self, purpose: str) -> ServoState:
         """Read until every servo has given a valid reading (up to COMMAND_ATTEMPTS reads)."""

@@ -574,6 +574,32 @@ def test_tripped_watchdog_found_and_rearmed(sim: SimBus) -> None:
         b.close()
 
 
+def test_goals_after_a_silence_rearm_the_watchdog_first(sim: SimBus) -> None:
+    """A host pause longer than the Bus Watchdog (a long garbage collection, say) trips
+    it and the servos refuse goals; the next goal write re-arms it before the goals."""
+    rig = small_rig()
+    b = DynamixelBus(sim.port_path, rig, baud=1_000_000, temperature_every=0)
+    b.connect()
+    try:
+        with b.torque():
+            time.sleep(0.3)  # silent: every servo's watchdog (100 ms) trips
+            assert all(sim.servo(s.id).get(SimReg.BUS_WATCHDOG) in (-1, 0xFF) for s in rig.servos)
+            goals = np.array([0.5 * s.max_deg for s in rig.servos])
+            b.write_goals_deg(goals)  # no read in between: the write alone must recover
+            want = [s.deg_to_ticks(float(g)) for s, g in zip(rig.servos, goals, strict=True)]
+            for _ in range(100):
+                if goals_received(sim, rig).tolist() == want:
+                    break
+                time.sleep(0.01)
+            assert goals_received(sim, rig).tolist() == want
+            assert b.stats.watchdog_gaps == 1
+            assert all(sim.servo(s.id).get(SimReg.BUS_WATCHDOG) == 5 for s in rig.servos)
+            b.write_goals_deg(goals)  # no silence this time: nothing re-armed
+            assert b.stats.watchdog_gaps == 1
+    finally:
+        b.close()
+
+
 def test_late_replies_are_never_taken_for_a_later_read() -> None:
     """A reply delayed past its read's deadline arrives during the next read: dropped."""
     rig = small_rig()
