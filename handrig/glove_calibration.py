@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from firmware_protocol.opengloves import BUTTON_LETTERS, CHANNEL_KEYS
-from handrig import hand
+from handrig import hand, kernels
 from handrig.config import CONFIG_DIR, load
 from handrig.errors import ConfigError, DataError
 from handrig.filters import OneEuroFilter
@@ -295,22 +295,20 @@ class GloveCalibration:
         """Raw counts (n_raw,) -> degrees (k,), clamped to each channel's range."""
         if out is None:
             out = np.empty(len(self.curves))
-        try:
-            np.take(raw, self.raw_index, out=out)
-        except IndexError:
-            raise DataError(
-                f"the glove sent {len(raw)} channels but the calibration reads channel "
-                f"{self.n_raw_needed - 1}; check [[channels]] in glove.toml or recalibrate"
-            ) from None
-        out *= self._gain
-        out += self._offset
-        if not math.isfinite(out.sum()):  # a NaN/inf reading: hold the channel's last value
-            bad = ~np.isfinite(out)
-            self.nonfinite += int(bad.sum())
-            np.copyto(out, self._last_good, where=bad)
-        np.clip(out, self._lo, self._hi, out=out)
-        self._last_good[:] = out
+        r = self._checked_raw(raw)
+        self.nonfinite += kernels.calibrate(r, self.raw_index, self._gain, self._offset,
+                                            self._lo, self._hi, self._last_good, out)
         return out
+
+    def _checked_raw(self, raw: FloatArray) -> FloatArray:
+        """``raw`` as contiguous float64, long enough for every calibrated channel."""
+        r = np.ascontiguousarray(raw, dtype=np.float64)
+        if r.ndim != 1 or len(r) < self.n_raw_needed:
+            raise DataError(
+                f"the glove sent {len(r)} channels but the calibration reads channel "
+                f"{self.n_raw_needed - 1}; check [[channels]] in glove.toml or recalibrate"
+            )
+        return r
 
     def to_raw(self, degrees: FloatArray) -> FloatArray:
         """Inverse map: degrees (..., k) -> raw counts (..., k), e.g. to synthesise a
@@ -357,10 +355,24 @@ class GloveControls:
         return cls(GloveCalibration.from_config(cfg), control_names, cfg.filter)
 
     def __call__(self, raw: FloatArray, t_s: float, out: FloatArray) -> FloatArray:
-        deg = self.calibration.calibrate(raw, self._deg)
-        if self.filter is not None:
-            self.filter.filter(deg, t_s, deg)
-        np.take(deg, self._perm, out=out)
+        cal = self.calibration
+        r = cal._checked_raw(raw)
+        f = self.filter
+        if f is None:
+            cal.nonfinite += kernels.glove_controls(
+                r, cal.raw_index, cal._gain, cal._offset, cal._lo, cal._hi, cal._last_good,
+                self._deg, False, False, 0.0, self._deg, self._deg, self._deg, self._deg,
+                self._deg, self._perm, out)
+            return out
+        prime = not f._primed
+        te = t_s - f._t_s
+        cal.nonfinite += kernels.glove_controls(
+            r, cal.raw_index, cal._gain, cal._offset, cal._lo, cal._hi, cal._last_good,
+            self._deg, True, prime, te, f._x_hat, f._dx_hat, f.min_cutoff_hz, f.beta,
+            f._two_pi_d, self._perm, out)
+        if prime or te > 0.0:
+            f._t_s = t_s
+            f._primed = True
         return out
 
     def reset(self) -> None:

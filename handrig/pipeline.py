@@ -19,14 +19,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from handrig import hand
+from handrig import hand, kernels
 from handrig.config import JointLimits
 from handrig.errors import ConfigError
+from handrig.sag import SagGrid
 
 FloatArray = NDArray[np.float64]
 POSE_NAMES: tuple[str, ...] = hand.ALL_JOINT_NAMES
@@ -212,6 +213,18 @@ class PosePipeline:
         self._servo_slot = slot
         self._sag24 = np.zeros(hand.DOFS_PER_HAND + 1)
         self._sag_servo = np.zeros(n)
+        # the compiled step (handrig.kernels) when the right hand's sag is a baked grid
+        # or absent; any other SagLike takes the numpy step
+        grid = self._grids.get("ri")
+        self._kernel = grid is None or isinstance(grid, SagGrid)
+        if isinstance(grid, SagGrid):
+            self._k_grid: tuple[Any, ...] = (grid._inc_arr, grid._rot_arr, grid._rot0,
+                                             grid._cells_off)
+        else:
+            self._k_grid = (np.array([-90.0, 90.0]), np.array([0.0, 360.0]), 0.0,
+                            np.zeros((0, 1, 4, hand.DOFS_PER_HAND)))
+        self._k_slot = np.ascontiguousarray(slot, dtype=np.int64)
+        kernels.warm_up()
 
     # -- pieces ---------------------------------------------------------------------------
     def _add_sag(self, pose: FloatArray, h: str, inclination_deg: float,
@@ -266,6 +279,27 @@ class PosePipeline:
         """The servo targets only (degrees, bus order): the short path the loop runs
         between reading a glove frame and handing the Sync Write to the OS. Call
         :meth:`account` afterwards for the full pose (outputs) and the statistics."""
+        if self._kernel:
+            grid = self._grids.get("ri")
+            if grid is not None:
+                inclination_deg = SagGrid.checked_inclination(inclination_deg, rotation_deg)
+            inc_axis, rot_axis, rot0, cells = self._k_grid
+            first = not self._has_targets
+            self.rejected += kernels.servo_targets(
+                np.ascontiguousarray(controls_deg, dtype=np.float64), self._servo_a,
+                self._servo_b, inc_axis, rot_axis, rot0, cells,
+                self._k_slot, float(self.sag_gain), float(inclination_deg),
+                float(rotation_deg), self.servo_low, self.servo_high, self.targets,
+                float(self.slew_deg_s * max(dt_s, 0.0)), first, self._raw_targets)
+            self._has_targets = True
+            return self.targets
+        return self._servo_targets_numpy(controls_deg, inclination_deg, rotation_deg, dt_s)
+
+    def _servo_targets_numpy(
+        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, dt_s: float
+    ) -> FloatArray:
+        """:meth:`servo_targets` in numpy, for a sag source other than a baked grid
+        (and the reference the compiled kernel is tested against)."""
         raw = self._raw_targets
         np.dot(controls_deg, self._servo_a, out=raw)
         raw += self._servo_b

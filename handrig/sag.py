@@ -115,6 +115,8 @@ class SagGrid:
         self._inc = [float(x) for x in inc_axis]
         self._rot = [float(x) for x in rot_axis] + [float(rot_axis[0]) + 360.0]
         self._rot0 = float(rot_axis[0])
+        self._inc_arr = np.array(self._inc)  # the same axes for handrig.kernels
+        self._rot_arr = np.array(self._rot)
         # Cell tables: for cell (i, j) the 4 corner vectors, contiguous, rotation wrapped.
         wrapped = np.concatenate([vals, vals[:, :1]], axis=1)
         cells = np.stack([wrapped[:-1, :-1], wrapped[:-1, 1:], wrapped[1:, :-1],
@@ -180,8 +182,10 @@ class SagGrid:
         """Sag offsets = :meth:`lookup` minus ``rest_deg`` (23,), degrees."""
         return self._interp(self._cells_off, inclination_deg, rotation_deg, out)
 
-    def _interp(self, cells: NDArray[np.float64], inc: float, rot: float,
-                out: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    @staticmethod
+    def checked_inclination(inc: float, rot: float) -> float:
+        """``inc`` clamped to -90..90 (rounding slack); DataError for NaN, a value
+        outside, or a non-finite rotation."""
         if not (-90.0 <= inc <= 90.0):
             if inc != inc:
                 raise DataError("sag lookup: inclination is NaN")
@@ -190,6 +194,11 @@ class SagGrid:
             inc = 90.0 if inc > 0 else -90.0
         if not math.isfinite(rot):
             raise DataError(f"sag lookup: rotation {rot} is not finite")
+        return inc
+
+    def _interp(self, cells: NDArray[np.float64], inc: float, rot: float,
+                out: NDArray[np.float64] | None) -> NDArray[np.float64]:
+        inc = self.checked_inclination(inc, rot)
         incs, rots = self._inc, self._rot
         i = bisect.bisect_right(incs, inc) - 1
         if i > len(incs) - 2:

@@ -27,6 +27,7 @@ from typing import Literal
 
 import numpy as np
 
+from handrig import kernels
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import DeviceError, DeviceTimeoutError, ProtocolError, SafetyStop, ServoFault
 from handrig.rigconfig import MODEL_NUMBERS, POSITION_TICKS_MAX, TICKS_PER_DEG, RigConfig
@@ -179,13 +180,12 @@ class DynamixelBus(ServoBus):
             (INST_SYNC_WRITE,)
         ) + u16(Reg.GOAL_POSITION.address) + u16(4)
         warm_up()
+        kernels.warm_up()
         self._sw_prefix_crc = crc16(self._sw_prefix)
         self._sw_body = np.zeros((n, 5), np.uint8)
         self._sw_body[:, 0] = self.ids
         self._goal_deg = np.zeros(n, np.float64)
-        self._goal_ticks = np.zeros(n, np.dtype("<i4"))  # little-endian, as on the wire
         self._last_goal_deg = np.full(n, np.nan)
-        self._scratch = np.zeros(n, np.float64)
         self._rehearsal_goal = np.zeros(n, np.float64)
         # Profile Velocity units (0.229 rpm of the servo) for APPROACH_DPS of the joint
         self._approach_units = [
@@ -194,7 +194,6 @@ class DynamixelBus(ServoBus):
         self.hold_outside_limits = False
         """Torque-on with a servo outside [min_deg, max_deg] holds it where it is instead
         of refusing (for ``handrig calibrate servos``, where the zero is being found)."""
-        self._finite = np.zeros(n, bool)
 
         # -- present-state read
         self.read_fields: ReadFields = read_fields
@@ -572,7 +571,7 @@ class DynamixelBus(ServoBus):
         with self._lock:
             self._rearm_after_silence()
             clamped = self._clamp_goals(goals_deg)
-            self._send_goals(self._goal_deg)
+            self._send_built_goals()
         return clamped
 
     def write_and_read(
@@ -586,7 +585,7 @@ class DynamixelBus(ServoBus):
         with self._lock:
             self._rearm_after_silence()
             clamped = self._clamp_goals(goals_deg)
-            self._pending_tx = self._goal_packet(self._goal_deg)
+            self._pending_tx = self._goal_packet()
             self._last_goal_deg[:] = self._goal_deg
             self._stats.writes += 1
             try:
@@ -615,23 +614,22 @@ class DynamixelBus(ServoBus):
         self._sync_write(Reg.BUS_WATCHDOG, [watchdog_ms // BUS_WATCHDOG_UNIT_MS] * self._n)
 
     def _clamp_goals(self, goals_deg: np.ndarray) -> int:
-        """Goals clamped into ``self._goal_deg``; returns (and counts) how many changed."""
+        """Goals clamped into ``self._goal_deg`` and the goal Sync Write built from them
+        (``self._sw_body``); returns (and counts) how many goals changed."""
         clamped = self._clamp_into(goals_deg, self._goal_deg)
         self._stats.clamps += clamped
         return clamped
 
     def _clamp_into(self, goals_deg: np.ndarray, goal: np.ndarray) -> int:
         """``goals_deg`` clamped to the limits into ``goal`` (a non-finite goal becomes the
-        last goal sent, or the hold position); returns how many changed. No counters."""
-        g = np.asarray(goals_deg, dtype=np.float64)
+        last goal sent, or the hold position), and their ticks into the Sync Write body;
+        returns how many changed. No counters. One compiled loop (handrig.kernels)."""
+        g = np.ascontiguousarray(goals_deg, dtype=np.float64)
         if g.shape != (self._n,):
             raise ValueError(f"goals_deg must have shape ({self._n},), got {g.shape}")
-        np.clip(g, self._min_deg, self._max_deg, out=goal)
-        np.isfinite(g, out=self._finite)
-        if not self._finite.all():
-            fallback = np.where(np.isnan(self._last_goal_deg), self._hold_deg, self._last_goal_deg)
-            np.copyto(goal, fallback, where=~self._finite)
-        return int(np.count_nonzero(goal != g))
+        return int(kernels.goal_body(
+            g, self._min_deg, self._max_deg, self._last_goal_deg, self._hold_deg,
+            self._ticks_per_deg, self._zero_ticks, goal, self._sw_body))
 
     def _send_request(self, packet: bytes) -> None:
         """Write ``packet`` after any goal Sync Write held back by ``write_and_read``."""
@@ -642,15 +640,8 @@ class DynamixelBus(ServoBus):
         self._last_tx_s = now
         self._bus_free_at = max(now, self._bus_free_at) + len(data) * self._byte_s
 
-    def _goal_packet(self, goal_deg: np.ndarray) -> bytes:
-        """The goal Sync Write for ``goal_deg`` (already clamped), as ticks."""
-        ticks = self._scratch
-        np.multiply(goal_deg, self._ticks_per_deg, out=ticks)
-        ticks += self._zero_ticks
-        np.rint(ticks, out=ticks)
-        np.clip(ticks, 0, POSITION_TICKS_MAX, out=ticks)
-        self._goal_ticks[:] = ticks
-        self._sw_body[:, 1:5] = self._goal_ticks.view(np.uint8).reshape(self._n, 4)
+    def _goal_packet(self) -> bytes:
+        """The goal Sync Write whose body :meth:`_clamp_into` filled last."""
         # Ticks in 0..4095 and IDs <= 252 never form FF FF FD: no stuffing needed.
         body = self._sw_body.tobytes()
         crc = crc16(body, self._sw_prefix_crc)
@@ -662,13 +653,19 @@ class DynamixelBus(ServoBus):
         path is warm in the CPU's caches when the real goals come (see handrig.rig)."""
         with self._lock:
             self._clamp_into(goals_deg, self._rehearsal_goal)
-            self._goal_packet(self._rehearsal_goal)
+            self._goal_packet()
 
     def _send_goals(self, goal_deg: np.ndarray) -> None:
+        """Send ``goal_deg`` (already within limits) as the goal Sync Write."""
         with self._lock:
-            self._send_request(self._goal_packet(goal_deg))
-            self._stats.writes += 1
-            self._last_goal_deg[:] = goal_deg
+            self._clamp_into(goal_deg, self._goal_deg)
+            self._send_built_goals()
+
+    def _send_built_goals(self) -> None:
+        """Send the Sync Write :meth:`_clamp_goals` built for ``self._goal_deg``."""
+        self._send_request(self._goal_packet())
+        self._stats.writes += 1
+        self._last_goal_deg[:] = self._goal_deg
 
     # ------------------------------------------------------------------ present state
     def read_state(self, deadline_s: float | None = None) -> ServoState:
