@@ -178,6 +178,44 @@ def glove_controls(
     return held
 
 
+@njit(cache=True, nogil=True)
+def fast_sync_decode(
+    raw: Any, read_len: int, order: Any, zero_ticks: Any, ticks_per_deg: Any,
+    dps_per_unit: Any, ma_per_unit: Any, pos_deg: Any, vel_dps: Any, cur_ma: Any,
+    status_err: Any,
+) -> bool:  # pragma: no cover - compiled
+    """Readings from an intact Fast Sync Read reply (bytes as uint8; header, LEN and
+    CRC already checked): block ``i`` is servo ``order[i]`` (rig index) and reads
+    ``read_len`` bytes, 4 (Present Position) or 10 (Present Current, Velocity,
+    Position). False, with nothing written, if any servo reports an error number
+    (ERR & 0x7F); otherwise every reading and ERR byte is stored, True."""
+    block = read_len + 4
+    n = order.shape[0]
+    for i in range(n):
+        if raw[8 + i * block] & 0x7F:
+            return False
+    for i in range(n):
+        b = 8 + i * block
+        k = order[i]
+        status_err[k] = raw[b]
+        d = b + 2
+        if read_len == 10:
+            cur = raw[d] | (raw[d + 1] << 8)
+            if cur >= 0x8000:
+                cur -= 0x10000
+            vel = raw[d + 2] | (raw[d + 3] << 8) | (raw[d + 4] << 16) | (raw[d + 5] << 24)
+            if vel >= 0x80000000:
+                vel -= 0x100000000
+            cur_ma[k] = cur * ma_per_unit[k]
+            vel_dps[k] = vel * dps_per_unit[k]
+            d += 6
+        pos = raw[d] | (raw[d + 1] << 8) | (raw[d + 2] << 16) | (raw[d + 3] << 24)
+        if pos >= 0x80000000:
+            pos -= 0x100000000
+        pos_deg[k] = (pos - zero_ticks[k]) / ticks_per_deg[k]
+    return True
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel with the types the loop uses."""
     f = np.zeros(2)
@@ -186,6 +224,10 @@ def warm_up() -> None:
                   f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
     goal_body(f, f - 1.0, f + 1.0, f, f, f + 1.0, f, np.zeros(2), np.zeros((2, 5), np.uint8))
     idx = np.zeros(2, np.intp)
+    for read_len in (4, 10):
+        fast_sync_decode(np.zeros(8 + 2 * (read_len + 4), np.uint8), read_len,
+                         np.arange(2), f, f + 1.0, f, f, np.zeros(2), np.zeros(2),
+                         np.zeros(2), np.zeros(2, np.uint8))
     one_euro_step(f, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0)
     glove_controls(f, idx, f + 1.0, f, f - 1.0, f + 1.0, np.zeros(2), np.zeros(2), True,
                    False, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0, idx, np.zeros(2))

@@ -707,7 +707,8 @@ class DynamixelBus(ServoBus):
                 pending = np.roll(pending[~fresh[pending]], -1)
             now = self.clock.now()
             stale = ~fresh
-            if fresh.all():
+            all_fresh = bool(fresh.all())
+            if all_fresh:
                 self._stale_run[:] = 0
                 self._read_time[:] = now
             else:
@@ -725,8 +726,8 @@ class DynamixelBus(ServoBus):
             ):
                 self._next_temperature_read = self._stats.reads + self.temperature_every
                 self._housekeeping(deadline_s)
-            worst = int(self._stale_run.argmax())
-            if self._stale_run[worst] >= self.policy.max_stale_reads:
+            worst = 0 if all_fresh else int(self._stale_run.argmax())
+            if not all_fresh and self._stale_run[worst] >= self.policy.max_stale_reads:
                 raise DeviceTimeoutError(
                     f"{self.describe(worst)} gave no valid reading in "
                     f"{int(self._stale_run[worst])} reads in a row {self._where()} "
@@ -843,13 +844,14 @@ class DynamixelBus(ServoBus):
             return False
         else:
             return False
-        if order is not None and fast_sync_intact(raw, ids_bytes, self._read_len):
-            errs = np.frombuffer(raw[8:expected:block], np.uint8)
-            if not (errs & 0x7F).any():
-                self._status_err[indices] = errs
-                self._decode_whole(raw, order)
-                self._fresh[:] = True
-                return True
+        # an intact reply: every servo at once, unless one reports an error number
+        if (order is not None and fast_sync_intact(raw, ids_bytes, self._read_len)
+                and kernels.fast_sync_decode(
+                    np.frombuffer(raw, np.uint8), self._read_len, indices, self._zero_ticks,
+                    self._ticks_per_deg, self._dps_per_unit, self._current_ma_per_unit,
+                    self._pos_deg, self._vel_dps, self._cur_ma, self._status_err)):
+            self._fresh[:] = True
+            return True
         if len(raw) < expected:
             self._stats.timeouts += 1
             self._line_dirty = True
@@ -909,34 +911,6 @@ class DynamixelBus(ServoBus):
         self._decode(rows[: len(got)], target)
         self._fresh[target] = True
         return True
-
-    def _decode_whole(self, raw: bytes, order: int) -> None:
-        """Readings of every servo from an intact Fast Sync Read reply (strided views);
-        block ``i`` holds servo ``self._orders[order][0][i]``."""
-        block = self._read_len + 4
-        n = self._n
-
-        def field(offset: int, dtype: str) -> np.ndarray:
-            return np.ndarray((n,), dtype, raw, 10 + offset, (block,))
-
-        if order:
-            idx = self._orders[order][0]
-            if self.read_fields == "position":
-                pos = field(0, "<i4")
-            else:
-                self._cur_ma[idx] = field(0, "<i2") * self._current_ma_per_unit[idx]
-                self._vel_dps[idx] = field(2, "<i4") * self._dps_per_unit[idx]
-                pos = field(6, "<i4")
-            self._pos_deg[idx] = (pos - self._zero_ticks[idx]) / self._ticks_per_deg[idx]
-            return
-        if self.read_fields == "position":
-            pos = field(0, "<i4")
-        else:
-            np.multiply(field(0, "<i2"), self._current_ma_per_unit, out=self._cur_ma)
-            np.multiply(field(2, "<i4"), self._dps_per_unit, out=self._vel_dps)
-            pos = field(6, "<i4")
-        np.subtract(pos, self._zero_ticks, out=self._pos_deg)
-        np.divide(self._pos_deg, self._ticks_per_deg, out=self._pos_deg)
 
     def _decode(self, data: np.ndarray, target: np.ndarray) -> None:
         """Turn raw little-endian rows (k, read_len) into readings for rig indices ``target``."""

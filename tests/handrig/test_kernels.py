@@ -86,3 +86,37 @@ def test_calibrate_and_filter_kernel_matches_numpy() -> None:
         assert held == bad.sum()
         np.testing.assert_allclose(out, want, rtol=0, atol=1e-9)
         np.testing.assert_array_equal(last_good, ref_last)
+
+
+def test_fast_sync_decode_reads_signed_fields_in_any_order() -> None:
+    rng = np.random.default_rng(9)
+    n = 7
+    order = rng.permutation(n)
+    zero, tpd = rng.uniform(1000, 3000, n), rng.choice([-1, 1], n) * rng.uniform(5, 20, n)
+    dps, ma = rng.uniform(0.1, 2, n), rng.uniform(0.5, 3, n)
+    for read_len in (4, 10):
+        cur = rng.integers(-2000, 2000, n).astype("<i2")
+        vel = rng.integers(-400, 400, n).astype("<i4")
+        pos = rng.integers(-5000, 9000, n).astype("<i4")
+        errs = rng.choice([0, 0x80], n).astype(np.uint8)
+        blocks = []
+        for i in range(n):
+            data = pos[i].tobytes() if read_len == 4 else (
+                cur[i].tobytes() + vel[i].tobytes() + pos[i].tobytes())
+            blocks.append(bytes((errs[i], 1 + order[i])) + data + b"\0\0")
+        raw = np.frombuffer(bytes(8) + b"".join(blocks), np.uint8)
+        out = [np.full(n, np.nan) for _ in range(3)]
+        status = np.zeros(n, np.uint8)
+        assert kernels.fast_sync_decode(raw, read_len, order, zero, tpd, dps, ma, *out, status)
+        np.testing.assert_allclose(out[0][order], (pos - zero[order]) / tpd[order])
+        np.testing.assert_array_equal(status[order], errs)
+        if read_len == 10:
+            np.testing.assert_allclose(out[1][order], vel * dps[order])
+            np.testing.assert_allclose(out[2][order], cur * ma[order])
+        bad = raw.copy()
+        bad[8 + 3 * (read_len + 4)] = 0x02  # an error number: nothing is written
+        before = [o.copy() for o in out]
+        assert not kernels.fast_sync_decode(bad, read_len, order, zero, tpd, dps, ma, *out,
+                                            status)
+        for o, b in zip(out, before, strict=True):
+            np.testing.assert_array_equal(o, b)
