@@ -183,17 +183,22 @@ def fast_sync_decode(
     raw: Any, read_len: int, order: Any, zero_ticks: Any, ticks_per_deg: Any,
     dps_per_unit: Any, ma_per_unit: Any, pos_deg: Any, vel_dps: Any, cur_ma: Any,
     status_err: Any,
-) -> bool:  # pragma: no cover - compiled
+) -> int:  # pragma: no cover - compiled
     """Readings from an intact Fast Sync Read reply (bytes as uint8; header, LEN and
     CRC already checked): block ``i`` is servo ``order[i]`` (rig index) and reads
     ``read_len`` bytes, 4 (Present Position) or 10 (Present Current, Velocity,
-    Position). False, with nothing written, if any servo reports an error number
-    (ERR & 0x7F); otherwise every reading and ERR byte is stored, True."""
+    Position). -1, with nothing written, if any servo reports an error number
+    (ERR & 0x7F); otherwise every reading and ERR byte is stored and the count of
+    servos raising the Alert bit (0x80) is returned."""
     block = read_len + 4
     n = order.shape[0]
+    alerts = 0
     for i in range(n):
-        if raw[8 + i * block] & 0x7F:
-            return False
+        err = raw[8 + i * block]
+        if err & 0x7F:
+            return -1
+        if err & 0x80:
+            alerts += 1
     for i in range(n):
         b = 8 + i * block
         k = order[i]
@@ -213,7 +218,7 @@ def fast_sync_decode(
         if pos >= 0x80000000:
             pos -= 0x100000000
         pos_deg[k] = (pos - zero_ticks[k]) / ticks_per_deg[k]
-    return True
+    return alerts
 
 
 def warm_up() -> None:

@@ -243,6 +243,7 @@ class DynamixelBus(ServoBus):
         self._byte_s = BITS_PER_BYTE / self.baud
         self._bus_free_at = -np.inf  # when the wire is expected to be quiet again
         self._pending_tx = b""  # a goal Sync Write to send with the next request
+        self._whole = False  # this read got every servo at once, no Alert bit raised
         self._last_tx_s = -np.inf  # when the host last put bytes on the bus
         self._line_dirty = False  # a reply failed: let the line go quiet before the next
         self.use_fast_sync_read = True
@@ -694,20 +695,21 @@ class DynamixelBus(ServoBus):
             self._status_err[:] = 0
             self._hw_err[:] = 0
             pending = self._orders[self._stats.reads % len(self._orders)][0]
+            self._whole = False
             for attempt in range(self.policy.read_retries + 1):
                 if attempt:
                     if self.clock.now() >= deadline_s:
                         break
                     self._stats.retries += 1
                 self._read_attempt(pending, deadline_s)
-                if fresh.all():
+                if self._whole or fresh.all():
                     break
                 # A Fast Sync Read reply stops at the first servo that does not answer:
                 # ask the rest (in the order just asked) first, the one where it stopped last.
                 pending = np.roll(pending[~fresh[pending]], -1)
             now = self.clock.now()
             stale = ~fresh
-            all_fresh = bool(fresh.all())
+            all_fresh = self._whole or bool(fresh.all())
             if all_fresh:
                 self._stale_run[:] = 0
                 self._read_time[:] = now
@@ -716,7 +718,7 @@ class DynamixelBus(ServoBus):
                 self._stale_run[fresh] = 0
                 self._stats.stale_readings[stale] += 1
                 self._read_time[fresh] = now
-            if self._status_err.any():
+            if not self._whole and self._status_err.any():
                 for i in np.flatnonzero(self._status_err & ERR_ALERT):
                     self._hardware_alert(int(i))
             if (
@@ -845,13 +847,15 @@ class DynamixelBus(ServoBus):
         else:
             return False
         # an intact reply: every servo at once, unless one reports an error number
-        if (order is not None and fast_sync_intact(raw, ids_bytes, self._read_len)
-                and kernels.fast_sync_decode(
-                    np.frombuffer(raw, np.uint8), self._read_len, indices, self._zero_ticks,
-                    self._ticks_per_deg, self._dps_per_unit, self._current_ma_per_unit,
-                    self._pos_deg, self._vel_dps, self._cur_ma, self._status_err)):
-            self._fresh[:] = True
-            return True
+        if order is not None and fast_sync_intact(raw, ids_bytes, self._read_len):
+            alerts = kernels.fast_sync_decode(
+                np.frombuffer(raw, np.uint8), self._read_len, indices, self._zero_ticks,
+                self._ticks_per_deg, self._dps_per_unit, self._current_ma_per_unit,
+                self._pos_deg, self._vel_dps, self._cur_ma, self._status_err)
+            if alerts >= 0:
+                self._fresh[:] = True
+                self._whole = alerts == 0  # every servo fresh, none raising its Alert bit
+                return True
         if len(raw) < expected:
             self._stats.timeouts += 1
             self._line_dirty = True

@@ -107,7 +107,9 @@ def test_fast_sync_decode_reads_signed_fields_in_any_order() -> None:
         raw = np.frombuffer(bytes(8) + b"".join(blocks), np.uint8)
         out = [np.full(n, np.nan) for _ in range(3)]
         status = np.zeros(n, np.uint8)
-        assert kernels.fast_sync_decode(raw, read_len, order, zero, tpd, dps, ma, *out, status)
+        alerts = kernels.fast_sync_decode(raw, read_len, order, zero, tpd, dps, ma, *out,
+                                          status)
+        assert alerts == np.count_nonzero(errs)
         np.testing.assert_allclose(out[0][order], (pos - zero[order]) / tpd[order])
         np.testing.assert_array_equal(status[order], errs)
         if read_len == 10:
@@ -116,7 +118,7 @@ def test_fast_sync_decode_reads_signed_fields_in_any_order() -> None:
         bad = raw.copy()
         bad[8 + 3 * (read_len + 4)] = 0x02  # an error number: nothing is written
         before = [o.copy() for o in out]
-        assert not kernels.fast_sync_decode(bad, read_len, order, zero, tpd, dps, ma, *out,
-                                            status)
+        assert kernels.fast_sync_decode(bad, read_len, order, zero, tpd, dps, ma, *out,
+                                        status) == -1
         for o, b in zip(out, before, strict=True):
             np.testing.assert_array_equal(o, b)
