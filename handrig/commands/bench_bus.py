@@ -31,9 +31,9 @@ from handrig.rigconfig import BAUD_RATES, RigConfig, load_rig_config
 
 PLAIN_TIMEOUT_NOTE = "SDK default timeouts"
 # DynamixelBus(spin_s=...) for the extra row: poll for the reply from 200 us before to
-# 200 us after its wire instant. Measured at 4 Mbps, 20 servos, 3 runs of this bench on a
-# 2-core host: 0.77-0.78 of wire with it, 0.73-0.75 without, at 150-170 us more CPU per
-# cycle (on a busier host the gain was nil, hence not the driver's default).
+# 200 us after its wire instant. Measured at 4 Mbps, 20 servos, 5 runs of this bench on a
+# 2-core VM (driver and emulator on separate CPUs): 0.82-0.87 of wire with it, 0.78-0.85
+# without, at 150-170 us more CPU per cycle; not the driver's default for that cost.
 SPIN_S = 0.0002
 TARGET_RATIO = 0.85  # issue 5: at least 85 % of the wire-limited rate
 
