@@ -50,7 +50,6 @@ from handrig.servo.packets import (
     packet_length,
     parse_status,
     u16,
-    warm_up,
 )
 from handrig.servo.registers import (
     BUS_WATCHDOG_TRIPPED,
@@ -179,7 +178,6 @@ class DynamixelBus(ServoBus):
         self._sw_prefix = HEADER + bytes((BROADCAST_ID, length & 0xFF, length >> 8)) + bytes(
             (INST_SYNC_WRITE,)
         ) + u16(Reg.GOAL_POSITION.address) + u16(4)
-        warm_up()
         kernels.warm_up()
         self._sw_prefix_crc = crc16(self._sw_prefix)
         self._sw_body = np.zeros((n, 5), np.uint8)

@@ -174,7 +174,3 @@ def fast_sync_intact(raw: bytes, ids: bytes, data_len: int) -> bool:
     ):
         return False
     return crc16(memoryview(raw)[:-2]) == raw[-2] | raw[-1] << 8
-
-
-def warm_up() -> None:
-    """Kept for callers: nothing to prepare since the CRC is compiled."""
