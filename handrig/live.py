@@ -9,6 +9,7 @@ checks afterwards, by reading every servo's Torque Enable, that torque is off.
 from __future__ import annotations
 
 import contextlib
+import gc
 import signal
 import sys
 import threading
@@ -168,6 +169,7 @@ def _run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None) -> LiveRe
 
         error: HandrigError | None = None
         rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
+        stack.callback(gc.unfreeze)  # also when torque-on fails and the loop never runs
         with bus.torque(on_signal=lambda name: rig.request_stop(f"{name} received")):
             # the Rig starts from bus.last_goals_deg: where torque-on holds every servo
             panel = contextlib.nullcontext()
