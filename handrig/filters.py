@@ -82,20 +82,28 @@ class OneEuroFilter:
     def __call__(self, x: FloatArray, t_s: float, out: FloatArray | None = None) -> FloatArray:
         return self.filter(x, t_s, out)
 
+    def advance(self, t_s: float) -> tuple[bool, float]:
+        """Move the filter's clock to ``t_s`` for a sample taken then: (prime, te), where
+        ``prime`` means the sample passes through (first call, or first after
+        :meth:`reset`) and ``te`` is the step in seconds (no step unless > 0)."""
+        if not self._primed:
+            self._primed = True
+            self._t_s = t_s
+            return True, 0.0
+        te = t_s - self._t_s
+        if te > 0.0:
+            self._t_s = t_s
+        return False, te
+
     def filter(self, x: FloatArray, t_s: float, out: FloatArray | None = None) -> FloatArray:
         """Filter ``x`` (n,) sampled at ``t_s``; writes into ``out`` if given (may be ``x``)."""
         xh = self._x_hat
-        if not self._primed:
+        prime, te = self.advance(t_s)
+        if prime:
             xh[:] = x
-            self._t_s = t_s
-            self._primed = True
-        else:
-            te = t_s - self._t_s
-            if te > 0.0:
-                self._t_s = t_s
-                kernels.one_euro_step(np.ascontiguousarray(x, dtype=np.float64), te, xh,
-                                      self._dx_hat, self.min_cutoff_hz, self.beta,
-                                      self._two_pi_d)
+        elif te > 0.0:
+            kernels.one_euro_step(np.ascontiguousarray(x, dtype=np.float64), te, xh,
+                                  self._dx_hat, self.min_cutoff_hz, self.beta, self._two_pi_d)
         if out is None:
             return xh.copy()
         out[:] = xh

@@ -364,15 +364,11 @@ class GloveControls:
                 self._deg, False, False, 0.0, self._deg, self._deg, self._deg, self._deg,
                 self._deg, self._perm, out)
             return out
-        prime = not f._primed
-        te = t_s - f._t_s
+        prime, te = f.advance(t_s)
         cal.nonfinite += kernels.glove_controls(
             r, cal.raw_index, cal._gain, cal._offset, cal._lo, cal._hi, cal._last_good,
             self._deg, True, prime, te, f._x_hat, f._dx_hat, f.min_cutoff_hz, f.beta,
             f._two_pi_d, self._perm, out)
-        if prime or te > 0.0:
-            f._t_s = t_s
-            f._primed = True
         return out
 
     def reset(self) -> None:

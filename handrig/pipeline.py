@@ -217,6 +217,7 @@ class PosePipeline:
         # or absent; any other SagLike takes the numpy step
         grid = self._grids.get("ri")
         self._kernel = grid is None or isinstance(grid, SagGrid)
+        self._k_sag = grid is not None
         if isinstance(grid, SagGrid):
             self._k_grid: tuple[Any, ...] = (grid._inc_arr, grid._rot_arr, grid._rot0,
                                              grid._cells_off)
@@ -280,8 +281,7 @@ class PosePipeline:
         between reading a glove frame and handing the Sync Write to the OS. Call
         :meth:`account` afterwards for the full pose (outputs) and the statistics."""
         if self._kernel:
-            grid = self._grids.get("ri")
-            if grid is not None:
+            if self._k_sag:
                 inclination_deg = SagGrid.checked_inclination(inclination_deg, rotation_deg)
             inc_axis, rot_axis, rot0, cells = self._k_grid
             first = not self._has_targets
