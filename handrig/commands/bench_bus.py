@@ -3,8 +3,9 @@
 Runs the emulated bus (``sim.dxl_bus.SimBus``, wire timing on) in a separate
 process, so its host time does not share this process's interpreter, then runs
 the same cycle five ways on it: :class:`~handrig.servo.DynamixelBus` as the loop
-calls it (``write_goals_deg`` + ``read_state``), with ``write_and_read``, and with
-its reply poll window (``spin_s``); the plain way most projects write it
+calls it (``write_goals_deg`` + ``read_state``), with ``write_and_read``, and
+without its reply poll (``spin_s=0``: always asleep until the reply); the plain way
+most projects write it
 (dynamixel-sdk ``GroupSyncWrite`` + ``GroupSyncRead`` with the SDK's default
 timeouts); and the SDK's own Fast Sync Read. Prints cycles per second, the
 wire-time limit for that baud and servo count (REFERENCE.md section 3), their
@@ -30,11 +31,6 @@ from handrig.realtime import helper_env, pinned_loop
 from handrig.rigconfig import BAUD_RATES, RigConfig, load_rig_config
 
 PLAIN_TIMEOUT_NOTE = "SDK default timeouts"
-# DynamixelBus(spin_s=...) for the extra row: poll for the reply from 200 us before to
-# 200 us after its wire instant. Measured at 4 Mbps, 20 servos, 5 runs of this bench on a
-# 2-core VM (driver and emulator on separate CPUs): 0.82-0.87 of wire with it, 0.78-0.85
-# without, at 150-170 us more CPU per cycle; not the driver's default for that cost.
-SPIN_S = 0.0002
 TARGET_RATIO = 0.85  # issue 5: at least 85 % of the wire-limited rate
 
 
@@ -126,13 +122,15 @@ def _goals(rig: RigConfig, k: int) -> np.ndarray:
 
 def run_ours(
     port: str, rig: RigConfig, baud: int, seconds: float, combined: bool = False,
-    spin_s: float = 0.0,
+    spin_s: float | None = None,
 ) -> Result:
     """``write_goals_deg`` + ``read_state`` per cycle (``combined``: ``write_and_read``);
-    ``spin_s``: the driver's reply poll window (:class:`~handrig.servo.DynamixelBus`)."""
+    ``spin_s``: the driver's reply poll lead (:class:`~handrig.servo.DynamixelBus`;
+    None: its default)."""
     from handrig.servo import DynamixelBus
 
-    bus = DynamixelBus(port, rig, baud=baud, read_fields="position", spin_s=spin_s)
+    bus = (DynamixelBus(port, rig, baud=baud, read_fields="position") if spin_s is None
+           else DynamixelBus(port, rig, baud=baud, read_fields="position", spin_s=spin_s))
     bus.connect()
     try:
         goals = [_goals(rig, k) for k in range(64)]
@@ -159,8 +157,9 @@ def run_ours(
         bus.close()
     name = "handrig write_and_read (one port write)" if combined else (
         "handrig write_goals_deg + read_state (FSR)")
-    if spin_s:
-        name = f"handrig write_goals_deg + read_state, spin {spin_s * 1e6:.0f} us"
+    if spin_s is not None:
+        name = ("handrig write_goals_deg + read_state, no poll" if not spin_s
+                else f"handrig write_goals_deg + read_state, poll {spin_s * 1e6:.0f} us")
     return Result(name, cycles, wall, cpu, failed,
                   float(np.median(np.diff(stamps[:cycles]))))
 
@@ -240,7 +239,7 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
         with pinned_loop():  # the driver on its own CPU, the emulator on the others
             results.append(run_ours(emu.port, rig, baud, seconds))
             results.append(run_ours(emu.port, rig, baud, seconds, combined=True))
-            results.append(run_ours(emu.port, rig, baud, seconds, spin_s=SPIN_S))
+            results.append(run_ours(emu.port, rig, baud, seconds, spin_s=0.0))
             if plain:
                 results.append(run_sdk(emu.port, rig, baud, seconds, fast=False))
                 results.append(run_sdk(emu.port, rig, baud, seconds, fast=True))

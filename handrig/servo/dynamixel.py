@@ -44,11 +44,11 @@ from handrig.servo.packets import (
     INST_WRITE,
     StatusPacket,
     build_instruction,
-    crc16,
     fast_sync_intact,
     fast_sync_valid,
     packet_length,
     parse_status,
+    sdk_crc16,
     u16,
 )
 from handrig.servo.registers import (
@@ -79,6 +79,11 @@ APPROACH_DPS = 30.0  # joint speed that brings a servo resting outside its limit
 # A goal write after a silence this fraction of the Bus Watchdog time re-arms it first
 # (the servo's clock and ours differ; a 200 Hz loop is silent 5 ms, far below).
 WATCHDOG_GAP_FRACTION = 0.8
+# Fast Sync Read replies are polled for (DynamixelBus spin_s) from REPLY_POLL_LEAD_S
+# before the instant the wire delivers them until REPLY_POLL_AFTER_S after it (the
+# pty or USB hand-over and the servos' own lateness), then waited for asleep.
+REPLY_POLL_LEAD_S = 50e-6
+REPLY_POLL_AFTER_S = 300e-6
 
 ReadFields = Literal["position", "motion"]
 # Contiguous control-table spans read each cycle: position only, or current+velocity+position.
@@ -86,6 +91,23 @@ _READ_SPANS: dict[str, tuple[int, int]] = {
     "position": (Reg.PRESENT_POSITION.address, 4),
     "motion": (Reg.PRESENT_CURRENT.address, 10),
 }
+
+
+_KERNEL_CRC_CHECKED = False
+
+
+def _check_kernel_crc() -> None:
+    """The compiled CRC (goal packets, whole Fast Sync Read replies) must equal
+    dynamixel-sdk's ``updateCRC``; checked once per process, RuntimeError if not."""
+    global _KERNEL_CRC_CHECKED
+    if _KERNEL_CRC_CHECKED:
+        return
+    probe = bytes(range(256)) + b"\xff\xff\xfd\x00\xfe\x55"
+    data = np.frombuffer(probe, np.uint8)
+    for n in (0, 1, 7, 77, len(probe)):
+        if kernels.crc16(data, n) != sdk_crc16(probe[:n]):
+            raise RuntimeError("handrig.kernels.crc16 disagrees with dynamixel-sdk's updateCRC")
+    _KERNEL_CRC_CHECKED = True
 
 
 def wire_time_s(n_bytes: int, baud: int) -> float:
@@ -114,13 +136,14 @@ class DynamixelBus(ServoBus):
     tripped (0: never). ``reply_timeout_s`` bounds the wait for one reply (default:
     twice its wire time plus 2 ms); ``reply_gap_s`` ends a reply that stops
     flowing (default 1.5 ms plus 32 byte times). ``spin_s``: poll for a Fast Sync
-    Read reply, instead of sleeping, from ``spin_s`` before until ``spin_s`` after
-    the instant the wire would deliver it (0, the default: always sleep); it
-    costs up to ``2 * spin_s`` of CPU per read to save the tens of microseconds a
-    sleeping thread takes to wake. Against the emulator on a shared 2-core host
-    (``handrig bench bus``, 4 Mbps, 20 servos) 200 us gave 0.75-0.79 of the wire
-    limit against 0.70-0.75 without, for 150-200 us more CPU per cycle, and no
-    steady gain while the host was busier: hence off by default.
+    Read reply, instead of sleeping, from ``spin_s`` before the instant the wire
+    would deliver it until ``REPLY_POLL_AFTER_S`` after (0: always sleep). A
+    sleeping thread takes tens of microseconds to wake, and wakes with cold
+    caches; the poll costs about ``spin_s`` plus the reply's lateness in CPU per
+    read. Against the emulator (``handrig bench bus``, 4 Mbps, 20 servos, 2-core
+    VM, timer slack 1 us as in :func:`~handrig.realtime.pinned_loop`): 0.83-0.85
+    of the wire limit always sleeping at 95 us CPU per cycle, 0.87-0.90 with the
+    default 50 us at 130-150 us.
     """
 
     def __init__(
@@ -134,7 +157,7 @@ class DynamixelBus(ServoBus):
         read_fields: ReadFields = "motion",
         temperature_every: int = 100,
         reply_timeout_s: float | None = None,
-        spin_s: float = 0.0,
+        spin_s: float = REPLY_POLL_LEAD_S,
         reply_gap_s: float | None = None,
     ) -> None:
         if not rig.servos:
@@ -171,6 +194,11 @@ class DynamixelBus(ServoBus):
         self._hold_deg = np.clip(0.0, self._min_deg, self._max_deg)
         # joint deg/s per Present Velocity unit: servo deg/s over (direction * gear ratio)
         self._dps_per_unit = VELOCITY_DPS_PER_UNIT * TICKS_PER_DEG / self._ticks_per_deg
+        # the same four as rows of one array, for kernels.fast_sync_whole (views from now on)
+        self._scale = np.stack([self._zero_ticks, self._ticks_per_deg, self._dps_per_unit,
+                                self._current_ma_per_unit])
+        (self._zero_ticks, self._ticks_per_deg, self._dps_per_unit,
+         self._current_ma_per_unit) = self._scale
 
         # -- goal Sync Write: constant prefix, CRC resumed after it each cycle
         body_len = 5 * n
@@ -179,9 +207,14 @@ class DynamixelBus(ServoBus):
             (INST_SYNC_WRITE,)
         ) + u16(Reg.GOAL_POSITION.address) + u16(4)
         kernels.warm_up()
-        self._sw_prefix_crc = crc16(self._sw_prefix)
-        self._sw_body = np.zeros((n, 5), np.uint8)
-        self._sw_body[:, 0] = self.ids
+        _check_kernel_crc()
+        # the whole goal Sync Write, rebuilt in place each cycle (kernels.goal_packet)
+        self._sw_packet = np.zeros(kernels.SYNC_WRITE_BODY + body_len + 2, np.uint8)
+        self._sw_packet[: len(self._sw_prefix)] = np.frombuffer(self._sw_prefix, np.uint8)
+        self._sw_packet[kernels.SYNC_WRITE_BODY :: 5][:n] = self.ids
+        self._sw_view = self._sw_packet.data  # a memoryview: what is written to the port
+        self._rehearsal_packet = self._sw_packet.copy()
+        self._sw_wire_s = wire_time_s(len(self._sw_packet), self.baud)
         self._goal_deg = np.zeros(n, np.float64)
         self._last_goal_deg = np.full(n, np.nan)
         self._rehearsal_goal = np.zeros(n, np.float64)
@@ -202,6 +235,7 @@ class DynamixelBus(ServoBus):
         # read's (Protocol 2.0 has no sequence numbers). Only a reply a multiple of
         # len(self._orders) reads late could pass.
         self._orders: list[tuple[np.ndarray, tuple[int, ...], bytes, bytes]] = []
+        self._order_ids_np: list[np.ndarray] = []  # each order's IDs, for the kernel
         seen_orders: set[bytes] = set()
         rng = np.random.default_rng(0)
         candidates = [np.roll(np.arange(n), -r) for r in range(n)]
@@ -217,10 +251,17 @@ class DynamixelBus(ServoBus):
                 BROADCAST_ID, INST_FAST_SYNC_READ,
                 u16(self._read_addr) + u16(self._read_len) + bytes(ids),
             )))
+            self._order_ids_np.append(np.array(ids, np.uint8))
         self._order_of = {id(o[0]): k for k, o in enumerate(self._orders)}
         self._order_ids = {o[2] for o in self._orders}
         self._fsr_full = self._orders[0][3]
         self._reply_len_full = 8 + (self._read_len + 4) * n
+        # the first 7 bytes of a whole reply: header, broadcast ID, LEN
+        self._reply_head_full = HEADER + bytes((BROADCAST_ID,)) + u16(self._reply_len_full - 7)
+        # a whole read's next state, allocated while the reply is on the wire
+        self._next_state: ServoState | None = None
+        self._next_out: tuple[np.ndarray, np.ndarray] | None = None
+        self._whole_at = 0.0  # when the last whole read was decoded
         if reply_timeout_s is None:
             wire = wire_time_s(len(self._fsr_full) + self._reply_len_full, self.baud)
             reply_timeout_s = 2.0 * wire + 0.002
@@ -243,6 +284,10 @@ class DynamixelBus(ServoBus):
         self._pending_tx = b""  # a goal Sync Write to send with the next request
         self._whole = False  # this read got every servo at once, no Alert bit raised
         self._last_tx_s = -np.inf  # when the host last put bytes on the bus
+        self._watchdog_gap_s = (
+            WATCHDOG_GAP_FRACTION * rig.bus.watchdog_ms / 1000.0 if rig.bus.watchdog_ms
+            else np.inf
+        )
         self._line_dirty = False  # a reply failed: let the line go quiet before the next
         self.use_fast_sync_read = True
         self._fast_fail_run = 0
@@ -251,15 +296,13 @@ class DynamixelBus(ServoBus):
         self._ids_bytes = bytes(self.ids)
         self._all_fresh = np.ones(n, bool)
 
-        # -- latest readings (rig order)
-        self._pos_deg = np.full(n, np.nan)
-        self._vel_dps = np.full(n, np.nan)
-        self._cur_ma = np.full(n, np.nan)
-        self._temp_c = np.full(n, np.nan)
+        # -- latest readings (rig order); rows of one array for kernels.fast_sync_whole
+        self._latest = np.full((5, n), np.nan)
+        self._pos_deg, self._vel_dps, self._cur_ma, self._temp_c, self._read_time = self._latest
+        self._read_time[:] = -np.inf
         self._status_err = np.zeros(n, np.uint8)
         self._hw_err = np.zeros(n, np.uint8)
         self._fresh = np.zeros(n, bool)
-        self._read_time = np.full(n, -np.inf)
         self._stale_run = np.zeros(n, np.int64)
         self._stats = BusStats(n)
 
@@ -568,7 +611,8 @@ class DynamixelBus(ServoBus):
         ``stats.clamps``). No reply is expected.
         """
         with self._lock:
-            self._rearm_after_silence()
+            if self._torque_on and self.clock.now() - self._last_tx_s >= self._watchdog_gap_s:
+                self._rearm_after_silence()
             clamped = self._clamp_goals(goals_deg)
             self._send_built_goals()
         return clamped
@@ -584,7 +628,7 @@ class DynamixelBus(ServoBus):
         with self._lock:
             self._rearm_after_silence()
             clamped = self._clamp_goals(goals_deg)
-            self._pending_tx = self._goal_packet()
+            self._pending_tx = self._sw_packet.tobytes()
             self._last_goal_deg[:] = self._goal_deg
             self._stats.writes += 1
             try:
@@ -604,7 +648,7 @@ class DynamixelBus(ServoBus):
         if not self._torque_on or not watchdog_ms:
             return
         silent_s = self.clock.now() - self._last_tx_s
-        if silent_s < WATCHDOG_GAP_FRACTION * watchdog_ms / 1000.0:
+        if silent_s < self._watchdog_gap_s:
             return
         self._stats.watchdog_gaps += 1
         log.warning("the bus was silent for %.0f ms (Bus Watchdog %d ms): re-arming the "
@@ -614,55 +658,49 @@ class DynamixelBus(ServoBus):
 
     def _clamp_goals(self, goals_deg: np.ndarray) -> int:
         """Goals clamped into ``self._goal_deg`` and the goal Sync Write built from them
-        (``self._sw_body``); returns (and counts) how many goals changed."""
-        clamped = self._clamp_into(goals_deg, self._goal_deg)
+        (``self._sw_packet``); returns (and counts) how many goals changed."""
+        clamped = self._clamp_into(goals_deg, self._goal_deg, self._sw_packet)
         self._stats.clamps += clamped
         return clamped
 
-    def _clamp_into(self, goals_deg: np.ndarray, goal: np.ndarray) -> int:
+    def _clamp_into(self, goals_deg: np.ndarray, goal: np.ndarray, packet: np.ndarray) -> int:
         """``goals_deg`` clamped to the limits into ``goal`` (a non-finite goal becomes the
-        last goal sent, or the hold position), and their ticks into the Sync Write body;
-        returns how many changed. No counters. One compiled loop (handrig.kernels)."""
+        last goal sent, or the hold position), and their ticks into the Sync Write
+        ``packet`` with its CRC; returns how many changed. No counters. One compiled
+        loop (handrig.kernels)."""
         g = np.ascontiguousarray(goals_deg, dtype=np.float64)
         if g.shape != (self._n,):
             raise ValueError(f"goals_deg must have shape ({self._n},), got {g.shape}")
-        return int(kernels.goal_body(
+        return int(kernels.goal_packet(
             g, self._min_deg, self._max_deg, self._last_goal_deg, self._hold_deg,
-            self._ticks_per_deg, self._zero_ticks, goal, self._sw_body))
+            self._ticks_per_deg, self._zero_ticks, goal, packet))
 
-    def _send_request(self, packet: bytes) -> None:
+    def _send_request(self, packet: bytes | memoryview) -> None:
         """Write ``packet`` after any goal Sync Write held back by ``write_and_read``."""
-        data = self._pending_tx + packet if self._pending_tx else packet
+        data = self._pending_tx + bytes(packet) if self._pending_tx else packet
         self._pending_tx = b""
         self._transport.write(data)
         now = self.clock.now()
         self._last_tx_s = now
         self._bus_free_at = max(now, self._bus_free_at) + len(data) * self._byte_s
 
-    def _goal_packet(self) -> bytes:
-        """The goal Sync Write whose body :meth:`_clamp_into` filled last."""
-        # Ticks in 0..4095 and IDs <= 252 never form FF FF FD: no stuffing needed.
-        body = self._sw_body.tobytes()
-        crc = crc16(body, self._sw_prefix_crc)
-        return self._sw_prefix + body + bytes((crc & 0xFF, crc >> 8))
-
     def rehearse_write(self, goals_deg: np.ndarray) -> None:
         """Build the goal Sync Write for ``goals_deg`` without sending it, counting or
         remembering anything: the loop calls it shortly before a deadline so the write
         path is warm in the CPU's caches when the real goals come (see handrig.rig)."""
         with self._lock:
-            self._clamp_into(goals_deg, self._rehearsal_goal)
-            self._goal_packet()
+            self._clamp_into(goals_deg, self._rehearsal_goal, self._rehearsal_packet)
 
     def _send_goals(self, goal_deg: np.ndarray) -> None:
         """Send ``goal_deg`` (already within limits) as the goal Sync Write."""
         with self._lock:
-            self._clamp_into(goal_deg, self._goal_deg)
+            self._clamp_into(goal_deg, self._goal_deg, self._sw_packet)
             self._send_built_goals()
 
     def _send_built_goals(self) -> None:
         """Send the Sync Write :meth:`_clamp_goals` built for ``self._goal_deg``."""
-        self._send_request(self._goal_packet())
+        # Ticks in 0..4095 and IDs <= 252 never form FF FF FD: no stuffing needed.
+        self._send_request(self._sw_view)
         self._stats.writes += 1
         self._last_goal_deg[:] = self._goal_deg
 
@@ -700,7 +738,17 @@ class DynamixelBus(ServoBus):
                         break
                     self._stats.retries += 1
                 self._read_attempt(pending, deadline_s)
-                if self._whole or fresh.all():
+                if self._whole:
+                    if self._stats.reads < self._next_temperature_read or not (
+                            self.temperature_every):
+                        # kernels.fast_sync_whole did the rest of this method's work
+                        state = self._next_state
+                        assert state is not None
+                        self._next_state = self._next_out = None
+                        state.timestamp_s = self._whole_at
+                        return state
+                    break
+                if fresh.all():
                     break
                 # A Fast Sync Read reply stops at the first servo that does not answer:
                 # ask the rest (in the order just asked) first, the one where it stopped last.
@@ -788,13 +836,15 @@ class DynamixelBus(ServoBus):
         expected = 8 + block * n_req
         self._quiet_line(deadline)
         self._send_request(packet)
+        if order is not None:
+            self._prepare_state()  # while the request and the reply are on the wire
         # the reply cannot end before the wire has carried the request and the reply
         spin_from = None
         spin_until = np.inf
         if self.spin_s > 0:
             arrival = self._bus_free_at + expected * self._byte_s
             spin_from = arrival - self.spin_s
-            spin_until = arrival + self.spin_s
+            spin_until = arrival + REPLY_POLL_AFTER_S
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until)
         if len(head) < 7:
             self._stats.timeouts += 1
@@ -824,6 +874,8 @@ class DynamixelBus(ServoBus):
         raw = head + t.read_exact(
             min(total, expected) - 7, deadline, spin_from, self.reply_gap_s, spin_until
         )
+        if order is not None and self._take_whole(raw, indices, order):
+            return True
         # A reply whose blocks name other servos, or ours in another order, is not the
         # reply to this request: an intact one is a late reply to an earlier read
         # (dropped; the one asked for may follow), anything else is rejected whole.
@@ -844,16 +896,11 @@ class DynamixelBus(ServoBus):
             return False
         else:
             return False
-        # an intact reply: every servo at once, unless one reports an error number
-        if order is not None and fast_sync_intact(raw, ids_bytes, self._read_len):
-            alerts = kernels.fast_sync_decode(
-                np.frombuffer(raw, np.uint8), self._read_len, indices, self._zero_ticks,
-                self._ticks_per_deg, self._dps_per_unit, self._current_ma_per_unit,
-                self._pos_deg, self._vel_dps, self._cur_ma, self._status_err)
-            if alerts >= 0:
-                self._fresh[:] = True
-                self._whole = alerts == 0  # every servo fresh, none raising its Alert bit
-                return True
+        # an intact reply after a late one was dropped: every servo at once
+        if order is not None and self._take_whole(raw, indices, order):
+            assert self._next_state is not None
+            self._next_state.stats = self._stats.copy()  # the late reply counted
+            return True
         if len(raw) < expected:
             self._stats.timeouts += 1
             self._line_dirty = True
@@ -880,6 +927,37 @@ class DynamixelBus(ServoBus):
         self._status_err[target] = blocks[ok, 0]
         self._decode(blocks[ok, 2 : 2 + self._read_len], target)
         self._fresh[target] = True
+        return True
+
+    def _prepare_state(self) -> None:
+        """Allocate the state a whole read returns (arrays and counters), so that the
+        work left once the reply is in is the one compiled pass of :meth:`_take_whole`."""
+        n = self._n
+        out = np.empty((5, n))
+        out_u8 = np.empty((3, n), np.uint8)
+        self._next_out = (out, out_u8)
+        self._next_state = ServoState(
+            positions_deg=out[0], velocities_dps=out[1], currents_ma=out[2],
+            temperatures_c=out[3], status_errors=out_u8[0], hardware_errors=out_u8[1],
+            stale=out_u8[2].view(np.bool_), age_s=out[4], timestamp_s=np.nan,
+            stats=self._stats.copy(),  # what they will be if this read is whole
+        )
+
+    def _take_whole(self, raw: bytes, indices: np.ndarray, order: int) -> bool:
+        """Decode a reply to a request for every servo (order ``order``) if intact as a
+        whole and no servo reports an error number (True; ``self._whole`` when no
+        servo raises its Alert bit either, and then ``self._next_state`` is the
+        read's state); False with nothing changed otherwise."""
+        assert self._next_out is not None
+        now = self.clock.now()
+        alerts = kernels.fast_sync_whole(
+            np.frombuffer(raw, np.uint8), self._read_len, indices, self._order_ids_np[order],
+            self._scale, self._latest, self._status_err, self._stale_run, self._fresh, now,
+            *self._next_out)
+        if alerts < 0:
+            return False
+        self._whole = alerts == 0  # every servo fresh, none raising its Alert bit
+        self._whole_at = now
         return True
 
     def _sync_read(self, indices: np.ndarray, deadline: float) -> bool:

@@ -92,20 +92,29 @@ class SerialTransport:
         if self._handler is None:
             raise DeviceError(f"servo port {self.port} is not open (call connect() first)")
 
-    def write(self, data: bytes) -> None:
-        """Send ``data`` completely; DeviceError if the port went away."""
-        self._check_open()
-        view = memoryview(data)
+    def write(self, data: bytes | memoryview) -> None:
+        """Send ``data`` completely; DeviceError if the port
+        went away. One ``os.write`` in the usual case: this is on the cycle's critical
+        path, between the reply that ended the last read and the next goals."""
         try:
-            while view:
-                try:
-                    n = os.write(self._fd, view)
-                except BlockingIOError:
-                    select.select([], [self._fd], [], 0.01)
-                    continue
-                view = view[n:]
+            n = os.write(self._fd, data)
+        except BlockingIOError:
+            n = 0
         except OSError as exc:
+            self._check_open()
             raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
+        if n < len(data):
+            view = memoryview(data)[n:]
+            try:
+                while view:
+                    try:
+                        n = os.write(self._fd, view)
+                    except BlockingIOError:
+                        select.select([], [self._fd], [], 0.01)
+                        continue
+                    view = view[n:]
+            except OSError as exc:
+                raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
         self.bytes_written += len(data)
 
     def _fill(
