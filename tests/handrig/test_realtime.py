@@ -3,6 +3,7 @@ import os
 import subprocess
 import sys
 
+from handrig import realtime
 from handrig.realtime import CPUS_ENV, cpu_split, helper_env, pinned_loop, realtime_priority
 
 
@@ -50,3 +51,12 @@ def test_a_helper_process_stays_off_the_loop_cpu():
     bad = subprocess.run([sys.executable, "-c", code], env={**os.environ, CPUS_ENV: "x,y"},
                          capture_output=True, text=True, check=True).stdout
     assert json.loads(bad) == sorted(os.sched_getaffinity(0))  # malformed: ignored
+
+
+def test_pinned_loop_tightens_the_timer_slack_and_restores_it() -> None:
+    before = realtime.timer_slack_ns()
+    if before is None:
+        pytest.skip("no prctl timer slack here")
+    with realtime.pinned_loop(enabled=False):
+        assert realtime.timer_slack_ns() == realtime.LOOP_TIMER_SLACK_NS
+    assert realtime.timer_slack_ns() == before

@@ -647,3 +647,65 @@ def test_one_late_reply_does_not_make_every_later_read_late() -> None:
             assert failed < 50, (failed, b.stats.summary())
         finally:
             b.close()
+
+
+def test_whole_reads_return_their_own_snapshot(sim: SimBus, bus: DynamixelBus) -> None:
+    """The usual read (every servo's reply intact, no alert) takes a shorter way through
+    the driver; what it returns is the same: fresh readings of the emulated servos, the
+    counters as they are at return, arrays that belong to that state alone."""
+    rig = small_rig()
+    first = bus.read_state()  # the first read also fetches the temperatures
+    states = [bus.read_state() for _ in range(3)]
+    assert bus._whole  # the last one went the short way
+    for k, s in enumerate(states):
+        assert not s.stale.any() and (s.age_s == 0).all()
+        assert (s.hardware_errors == 0).all() and (s.status_errors == 0).all()
+        assert s.stats.reads == first.stats.reads + k + 1
+        assert np.isfinite(s.temperatures_c).all()
+        np.testing.assert_array_equal(s.temperatures_c, first.temperatures_c)
+    assert states[-1].stats.summary() == bus.stats.summary()
+    assert states[-1].stats is not bus.stats
+    # a caller scribbling on one state changes neither the driver nor the next state
+    states[0].positions_deg[:] = 999.0
+    states[0].stale[:] = True
+    states[0].stats.reads = -1
+    nxt = bus.read_state()
+    true = np.array([s.ticks_to_deg(sim.servo(s.id).present) for s in rig.servos])
+    np.testing.assert_allclose(nxt.positions_deg, true, atol=1e-9)
+    assert not nxt.stale.any() and bus.stats.reads == nxt.stats.reads > 0
+    for a, b in zip(vars(states[-1]).values(), vars(nxt).values(), strict=True):
+        if isinstance(a, np.ndarray):
+            assert not np.shares_memory(a, b)
+    assert nxt.timestamp_s > states[-1].timestamp_s
+
+
+@pytest.mark.parametrize("read", [True, False])
+def test_servos_move_while_the_bus_is_busy_with_wire_timing(read: bool) -> None:
+    """The emulator's housekeeping (kinematic motion, watchdogs) runs in the replies'
+    wire time, or once overdue when no reply leaves such time (goal writes only)."""
+    rig = small_rig()
+    goals = np.array([0.5 * s.max_deg for s in rig.servos])
+    with SimBus.from_rig(rig, wire_timing=True) as sim:
+        b = DynamixelBus(sim.port_path, rig, baud=4_000_000, read_fields="position")
+        b.connect()
+        try:
+            with b.torque():
+                t_end = time.monotonic() + 3.0
+                k = 0
+                while time.monotonic() < t_end:  # back to back: the bus never idles
+                    b.write_goals_deg(goals)
+                    if read:
+                        b.read_state()
+                    else:
+                        time.sleep(0.0002)
+                    k += 1
+                    if k % 50 == 0:
+                        with sim.lock:
+                            true = np.array([s.ticks_to_deg(sim.servo(s.id).present)
+                                             for s in rig.servos])
+                        if np.allclose(true, goals, atol=0.2):
+                            break
+                np.testing.assert_allclose(true, goals, atol=0.2)
+                assert b.stats.watchdog_gaps == 0
+        finally:
+            b.close()
