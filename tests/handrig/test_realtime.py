@@ -3,6 +3,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from handrig import realtime
 from handrig.realtime import CPUS_ENV, cpu_split, helper_env, pinned_loop, realtime_priority
 
