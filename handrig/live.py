@@ -123,7 +123,11 @@ def _run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None) -> LiveRe
         glove: GloveSource = open_glove(opts.glove, parts.glove_config, clock)
         stack.enter_context(glove)
         read_fields = read_fields_for(rig_cfg)
-        bus = DynamixelBus(bus_port, rig_cfg, clock=clock, read_fields=read_fields)
+        # No reply poll: the loop reads the servos once every few 5 ms cycles, where the
+        # tens of microseconds a poll saves do not matter, and a SCHED_FIFO thread that
+        # polls holds back the kernel worker delivering the reply (and the glove's
+        # bytes) whenever that worker is queued on the loop's CPU (seen with ftrace).
+        bus = DynamixelBus(bus_port, rig_cfg, clock=clock, read_fields=read_fields, spin_s=0.0)
         stack.callback(bus.close)
         bus.connect()
         if opts.verbose:

@@ -143,7 +143,9 @@ class DynamixelBus(ServoBus):
     read. Against the emulator (``handrig bench bus``, 4 Mbps, 20 servos, 2-core
     VM, timer slack 1 us as in :func:`~handrig.realtime.pinned_loop`): 0.83-0.85
     of the wire limit always sleeping at 95 us CPU per cycle, 0.87-0.90 with the
-    default 50 us at 130-150 us.
+    default 50 us at 130-150 us. Pass 0 from a SCHED_FIFO thread that shares its
+    CPU with the kernel's workers: while it polls, the worker that would deliver
+    the reply cannot run there (the live loop does, see handrig.live).
     """
 
     def __init__(
