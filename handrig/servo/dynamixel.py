@@ -141,9 +141,9 @@ class DynamixelBus(ServoBus):
     sleeping thread takes tens of microseconds to wake, and wakes with cold
     caches; the poll costs about ``spin_s`` plus the reply's lateness in CPU per
     read. Against the emulator (``handrig bench bus``, 4 Mbps, 20 servos, 2-core
-    VM, timer slack 1 us as in :func:`~handrig.realtime.pinned_loop`): 0.83-0.85
-    of the wire limit always sleeping at 95 us CPU per cycle, 0.87-0.90 with the
-    default 50 us at 130-150 us. Pass 0 from a SCHED_FIFO thread that shares its
+    VM, timer slack 1 us as in :func:`~handrig.realtime.pinned_loop`, 10 runs):
+    0.85-0.87 of the wire limit always sleeping, at 72-87 us CPU per cycle;
+    0.88-0.90 with the default 50 us, at 129-155 us. Pass 0 from a SCHED_FIFO thread that shares its
     CPU with the kernel's workers: while it polls, the worker that would deliver
     the reply cannot run there (the live loop does, see handrig.live).
     """
