@@ -211,7 +211,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     glove = summary.get("glove", {})
     bus = summary.get("bus", {})
     faults = {k: v for k, v in bus.items()
-              if v and any(w in k for w in ("timeout", "crc", "error", "retr", "fault", "stale"))}
+              if v and any(w in k for w in ("timeout", "crc", "error", "retr", "fault", "stale",
+                                            "skipped"))}
     lines = [
         f"frames            {summary['frames']} in {summary['duration_s']} s "
         f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us)",

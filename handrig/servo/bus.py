@@ -59,6 +59,7 @@ class BusStats:
     watchdog_trips: int = 0  # servos found with a tripped Bus Watchdog (then re-armed)
     late_replies: int = 0  # intact replies to an earlier read, recognised and dropped
     watchdog_gaps: int = 0  # goal writes after a silence near the Bus Watchdog (re-armed)
+    skipped_reads: int = 0  # reads not sent: the wire could not carry them by their deadline
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -83,7 +84,8 @@ class BusStats:
             f"timeouts {self.timeouts}, crc errors {self.crc_errors}, malformed "
             f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
             f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
-            f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, stale readings "
+            f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, skipped reads "
+            f"{self.skipped_reads}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )

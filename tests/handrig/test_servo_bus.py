@@ -709,3 +709,42 @@ def test_servos_move_while_the_bus_is_busy_with_wire_timing(read: bool) -> None:
                 assert b.stats.watchdog_gaps == 0
         finally:
             b.close()
+
+
+def test_a_read_the_wire_cannot_carry_by_its_deadline_is_not_sent(sim: SimBus) -> None:
+    """On a half-duplex bus a reply still arriving when the next goals go out collides
+    with them: a read that cannot fit before its deadline is skipped, its servos stale."""
+    rig = small_rig()
+    b = DynamixelBus(sim.port_path, rig, baud=57_600,
+                     fault_policy=FaultPolicy(max_stale_reads=3))
+    b.connect()
+    try:
+        fresh = b.read_state()
+        wire_s = b._read_wire_s(len(rig.servos))  # about 19 ms at 57600 baud
+        packets = sim.stats.packets
+        for _ in range(6):  # more than max_stale_reads: not a servo fault
+            state = b.read_state(b.clock.now() + 0.5 * wire_s)
+            assert state.stale.all() and (state.age_s > 0).all()
+            np.testing.assert_array_equal(state.positions_deg, fresh.positions_deg)
+        assert sim.stats.packets == packets  # nothing was sent
+        assert b.stats.skipped_reads == 6 and b.stats.timeouts == 0
+        assert not b.read_state(b.clock.now() + 2 * wire_s + 0.01).stale.any()
+    finally:
+        b.close()
+
+
+def test_a_reply_behind_writes_still_on_the_wire_is_waited_for() -> None:
+    """Torque-on arms the Bus Watchdogs by two broadcast Sync Writes, then reads them
+    back: with wire timing the reply starts only once those writes are off the wire,
+    later than the reply gap after the request. It must not count as a timeout."""
+    with SimBus.from_rig(RIG, wire_timing=True) as sim:
+        b = DynamixelBus(sim.port_path, RIG, baud=1_000_000, read_fields="position")
+        b.connect()
+        try:
+            for _ in range(3):
+                with b.torque():
+                    b.write_goals_deg(np.zeros(len(RIG.servos)))
+                    assert not b.read_state().stale.any()
+            assert b.stats.timeouts == 0, b.stats.summary()
+        finally:
+            b.close()
