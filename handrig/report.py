@@ -92,10 +92,9 @@ def strongest_pairs(an: Analysis, count: int = 4) -> list[tuple[int, int, int, f
 def write_report(an: Analysis, curves: FloatArray, out_dir: str | Path, *, title: str,
                  fps: float, notes: list[str] | None = None) -> Path:
     """Write ``report.md`` and the PNG figures into ``out_dir``; return the Markdown path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # Figure objects, not pyplot: no global figure registry, no backend switch in the
+    # caller's process, nothing left for the garbage collector (as sim.bake.plot)
+    from matplotlib.figure import Figure
 
     out = Path(out_dir)
     try:
@@ -105,28 +104,29 @@ def write_report(an: Analysis, curves: FloatArray, out_dir: str | Path, *, title
     k = len(an.names)
     iu = np.triu_indices(k, 1)
 
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig = Figure(figsize=(6, 3.5))
+    ax = fig.subplots()
     ax.hist(an.range_deg, bins=list(np.arange(0, max(5.0, float(an.range_deg.max())) + 5, 5)))
     ax.set_xlabel("range (deg)")
     ax.set_ylabel("curves")
     ax.set_title(f"Ranges of the {k} rotation curves")
     fig.tight_layout()
     fig.savefig(out / "ranges.png", dpi=100)
-    plt.close(fig)
 
     for name, mat in (("rmsd1", an.rmsd1), ("rmsd2", an.rmsd2)):
-        fig, ax = plt.subplots(figsize=(6, 3.5))
+        fig = Figure(figsize=(6, 3.5))
+        ax = fig.subplots()
         ax.hist(mat[iu], bins=list(np.linspace(0.0, 2.0, 41)))
         ax.set_xlabel(name)
         ax.set_ylabel("pairs")
         ax.set_title(f"Distribution of the {len(iu[0])} values of {name}")
         fig.tight_layout()
         fig.savefig(out / f"{name}.png", dpi=100)
-        plt.close(fig)
 
     pairs = strongest_pairs(an)
     if pairs:
-        fig, axes = plt.subplots(1, len(pairs), figsize=(3.2 * len(pairs), 3.2), squeeze=False)
+        fig = Figure(figsize=(3.2 * len(pairs), 3.2))
+        axes = fig.subplots(1, len(pairs), squeeze=False)
         for ax, (a, b, slope, r) in zip(axes[0], pairs, strict=True):
             ax.plot(curves[:, b], curves[:, a], "-", lw=0.4, color="0.7")
             ax.plot(curves[:, b], curves[:, a], ".", ms=2)
@@ -135,7 +135,6 @@ def write_report(an: Analysis, curves: FloatArray, out_dir: str | Path, *, title
             ax.set_title(f"rmsd{1 if slope > 0 else 2} = {r:.2f}", fontsize=9)
         fig.tight_layout()
         fig.savefig(out / "strongest_pairs.png", dpi=100)
-        plt.close(fig)
 
     final = an.stages[4]
     rebuilt = rebuild(curves, final, an.names)
@@ -143,7 +142,8 @@ def write_report(an: Analysis, curves: FloatArray, out_dir: str | Path, *, title
     shown = sorted(final.links, key=lambda lk: -an.std_deg[idx[lk.dependent]])[:4]
     if shown:
         t_s = np.arange(curves.shape[0]) / fps
-        fig, axes = plt.subplots(len(shown), 1, figsize=(8, 2.0 * len(shown)), squeeze=False)
+        fig = Figure(figsize=(8, 2.0 * len(shown)))
+        axes = fig.subplots(len(shown), 1, squeeze=False)
         for ax, lk in zip(axes[:, 0], shown, strict=True):
             i = idx[lk.dependent]
             ax.plot(t_s, curves[:, i], lw=0.8, label="original")
@@ -153,7 +153,6 @@ def write_report(an: Analysis, curves: FloatArray, out_dir: str | Path, *, title
         axes[-1, 0].set_xlabel("time (s)")
         fig.tight_layout()
         fig.savefig(out / "rebuilt.png", dpi=100)
-        plt.close(fig)
 
     err = np.sqrt(np.mean((rebuilt - curves) ** 2))
     md = [f"# Dimensionality of finger motion: {title}", "",

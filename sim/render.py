@@ -89,10 +89,7 @@ def render_strip(
     strip = np.concatenate(rows, axis=0)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    import matplotlib
+    from matplotlib.image import imsave  # no pyplot: no backend switch in the caller
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    plt.imsave(out, strip)
+    imsave(out, strip)
     return out
