@@ -794,18 +794,7 @@ class DynamixelBus(ServoBus):
                     f"{int(self._stale_run[worst])} reads in a row {self._where()} "
                     f"({self._stats.summary()}): check its cable, power and ID"
                 )
-            return ServoState(
-                positions_deg=self._pos_deg.copy(),
-                velocities_dps=self._vel_dps.copy(),
-                currents_ma=self._cur_ma.copy(),
-                temperatures_c=self._temp_c.copy(),
-                status_errors=self._status_err.copy(),
-                hardware_errors=self._hw_err.copy(),
-                stale=stale,
-                age_s=now - self._read_time,
-                timestamp_s=now,
-                stats=self._stats.copy(),
-            )
+            return self._snapshot(now, stale, self._hw_err.copy())
 
     def _read_wire_s(self, n: int) -> float:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
@@ -817,14 +806,18 @@ class DynamixelBus(ServoBus):
 
     def _unread_state(self, now: float) -> ServoState:
         """The state of a read that was not sent: every servo stale, its last reading."""
+        return self._snapshot(now, np.ones(self._n, bool), np.zeros(self._n, np.uint8))
+
+    def _snapshot(self, now: float, stale: np.ndarray, hardware_errors: np.ndarray) -> ServoState:
+        """A state of copies of the latest readings and counters, marked ``stale``."""
         return ServoState(
             positions_deg=self._pos_deg.copy(),
             velocities_dps=self._vel_dps.copy(),
             currents_ma=self._cur_ma.copy(),
             temperatures_c=self._temp_c.copy(),
             status_errors=self._status_err.copy(),
-            hardware_errors=np.zeros(self._n, np.uint8),
-            stale=np.ones(self._n, bool),
+            hardware_errors=hardware_errors,
+            stale=stale,
             age_s=now - self._read_time,
             timestamp_s=now,
             stats=self._stats.copy(),
