@@ -143,9 +143,10 @@ class DynamixelBus(ServoBus):
     read. Against the emulator (``handrig bench bus``, 4 Mbps, 20 servos, 2-core
     VM, timer slack 1 us as in :func:`~handrig.realtime.pinned_loop`, 10 runs):
     0.85-0.87 of the wire limit always sleeping, at 72-87 us CPU per cycle;
-    0.88-0.90 with the default 50 us, at 129-155 us. Pass 0 from a SCHED_FIFO thread that shares its
-    CPU with the kernel's workers: while it polls, the worker that would deliver
-    the reply cannot run there (the live loop does, see handrig.live).
+    0.88-0.90 with the default 50 us, at 129-155 us. Pass 0 from a SCHED_FIFO
+    thread that shares its CPU with the kernel's workers: while it polls, the
+    worker that would deliver the reply cannot run there (the live loop does, see
+    handrig.live).
     """
 
     def __init__(
@@ -216,7 +217,6 @@ class DynamixelBus(ServoBus):
         self._sw_packet[kernels.SYNC_WRITE_BODY :: 5][:n] = self.ids
         self._sw_view = self._sw_packet.data  # a memoryview: what is written to the port
         self._rehearsal_packet = self._sw_packet.copy()
-        self._sw_wire_s = wire_time_s(len(self._sw_packet), self.baud)
         self._goal_deg = np.zeros(n, np.float64)
         self._last_goal_deg = np.full(n, np.nan)
         self._rehearsal_goal = np.zeros(n, np.float64)
@@ -255,11 +255,8 @@ class DynamixelBus(ServoBus):
             )))
             self._order_ids_np.append(np.array(ids, np.uint8))
         self._order_of = {id(o[0]): k for k, o in enumerate(self._orders)}
-        self._order_ids = {o[2] for o in self._orders}
         self._fsr_full = self._orders[0][3]
         self._reply_len_full = 8 + (self._read_len + 4) * n
-        # the first 7 bytes of a whole reply: header, broadcast ID, LEN
-        self._reply_head_full = HEADER + bytes((BROADCAST_ID,)) + u16(self._reply_len_full - 7)
         # a whole read's next state, allocated while the reply is on the wire
         self._next_state: ServoState | None = None
         self._next_out: tuple[np.ndarray, np.ndarray] | None = None
@@ -296,7 +293,6 @@ class DynamixelBus(ServoBus):
         self._all_indices = self._orders[0][0]
         self._valid = [False] * n
         self._ids_bytes = bytes(self.ids)
-        self._all_fresh = np.ones(n, bool)
 
         # -- latest readings (rig order); rows of one array for kernels.fast_sync_whole
         self._latest = np.full((5, n), np.nan)
@@ -613,8 +609,7 @@ class DynamixelBus(ServoBus):
         ``stats.clamps``). No reply is expected.
         """
         with self._lock:
-            if self._torque_on and self.clock.now() - self._last_tx_s >= self._watchdog_gap_s:
-                self._rearm_after_silence()
+            self._rearm_after_silence()
             clamped = self._clamp_goals(goals_deg)
             self._send_built_goals()
         return clamped
