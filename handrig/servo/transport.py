@@ -93,28 +93,22 @@ class SerialTransport:
             raise DeviceError(f"servo port {self.port} is not open (call connect() first)")
 
     def write(self, data: bytes | memoryview) -> None:
-        """Send ``data`` completely; DeviceError if the port
-        went away. One ``os.write`` in the usual case: this is on the cycle's critical
-        path, between the reply that ended the last read and the next goals."""
+        """Send ``data`` completely; DeviceError if the port went away. One ``os.write``
+        in the usual case: the goals' write is on the cycle's critical path."""
+        view = data
         try:
-            n = os.write(self._fd, data)
-        except BlockingIOError:
-            n = 0
+            while True:
+                try:
+                    n = os.write(self._fd, view)
+                except BlockingIOError:
+                    select.select([], [self._fd], [], 0.01)
+                    continue
+                if n == len(view):
+                    break
+                view = memoryview(view)[n:]
         except OSError as exc:
-            self._check_open()
+            self._check_open()  # closed: say so rather than "bad file descriptor"
             raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
-        if n < len(data):
-            view = memoryview(data)[n:]
-            try:
-                while view:
-                    try:
-                        n = os.write(self._fd, view)
-                    except BlockingIOError:
-                        select.select([], [self._fd], [], 0.01)
-                        continue
-                    view = view[n:]
-            except OSError as exc:
-                raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
         self.bytes_written += len(data)
 
     def _fill(
