@@ -304,7 +304,8 @@ def warm_up() -> None:
                 np.zeros(SYNC_WRITE_BODY + 12, np.uint8))
     idx = np.zeros(2, np.intp)
     for read_len in (4, 10):
-        fast_sync_whole(np.zeros(8 + 2 * (read_len + 4), np.uint8), read_len, idx,
+        reply = np.frombuffer(bytes(8 + 2 * (read_len + 4)), np.uint8)  # read-only, as used
+        fast_sync_whole(reply, read_len, idx,
                         np.zeros(2, np.uint8), np.ones((4, 2)), np.zeros((5, 2)),
                         np.zeros(2, np.uint8), np.zeros(2, np.int64), np.zeros(2, np.bool_),
                         0.0, np.zeros((5, 2)), np.zeros((3, 2), np.uint8))

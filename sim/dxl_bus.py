@@ -548,8 +548,10 @@ class SimBus:
         byte_s = BITS_PER_BYTE / self.baud()
         t = max(t_rx, self._bus_free_at) + frame_len * byte_s
         if replies:
+            first = replies[0]
+            first_at = t + first.return_delay_s + first.fault_delay_s + len(first.data) * byte_s
             now = self.clock.now()
-            if t - now >= HOUSEKEEPING_SLOT_S:
+            if first_at - now >= HOUSEKEEPING_SLOT_S:
                 self._housekeeping(now)  # in the reply's wire time, not after it
         for r in replies:
             t += r.return_delay_s + r.fault_delay_s + len(r.data) * byte_s

@@ -261,6 +261,7 @@ class DynamixelBus(ServoBus):
         self._next_state: ServoState | None = None
         self._next_out: tuple[np.ndarray, np.ndarray] | None = None
         self._whole_at = 0.0  # when the last whole read was decoded
+        self._skip_run = 0  # reads in a row not sent for lack of wire time
         if reply_timeout_s is None:
             wire = wire_time_s(len(self._fsr_full) + self._reply_len_full, self.baud)
             reply_timeout_s = 2.0 * wire + 0.002
@@ -714,7 +715,9 @@ class DynamixelBus(ServoBus):
         A read (or retry) whose request and reply could not both be on the wire
         before the deadline is not sent: on a half-duplex bus its reply would still
         be arriving when the caller's next goals go out. Its servos are marked stale
-        (``stats.skipped_reads``), without counting towards ``max_stale_reads``.
+        (``stats.skipped_reads``), not counted as a servo's stale run;
+        ``max_stale_reads`` skipped reads in a row raise DeviceTimeoutError (the
+        caller's deadlines never leave the wire time a read needs).
         A servo raising its Alert bit is handled per policy (reboot or
         ServoFault); a servo stale ``max_stale_reads`` times in a row raises
         DeviceTimeoutError naming it.
@@ -723,12 +726,21 @@ class DynamixelBus(ServoBus):
             now = self.clock.now()
             if deadline_s is None:
                 # from when the wire is free of the goal Sync Write just sent
-                deadline_s = max(now, self._bus_free_at) + max(
+                deadline_s = self._request_start(now) + max(
                     self.policy.read_budget_s, self._min_read_budget_s
                 )
-            elif max(now, self._bus_free_at) + self._read_wire_s(self._n) > deadline_s:
+            elif self._request_start(now) + self._read_wire_s(self._n) > deadline_s:
                 self._stats.skipped_reads += 1
+                self._skip_run += 1
+                if self._skip_run >= self.policy.max_stale_reads:
+                    raise DeviceTimeoutError(
+                        f"no read of the servos fitted its deadline {self._skip_run} times "
+                        f"in a row {self._where()}: one takes "
+                        f"{self._read_wire_s(self._n) * 1e3:.2f} ms of wire, the caller "
+                        f"allowed {(deadline_s - now) * 1e3:.2f} ms; raise the baud rate, "
+                        "read fewer fields or read less often")
                 return self._unread_state(now)
+            self._skip_run = 0
             self._stats.reads += 1
             fresh = self._fresh
             fresh[:] = False
@@ -738,8 +750,8 @@ class DynamixelBus(ServoBus):
             self._whole = False
             for attempt in range(self.policy.read_retries + 1):
                 if attempt:
-                    wire_free = max(self.clock.now(), self._bus_free_at)
-                    if wire_free + self._read_wire_s(len(pending)) > deadline_s:
+                    start = self._request_start(self.clock.now())
+                    if start + self._read_wire_s(len(pending)) > deadline_s:
                         break
                     self._stats.retries += 1
                 self._read_attempt(pending, deadline_s)
@@ -790,6 +802,13 @@ class DynamixelBus(ServoBus):
                     f"({self._stats.summary()}): check its cable, power and ID"
                 )
             return self._snapshot(now, stale, self._hw_err.copy())
+
+    def _request_start(self, now: float) -> float:
+        """When a request written now would start on the wire: after what is still on
+        it, a goal Sync Write held back by ``write_and_read``, and the wait for a
+        quiet line after a failed reply (:meth:`_quiet_line`)."""
+        start = max(now, self._bus_free_at) + len(self._pending_tx) * self._byte_s
+        return start + self.reply_gap_s if self._line_dirty else start
 
     def _read_wire_s(self, n: int) -> float:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
@@ -903,6 +922,7 @@ class DynamixelBus(ServoBus):
         # A reply whose blocks name other servos, or ours in another order, is not the
         # reply to this request: an intact one is a late reply to an earlier read
         # (dropped; the one asked for may follow), anything else is rejected whole.
+        late = False
         for _ in range(4):
             m = min(n_req, (len(raw) - 8) // block)
             named = raw[9 : 8 + m * block : block]
@@ -914,6 +934,7 @@ class DynamixelBus(ServoBus):
             ):
                 self._stats.late_replies += 1
                 raw = self._read_reply(expected, deadline)
+                late = True
                 continue
             self._stats.malformed += 1
             self._line_dirty = True
@@ -921,7 +942,7 @@ class DynamixelBus(ServoBus):
         else:
             return False
         # an intact reply after a late one was dropped: every servo at once
-        if order is not None and self._take_whole(raw, indices, order):
+        if late and order is not None and self._take_whole(raw, indices, order):
             assert self._next_state is not None
             self._next_state.stats = self._stats.copy()  # the late reply counted
             return True

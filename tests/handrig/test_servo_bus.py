@@ -683,9 +683,19 @@ def test_whole_reads_return_their_own_snapshot(sim: SimBus, bus: DynamixelBus) -
 def test_servos_move_while_the_bus_is_busy_with_wire_timing(read: bool) -> None:
     """The emulator's housekeeping (kinematic motion, watchdogs) runs in the replies'
     wire time, or once overdue when no reply leaves such time (goal writes only)."""
-    rig = small_rig()
+    rig = RIG  # 20 servos: at 4 Mbps a Fast Sync Read reply takes 420 us of wire
     goals = np.array([0.5 * s.max_deg for s in rig.servos])
     with SimBus.from_rig(rig, wire_timing=True) as sim:
+        advances: list[float] = []  # when the emulated servos' motion was advanced
+        housekeeping = sim._housekeeping
+
+        def spy(now: float) -> None:
+            before = sim._last_advance
+            housekeeping(now)
+            if sim._last_advance != before:
+                advances.append(sim._last_advance)
+
+        sim._housekeeping = spy  # type: ignore[method-assign]
         b = DynamixelBus(sim.port_path, rig, baud=4_000_000, read_fields="position")
         b.connect()
         try:
@@ -707,28 +717,43 @@ def test_servos_move_while_the_bus_is_busy_with_wire_timing(read: bool) -> None:
                             break
                 np.testing.assert_allclose(true, goals, atol=0.2)
                 assert b.stats.watchdog_gaps == 0
+                # every 2 ms in the replies' wire time; once overdue (10 ms) without replies
+                step = float(np.median(np.diff(advances[-50:])))
+                assert step < (0.004 if read else 0.015), step
         finally:
             b.close()
 
 
 def test_a_read_the_wire_cannot_carry_by_its_deadline_is_not_sent(sim: SimBus) -> None:
     """On a half-duplex bus a reply still arriving when the next goals go out collides
-    with them: a read that cannot fit before its deadline is skipped, its servos stale."""
+    with them: a read that cannot fit before its deadline is skipped, its servos stale;
+    reads that never fit stop the bus with the reason."""
     rig = small_rig()
     b = DynamixelBus(sim.port_path, rig, baud=57_600,
                      fault_policy=FaultPolicy(max_stale_reads=3))
     b.connect()
+    fsr = 0x8A
     try:
         fresh = b.read_state()
         wire_s = b._read_wire_s(len(rig.servos))  # about 19 ms at 57600 baud
-        packets = sim.stats.packets
-        for _ in range(6):  # more than max_stale_reads: not a servo fault
-            state = b.read_state(b.clock.now() + 0.5 * wire_s)
-            assert state.stale.all() and (state.age_s > 0).all()
-            np.testing.assert_array_equal(state.positions_deg, fresh.positions_deg)
-        assert sim.stats.packets == packets  # nothing was sent
-        assert b.stats.skipped_reads == 6 and b.stats.timeouts == 0
+        reads = sim.stats.by_instruction[fsr]
+        state = b.read_state(b.clock.now() + 0.5 * wire_s)
+        assert state.stale.all() and (state.age_s > 0).all()
+        np.testing.assert_array_equal(state.positions_deg, fresh.positions_deg)
+        # the goals write_and_read sends first count: the read no longer fits after them
+        goal_wire_s = (14 + 5 * len(rig.servos)) * 10 / 57_600
+        _, state = b.write_and_read(np.zeros(len(rig.servos)),
+                                    b.clock.now() + wire_s + 0.5 * goal_wire_s)
+        assert state.stale.all()
+        assert sim.stats.by_instruction[fsr] == reads  # no read was sent
+        # fewer than max_stale_reads in a row: not a fault
+        assert b.stats.skipped_reads == 2 and b.stats.timeouts == 0
+        b.clock.sleep(2 * goal_wire_s)  # the goals are off the wire
         assert not b.read_state(b.clock.now() + 2 * wire_s + 0.01).stale.any()
+        for _ in range(2):
+            assert b.read_state(b.clock.now() + 0.5 * wire_s).stale.all()
+        with pytest.raises(DeviceTimeoutError, match="fitted its deadline 3 times in a row"):
+            b.read_state(b.clock.now() + 0.5 * wire_s)
     finally:
         b.close()
 
@@ -748,3 +773,19 @@ def test_a_reply_behind_writes_still_on_the_wire_is_waited_for() -> None:
             assert b.stats.timeouts == 0, b.stats.summary()
         finally:
             b.close()
+
+
+def test_after_a_failed_read_the_wait_for_a_quiet_line_counts_against_the_deadline(
+    sim: SimBus, bus: DynamixelBus
+) -> None:
+    """A reply that failed may still be on the wire: the next request waits for a quiet
+    line first, so a read that fits only without that wait is not sent."""
+    n = len(small_rig().servos)
+    sim.faults = FaultSpec(drop=1.0)
+    assert bus.read_state(bus.clock.now() + 0.01).stale.all()  # every reply lost
+    sim.faults = FaultSpec()
+    wire_s = bus._read_wire_s(n)
+    sent = bus.stats.reads
+    tight = bus.read_state(bus.clock.now() + wire_s + 0.5 * bus.reply_gap_s)
+    assert tight.stale.all() and bus.stats.reads == sent and bus.stats.skipped_reads == 1
+    assert not bus.read_state(bus.clock.now() + wire_s + 2 * bus.reply_gap_s).stale.any()
