@@ -288,7 +288,9 @@ class DynamixelBus(ServoBus):
             WATCHDOG_GAP_FRACTION * rig.bus.watchdog_ms / 1000.0 if rig.bus.watchdog_ms
             else np.inf
         )
-        self._line_dirty = False  # a reply failed: let the line go quiet before the next
+        # when a reply failed (None: none did since the last request): the line must be
+        # quiet for reply_gap_s after that, and after any byte since, before a request
+        self._dirty_at: float | None = None
         self.use_fast_sync_read = True
         self._fast_fail_run = 0
         self._all_indices = self._orders[0][0]
@@ -345,7 +347,7 @@ class DynamixelBus(ServoBus):
             raw = self._transport.read_packet(deadline)
             if raw is None:
                 self._stats.timeouts += 1
-                self._line_dirty = True
+                self._dirty_at = self.clock.now()
                 return None
             try:
                 return parse_status(raw)
@@ -380,14 +382,15 @@ class DynamixelBus(ServoBus):
 
     def _quiet_line(self, deadline_s: float | None = None) -> None:
         """Before a request: drop old input; after a failed reply, wait for the line to
-        go quiet first (a late reply still on the wire would collide with the request),
-        at most ``reply_timeout_s`` and not past ``deadline_s``."""
-        if self._line_dirty:
-            self._line_dirty = False
+        have been quiet ``reply_gap_s`` since the failure (a late reply still on the wire
+        would collide with the request), at most ``reply_timeout_s`` and not past
+        ``deadline_s``."""
+        if self._dirty_at is not None:
+            since, self._dirty_at = self._dirty_at, None
             most = self.reply_timeout_s
             if deadline_s is not None:
                 most = min(most, deadline_s - self.clock.now())
-            self._transport.wait_quiet(self.reply_gap_s, max(0.0, most))
+            self._transport.wait_quiet(self.reply_gap_s, max(0.0, most), since_s=since)
         else:
             self._transport.discard_input()
 
@@ -808,7 +811,10 @@ class DynamixelBus(ServoBus):
         it, a goal Sync Write held back by ``write_and_read``, and the wait for a
         quiet line after a failed reply (:meth:`_quiet_line`)."""
         start = max(now, self._bus_free_at) + len(self._pending_tx) * self._byte_s
-        return start + self.reply_gap_s if self._line_dirty else start
+        if self._dirty_at is None:
+            return start
+        quiet_from = max(self._dirty_at, self._transport.last_rx_s)
+        return max(start, quiet_from + self.reply_gap_s)
 
     def _read_wire_s(self, n: int) -> float:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
@@ -891,11 +897,11 @@ class DynamixelBus(ServoBus):
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until)
         if len(head) < 7:
             self._stats.timeouts += 1
-            self._line_dirty = True
+            self._dirty_at = self.clock.now()
             return False
         if head[:4] != HEADER:
             self._stats.malformed += 1
-            self._line_dirty = True
+            self._dirty_at = self.clock.now()
             return False
         total = packet_length(head)
         if head[4] != BROADCAST_ID:
@@ -937,7 +943,7 @@ class DynamixelBus(ServoBus):
                 late = True
                 continue
             self._stats.malformed += 1
-            self._line_dirty = True
+            self._dirty_at = self.clock.now()
             return False
         else:
             return False
@@ -948,7 +954,7 @@ class DynamixelBus(ServoBus):
             return True
         if len(raw) < expected:
             self._stats.timeouts += 1
-            self._line_dirty = True
+            self._dirty_at = self.clock.now()
         m = min(n_req, (len(raw) - 8) // block)  # complete blocks received
         if m <= 0:
             return False
@@ -1096,7 +1102,7 @@ class DynamixelBus(ServoBus):
                     out[index] = reg.decode(status.params[:1])
         if None in out:
             self._stats.timeouts += 1
-            self._line_dirty = True
+            self._dirty_at = self.clock.now()
         return out
 
     def _housekeeping(self, deadline_s: float) -> None:

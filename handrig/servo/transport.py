@@ -55,6 +55,7 @@ class SerialTransport:
         self.skipped_bytes = 0
         self.bytes_written = 0
         self.bytes_read = 0
+        self.last_rx_s = -np.inf  # clock time bytes last came in
 
     @property
     def is_open(self) -> bool:
@@ -163,6 +164,7 @@ class SerialTransport:
                     raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
             if not chunk:
                 raise DeviceError(f"servo port {self.port} closed (adapter unplugged?)")
+            self.last_rx_s = self.clock.now()
             self.bytes_read += len(chunk)
             self._buf += chunk
             return True
@@ -182,10 +184,12 @@ class SerialTransport:
             if not chunk:
                 break
             n += len(chunk)
+            self.last_rx_s = self.clock.now()
         return n
 
-    def wait_quiet(self, quiet_s: float, max_s: float) -> int:
-        """Discard input until none has come for ``quiet_s`` (at most ``max_s``); return bytes.
+    def wait_quiet(self, quiet_s: float, max_s: float, since_s: float = -np.inf) -> int:
+        """Discard input until none has come for ``quiet_s``, counting from ``since_s``
+        or the last byte received, whichever is later (at most ``max_s``); return bytes.
 
         The bus is half duplex: a request sent while a late reply is still coming
         would collide with it on a real bus (and queue behind it in the emulator).
@@ -195,9 +199,10 @@ class SerialTransport:
         end = self.clock.now() + max_s
         while True:
             now = self.clock.now()
-            if now >= end:
+            quiet_until = max(since_s, self.last_rx_s) + quiet_s
+            if now >= quiet_until or now >= end:
                 return n
-            if not self._fill(min(end, now + quiet_s)):
+            if not self._fill(min(end, quiet_until)):
                 return n
             n += len(self._buf)
             self._buf.clear()
