@@ -54,7 +54,7 @@ apply_cpus_from_env()  # off the driver's CPU, as real servos would be
 from handrig.commands.bench_bus import bench_rig
 from sim.dxl_bus import SimBus
 rig = bench_rig(int(sys.argv[1]), int(sys.argv[2]))
-bus = SimBus.from_rig(rig, wire_timing=sys.argv[3] == "1").start()
+bus = SimBus.from_rig(rig, wire_timing=sys.argv[3] == "1", puppet=sys.argv[4] == "1").start()
 print("port:", bus.port_path, flush=True)
 signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
 try:
@@ -71,9 +71,12 @@ finally:
 class EmulatorProcess:
     """The emulated bus in a child process; ``port`` is its pty path."""
 
-    def __init__(self, n_servos: int, baud: int, wire_timing: bool = True) -> None:
+    def __init__(
+        self, n_servos: int, baud: int, wire_timing: bool = True, puppet: bool = False
+    ) -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", _EMULATOR, str(n_servos), str(baud), str(int(wire_timing))],
+            [sys.executable, "-c", _EMULATOR, str(n_servos), str(baud), str(int(wire_timing)),
+             str(int(puppet))],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=helper_env(),
         )
         assert self.proc.stdout is not None
@@ -222,7 +225,7 @@ def wire_limit_hz(n_servos: int, baud: int) -> tuple[int, float]:
 
 
 def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
-          out: Any = None) -> list[Result]:
+          puppet: bool = False, out: Any = None) -> list[Result]:
     """Run the comparison and print a table; returns the results (ours first)."""
     write = (out or sys.stdout).write
     rig = bench_rig(n_servos, baud)
@@ -231,9 +234,10 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
         f"{n_servos} servos at {baud} baud: {nbytes} bytes per cycle (Sync Write "
         f"{14 + 5 * n_servos} + Fast Sync Read {14 + n_servos} + reply {8 + 8 * n_servos}) "
         "-> wire limit "
-        f"{limit:.0f} Hz ({1e6 / limit:.0f} us per cycle)\n"
+        f"{limit:.0f} Hz ({1e6 / limit:.0f} us per cycle); emulated servos "
+        f"{'drive the MuJoCo puppet' if puppet else 'move kinematically'}\n"
     )
-    emu = EmulatorProcess(n_servos, baud)
+    emu = EmulatorProcess(n_servos, baud, puppet=puppet)
     results: list[Result] = []
     try:
         with pinned_loop():  # the driver on its own CPU, the emulator on the others
@@ -261,7 +265,7 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
           f"{wire_us * (1 / TARGET_RATIO - 1):.0f} us per cycle for the driver, the emulator "
           "and both pty hand-overs\n")
     # where the time goes: the same cycle with the wire taking no time
-    emu = EmulatorProcess(n_servos, baud, wire_timing=False)
+    emu = EmulatorProcess(n_servos, baud, wire_timing=False, puppet=puppet)
     try:
         with pinned_loop():
             host = run_ours(emu.port, rig, baud, min(seconds, 1.0))
@@ -289,6 +293,8 @@ def register(sub: Any) -> None:
     p.add_argument("--baud", type=int, default=4_000_000, help="baud rate (default 4000000)")
     p.add_argument("--seconds", type=float, default=3.0, help="seconds per way (default 3)")
     p.add_argument("--no-plain", action="store_true", help="skip the plain SDK ways")
+    p.add_argument("--puppet", action="store_true",
+                   help="servos drive the MuJoCo puppet (default: they move kinematically)")
     p.set_defaults(func=run)
 
 
@@ -299,5 +305,5 @@ def run(args: argparse.Namespace) -> int:
     if not 0.1 <= args.seconds <= 600:
         raise ConfigError("out of range", key="--seconds", value=args.seconds,
                           allowed="0.1..600")
-    bench(args.servos, args.baud, args.seconds, plain=not args.no_plain)
+    bench(args.servos, args.baud, args.seconds, plain=not args.no_plain, puppet=args.puppet)
     return 0

@@ -1,0 +1,24 @@
+"""``handrig bench bus`` end to end, briefly: every way runs, none beats the wire."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+
+from handrig.commands.bench_bus import bench, wire_limit_hz
+
+
+@pytest.mark.parametrize("puppet", [False, True])
+def test_bench_bus_runs_every_way_and_none_beats_the_wire(puppet: bool) -> None:
+    out = io.StringIO()
+    results = bench(4, 1_000_000, 0.3, plain=True, puppet=puppet, out=out)
+    text = out.getvalue()
+    _, limit = wire_limit_hz(4, 1_000_000)
+    assert len(results) == 5 and results[0].name.startswith("handrig")
+    for r in results:
+        assert r.cycles > 0 and r.failed <= r.cycles // 10, r
+        # the emulator holds every reply until the wire could have carried it
+        assert r.hz <= 1.02 * limit, (r.name, r.hz, limit)
+    assert ("drive the MuJoCo puppet" if puppet else "move kinematically") in text
+    assert "host round trip, wire timing off" in text
