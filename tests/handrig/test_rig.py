@@ -239,15 +239,20 @@ def test_lost_servo_port_stops_with_the_message(parts_factory):
     assert rig.stats.frames == 30 and "went away" in rig.stats.stop_reason
 
 
-def test_a_silent_glove_at_start_holds_then_relaxes_from_where_the_servos_are(parts_factory):
-    """Never 'all controls 0': before the first frame the servos hold their positions."""
-    parts = parts_factory()
+def _silent_glove_rig_held_mid_range(parts):
+    """A rig whose glove never sends, its servos seeded at mid-range: (rig, bus, start)."""
     clock = FakeClock()
     bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     start = 0.5 * (parts.pipeline.servo_low + parts.pipeline.servo_high)
     parts.pipeline.seed(start)
+    return make_rig(parts, ScriptedGlove(clock, lambda t: None), bus, clock), bus, start
+
+
+def test_a_silent_glove_at_start_holds_then_relaxes_from_where_the_servos_are(parts_factory):
+    """Never 'all controls 0': before the first frame the servos hold their positions."""
+    parts = parts_factory()
+    rig, bus, start = _silent_glove_rig_held_mid_range(parts)
     events: list[str] = []
-    rig = make_rig(parts, ScriptedGlove(clock, lambda t: None), bus, clock)
     rig.log = events.append
     rig.run(frames=200)
     held = np.array(bus.goals[: int(0.25 * 200)])
@@ -260,11 +265,7 @@ def test_a_silent_glove_at_start_holds_then_relaxes_from_where_the_servos_are(pa
 
 def test_a_stop_before_the_first_frame_eases_from_the_held_pose(parts_factory):
     parts = parts_factory()
-    clock = FakeClock()
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
-    start = 0.5 * (parts.pipeline.servo_low + parts.pipeline.servo_high)
-    parts.pipeline.seed(start)
-    rig = make_rig(parts, ScriptedGlove(clock, lambda t: None), bus, clock)
+    rig, bus, start = _silent_glove_rig_held_mid_range(parts)
     rig.request_stop("SIGTERM received")  # e.g. during torque-on, before the loop
     rig.run(frames=1000)
     np.testing.assert_allclose(bus.goals[0], start, atol=1e-9)
