@@ -156,6 +156,145 @@ class LoopConfig:
                               allowed="0..2")
 
 
+# ------------------------------------------------------------ servo settings
+# Operating Mode (11) values (REFERENCE.md section 2).
+OPERATING_MODES: dict[str, int] = {
+    "position": 3, "extended_position": 4, "current_based_position": 5,
+}
+# Current Limit (38) maximum per model, mA: XL330-M288 1750 x 1 mA, XC330-T288 910 x 1 mA,
+# XM430-W350 1193 x 2.69 mA (ROBOTIS e-manual control tables).
+CURRENT_LIMIT_MAX_MA: dict[str, float] = {
+    "XL330-M288": 1750.0, "XC330-T288": 910.0, "XM430-W350": 1193 * 2.69,
+}
+CURRENT_UNIT_MA: dict[str, float] = {"XL330-M288": 1.0, "XC330-T288": 1.0, "XM430-W350": 2.69}
+GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
+RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
+RETURN_DELAY_MAX_US = 254 * RETURN_DELAY_UNIT_US
+
+
+def _check_gain(value: int | None, key: str) -> None:
+    if value is not None and not 0 <= value <= GAIN_MAX:
+        raise ConfigError("gain out of range", key=key, value=value, allowed=f"0..{GAIN_MAX}")
+
+
+def _check_current(value: int | None, key: str) -> None:
+    if value is not None and not 1 <= value <= max(CURRENT_LIMIT_MAX_MA.values()):
+        raise ConfigError("current limit out of range", key=key, value=value,
+                          allowed=f"1..{max(CURRENT_LIMIT_MAX_MA.values()):.0f} mA "
+                          "(and at most the servo model's own maximum)")
+
+
+@dataclass(frozen=True)
+class ServoSettingsGroup:
+    """Settings for some servos that differ from ``[servo_settings]`` (e.g. side-to-side
+    joints with lower gains). ``None`` keeps the value of ``[servo_settings]``."""
+
+    ids: tuple[int, ...]
+    current_limit_ma: int | None = None
+    position_p_gain: int | None = None
+    position_d_gain: int | None = None
+
+    def check(self) -> None:
+        if not self.ids:
+            raise ConfigError("a group needs at least one servo ID", key="ids")
+        _check_current(self.current_limit_ma, "current_limit_ma")
+        _check_gain(self.position_p_gain, "position_p_gain")
+        _check_gain(self.position_d_gain, "position_d_gain")
+
+
+@dataclass(frozen=True)
+class ServoSettings:
+    """What commissioning writes to every servo (``[servo_settings]``).
+
+    ``operating_mode``: ``"position"`` (3, the default), ``"extended_position"`` (4) or
+    ``"current_based_position"`` (5: position control whose torque is capped by the
+    current limit). ``current_limit_ma``: written to Current Limit (38) and Goal
+    Current (102); ``None`` leaves the servo's own. Position P/D Gain (84/80): ``None``
+    leaves the servo's own. ``return_delay_us``: Return Delay Time (9), even, 0..508.
+    ``groups``: per-servo differences.
+    """
+
+    operating_mode: Literal["position", "extended_position", "current_based_position"] = (
+        "position")
+    current_limit_ma: int | None = None
+    position_p_gain: int | None = None
+    position_d_gain: int | None = None
+    return_delay_us: int = 0
+    groups: tuple[ServoSettingsGroup, ...] = ()
+
+    def check(self) -> None:
+        _check_current(self.current_limit_ma, "current_limit_ma")
+        _check_gain(self.position_p_gain, "position_p_gain")
+        _check_gain(self.position_d_gain, "position_d_gain")
+        if (not 0 <= self.return_delay_us <= RETURN_DELAY_MAX_US
+                or self.return_delay_us % RETURN_DELAY_UNIT_US):
+            raise ConfigError("return delay out of range", key="return_delay_us",
+                              value=self.return_delay_us,
+                              allowed=f"0..{RETURN_DELAY_MAX_US} us in steps of "
+                              f"{RETURN_DELAY_UNIT_US} (0 is what a fast loop wants)")
+        seen: dict[int, int] = {}
+        for g, group in enumerate(self.groups):
+            for servo_id in group.ids:
+                if servo_id in seen:
+                    raise ConfigError(f"servo ID in two groups (also groups[{seen[servo_id]}])",
+                                      key=f"groups[{g}].ids", value=servo_id)
+                seen[servo_id] = g
+
+    @property
+    def operating_mode_value(self) -> int:
+        """The Operating Mode (11) register value."""
+        return OPERATING_MODES[self.operating_mode]
+
+
+@dataclass(frozen=True)
+class ResolvedServoSettings:
+    """The settings of one servo, groups applied (what commissioning writes and checks)."""
+
+    servo_id: int
+    operating_mode: int  # Operating Mode (11) value
+    current_limit_ma: int | None
+    position_p_gain: int | None
+    position_d_gain: int | None
+    return_delay_us: int
+
+    def current_limit_units(self, model: str) -> int | None:
+        """Current Limit / Goal Current in the register's units for servo ``model``."""
+        if self.current_limit_ma is None:
+            return None
+        return round(self.current_limit_ma / CURRENT_UNIT_MA[model])
+
+
+def resolve_servo_settings(settings: ServoSettings, servo_id: int) -> ResolvedServoSettings:
+    """``[servo_settings]`` for one servo, with its group's values where it has one."""
+    current, p_gain, d_gain = (settings.current_limit_ma, settings.position_p_gain,
+                               settings.position_d_gain)
+    for group in settings.groups:
+        if servo_id in group.ids:
+            current = group.current_limit_ma if group.current_limit_ma is not None else current
+            p_gain = group.position_p_gain if group.position_p_gain is not None else p_gain
+            d_gain = group.position_d_gain if group.position_d_gain is not None else d_gain
+    return ResolvedServoSettings(servo_id, settings.operating_mode_value, current, p_gain,
+                                 d_gain, settings.return_delay_us)
+
+
+def check_servo_settings(rig: RigConfig) -> None:
+    """Groups name servos of the rig; current limits fit each servo's model."""
+    ids = {s.id: s for s in rig.servos}
+    for g, group in enumerate(rig.servo_settings.groups):
+        for servo_id in group.ids:
+            if servo_id not in ids:
+                raise ConfigError("no servo with this ID in [[servos]]",
+                                  key=f"servo_settings.groups[{g}].ids", value=servo_id,
+                                  allowed=", ".join(str(i) for i in sorted(ids)))
+    for s in rig.servos:
+        resolved = resolve_servo_settings(rig.servo_settings, s.id)
+        top = CURRENT_LIMIT_MAX_MA[s.model]
+        if resolved.current_limit_ma is not None and resolved.current_limit_ma > top:
+            raise ConfigError(f"current limit above the {s.model}'s maximum for servo {s.id}",
+                              key="servo_settings.current_limit_ma",
+                              value=resolved.current_limit_ma, allowed=f"1..{top:.0f} mA")
+
+
 @dataclass(frozen=True)
 class RigConfig:
     """The whole rig file: ``[bus]``, ``[loop]`` and ``[[servos]]``."""
@@ -163,6 +302,7 @@ class RigConfig:
     bus: BusConfig = BusConfig()
     loop: LoopConfig = LoopConfig()
     servos: tuple[ServoCalibration, ...] = ()
+    servo_settings: ServoSettings = ServoSettings()
 
     def check(self) -> None:
         seen_ids: dict[int, int] = {}
@@ -180,12 +320,23 @@ class RigConfig:
                 )
             seen_ids[s.id] = i
             seen_joints[s.joint] = i
+        check_servo_settings(self)
 
     def servo(self, servo_id: int) -> ServoCalibration:
         for s in self.servos:
             if s.id == servo_id:
                 return s
         raise KeyError(servo_id)
+
+    @property
+    def effective_sag_gain(self) -> float:
+        """The sag gain the pipeline uses ([loop].sag_gain; a robot rig turns it off
+        unless its ``[robot].sag`` is true, see :mod:`handrig.robotrig`)."""
+        return self.loop.sag_gain
+
+    def servo_settings_for(self, servo_id: int) -> ResolvedServoSettings:
+        """What commissioning writes to servo ``servo_id`` ([servo_settings], groups applied)."""
+        return resolve_servo_settings(self.servo_settings, servo_id)
 
 
 DEFAULT_RIG = CONFIG_DIR / "rig.toml"
