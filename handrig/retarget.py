@@ -191,3 +191,63 @@ def retarget(human_deg: FloatArray, gain: FloatArray, offset_deg: FloatArray,
 def load_retarget(path: str | Path) -> Retarget:
     """Load and compile a retarget table; every problem is a ConfigError naming file and key."""
     return Retarget.from_table(load(path, RetargetTable))
+
+
+@dataclass(frozen=True)
+class JointCheck:
+    """How one robot joint's inputs compare with its range (``handrig retarget check``).
+
+    Ranges are of the unclipped retarget output, degrees; ``None`` when that data was
+    not given. ``demo_low_frac`` / ``demo_high_frac``: share of demo frames whose
+    output is clipped at the robot's low / high limit.
+    """
+
+    joint: str
+    range_deg: tuple[float, float]
+    anatomical_deg: tuple[float, float]
+    capture_deg: tuple[float, float] | None
+    demo_deg: tuple[float, float] | None
+    demo_low_frac: float
+    demo_high_frac: float
+
+    @property
+    def flags(self) -> tuple[str, ...]:
+        """Which inputs reach past the robot's range: "capture", "demo", "anatomy"."""
+        low, high = self.range_deg
+        out = []
+        for name, rng in (("capture", self.capture_deg), ("demo", self.demo_deg),
+                          ("anatomy", self.anatomical_deg)):
+            if rng is not None and (rng[0] < low or rng[1] > high):
+                out.append(name)
+        return tuple(out)
+
+
+def check_joints(
+    rt: Retarget,
+    human_low_deg: FloatArray,
+    human_high_deg: FloatArray,
+    capture_deg: FloatArray | None = None,
+    demo_deg: FloatArray | None = None,
+) -> list[JointCheck]:
+    """Per robot joint: the range its sources reach over the human limits (50,), the
+    capture poses and the demo poses (n, 50), and how often the demo hits each limit."""
+    a_lo, a_hi = rt.source_interval_deg(human_low_deg, human_high_deg)
+
+    def span(poses: FloatArray | None) -> FloatArray | None:
+        return None if poses is None or len(poses) == 0 else rt.unclipped_many(poses)
+
+    cap, demo = span(capture_deg), span(demo_deg)
+    out = []
+    for k, name in enumerate(rt.joint_names):
+        lo, hi = float(rt.low_deg[k]), float(rt.high_deg[k])
+        low_frac = high_frac = 0.0
+        if demo is not None:
+            low_frac = float(np.mean(demo[:, k] < lo))
+            high_frac = float(np.mean(demo[:, k] > hi))
+        out.append(JointCheck(
+            name, (lo, hi), (float(a_lo[k]), float(a_hi[k])),
+            None if cap is None else (float(cap[:, k].min()), float(cap[:, k].max())),
+            None if demo is None else (float(demo[:, k].min()), float(demo[:, k].max())),
+            low_frac, high_frac,
+        ))
+    return out

@@ -19,6 +19,13 @@ Rules modelled (ROBOTIS e-manual, X-series control table and protocol 2.0):
   writes with a Data Range Error until 0 is written to it.
 - Present Position = direction * motor position + Homing Offset (Drive Mode bit 0
   reverses direction); the motor position is what moves the joint.
+- Current-based position control (Operating Mode 5): the position controller's
+  output current is capped by Goal Current, which cannot exceed Current Limit
+  (e-manual, Current Limit(38) and Goal Current(102));
+  :meth:`EmulatedServo.current_cap_ma` is that cap, which the physics applies
+  (:mod:`sim.puppet`). Goal Current starts at Current Limit after power-on or a
+  reboot: an assumption of this emulator (the e-manual gives no initial value), so
+  a servo put in mode 5 without a Goal Current write still has its full torque.
 
 Without a physics model attached (see :mod:`sim.puppet`), :meth:`advance` moves
 the motor toward the goal at the Velocity Limit (or Profile Velocity) so the
@@ -57,6 +64,8 @@ READABLE_BYTES = 662
 REBOOT_S = 0.1
 POSITION_MODES = (3, 4, 5)
 OPERATING_MODES = (0, 1, 3, 4, 5, 16)
+CURRENT_MODE = 0
+CURRENT_BASED_POSITION_MODE = 5
 # Present Current (126, int16), Present Velocity (128, int32), Present Position (132, int32).
 _PRESENT = struct.Struct("<hii")
 # Thermal model: winding resistance from the datasheet's stall current at nominal
@@ -162,6 +171,7 @@ class EmulatedServo:
         self._registered = None
         self._publish_present()
         self.set(Reg.GOAL_POSITION, self.get(Reg.PRESENT_POSITION))
+        self.set(Reg.GOAL_CURRENT, self.get(Reg.CURRENT_LIMIT))
 
     @property
     def id(self) -> int:
@@ -197,6 +207,20 @@ class EmulatedServo:
     @property
     def direction(self) -> int:
         return -1 if self.mem[10] & 1 else 1
+
+    @property
+    def operating_mode(self) -> int:
+        """Operating Mode (11): 3 position, 4 extended position, 5 current-based position."""
+        return self.mem[11]
+
+    def current_cap_ma(self) -> float | None:
+        """The motor current the controller may use, mA: in current-based position
+        (and current) mode min(|Goal Current|, Current Limit); ``None`` in the other
+        modes, where only the motor's stall current bounds it."""
+        if self.mem[11] not in (CURRENT_MODE, CURRENT_BASED_POSITION_MODE):
+            return None
+        units = min(abs(self.get(Reg.GOAL_CURRENT)), self.get(Reg.CURRENT_LIMIT))
+        return units * self.info.current_unit_ma
 
     def error_byte(self, code: int = 0) -> int:
         """ERR byte of a status: ``code`` plus the Alert bit while a hardware error stands."""

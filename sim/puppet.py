@@ -2,18 +2,29 @@
 
 Each calibrated servo of the rig (``config/rig.toml``) drives one joint of the
 hand from :mod:`sim.hand_model` through a MuJoCo ``position`` actuator made to
-behave like an X-series servo:
+behave like an X-series servo. A robot rig (:mod:`handrig.robotrig`, e.g.
+``config/rigs/leap.toml``) drives the joints of its own MJCF model instead
+(``[robot].model``): each servo's joint is found by name, and the model's own
+position actuator on that joint (or one added) is rewired the same way.
 
 - target: Goal Position (motor ticks, undoing Homing Offset and Drive Mode) ->
   joint angle by the rig calibration (:meth:`ServoCalibration.ticks_to_deg`);
 - speed: the target moves toward the goal at most at the servo's Profile
   Velocity (or Velocity Limit), divided by the gear ratio;
 - torque: saturates at the stall torque times the gear ratio (in
-  current-based position mode at the Goal Current, via the datasheet's
-  stall torque / stall current ratio);
+  current-based position mode at min(Goal Current, Current Limit),
+  :meth:`EmulatedServo.current_cap_ma`, via the datasheet's stall torque /
+  stall current ratio), so a stalled joint shows Present Current at that cap;
 - stiffness from Position P Gain. Model (an assumption, not a datasheet
   formula): PWM = P/128 x error in ticks, torque = stall torque x PWM / 885, so
   P = 400 gives 1.2 Nm/rad at the XL330 horn;
+- damping: a critically damped base (servo's inner loops, assumed) plus Position
+  D Gain under the same PWM model, PWM = D/16 x error rate in ticks per
+  :data:`D_GAIN_TIME_S` (the time unit is an assumption);
+- a robot model's joints are not clipped to their range on the goal side: a goal
+  beyond a joint's range drives it into the model's limit and the servo stalls
+  there at its torque cap, as on a real hand whose goal lies past a mechanical
+  stop;
 - torque off: no drive, only back-drive damping.
 
 Present Position / Velocity / Current come from the simulation (joint angle,
@@ -41,6 +52,7 @@ from firmware_protocol.dynamixel import MODELS, TICKS_PER_TURN, HardwareError, R
 from handrig.errors import ConfigError, HandrigError
 from handrig.hand import DOF_NAMES, Hand
 from handrig.rigconfig import RigConfig, ServoCalibration
+from handrig.robotrig import RobotRigConfig
 from sim.dxl_servo import EmulatedServo
 from sim.hand_model import (
     REFERENCE_HAND_LENGTH_M,
@@ -57,11 +69,19 @@ ARMATURE_KGM2 = 1e-4
 BACKDRIVE_DAMPING_NMS = 0.01
 TICKS_PER_RAD = TICKS_PER_TURN / (2.0 * math.pi)
 HEAT_EVERY_S = 0.05
+# Time unit of the D term under this module's PWM model (assumed: the X series does
+# not document its position loop period).
+D_GAIN_TIME_S = 0.001
 
 
 def kp_from_p_gain(p_gain: int, stall_torque_nm: float) -> float:
     """Horn stiffness (N m/rad) for a Position P Gain, under this module's PWM model."""
     return stall_torque_nm * (p_gain / 128.0) / PWM_LIMIT * TICKS_PER_RAD
+
+
+def kv_from_d_gain(d_gain: int, stall_torque_nm: float) -> float:
+    """Horn damping (N m s/rad) that Position D Gain adds, under this module's PWM model."""
+    return stall_torque_nm * (d_gain / 16.0) / PWM_LIMIT * TICKS_PER_RAD * D_GAIN_TIME_S
 
 
 def _fallback_passive() -> PassiveParams:
@@ -83,8 +103,9 @@ class _Channel:
     powered: bool = False
     servo: EmulatedServo | None = None
     p_gain: int = -1
+    d_gain: int = 0
     saturated_s: float = 0.0
-    limits_key: tuple[bytes, bytes, bytes, int] | None = None
+    limits_key: tuple[bytes, bytes, bytes, bytes, bytes, int] | None = None
     force_limit_nm: float = 0.0
 
 
@@ -118,15 +139,22 @@ class _HandSim:
         xml = hand_model_xml(hand, hand_length_m, passive=passive, actuated=actuated,
                              timestep_s=timestep_s)
         self.model = mujoco.MjModel.from_xml_string(xml)
+        self.joint_names: tuple[str, ...] = DOF_NAMES[hand]
+        acts = {c.joint: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, c.joint)
+                for c in cals}
+        self._setup(cals, acts)
+
+    def _setup(self, cals: Sequence[ServoCalibration], actuator_of: dict[str, int]) -> None:
+        """Channels and calibration arrays for ``cals`` on ``self.model``."""
+        mujoco = self.mujoco
         self.data = mujoco.MjData(self.model)
         self.channels: list[_Channel] = []
         for c in cals:
-            act = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, c.joint)
             jnt = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, c.joint)
             info = MODELS[c.model]
             self.channels.append(_Channel(
-                c.id, c, act, int(self.model.jnt_qposadr[jnt]), info.stall_torque_nm,
-                info.stall_torque_nm / info.stall_current_a))
+                c.id, c, actuator_of[c.joint], int(self.model.jnt_qposadr[jnt]),
+                info.stall_torque_nm, info.stall_torque_nm / info.stall_current_a))
         n = len(self.channels)
         self.act_idx = np.array([ch.actuator for ch in self.channels], dtype=np.intp)
         self.q_idx = np.array([ch.qpos for ch in self.channels], dtype=np.intp)
@@ -152,7 +180,9 @@ class _HandSim:
         a = ch.actuator
         g = ch.cal.gear_ratio
         if on:
-            self._set_gain(ch, ch.servo.get(Reg.POSITION_P_GAIN) if ch.servo else 400)
+            s = ch.servo
+            ch.d_gain = s.get(Reg.POSITION_D_GAIN) if s else 0
+            self._set_gain(ch, s.get(Reg.POSITION_P_GAIN) if s else 400)
             self.data.ctrl[a] = self.data.qpos[ch.qpos]
         else:
             m.actuator_gainprm[a, 0] = 0.0
@@ -168,9 +198,11 @@ class _HandSim:
         a = ch.actuator
         g = ch.cal.gear_ratio
         kp = kp_from_p_gain(p_gain, ch.stall_nm) * g * g
+        kv = 2.0 * math.sqrt(kp * ARMATURE_KGM2 * g * g)
+        kv += kv_from_d_gain(ch.d_gain, ch.stall_nm) * g * g
         m.actuator_gainprm[a, 0] = kp
         m.actuator_biasprm[a, 1] = -kp
-        m.actuator_biasprm[a, 2] = -2.0 * math.sqrt(kp * ARMATURE_KGM2 * g * g)
+        m.actuator_biasprm[a, 2] = -kv
         ch.p_gain = p_gain
 
     def pull(self) -> None:
@@ -188,21 +220,25 @@ class _HandSim:
             g = ch.cal.gear_ratio
             self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
             self.speed_rad_s[k] = s.speed_limit_ticks_per_s() / TICKS_PER_RAD / g
-            # P gain, Goal Current, PWM Limit, Operating Mode: act only on a change
-            key = (bytes(mem[84:86]), bytes(mem[102:104]), bytes(mem[36:38]), mem[11])
+            # P/D gain, Goal Current, Current Limit, PWM Limit, Operating Mode: act
+            # only on a change
+            key = (bytes(mem[80:82]), bytes(mem[84:86]), bytes(mem[102:104]),
+                   bytes(mem[38:40]), bytes(mem[36:38]), mem[11])
             if key != ch.limits_key:
                 self._apply_limits(ch, s)
                 ch.limits_key = key
 
     def _apply_limits(self, ch: _Channel, s: EmulatedServo) -> None:
         p_gain = s.get(Reg.POSITION_P_GAIN)
-        if p_gain != ch.p_gain:
+        d_gain = s.get(Reg.POSITION_D_GAIN)
+        if p_gain != ch.p_gain or d_gain != ch.d_gain:
+            ch.d_gain = d_gain
             self._set_gain(ch, p_gain)
         g = ch.cal.gear_ratio
         limit = ch.stall_nm
-        if s.mem[11] == 5:  # current-based position: Goal Current bounds torque
-            amps = abs(s.get(Reg.GOAL_CURRENT)) * s.info.current_unit_ma / 1000.0
-            limit = min(limit, amps * ch.kt_nm_per_a)
+        cap_ma = s.current_cap_ma()
+        if cap_ma is not None:  # current-based position: the current cap bounds torque
+            limit = min(limit, cap_ma / 1000.0 * ch.kt_nm_per_a)
         limit *= g * min(1.0, s.get(Reg.PWM_LIMIT) / PWM_LIMIT)
         self.model.actuator_forcerange[ch.actuator] = (-limit, limit)
         ch.force_limit_nm = limit
@@ -250,6 +286,62 @@ class _HandSim:
                     ch.saturated_s = 0.0
 
 
+# Goals of a robot model's servos are not clipped to the joint range (see the module
+# docstring): MuJoCo's ctrlrange is set this wide instead.
+UNCLIPPED_CTRL_RAD = 1000.0
+
+
+class _RobotSim(_HandSim):
+    """A robot's own MJCF model (``[robot].model`` of a robot rig) driven by servos.
+
+    Each servo's joint must exist and carry an actuator (a ``<position>`` actuator,
+    as Menagerie models have); that actuator is rewired as a servo (gains, bias,
+    force limit, armature at the servo's values). Actuators no servo drives go slack.
+    """
+
+    def __init__(self, model_path: str, cals: Sequence[ServoCalibration],
+                 timestep_s: float) -> None:
+        import mujoco
+
+        self.mujoco = mujoco
+        self.hand = "ri"
+        try:
+            self.model = mujoco.MjModel.from_xml_path(model_path)
+        except ValueError as exc:
+            raise ConfigError(f"MuJoCo cannot load the robot model: {exc}",
+                              file=model_path) from None
+        m = self.model
+        m.opt.timestep = timestep_s
+        names = (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(m.njnt))
+        self.joint_names = tuple(n for n in names if n)
+        actuator_of: dict[str, int] = {}
+        for i, c in enumerate(cals):
+            jnt = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, c.joint)
+            if jnt < 0:
+                raise ConfigError("no such joint in the robot model", file=model_path,
+                                  key=f"servos[{i}].joint", value=c.joint,
+                                  allowed=", ".join(self.joint_names))
+            acts = [a for a in range(m.nu)
+                    if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
+                    and m.actuator_trnid[a, 0] == jnt]
+            if not acts:
+                raise ConfigError(f"the robot model has no actuator on joint {c.joint}",
+                                  file=model_path, key=f"servos[{i}].joint", value=c.joint,
+                                  allowed="a joint with a <position> actuator")
+            a = acts[0]
+            m.actuator_gaintype[a] = mujoco.mjtGain.mjGAIN_FIXED
+            m.actuator_biastype[a] = mujoco.mjtBias.mjBIAS_AFFINE
+            m.actuator_forcelimited[a] = 1
+            m.actuator_ctrllimited[a] = 0
+            m.actuator_ctrlrange[a] = (-UNCLIPPED_CTRL_RAD, UNCLIPPED_CTRL_RAD)
+            m.dof_armature[m.jnt_dofadr[jnt]] = ARMATURE_KGM2 * c.gear_ratio**2
+            actuator_of[c.joint] = a
+        for a in set(range(m.nu)) - set(actuator_of.values()):
+            m.actuator_gainprm[a, 0] = 0.0
+            m.actuator_biasprm[a, 1:3] = 0.0
+        self._setup(cals, actuator_of)
+
+
 class Puppet:
     """A MuJoCo hand driven by emulated servos, stepped in wall-clock time.
 
@@ -275,15 +367,20 @@ class Puppet:
         if not 0 < timestep_s <= period_s:
             raise ConfigError("need 0 < timestep_s <= period_s", key="timestep_s",
                               value=(timestep_s, period_s))
-        by_hand: dict[Hand, list[ServoCalibration]] = {}
-        for cal in rig.servos:
-            hand: Hand = "ri" if cal.joint in DOF_NAMES["ri"] else "le"
-            if cal.joint not in DOF_NAMES[hand]:
-                continue  # a curve with no joint in the 23-DOF model
-            by_hand.setdefault(hand, []).append(cal)
-        self.hands: dict[Hand, _HandSim] = {
-            h: _HandSim(h, cals, timestep_s, hand_length_m) for h, cals in by_hand.items()
-        }
+        self.hands: dict[Hand, _HandSim]
+        robot = rig.robot if isinstance(rig, RobotRigConfig) else None
+        if robot is not None:  # a robot rig: its own model, every servo on it
+            self.hands = {"ri": _RobotSim(robot.model, rig.servos, timestep_s)}
+        else:
+            by_hand: dict[Hand, list[ServoCalibration]] = {}
+            for cal in rig.servos:
+                hand: Hand = "ri" if cal.joint in DOF_NAMES["ri"] else "le"
+                if cal.joint not in DOF_NAMES[hand]:
+                    continue  # a curve with no joint in the 23-DOF model
+                by_hand.setdefault(hand, []).append(cal)
+            self.hands = {
+                h: _HandSim(h, cals, timestep_s, hand_length_m) for h, cals in by_hand.items()
+            }
         self.timestep_s = timestep_s
         self.period_s = period_s
         self.max_lag_s = max_lag_s
@@ -394,8 +491,8 @@ class Puppet:
         """All simulated joint angles, degrees."""
         out: dict[str, float] = {}
         with self.physics_lock:
-            for hand, h in self.hands.items():
-                for name in DOF_NAMES[hand]:
+            for h in self.hands.values():
+                for name in h.joint_names:
                     jid = h.mujoco.mj_name2id(h.model, h.mujoco.mjtObj.mjOBJ_JOINT, name)
                     out[name] = math.degrees(float(h.data.qpos[h.model.jnt_qposadr[jid]]))
         return out

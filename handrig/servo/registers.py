@@ -21,13 +21,19 @@ class Reg(Enum):
     DRIVE_MODE = (10, 1, False)
     OPERATING_MODE = (11, 1, False)
     HOMING_OFFSET = (20, 4, True)
+    PWM_LIMIT = (36, 2, False)
+    CURRENT_LIMIT = (38, 2, False)
     MAX_POSITION_LIMIT = (48, 4, False)
     MIN_POSITION_LIMIT = (52, 4, False)
     TORQUE_ENABLE = (64, 1, False)
     LED = (65, 1, False)
     STATUS_RETURN_LEVEL = (68, 1, False)
     HARDWARE_ERROR_STATUS = (70, 1, False)
+    POSITION_D_GAIN = (80, 2, False)
+    POSITION_I_GAIN = (82, 2, False)
+    POSITION_P_GAIN = (84, 2, False)
     BUS_WATCHDOG = (98, 1, True)
+    GOAL_CURRENT = (102, 2, True)
     PROFILE_VELOCITY = (112, 4, False)
     GOAL_POSITION = (116, 4, True)
     MOVING = (122, 1, False)
@@ -59,6 +65,8 @@ class Reg(Enum):
 
 
 OPERATING_MODE_POSITION = 3
+OPERATING_MODE_EXTENDED_POSITION = 4
+OPERATING_MODE_CURRENT_BASED_POSITION = 5  # position control, torque capped by Goal Current
 STATUS_RETURN_ALL = 2
 BUS_WATCHDOG_UNIT_MS = 20  # Bus Watchdog counts in 20 ms units
 BUS_WATCHDOG_TRIPPED = -1  # the servo writes -1 (0xFF) after a watchdog stop
