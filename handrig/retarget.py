@@ -53,11 +53,14 @@ class RetargetJoint:
     def check(self) -> None:
         for name, gain in self.sources.items():
             if name not in hand.CURVE_NAMES:
-                try:
-                    hand.curve(name)
-                    detail = "not one of the 50 curves (wrist DOFs have no curve)"
-                except hand.UnknownJointError as exc:
-                    detail = str(exc)
+                if hand.is_joint_name(name):
+                    detail = "a wrist DOF, not one of the 50 curves the retarget reads"
+                else:
+                    try:
+                        hand.curve(name)
+                        detail = "unknown curve"
+                    except hand.UnknownJointError as exc:
+                        detail = str(exc)
                 raise ConfigError(detail, key=f"sources.{name}", value=name,
                                   allowed="a curve name such as riIndexMCPy")
             if not abs(gain) <= MAX_GAIN:

@@ -178,12 +178,14 @@ def check_servos_against_model(rig: RigConfig, joints: dict[str, MjcfJoint], *,
         if j.range is not None:
             low, high = j.range
             tol = RANGE_TOLERANCE_DEG
-            if s.min_deg < low - tol or s.max_deg > high + tol:
-                raise ConfigError(
-                    f"servo limits exceed the model's range of {s.joint}", file=file,
-                    key=f"servos[{i}].min_deg", value=[s.min_deg, s.max_deg],
-                    allowed=f"within [{low:.2f}, {high:.2f}] deg",
-                )
+            for key, bad in (("min_deg", s.min_deg < low - tol),
+                             ("max_deg", s.max_deg > high + tol)):
+                if bad:
+                    raise ConfigError(
+                        f"servo limit exceeds the model's range of {s.joint}", file=file,
+                        key=f"servos[{i}].{key}", value=getattr(s, key),
+                        allowed=f"within [{low:.2f}, {high:.2f}] deg",
+                    )
 
 
 def check_servos_against_retarget(rig: RigConfig, table: Retarget, *, file: str) -> None:

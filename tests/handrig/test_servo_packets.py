@@ -135,3 +135,14 @@ def test_fast_sync_valid_prefix_on_truncation(datas: list[bytes], cut: int) -> N
     fast_sync_valid(raw[:cut], ids, 10, out)
     complete = max(0, (cut - 8) // 14)
     assert out == [i < complete for i in range(len(ids))]
+
+
+def test_driver_registers_match_the_emulators_control_table() -> None:
+    from firmware_protocol.dynamixel import X_SERIES_TABLE
+    from firmware_protocol.dynamixel import Reg as TableReg
+
+    for reg in Reg:
+        item = X_SERIES_TABLE[TableReg[reg.name]]
+        assert (reg.address, reg.size, reg.signed) == (item.address, item.size, item.signed), reg
+    for name in ("CURRENT_LIMIT", "POSITION_P_GAIN", "POSITION_D_GAIN", "GOAL_CURRENT"):
+        assert name in Reg.__members__

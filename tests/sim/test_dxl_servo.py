@@ -160,3 +160,22 @@ def test_current_heats_the_motor_and_overheating_stops_it() -> None:
     for _ in range(100):
         s.heat(60.0)
     assert s.get(Reg.PRESENT_TEMPERATURE) == 30
+
+
+def test_current_based_position_mode_caps_current_at_goal_current_and_current_limit() -> None:
+    s = EmulatedServo(3, "XC330-T288")
+    assert s.current_cap_ma() is None  # position mode: only the stall current bounds it
+    assert s.get(Reg.GOAL_CURRENT) == s.get(Reg.CURRENT_LIMIT) == 910  # starts at the limit
+    assert _w(s, Reg.OPERATING_MODE, 5, 1) == 0
+    assert s.operating_mode == 5 and s.current_cap_ma() == 910.0
+    assert _w(s, Reg.CURRENT_LIMIT, 350, 2) == 0  # below the Goal Current already set
+    assert s.current_cap_ma() == 350.0
+    assert _w(s, Reg.GOAL_CURRENT, 351, 2, signed=True) == ErrorCode.DATA_LIMIT
+    assert _w(s, Reg.GOAL_CURRENT, -200, 2, signed=True) == 0
+    assert s.current_cap_ma() == 200.0  # the magnitude counts
+    # after a reboot Goal Current is back at the (kept, EEPROM) Current Limit
+    s.reboot(0.0)
+    assert s.get(Reg.GOAL_CURRENT) == 350 and s.current_cap_ma() == 350.0
+    xm = EmulatedServo(4, "XM430-W350")
+    assert _w(xm, Reg.OPERATING_MODE, 5, 1) == 0
+    assert xm.current_cap_ma() == 1193 * 2.69  # XM430 counts 2.69 mA per unit

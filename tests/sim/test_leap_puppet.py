@@ -1,0 +1,121 @@
+"""The LEAP preset in simulation: its MJCF in MuJoCo, driven by emulated XC330s in
+current-based position mode, where a stalled joint shows its current at the cap."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from firmware_protocol.dynamixel import Reg
+from handrig.config import REPO_ROOT
+from handrig.robotrig import RobotRigConfig, load_rig
+from sim.dxl_bus import servos_from_rig
+from sim.dxl_servo import EmulatedServo
+from sim.puppet import Puppet, kv_from_d_gain
+
+mujoco = pytest.importorskip("mujoco")
+LEAP_MODEL = REPO_ROOT / "data" / "robots" / "leap_hand" / "right_hand.xml"
+
+
+def _w(s: EmulatedServo, reg: Reg, value: int, size: int) -> None:
+    assert s.write(int(reg), int(value).to_bytes(size, "little", signed=True)) == 0, reg
+
+
+def _commission(rig: RobotRigConfig, servos: dict[int, EmulatedServo]) -> None:
+    """What phase-2 commissioning will write: the rig's [servo_settings], then torque."""
+    for cal in rig.servos:
+        s, st = servos[cal.id], rig.servo_settings_for(cal.id)
+        assert st.current_limit_ma is not None and st.position_p_gain is not None
+        assert st.position_d_gain is not None
+        _w(s, Reg.OPERATING_MODE, st.operating_mode, 1)
+        _w(s, Reg.CURRENT_LIMIT, st.current_limit_units(cal.model) or 0, 2)
+        _w(s, Reg.RETURN_DELAY_TIME, st.return_delay_us // 2, 1)
+        _w(s, Reg.GOAL_CURRENT, st.current_limit_units(cal.model) or 0, 2)
+        _w(s, Reg.POSITION_P_GAIN, st.position_p_gain, 2)
+        _w(s, Reg.POSITION_D_GAIN, st.position_d_gain, 2)
+        _w(s, Reg.TORQUE_ENABLE, 1, 1)
+
+
+def _leap(overload_s: float | None = None
+          ) -> tuple[RobotRigConfig, Puppet, dict[int, EmulatedServo]]:
+    rig = load_rig("leap")
+    assert isinstance(rig, RobotRigConfig)
+    puppet = Puppet(rig, overload_s=overload_s)
+    servos = servos_from_rig(rig)
+    puppet.attach(servos, threading.RLock())
+    return rig, puppet, {s.id: s for s in servos}
+
+
+def test_the_shipped_mjcf_loads_in_mujoco_with_sixteen_actuated_joints() -> None:
+    model = mujoco.MjModel.from_xml_path(str(LEAP_MODEL))
+    assert (model.njnt, model.nu, model.nmesh) == (16, 16, 0)
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data)
+    tips = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)
+            for n in ("if_tip", "mf_tip", "rf_tip", "th_tip")]
+    assert min(tips) >= 0
+    assert model.body_mass.sum() == pytest.approx(0.237 + 3 * (0.044 + 0.032 + 0.037 + 0.016)
+                                                  + 0.032 + 0.003 + 0.038 + 0.049)
+
+
+def test_joints_follow_their_goals_in_current_based_position_mode() -> None:
+    rig, puppet, servos = _leap()
+    _commission(rig, servos)
+    goals = {}
+    for cal in rig.servos:
+        goals[cal.joint] = cal.min_deg + 0.4 * (cal.max_deg - cal.min_deg)
+        _w(servos[cal.id], Reg.GOAL_POSITION, cal.deg_to_ticks(goals[cal.joint]), 4)
+    puppet.step(1000)
+    angles = puppet.joint_angles_deg()
+    assert set(angles) == set(goals)
+    for cal in rig.servos:
+        assert angles[cal.joint] == pytest.approx(goals[cal.joint], abs=3.0), cal.joint
+        present = cal.ticks_to_deg(servos[cal.id].present)
+        assert present == pytest.approx(angles[cal.joint], abs=0.1)
+        assert abs(servos[cal.id].get(Reg.PRESENT_CURRENT)) < 350  # not saturated
+
+
+@pytest.mark.parametrize("limit_ma", [200, 350])
+def test_a_goal_past_the_stop_stalls_the_joint_with_current_at_the_limit(limit_ma: int) -> None:
+    rig, puppet, servos = _leap()
+    _commission(rig, servos)
+    cal = next(c for c in rig.servos if c.joint == "if_mcp")
+    s = servos[cal.id]
+    _w(s, Reg.GOAL_CURRENT, limit_ma, 2)
+    # past the joint's range (127.8 deg): the servo never gets there, the model's stop holds
+    _w(s, Reg.GOAL_POSITION, round(cal.deg_to_ticks_exact(170.0)), 4)
+    puppet.step(1000)
+    assert 125.0 < puppet.joint_deg("if_mcp") < 135.0
+    assert s.get(Reg.PRESENT_CURRENT) == pytest.approx(limit_ma, abs=2)
+    assert s.hardware_error == 0 and s.torque_enabled  # no overload switch: it just pushes
+
+
+def test_a_persistent_stall_becomes_an_overload_when_the_emulator_models_it() -> None:
+    rig, puppet, servos = _leap(overload_s=0.3)
+    _commission(rig, servos)
+    cal = next(c for c in rig.servos if c.joint == "if_pip")
+    s = servos[cal.id]
+    _w(s, Reg.GOAL_POSITION, round(cal.deg_to_ticks_exact(150.0)), 4)
+    puppet.step(800)
+    assert s.hardware_error == 0x20 and not s.torque_enabled
+    other = servos[next(c.id for c in rig.servos if c.joint == "mf_pip")]
+    assert other.hardware_error == 0 and other.torque_enabled
+
+
+def test_d_gain_adds_damping_under_the_pwm_model() -> None:
+    assert kv_from_d_gain(0, 0.92) == 0.0
+    assert kv_from_d_gain(200, 0.92) == pytest.approx(2 * kv_from_d_gain(100, 0.92))
+    rig, puppet, servos = _leap()
+    _commission(rig, servos)
+    cal = next(c for c in rig.servos if c.joint == "if_mcp")
+    sim = puppet.hands["ri"]
+    ch = next(ch for ch in sim.channels if ch.servo_id == cal.id)
+
+    def kv() -> float:
+        puppet.step(1)
+        return -float(sim.model.actuator_biasprm[ch.actuator, 2])
+
+    with_d = kv()
+    _w(servos[cal.id], Reg.POSITION_D_GAIN, 0, 2)
+    assert with_d - kv() == pytest.approx(kv_from_d_gain(200, 0.92), rel=1e-9)
