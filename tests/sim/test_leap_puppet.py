@@ -119,3 +119,55 @@ def test_d_gain_adds_damping_under_the_pwm_model() -> None:
     with_d = kv()
     _w(servos[cal.id], Reg.POSITION_D_GAIN, 0, 2)
     assert with_d - kv() == pytest.approx(kv_from_d_gain(200, 0.92), rel=1e-9)
+
+
+def test_the_real_sdk_commissions_and_stalls_the_leap_puppet_over_the_emulated_bus() -> None:
+    """Byte level at 4 Mbps: the LEAP API's own writes (mode 5, P/D, Goal Current by Sync
+    Write), then a goal past a stop; Present Current read back sits at the cap."""
+    import time
+
+    from dynamixel_sdk import COMM_SUCCESS, GroupSyncWrite, PacketHandler, PortHandler
+
+    from sim.dxl_bus import SimBus
+
+    rig = load_rig("leap")
+    ids = [s.id for s in rig.servos]
+    with SimBus.from_rig(rig, puppet=True) as bus:
+        port = PortHandler(bus.port_path)
+        assert port.openPort() and port.setBaudRate(4_000_000)
+        ph = PacketHandler(2.0)
+        try:
+            def sync(addr: int, size: int, values: dict[int, int]) -> None:
+                gw = GroupSyncWrite(port, ph, addr, size)
+                for i, v in values.items():
+                    assert gw.addParam(i, list(int(v).to_bytes(size, "little")))
+                assert gw.txPacket() == COMM_SUCCESS
+
+            settings = {i: rig.servo_settings_for(i) for i in ids}
+            sync(int(Reg.OPERATING_MODE), 1, {i: s.operating_mode for i, s in settings.items()})
+            sync(int(Reg.TORQUE_ENABLE), 1, dict.fromkeys(ids, 1))
+            sync(int(Reg.POSITION_P_GAIN), 2, {i: s.position_p_gain or 0
+                                               for i, s in settings.items()})
+            sync(int(Reg.POSITION_D_GAIN), 2, {i: s.position_d_gain or 0
+                                               for i, s in settings.items()})
+            sync(int(Reg.GOAL_CURRENT), 2, {i: s.current_limit_ma or 0
+                                            for i, s in settings.items()})
+            cal = next(c for c in rig.servos if c.joint == "mf_mcp")
+            goals = {c.id: c.deg_to_ticks(10.0) for c in rig.servos}
+            goals[cal.id] = round(cal.deg_to_ticks_exact(170.0))  # past the 127.8 deg stop
+            sync(int(Reg.GOAL_POSITION), 4, goals)
+            deadline = time.monotonic() + 10.0  # simulated time follows a busy wall clock
+            current = 0
+            while time.monotonic() < deadline and abs(current - 350) > 5:
+                time.sleep(0.1)
+                current, result, err = ph.read2ByteTxRx(port, cal.id,
+                                                        int(Reg.PRESENT_CURRENT))
+                assert (result, err) == (COMM_SUCCESS, 0)
+            assert current == pytest.approx(350, abs=5)
+            time.sleep(0.3)
+            assert bus.puppet is not None
+            moved = next(c for c in rig.servos if c.joint == "if_pip")
+            ticks, result, _ = ph.read4ByteTxRx(port, moved.id, int(Reg.PRESENT_POSITION))
+            assert moved.ticks_to_deg(ticks) == pytest.approx(10.0, abs=3.0)
+        finally:
+            port.closePort()
