@@ -56,7 +56,8 @@ from firmware_protocol.dynamixel import (
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import ConfigError
 from handrig.realtime import LOOP_TIMER_SLACK_NS, timer_slack_ns
-from handrig.rigconfig import RigConfig, load_rig_config
+from handrig.rigconfig import RigConfig
+from handrig.robotrig import load_rig
 from sim.dxl_servo import READABLE_BYTES, EmulatedServo
 
 
@@ -324,7 +325,8 @@ class SimBus:
         ``puppet=True`` attaches a MuJoCo hand (:class:`sim.puppet.Puppet`) whose joints
         the calibrated servos drive; IDs without a calibration move kinematically.
         """
-        config = rig if isinstance(rig, RigConfig) else load_rig_config(rig)
+        # a path or preset name; a robot rig ("leap") brings its own MJCF model
+        config = rig if isinstance(rig, RigConfig) else load_rig(rig)
         if model is not None:
             config = with_model(config, model)
         servos = servos_from_rig(config, ids=ids, model=model)

@@ -132,7 +132,7 @@ def test_the_real_sdk_commissions_and_stalls_the_leap_puppet_over_the_emulated_b
 
     rig = load_rig("leap")
     ids = [s.id for s in rig.servos]
-    with SimBus.from_rig(rig, puppet=True) as bus:
+    with SimBus.from_rig("leap", puppet=True) as bus:  # a preset by name
         port = PortHandler(bus.port_path)
         assert port.openPort() and port.setBaudRate(4_000_000)
         ph = PacketHandler(2.0)
