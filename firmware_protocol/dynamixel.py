@@ -571,10 +571,13 @@ class ModelInfo:
 
 
 # Datasheet figures (ROBOTIS e-manual): XL330-M288 0.52 Nm / 1.47 A / 103 rpm at 5 V;
-# XC330-T288 0.92 Nm / 0.8 A / 67 rpm at 11.1 V; XM430-W350 4.1 Nm / 2.3 A / 46 rpm at 12 V.
+# XC330-T288 0.92 Nm / 0.8 A / 67 rpm at 11.1 V; XM430-W350 4.1 Nm / 2.3 A / 46 rpm at 12 V;
+# XC330-M288 (the LEAP hand's servo) 0.93 Nm / 1.80 A / 81 rpm at 5 V, model number 1240,
+# Current Limit 2352 x 1 mA, Position P 1100 / D 500 by default.
 MODELS: dict[str, ModelInfo] = {
     "XL330-M288": ModelInfo("XL330-M288", 1200, 46, 0.52, 1.47, 103.0, 1750, 1.0, 50, 400, 0),
     "XC330-T288": ModelInfo("XC330-T288", 1220, 46, 0.92, 0.8, 67.0, 910, 1.0, 120, 400, 0),
+    "XC330-M288": ModelInfo("XC330-M288", 1240, 46, 0.93, 1.80, 81.0, 2352, 1.0, 50, 1100, 500),
     "XM430-W350": ModelInfo("XM430-W350", 1020, 46, 4.1, 2.3, 46.0, 1193, 2.69, 120, 800, 0),
 }
 MODEL_BY_NUMBER: dict[int, ModelInfo] = {m.model_number: m for m in MODELS.values()}

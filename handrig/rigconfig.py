@@ -30,6 +30,7 @@ POSITION_TICKS_MAX = 4095
 
 # Model numbers of the X-series servos we know (REFERENCE.md section 2).
 MODEL_NUMBERS: dict[str, int] = {"XL330-M288": 1200, "XC330-T288": 1220, "XM430-W350": 1020}
+MODEL_NUMBERS["XC330-M288"] = 1240  # the LEAP hand's servo
 # Baud rates the X series and dynamixel-sdk both accept.
 BAUD_RATES: tuple[int, ...] = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000)
 
@@ -40,7 +41,7 @@ class ServoCalibration:
 
     id: int
     joint: str
-    model: Literal["XL330-M288", "XC330-T288", "XM430-W350"] = "XL330-M288"
+    model: Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288"] = "XL330-M288"
     zero_ticks: int = 2048
     direction: Literal[1, -1] = 1
     gear_ratio: float = 1.0
@@ -162,11 +163,13 @@ OPERATING_MODES: dict[str, int] = {
     "position": 3, "extended_position": 4, "current_based_position": 5,
 }
 # Current Limit (38) maximum per model, mA: XL330-M288 1750 x 1 mA, XC330-T288 910 x 1 mA,
-# XM430-W350 1193 x 2.69 mA (ROBOTIS e-manual control tables).
+# XC330-M288 2352 x 1 mA, XM430-W350 1193 x 2.69 mA (ROBOTIS e-manual control tables).
 CURRENT_LIMIT_MAX_MA: dict[str, float] = {
-    "XL330-M288": 1750.0, "XC330-T288": 910.0, "XM430-W350": 1193 * 2.69,
+    "XL330-M288": 1750.0, "XC330-T288": 910.0, "XC330-M288": 2352.0, "XM430-W350": 1193 * 2.69,
 }
-CURRENT_UNIT_MA: dict[str, float] = {"XL330-M288": 1.0, "XC330-T288": 1.0, "XM430-W350": 2.69}
+CURRENT_UNIT_MA: dict[str, float] = {
+    "XL330-M288": 1.0, "XC330-T288": 1.0, "XC330-M288": 1.0, "XM430-W350": 2.69,
+}
 GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
 RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
 RETURN_DELAY_MAX_US = 254 * RETURN_DELAY_UNIT_US

@@ -802,7 +802,7 @@ def with_model(config: RigConfig, model: str) -> RigConfig:
     if model not in MODELS:
         raise ConfigError("unknown servo model", key="model", value=model,
                           allowed=", ".join(MODELS))
-    name = cast(Literal["XL330-M288", "XC330-T288", "XM430-W350"], model)
+    name = cast(Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288"], model)
     return dataclasses.replace(config, servos=tuple(
         dataclasses.replace(s, model=name) for s in config.servos))
 

@@ -75,6 +75,7 @@ BUS_WATCHDOG_TRIPPED = -1  # the servo writes -1 (0xFF) after a watchdog stop
 VELOCITY_DPS_PER_UNIT = 0.229 * 360.0 / 60.0
 # Present Current unit per model number: XL330/XC330 1 mA, XM430 2.69 mA (e-manual).
 CURRENT_MA_PER_UNIT: dict[int, float] = {1200: 1.0, 1220: 1.0, 1020: 2.69}
+CURRENT_MA_PER_UNIT[1240] = 1.0  # XC330-M288 (the LEAP hand's servo)
 
 # Status ERR byte (protocol 2.0): bit 7 Alert; bits 0-6 hold an error number.
 ERR_ALERT = 0x80

@@ -34,7 +34,7 @@ def test_leap_preset_is_sixteen_xc330s_at_4_mbps_with_sag_off() -> None:
     assert rig.bus.baud == 4_000_000
     assert [s.id for s in rig.servos] == list(range(16))
     assert [s.joint for s in rig.servos] == LEAP_IDS
-    assert {s.model for s in rig.servos} == {"XC330-T288"}
+    assert {s.model for s in rig.servos} == {"XC330-M288"}  # 5 V, model number 1240
     assert {(s.zero_ticks, s.direction) for s in rig.servos} == {(2048, 1)}
     assert Path(rig.robot.model) == LEAP_MODEL.resolve()
     assert rig.robot.sag is False and rig.effective_sag_gain == 0.0
@@ -115,8 +115,8 @@ def test_a_copy_of_the_preset_loads_with_paths_relative_to_it(tmp_path: Path) ->
     ("max_deg = 127.7", "max_deg = 140.0",
      r"servos\[1\].max_deg.*140.0.*exceeds the model's range of if_mcp"),
     ("ids = [0, 4, 8]", "ids = [0, 4, 16]", r"servo_settings.groups\[0\].ids.*= 16.*no servo"),
-    ("current_limit_ma = 350", "current_limit_ma = 1000",
-     r"current_limit_ma.*1000.*above the XC330-T288's maximum"),
+    ("current_limit_ma = 350", "current_limit_ma = 2400",
+     r"current_limit_ma.*2400.*above the XC330-M288's maximum"),
     ("return_delay_us = 0", "return_delay_us = 3", r"return_delay_us.*= 3.*steps of 2"),
     ('operating_mode = "current_based_position"', 'operating_mode = "current"',
      r"operating_mode.*'current'.*current_based_position"),
