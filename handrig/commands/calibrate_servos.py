@@ -35,8 +35,8 @@ from pathlib import Path
 from typing import Any
 
 from handrig.app import port_process
-from handrig.commands.calibrate_glove import calibrate_subparsers
 from handrig.clock import Clock, MonotonicClock
+from handrig.commands.calibrate_glove import calibrate_subparsers
 from handrig.config import build
 from handrig.errors import ConfigError, HandrigError
 from handrig.paths import CONFIG_HOME_HELP, config_file, output_for
