@@ -383,7 +383,7 @@ class LivePanel:
 
     def log(self, text: str) -> None:
         """Print a line above the panel (or as a line without a terminal)."""
-        self.console.print(text, markup=False, highlight=False)
+        self.console.print(text, markup=False, highlight=False, soft_wrap=True)
 
     def _loop_live(self) -> None:
         first = self._snapshot()
@@ -472,7 +472,7 @@ class RigSnapshot:
         rig = self.rig
         now = rig.clock.now()
         stats = rig.stats
-        elapsed = now - rig.started_at if rig.started_at else 0.0
+        elapsed = now - rig.started_at if stats.frames else 0.0  # started_at is set by then
         lat = np.asarray(stats.latencies_s[-2000:], dtype=np.float64)
         p50, p99 = (np.percentile(lat, [50, 99]) * 1e6) if lat.size else (NAN, NAN)
         mode = getattr(rig.mode, "value", str(rig.mode))
