@@ -68,3 +68,17 @@ def test_help_says_where_files_go(capsys: pytest.CaptureFixture[str]) -> None:
             main([*argv, "--help"])
         text = " ".join(capsys.readouterr().out.split())
         assert "XDG_" in text and "never rewritten" in text, argv
+
+
+def test_demo_recording_script_writes_into_the_data_directory(tmp_path: Path) -> None:
+    import os
+    import sys
+
+    before = config_status()
+    env = {**os.environ, "XDG_DATA_HOME": str(tmp_path / "data")}
+    res = subprocess.run([sys.executable, "-m", "sim.demo_recording", "--rate", "50"],
+                         cwd=CHECKOUT, env=env, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    out = tmp_path / "data" / "handrig" / "recordings" / "demo_glove.csv"
+    assert res.stdout.startswith(f"wrote {out}") and out.exists()
+    assert config_status() == before
