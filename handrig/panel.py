@@ -458,13 +458,16 @@ class RigSnapshot:
     Reads the rig's counters, its glove's and bus's statistics, its newest
     servo state, and the VMC sender and recorder among its outputs. Rates are
     taken over the last second between calls. ``glove_source`` and
-    ``temperature_limit_c`` (servo id -> limit) are shown when given.
+    ``temperature_limit_c`` (servo id -> limit) are shown when given; ``keys``:
+    whether a :class:`KeyReader` is listening (the panel says so either way).
     """
 
     def __init__(self, rig: Any, *, glove_source: str = "",
-                 temperature_limit_c: Mapping[int, float] | None = None) -> None:
+                 temperature_limit_c: Mapping[int, float] | None = None,
+                 keys: bool = True) -> None:
         self.rig = rig
         self.glove_source = glove_source
+        self.keys = keys
         self.temperature_limit_c = dict(temperature_limit_c or {})
         self._rates = {k: _Rate() for k in ("loop", "glove", "reads", "writes", "vmc")}
 
@@ -490,7 +493,7 @@ class RigSnapshot:
             loop_rate_hz=self._rates["loop"].update(now, stats.frames),
             overruns=stats.overruns, latency_p50_us=float(p50), latency_p99_us=float(p99),
             glove=self._glove(now), bus=self._bus(now), servos=self._servos(now),
-            outputs=self._outputs(now), events=tuple(stats.events[-3:]),
+            outputs=self._outputs(now), events=tuple(stats.events[-3:]), keys=self.keys,
         )
 
     def _glove(self, now: float) -> GloveLink:

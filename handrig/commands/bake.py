@@ -7,9 +7,9 @@ writes the plot and a JSON summary (timings, solver statistics, comparison) ther
 
 The installed grid (``config/sag_grid.npz``) is never rewritten unless ``--out``
 names it: by default the grid goes to the user's data directory
-(``$XDG_DATA_HOME/handrig/sag_grid.npz``, ``~/.local/share/handrig`` when unset,
-see :mod:`handrig.paths`), and a rig uses it through ``sag_grid`` in the
-``[loop]`` table of its ``rig.toml``.
+(``$XDG_DATA_HOME/handrig/sag_grid.npz``, ``~/.local/share/handrig`` when
+unset), and a rig uses it through ``sag_grid`` in the ``[loop]`` table of its
+``rig.toml``. The shipped grid is regenerated with ``--out config/sag_grid.npz``.
 """
 
 from __future__ import annotations
