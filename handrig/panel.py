@@ -135,7 +135,7 @@ class PanelSnapshot:
     servos: tuple[ServoLine, ...] = ()
     outputs: Outputs = field(default_factory=Outputs)
     events: tuple[str, ...] = ()  # the newest last
-    keys: bool = True  # whether the show keys work (a terminal to read them from)
+    keys: bool = True  # whether the show keys are read (a KeyReader on a terminal)
 
 
 # -- formatting -----------------------------------------------------------------------
@@ -296,7 +296,7 @@ LEGEND = "er: V voltage H overheating E encoder S shock L overload; now dimmed: 
 
 def keys_line(s: PanelSnapshot) -> Text:
     if not s.keys:
-        return Text("keys off (no terminal to read them from): Ctrl-C stops", "dim")
+        return Text("keys off: Ctrl-C stops (ease, then torque off)", "dim")
     text = Text()
     for key, what in SHOW_KEYS.items():
         text.append(" space " if key == " " else f" {key} ", "reverse")
@@ -464,7 +464,7 @@ class RigSnapshot:
 
     def __init__(self, rig: Any, *, glove_source: str = "",
                  temperature_limit_c: Mapping[int, float] | None = None,
-                 keys: bool = True) -> None:
+                 keys: bool = False) -> None:
         self.rig = rig
         self.glove_source = glove_source
         self.keys = keys

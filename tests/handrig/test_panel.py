@@ -220,7 +220,8 @@ def test_rig_snapshot_reads_a_running_rig() -> None:
     rig = Rig(SteadyGlove(clock), bus, parts.pipeline, clock, controls_from_raw=parts.controls,
               orientation=parts.orientation, rate_hz=200.0, read_every=4,
               glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None)
-    snapshot = RigSnapshot(rig, glove_source="/dev/ttyACM0", temperature_limit_c={1: 45.0})
+    snapshot = RigSnapshot(rig, glove_source="/dev/ttyACM0", temperature_limit_c={1: 45.0},
+                           keys=True)
     rig.run(frames=100)
     first = snapshot()
     clock.advance(1.0)
@@ -238,7 +239,8 @@ def test_rig_snapshot_reads_a_running_rig() -> None:
     assert snap.servos[1].stale and not snap.servos[0].stale
     assert np.isfinite(snap.latency_p50_us) and snap.elapsed_s > 1.0
     text = "\n".join(screen(snap))
-    assert "stale 2 (worst" in text and "/dev/ttyUSB9" in text
+    assert "stale 2 (worst" in text and "/dev/ttyUSB9" in text and "e-stop" in text
+    assert "keys off" in "\n".join(screen(RigSnapshot(rig)()))  # until a KeyReader listens
 
 
 # -- keys ----------------------------------------------------------------------------------
