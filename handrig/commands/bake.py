@@ -19,7 +19,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from handrig.paths import DATA_HOME_HELP, user_data
+from handrig.paths import DATA_HOME_HELP, config_file, user_data
 
 
 def register(sub: Any) -> None:
@@ -35,7 +35,9 @@ def register(sub: Any) -> None:
     p.add_argument("--out", default=None, metavar="FILE.npz",
                    help=f"output grid (default sag_grid.npz in {DATA_HOME_HELP}; the installed "
                         "config/sag_grid.npz only when named here)")
-    p.add_argument("--config", default=None, help="passive-hand TOML (default config/)")
+    p.add_argument("--config", default=None, metavar="FILE",
+                   help="passive-hand TOML (default: yours from `handrig passive tune` if "
+                        "there is one, else the installed config/passive_hand.toml)")
     p.add_argument("--dynamic", action="store_true",
                    help="bake with the dynamic settle sweep (slow reference) instead")
     p.add_argument("--compare", action="store_true",
@@ -56,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
     fine = args.step_deg / 2.5 if args.fine_step_deg is None else args.fine_step_deg or None
     bake.grid_axes(args.step_deg, fine)  # validates the steps before any work
-    cfg = load_passive_params(args.config)
+    cfg = load_passive_params(args.config or config_file("passive_hand.toml"))
     out = Path(args.out) if args.out else user_data("sag_grid.npz")
     out.parent.mkdir(parents=True, exist_ok=True)
     primary = bake.bake_dynamic if args.dynamic else bake.bake_static

@@ -82,3 +82,13 @@ def test_demo_recording_script_writes_into_the_data_directory(tmp_path: Path) ->
     out = tmp_path / "data" / "handrig" / "recordings" / "demo_glove.csv"
     assert res.stdout.startswith(f"wrote {out}") and out.exists()
     assert config_status() == before
+
+
+def test_passive_tune_writes_the_users_copy_which_bake_then_reads(
+        xdg: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    before = config_status()
+    assert main(["passive", "tune"]) == 0
+    mine = xdg["config"] / "handrig" / "passive_hand.toml"
+    assert f"wrote {mine}" in capsys.readouterr().out and mine.exists()
+    assert paths.config_file("passive_hand.toml") == mine
+    assert config_status() == before
