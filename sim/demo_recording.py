@@ -11,8 +11,10 @@ sweeps the passive sag: inclination swings between -55 and +55 degrees
 too, and must not matter. IMU quaternions are scalar last, ENU world frame, as
 ``firmware_protocol/SPEC.md`` sends them.
 
-Regenerate with ``python -m sim.demo_recording`` (writes
-``config/recordings/demo_glove.csv``).
+``python -m sim.demo_recording`` writes it to the user's data directory
+(``$XDG_DATA_HOME/handrig/recordings/demo_glove.csv``, ``~/.local/share/handrig``
+when unset); the shipped copy is regenerated only when named:
+``python -m sim.demo_recording --out config/recordings/demo_glove.csv``.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from handrig.glove_recording import GloveRecording, write_glove_recording
 from handrig.hand import curve_index
 from handrig.mocap import load_reference
 from handrig.orientation import ForearmOrientation
+from handrig.paths import DATA_HOME_HELP, user_data
 
 DEMO_RECORDING = CONFIG_DIR / "recordings" / "demo_glove.csv"
 ADC_MAX = 4095
@@ -70,8 +73,13 @@ def make_demo_recording(rate_hz: float = 200.0) -> GloveRecording:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rate", type=float, default=200.0)
-    ap.add_argument("--out", type=Path, default=DEMO_RECORDING)
+    ap.add_argument("--out", type=Path, default=None,
+                    help=f"output CSV (default recordings/demo_glove.csv in {DATA_HOME_HELP}; "
+                         f"the shipped {DEMO_RECORDING.relative_to(CONFIG_DIR.parent)} only "
+                         "when named here)")
     args = ap.parse_args()
+    if args.out is None:
+        args.out = user_data("recordings/demo_glove.csv")
     rec = make_demo_recording(args.rate)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_glove_recording(args.out, rec)

@@ -6,6 +6,8 @@ frames (``firmware_protocol/SPEC.md``) or OpenGloves alpha lines. Whatever reads
 ``port_path`` (``SerialGlove``, ``handrig run --glove``) sees what a USB glove
 would send. Fault switches for tests: :meth:`inject_garbage`,
 :meth:`corrupt_next`, :meth:`pause` / :meth:`resume`, :meth:`hang_up`.
+:meth:`play` switches to another recording while streaming (a glove that
+changes pose on cue, :mod:`sim.calibration_motion`).
 
 Example::
 
@@ -39,8 +41,9 @@ class GloveEmulator:
 
     ``rate_hz``: send at this fixed rate, each time the recording's sample due
     then (``None``: send each recorded sample at its own ``t_s``). ``loop``: start
-    over at the end; otherwise the emulator stops sending after the last sample
-    (:attr:`done` is set) and keeps the port open until :meth:`close`.
+    over at the end (at ``loop_from_s`` of the recording, 0 = its start);
+    otherwise the emulator stops sending after the last sample (:attr:`done` is
+    set) and keeps the port open until :meth:`close`.
     OpenGloves: the first five channels are the fingers (clipped to 0..analog_max),
     channels 5..9 if present the splays; buttons bit 0 is sent as
     ``estop_letter``, bits 1..8 as H..O.
@@ -53,6 +56,7 @@ class GloveEmulator:
         *,
         rate_hz: float | None = None,
         loop: bool = False,
+        loop_from_s: float = 0.0,
         clock: Clock | None = None,
         analog_max: int = 4095,
         estop_letter: str = "N",
@@ -60,23 +64,17 @@ class GloveEmulator:
     ) -> None:
         if fmt not in ("frames", "opengloves"):
             raise DataError(f"glove format {fmt!r} unknown: use 'frames' or 'opengloves'")
-        if len(recording) == 0:
-            raise DataError("glove recording is empty: nothing to stream")
-        if fmt == "opengloves" and recording.n_channels < 5:
-            raise DataError(f"OpenGloves needs 5 finger channels, the recording has "
-                            f"{recording.n_channels}")
-        if fmt == "frames" and recording.n_channels > MAX_CHANNELS:
-            raise DataError(f"a frame carries at most {MAX_CHANNELS} channels, the recording "
-                            f"has {recording.n_channels}")
         if estop_letter not in BUTTON_LETTERS:
             raise DataError(f"e-stop letter {estop_letter!r} is not an OpenGloves button "
                             f"(one of {BUTTON_LETTERS})")
         if rate_hz is not None and not 1.0 <= rate_hz <= 5000.0:
             raise DataError(f"glove rate {rate_hz} Hz out of range 1..5000")
+        self._check_recording(recording, fmt, loop_from_s)
         self.recording = recording
         self.fmt: EmulatorFormat = fmt
         self.rate_hz = rate_hz
         self.loop = loop
+        self.loop_from_s = loop_from_s
         self.clock: Clock = clock or MonotonicClock()
         self.analog_max = analog_max
         self.estop_letter = estop_letter
@@ -92,10 +90,26 @@ class GloveEmulator:
         self._lock = threading.Lock()
         self._garbage: list[bytes] = []
         self._corrupt = 0
+        self._next: tuple[GloveRecording, bool, float] | None = None
         self.frames_sent = 0
         self.bytes_sent = 0
         self.bytes_dropped = 0
         """Bytes the pty would not take (nobody reading): a real UART loses them too."""
+
+    @staticmethod
+    def _check_recording(recording: GloveRecording, fmt: str, loop_from_s: float) -> None:
+        if len(recording) == 0:
+            raise DataError("glove recording is empty: nothing to stream")
+        if fmt == "opengloves" and recording.n_channels < 5:
+            raise DataError(f"OpenGloves needs 5 finger channels, the recording has "
+                            f"{recording.n_channels}")
+        if fmt == "frames" and recording.n_channels > MAX_CHANNELS:
+            raise DataError(f"a frame carries at most {MAX_CHANNELS} channels, the recording "
+                            f"has {recording.n_channels}")
+        span_s = float(recording.t_s[-1] - recording.t_s[0])
+        if not 0.0 <= loop_from_s < max(span_s, 1e-9):
+            raise DataError(f"loop_from_s {loop_from_s:g} s outside the recording "
+                            f"(0..{span_s:g} s)")
 
     # -- lifecycle ----------------------------------------------------------
 
@@ -170,6 +184,15 @@ class GloveEmulator:
             self._thread = None
         self._close_fds()
 
+    def play(self, recording: GloveRecording, *, loop: bool = False,
+             loop_from_s: float = 0.0) -> None:
+        """Stream ``recording`` from its start, from the next sample on (``loop`` and
+        ``loop_from_s`` as in the constructor); :attr:`done` is cleared."""
+        self._check_recording(recording, self.fmt, loop_from_s)
+        with self._lock:
+            self._next = (recording, loop, loop_from_s)
+        self.done.clear()
+
     # -- streaming ------------------------------------------------------------
 
     def _sample_index(self, elapsed_s: float) -> int:
@@ -223,17 +246,31 @@ class GloveEmulator:
         with contextlib.suppress(OSError):
             os.read(self._master, 4096)  # host-to-glove bytes (force feedback): discarded
 
-    def _run(self) -> None:
-        rec = self.recording
-        span_s = float(rec.t_s[-1] - rec.t_s[0])
+    @staticmethod
+    def _timing(rec: GloveRecording) -> tuple[float, float]:
+        """(span, typical gap between samples) in seconds."""
         gap_s = float(np.median(np.diff(rec.t_s))) if len(rec) > 1 else 0.01
-        lap_s = span_s + gap_s
-        t0 = self.clock.now()
+        return float(rec.t_s[-1] - rec.t_s[0]), gap_s
+
+    def _run(self) -> None:
+        t0 = t_first = self.clock.now()
         k = 0
         seq = 0
+        rec = self.recording
+        span_s, gap_s = self._timing(rec)
         while not self._stop.is_set():
+            with self._lock:
+                switch, self._next = self._next, None
+            if switch is not None:
+                self.recording, self.loop, self.loop_from_s = switch
+                rec = self.recording
+                span_s, gap_s = self._timing(rec)
+                t0, k = self.clock.now(), 0
+            lap_s = span_s + gap_s
             if self.rate_hz is not None:
                 elapsed = k / self.rate_hz
+            elif self.loop and self.loop_from_s > 0:
+                elapsed = k * gap_s  # a loop that restarts mid-recording: evenly spaced
             else:
                 lap, idx = divmod(k, len(rec))
                 elapsed = lap * lap_s + float(rec.t_s[idx] - rec.t_s[0])
@@ -242,16 +279,22 @@ class GloveEmulator:
             if self._stop.is_set():
                 return
             if self.loop:
-                elapsed %= lap_s
+                if elapsed >= lap_s:
+                    tail = lap_s - self.loop_from_s
+                    elapsed = self.loop_from_s + (elapsed - lap_s) % tail
             elif elapsed > span_s + 1e-9:
                 self.done.set()
-                self._stop.wait()
-                return
-            i = self._sample_index(elapsed) if self.rate_hz is not None else k % len(rec)
+                while not self._stop.is_set() and self._next is None:
+                    self._stop.wait(0.01)
+                continue
+            i = (self._sample_index(elapsed)
+                 if self.rate_hz is not None or (self.loop and self.loop_from_s > 0)
+                 else k % len(rec))
             k += 1
             if self._paused.is_set():
                 continue
-            wire = self.encode_sample(i, seq, round(elapsed * 1e6))
+            # the glove's clock: time since streaming began, across loops and switches
+            wire = self.encode_sample(i, seq, round((due - t_first) * 1e6))
             seq = (seq + 1) & 0xFFFF
             with self._lock:
                 garbage, self._garbage = self._garbage, []

@@ -4,6 +4,14 @@ Uses MuJoCo's offscreen renderer with ``MUJOCO_GL=egl`` (or ``osmesa``); where
 neither works, :func:`render_strip` raises :class:`RenderUnavailable` with the
 reason, and callers say so plainly. ``make render-deps`` installs the system
 libraries (Debian: libegl1, libgl1-mesa-dri, libosmesa6).
+
+Every frame given is one tile, up to :data:`MAX_TILES` (beyond that, that many
+evenly spaced frames: :func:`picked`), labelled with its time (or its number
+when no times are given).
+The camera looks from ahead of the fingers on the thumb's side, a little above
+the back of the hand, and follows the hand. The thumb is drawn in its own
+colour (:data:`THUMB_RGBA`), the other fingers in skin tones, the palm and
+forearm darker, on a light background.
 """
 
 from __future__ import annotations
@@ -16,6 +24,15 @@ import numpy as np
 
 from handrig.errors import HandrigError
 
+MAX_TILES = 12
+COLUMNS = 3
+THUMB_RGBA = (0.93, 0.45, 0.16, 1.0)
+FINGER_RGBA = (0.87, 0.72, 0.62, 1.0)
+PALM_RGBA = (0.72, 0.55, 0.46, 1.0)
+FOREARM_RGBA = (0.58, 0.47, 0.42, 1.0)
+BACKGROUND = '<texture type="skybox" builtin="gradient" rgb1="0.96 0.96 0.97" ' \
+             'rgb2="0.78 0.81 0.86" width="64" height="64"/>'
+
 
 class RenderUnavailable(HandrigError):
     """Offscreen rendering does not work on this machine."""
@@ -25,30 +42,57 @@ def _renderer_backend() -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
 
 
+def picked(n_frames: int) -> list[int]:
+    """Indices of the frames drawn out of ``n_frames``: all of them up to
+    :data:`MAX_TILES`, else that many evenly spaced, first and last included."""
+    if n_frames <= MAX_TILES:
+        return list(range(n_frames))
+    return [round(i * (n_frames - 1) / (MAX_TILES - 1)) for i in range(MAX_TILES)]
+
+
+def tile_labels(n_frames: int, times_s: Sequence[float] | None) -> list[str]:
+    """The label of each tile drawn (:func:`picked`): the frame's time, or its number
+    without times."""
+    if times_s is not None and len(times_s) != n_frames:
+        raise RenderUnavailable(f"{len(times_s)} times for {n_frames} frames: give one "
+                                "time per frame")
+    if times_s is None:
+        return [f"frame {i + 1}/{n_frames}" for i in picked(n_frames)]
+    return [f"t = {times_s[i]:.2f} s" for i in picked(n_frames)]
+
+
 def render_strip(
     frames_deg: Sequence[np.ndarray],
     joint_names: Sequence[str],
     out: str | Path,
     *,
-    n_images: int = 6,
+    times_s: Sequence[float] | None = None,
     size: tuple[int, int] = (320, 240),
 ) -> Path:
-    """Pose the puppet hand at up to ``n_images`` of ``frames_deg`` and save a PNG strip.
+    """Pose the puppet hand at each of ``frames_deg`` and save the tiles as one PNG.
 
-    ``frames_deg``: joint angles in degrees, one array per frame, in ``joint_names``
-    order (the rig's servo order); other joints stay at zero.
+    ``frames_deg``: joint angles in degrees, one array per frame, in
+    ``joint_names`` order (the rig's servo order); other joints stay at zero.
+    ``len(picked(len(frames_deg)))`` tiles are drawn. ``times_s``: each frame's
+    time, written on its tile.
     """
     _renderer_backend()
     if not frames_deg:
         raise RenderUnavailable("nothing to render: no frames were captured")
+    labels = tile_labels(len(frames_deg), times_s)
     try:
         import mujoco
-    except ImportError as exc:  # pragma: no cover - mujoco is a core dependency
-        raise RenderUnavailable(f"mujoco is not importable: {exc}") from None
+    except Exception as exc:  # a GL backend without its library fails at import
+        raise RenderUnavailable(
+            f"mujoco does not load with MUJOCO_GL={os.environ.get('MUJOCO_GL')}: {exc!r}; "
+            "`make render-deps` installs the EGL/OSMesa libraries") from None
     from sim.hand_model import hand_model_xml
 
-    model = mujoco.MjModel.from_xml_string(hand_model_xml("ri"))
+    xml = hand_model_xml("ri").replace("<worldbody>", f"<asset>{BACKGROUND}</asset><worldbody>",
+                                       1)
+    model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
+    _colour(model, mujoco)
     qadr = []
     for name in joint_names:
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
@@ -61,35 +105,67 @@ def render_strip(
             f"offscreen rendering is not available (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): "
             f"{exc}; `make render-deps` installs the EGL/OSMesa libraries"
         ) from None
-    mujoco.mj_forward(model, data)
+    palm = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "riPalm")
+    hand_bodies = [i for i in range(model.nbody) if i >= palm > 0]
     cam = mujoco.MjvCamera()
-    # look at the middle of the fingers from the thumb side, a little from above
-    tips = [i for i in range(model.nbody) if model.body_parentid[i] > 0]
-    cam.lookat[:] = data.xpos[tips].mean(axis=0)
-    cam.distance = 0.32
-    cam.azimuth = 120.0
-    cam.elevation = -25.0
-    model.vis.headlight.ambient[:] = (0.45, 0.45, 0.45)
-    model.vis.headlight.diffuse[:] = (0.7, 0.7, 0.7)
-    picks = np.linspace(0, len(frames_deg) - 1, min(n_images, len(frames_deg))).astype(int)
+    # ahead of the fingers on the thumb's side, a little above the back of the hand
+    cam.distance = 0.30
+    cam.azimuth = -150.0
+    cam.elevation = -20.0
+    model.vis.headlight.ambient[:] = (0.42, 0.42, 0.42)
+    model.vis.headlight.diffuse[:] = (0.62, 0.62, 0.62)
+    model.vis.headlight.specular[:] = (0.1, 0.1, 0.1)
     images = []
-    for i in picks:
-        data.qpos[:] = 0.0
-        for adr, value in zip(qadr, frames_deg[i], strict=True):
-            if adr >= 0 and np.isfinite(value):
-                data.qpos[adr] = np.radians(value)
-        mujoco.mj_forward(model, data)
-        renderer.update_scene(data, camera=cam)
-        images.append(renderer.render().copy())
-    renderer.close()
-    cols = min(3, len(images))
-    while len(images) % cols:
-        images.append(np.zeros_like(images[0]))
-    rows = [np.concatenate(images[r:r + cols], axis=1) for r in range(0, len(images), cols)]
-    strip = np.concatenate(rows, axis=0)
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    from matplotlib.image import imsave  # no pyplot: no backend switch in the caller
+    try:
+        for i in picked(len(frames_deg)):
+            frame = frames_deg[i]
+            data.qpos[:] = 0.0
+            for adr, value in zip(qadr, frame, strict=True):
+                if adr >= 0 and np.isfinite(value):
+                    data.qpos[adr] = np.radians(value)
+            mujoco.mj_forward(model, data)
+            cam.lookat[:] = data.xpos[hand_bodies].mean(axis=0)
+            renderer.update_scene(data, camera=cam)
+            images.append(renderer.render().copy())
+    finally:
+        renderer.close()
+    return _save(images, labels, Path(out))
 
-    imsave(out, strip)
+
+def _colour(model: object, mujoco: object) -> None:
+    """Thumb, fingers, palm and forearm in their colours (geoms named by their body)."""
+    m = model
+    for g in range(m.ngeom):  # type: ignore[attr-defined]
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY,  # type: ignore[attr-defined]
+                                 int(m.geom_bodyid[g])) or ""  # type: ignore[attr-defined]
+        rgba = (THUMB_RGBA if "Thumb" in body else PALM_RGBA if body.endswith("Palm")
+                else FOREARM_RGBA if body.endswith("Forearm") else FINGER_RGBA)
+        m.geom_rgba[g] = rgba  # type: ignore[attr-defined]
+
+
+def _save(images: list[np.ndarray], labels: list[str], out: Path) -> Path:
+    """Tiles in rows of :data:`COLUMNS`, each labelled, as one PNG."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure  # no pyplot: no backend switch in the caller
+
+    h, w = images[0].shape[:2]
+    cols = min(COLUMNS, len(images))
+    rows = -(-len(images) // cols)
+    dpi = 100
+    fig = Figure(figsize=(cols * w / dpi, rows * h / dpi), dpi=dpi, facecolor="white")
+    FigureCanvasAgg(fig)
+    for i, (img, label) in enumerate(zip(images, labels, strict=True)):
+        r, c = divmod(i, cols)
+        ax = fig.add_axes((c / cols, 1 - (r + 1) / rows, 1 / cols, 1 / rows))
+        ax.imshow(img, interpolation="nearest")
+        ax.set_axis_off()
+        ax.text(0.03, 0.95, label, transform=ax.transAxes, ha="left", va="top",
+                fontsize=11, family="monospace", color="black",
+                bbox={"facecolor": "white", "alpha": 0.75, "edgecolor": "none", "pad": 2})
+        if i == 0:
+            ax.text(0.97, 0.05, "thumb", transform=ax.transAxes, ha="right", va="bottom",
+                    fontsize=9, color=THUMB_RGBA, fontweight="bold")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi, facecolor="white")
+    fig.clear()
     return out

@@ -4,6 +4,12 @@ Static equilibrium solves by default (fast); ``--dynamic`` uses the dynamic sett
 sweep instead, ``--compare`` runs both and reports their difference. ``--plot``
 draws every DOF over inclination x rotation next to the grid; ``--report DIR``
 writes the plot and a JSON summary (timings, solver statistics, comparison) there.
+
+The installed grid (``config/sag_grid.npz``) is never rewritten unless ``--out``
+names it: by default the grid goes to the user's data directory
+(``$XDG_DATA_HOME/handrig/sag_grid.npz``, ``~/.local/share/handrig`` when
+unset), and a rig uses it through ``sag_grid`` in the ``[loop]`` table of its
+``rig.toml``. The shipped grid is regenerated with ``--out config/sag_grid.npz``.
 """
 
 from __future__ import annotations
@@ -13,23 +19,31 @@ import json
 from pathlib import Path
 from typing import Any
 
+from handrig.paths import DATA_HOME_HELP, config_file, user_data
+
 
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
-        "bake", help="bake the passive-sag grid (23 DOFs over forearm inclination x rotation)")
+        "bake", help="bake the passive-sag grid (23 DOFs over forearm inclination x rotation)",
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--step-deg", type=float, default=2.5,
                    help="grid step in degrees, dividing 90 (default 2.5; 5 gives 37 x 72)")
     p.add_argument("--fine-step-deg", type=float, default=None,
                    help="step in the palm-up band (inclination 0..45, |rotation| >= 100)"
                         " where the fingers bend fastest; 0 = no band (default step / 2.5:"
                         " 1 at step 2.5, 100 x 240 samples, the shipped grid)")
-    p.add_argument("--out", default=None, help="output .npz (default config/sag_grid.npz)")
-    p.add_argument("--config", default=None, help="passive-hand TOML (default config/)")
+    p.add_argument("--out", default=None, metavar="FILE.npz",
+                   help=f"output grid (default sag_grid.npz in {DATA_HOME_HELP}; the installed "
+                        "config/sag_grid.npz only when named here)")
+    p.add_argument("--config", default=None, metavar="FILE",
+                   help="passive-hand TOML (default: yours from `handrig passive tune` if "
+                        "there is one, else the installed config/passive_hand.toml)")
     p.add_argument("--dynamic", action="store_true",
                    help="bake with the dynamic settle sweep (slow reference) instead")
     p.add_argument("--compare", action="store_true",
                    help="also run the other solver and report the difference")
-    p.add_argument("--plot", action="store_true", help="write <out>.png: each DOF as a map")
+    p.add_argument("--plot", action="store_true",
+                   help="also write the plot next to the grid (<out>.png): each DOF as a map")
     p.add_argument("--report", default=None, metavar="DIR",
                    help="write sag_grid.png and bake_report.json into DIR")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -39,14 +53,14 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from handrig.sag import SAG_GRID
     from sim import bake
     from sim.passive import load_passive_params
 
     fine = args.step_deg / 2.5 if args.fine_step_deg is None else args.fine_step_deg or None
     bake.grid_axes(args.step_deg, fine)  # validates the steps before any work
-    cfg = load_passive_params(args.config)
-    out = Path(args.out) if args.out else SAG_GRID
+    cfg = load_passive_params(args.config or config_file("passive_hand.toml"))
+    out = Path(args.out) if args.out else user_data("sag_grid.npz")
+    out.parent.mkdir(parents=True, exist_ok=True)
     primary = bake.bake_dynamic if args.dynamic else bake.bake_static
     other = bake.bake_static if args.dynamic else bake.bake_dynamic
     columns = (TextColumn("{task.description}"), BarColumn(),
@@ -80,8 +94,11 @@ def run(args: argparse.Namespace) -> int:
               f" {cmp['max_deg']:.4f} deg, median {cmp['median_deg']:.2e} deg")
     if args.plot:
         print(f"plot: {bake.plot(grid, path.with_suffix('.png'))}")
+    if not args.out:
+        print(f"  to use it: sag_grid = \"{path}\" in the [loop] table of rig.toml")
     if args.report:
         rdir = Path(args.report)
+        rdir.mkdir(parents=True, exist_ok=True)
         png = bake.plot(grid, rdir / "sag_grid.png")
         summary = {k: v for k, v in meta.items()
                    if k not in ("ks_nm_per_rad", "kd_nms_per_rad", "rest_deg")}

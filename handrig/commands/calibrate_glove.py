@@ -6,11 +6,18 @@ and the median of each raw channel is kept. Then, per calibrated channel:
 ``raw_open`` = the open-hand median; ``raw_closed`` = the step median farthest
 from it in the channel's closing direction (the direction of the current
 ``raw_open -> raw_closed``, so reversed sensors stay reversed). The curves and
-their open/closed angles are kept from the current config. The result is
-written with tomli-w (default: back to ``config/glove.toml``).
+their open/closed angles are kept from the current config.
+
+Where it reads and writes: it starts from ``--config``, by default your own
+glove.toml ($XDG_CONFIG_HOME/handrig/glove.toml, ~/.config/handrig when unset)
+if there is one, else the installed config/glove.toml. It writes ``--out``; by
+default back to ``--config`` when that is your own file, and to your own
+glove.toml when it started from the installed one, which is never rewritten.
+Use the result with ``handrig run --glove-config FILE``.
 
 Interactive by default (Enter starts each step); ``--yes`` runs the steps on a
-timer with no input, for scripts and tests.
+timer with no input, for scripts and tests. ``handrig sim-glove --calibration``
+is an emulated glove that performs the poses, to rehearse without a glove.
 """
 
 from __future__ import annotations
@@ -28,11 +35,11 @@ from handrig.clock import Clock, MonotonicClock
 from handrig.errors import DataError, DeviceError
 from handrig.glove import GloveSource, SerialGlove
 from handrig.glove_calibration import (
-    DEFAULT_GLOVE_PATH,
     GloveConfig,
     glove_config_to_toml,
     load_glove_config,
 )
+from handrig.paths import CONFIG_HOME_HELP, config_file, output_for
 
 STEPS: tuple[tuple[str, str], ...] = (
     ("open", "Open hand: fingers straight and together, thumb relaxed beside the index."),
@@ -40,6 +47,8 @@ STEPS: tuple[tuple[str, str], ...] = (
     ("thumb-oppose", "Thumb to little finger: touch the two tips together."),
     ("thumb-spread", "Thumb spread: move the thumb as far from the index as is comfortable."),
 )
+DEFAULT_SETTLE_S = 1.0
+DEFAULT_HOLD_S = 2.0
 MIN_SPAN_FRACTION = 0.02
 """A channel must move at least this fraction of its full scale between open and closed."""
 
@@ -75,15 +84,20 @@ def register(sub: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--config", default=None,
-                   help="glove config to start from (default: config/glove.toml)")
-    p.add_argument("--out", default=None, help="where to write (default: the --config file)")
+    p.add_argument("--config", default=None, metavar="FILE",
+                   help=f"glove config to start from (default: glove.toml in {CONFIG_HOME_HELP}"
+                        ", else the installed config/glove.toml)")
+    p.add_argument("--out", default=None, metavar="FILE",
+                   help="where to write (default: the --config file if it is yours, else "
+                        "glove.toml in the user config directory; the installed file is "
+                        "never rewritten)")
     p.add_argument("--glove", default=None, metavar="PORT",
                    help="glove port, or opengloves:PORT (default: [glove] port of the config)")
-    p.add_argument("--hold", type=float, default=2.0, metavar="S",
-                   help="seconds to record each pose (default 2)")
-    p.add_argument("--settle", type=float, default=1.0, metavar="S",
-                   help="seconds to get into each pose before recording (default 1)")
+    p.add_argument("--hold", type=float, default=DEFAULT_HOLD_S, metavar="S",
+                   help=f"seconds to record each pose (default {DEFAULT_HOLD_S:g})")
+    p.add_argument("--settle", type=float, default=DEFAULT_SETTLE_S, metavar="S",
+                   help=f"seconds to get into each pose before recording "
+                        f"(default {DEFAULT_SETTLE_S:g})")
     p.add_argument("--yes", action="store_true",
                    help="no questions: run the steps on the timer and write the file")
     p.set_defaults(func=run)
@@ -158,9 +172,9 @@ def derive(cfg: GloveConfig, medians: dict[str, np.ndarray],
 
 
 def run(args: argparse.Namespace) -> int:
-    src = Path(args.config) if args.config else DEFAULT_GLOVE_PATH
+    src = Path(args.config) if args.config else config_file("glove.toml")
     cfg = load_glove_config(src)
-    out_path = Path(args.out) if args.out else src
+    out_path = Path(args.out) if args.out else output_for(src, "glove.toml")
     port, fmt = _port_and_format(args, cfg)
     if args.hold <= 0 or args.settle < 0:
         raise DataError("--hold must be positive and --settle zero or positive")
@@ -193,7 +207,9 @@ def run(args: argparse.Namespace) -> int:
             new_cfg, glove=dataclasses.replace(new_cfg.glove, port=port, format=fmt))  # type: ignore[arg-type]
     header = ("# handrig glove: written by `handrig calibrate glove`.\n"
               "# Format: handrig/glove_calibration.py.\n")
+    out_path.parent.mkdir(parents=True, exist_ok=True)
     out_path.write_text(header + tomli_w.dumps(glove_config_to_toml(new_cfg)), encoding="utf-8")
     load_glove_config(out_path)  # what was written must load
     print(f"wrote {out_path}")
+    print(f"  use it with: handrig run --glove-config {out_path}")
     return 0

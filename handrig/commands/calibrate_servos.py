@@ -4,12 +4,19 @@ For every servo in the rig, the joint is brought to its zero pose (finger
 straight, wrist neutral: 0 deg in the vocabulary convention) and the servo's
 present position becomes ``zero_ticks``:
 
-* by hand (default): torque stays off; move the joint, press Enter;
-* ``--jog``: torque on; type ``+2`` / ``-0.5`` (joint degrees) to jog the servo,
-  Enter to accept; ``s`` skips a servo, ``q`` stops (nothing is written);
+* by hand (default): torque stays off; move the joint, press Enter to read
+  where it is now, Enter again to accept that reading;
+* ``--jog``: torque on; type ``+2`` / ``-0.5`` (joint degrees) to jog the
+  servo; the prompt then shows the position it settled at, and Enter accepts
+  exactly that; ``s`` skips a servo, ``q`` stops (nothing is written);
 * ``--yes``: accept every servo's present position without asking (scripts, tests).
 
-The rig file is rewritten in place, keeping its comments; only the
+Where it reads and writes: the rig file is ``--config``, by default your own
+rig.toml ($XDG_CONFIG_HOME/handrig/rig.toml, ~/.config/handrig when unset) if
+there is one, else the installed config/rig.toml. The result goes to ``--out``;
+by default back to ``--config`` when that is your own file, and to your own
+rig.toml when it started from the installed one, which is never rewritten. Use
+it with ``handrig run --config FILE``. Comments and layout are kept; only the
 ``zero_ticks`` lines change, and the new file is checked before it is written
 (a zero whose limits fall outside the servo's range is refused with the reason).
 """
@@ -28,9 +35,11 @@ from pathlib import Path
 from typing import Any
 
 from handrig.app import port_process
+from handrig.clock import Clock, MonotonicClock
 from handrig.commands.calibrate_glove import calibrate_subparsers
-from handrig.config import CONFIG_DIR, build
+from handrig.config import build
 from handrig.errors import ConfigError, HandrigError
+from handrig.paths import CONFIG_HOME_HELP, config_file, output_for
 from handrig.rigconfig import RigConfig, load_rig_config
 from handrig.servo import DynamixelBus
 from handrig.servo.registers import Reg
@@ -39,10 +48,11 @@ from handrig.servo.registers import Reg
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = calibrate_subparsers(sub).add_parser(
         "servos", help="set each servo's zero (by hand, or jogging) and save it to rig.toml",
-        description=__doc__,
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--config", default=None, metavar="FILE",
-                   help="rig file to update (default config/rig.toml)")
+                   help=f"rig file to start from (default: rig.toml in {CONFIG_HOME_HELP}, "
+                        "else the installed config/rig.toml)")
     p.add_argument("--bus", default=None, metavar="PORT",
                    help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
     p.add_argument("--ids", default=None, metavar="LIST", help="only these servo IDs, e.g. 1,2,7")
@@ -50,7 +60,9 @@ def register(sub: Any) -> None:
     p.add_argument("--yes", action="store_true",
                    help="accept every present position without asking")
     p.add_argument("--out", default=None, metavar="FILE",
-                   help="write here instead of rewriting the rig file")
+                   help="where to write (default: the --config file if it is yours, else "
+                        "rig.toml in the user config directory; the installed file is never "
+                        "rewritten)")
     p.set_defaults(func=run)
 
 
@@ -112,6 +124,11 @@ def calibration_rig(rig: RigConfig) -> RigConfig:
 
 
 MAX_JOG_STEP_DEG = 10.0  # one jog command moves the joint at most this far
+ACCEPT_TOLERANCE_TICKS = 2  # Enter accepts the shown reading if the servo is still within this
+POLL_S = 0.02  # present position is read this often while waiting for the servo to settle
+STILL_S = 0.15  # ... and counts as settled after this long within STILL_TICKS
+STILL_TICKS = 1
+SETTLE_TIMEOUT_S = 3.0
 
 
 def _ask(prompt: str) -> str:
@@ -122,32 +139,69 @@ def _ask(prompt: str) -> str:
     return line.strip()
 
 
+def settled_position(bus: DynamixelBus, index: int, clock: Clock,
+                     timeout_s: float = SETTLE_TIMEOUT_S) -> tuple[int, bool]:
+    """Present Position of servo ``index`` once it has stopped moving: (ticks, settled).
+
+    Settled: ``STILL_S`` without a change of more than ``STILL_TICKS``. After
+    ``timeout_s`` the last reading is returned with ``settled`` False.
+    """
+    ticks = bus.read_register(index, Reg.PRESENT_POSITION)
+    t_end = clock.now() + timeout_s
+    anchor, since = ticks, clock.now()
+    while True:
+        now = clock.now()
+        if now - since >= STILL_S:
+            return ticks, True
+        if now >= t_end:
+            return ticks, False
+        clock.sleep(POLL_S)
+        ticks = bus.read_register(index, Reg.PRESENT_POSITION)
+        if abs(ticks - anchor) > STILL_TICKS:
+            anchor, since = ticks, clock.now()
+
+
 def calibrate(
     bus: DynamixelBus, rig: RigConfig, ids: list[int], *, jog: bool, yes: bool,
     ask: Callable[[str], str] = _ask, say: Callable[[str], None] = print,
+    clock: Clock | None = None,
 ) -> dict[int, int]:
-    """Walk through the servos and return {id: new zero_ticks}."""
+    """Walk through the servos and return {id: new zero_ticks}.
+
+    The prompt shows the servo's position read after it settled (after a jog,
+    or after the joint was moved by hand); Enter accepts exactly that reading,
+    once a fresh read confirms the servo is still there (else the new reading
+    is shown and Enter is asked for again).
+    """
+    clock = clock or MonotonicClock()
     zeros: dict[int, int] = {}
     for servo_id in ids:
         index = bus.ids.index(servo_id)
         cal = rig.servo(servo_id)
         name = bus.describe(index)
         start = bus.read_register(index, Reg.PRESENT_POSITION)
+        shown, settled = settled_position(bus, index, clock)
         while True:
-            ticks = bus.read_register(index, Reg.PRESENT_POSITION)
-            deg = cal.ticks_to_deg(ticks)
             if yes:
-                answer = ""
-            else:
-                hint = ("+N/-N jog degrees, " if jog else "move the joint by hand, ") + \
-                    "Enter accepts, s skips, q quits"
-                answer = ask(f"{name}: present {ticks} ticks ({deg:+.1f} deg from the "
-                             f"current zero {cal.zero_ticks}); bring it to 0 deg [{hint}]: ")
-            if answer == "":
-                ticks = bus.read_register(index, Reg.PRESENT_POSITION)  # where it is now
-                zeros[servo_id] = int(ticks)
-                say(f"{name}: zero_ticks {cal.zero_ticks} -> {ticks}")
+                zeros[servo_id] = shown
+                say(f"{name}: zero_ticks {cal.zero_ticks} -> {shown}")
                 break
+            hint = ("+N/-N jog degrees, " if jog else "move the joint by hand, ") + \
+                "Enter accepts the position shown, s skips, q quits"
+            moving = "" if settled else ", still moving"
+            answer = ask(f"{name}: at {shown} ticks ({cal.ticks_to_deg(shown):+.1f} deg from "
+                         f"the current zero {cal.zero_ticks}{moving}); bring it to 0 deg "
+                         f"[{hint}]: ")
+            if answer == "":
+                now_ticks, settled = settled_position(bus, index, clock)
+                if settled and abs(now_ticks - shown) <= ACCEPT_TOLERANCE_TICKS:
+                    zeros[servo_id] = shown
+                    say(f"{name}: zero_ticks {cal.zero_ticks} -> {shown}")
+                    break
+                say(f"{name}: it moved ({shown} -> {now_ticks} ticks); Enter accepts the new "
+                    "position if it stays")
+                shown = now_ticks
+                continue
             if answer.lower() == "s":
                 say(f"{name}: skipped (zero_ticks stays {cal.zero_ticks})")
                 break
@@ -171,11 +225,12 @@ def calibrate(
                 bus.write_register(index, Reg.GOAL_POSITION, int(min(max(goal, low), high)))
             else:
                 say("torque is off: move the joint by hand, then press Enter")
+            shown, settled = settled_position(bus, index, clock)
     return zeros
 
 
 def run(args: argparse.Namespace) -> int:
-    rig_path = Path(args.config) if args.config else CONFIG_DIR / "rig.toml"
+    rig_path = Path(args.config) if args.config else config_file("rig.toml")
     rig = load_rig_config(rig_path)
     ids = [s.id for s in rig.servos]
     if args.ids:
@@ -209,7 +264,15 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         raise ConfigError(f"the new zeros do not fit: {exc.detail}", key=exc.key,
                           value=exc.value, allowed=exc.allowed) from None
-    out = Path(args.out) if args.out else rig_path
+    out = Path(args.out) if args.out else output_for(rig_path, "rig.toml")
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     print(f"wrote {len(zeros)} zero(s) to {out}")
+    moved = out.resolve().parent != rig_path.resolve().parent
+    relative = [f"{k} = {v!r}" for k in ("map", "sag_grid", "glove")
+                if (v := getattr(rig.loop, k)) and not Path(v).is_absolute()]
+    if moved and relative:
+        print(f"  note: {', '.join(relative)} in [loop] are relative to the rig file's "
+              f"folder, now {out.parent}")
+    print(f"  use it with: handrig run --config {out}")
     return 0

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import time
+import re
 from pathlib import Path
 
 import pytest
@@ -10,7 +10,7 @@ import pytest
 from handrig.commands.calibrate_servos import calibrate, calibration_rig, update_zero_ticks
 from handrig.config import CONFIG_DIR
 from handrig.errors import ConfigError
-from handrig.rigconfig import load_rig_config
+from handrig.rigconfig import RigConfig, load_rig_config
 from handrig.servo import DynamixelBus
 from sim.dxl_bus import SimBus
 
@@ -37,34 +37,101 @@ def test_update_binds_zero_ticks_to_its_block_whatever_the_line_order():
     assert new.count("zero_ticks") == 2
 
 
-def test_jogging_a_servo_sets_its_zero(tmp_path: Path):
-    rig = load_rig_config()
+PROMPT = re.compile(r"at (\d+) ticks \(([+-][\d.]+) deg")
+
+
+def two_servo_bus(rig: RigConfig, sim: SimBus) -> DynamixelBus:
     two = rig.__class__(bus=rig.bus, loop=rig.loop, servos=(rig.servo(7), rig.servo(8)))
+    bus = DynamixelBus(sim.port_path, calibration_rig(two))
+    bus.connect()
+    return bus
+
+
+def test_each_jog_shows_where_the_servo_settled_and_enter_accepts_that() -> None:
+    rig = load_rig_config()
     said: list[str] = []
+    prompts: list[str] = []
+    answers = iter(["+1000", "nan", "inf", "+5", "+5", "", "s"])
+
+    def ask(prompt: str) -> str:  # answers at once: no pause for the servo to arrive
+        prompts.append(prompt)
+        return next(answers)
+
     with SimBus.from_rig(rig, ids=[7, 8]) as sim:
-        bus = DynamixelBus(sim.port_path, calibration_rig(two))
-        bus.connect()
+        bus = two_servo_bus(rig, sim)
         try:
-            # wild jogs are refused; a person is slow (longer than the 100 ms watchdog)
-            answers = iter(["+1000", "nan", "inf", "WAIT", "+5", "WAIT", "+5", "WAIT", "",
-                            "s"])
-
-            def ask(prompt: str) -> str:
-                a = next(answers)
-                if a == "WAIT":
-                    time.sleep(0.4)  # let the emulated servo travel; a human pause
-                    a = next(answers)
-                return a
-
             with bus.torque(handle_signals=False):
                 zeros = calibrate(bus, rig, [7, 8], jog=True, yes=False, ask=ask,
                                   say=said.append)
         finally:
             bus.close()
-    # +10 joint degrees at direction +1, gear 1: about 114 ticks above 2048
-    assert set(zeros) == {7}
-    assert zeros[7] == pytest.approx(2048 + 10 * 4096 / 360, abs=3)
     assert sum("not a jog" in s for s in said) == 3
+    shown = [PROMPT.search(p) for p in prompts]
+    assert all(shown), prompts
+    ticks = [int(m.group(1)) for m in shown if m]
+    degs = [float(m.group(2)) for m in shown if m]
+    # prompts 4, 5, 6 (servo 7): before any jog, after +5, after +5 more (10 deg in all)
+    assert degs[3] == pytest.approx(0.0, abs=0.2)
+    assert degs[4] == pytest.approx(5.0, abs=0.2)
+    assert degs[5] == pytest.approx(10.0, abs=0.2)
+    assert set(zeros) == {7}
+    assert zeros[7] == ticks[5]  # exactly the reading the last prompt showed
+    assert zeros[7] == pytest.approx(2048 + 10 * 4096 / 360, abs=3)
+
+
+def test_by_hand_enter_reads_again_and_accepts_only_what_was_shown() -> None:
+    rig = load_rig_config()
+    said: list[str] = []
+    prompts: list[str] = []
+    with SimBus.from_rig(rig, ids=[7, 8]) as sim:
+        moves = iter([2200, None, None])
+
+        def ask(prompt: str) -> str:
+            prompts.append(prompt)
+            to = next(moves)
+            if to is not None:  # a person moves the joint, then presses Enter
+                servo = sim.servo(7)
+                servo.set_motion(float(to), 0.0, 0.0)
+            return "" if len(prompts) < 3 else "s"
+
+        bus = two_servo_bus(rig, sim)
+        try:
+            bus.disable_torque()
+            zeros = calibrate(bus, rig, [7, 8], jog=False, yes=False, ask=ask,
+                              say=said.append)
+        finally:
+            bus.close()
+    assert any("it moved (2048 -> 2200 ticks)" in s for s in said), said
+    assert PROMPT.search(prompts[1]).group(1) == "2200"  # type: ignore[union-attr]
+    assert zeros == {7: 2200}
+
+
+def test_default_output_is_the_users_copy_and_the_checkout_stays_clean(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    checkout = Path(__file__).resolve().parents[2]
+
+    def status() -> str:
+        res = subprocess.run(["git", "status", "--porcelain", "--untracked-files=all",
+                              "config"], cwd=checkout, capture_output=True, text=True)
+        if res.returncode:
+            pytest.skip("not a git checkout")
+        return res.stdout
+
+    before = status()
+    env = {**os.environ, "XDG_CONFIG_HOME": str(tmp_path / "cfg")}
+    res = subprocess.run(
+        [sys.executable, "-m", "handrig.cli", "calibrate", "servos", "--bus", "sim",
+         "--ids", "1", "--yes"], capture_output=True, text=True, timeout=120, env=env,
+    )
+    assert res.returncode == 0, res.stderr
+    mine = tmp_path / "cfg" / "handrig" / "rig.toml"
+    assert f"wrote 1 zero(s) to {mine}" in res.stdout
+    assert f"handrig run --config {mine}" in res.stdout
+    assert load_rig_config(mine).servo(1).zero_ticks == pytest.approx(2048, abs=2)
+    assert status() == before
 
 
 def test_cli_writes_a_checked_copy_of_the_rig_file(tmp_path: Path):

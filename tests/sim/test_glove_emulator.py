@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import select
 import subprocess
 import sys
@@ -16,7 +17,7 @@ import pytest
 from firmware_protocol.glove import FrameDecoder, GloveFrame
 from firmware_protocol.opengloves import LineDecoder
 from handrig.errors import DataError
-from handrig.glove_recording import sweep_recording, write_glove_recording
+from handrig.glove_recording import GloveRecording, sweep_recording, write_glove_recording
 from sim.glove_emulator import GloveEmulator
 
 
@@ -159,3 +160,82 @@ def test_sim_glove_command_bad_file(tmp_path: Path) -> None:
     bad = tmp_path / "bad.csv"
     bad.write_text("nope\n")
     assert main(["sim-glove", str(bad)]) == 2
+
+
+def test_play_switches_recording_mid_stream_and_loops_from_a_point() -> None:
+    def constant(value: int, seconds: float, channels: int = 3) -> GloveRecording:
+        n = round(seconds * 100)
+        raw = np.full((n, channels), float(value))
+        return GloveRecording(np.arange(n) / 100.0, raw, np.zeros(n, dtype=np.int64),
+                              tuple(f"ch{i}" for i in range(channels)), None, 100.0)
+
+    first = constant(100, 0.1)
+    with GloveEmulator(first, "frames", rate_hz=100.0) as emu:
+        fd = open_port(emu.port_path)
+        try:
+            assert emu.done.wait(2.0)  # the first recording ran out: silent, port open
+            data = read_for(fd, 0.05)
+            # a move (0.1 s at 200) and a hold (700) looped from 0.1 s: never 200 again
+            move = constant(200, 0.1)
+            hold = constant(700, 0.1)
+            both = GloveRecording(np.arange(20) / 100.0, np.vstack([move.raw, hold.raw]),
+                                  np.zeros(20, dtype=np.int64), move.channel_names, None, 100.0)
+            emu.play(both, loop=True, loop_from_s=0.1)
+            assert not emu.done.is_set()
+            data += read_for(fd, 0.5)
+        finally:
+            os.close(fd)
+    frames = FrameDecoder().feed(data)
+    values = [f.channels[0] for f in frames]
+    assert values[:10] == [100] * 10
+    rest = values[10:]
+    assert rest[:10] == [200] * 10 and set(rest[10:]) == {700} and len(rest) > 35
+    stamps = [f.timestamp_us for f in frames]
+    assert np.all(np.diff(stamps) > 0)  # the glove's clock
+    with pytest.raises(DataError, match="loop_from_s"):
+        GloveEmulator(first, "frames", loop=True, loop_from_s=5.0)
+
+
+def test_sim_glove_calibration_on_a_timer_announces_each_pose() -> None:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handrig.cli", "sim-glove", "--calibration", "--pose-s", "0.8",
+         "--transition-s", "0.2"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        cwd=Path(__file__).resolve().parents[2],
+    )
+    lines: list[str] = []
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first.startswith("port: /dev/pts/")
+        fd = open_port(first.split(": ", 1)[1].strip())
+        try:
+            while sum(line.startswith("pose 1/4 open") for line in lines) < 2:
+                lines.append(proc.stdout.readline())
+                if sum(line.startswith("pose ") for line in lines) > 8:
+                    break
+            data = read_for(fd, 0.2)
+        finally:
+            os.close(fd)
+    finally:
+        proc.send_signal(2)  # Ctrl-C
+        out, _ = proc.communicate(timeout=10)
+    text = "".join(lines)
+    poses = re.findall(r"^pose (\d)/4 (\S+):", text, flags=re.M)
+    assert [name for _, name in poses][:5] == ["open", "fist", "thumb-oppose",
+                                               "thumb-spread", "open"]
+    assert "riIndexMCPy" in text and "closed" in text  # the emulated ranges are printed
+    assert "sent " in out and proc.returncode == 0
+    assert len(FrameDecoder().feed(data)) >= 20
+
+
+def test_sim_glove_argument_mistakes_are_one_line(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    from handrig.cli import main
+
+    assert main(["sim-glove"]) == 2
+    assert "--calibration" in capsys.readouterr().err
+    assert main(["sim-glove", "x.csv", "--calibration"]) == 2
+    assert "not both" in capsys.readouterr().err
+    assert main(["sim-glove", "x.csv", "--cue"]) == 2
+    assert "--cue is for --calibration" in capsys.readouterr().err

@@ -1,0 +1,325 @@
+"""The show console: the panel drawn from plain snapshots, the plain-line fallback, the
+snapshot of a running rig, and the key reader on a real pseudo-terminal."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import termios
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from rich.console import Console
+
+from handrig.app import build_parts
+from handrig.clock import FakeClock
+from handrig.glove import GloveSample, GloveSource, GloveStats
+from handrig.panel import (
+    BusHealth,
+    GloveLink,
+    KeyReader,
+    LivePanel,
+    Outputs,
+    PanelSnapshot,
+    RigSnapshot,
+    ServoLine,
+    plain_line,
+    render,
+)
+from handrig.rig import Rig
+from handrig.rigconfig import load_rig_config
+from handrig.servo.bus import BusStats, ServoBus, ServoState
+
+
+def show_snapshot(**kw: object) -> PanelSnapshot:
+    rig = load_rig_config()
+    servos = tuple(
+        ServoLine(s.id, s.joint, goal_deg=10.0 - i, present_deg=9.5 - i, stale=i in (3, 12),
+                  temperature_c=30.0 + i, temperature_limit_c=70.0, current_ma=-25.0 * i,
+                  hardware_error=0x20 if s.id == 8 else 0)
+        for i, s in enumerate(rig.servos))
+    base = {
+        "mode": "relaxing", "reason": "glove silent for 0.25 s: easing to the relaxed pose",
+        "elapsed_s": 754.0, "loop_rate_hz": 200.0, "overruns": 2, "latency_p50_us": 92.0,
+        "latency_p99_us": 197.0,
+        "glove": GloveLink("/dev/ttyACM0", 199.5, 150000, 3, 0.31, 1),
+        "bus": BusHealth("/dev/ttyUSB0", 50.0, 200.0, 19, 1, 2, 0.12),
+        "servos": servos,
+        "outputs": Outputs("127.0.0.1:39539", 60.0, 0, "/shows/take1.bvh", 3_400_000, 201.0),
+        "events": ("commissioned", "glove silent for 0.25 s: easing to the relaxed pose"),
+    }
+    base.update(kw)
+    return PanelSnapshot(**base)  # type: ignore[arg-type]
+
+
+def screen(snap: PanelSnapshot, height: int = 24) -> list[str]:
+    console = Console(width=80, height=height, record=True, file=io.StringIO(),
+                      force_terminal=True)
+    console.print(render(snap, height))
+    return console.export_text().splitlines()
+
+
+def test_the_panel_fits_80x24_and_shows_what_a_show_needs() -> None:
+    lines = screen(show_snapshot())
+    assert len(lines) <= 24 and max(len(line) for line in lines) <= 80
+    text = "\n".join(lines)
+    assert lines[0].startswith("handrig  RELAXING") and "glove silent for 0.25 s" in lines[0]
+    assert lines[0].endswith("12:34")
+    assert "/dev/ttyACM0  199.5 Hz  errors 3  last 310 ms  reconnects 1" in text
+    assert "latency p50 92 us  p99 197 us  overruns 2" in text
+    assert "reads 50/s  timeouts 19  errors 1  stale 2 (worst 120 ms)" in text
+    assert "VMC 127.0.0.1:39539 60 Hz" in text and "rec /shows/take1.bvh 3.2 MB 3:21" in text
+    # all 20 servos, two to a line, with temperature, current and errors
+    rows = [line for line in lines if "│" in line][1:]
+    assert len(rows) == 10
+    assert rows[0].split("│")[0].split() == ["1", "ThumbCMCx", "+10.0", "+9.5", "30", "0", "-"]
+    assert rows[7].split("│")[0].split()[-1] == "L"  # servo 8: overload
+    assert rows[9].split("│")[1].split()[:2] == ["20", "WristDev"]
+    assert "stale" not in "".join(rows)  # stale readings are counted, not spelled per servo
+    assert "space" in lines[-1] and "e-stop" in lines[-1]
+
+
+def test_a_small_terminal_keeps_the_head_and_the_keys() -> None:
+    lines = screen(show_snapshot(events=tuple(f"event {i}" for i in range(9))), height=18)
+    assert len(lines) <= 18
+    assert lines[0].startswith("handrig") and "space" in lines[-1]
+
+
+def test_without_outputs_or_readings_it_says_so() -> None:
+    snap = PanelSnapshot(servos=(ServoLine(1, "riIndexMCPy"),), keys=False)
+    text = "\n".join(screen(snap))
+    assert "WAITING" in text and "VMC off" in text and "rec off" in text
+    assert "last never" in text and "stale none" in text
+    assert "keys off" in text
+    line = plain_line(snap)
+    assert line.startswith("0:00 waiting") and "vmc off" in line and "rec off" in line
+
+
+def test_plain_line_carries_the_same_figures() -> None:
+    line = plain_line(show_snapshot())
+    for part in ("12:34 relaxing (glove silent", "glove 200 Hz err 3 last 310 ms reconnects 1",
+                 "latency p50 92 p99 197 us", "timeouts 19", "stale 2 (worst 120 ms)",
+                 "servos max 49 C, 1 with errors", "vmc 127.0.0.1:39539 60 Hz",
+                 "rec /shows/take1.bvh 3.2 MB 3:21"):
+        assert part in line, part
+    assert "\n" not in line
+
+
+def test_live_panel_without_a_terminal_prints_plain_lines_after_the_header_once() -> None:
+    out = io.StringIO()
+    console = Console(file=out, width=200)
+    assert not console.is_terminal
+    snaps = iter([show_snapshot(elapsed_s=float(i)) for i in range(100)])
+    with LivePanel(lambda: next(snaps), console=console, header=["bus: 20 servos"],
+                   plain_every_s=0.05):
+        time.sleep(0.3)
+    lines = out.getvalue().splitlines()
+    assert lines[0] == "bus: 20 servos" and lines.count("bus: 20 servos") == 1
+    assert len(lines) >= 3 and all(" | glove " in line for line in lines[1:])
+
+
+def test_live_panel_on_a_terminal_draws_below_the_header() -> None:
+    out = io.StringIO()
+    console = Console(file=out, width=80, height=24, force_terminal=True)
+    panel = LivePanel(show_snapshot, refresh_hz=20.0, console=console,
+                      header=["servo bus /dev/ttyUSB0: 20 servos commissioned"])
+    with panel:
+        time.sleep(0.3)
+        panel.log("a line above the panel")
+    text = out.getvalue()
+    assert text.count("20 servos commissioned") == 1
+    assert text.index("20 servos commissioned") < text.index("RELAXING")
+    assert "a line above the panel" in text and panel.failure == ""
+
+
+def test_a_failing_snapshot_stops_the_panel_not_the_show() -> None:
+    out = io.StringIO()
+
+    def broken() -> PanelSnapshot:
+        raise KeyError("bus")
+
+    with LivePanel(broken, console=Console(file=out), plain_every_s=0.02) as panel:
+        time.sleep(0.1)
+    assert "panel stopped: the snapshot failed: KeyError('bus')" in out.getvalue()
+    assert panel.failure
+
+
+# -- a running rig's snapshot ----------------------------------------------------------
+
+
+class SteadyGlove(GloveSource):
+    def __init__(self, clock: FakeClock) -> None:
+        super().__init__()
+        self.clock = clock
+        self.n = 0
+
+    def latest(self) -> GloveSample | None:
+        self.n += 1
+        t = self.clock.now()
+        raw = np.array([2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
+        return GloveSample(raw, np.array([0.0, 0.0, 0.0, 1.0]), 0, False, self.n, 0, t, self.n)
+
+    def stats(self) -> GloveStats:
+        return GloveStats(frames_ok=self.n, crc_errors=2, reconnects=1,
+                          time_since_last_good_s=0.004)
+
+
+class WarmBus(ServoBus):
+    """Servos 2 and 5 stale; temperatures and currents reported."""
+
+    def __init__(self, names: tuple[str, ...], clock: FakeClock) -> None:
+        self._names = names
+        self.clock = clock
+        self._stats = BusStats(len(names), writes=0, timeouts=4)
+        self.ids = list(range(1, len(names) + 1))
+        self.port = "/dev/ttyUSB9"
+        self.last_goals_deg = np.zeros(len(names))  # where torque-on holds the servos
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self._names
+
+    @property
+    def stats(self) -> BusStats:
+        return self._stats
+
+    def connect(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    @contextlib.contextmanager
+    def torque(self) -> Iterator[ServoBus]:  # type: ignore[override]
+        yield self
+
+    def write_goals_deg(self, goals_deg: np.ndarray) -> int:
+        self._stats.writes += 1
+        return 0
+
+    def read_state(self, deadline_s: float | None = None) -> ServoState:
+        self._stats.reads += 1
+        n = len(self._names)
+        stale = np.zeros(n, bool)
+        stale[[1, 4]] = True
+        age = np.where(stale, 0.05, 0.0)
+        hw = np.zeros(n, np.uint8)
+        hw[6] = 0x04
+        return ServoState(np.full(n, 3.0), np.zeros(n), np.full(n, -120.0),
+                          np.full(n, 41.0), np.zeros(n, np.uint8), hw, stale, age,
+                          self.clock.now(), self._stats.copy())
+
+
+def test_rig_snapshot_reads_a_running_rig() -> None:
+    parts = build_parts()
+    clock = FakeClock()
+    bus = WarmBus(tuple(parts.pipeline.servo_joints), clock)
+    rig = Rig(SteadyGlove(clock), bus, parts.pipeline, clock, controls_from_raw=parts.controls,
+              orientation=parts.orientation, rate_hz=200.0, read_every=4,
+              glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None)
+    snapshot = RigSnapshot(rig, glove_source="/dev/ttyACM0", temperature_limit_c={1: 45.0},
+                           keys=True)
+    rig.run(frames=100)
+    first = snapshot()
+    clock.advance(1.0)
+    snap = snapshot()
+    assert first.mode == snap.mode
+    assert snap.glove.source == "/dev/ttyACM0" and snap.glove.errors == 2
+    assert snap.glove.reconnects == 1 and snap.glove.last_frame_age_s == pytest.approx(0.004)
+    assert snap.bus.port == "/dev/ttyUSB9" and snap.bus.timeouts == 4
+    assert snap.bus.stale_servos == 2
+    assert snap.bus.stale_worst_age_s == pytest.approx(1.05, abs=0.02)  # 50 ms + 1 s since
+    assert len(snap.servos) == 20
+    sv = snap.servos[6]
+    assert (sv.temperature_c, sv.current_ma, sv.hardware_error) == (41.0, -120.0, 0x04)
+    assert snap.servos[0].temperature_limit_c == 45.0
+    assert snap.servos[1].stale and not snap.servos[0].stale
+    assert np.isfinite(snap.latency_p50_us) and snap.elapsed_s > 1.0
+    text = "\n".join(screen(snap))
+    assert "stale 2 (worst" in text and "/dev/ttyUSB9" in text and "e-stop" in text
+    assert "keys off" in "\n".join(screen(RigSnapshot(rig)()))  # until a KeyReader listens
+
+
+# -- keys ----------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def pty_pair() -> Iterator[tuple[int, int]]:
+    master, slave = os.openpty()
+    try:
+        yield master, slave
+    finally:
+        for fd in (master, slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+def test_keys_call_their_callbacks_without_blocking(pty_pair: tuple[int, int]) -> None:
+    master, slave = pty_pair
+    calls: list[str] = []
+    before = termios.tcgetattr(slave)
+    reader = KeyReader.for_show(slave, toggle_relax=lambda: calls.append("relax"),
+                                stop=lambda: calls.append("stop"),
+                                estop=lambda: calls.append("estop"))
+    with reader:
+        lflag = termios.tcgetattr(slave)[3]
+        assert not lflag & termios.ECHO and not lflag & termios.ICANON  # keys, not lines
+        assert lflag & termios.ISIG  # Ctrl-C still interrupts
+        t0 = time.monotonic()
+        assert reader.poll() == 0  # nothing typed: returns at once
+        assert time.monotonic() - t0 < 0.05
+        os.write(master, b" x\x1b[Aq")  # space, an unbound key, an arrow key, q
+        assert reader.poll(1.0) >= 1
+        reader.poll(0.2)
+        os.write(master, b"E")
+        reader.poll(1.0)
+    assert calls == ["relax", "stop", "estop"]
+    assert reader.pressed == [" ", "q", "E"]
+    assert termios.tcgetattr(slave) == before  # the terminal is given back as it was
+
+
+def test_the_key_thread_reads_until_closed_and_keeps_a_failing_callback(
+        pty_pair: tuple[int, int]) -> None:
+    master, slave = pty_pair
+    calls: list[str] = []
+
+    def broken() -> None:
+        raise RuntimeError("estop wiring")
+
+    reader = KeyReader(slave, {" ": lambda: calls.append("relax"), "e": broken}, poll_s=0.01)
+    reader.start()
+    try:
+        os.write(master, b"  ")
+        deadline = time.monotonic() + 2.0
+        while len(calls) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert calls == ["relax", "relax"]
+        os.write(master, b"e")
+        deadline = time.monotonic() + 2.0
+        while reader.error is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert isinstance(reader.error, RuntimeError)
+    finally:
+        reader.close()
+    errors: list[BaseException] = []
+    with KeyReader(slave, {"e": broken}, on_error=errors.append) as again:
+        os.write(master, b"e")
+        again.poll(1.0)
+    assert len(errors) == 1
+
+
+def test_a_key_reader_on_a_pipe_leaves_it_alone() -> None:
+    r, w = os.pipe()
+    try:
+        calls: list[str] = []
+        with KeyReader(r, {"q": lambda: calls.append("q")}) as reader:
+            os.write(w, b"q")
+            reader.poll(1.0)
+            os.close(w)
+            reader.poll(0.5)
+        assert calls == ["q"] and reader.eof
+    finally:
+        os.close(r)

@@ -1,0 +1,92 @@
+"""The rendered strip: one labelled tile per frame, the thumb in its own colour.
+
+Rendering needs EGL or OSMesa (``make render-deps``); where neither works the
+drawing test skips with the renderer's reason."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.render import (
+    MAX_TILES,
+    THUMB_RGBA,
+    RenderUnavailable,
+    picked,
+    render_strip,
+    tile_labels,
+)
+
+DRAW = """
+import json, sys
+import numpy as np
+from handrig.rigconfig import load_rig_config
+from sim.render import RenderUnavailable, render_strip
+rig = load_rig_config()
+names = [s.joint for s in rig.servos]
+frames = [np.array([0.0 if "Wrist" in n else k / 4 * (s.max_deg if "Thumb" in n else
+          0.6 * s.max_deg) for n, s in zip(names, rig.servos)]) for k in range(5)]
+try:
+    path = render_strip(frames, names, sys.argv[1], times_s=[0.0, 0.5, 1.0, 1.5, 2.0])
+except RenderUnavailable as exc:
+    print(json.dumps({"unavailable": str(exc)}))
+else:
+    print(json.dumps({"path": str(path)}))
+"""
+
+
+def test_labels_are_times_or_numbers() -> None:
+    assert tile_labels(2, [0.0, 1.25]) == ["t = 0.00 s", "t = 1.25 s"]
+    assert tile_labels(3, None) == ["frame 1/3", "frame 2/3", "frame 3/3"]
+    with pytest.raises(RenderUnavailable, match="one time per frame"):
+        tile_labels(3, [0.0])
+
+
+def test_many_frames_give_evenly_spaced_tiles_that_say_which() -> None:
+    assert picked(5) == [0, 1, 2, 3, 4]
+    many = picked(100)
+    assert len(many) == MAX_TILES and many[0] == 0 and many[-1] == 99
+    labels = tile_labels(100, [i / 10 for i in range(100)])
+    assert len(labels) == MAX_TILES and labels[-1] == "t = 9.90 s"
+    assert tile_labels(100, None)[-1] == "frame 100/100"
+
+
+def test_no_frames_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(RenderUnavailable, match="no frames"):
+        render_strip([], ["riIndexMCPy"], tmp_path / "x.png")
+
+
+@pytest.mark.slow
+def test_one_tile_per_frame_with_the_thumb_in_colour(tmp_path: Path) -> None:
+    from matplotlib.image import imread
+
+    out = tmp_path / "strip.png"
+    # a fresh process: MuJoCo picks its GL backend when it is first imported
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    res = subprocess.run([sys.executable, "-c", DRAW, str(out)], capture_output=True,
+                         text=True, timeout=120, env=env)
+    assert res.returncode == 0, res.stderr
+    said = json.loads(res.stdout.strip().splitlines()[-1])
+    if "unavailable" in said:
+        pytest.skip(said["unavailable"])
+    img = imread(out)[..., :3]
+    assert img.shape == (2 * 240, 3 * 320, 3)  # 5 tiles in rows of 3
+    thumb = np.array(THUMB_RGBA[:3])
+    for i in range(6):
+        r, c = divmod(i, 3)
+        tile = img[r * 240:(r + 1) * 240, c * 320:(c + 1) * 320]
+        # shaded thumb: the hue of THUMB_RGBA at some brightness
+        near = np.abs(tile / np.maximum(tile.max(axis=2, keepdims=True), 1e-6)
+                      - thumb / thumb.max()).max(axis=2) < 0.12
+        lit = tile.max(axis=2) > 0.3
+        if i < 5:
+            assert (near & lit).sum() > 150, f"tile {i}: no thumb"
+            assert tile[8:20, 10:60].mean() > 0.8  # the label's white box
+        else:
+            assert np.all(tile > 0.99)  # the empty sixth place is blank
