@@ -25,6 +25,7 @@ import numpy as np
 import tomli_w
 
 from handrig.clock import Clock, MonotonicClock
+from handrig.commands._numbers import nonnegative_float, positive_float
 from handrig.errors import DataError, DeviceError
 from handrig.glove import GloveSource, SerialGlove
 from handrig.glove_calibration import (
@@ -80,9 +81,9 @@ def register(sub: Any) -> None:
     p.add_argument("--out", default=None, help="where to write (default: the --config file)")
     p.add_argument("--glove", default=None, metavar="PORT",
                    help="glove port, or opengloves:PORT (default: [glove] port of the config)")
-    p.add_argument("--hold", type=float, default=2.0, metavar="S",
+    p.add_argument("--hold", type=positive_float, default=2.0, metavar="S",
                    help="seconds to record each pose (default 2)")
-    p.add_argument("--settle", type=float, default=1.0, metavar="S",
+    p.add_argument("--settle", type=nonnegative_float, default=1.0, metavar="S",
                    help="seconds to get into each pose before recording (default 1)")
     p.add_argument("--yes", action="store_true",
                    help="no questions: run the steps on the timer and write the file")

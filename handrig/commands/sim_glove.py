@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from handrig.commands._numbers import positive_float
 from handrig.errors import DataError
 from handrig.glove_recording import read_glove_recording
 
@@ -20,7 +21,7 @@ def register(sub: Any) -> None:
     p.add_argument("file", help="glove recording (CSV)")
     p.add_argument("--format", choices=("frames", "opengloves"), default="frames",
                    help="wire format (default: frames, firmware_protocol/SPEC.md)")
-    p.add_argument("--rate", type=float, default=None, metavar="HZ",
+    p.add_argument("--rate", type=positive_float, default=None, metavar="HZ",
                    help="send at this rate (default: the recording's own timestamps)")
     p.add_argument("--loop", action="store_true", help="start over at the end, until Ctrl-C")
     p.add_argument("--analog-max", type=int, default=4095, choices=(1023, 4095),
