@@ -38,6 +38,7 @@ from __future__ import annotations
 import errno
 import math
 import os
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -58,6 +59,7 @@ from handrig.outputs.vmc import WRIST_NAMES
 Format = Literal["csv", "bvh"]
 FORMATS: tuple[Format, ...] = ("csv", "bvh")
 PARTIAL_SUFFIX = ".partial"
+_IOV_MAX = 1024 if sys.platform.startswith("linux") else 16  # buffers per writev (Linux; POSIX)
 BVH_PROFILE = "perception_neuron"
 """The joint-mapping profile that puts curves into BVH channels (and takes them out)."""
 BVH_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
@@ -95,7 +97,7 @@ class Recorder:
 
     ``add`` (or calling the recorder, the rig's output hook) turns the frame into one
     text line at once and appends it to a list; a writer thread takes that list every
-    ``flush_s`` seconds, writes it with ``os.write`` and (``sync=True``) asks the OS to
+    ``flush_s`` seconds, writes it with ``os.writev`` and (``sync=True``) asks the OS to
     put it on the disk (``fdatasync``). So a killed process or a power cut loses at most
     the last ``flush_s`` seconds plus one write, and memory holds at most
     ``max_pending_s`` seconds of lines (frames beyond that, when the disk stalls, are
@@ -125,7 +127,7 @@ class Recorder:
         self.with_wrist = with_wrist
         self.flush_s = float(flush_s)
         self.sync = sync
-        self._max_pending = max(1, math.ceil(max_pending_s * self.rate_hz))
+        self._max_pending = max(1, math.ceil(max_pending_s * self.rate_hz)) + 1  # + header
         self._n_added = 0
         self.frames_dropped = 0
         """Frames not recorded because the disk fell ``max_pending_s`` behind or failed."""
@@ -134,7 +136,7 @@ class Recorder:
         self.bytes_written = 0
         self.error: DataError | None = None
         self._closed = False
-        self._pending: list[str] = []
+        self._pending: list[bytes] = []
         self._lock = threading.Lock()  # the pending list (the loop thread takes only this)
         self._io_lock = threading.Lock()  # the file
         self._wake = threading.Event()
@@ -147,7 +149,7 @@ class Recorder:
         if self.fmt == "bvh":
             self._cols, self._sign, self._offset, n_channels = _bvh_layout(self._table)
             self._motion = np.zeros(n_channels)
-            self._line_fmt = " ".join(["%.6f"] * n_channels) + "\n"
+            self._line_fmt = b" ".join([b"%.6f"] * n_channels) + b"\n"
         self._tmp = partial_path(self.path)
         if self._tmp.exists():
             raise DataError(
@@ -166,7 +168,7 @@ class Recorder:
         if self.fmt == "bvh":
             head = _bvh_header(self.rate_hz)
             self._frames_offset = head.index(FRAMES_FIELD) + len(FRAMES_FIELD)
-            self._pending.append(head)
+            self._pending.append(head.encode("ascii"))
         self._thread = threading.Thread(target=self._writer, name=f"recorder:{self.path.name}",
                                         daemon=True)
         self._thread.start()
@@ -212,9 +214,9 @@ class Recorder:
 
     def _start_csv(self) -> None:
         names = csv_header(bool(self.with_wrist))
-        self._line_fmt = ",".join(["%.6f"] * len(names)) + "\n"
+        self._line_fmt = b",".join([b"%.6f"] * len(names)) + b"\n"
         with self._lock:
-            self._pending.append(",".join(names) + "\n")
+            self._pending.append((",".join(names) + "\n").encode("ascii"))
 
     def __call__(self, t_s: float, pose54_deg: NDArray[np.float64]) -> None:
         """The rig's output hook: ``pose54_deg`` = 50 curves then the 4 wrist DOFs
@@ -237,13 +239,19 @@ class Recorder:
             if lines and self.error is None:
                 self._write(lines)
 
-    def _write(self, lines: list[str]) -> None:
+    def _write(self, lines: list[bytes]) -> None:
         header = 1 if self.bytes_written == 0 else 0  # the first line written is the header
-        data = "".join(lines).encode("ascii")
+        size = 0
         try:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(self._fd, view):]
+            for k in range(0, len(lines), _IOV_MAX):  # no join: writev releases the GIL
+                group = lines[k: k + _IOV_MAX]
+                want = sum(len(b) for b in group)
+                done = os.writev(self._fd, group)
+                if done < want:  # a short write (a signal, a full disk): write the rest
+                    view = memoryview(b"".join(group))[done:]
+                    while view:
+                        view = view[os.write(self._fd, view):]
+                size += want
             if self.sync:
                 _datasync(self._fd)
         except OSError as exc:
@@ -253,7 +261,7 @@ class Recorder:
                     f" holds the first {self.frames_written} frames")
                 self.frames_dropped += len(lines) - header
             return
-        self.bytes_written += len(data)
+        self.bytes_written += size
         self.frames_written += len(lines) - header
 
     def flush(self) -> None:
