@@ -112,3 +112,66 @@ def test_record_repair_command(tmp_path: Path) -> None:
     out = subprocess.run([*cli, str(bad)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "bad.bvh: no MOTION block" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def _descendants(pid: int) -> list[int]:
+    """Child processes of ``pid``, recursively (from /proc; Linux)."""
+    out: list[int] = []
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return out
+    for tid in tasks:
+        try:
+            with open(f"/proc/{pid}/task/{tid}/children") as f:
+                kids = [int(k) for k in f.read().split()]
+        except OSError:
+            continue
+        for k in kids:
+            out += [k, *_descendants(k)]
+    return out
+
+
+def _frame_lines(path: Path) -> int:
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return 0
+    return max(0, data.count(b"\n") - data[: data.find(b"MOTION")].count(b"\n") - 3)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_sigkilled_handrig_run_leaves_a_repairable_take(tmp_path: Path) -> None:
+    from sim.demo_recording import DEMO_RECORDING
+
+    take = tmp_path / "show.bvh"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handrig.cli", "run", "--glove", f"replay:{DEMO_RECORDING}",
+         "--bus", "sim", "--seconds", "60", "--record", str(take)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    kids: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        seen = 0
+        while seen < 2 * RATE_HZ and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            seen = _frame_lines(partial_path(take))
+        assert seen >= 2 * RATE_HZ, proc.stderr.read() if proc.poll() is not None else seen
+        time.sleep(0.7)  # past the next flush
+        seen = _frame_lines(partial_path(take))
+        kids = _descendants(proc.pid)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        for pid in [proc.pid, *kids]:  # the emulators it started do not outlive the test
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        if proc.poll() is None:
+            proc.wait()
+    fixed = repair(partial_path(take))
+    assert fixed.path == take and fixed.frames >= seen
+    t_s, poses, wrist = load_performance(take)
+    assert len(t_s) == fixed.frames and wrist is not None
+    assert np.all(np.isfinite(poses))
