@@ -103,7 +103,7 @@ class Recorder:
     ``max_pending_s`` seconds of lines (frames beyond that, when the disk stalls, are
     dropped and counted in :attr:`frames_dropped`, never raised into the loop). A
     write error (disk full) stops the writing, is kept in :attr:`error` and raised by
-    :meth:`close`.
+    :meth:`close`, which then leaves the take as ``<path>.partial`` for :func:`repair`.
 
     The file is written as ``<path>.partial`` and renamed to ``path`` by :meth:`close`,
     which also writes the frame count into the BVH header (a fixed-width field written
@@ -279,8 +279,12 @@ class Recorder:
         self._stop = True
         self._wake.set()
         self._thread.join()
+        if self.error is not None:  # the take stays a .partial, for repair
+            os.close(self._fd)
+            raise DataError(f"{self.error}; what was written is in {self._tmp}: `handrig"
+                            f" record repair {self._tmp}` keeps its whole frames")
         try:
-            if self.error is None and self.fmt == "bvh":
+            if self.fmt == "bvh":
                 os.pwrite(self._fd, _frames_value(self.frames_written).encode("ascii"),
                           self._frames_offset)
                 _datasync(self._fd)
@@ -288,9 +292,8 @@ class Recorder:
             os.replace(self._tmp, self.path)
         except OSError as exc:
             raise DataError(f"{self.path}: finishing the recording failed ({exc.strerror});"
-                            f" the take is in {self._tmp}") from None
-        if self.error is not None:
-            raise self.error
+                            f" the take is in {self._tmp}: `handrig record repair"
+                            f" {self._tmp}` makes it readable") from None
         return self.path
 
     def __enter__(self) -> Recorder:

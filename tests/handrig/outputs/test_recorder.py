@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -377,3 +378,20 @@ def test_bvh_fingers_curl_toward_the_palm_on_both_hands(tmp_path: Path) -> None:
         # wrist flexion (palmar) lowers the knuckles, radial deviation moves them forward
         assert r2[f"{side}HandMiddle1"][1] < r0[f"{side}HandMiddle1"][1] - 2.0
         assert r3[f"{side}HandMiddle1"][2] > r0[f"{side}HandMiddle1"][2] + 1.0
+
+
+def test_a_write_error_never_reaches_the_loop_and_close_says_what_to_do(tmp_path: Path) -> None:
+    if not Path("/dev/full").exists():
+        pytest.skip("needs /dev/full (Linux)")
+    _, poses, _ = _performance(1)
+    rec = Recorder(tmp_path / "t.csv", sync=False)
+    os.close(rec._fd)
+    rec._fd = os.open("/dev/full", os.O_WRONLY)  # every write fails: ENOSPC
+    for i in range(5):
+        rec.add(i / 200.0, poses[0])
+    rec.flush()
+    assert rec.error is not None and "No space left" in str(rec.error)
+    rec.add(1.0, poses[0])  # dropped and counted, not raised
+    assert rec.frames_dropped == 6
+    with pytest.raises(DataError, match=r"writing the recording failed.*record repair"):
+        rec.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
 import signal
@@ -164,10 +165,8 @@ def test_a_sigkilled_handrig_run_leaves_a_repairable_take(tmp_path: Path) -> Non
         proc.wait(timeout=10)
     finally:
         for pid in [proc.pid, *kids]:  # the emulators it started do not outlive the test
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
         if proc.poll() is None:
             proc.wait()
     fixed = repair(partial_path(take))
