@@ -28,6 +28,11 @@ def _integer(text: str) -> int:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
 
 
+def whole_int(text: str) -> int:
+    """Any whole number (for a flag whose command checks the range itself)."""
+    return _integer(text)
+
+
 def finite_float(text: str) -> float:
     """Any finite number (not nan, not inf)."""
     return _number(text)
