@@ -226,8 +226,11 @@ def _motion_matrix(
                 try:
                     float(tok)
                 except ValueError:
+                    last = (f" (the last frame: the file is cut; {UNFINISHED_HINT})"
+                            if k == len(data_lines) - 1 else "")
+                    shown = repr(tok) if len(tok) <= 24 else repr(tok[:24]) + "..."
                     raise DataError(
-                        f"{source}: MOTION frame {k}: {tok!r} is not a number"
+                        f"{source}: MOTION frame {k}: {shown} is not a number{last}"
                     ) from None
         raise
     expected = n_frames * n_channels

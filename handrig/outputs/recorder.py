@@ -105,9 +105,10 @@ class Recorder:
     write error (disk full) stops the writing, is kept in :attr:`error` and raised by
     :meth:`close`, which then leaves the take as ``<path>.partial`` for :func:`repair`.
 
-    The file is written as ``<path>.partial`` and renamed to ``path`` by :meth:`close`,
-    which also writes the frame count into the BVH header (a fixed-width field written
-    as ``0`` at the start). A ``.partial`` left by a run that did not close is
+    The file is written as ``<path>.partial`` and renamed to ``path`` by :meth:`close`.
+    The BVH header's frame count is a fixed-width field, rewritten after each batch, so
+    a take cut by a kill between batches reads as it is; one cut inside a batch or by a
+    power cut needs :func:`repair`. A ``.partial`` left by a run that did not close is
     refused at start (it holds a take): :func:`repair` turns it into a readable file.
     ``with_wrist``: record the 4 wrist DOFs; None decides on the first frame.
     """
@@ -263,6 +264,15 @@ class Recorder:
             return
         self.bytes_written += size
         self.frames_written += len(lines) - header
+        if self.fmt == "bvh":
+            # the header follows the data, so a killed run's take usually reads as it is
+            try:
+                os.pwrite(self._fd, _frames_value(self.frames_written).encode("ascii"),
+                          self._frames_offset)
+            except OSError as exc:
+                with self._lock:
+                    self.error = DataError(f"{self.path}: updating the frame count failed"
+                                           f" ({exc.strerror})")
 
     def flush(self) -> None:
         """Write everything added so far now (from the calling thread)."""
@@ -507,8 +517,12 @@ def _raise_bad_row(p: Path, rows: list[tuple[int, str]], width: int) -> None:
             try:
                 float(tok)
             except ValueError:
-                raise DataError(f"{p}: line {n}, column {col + 1}: {tok.strip()!r} is not"
-                                " a number") from None
+                shown = tok.strip()
+                shown = repr(shown) if len(shown) <= 24 else repr(shown[:24]) + "..."
+                last = (f" (the last line: the file is cut; {UNFINISHED_HINT})"
+                        if n == rows[-1][0] else "")
+                raise DataError(f"{p}: line {n}, column {col + 1}: {shown} is not"
+                                f" a number{last}") from None
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from handrig.errors import DataError
 from handrig.outputs.recorder import load_performance, partial_path, repair
 
 RATE_HZ = 200.0
@@ -78,6 +79,10 @@ def test_sigkill_mid_take_loses_at_most_about_a_second(tmp_path: Path, fmt: str)
             proc.kill()
             proc.wait()
     assert not take.exists() and partial_path(take).exists()
+    try:  # killed between batches it reads as it is; inside one, it says to repair
+        load_performance(partial_path(take))
+    except DataError as exc:
+        assert "record repair" in str(exc), exc
     fixed = repair(partial_path(take))
     assert fixed.path == take
     t_s, poses, wrist = load_performance(take)
