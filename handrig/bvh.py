@@ -125,7 +125,7 @@ def _parse_joint(
     if toks.peek() == "CHANNELS":
         toks.next("CHANNELS")
         count_tok = toks.next("channel count")
-        if not count_tok.isdigit():
+        if not (count_tok.isascii() and count_tok.isdigit()):
             toks.pos -= 1
             raise toks.fail(f"expected a channel count, found {count_tok!r}")
         chans = []
@@ -165,7 +165,17 @@ def parse_bvh(text: str, source: str = "<string>") -> Bvh:
     motion_line = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
     if motion_line is None:
         raise DataError(f"{source}: no MOTION block: not a BVH file, or the file is cut short")
-    toks = _Tokens(lines[:motion_line], source)
+    joints, n_channels = parse_hierarchy(lines[:motion_line], source)
+    header = [(n, ln.strip()) for n, ln in enumerate(lines[motion_line + 1:], motion_line + 2)]
+    n_frames, frame_time_s, first_data = _motion_header(header, source)
+    data_lines = [ln for ln in lines[first_data:] if ln.strip()]
+    motion = _motion_matrix(data_lines, n_frames, n_channels, first_data, source)
+    return Bvh(tuple(joints), frame_time_s, motion, source)
+
+
+def parse_hierarchy(lines: list[str], source: str = "<string>") -> tuple[list[BvhJoint], int]:
+    """The joints of a ``HIERARCHY`` block (``lines`` up to ``MOTION``) and the channel count."""
+    toks = _Tokens(lines, source)
     toks.expect("HIERARCHY")
     joints: list[BvhJoint] = []
     n_channels = 0
@@ -174,12 +184,11 @@ def parse_bvh(text: str, source: str = "<string>") -> Bvh:
         n_channels = _parse_joint(toks, toks.next("the root name"), -1, joints, n_channels)
     if not joints:
         raise DataError(f"{source}: the HIERARCHY block has no ROOT joint")
+    return joints, n_channels
 
-    header = [(n, ln.strip()) for n, ln in enumerate(lines[motion_line + 1:], motion_line + 2)]
-    n_frames, frame_time_s, first_data = _motion_header(header, source)
-    data_lines = [ln for ln in lines[first_data:] if ln.strip()]
-    motion = _motion_matrix(data_lines, n_frames, n_channels, first_data, source)
-    return Bvh(tuple(joints), frame_time_s, motion, source)
+
+UNFINISHED_HINT = ("if the recording was cut short (a crash, a power cut), `handrig record"
+                   " repair FILE` keeps every whole frame and sets 'Frames:'")
 
 
 def _motion_header(header: list[tuple[int, str]], source: str) -> tuple[int, float, int]:
@@ -195,7 +204,10 @@ def _motion_header(header: list[tuple[int, str]], source: str) -> tuple[int, flo
         raise DataError(
             f"{source}: line {body[0][0]}: cannot read 'Frames:'/'Frame Time:' values"
         ) from None
-    if n_frames < 1 or not frame_time_s > 0.0:
+    if n_frames == 0:
+        raise DataError(f"{source}: 'Frames: 0': an empty recording, or one that was never"
+                        f" finished; {UNFINISHED_HINT}")
+    if n_frames < 1 or not 0.0 < frame_time_s < float("inf"):
         raise DataError(
             f"{source}: Frames = {n_frames} and Frame Time = {frame_time_s}: need at least one"
             " frame and a positive frame time"
@@ -214,8 +226,11 @@ def _motion_matrix(
                 try:
                     float(tok)
                 except ValueError:
+                    last = (f" (the last frame: the file is cut; {UNFINISHED_HINT})"
+                            if k == len(data_lines) - 1 else "")
+                    shown = repr(tok) if len(tok) <= 24 else repr(tok[:24]) + "..."
                     raise DataError(
-                        f"{source}: MOTION frame {k}: {tok!r} is not a number"
+                        f"{source}: MOTION frame {k}: {shown} is not a number{last}"
                     ) from None
         raise
     expected = n_frames * n_channels
@@ -227,8 +242,8 @@ def _motion_matrix(
             raise DataError(
                 f"{source}: MOTION is truncated at frame {bad} (0-based): the header declares"
                 f" {n_frames} frames of {n_channels} channels; frame {bad} has {got} values"
-                f" and {len(data_lines)} frame lines are present. Re-export the file or fix"
-                " 'Frames:'"
+                f" and {len(data_lines)} frame lines are present. Re-export the file, or"
+                f" {UNFINISHED_HINT}"
             )
         raise DataError(
             f"{source}: MOTION frame {bad} (0-based) has {counts[bad] if bad < len(counts) else 0}"
@@ -257,15 +272,15 @@ def format_bvh(bvh: Bvh, decimals: int = 5) -> str:
     return buf.getvalue()
 
 
-def write_bvh(f: TextIO, bvh: Bvh, decimals: int = 5) -> None:
-    """Write ``bvh`` to the text stream ``f`` (the motion block with numpy, for long takes)."""
+def format_hierarchy(joints: tuple[BvhJoint, ...] | list[BvhJoint]) -> str:
+    """The ``HIERARCHY`` block for ``joints`` (joints as a tree), ending in a newline."""
     children: dict[int, list[int]] = {}
-    for i, j in enumerate(bvh.joints):
+    for i, j in enumerate(joints):
         children.setdefault(j.parent, []).append(i)
     out = ["HIERARCHY"]
 
     def emit(i: int, depth: int) -> None:
-        j = bvh.joints[i]
+        j = joints[i]
         pad = "\t" * depth
         out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}")
         out.append(f"{pad}{{")
@@ -283,8 +298,13 @@ def write_bvh(f: TextIO, bvh: Bvh, decimals: int = 5) -> None:
 
     for root in children.get(-1, []):
         emit(root, 0)
-    out += ["MOTION", f"Frames: {bvh.n_frames}", f"Frame Time: {bvh.frame_time_s:.10g}"]
-    f.write("\n".join(out) + "\n")
+    return "\n".join(out) + "\n"
+
+
+def write_bvh(f: TextIO, bvh: Bvh, decimals: int = 5) -> None:
+    """Write ``bvh`` to the text stream ``f`` (the motion block with numpy, for long takes)."""
+    f.write(format_hierarchy(bvh.joints))
+    f.write(f"MOTION\nFrames: {bvh.n_frames}\nFrame Time: {bvh.frame_time_s:.10g}\n")
     if bvh.n_frames:
         np.savetxt(f, bvh.motion, fmt=f"%.{decimals}f", delimiter=" ")
 

@@ -48,6 +48,8 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"not valid TOML: {exc}", file=str(p)) from None
+    except RecursionError:
+        raise ConfigError("not valid TOML: nested too deeply", file=str(p)) from None
 
 
 def load(path: str | Path, cls: type[T], *, section: str | None = None) -> T:
@@ -183,6 +185,9 @@ def _build_dataclass(cls: type, value: Any, key: str) -> Any:
             value=exc.value,
             allowed=exc.allowed,
         ) from None
+    except (TypeError, ValueError, ArithmeticError, LookupError) as exc:
+        # a value the types allow but the class's own code cannot use
+        raise ConfigError(f"not a usable {cls.__name__}: {exc}", key=key or None) from None
     return obj
 
 

@@ -11,11 +11,19 @@ when nothing new has arrived, and never blocks. Concrete sources:
   played against the injected clock (no thread, deterministic with a FakeClock).
 
 Each source keeps :class:`GloveStats` (good frames, CRC and other errors,
-resyncs, garbage bytes, sequence gaps, time since the last good frame). A port
-that goes away sets :attr:`GloveSource.failure` to a :class:`DeviceError` with a
+frames dropped for an unexpected channel count, resyncs, garbage bytes, sequence
+gaps, disconnects and reconnects, time since the last good frame). A port that
+goes away sets :attr:`GloveSource.failure` to a :class:`DeviceError` with a
 clear message; ``latest()`` then simply returns ``None`` (the loop's glove
 timeout eases the puppet to the relaxed pose) and :meth:`GloveSource.check`
-raises it for callers that prefer to stop.
+raises it for callers that prefer to stop. What happened to the port (gone,
+back after how long) is also queued as text for :meth:`GloveSource.drain_events`.
+
+A frame's channel count is checked before it becomes a sample: ``channels`` if
+given, else the count the glove settles on (:data:`LOCK_FRAMES` good frames in a
+row with the same count, at least ``min_channels``, after each open). A frame
+with another count, valid CRC or not, is counted in ``channel_errors`` and
+dropped: to the loop it looks like a garbled glove, never like a sample.
 
 ``SerialGlove(reader="poll")`` reads without a thread instead: each ``latest()``
 does one non-blocking read and decodes what is there (a few microseconds, no
@@ -32,6 +40,7 @@ import select
 import termios
 import threading
 from abc import ABC, abstractmethod
+from collections import deque
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Literal
@@ -39,14 +48,19 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from firmware_protocol.glove import BUTTON_RELAX, FrameDecoder
-from firmware_protocol.opengloves import BUTTON_LETTERS, LineDecoder
+from firmware_protocol.glove import BUTTON_RELAX, MAX_CHANNELS, FrameDecoder
+from firmware_protocol.opengloves import BUTTON_LETTERS, CHANNEL_KEYS, LineDecoder
 from handrig.clock import Clock
 from handrig.errors import DeviceError
 from handrig.glove_recording import GloveRecording
 
 FloatArray = NDArray[np.float64]
 GloveFormat = Literal["frames", "opengloves"]
+
+LOCK_FRAMES = 3
+"""Good frames in a row with one channel count that fix the count a glove sends."""
+MAX_EVENTS = 64
+"""Port events kept for :meth:`GloveSource.drain_events` (the oldest go first)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -95,8 +109,18 @@ class GloveStats:
     frames_lost: int = 0
     bytes_read: int = 0
     reconnects: int = 0
+    """Times the port came back after it went away."""
     time_since_last_good_s: float = math.inf
     failure: str = ""
+    channel_errors: int = 0
+    """Frames dropped for a channel count other than :attr:`expected_channels`
+    (also counted in ``decode_errors``)."""
+    expected_channels: int = 0
+    """The channel count frames must have; 0 until the glove has settled on one."""
+    disconnects: int = 0
+    """Times the port went away (unplugged, hung up, unreadable)."""
+    last_outage_s: float = 0.0
+    """How long the port was gone the last time it came back, seconds."""
 
     @property
     def errors(self) -> int:
@@ -115,6 +139,7 @@ class GloveSource(ABC):
         self._newest: GloveSample | None = None
         self._taken = 0
         self._failure: DeviceError | None = None
+        self._events: deque[str] = deque(maxlen=MAX_EVENTS)
 
     def start(self) -> None:  # noqa: B027 - optional hook
         """Begin reading (open the port, start the thread). Idempotent."""
@@ -154,6 +179,17 @@ class GloveSource(ABC):
         """Raise :attr:`failure` if the device has failed."""
         if self._failure is not None:
             raise self._failure
+
+    def drain_events(self) -> list[str]:
+        """What happened to the device since the last call (port gone, port back), oldest
+        first; at most :data:`MAX_EVENTS` are kept. Safe to call from any thread."""
+        out = []
+        while self._events:
+            try:
+                out.append(self._events.popleft())
+            except IndexError:
+                break
+        return out
 
     def __enter__(self) -> GloveSource:
         self.start()
@@ -195,8 +231,18 @@ class SerialGlove(GloveSource):
         reconnect_s: float = 0.5,
         poll_s: float = 0.05,
         reader: Literal["thread", "poll"] = "thread",
+        channels: int | None = None,
+        min_channels: int = 1,
     ) -> None:
         super().__init__()
+        if channels is not None and not 0 <= channels <= MAX_CHANNELS:
+            raise DeviceError(f"glove channels {channels}: a frame carries 0..{MAX_CHANNELS}")
+        if not 0 <= min_channels <= MAX_CHANNELS:
+            raise DeviceError(f"glove min_channels {min_channels}: use 0..{MAX_CHANNELS}")
+        if channels is not None and channels < min_channels:
+            raise DeviceError(f"glove channels {channels} is below min_channels {min_channels}")
+        self.channels = channels
+        self.min_channels = min_channels
         if fmt not in ("frames", "opengloves"):
             raise DeviceError(f"glove format {fmt!r} unknown: use 'frames' or 'opengloves'")
         if estop_letter not in BUTTON_LETTERS:
@@ -225,6 +271,13 @@ class SerialGlove(GloveSource):
         self._count = 0
         self._bytes = 0
         self._reconnects = 0
+        self._disconnects = 0
+        self._lost_at_s = 0.0
+        self._last_outage_s = 0.0
+        self._channel_errors = 0
+        self._expected = channels if channels is not None else 0
+        self._candidate = -1  # the count of the good frames in a row before it is fixed
+        self._run_length = 0
         self._last_good_s = -math.inf
         self._lock = threading.Lock()
 
@@ -266,7 +319,9 @@ class SerialGlove(GloveSource):
             self._poll()
         return super().latest()
 
-    def _feed(self, data: bytes, now: float) -> None:
+    def feed(self, data: bytes, now: float) -> None:
+        """Decode ``data`` as bytes read from the port at clock time ``now`` (the reader
+        thread and :meth:`latest` with ``reader="poll"`` call this; tests may too)."""
         with self._lock:
             self._bytes += len(data)
             self._last_chunk = data
@@ -301,7 +356,7 @@ class SerialGlove(GloveSource):
                 data = os.read(fd, 4096)  # EAGAIN when empty (VMIN 1, O_NONBLOCK)
                 if not data:
                     raise OSError("end of file: the device hung up")
-                self._feed(data, self.clock.now())
+                self.feed(data, self.clock.now())
                 if len(data) < 4096:
                     return
         except BlockingIOError:
@@ -317,18 +372,23 @@ class SerialGlove(GloveSource):
             if self.fmt == "frames":
                 f = self._frames.stats
                 return GloveStats(
-                    frames_ok=f.frames_ok, crc_errors=f.crc_errors,
-                    decode_errors=f.errors - f.crc_errors, resyncs=f.resyncs,
+                    frames_ok=f.frames_ok - self._channel_errors, crc_errors=f.crc_errors,
+                    decode_errors=f.errors - f.crc_errors + self._channel_errors,
+                    resyncs=f.resyncs + self._channel_errors,
                     garbage_bytes=f.garbage_bytes, seq_gaps=f.seq_gaps,
                     frames_lost=f.frames_lost, bytes_read=self._bytes,
                     reconnects=self._reconnects, time_since_last_good_s=since,
-                    failure=failure,
+                    failure=failure, channel_errors=self._channel_errors,
+                    expected_channels=self._expected, disconnects=self._disconnects,
+                    last_outage_s=self._last_outage_s,
                 )
             g = self._lines.stats
             return GloveStats(
                 frames_ok=g.lines_ok, decode_errors=g.errors, resyncs=g.errors,
                 garbage_bytes=g.garbage_bytes, bytes_read=self._bytes,
                 reconnects=self._reconnects, time_since_last_good_s=since, failure=failure,
+                expected_channels=len(CHANNEL_KEYS), disconnects=self._disconnects,
+                last_outage_s=self._last_outage_s,
             )
 
     def _run(self) -> None:
@@ -353,7 +413,7 @@ class SerialGlove(GloveSource):
                     return
                 self._lost(exc)
                 continue
-            self._feed(data, self.clock.now())
+            self.feed(data, self.clock.now())
 
     def _lost(self, exc: BaseException) -> None:
         self._failure = DeviceError(
@@ -361,6 +421,9 @@ class SerialGlove(GloveSource):
             + ("retrying every " + f"{self.reconnect_s:g} s" if self.reconnect_s > 0
                else "check the cable and restart")
         )
+        self._disconnects += 1
+        self._lost_at_s = self.clock.now()
+        self._events.append(str(self._failure))
         with contextlib.suppress(Exception):  # the port is already gone
             self._serial.close()
         self._serial = None
@@ -379,10 +442,17 @@ class SerialGlove(GloveSource):
             _nonblocking(ser.fileno())
         except (DeviceError, OSError):
             return False
-        self._serial = ser
-        self._frames.reset()
-        self._reconnects += 1
-        self._failure = None
+        with self._lock:
+            self._serial = ser
+            self._frames.reset()
+            self._reconnects += 1
+            self._last_outage_s = self.clock.now() - self._lost_at_s
+            if self.channels is None:  # the glove may come back reflashed: settle again
+                self._expected, self._candidate, self._run_length = 0, -1, 0
+            self._failure = None
+        self._events.append(
+            f"glove port {self.port} is back after {self._last_outage_s:.2f} s"
+            f" (reconnect {self._reconnects}, {self._disconnects} disconnects so far)")
         return True
 
     @staticmethod
@@ -404,8 +474,31 @@ class SerialGlove(GloveSource):
             sensor_time_us=0, host_time_s=now, count=count,
         )
 
+    def _channels_ok(self, n: int) -> bool:
+        """Whether a decoded frame with ``n`` channels may become a sample (settling the
+        expected count first, see the module docstring)."""
+        if self._expected or self.channels is not None:
+            if n == self._expected:
+                return True
+            self._channel_errors += 1
+            return False
+        if n < self.min_channels:
+            self._channel_errors += 1
+            self._candidate, self._run_length = -1, 0
+            return False
+        if n == self._candidate:
+            self._run_length += 1
+        else:
+            self._candidate, self._run_length = n, 1
+        if self._run_length >= LOCK_FRAMES:
+            self._expected = n
+            return True
+        return False
+
     def _feed_frames(self, data: bytes, now: float) -> None:
         for fr in self._frames.feed(data):
+            if not self._channels_ok(len(fr.channels)):
+                continue
             self._count += 1
             self._newest = self._frame_sample(fr, now, self._count)
             self._last_good_s = now

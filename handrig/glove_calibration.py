@@ -58,6 +58,8 @@ from handrig.glove_recording import GloveRecording
 FloatArray = NDArray[np.float64]
 DEFAULT_GLOVE_PATH = CONFIG_DIR / "glove.toml"
 MAX_RAW_CHANNELS = 16
+RAW_MAX = 65535
+"""The largest raw reading: frames carry uint16 channels (OpenGloves at most 4095)."""
 OPENGLOVES_KEYS: dict[str, int] = {
     **{k: i for i, k in enumerate(CHANNEL_KEYS)},
     **{k.strip("()"): i for i, k in enumerate(CHANNEL_KEYS)},
@@ -99,6 +101,11 @@ class ChannelCalibration:
         if self.letter and self.letter not in OPENGLOVES_KEYS:
             raise ConfigError("unknown OpenGloves key", key="letter", value=self.letter,
                               allowed="A..E (fingers), AB..EB (splay), F, G (joystick), P")
+        for name in ("raw_open", "raw_closed"):
+            v = getattr(self, name)
+            if not 0 <= v <= RAW_MAX:
+                raise ConfigError("outside the range of a raw reading", key=name, value=v,
+                                  allowed=f"0..{RAW_MAX} (a uint16 channel)")
         if self.raw_open == self.raw_closed:
             raise ConfigError(
                 "raw_open equals raw_closed: the sensor did not move during calibration",

@@ -308,6 +308,11 @@ class RigConfig:
     servo_settings: ServoSettings = ServoSettings()
 
     def check(self) -> None:
+        if not self.servos:
+            raise ConfigError(
+                "no [[servos]]: the rig drives no servo", key="servos",
+                allowed="one [[servos]] table per servo (id, joint, zero_ticks, limits);"
+                " see config/rig.toml")
         seen_ids: dict[int, int] = {}
         seen_joints: dict[str, int] = {}
         for i, s in enumerate(self.servos):

@@ -32,6 +32,8 @@ from __future__ import annotations
 import bisect
 import json
 import math
+import zipfile
+import zlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -46,6 +48,7 @@ from handrig.hand import DOF_NAMES, Hand, dof_limits_deg
 SAG_GRID = CONFIG_DIR / "sag_grid.npz"
 _AXIS_TOL_DEG = 1e-6
 _POLE_TOL_DEG = 1e-3
+_LIMIT_TOL_DEG = 1.0  # slack for the solver's equilibria at a joint's end stop
 
 
 class SagGrid:
@@ -131,19 +134,29 @@ class SagGrid:
     def load(cls, path: str | Path | None = None, *, hand: Hand = "ri") -> SagGrid:
         """Load a baked grid (default ``config/sag_grid.npz``)."""
         p = Path(path) if path is not None else SAG_GRID
+        fix = f"re-bake it with `handrig bake --out {p}` or restore the shipped file"
         try:
             with np.load(p, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
         except FileNotFoundError:
             raise DataError(f"{p}: sag grid not found; bake one with `handrig bake --out {p}`"
                             ) from None
-        except (OSError, ValueError) as exc:
-            raise DataError(f"{p}: not a readable .npz sag grid ({exc})") from None
+        except IsADirectoryError:
+            raise DataError(f"{p}: is a folder, not a .npz sag grid") from None
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error,
+                NotImplementedError, KeyError, TypeError) as exc:
+            # a cut file (EOFError, BadZipFile), flipped bits (zlib.error, a CRC-32 check
+            # in zipfile), an array header numpy cannot parse (ValueError)
+            raise DataError(f"{p}: not a readable .npz sag grid, the file is damaged"
+                            f" ({type(exc).__name__}: {exc}); {fix}") from None
         missing = [k for k in ("inclination_deg", "rotation_deg", "dofs_deg", "rest_deg",
                                "dof_names") if k not in data]
         if missing:
             raise DataError(f"{p}: missing arrays {missing}; re-run `handrig bake`")
-        names = tuple(str(n) for n in data["dof_names"])
+        for k, arr in data.items():
+            if k not in ("dof_names", "metadata") and arr.dtype.kind not in "fiu":
+                raise DataError(f"{p}: array {k!r} holds {arr.dtype}, not numbers; {fix}")
+        names = tuple(str(n) for n in np.ravel(data["dof_names"]))
         if names != DOF_NAMES["ri"]:
             raise DataError(f"{p}: dof_names differ from the vocabulary's 23 ri DOFs")
         meta: dict[str, Any] = {}
@@ -152,10 +165,44 @@ class SagGrid:
                 meta = json.loads(str(data["metadata"]))
             except json.JSONDecodeError as exc:
                 raise DataError(f"{p}: metadata is not JSON ({exc})") from None
+            if not isinstance(meta, dict):
+                raise DataError(f"{p}: metadata is not a JSON object")
+        limits = data.get("limits_deg")
+        if limits is not None and limits.shape != (23, 2):
+            raise DataError(f"{p}: limits_deg has shape {limits.shape}, expected (23, 2); {fix}")
         grid = cls(data["inclination_deg"], data["rotation_deg"], data["dofs_deg"],
-                   data["rest_deg"], limits_deg=data.get("limits_deg"), metadata=meta,
+                   data["rest_deg"], limits_deg=limits, metadata=meta,
                    hand="ri", source=str(p))
+        grid._check_plausible(fix)
         return grid if hand == "ri" else grid.for_hand(hand)
+
+    def _check_plausible(self, fix: str) -> None:
+        """Refuse a grid whose limits exceed the anatomical ones, or whose poses or rest
+        pose lie outside its limits (a grid in the wrong unit or scaled)."""
+        where = self.source or "<sag grid>"
+        anatomical = dof_limits_deg("ri")
+        lim = self.limits_deg
+        if not np.all(np.isfinite(lim)) or np.any(lim[:, 0] >= lim[:, 1]):
+            raise DataError(f"{where}: limits_deg must be finite with low < high; {fix}")
+        wide = np.flatnonzero((lim[:, 0] < anatomical[:, 0] - _LIMIT_TOL_DEG)
+                              | (lim[:, 1] > anatomical[:, 1] + _LIMIT_TOL_DEG))
+        if wide.size:
+            i = int(wide[0])
+            raise DataError(
+                f"{where}: limits of {DOF_NAMES['ri'][i]} are {lim[i, 0]:g}..{lim[i, 1]:g} deg,"
+                f" beyond the anatomical {anatomical[i, 0]:g}..{anatomical[i, 1]:g}; {fix}")
+        for what, values in (("rest_deg", self.rest_deg[None, :]),
+                             ("dofs_deg", self.dofs_deg.reshape(-1, 23))):
+            below = values < lim[:, 0] - _LIMIT_TOL_DEG
+            above = values > lim[:, 1] + _LIMIT_TOL_DEG
+            bad = np.argwhere(below | above)
+            if bad.size:
+                k, i = (int(v) for v in bad[0])
+                raise DataError(
+                    f"{where}: {what} puts {DOF_NAMES['ri'][i]} at {values[k, i]:g} deg,"
+                    f" outside its limits {lim[i, 0]:g}..{lim[i, 1]:g}"
+                    f" ({int(np.count_nonzero(below | above))} values outside): not a sag"
+                    f" grid in degrees (scaled, or another unit); {fix}")
 
     def for_hand(self, hand: Hand) -> SagGrid:
         """The same grid for ``hand`` (shared tables; DOF names of that hand). Rotation is

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from handrig import hand, mocap
+from handrig.commands._numbers import positive_float
 from handrig.errors import DataError
 
 
@@ -14,7 +15,7 @@ def add_input_args(p: argparse.ArgumentParser) -> None:
                    help="joint-mapping profile name or .toml path (default perception_neuron)")
     p.add_argument("--despike", action="store_true",
                    help="repair NaN/absurd values and single-frame spikes by interpolation")
-    p.add_argument("--fps", type=float, default=None,
+    p.add_argument("--fps", type=positive_float, default=None,
                    help="resample to this frame rate first (default: the file's rate)")
 
 

@@ -10,6 +10,7 @@ from typing import Any
 
 from handrig import mocap
 from handrig.analysis import Thresholds, analyze
+from handrig.commands._numbers import nonnegative_float, positive_float
 from handrig.report import tables_markdown, write_report
 
 
@@ -25,7 +26,7 @@ def register(sub: Any) -> None:
                    help="joint-mapping profile name or .toml path (default perception_neuron)")
     p.add_argument("--out", default=None, help="write report.md and PNG figures here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--fps", type=float, default=None,
+    p.add_argument("--fps", type=positive_float, default=None,
                    help="resample to this rate first (the paper used 30); default: file's rate")
     p.add_argument("--despike", action="store_true",
                    help="repair NaN/absurd values and single-frame spikes before analysing")
@@ -35,7 +36,8 @@ def register(sub: Any) -> None:
         ("range-large", 5.0, "step 3 range threshold, deg"),
         ("rmsd-loose", 0.5, "step 4 rmsd threshold"),
     ):
-        p.add_argument(f"--{name}", type=float, default=default, help=f"{what} ({default:g})")
+        p.add_argument(f"--{name}", type=nonnegative_float, default=default,
+                       help=f"{what} ({default:g})")
     p.set_defaults(func=run)
 
 

@@ -19,6 +19,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from handrig.commands._numbers import positive_float
 from handrig.paths import DATA_HOME_HELP, config_file, user_data
 
 
@@ -26,9 +27,9 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "bake", help="bake the passive-sag grid (23 DOFs over forearm inclination x rotation)",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--step-deg", type=float, default=2.5,
+    p.add_argument("--step-deg", type=positive_float, default=2.5,
                    help="grid step in degrees, dividing 90 (default 2.5; 5 gives 37 x 72)")
-    p.add_argument("--fine-step-deg", type=float, default=None,
+    p.add_argument("--fine-step-deg", type=positive_float, default=None,
                    help="step in the palm-up band (inclination 0..45, |rotation| >= 100)"
                         " where the fingers bend fastest; 0 = no band (default step / 2.5:"
                         " 1 at step 2.5, 100 x 240 samples, the shipped grid)")

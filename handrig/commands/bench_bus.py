@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from handrig.commands._numbers import positive_float, positive_int
 from handrig.errors import ConfigError, DeviceError
 from handrig.realtime import helper_env, pinned_loop
 from handrig.rigconfig import BAUD_RATES, RigConfig, load_rig_config
@@ -289,9 +290,11 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = bench_sub.add_parser(
         "bus", help="servo bus cycle rate vs the wire-time limit, against the emulator"
     )
-    p.add_argument("--servos", type=int, default=20, help="servos on the bus (default 20)")
-    p.add_argument("--baud", type=int, default=4_000_000, help="baud rate (default 4000000)")
-    p.add_argument("--seconds", type=float, default=3.0, help="seconds per way (default 3)")
+    p.add_argument("--servos", type=positive_int, default=20, help="servos on the bus (default 20)")
+    p.add_argument("--baud", type=positive_int, default=4_000_000,
+                   help="baud rate (default 4000000)")
+    p.add_argument("--seconds", type=positive_float, default=3.0,
+                   help="seconds per way (default 3)")
     p.add_argument("--no-plain", action="store_true", help="skip the plain SDK ways")
     p.add_argument("--puppet", action="store_true",
                    help="servos drive the MuJoCo puppet (default: they move kinematically)")

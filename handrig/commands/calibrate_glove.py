@@ -32,6 +32,7 @@ import numpy as np
 import tomli_w
 
 from handrig.clock import Clock, MonotonicClock
+from handrig.commands._numbers import nonnegative_float, positive_float
 from handrig.errors import DataError, DeviceError
 from handrig.glove import GloveSource, SerialGlove
 from handrig.glove_calibration import (
@@ -93,9 +94,9 @@ def register(sub: Any) -> None:
                         "never rewritten)")
     p.add_argument("--glove", default=None, metavar="PORT",
                    help="glove port, or opengloves:PORT (default: [glove] port of the config)")
-    p.add_argument("--hold", type=float, default=DEFAULT_HOLD_S, metavar="S",
+    p.add_argument("--hold", type=positive_float, default=DEFAULT_HOLD_S, metavar="S",
                    help=f"seconds to record each pose (default {DEFAULT_HOLD_S:g})")
-    p.add_argument("--settle", type=float, default=DEFAULT_SETTLE_S, metavar="S",
+    p.add_argument("--settle", type=nonnegative_float, default=DEFAULT_SETTLE_S, metavar="S",
                    help=f"seconds to get into each pose before recording "
                         f"(default {DEFAULT_SETTLE_S:g})")
     p.add_argument("--yes", action="store_true",

@@ -16,6 +16,7 @@ import sys
 from typing import Any
 
 from handrig.app import build_parts, port_process
+from handrig.commands._numbers import positive_float, positive_int
 from handrig.errors import HandrigError
 from handrig.live import LiveOptions, format_summary, run_live
 
@@ -27,14 +28,14 @@ def register(sub: Any) -> None:
         "demo", help="the embedded demo: a recorded glove drives the simulated puppet",
         description=__doc__,
     )
-    p.add_argument("--frames", type=int, default=DEFAULT_FRAMES, metavar="N",
+    p.add_argument("--frames", type=positive_int, default=DEFAULT_FRAMES, metavar="N",
                    help=f"loop cycles to run (default {DEFAULT_FRAMES}, 15 s at 200 Hz)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--render", default=None, metavar="FILE.png",
                    help="also write an image strip of the simulated hand")
     p.add_argument("--recording", default=None, metavar="FILE.csv",
                    help="glove recording to stream (default config/recordings/demo_glove.csv)")
-    p.add_argument("--glove-rate", type=float, default=200.0, metavar="HZ",
+    p.add_argument("--glove-rate", type=positive_float, default=200.0, metavar="HZ",
                    help="rate the emulated glove sends at (default 200)")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="switch on emulated bus faults (see handrig sim-bus --help)")

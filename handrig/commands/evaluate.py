@@ -9,6 +9,7 @@ from typing import Any
 
 from handrig import hand, mocap
 from handrig.commands import _mapio
+from handrig.commands._numbers import positive_int
 from handrig.evaluation import Errors, contiguous_folds, cross_validate, predict, rms_errors
 from handrig.expand import DEFAULT_MAP
 from handrig.maps import LinearMap
@@ -28,7 +29,7 @@ def register(sub: Any) -> None:
     p.add_argument("file", metavar="FILE.bvh")
     p.add_argument("--map", default=str(DEFAULT_MAP), help="map TOML (default: shipped map)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--folds", type=int, default=5,
+    p.add_argument("--folds", type=positive_int, default=5,
                    help="held-out blocks for files without known clips (default 5)")
     p.add_argument("--no-compare", action="store_true", help="skip the held-out comparison")
     _mapio.add_input_args(p)

@@ -9,6 +9,7 @@ import numpy as np
 
 from handrig import maps
 from handrig.commands import _mapio
+from handrig.commands._numbers import nonnegative_float
 
 
 def register(sub: Any) -> None:
@@ -24,7 +25,7 @@ def register(sub: Any) -> None:
     p.add_argument("--out", required=True, help="map TOML file to write")
     p.add_argument("--method", choices=maps.METHODS, default=maps.DEFAULT_METHOD,
                    help=f"fitting method (default {maps.DEFAULT_METHOD}: best on unseen gestures)")
-    p.add_argument("--alpha", type=float, default=maps.RIDGE_ALPHA,
+    p.add_argument("--alpha", type=nonnegative_float, default=maps.RIDGE_ALPHA,
                    help=f"ridge penalty for ridge/huber (default {maps.RIDGE_ALPHA:g})")
     p.add_argument("--description", default="", help="free text stored in the map")
     _mapio.add_input_args(p)

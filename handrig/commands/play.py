@@ -7,6 +7,7 @@ import json
 from typing import Any
 
 from handrig.clock import MonotonicClock
+from handrig.commands._numbers import positive_float
 from handrig.errors import ConfigError
 from handrig.outputs.recorder import Playback
 from handrig.outputs.vmc import DEFAULT_PORT, VmcSender, parse_host_port
@@ -23,9 +24,10 @@ def register(sub: Any) -> None:
     p.add_argument("file", help="recording: .csv or .bvh")
     p.add_argument("--vmc", default=f"127.0.0.1:{DEFAULT_PORT}", metavar="HOST:PORT",
                    help=f"VMC receiver (default 127.0.0.1:{DEFAULT_PORT})")
-    p.add_argument("--rate", type=float, default=60.0, metavar="HZ",
+    p.add_argument("--rate", type=positive_float, default=60.0, metavar="HZ",
                    help="VMC bundles per second (default 60)")
-    p.add_argument("--speed", type=float, default=1.0, help="time scale, 2 = twice as fast")
+    p.add_argument("--speed", type=positive_float, default=1.0,
+                   help="time scale, 2 = twice as fast")
     p.add_argument("--loop", action="store_true", help="start over at the end (until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)

@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from handrig.app import build_parts
+from handrig.commands._numbers import positive_float, positive_int
 from handrig.live import LiveOptions, format_summary, run_live
 
 
@@ -31,8 +32,10 @@ def register(sub: Any) -> None:
                    help="also send the hands to a VMC receiver (VSeeFace, Unity, Blender)")
     p.add_argument("--record", default=None, metavar="FILE",
                    help="record the performance (.csv or .bvh)")
-    p.add_argument("--frames", type=int, default=None, metavar="N", help="stop after N cycles")
-    p.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S s")
+    p.add_argument("--frames", type=positive_int, default=None, metavar="N",
+                   help="stop after N cycles")
+    p.add_argument("--seconds", type=positive_float, default=None, metavar="S",
+                   help="stop after S s")
     p.add_argument("--no-wire-timing", action="store_true",
                    help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")

@@ -6,14 +6,16 @@ import argparse
 import json
 from typing import Any
 
+from handrig.commands._numbers import finite_float
+
 
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "sag", help="look up the passive-sag pose at a forearm orientation")
     p.add_argument("--grid", default=None, help="baked grid .npz (default config/sag_grid.npz)")
-    p.add_argument("--inclination", type=float, required=True, metavar="DEG",
+    p.add_argument("--inclination", type=finite_float, required=True, metavar="DEG",
                    help="forearm above horizontal: -90 hanging down .. 90 pointing up")
-    p.add_argument("--rotation", type=float, required=True, metavar="DEG",
+    p.add_argument("--rotation", type=finite_float, required=True, metavar="DEG",
                    help="about the forearm: 0 palm down, 90 thumb up, 180 palm up")
     p.add_argument("--hand", choices=("ri", "le"), default="ri", help="DOF names of this hand")
     p.add_argument("--json", action="store_true", help='print {"dofs": {name: degrees}}')

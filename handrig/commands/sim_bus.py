@@ -16,6 +16,7 @@ import time
 from types import FrameType
 from typing import Any, TextIO
 
+from handrig.commands._numbers import whole_int
 from handrig.errors import ConfigError, HandrigError
 from handrig.rigconfig import load_rig_config
 
@@ -30,7 +31,7 @@ def register(sub: Any) -> None:
         "'port: /dev/pts/N' first, serves until SIGINT/SIGTERM.",
     )
     who = p.add_mutually_exclusive_group()
-    who.add_argument("--servos", type=int, metavar="N",
+    who.add_argument("--servos", type=whole_int, metavar="N",
                      help="servos with IDs 1..N (default: the rig's servos)")
     who.add_argument("--ids", metavar="LIST", help="servo IDs, e.g. '1,2,5' or '1-16,20'")
     p.add_argument("--rig", default=None, metavar="FILE",

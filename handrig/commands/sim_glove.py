@@ -25,6 +25,7 @@ import argparse
 import sys
 from typing import Any
 
+from handrig.commands._numbers import float_in, nonnegative_float, positive_float, whole_int
 from handrig.errors import DataError
 from handrig.glove_recording import read_glove_recording
 
@@ -40,7 +41,7 @@ def register(sub: Any) -> None:
                    help="glove recording (CSV) to stream; omit with --calibration")
     p.add_argument("--format", choices=("frames", "opengloves"), default="frames",
                    help="wire format (default: frames, firmware_protocol/SPEC.md)")
-    p.add_argument("--rate", type=float, default=None, metavar="HZ",
+    p.add_argument("--rate", type=positive_float, default=None, metavar="HZ",
                    help="send at this rate (default: the recording's own timestamps; "
                         "200 with --calibration)")
     p.add_argument("--loop", action="store_true", help="start over at the end, until Ctrl-C")
@@ -51,21 +52,21 @@ def register(sub: Any) -> None:
                      help="perform the poses of `handrig calibrate glove` instead of a file")
     cal.add_argument("--cue", action="store_true",
                      help="change pose on a line of standard input, not on a timer")
-    cal.add_argument("--pose-s", type=float, default=None, metavar="S",
+    cal.add_argument("--pose-s", type=positive_float, default=None, metavar="S",
                      help="seconds per pose on the timer (default: calibrate glove's "
                           "settle + hold + 2 s to press Enter: 5)")
-    cal.add_argument("--transition-s", type=float, default=0.5, metavar="S",
+    cal.add_argument("--transition-s", type=nonnegative_float, default=0.5, metavar="S",
                      help="seconds to move into a pose (default 0.5; keep it below "
                           "calibrate glove's --settle)")
-    cal.add_argument("--noise", type=float, default=6.0, metavar="COUNTS",
+    cal.add_argument("--noise", type=nonnegative_float, default=6.0, metavar="COUNTS",
                      help="sensor noise, standard deviation in raw counts (default 6)")
-    cal.add_argument("--travel", type=float, default=0.85, metavar="FRACTION",
+    cal.add_argument("--travel", type=float_in(0.0, 1.0), default=0.85, metavar="FRACTION",
                      help="the emulated sensors' travel as a fraction of the spans in the "
                           "glove config (default 0.85)")
     cal.add_argument("--glove-config", default=None, metavar="FILE",
                      help="glove config whose channels are emulated (default: the one "
                           "`handrig calibrate glove` starts from)")
-    cal.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    cal.add_argument("--seed", type=whole_int, default=0, help="noise seed (default 0)")
     p.set_defaults(func=run)
 
 

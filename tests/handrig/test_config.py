@@ -83,3 +83,31 @@ def test_nested_paths_unknown_keys_and_literals():
         build(_Rig, {})
     with pytest.raises(ConfigError, match="expected an integer"):
         build(_Rig, {"port": "p", "servos": [{"id": True}]})
+
+
+@dataclass(frozen=True)
+class _Ratio:
+    top: float = 1.0
+    bottom: float = 1.0
+
+    def check(self) -> None:
+        _ = self.top / self.bottom  # code of its own that a value can break
+
+
+@dataclass(frozen=True)
+class _Holder:
+    ratio: _Ratio = _Ratio()
+
+
+def test_a_class_failing_on_an_allowed_value_is_a_config_error(tmp_path):
+    p = write(tmp_path, "[ratio]\nbottom = 0\n", name="ratio.toml")
+    with pytest.raises(ConfigError) as exc:
+        load(p, _Holder)
+    msg = str(exc.value)
+    assert "ratio.toml" in msg and "'ratio'" in msg and "division by zero" in msg
+
+
+def test_deeply_nested_toml_is_a_config_error(tmp_path):
+    p = write(tmp_path, "x = " + "[" * 100_000 + "]" * 100_000 + "\n", name="deep.toml")
+    with pytest.raises(ConfigError, match=r"deep\.toml: not valid TOML"):
+        load(p, JointLimits)

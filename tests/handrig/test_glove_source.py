@@ -198,4 +198,68 @@ def test_a_replugged_glove_is_picked_up_again(reader: str) -> None:
                 pytest.skip(f"the kernel gave the new pty another name ({second.port_path})")
             assert len(collect(glove, 3)) == 3
             assert glove.failure is None and glove.stats().reconnects >= 1
+            st = glove.stats()
+            assert st.disconnects >= 1 and st.last_outage_s > 0.0
+            events = glove.drain_events()
+            assert any("went away" in e for e in events), events
+            assert any(f"glove port {path} is back after" in e and "reconnect 1" in e
+                       for e in events), events
+            assert glove.drain_events() == []
     first.close()
+
+
+def _pty_glove(**kw: object) -> tuple[int, SerialGlove]:
+    import os
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    glove = SerialGlove(os.ttyname(slave), "frames", clock=MonotonicClock(), reader="poll",
+                        **kw)  # type: ignore[arg-type]
+    os.close(slave)
+    return master, glove
+
+
+def _frame(seq: int, n: int) -> bytes:
+    from firmware_protocol.glove import GloveFrame, encode_frame
+
+    return encode_frame(GloveFrame(seq, seq * 5000, tuple(100 + 10 * k for k in range(n))))
+
+
+def test_a_valid_frame_with_another_channel_count_is_counted_and_dropped() -> None:
+    import os
+
+    master, glove = _pty_glove()
+    with glove:
+        os.write(master, _frame(0, 5) + _frame(1, 5))
+        assert collect(glove, 1, timeout_s=0.3) == []  # not settled yet (LOCK_FRAMES)
+        os.write(master, _frame(2, 5))
+        got = collect(glove, 1)
+        assert [s.seq for s in got] == [2] and len(got[0].raw) == 5
+        os.write(master, _frame(3, 7) + _frame(4, 3))
+        assert collect(glove, 1, timeout_s=0.3) == []  # valid CRC, never a sample
+        os.write(master, _frame(5, 5))
+        assert [s.seq for s in collect(glove, 1)] == [5]
+        st = glove.stats()
+        assert st.channel_errors == 2 and st.expected_channels == 5
+        assert st.decode_errors == 2 and st.crc_errors == 0 and st.frames_ok == 4
+    os.close(master)
+
+
+def test_a_fixed_channel_count_and_a_minimum() -> None:
+    import os
+
+    master, glove = _pty_glove(channels=5)
+    with glove:
+        os.write(master, _frame(0, 5) + _frame(1, 6))
+        assert [s.seq for s in collect(glove, 1)] == [0]  # no settling with a fixed count
+        assert glove.stats().channel_errors == 1
+    os.close(master)
+    master, glove = _pty_glove(min_channels=5)
+    with glove:  # a glove that settles on fewer channels than the calibration reads
+        os.write(master, b"".join(_frame(i, 3) for i in range(5)) + _frame(5, 5))
+        assert collect(glove, 1, timeout_s=0.3) == []
+        assert glove.stats().channel_errors == 5 and glove.stats().expected_channels == 0
+    os.close(master)
+    with pytest.raises(DeviceError, match="channels 17"):
+        SerialGlove("/dev/null", clock=MonotonicClock(), channels=17)

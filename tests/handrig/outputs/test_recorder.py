@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -25,8 +26,8 @@ def _performance(n: int, seed: int = 0, rate_hz: float = 200.0) -> tuple[np.ndar
 
 
 def _record(path: Path, t_s: np.ndarray, poses: np.ndarray, wrist: np.ndarray | None,
-            rate_hz: float = 200.0, chunk_frames: int = 16) -> Path:
-    with Recorder(path, rate_hz=rate_hz, chunk_frames=chunk_frames) as rec:
+            rate_hz: float = 200.0) -> Path:
+    with Recorder(path, rate_hz=rate_hz) as rec:
         for i in range(len(t_s)):
             rec.add(t_s[i], poses[i], None if wrist is None else wrist[i])
         assert rec.n_frames == len(t_s)
@@ -35,7 +36,7 @@ def _record(path: Path, t_s: np.ndarray, poses: np.ndarray, wrist: np.ndarray | 
 
 @pytest.mark.parametrize("with_wrist", [True, False])
 def test_csv_round_trip_within_1e6(tmp_path: Path, with_wrist: bool) -> None:
-    t_s, poses, wrist = _performance(53)  # > 3 chunks of 16
+    t_s, poses, wrist = _performance(53)
     path = _record(tmp_path / "take.csv", t_s, poses, wrist if with_wrist else None)
     header = path.read_text().splitlines()[0].split(",")
     assert header[:3] == ["t_s", "riThumbCMCx", "riThumbCMCy"]
@@ -106,18 +107,103 @@ def test_reference_capture_loads_as_a_performance() -> None:
     assert t_s[1] == pytest.approx(1 / 24, rel=1e-4)
 
 
-def test_nothing_is_written_before_close(tmp_path: Path) -> None:
-    t_s, poses, _ = _performance(3)
-    path = tmp_path / "take.csv"
-    rec = Recorder(path)
-    rec.add(t_s[0], poses[0])
-    assert not path.exists()
-    assert (tmp_path / "take.csv.partial").stat().st_size == 0
-    rec.close()
-    assert path.exists() and not (tmp_path / "take.csv.partial").exists()
-    rec.close()  # idempotent
+def test_frames_stream_to_the_partial_file_and_close_renames_it(tmp_path: Path) -> None:
+    t_s, poses, wrist = _performance(30)
+    path = tmp_path / "take.bvh"
+    part = tmp_path / "take.bvh.partial"
+    rec = Recorder(path, rate_hz=200.0)
+    for i in range(20):
+        rec.add(t_s[i], poses[i], wrist[i])
+    rec.flush()
+    assert not path.exists() and rec.frames_written == 20
+    text = part.read_text()
+    lines = text.splitlines()
+    motion = lines.index("MOTION")
+    assert lines[motion + 1] == "Frames: 20" + " " * 10  # fixed width, kept up to date
+    assert len(lines) - (motion + 3) == 20
+    for i in range(20, 30):
+        rec.add(t_s[i], poses[i], wrist[i])
+    assert rec.close() == path
+    assert path.exists() and not part.exists()
+    assert read_bvh(path).n_frames == 30
+    assert rec.close() == path  # idempotent
     with pytest.raises(ValueError, match="closed"):
         rec.add(t_s[1], poses[1])
+
+
+def test_the_writer_flushes_on_its_own_within_flush_s(tmp_path: Path) -> None:
+    import time
+
+    t_s, poses, _ = _performance(5)
+    rec = Recorder(tmp_path / "t.csv", flush_s=0.05)
+    for i in range(5):
+        rec.add(t_s[i], poses[i])
+    deadline = time.monotonic() + 10.0
+    while rec.frames_written < 5 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert rec.frames_written == 5
+    assert (tmp_path / "t.csv.partial").read_text().count("\n") == 6  # header + 5
+    rec.close()
+
+
+def test_memory_is_bounded_when_the_disk_falls_behind(tmp_path: Path) -> None:
+    _, poses, _ = _performance(1)
+    rec = Recorder(tmp_path / "t.csv", rate_hz=100.0, flush_s=1.0, max_pending_s=1.0)
+    with rec._io_lock:  # the writer is stuck (a stalled disk): nothing leaves the list
+        for i in range(250):
+            rec.add(i / 100.0, poses[0])
+        assert len(rec._pending) <= 101 and rec.frames_dropped >= 149  # 1 s and the header
+    rec.close()
+    assert rec.frames_dropped + rec.frames_written == 250
+    assert len(load_performance(tmp_path / "t.csv")[0]) == rec.frames_written
+
+
+def test_a_leftover_partial_take_is_never_overwritten(tmp_path: Path) -> None:
+    (tmp_path / "take.csv.partial").write_text("t_s,...")
+    with pytest.raises(DataError, match=r"take\.csv\.partial: an unfinished take.*record repair"):
+        Recorder(tmp_path / "take.csv")
+    assert (tmp_path / "take.csv.partial").read_text() == "t_s,..."
+
+
+@pytest.mark.parametrize("fmt", ["csv", "bvh"])
+def test_repair_keeps_every_whole_frame_of_a_cut_take(tmp_path: Path, fmt: str) -> None:
+    t_s, poses, wrist = _performance(40)
+    rec = Recorder(tmp_path / f"take.{fmt}", rate_hz=200.0)
+    for i in range(40):
+        rec.add(t_s[i], poses[i], wrist[i])
+    rec.flush()  # as after a crash: the .partial holds the frames
+    part = tmp_path / f"take.{fmt}.partial"
+    data = part.read_bytes()
+    if fmt == "bvh":  # killed between batches: readable as it is
+        assert len(load_performance(part)[0]) == 40
+    rec._stop = True  # abandon the recorder without closing (the process "died")
+    cut = data[: len(data) - 37] + b"\x00" * 600  # a cut last line and a power cut's zeros
+    part.write_bytes(cut)
+    with pytest.raises(DataError, match="record repair"):
+        load_performance(part)
+    fixed = recorder.repair(part)
+    assert fixed.path == tmp_path / f"take.{fmt}" and not part.exists()
+    assert fixed.frames == 39 and fixed.bytes_dropped > 600
+    assert fixed.declared_frames == (40 if fmt == "bvh" else None)
+    assert "39 whole frames" in fixed.describe()
+    t2, p2, _ = load_performance(fixed.path)
+    assert len(t2) == 39
+    np.testing.assert_allclose(p2, poses[:39], atol=1e-4)
+    again = recorder.repair(fixed.path)  # a whole file: nothing to do
+    assert again.frames == 39 and again.bytes_dropped == 0
+
+
+def test_repair_refuses_a_damaged_header(tmp_path: Path) -> None:
+    bad = tmp_path / "x.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n")
+    with pytest.raises(DataError, match=r"x\.bvh: no MOTION block.*nothing to keep"):
+        recorder.repair(bad)
+    csv = tmp_path / "x.csv"
+    csv.write_text("1,2,3\n")
+    with pytest.raises(DataError, match=r"x\.csv: no header row"):
+        recorder.repair(csv)
+    with pytest.raises(DataError, match="not found"):
+        recorder.repair(tmp_path / "nope.csv")
 
 
 def test_wrist_must_stay_consistent(tmp_path: Path) -> None:
@@ -295,3 +381,20 @@ def test_bvh_fingers_curl_toward_the_palm_on_both_hands(tmp_path: Path) -> None:
         # wrist flexion (palmar) lowers the knuckles, radial deviation moves them forward
         assert r2[f"{side}HandMiddle1"][1] < r0[f"{side}HandMiddle1"][1] - 2.0
         assert r3[f"{side}HandMiddle1"][2] > r0[f"{side}HandMiddle1"][2] + 1.0
+
+
+def test_a_write_error_never_reaches_the_loop_and_close_says_what_to_do(tmp_path: Path) -> None:
+    if not Path("/dev/full").exists():
+        pytest.skip("needs /dev/full (Linux)")
+    _, poses, _ = _performance(1)
+    rec = Recorder(tmp_path / "t.csv", sync=False)
+    os.close(rec._fd)
+    rec._fd = os.open("/dev/full", os.O_WRONLY)  # every write fails: ENOSPC
+    for i in range(5):
+        rec.add(i / 200.0, poses[0])
+    rec.flush()
+    assert rec.error is not None and "No space left" in str(rec.error)
+    rec.add(1.0, poses[0])  # dropped and counted, not raised
+    assert rec.frames_dropped == 6
+    with pytest.raises(DataError, match=r"writing the recording failed.*record repair"):
+        rec.close()
