@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from handrig import kernels
+from handrig import pose_kernels as kernels
 
 FloatArray = NDArray[np.float64]
 TWO_PI = 2.0 * math.pi

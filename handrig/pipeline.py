@@ -24,7 +24,8 @@ from typing import Any, Literal, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from handrig import hand, kernels
+from handrig import hand
+from handrig import pose_kernels as kernels
 from handrig.config import JointLimits
 from handrig.errors import ConfigError
 from handrig.sag import SagGrid
