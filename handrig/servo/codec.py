@@ -142,6 +142,13 @@ def decode_reading(
 
 
 @njit(cache=True, nogil=True)
+def _fast_head_ok(raw: Any) -> bool:  # pragma: no cover - compiled
+    """Header, ID 0xFE and instruction 0x55 of a Fast Sync Read reply (8+ bytes)."""
+    return (raw[0] == 0xFF and raw[1] == 0xFF and raw[2] == 0xFD and raw[3] == 0
+            and raw[4] == BROADCAST_ID and raw[7] == INST_STATUS)
+
+
+@njit(cache=True, nogil=True)
 def fast_sync_check(raw: Any, ids: Any, data_len: int, valid: Any) -> int:  # pragma: no cover
     """Check a (possibly truncated) Fast Sync Read reply servo by servo.
 
@@ -155,8 +162,7 @@ def fast_sync_check(raw: Any, ids: Any, data_len: int, valid: Any) -> int:  # pr
         return 0
     block = data_len + FAST_BLOCK_EXTRA
     complete = min(n, (raw.shape[0] - FAST_REPLY_HEAD) // block)
-    if (raw[0] != 0xFF or raw[1] != 0xFF or raw[2] != 0xFD or raw[3] != 0
-            or raw[4] != BROADCAST_ID or raw[7] != INST_STATUS):
+    if not _fast_head_ok(raw):
         return complete
     crc = crc16_kernel(raw, 0, FAST_REPLY_HEAD, 0)
     for i in range(complete):
@@ -220,9 +226,8 @@ def fast_sync_whole(
     block = read_len + FAST_BLOCK_EXTRA
     total = FAST_REPLY_HEAD + block * n
     length = total - 7
-    if (raw.shape[0] != total or raw[0] != 0xFF or raw[1] != 0xFF or raw[2] != 0xFD
-            or raw[3] != 0 or raw[4] != BROADCAST_ID or raw[5] != (length & 0xFF)
-            or raw[6] != (length >> 8) or raw[7] != INST_STATUS):
+    if (raw.shape[0] != total or not _fast_head_ok(raw) or raw[5] != (length & 0xFF)
+            or raw[6] != (length >> 8)):
         return NOT_THIS_REPLY
     for i in range(n):
         if raw[FAST_REPLY_HEAD + 1 + i * block] != ids[i]:

@@ -80,12 +80,9 @@ class FastSyncRead:
         self.stats = stats
         self.spin_s = spin_s
         self.orders = make_orders(roster, plan)
+        self._whole_len = codec.fast_reply_len(plan.data_len, roster.n)
         self._valid = np.zeros(roster.n, np.bool_)
         self.whole_at = 0.0  # when the last whole reply was decoded
-
-    def order(self, read_number: int) -> Order:
-        """The order of read number ``read_number``."""
-        return self.orders[read_number % len(self.orders)]
 
     def read(self, indices: np.ndarray, deadline: float, order: Order | None = None) -> int:
         """One Fast Sync Read of ``indices`` (``order``: every servo, as that order asks).
@@ -101,7 +98,8 @@ class FastSyncRead:
             whole_ok = False
         else:
             whole_ok = True
-        expected = codec.fast_reply_len(self.plan.data_len, len(indices))
+        expected = self._whole_len if whole_ok else codec.fast_reply_len(
+            self.plan.data_len, len(indices))
         self.link.quiet_line(deadline)
         self.link.send(order.request)
         out = self.readings.prepare_whole() if whole_ok else None
@@ -126,7 +124,8 @@ class FastSyncRead:
         spin_until = np.inf
         if self.spin_s > 0:
             # the reply cannot end before the wire has carried the request and the reply
-            arrival = self.link.budget.arrival(expected)
+            budget = self.link.budget
+            arrival = budget.free_at + expected * budget.byte_s
             spin_from = arrival - self.spin_s
             spin_until = arrival + REPLY_POLL_AFTER_S
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until)

@@ -66,17 +66,17 @@ class Link:
         """Before a request: drop old input; after a failed reply, wait for the line to
         have been quiet ``reply_gap_s`` (at most ``reply_timeout_s``, not past
         ``deadline_s``)."""
-        wait = self.budget.take_quiet_wait(self.clock.now(), deadline_s)
-        if wait is None:
+        if self.budget.failed_at is None:
             self.transport.discard_input()
-        else:
-            since, most = wait
-            self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since)
+            return
+        wait = self.budget.take_quiet_wait(self.clock.now(), deadline_s)
+        assert wait is not None
+        since, most = wait
+        self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since)
 
-    def request_start(self) -> float:
-        """When a request written now would start on the wire."""
-        return self.budget.request_start(
-            self.clock.now(), len(self.held), self.transport.last_rx_s)
+    def request_start(self, now: float) -> float:
+        """When a request written at ``now`` would start on the wire."""
+        return self.budget.request_start(now, len(self.held), self.transport.last_rx_s)
 
     def failed(self) -> None:
         """The reply being read failed now."""

@@ -68,28 +68,30 @@ class StateReader:
         n = self.readings.n
         if deadline_s is None:
             # from when the wire is free of the goal Sync Write just sent
-            deadline_s = self.link.request_start() + max(
+            deadline_s = self.link.request_start(now) + max(
                 self.policy.read_budget_s, self._min_budget_s)
-        elif self.link.request_start() + self.read_wire_s(n) > deadline_s:
+        elif self.link.request_start(now) + self.read_wire_s(n) > deadline_s:
             self.faults.read_skipped(self.read_wire_s(n), deadline_s - now)
             return self.readings.unread(now)
         self.faults.skip_run = 0
         self.stats.reads += 1
         self.readings.start_read()
         self.last_whole = False
-        if self._attempts(deadline_s) and not self._housekeeping_due():
+        if self._attempts(deadline_s) and not (
+                self.temperature_every and self.stats.reads >= self._next_temperature_read):
             return self.readings.take_whole(self.fast.whole_at)
         return self._finish(deadline_s)
 
     def _attempts(self, deadline_s: float) -> bool:
         """The read and its retries; True when it was whole."""
         fresh = self.readings.fresh
-        first = self.fast.order(self.stats.reads)
+        first = self.fast.orders[self.stats.reads % len(self.fast.orders)]
         order: Order | None = first
         pending = first.indices
         for attempt in range(self.policy.read_retries + 1):
             if attempt:
-                if self.link.request_start() + self.read_wire_s(len(pending)) > deadline_s:
+                start = self.link.request_start(self.clock.now())
+                if start + self.read_wire_s(len(pending)) > deadline_s:
                     break
                 self.stats.retries += 1
             if self._attempt(pending, order, deadline_s) == WHOLE:

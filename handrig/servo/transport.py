@@ -209,6 +209,10 @@ class SerialTransport(Transport):
     def is_open(self) -> bool:
         return self._handler is not None
 
+    def _check_open(self) -> None:
+        if self._handler is None:  # the base class's check, without the property call
+            raise DeviceError(f"servo port {self.port} is not open (call connect() first)")
+
     def open(self) -> None:
         """Open the port at ``baud`` (SDK PortHandler); DeviceError if impossible."""
         handler = PortHandler(self.port)

@@ -86,10 +86,6 @@ class WireBudget:
         """When a reply to a request sent now is overdue (the wire may still be busy)."""
         return max(now, self.free_at) + self.reply_timeout_s
 
-    def arrival(self, n_bytes: int) -> float:
-        """When the wire delivers the last of ``n_bytes`` sent after what is on it."""
-        return self.free_at + n_bytes * self.byte_s
-
     def take_quiet_wait(self, now: float, deadline_s: float | None) -> tuple[float, float] | None:
         """Before a request: (since, at most) to wait for a quiet line after a failed
         reply (then cleared), or None when no reply failed since the last request."""
