@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import copy
+import subprocess
+import sys
 
 import numpy as np
 
@@ -60,3 +62,12 @@ def test_calibrate_and_filter_kernel_matches_numpy() -> None:
         assert held == bad.sum()
         np.testing.assert_allclose(out, want, rtol=0, atol=1e-9)
         np.testing.assert_array_equal(last_good, ref_last)
+
+
+def test_the_pose_pipeline_imports_no_wire_code() -> None:
+    code = ("import sys, handrig.pipeline, handrig.glove_calibration, handrig.filters; "
+            "print(sorted(m for m in sys.modules if m.startswith(('handrig.servo', "
+            "'dynamixel_sdk', 'serial'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"

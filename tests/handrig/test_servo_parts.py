@@ -66,7 +66,7 @@ def test_the_fake_is_a_transport() -> None:
     assert bus.transport is transport
 
 
-def test_commissioning_through_the_fake(peer: PeerBus | None = None) -> None:
+def test_commissioning_through_the_fake() -> None:
     bus, _, peer = make_bus()
     text = "\n".join(bus.commissioning)
     assert "no USB latency timer on fake:emulator: skipped" in text
