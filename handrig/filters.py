@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from handrig import kernels
+from handrig import pose_kernels as kernels
 
 FloatArray = NDArray[np.float64]
 TWO_PI = 2.0 * math.pi
@@ -32,7 +32,7 @@ TWO_PI = 2.0 * math.pi
 
 class OneEuroFilter:
     """One Euro filter over ``n`` channels; a step allocates no arrays (one compiled
-    loop, :func:`handrig.kernels.one_euro_step`).
+    loop, :func:`handrig.pose_kernels.one_euro_step`).
 
     ``min_cutoff_hz``, ``beta`` (cutoff Hz per unit/s of speed, e.g. per deg/s)
     and ``d_cutoff_hz`` may be scalars or per-channel arrays of shape (n,).

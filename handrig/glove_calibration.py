@@ -49,7 +49,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from firmware_protocol.opengloves import BUTTON_LETTERS, CHANNEL_KEYS
-from handrig import hand, kernels
+from handrig import hand
+from handrig import pose_kernels as kernels
 from handrig.config import CONFIG_DIR, load
 from handrig.errors import ConfigError, DataError
 from handrig.filters import OneEuroFilter

@@ -24,7 +24,8 @@ from typing import Any, Literal, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from handrig import hand, kernels
+from handrig import hand
+from handrig import pose_kernels as kernels
 from handrig.config import JointLimits
 from handrig.errors import ConfigError
 from handrig.sag import SagGrid
@@ -213,7 +214,7 @@ class PosePipeline:
         self._servo_slot = slot
         self._sag24 = np.zeros(hand.DOFS_PER_HAND + 1)
         self._sag_servo = np.zeros(n)
-        # the compiled step (handrig.kernels) when the right hand's sag is a baked grid
+        # the compiled step (handrig.pose_kernels) when the right hand's sag is a baked grid
         # or absent; any other SagLike takes the numpy step
         grid = self._grids.get("ri")
         self._kernel = grid is None or isinstance(grid, SagGrid)

@@ -118,7 +118,7 @@ class SagGrid:
         self._inc = [float(x) for x in inc_axis]
         self._rot = [float(x) for x in rot_axis] + [float(rot_axis[0]) + 360.0]
         self._rot0 = float(rot_axis[0])
-        self._inc_arr = np.array(self._inc)  # the same axes for handrig.kernels
+        self._inc_arr = np.array(self._inc)  # the same axes for handrig.pose_kernels
         self._rot_arr = np.array(self._rot)
         # Cell tables: for cell (i, j) the 4 corner vectors, contiguous, rotation wrapped.
         wrapped = np.concatenate([vals, vals[:, :1]], axis=1)

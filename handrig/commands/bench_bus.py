@@ -32,7 +32,7 @@ from handrig.realtime import helper_env, pinned_loop
 from handrig.rigconfig import BAUD_RATES, RigConfig, load_rig_config
 
 PLAIN_TIMEOUT_NOTE = "SDK default timeouts"
-TARGET_RATIO = 0.85  # issue 5: at least 85 % of the wire-limited rate
+TARGET_RATIO = 0.85  # the driver's target: at least 85 % of the wire-limited rate
 
 
 def bench_rig(n_servos: int, baud: int, base: RigConfig | None = None) -> RigConfig:

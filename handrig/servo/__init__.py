@@ -1,11 +1,14 @@
 """The servo bus: an abstract :class:`ServoBus` and the Dynamixel adapter on dynamixel-sdk.
 
 This package is the one adapter that imports ``dynamixel_sdk`` and ``serial``;
-pipeline code talks to :class:`ServoBus` only. Layers: ``transport`` (bytes in
-and out of the SDK's PortHandler, deadlines on the injected Clock), ``packets``
-(Protocol 2.0 framing with the SDK's CRC table), ``registers`` (the X-series
-control table as data), ``bus`` (the ABC, ServoState, BusStats, FaultPolicy),
-``dynamixel`` (DynamixelBus).
+pipeline code talks to :class:`ServoBus` only. Layers, bottom up: ``transport``
+(the Transport ABC; SerialTransport on the SDK's PortHandler, deadlines on the
+injected Clock), ``codec`` (Protocol 2.0 packets and the compiled kernels that
+build and parse them), ``registers`` (the X-series control table as data),
+``bus`` (the ABC, ServoState, BusStats, FaultPolicy), then the parts of
+``DynamixelBus``: ``roster``, ``wire``, ``link``, ``goals``, ``readings``,
+``fast_read``, ``sync_read``, ``reader``, ``faults``, ``commissioning``,
+``torque``; ``dynamixel`` is the facade over them.
 
     from handrig.servo import DynamixelBus
     bus = DynamixelBus("/dev/ttyUSB0", load_rig_config())  # baud from the rig file

@@ -1,8 +1,8 @@
 """X-series control table items the driver uses (REFERENCE.md section 2), as data.
 
-Each :class:`Reg` member is ``(address, size in bytes, signed)``; values on the wire
-are little-endian two's complement. Addresses below 64 are EEPROM (writable only
-with torque off).
+Each :class:`Reg` member is ``(address, size in bytes, signed, access)``, access
+``"R"`` (read only) or ``"RW"``; values on the wire are little-endian two's
+complement. Addresses below 64 are EEPROM (writable only with torque off).
 """
 
 from __future__ import annotations
@@ -11,37 +11,37 @@ from enum import Enum
 
 
 class Reg(Enum):
-    """A control-table item: ``address``, ``size`` (bytes), ``signed``."""
+    """A control-table item: ``address``, ``size`` (bytes), ``signed``, ``access``."""
 
-    MODEL_NUMBER = (0, 2, False)
-    FIRMWARE_VERSION = (6, 1, False)
-    ID = (7, 1, False)
-    BAUD_RATE = (8, 1, False)
-    RETURN_DELAY_TIME = (9, 1, False)
-    DRIVE_MODE = (10, 1, False)
-    OPERATING_MODE = (11, 1, False)
-    HOMING_OFFSET = (20, 4, True)
-    PWM_LIMIT = (36, 2, False)
-    CURRENT_LIMIT = (38, 2, False)
-    MAX_POSITION_LIMIT = (48, 4, False)
-    MIN_POSITION_LIMIT = (52, 4, False)
-    TORQUE_ENABLE = (64, 1, False)
-    LED = (65, 1, False)
-    STATUS_RETURN_LEVEL = (68, 1, False)
-    HARDWARE_ERROR_STATUS = (70, 1, False)
-    POSITION_D_GAIN = (80, 2, False)
-    POSITION_I_GAIN = (82, 2, False)
-    POSITION_P_GAIN = (84, 2, False)
-    BUS_WATCHDOG = (98, 1, True)
-    GOAL_CURRENT = (102, 2, True)
-    PROFILE_VELOCITY = (112, 4, False)
-    GOAL_POSITION = (116, 4, True)
-    MOVING = (122, 1, False)
-    PRESENT_CURRENT = (126, 2, True)
-    PRESENT_VELOCITY = (128, 4, True)
-    PRESENT_POSITION = (132, 4, True)
-    PRESENT_INPUT_VOLTAGE = (144, 2, False)
-    PRESENT_TEMPERATURE = (146, 1, False)
+    MODEL_NUMBER = (0, 2, False, "R")
+    FIRMWARE_VERSION = (6, 1, False, "R")
+    ID = (7, 1, False, "RW")
+    BAUD_RATE = (8, 1, False, "RW")
+    RETURN_DELAY_TIME = (9, 1, False, "RW")
+    DRIVE_MODE = (10, 1, False, "RW")
+    OPERATING_MODE = (11, 1, False, "RW")
+    HOMING_OFFSET = (20, 4, True, "RW")
+    PWM_LIMIT = (36, 2, False, "RW")
+    CURRENT_LIMIT = (38, 2, False, "RW")
+    MAX_POSITION_LIMIT = (48, 4, False, "RW")
+    MIN_POSITION_LIMIT = (52, 4, False, "RW")
+    TORQUE_ENABLE = (64, 1, False, "RW")
+    LED = (65, 1, False, "RW")
+    STATUS_RETURN_LEVEL = (68, 1, False, "RW")
+    HARDWARE_ERROR_STATUS = (70, 1, False, "R")
+    POSITION_D_GAIN = (80, 2, False, "RW")
+    POSITION_I_GAIN = (82, 2, False, "RW")
+    POSITION_P_GAIN = (84, 2, False, "RW")
+    BUS_WATCHDOG = (98, 1, True, "RW")
+    GOAL_CURRENT = (102, 2, True, "RW")
+    PROFILE_VELOCITY = (112, 4, False, "RW")
+    GOAL_POSITION = (116, 4, True, "RW")
+    MOVING = (122, 1, False, "R")
+    PRESENT_CURRENT = (126, 2, True, "R")
+    PRESENT_VELOCITY = (128, 4, True, "R")
+    PRESENT_POSITION = (132, 4, True, "R")
+    PRESENT_INPUT_VOLTAGE = (144, 2, False, "R")
+    PRESENT_TEMPERATURE = (146, 1, False, "R")
 
     @property
     def address(self) -> int:
@@ -54,6 +54,10 @@ class Reg(Enum):
     @property
     def signed(self) -> bool:
         return bool(self.value[2])
+
+    @property
+    def writable(self) -> bool:
+        return self.value[3] == "RW"
 
     def encode(self, value: int) -> bytes:
         """Little-endian bytes of ``value``; raises OverflowError if it does not fit."""

@@ -656,7 +656,7 @@ def test_whole_reads_return_their_own_snapshot(sim: SimBus, bus: DynamixelBus) -
     rig = small_rig()
     first = bus.read_state()  # the first read also fetches the temperatures
     states = [bus.read_state() for _ in range(3)]
-    assert bus._whole  # the last one went the short way
+    assert bus.last_read_whole  # the last one went the short way
     for k, s in enumerate(states):
         assert not s.stale.any() and (s.age_s == 0).all()
         assert (s.hardware_errors == 0).all() and (s.status_errors == 0).all()
@@ -735,7 +735,7 @@ def test_a_read_the_wire_cannot_carry_by_its_deadline_is_not_sent(sim: SimBus) -
     fsr = 0x8A
     try:
         fresh = b.read_state()
-        wire_s = b._read_wire_s(len(rig.servos))  # about 19 ms at 57600 baud
+        wire_s = b.read_wire_s(len(rig.servos))  # about 19 ms at 57600 baud
         reads = sim.stats.by_instruction[fsr]
         state = b.read_state(b.clock.now() + 0.5 * wire_s)
         assert state.stale.all() and (state.age_s > 0).all()
@@ -784,7 +784,7 @@ def test_after_a_failed_read_the_wait_for_a_quiet_line_counts_against_the_deadli
     sim.faults = FaultSpec(drop=1.0)
     assert bus.read_state(bus.clock.now() + 0.01).stale.all()  # every reply lost
     sim.faults = FaultSpec()
-    wire_s = bus._read_wire_s(n)
+    wire_s = bus.read_wire_s(n)
     sent = bus.stats.reads
     tight = bus.read_state(bus.clock.now() + wire_s + 0.5 * bus.reply_gap_s)
     assert tight.stale.all() and bus.stats.reads == sent and bus.stats.skipped_reads == 1

@@ -1,0 +1,159 @@
+"""Compiled kernels of the pose pipeline (numba): glove counts to joint degrees to servo targets.
+
+Why compiled: the loop runs once a cycle and sleeps in between, so each cycle
+starts with cold CPU caches, and a dozen small numpy calls each walk a large
+amount of cold dispatch code; one compiled loop over the servos (targets, sag,
+limits, slew) does the same work once.
+
+Each kernel is a plain loop that the numpy code it replaces could be checked
+against: ``tests/handrig/test_pose_kernels.py`` does, on random inputs including
+NaN and inf. ``cache=True`` keeps the machine code in ``__pycache__``;
+:func:`warm_up` compiles (or loads) everything before a loop starts, never inside
+a cycle. No wire code here: the servo packets' kernels are in
+:mod:`handrig.servo.codec`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def _sag_cell(axis: Any, x: float) -> int:  # pragma: no cover - compiled
+    """Index i of the cell [axis[i], axis[i + 1]] holding x (the last cell past the end)."""
+    i = int(np.searchsorted(axis, x, side="right")) - 1
+    last = axis.shape[0] - 2
+    if i > last:
+        i = last
+    if i < 0:
+        i = 0
+    return i
+
+
+@njit(cache=True, nogil=True)
+def servo_targets(
+    controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
+    slot: Any, gain: float, inclination: float, rotation: float, low: Any, high: Any,
+    targets: Any, limit: float, first: bool, raw: Any,
+) -> int:  # pragma: no cover - compiled
+    """The servo targets in place: ``targets`` (n,) becomes the slew-limited step toward
+    ``controls @ a + b + gain * sag[slot]``, clamped to ``[low, high]``.
+
+    ``cells`` (n_inc-1, n_rot-1, 4, n_dof): each grid cell's four corner offsets
+    (:class:`handrig.sag.SagGrid`); ``slot[k] >= n_dof`` means no sag for servo k;
+    an empty ``cells`` means no sag at all. ``inclination`` is already checked and
+    clamped to -90..90, ``rotation`` finite. A non-finite target holds the previous
+    one (the middle of the range on the first step); returns how many did.
+    ``raw`` gets the targets before slew limiting. ``first``: no previous targets yet.
+    """
+    n = targets.shape[0]
+    n_dof = cells.shape[3]
+    use_sag = cells.shape[0] > 0
+    w0 = w1 = w2 = w3 = 0.0
+    i = j = 0
+    if use_sag:
+        i = _sag_cell(inc_axis, inclination)
+        r = (rotation - rot0) % 360.0 + rot0
+        j = _sag_cell(rot_axis, r)
+        ti = (inclination - inc_axis[i]) / (inc_axis[i + 1] - inc_axis[i])
+        tj = (r - rot_axis[j]) / (rot_axis[j + 1] - rot_axis[j])
+        w0 = (1.0 - ti) * (1.0 - tj)
+        w1 = (1.0 - ti) * tj
+        w2 = ti * (1.0 - tj)
+        w3 = ti * tj
+    held = 0
+    for k in range(n):
+        v = b[k]
+        for m in range(controls.shape[0]):
+            v += controls[m] * a[m, k]
+        s = slot[k]
+        if use_sag and s < n_dof:
+            v += gain * (w0 * cells[i, j, 0, s] + w1 * cells[i, j, 1, s]
+                         + w2 * cells[i, j, 2, s] + w3 * cells[i, j, 3, s])
+        if not math.isfinite(v):
+            held += 1
+            v = 0.5 * (low[k] + high[k]) if first else targets[k]
+        v = min(max(v, low[k]), high[k])
+        raw[k] = v
+        if first:
+            targets[k] = v
+        else:
+            step = min(max(v - targets[k], -limit), limit)
+            targets[k] = targets[k] + step
+    return held
+
+
+@njit(cache=True, nogil=True)
+def calibrate(
+    raw: Any, raw_index: Any, gain: Any, offset: Any, lo: Any, hi: Any, last_good: Any,
+    out: Any,
+) -> int:  # pragma: no cover - compiled
+    """Raw counts -> degrees (``raw[raw_index] * gain + offset``, clamped to
+    ``[lo, hi]``) into ``out``; a non-finite reading holds ``last_good`` (which the
+    finite ones update). ``raw`` must be long enough (checked by the caller).
+    Returns how many readings were held."""
+    held = 0
+    for k in range(out.shape[0]):
+        v = raw[raw_index[k]] * gain[k] + offset[k]
+        if not math.isfinite(v):
+            held += 1
+            v = last_good[k]
+        v = min(max(v, lo[k]), hi[k])
+        last_good[k] = v
+        out[k] = v
+    return held
+
+
+@njit(cache=True, nogil=True)
+def one_euro_step(
+    x: Any, te: float, x_hat: Any, dx_hat: Any, min_cutoff: Any, beta: Any, two_pi_d: Any,
+) -> None:  # pragma: no cover - compiled
+    """One step of the One Euro filter (handrig.filters) over every channel, in place on
+    ``x_hat`` and ``dx_hat``; ``te`` > 0 is the time since the previous sample."""
+    two_pi_te = 2.0 * math.pi * te
+    for i in range(x.shape[0]):
+        prev = x_hat[i]
+        a_d = 1.0 / (1.0 + 1.0 / (two_pi_d[i] * te))
+        d = dx_hat[i] + a_d * ((x[i] - prev) / te - dx_hat[i])
+        dx_hat[i] = d
+        fc = min_cutoff[i] + beta[i] * abs(d)
+        x_hat[i] = prev + (x[i] - prev) / (1.0 + 1.0 / (two_pi_te * fc))
+
+
+@njit(cache=True, nogil=True)
+def glove_controls(
+    raw: Any, raw_index: Any, gain: Any, offset: Any, lo: Any, hi: Any, last_good: Any,
+    deg: Any, filtered: bool, prime: bool, te: float, x_hat: Any, dx_hat: Any,
+    min_cutoff: Any, beta: Any, two_pi_d: Any, perm: Any, out: Any,
+) -> int:  # pragma: no cover - compiled
+    """:func:`calibrate`, then (``filtered``) the One Euro filter (``prime``: the first
+    sample passes through; a step only when ``te`` > 0), then ``out = deg[perm]``.
+    Returns how many readings were held."""
+    held = calibrate(raw, raw_index, gain, offset, lo, hi, last_good, deg)
+    if filtered:
+        if prime:
+            for i in range(deg.shape[0]):
+                x_hat[i] = deg[i]
+        elif te > 0.0:
+            one_euro_step(deg, te, x_hat, dx_hat, min_cutoff, beta, two_pi_d)
+        for i in range(deg.shape[0]):
+            deg[i] = x_hat[i]
+    for i in range(out.shape[0]):
+        out[i] = deg[perm[i]]
+    return held
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) every kernel with the types the loop uses."""
+    f = np.zeros(2)
+    servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]), 0.0,
+                  np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, 0.5, 0.5, f - 1.0,
+                  f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
+    idx = np.zeros(2, np.intp)
+    one_euro_step(f, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0)
+    glove_controls(f, idx, f + 1.0, f, f - 1.0, f + 1.0, np.zeros(2), np.zeros(2), True,
+                   False, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0, idx, np.zeros(2))

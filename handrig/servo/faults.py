@@ -1,0 +1,227 @@
+"""Fault handling: hardware errors and the reboot policy, the Bus Watchdog, stale runs.
+
+A servo raising its Alert bit has its Hardware Error Status read; the
+:class:`~handrig.servo.bus.FaultPolicy` then reboots it (bounded) or stops with a
+:class:`~handrig.errors.ServoFault`. The Bus Watchdog (``rig.bus.watchdog_ms``,
+20 ms units) stops a servo whose host goes silent; a tripped watchdog (-1) makes
+the servo refuse goals until it is cleared with 0 and armed again.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from handrig.clock import Clock
+from handrig.errors import DeviceError, DeviceTimeoutError, ServoFault
+from handrig.servo.bus import BusStats, FaultPolicy
+from handrig.servo.codec import INST_PING, INST_REBOOT, build_instruction
+from handrig.servo.goals import GoalWriter
+from handrig.servo.link import COMMAND_ATTEMPTS, COMMAND_TIMEOUT_S, Link
+from handrig.servo.readings import Readings
+from handrig.servo.registers import (
+    BUS_WATCHDOG_TRIPPED,
+    BUS_WATCHDOG_UNIT_MS,
+    STATUS_RETURN_ALL,
+    Reg,
+    describe_hardware_error,
+    describe_status_error,
+)
+from handrig.servo.roster import Roster
+from handrig.servo.sync_read import RegisterSweep
+
+log = logging.getLogger("handrig.servo")
+
+# A goal write after a silence this fraction of the Bus Watchdog time re-arms it first
+# (the servo's clock and ours differ).
+WATCHDOG_GAP_FRACTION = 0.8
+
+
+class FaultHandler:
+    """What the bus does about hardware errors, watchdogs and servos that stay stale.
+
+    ``torque_on``: set by the torque control; a reboot then gives the servo its
+    last goal and torque back, and the watchdogs are kept armed.
+    """
+
+    def __init__(
+        self, roster: Roster, link: Link, writer: GoalWriter, sweep: RegisterSweep,
+        readings: Readings, policy: FaultPolicy, stats: BusStats, clock: Clock,
+    ) -> None:
+        self.roster = roster
+        self.link = link
+        self.writer = writer
+        self.sweep = sweep
+        self.readings = readings
+        self.policy = policy
+        self.stats = stats
+        self.clock = clock
+        self.watchdog_ms = roster.rig.bus.watchdog_ms
+        self._watchdog_gap_s = (
+            WATCHDOG_GAP_FRACTION * self.watchdog_ms / 1000.0 if self.watchdog_ms else np.inf)
+        self.torque_on = False
+        self.skip_run = 0  # reads in a row not sent for lack of wire time
+
+    # ------------------------------------------------------------------ hardware errors
+    def alerts_raised(self) -> None:
+        """Handle every servo whose ERR byte in this read raised the Alert bit."""
+        for i in np.flatnonzero(self.readings.status_err & 0x80):
+            self.hardware_alert(int(i))
+
+    def hardware_alert(self, index: int) -> None:
+        """Servo ``index`` raised Alert: read its Hardware Error Status and act on it."""
+        try:
+            bits = self.link.read_register(index, Reg.HARDWARE_ERROR_STATUS)
+        except DeviceError as exc:
+            log.warning("%s raised Alert but its Hardware Error Status is unreadable: %s",
+                        self.roster.describe(index), exc)
+            return
+        if bits:
+            self.hardware_error(index, bits)
+
+    def hardware_error(self, index: int, bits: int) -> None:
+        """Servo ``index`` reports Hardware Error Status ``bits``: per policy, reboot or stop."""
+        r = self.roster
+        self.readings.hw_err[index] = bits
+        self.stats.hardware_errors[index] += 1
+        what = (f"{r.describe(index)} hardware error 0x{bits:02x}: "
+                f"{describe_hardware_error(bits)} {r.where()}")
+        if self.policy.on_hardware_error == "stop":
+            raise ServoFault(f"{what}; policy: stop", servo_id=r.ids[index], bits=bits)
+        if self.stats.reboots[index] >= self.policy.max_reboots:
+            raise ServoFault(
+                f"{what}; still there after {int(self.stats.reboots[index])} reboots: "
+                "stopping (check the load, supply voltage and temperature)",
+                servo_id=r.ids[index], bits=bits,
+            )
+        log.warning("%s; rebooting it", what)
+        self.reboot(index)
+
+    def reboot(self, index: int) -> None:
+        """Reboot servo ``index``, wait for it (ServoFault if it does not come back within
+        ``policy.reboot_wait_s``), then restore its settings (and torque, if on)."""
+        r = self.roster
+        sid = r.ids[index]
+        # One attempt only: a lost status must not send a second reboot to a
+        # servo that is already restarting (it would not answer that one either).
+        status = self.link.transact(build_instruction(sid, INST_REBOOT), sid, attempts=1,
+                                    n_params=0)
+        if status is not None and status.error & 0x7F:
+            raise ServoFault(
+                f"{r.describe(index)} refused a reboot: {describe_status_error(status.error)}",
+                servo_id=sid, bits=status.error,
+            )
+        self.stats.reboots[index] += 1
+        self._wait_for_restart(index)
+        remaining = self.link.read_register(index, Reg.HARDWARE_ERROR_STATUS)
+        if remaining:
+            log.warning("%s still reports hardware error 0x%02x after a reboot: %s",
+                        r.describe(index), remaining, describe_hardware_error(remaining))
+        self.link.write_register(index, Reg.RETURN_DELAY_TIME, 0)
+        self.link.write_register(index, Reg.STATUS_RETURN_LEVEL, STATUS_RETURN_ALL)
+        if self.torque_on:
+            goal = self.writer.last_goal_deg[index]
+            if not np.isfinite(goal):
+                goal = r.hold_deg[index]
+            self.link.write_register(index, Reg.GOAL_POSITION, r.ticks(index, float(goal)))
+            self.link.write_register(index, Reg.TORQUE_ENABLE, 1)
+            self.arm_watchdog()
+
+    def _wait_for_restart(self, index: int) -> None:
+        sid = self.roster.ids[index]
+        deadline = self.clock.now() + self.policy.reboot_wait_s
+        last = self.writer.last_goal_deg
+        while True:
+            if self.torque_on and not np.isnan(last).any():
+                # keep the other servos' Bus Watchdogs fed while this one restarts
+                self.writer.resend(last.copy())
+            status = self.link.transact(build_instruction(sid, INST_PING), sid, attempts=1,
+                                        n_params=3)
+            if status is not None:
+                return
+            if self.clock.now() >= deadline:
+                raise ServoFault(
+                    f"{self.roster.describe(index)} did not come back within "
+                    f"{self.policy.reboot_wait_s} s of a reboot {self.roster.where()}",
+                    servo_id=sid,
+                )
+
+    # ------------------------------------------------------------------ watchdog
+    def arm_watchdog(self) -> None:
+        """Bus Watchdog to ``rig.bus.watchdog_ms`` on every servo at once, then checked.
+
+        Broadcast Sync Writes reach every servo in one packet (servo by servo, the
+        first ones armed could trip while a lossy bus delays the last); 0 first
+        clears a tripped watchdog (-1). Servos not confirmed get checked writes.
+        """
+        n = self.roster.n
+        units = self.watchdog_ms // BUS_WATCHDOG_UNIT_MS
+        self.link.sync_write(Reg.BUS_WATCHDOG, [0] * n)
+        if units:
+            self.link.sync_write(Reg.BUS_WATCHDOG, [units] * n)
+        for _ in range(COMMAND_ATTEMPTS):
+            values = self.sweep.read(Reg.BUS_WATCHDOG, self.clock.now() + COMMAND_TIMEOUT_S)
+            if all(v is not None for v in values):
+                break
+        for i, value in enumerate(values):
+            if value == units:
+                continue
+            if value is not None:  # answered with another value: set it explicitly
+                self.link.write_register(i, Reg.BUS_WATCHDOG, 0)
+                if units:
+                    self.link.write_register(i, Reg.BUS_WATCHDOG, units)
+            else:
+                self.link.write_register(i, Reg.BUS_WATCHDOG, units)
+
+    def rearm_after_silence(self) -> None:
+        """Before goals: if the host was silent near the Bus Watchdog time, the servos'
+        watchdogs may have tripped and they refuse goals until it is cleared; clear
+        and re-arm it by broadcast first (two Sync Writes, no replies), counted in
+        ``stats.watchdog_gaps``. Housekeeping reads the watchdogs back later."""
+        if not self.torque_on or not self.watchdog_ms:
+            return
+        silent_s = self.clock.now() - self.link.budget.last_tx_s
+        if silent_s < self._watchdog_gap_s:
+            return
+        self.stats.watchdog_gaps += 1
+        log.warning("the bus was silent for %.0f ms (Bus Watchdog %d ms): re-arming the "
+                    "watchdogs before the next goals", silent_s * 1e3, self.watchdog_ms)
+        n = self.roster.n
+        self.link.sync_write(Reg.BUS_WATCHDOG, [0] * n)
+        self.link.sync_write(Reg.BUS_WATCHDOG, [self.watchdog_ms // BUS_WATCHDOG_UNIT_MS] * n)
+
+    def check_watchdogs(self, deadline_s: float) -> None:
+        """Read every Bus Watchdog back and re-arm them if one tripped."""
+        watchdogs = self.sweep.read(Reg.BUS_WATCHDOG, deadline_s)
+        tripped = [i for i, v in enumerate(watchdogs) if v == BUS_WATCHDOG_TRIPPED]
+        if not tripped:
+            return
+        self.stats.watchdog_trips += len(tripped)
+        log.warning("Bus Watchdog tripped on %s (the bus was quiet for more than %d ms): "
+                    "re-arming", ", ".join(self.roster.describe(i) for i in tripped),
+                    self.watchdog_ms)
+        self.arm_watchdog()
+
+    # ------------------------------------------------------------------ stale runs
+    def read_skipped(self, wire_s: float, allowed_s: float) -> None:
+        """A read was not sent for lack of wire time; too many in a row raise."""
+        self.stats.skipped_reads += 1
+        self.skip_run += 1
+        if self.skip_run >= self.policy.max_stale_reads:
+            raise DeviceTimeoutError(
+                f"no read of the servos fitted its deadline {self.skip_run} times in a row "
+                f"{self.roster.where()}: one takes {wire_s * 1e3:.2f} ms of wire, the caller "
+                f"allowed {allowed_s * 1e3:.2f} ms; raise the baud rate, read fewer fields "
+                "or read less often")
+
+    def check_stale_runs(self) -> None:
+        """A servo stale ``policy.max_stale_reads`` reads in a row is a fault."""
+        run = self.readings.stale_run
+        worst = int(run.argmax())
+        if run[worst] >= self.policy.max_stale_reads:
+            raise DeviceTimeoutError(
+                f"{self.roster.describe(worst)} gave no valid reading in {int(run[worst])} "
+                f"reads in a row {self.roster.where()} ({self.stats.summary()}): check its "
+                "cable, power and ID"
+            )

@@ -1,0 +1,156 @@
+"""The state reader: one present-state read with its retries, stale marking and checks.
+
+A read (or retry) whose request and reply could not both be on the wire before
+its deadline is not sent: on a half-duplex bus its reply would still be arriving
+when the caller's next goals go out. Failed servos are retried while the
+deadline allows; a Fast Sync Read reply stops at the first servo that does not
+answer, so a retry asks the rest first and the one where it stopped last.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handrig.clock import Clock
+from handrig.servo.bus import BusStats, FaultPolicy, ServoState
+from handrig.servo.fast_read import WHOLE, FastSyncRead, Order
+from handrig.servo.faults import FaultHandler
+from handrig.servo.link import Link
+from handrig.servo.readings import Readings, ReadPlan
+from handrig.servo.registers import Reg
+from handrig.servo.sync_read import RegisterSweep, SyncRead
+from handrig.servo.wire import read_bytes, wire_time_s
+
+
+class StateReader:
+    """Present-state reads: Fast Sync Read, with a fallback to Sync Read for good after
+    ``policy.fast_failures_before_fallback`` failures in a row while Sync Read works.
+
+    ``temperature_every``: every that many reads, when the deadline leaves time,
+    the Bus Watchdogs (torque on) and then the temperatures are read too (0: never).
+    """
+
+    def __init__(
+        self, link: Link, readings: Readings, plan: ReadPlan, fast: FastSyncRead,
+        sync: SyncRead, sweep: RegisterSweep, faults: FaultHandler, policy: FaultPolicy,
+        stats: BusStats, clock: Clock, temperature_every: int,
+    ) -> None:
+        self.link = link
+        self.readings = readings
+        self.plan = plan
+        self.fast = fast
+        self.sync = sync
+        self.sweep = sweep
+        self.faults = faults
+        self.policy = policy
+        self.stats = stats
+        self.clock = clock
+        self.temperature_every = int(temperature_every)
+        self._next_temperature_read = 0
+        self._fast_fail_run = 0
+        n = readings.n
+        baud = link.budget.baud
+        # a temperature Fast Sync Read: request 14 + N bytes, reply 8 + 5N
+        self._temperature_wire_s = wire_time_s(22 + 6 * n, baud) + 0.0005
+        # a read's default budget is never shorter than one reply on the wire plus slack
+        self._min_budget_s = 1.5 * wire_time_s(read_bytes(n, plan.data_len, True), baud) + 0.001
+        self.last_whole = False
+        """Whether the last read got every servo at once with no Alert bit raised (the
+        short way: one compiled pass decoded the reply into the returned state)."""
+
+    def read_wire_s(self, n: int) -> float:
+        """Wire time of a present-state read of ``n`` servos: the request and every reply."""
+        return read_bytes(n, self.plan.data_len, self.plan.fast) * self.link.budget.byte_s
+
+    def read(self, deadline_s: float | None) -> ServoState:
+        """One present-state read (see :meth:`handrig.servo.DynamixelBus.read_state`)."""
+        now = self.clock.now()
+        n = self.readings.n
+        if deadline_s is None:
+            # from when the wire is free of the goal Sync Write just sent
+            deadline_s = self.link.request_start(now) + max(
+                self.policy.read_budget_s, self._min_budget_s)
+        elif self.link.request_start(now) + self.read_wire_s(n) > deadline_s:
+            self.faults.read_skipped(self.read_wire_s(n), deadline_s - now)
+            return self.readings.unread(now)
+        self.faults.skip_run = 0
+        self.stats.reads += 1
+        self.readings.start_read()
+        self.last_whole = False
+        if self._attempts(deadline_s) and not (
+                self.temperature_every and self.stats.reads >= self._next_temperature_read):
+            return self.readings.take_whole(self.fast.whole_at)
+        return self._finish(deadline_s)
+
+    def _attempts(self, deadline_s: float) -> bool:
+        """The read and its retries; True when it was whole."""
+        fresh = self.readings.fresh
+        first = self.fast.orders[self.stats.reads % len(self.fast.orders)]
+        order: Order | None = first
+        pending = first.indices
+        for attempt in range(self.policy.read_retries + 1):
+            if attempt:
+                start = self.link.request_start(self.clock.now())
+                if start + self.read_wire_s(len(pending)) > deadline_s:
+                    break
+                self.stats.retries += 1
+            if self._attempt(pending, order, deadline_s) == WHOLE:
+                self.last_whole = True
+                return True
+            if fresh.all():
+                break
+            pending = np.roll(pending[~fresh[pending]], -1)
+            order = None
+        return False
+
+    def _attempt(self, indices: np.ndarray, order: Order | None, deadline_s: float) -> int:
+        """One read of ``indices``: what :meth:`FastSyncRead.read` returns (Sync Read: 1/0)."""
+        deadline = min(deadline_s, self.link.budget.reply_deadline(self.clock.now()))
+        if not self.plan.fast:
+            return int(self.sync.read(indices, deadline))
+        got = self.fast.read(indices, deadline, order)
+        if got:
+            self._fast_fail_run = 0
+            return got
+        self._fast_fail_run += 1
+        if self._fast_fail_run >= self.policy.fast_failures_before_fallback:
+            self._fast_fail_run = 0
+            deadline = min(deadline_s, self.link.budget.reply_deadline(self.clock.now()))
+            if self.sync.read(indices, deadline):
+                self.plan.fall_back(
+                    f"{self.policy.fast_failures_before_fallback} Fast Sync Reads "
+                    "failed in a row while Sync Read works")
+                return 1
+        return got
+
+    def _housekeeping_due(self) -> bool:
+        return bool(self.temperature_every) and self.stats.reads >= self._next_temperature_read
+
+    def _finish(self, deadline_s: float) -> ServoState:
+        """Stale marking, alerts, housekeeping and the stale-run check of a read."""
+        now = self.clock.now()
+        r = self.readings
+        whole = self.last_whole
+        if whole or r.fresh.all():
+            self.link.budget.reply_in(now)
+        stale = r.mark(now)
+        if not whole and r.status_err.any():
+            self.faults.alerts_raised()
+        if self._housekeeping_due() and deadline_s - self.clock.now() > self._temperature_wire_s:
+            self._next_temperature_read = self.stats.reads + self.temperature_every
+            self._housekeeping(deadline_s)
+        if stale.any():
+            self.faults.check_stale_runs()
+        return r.snapshot(now, stale, r.hw_err.copy())
+
+    def _housekeeping(self, deadline_s: float) -> None:
+        """With torque on, the Bus Watchdogs first, then the temperatures if the read's
+        deadline leaves time for them."""
+        if self.faults.torque_on and self.faults.watchdog_ms:
+            self.faults.check_watchdogs(deadline_s)
+            if deadline_s - self.clock.now() <= self._temperature_wire_s:
+                return
+        temps = self.readings.temperatures_c
+        for i, value in enumerate(self.sweep.read(Reg.PRESENT_TEMPERATURE, deadline_s)):
+            if value is not None:
+                temps[i] = value
