@@ -108,6 +108,18 @@ class Expander:
         self._outside_counts = np.zeros(self._k, dtype=np.int64)
         self.frames = 0
         self.outside_frames = 0
+        # One matrix product gives the curves and each control's distance inside its range
+        # (c - low, high - c; negative = outside), so the check costs one reduction.
+        eye = np.eye(self._k)
+        self._ext_gains_t: FloatArray = np.ascontiguousarray(
+            np.hstack([self._gains_t, eye, -eye]), dtype=np.float64)
+        fin_low = np.where(np.isfinite(self.train_low_deg), self.train_low_deg, 0.0)
+        fin_high = np.where(np.isfinite(self.train_high_deg), self.train_high_deg, 0.0)
+        self._ext_bias: FloatArray = np.ascontiguousarray(
+            np.concatenate([self._bias, -fin_low, fin_high]), dtype=np.float64)
+        self._ext: FloatArray = np.zeros(len(self.curve_names) + 2 * self._k)
+        self._ext_curves: FloatArray = self._ext[:len(self.curve_names)]
+        self._ext_inside: FloatArray = self._ext[len(self.curve_names):]
 
     @classmethod
     def from_file(cls, path: str | Path | None = None, limits: JointLimits | None = None
@@ -130,15 +142,16 @@ class Expander:
                 f"expected {self._k} control values ({', '.join(self.controls)}), got shape"
                 f" {c.shape}"
             )
-        np.dot(c, self._gains_t, out=out)
-        np.add(out, self._bias, out=out)
-        np.clip(out, self.low_deg, self.high_deg, out=out)
+        ext = self._ext
+        np.dot(c, self._ext_gains_t, out=ext)
+        np.add(ext, self._ext_bias, out=ext)
+        np.clip(self._ext_curves, self.low_deg, self.high_deg, out=out)
         self.frames += 1
-        np.less(c, self.train_low_deg, out=self._below)
-        np.greater(c, self.train_high_deg, out=self._above)
-        np.logical_or(self._below, self._above, out=self._below)
-        if self._below.any():
+        if self._range_known and self._ext_inside.min() < 0.0:
             self.outside_frames += 1
+            np.less(c, self.train_low_deg, out=self._below)
+            np.greater(c, self.train_high_deg, out=self._above)
+            np.logical_or(self._below, self._above, out=self._below)
             np.add(self._outside_counts, self._below, out=self._outside_counts)
         return out
 
