@@ -246,16 +246,18 @@ def out_of_regime(
 
 
 def regime_table(results: dict[str, dict[str, Errors]], splits: Sequence[Split]) -> list[str]:
-    """The results as aligned text lines: split, method, right, left, right-hand groups."""
+    """The results as aligned text lines: split, method, each hand and its curve groups."""
     groups = tuple(CURVE_GROUPS)
-    head = (f"  {'split':<12} {'method':<7} {'right':>6} {'left':>6}   right hand: "
-            + " ".join(f"{g:>7}" for g in groups))
-    lines = [head]
+    cols = " ".join(f"{g:>7}" for g in groups)
+    lines = [f"  {'':<12} {'':<7} {'right hand':^32}   {'left hand':^32}",
+             f"  {'split':<12} {'method':<7} {'all':>7} {cols}   {'all':>7} {cols}"]
     for sp in splits:
         for method, err in results[sp.name].items():
-            g = group_rms(err)
-            lines.append(f"  {sp.name:<12} {method:<7} {err.ri:>6.2f} {err.le:>6.2f}"
-                         f"               " + " ".join(f"{g[k]:>7.2f}" for k in groups))
+            cells = []
+            for side, total in (("ri", err.ri), ("le", err.le)):
+                g = group_rms(err, side)
+                cells.append(f"{total:>7.2f} " + " ".join(f"{g[k]:>7.2f}" for k in groups))
+            lines.append(f"  {sp.name:<12} {method:<7} {cells[0]}   {cells[1]}")
     return lines
 
 

@@ -207,3 +207,11 @@ def test_robust_never_hurts_when_the_controls_are_off() -> None:
         "mean"].ri
     assert clips["robust"].ri < 0.8 * clips["paper"].ri
     assert clips["robust"].ri < clips["ridge"].ri + 0.3
+
+
+def test_expand_command_reports_the_training_range(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    ref = str(mocap.REFERENCE_BVH)
+    assert main(["expand", "--map", str(DEFAULT_MAP), ref, "--out", str(tmp_path / "o.csv")]) == 0
+    assert "inside the map's training range in all 1063 frames" in capsys.readouterr().out
