@@ -8,7 +8,9 @@ A map records the range each control covered in training; the expander counts th
 calls whose controls leave it (by more than ``margin_deg``), per control too, so a run
 summary can say how often the live glove asked for hand shapes the map never saw (a
 glove calibration that is off shows up here first). :meth:`Expander.training_range`
-reads the counters.
+reads the counters. Every :meth:`Expander.expand` call counts as a frame; a caller whose
+own path precomposes the map counts frames with :meth:`Expander.note_controls` instead
+(one of the two per frame, not both).
 """
 
 from __future__ import annotations
@@ -120,6 +122,9 @@ class Expander:
         self._ext: FloatArray = np.zeros(len(self.curve_names) + 2 * self._k)
         self._ext_curves: FloatArray = self._ext[:len(self.curve_names)]
         self._ext_inside: FloatArray = self._ext[len(self.curve_names):]
+        self._range_t: FloatArray = np.ascontiguousarray(np.hstack([eye, -eye]))
+        self._range_bias: FloatArray = np.ascontiguousarray(self._ext_bias[len(self.curve_names):])
+        self._gap: FloatArray = np.zeros(2 * self._k)
 
     @classmethod
     def from_file(cls, path: str | Path | None = None, limits: JointLimits | None = None
@@ -148,12 +153,31 @@ class Expander:
         np.clip(self._ext_curves, self.low_deg, self.high_deg, out=out)
         self.frames += 1
         if self._range_known and self._ext_inside.min() < 0.0:
-            self.outside_frames += 1
-            np.less(c, self.train_low_deg, out=self._below)
-            np.greater(c, self.train_high_deg, out=self._above)
-            np.logical_or(self._below, self._above, out=self._below)
-            np.add(self._outside_counts, self._below, out=self._outside_counts)
+            self._count_outside(c)
         return out
+
+    def note_controls(self, controls_deg: FloatArray) -> bool:
+        """Count one frame of controls against the training range without expanding it
+        (for a caller whose own path precomposes the map); True if any was outside."""
+        c = controls_deg
+        if c.shape != (self._k,):
+            raise DataError(f"expected {self._k} control values, got shape {c.shape}")
+        self.frames += 1
+        if not self._range_known:
+            return False
+        np.dot(c, self._range_t, out=self._gap)
+        np.add(self._gap, self._range_bias, out=self._gap)
+        if self._gap.min() < 0.0:
+            self._count_outside(c)
+            return True
+        return False
+
+    def _count_outside(self, c: FloatArray) -> None:
+        self.outside_frames += 1
+        np.less(c, self.train_low_deg, out=self._below)
+        np.greater(c, self.train_high_deg, out=self._above)
+        np.logical_or(self._below, self._above, out=self._below)
+        np.add(self._outside_counts, self._below, out=self._outside_counts)
 
     def expand_many(self, controls_deg: FloatArray, out: FloatArray | None = None) -> FloatArray:
         """Many frames: (n, k) -> (n, 50), clamped; ``out`` (n, 50) is reused if given."""

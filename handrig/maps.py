@@ -23,7 +23,8 @@ much (degrees per degree). A control curve maps to itself (gain 1). Methods:
   what the training capture showed (a calibration offset, a rest pose the capture did
   not hold): the expected error ``E[(y - g.(x + e))^2]`` with independent offsets ``e``
   of that size is the least-squares error plus ``noise^2 * |g|^2`` (Tikhonov
-  regularisation in degrees, the equivalence of training with input noise). The
+  regularisation in degrees: C. Bishop, "Training with noise is equivalent to Tikhonov
+  regularization", Neural Computation 7, 1995). The
   penalty is taken toward the ``paper`` gains rather than toward zero, so a curve that
   copies one control keeps the copy. A gain on a control that moved little in training
   (the left hand of a gesturing performer) then costs what it would cost when that

@@ -145,6 +145,9 @@ def test_expander_counts_frames_outside_the_training_range() -> None:
     assert "1 of 5 frames" in rep.summary() and "calibration" in rep.summary()
     ex.expand_many(np.tile(np.array([high[0] + 2.0, inside[1], inside[2]]), (4, 1)))
     assert ex.training_range().outside_frames == 5 and ex.training_range().frames == 9
+    assert ex.note_controls(inside) is False
+    assert ex.note_controls(np.array([inside[0], high[1] + 3.0, inside[2]])) is True
+    assert ex.training_range().outside_by_control["riPinkyMCPy"] == 1
     ex.reset_training_range()
     assert ex.training_range().frames == 0 and ex.training_range().outside_frames == 0
     old = LinearMap(**{**m.__dict__, "control_range_deg": None})
