@@ -186,8 +186,10 @@ def test_evaluate_compares_methods_on_held_out_blocks(
     b = read_bvh(mocap.REFERENCE_BVH)
     p = tmp_path / "part.bvh"
     p.write_text(format_bvh(Bvh(b.joints, b.frame_time_s, b.motion[300:700])))
-    assert main(["evaluate", str(p), "--json", "--folds", "4"]) == 0
+    fig = tmp_path / "err.png"
+    assert main(["evaluate", str(p), "--json", "--folds", "4", "--figure", str(fig)]) == 0
     obj = json.loads(capsys.readouterr().out)
+    assert obj["figure"] == str(fig) and fig.stat().st_size > 10000
     assert obj["in_sample"] is False
     assert "4 contiguous blocks" in obj["held_out"]["scheme"]
     meth = obj["held_out"]["methods"]
@@ -196,3 +198,9 @@ def test_evaluate_compares_methods_on_held_out_blocks(
     assert meth["ridge"]["ri_rms_deg"] < meth["mean"]["ri_rms_deg"]
     assert main(["evaluate", str(p), "--folds", "1"]) == 2
     assert "folds" in capsys.readouterr().err
+    assert main(["evaluate", str(p), "--folds", "3", "--methods", "mean,paper"]) == 0
+    text = capsys.readouterr().out
+    assert "offset: leave one block out, every control off by 2 deg" in text
+    assert "  offset       paper" in text and "right hand" in text and "left hand" in text
+    assert main(["evaluate", str(p), "--methods", "mean,lasso"]) == 2
+    assert "lasso" in capsys.readouterr().err
