@@ -219,13 +219,16 @@ class LinearMap:
                 fit[i] = entry.fit_rms_deg
         rng = None if mf.control_range_deg is None else np.array(mf.control_range_deg,
                                                                   dtype=np.float64)
-        lm = cls(
-            controls=mf.controls, control_means_deg=np.array(mf.control_means_deg),
-            curve_means_deg=means, gains=gains, method=mf.method, trained_on=mf.trained_on,
-            profile=mf.profile, frames=mf.frames, fps=mf.fps, description=mf.description,
-            fit_rms_deg=None if np.isnan(fit).any() else fit, control_range_deg=rng,
-            fitting=mf.fitting, evaluation=mf.evaluation,
-        )
+        try:
+            lm = cls(
+                controls=mf.controls, control_means_deg=np.array(mf.control_means_deg),
+                curve_means_deg=means, gains=gains, method=mf.method, trained_on=mf.trained_on,
+                profile=mf.profile, frames=mf.frames, fps=mf.fps, description=mf.description,
+                fit_rms_deg=None if np.isnan(fit).any() else fit, control_range_deg=rng,
+                fitting=mf.fitting, evaluation=mf.evaluation,
+            )
+        except DataError as exc:
+            raise ConfigError(str(exc), file=str(path)) from None
         for msg in lm.check_plausible(str(path)):
             warnings.warn(msg, MapWarning, stacklevel=2)
         return lm
@@ -262,10 +265,24 @@ class LinearMap:
                         f" training range [{lo:.4g}, {hi:.4g}]", file=source,
                         key=f"control_range_deg[{j}]", allowed="low <= mean <= high",
                     )
+        lim = hand.curve_limits_deg()
+        span = lim[:, 1] - lim[:, 0]
+        means = self.curve_means_deg.copy()
+        means[self.control_indices] = self.control_means_deg
+        far = np.maximum(lim[:, 0] - means, means - lim[:, 1]) / span
+        if far.max() > 1.0:
+            i = int(np.argmax(far))
+            name = hand.CURVE_NAMES[i]
+            key = (f"control_means_deg[{self.controls.index(name)}]" if name in self.controls
+                   else f"curves.{name}.mean_deg")
+            raise ConfigError(
+                f"the mean of {name} lies more than its joint range beyond its joint limits"
+                f" [{lim[i, 0]:g}, {lim[i, 1]:g}] deg: not a pose of this hand (wrong"
+                " convention or a corrupt file)", file=source, key=key, value=float(means[i]),
+            )
         swing = self.swing_deg()
         if swing is None:
             return []
-        lim = hand.curve_limits_deg()
         ratio = swing / (lim[:, 1] - lim[:, 0])
         doubtful = [i for i in np.argsort(-ratio) if i not in idx and ratio[i] > SWING_WARN]
         if not doubtful:

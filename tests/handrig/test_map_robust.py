@@ -12,7 +12,7 @@ import pytest
 from handrig import hand, mocap
 from handrig.cli import main
 from handrig.config import JointLimits
-from handrig.errors import ConfigError
+from handrig.errors import ConfigError, HandrigError
 from handrig.evaluation import (
     block_splits,
     calm_frames,
@@ -111,6 +111,8 @@ def test_gains_beyond_the_training_data_warn_then_refuse(tmp_path: Path) -> None
         (lambda t: t.replace("control_means_deg = [", "control_means_deg = [-900.0, 0.0, 0.0]"
                              " #"), r"control_range_deg\[0\].*outside its training range"),
         (lambda t: t.replace("mean_deg = ", "mean_deg = nan #", 1), r"finite number"),
+        (lambda t: t.replace("[curves.riRingMCPy]\nmean_deg = ", "[curves.riRingMCPy]\nmean_deg"
+                             " = 4000.0 #"), r"curves\.riRingMCPy\.mean_deg.*not a pose"),
         (lambda t: t[: len(t) // 2], r"(not valid TOML|missing)"),
     ],
 )
@@ -218,3 +220,23 @@ def test_expand_command_reports_the_training_range(
     ref = str(mocap.REFERENCE_BVH)
     assert main(["expand", "--map", str(DEFAULT_MAP), ref, "--out", str(tmp_path / "o.csv")]) == 0
     assert "inside the map's training range in all 1063 frames" in capsys.readouterr().out
+
+
+def test_randomly_damaged_map_files_never_raise_anything_but_a_handrig_error(
+    tmp_path: Path,
+) -> None:
+    text = _saved(tmp_path).read_text()
+    rng = np.random.default_rng(7)
+    alphabet = list("[]{}=\"#,.0123456789-e\n abcxyz")
+    p = tmp_path / "damaged.toml"
+    for _ in range(150):
+        chars = list(text)
+        for pos in rng.integers(0, len(chars), size=int(rng.integers(1, 6))):
+            chars[pos] = str(rng.choice(alphabet))
+        p.write_text("".join(chars))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MapWarning)
+            try:
+                LinearMap.load(p)
+            except HandrigError as exc:
+                assert "damaged.toml" in str(exc)
