@@ -522,14 +522,16 @@ def fit_map(
     range_min_deg: float = 1.0,
     control_noise_deg: float = CONTROL_NOISE_DEG,
     groups: Sequence[int] | NDArray[np.intp] | None = None,
+    groups_name: str = "",
     **meta: object,
 ) -> LinearMap:
     """Fit a map from ``controls`` to all 50 curves on ``curves`` (frames x 50, vocabulary).
 
     ``groups``: one label per frame (e.g. the gesture clip), the units the ``robust``
     method holds out in its per-curve cross-validation (None: :data:`DEFAULT_GROUPS`
-    contiguous blocks). ``meta`` goes to the map's descriptive fields (trained_on,
-    profile, fps, description, evaluation).
+    contiguous blocks); ``groups_name`` says what they are in the map's ``fitting`` note
+    (default "clips", or "contiguous blocks" without groups). ``meta`` goes to the map's
+    descriptive fields (trained_on, profile, fps, description, evaluation).
     """
     if method not in METHODS:
         raise DataError(f"unknown method {method!r}; methods: {', '.join(METHODS)}")
@@ -556,6 +558,7 @@ def fit_map(
             raise DataError(f"groups needs one label per frame ({y.shape[0]}), got"
                             f" {labels.shape}")
         n_groups = len(np.unique(labels))
+        default_name = "clips" if groups is not None else "contiguous blocks"
         if n_groups < 2:
             raise DataError("the robust method needs at least 2 groups (clips) to hold out")
         if not control_noise_deg > 0:
@@ -567,7 +570,7 @@ def fit_map(
         fitting = (f"robust: gains shrunk toward the paper map for controls off by"
                    f" {control_noise_deg:g} deg; per curve, follow the controls or hold the mean"
                    f" by leave-one-group-out over {n_groups} groups"
-                   f" ({'clips' if groups is not None else 'contiguous blocks'});"
+                   f" ({groups_name or default_name});"
                    f" {len(held)} curve(s) held at the mean")
     elif method == "ridge":
         gains, means = _fit_ridge(x, y, alpha)

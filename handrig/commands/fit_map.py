@@ -76,7 +76,10 @@ def run(args: argparse.Namespace) -> int:
             evaluation.append(f"{sp.name} ({sp.description}): {cells}")
     lm = maps.fit_map(
         curves, controls, args.method, alpha=args.alpha, control_noise_deg=args.noise,
-        groups=groups, trained_on=tuple(args.files), profile=str(args.profile),
+        groups=groups, groups_name=(
+            "the gesture clips of the README" if reference
+            else f"{maps.DEFAULT_GROUPS} contiguous blocks per file"),
+        trained_on=tuple(args.files), profile=str(args.profile),
         fps=fps or 0.0, description=args.description, evaluation=tuple(evaluation),
     )
     path = lm.save(args.out)

@@ -194,7 +194,7 @@ def test_shipped_maps_are_robust_and_say_how_they_were_fit() -> None:
             m = LinearMap.load(path)
         assert m.method == "robust" and len(m.controls) == k
         assert m.control_range_deg is not None and m.frames == 1063
-        assert "15 groups (clips)" in m.fitting
+        assert "15 groups (the gesture clips of the README)" in m.fitting
         assert [e.split(" ")[0] for e in m.evaluation] == [
             "clips", "kinds", "calm", "calm-unseen", "offset"]
 
@@ -240,3 +240,23 @@ def test_randomly_damaged_map_files_never_raise_anything_but_a_handrig_error(
                 LinearMap.load(p)
             except HandrigError as exc:
                 assert "damaged.toml" in str(exc)
+
+
+def test_fit_map_on_two_files_groups_each_files_blocks(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from handrig.bvh import Bvh, format_bvh, read_bvh
+
+    b = read_bvh(mocap.REFERENCE_BVH)
+    files = []
+    for i, (a, z) in enumerate(((0, 300), (300, 700))):
+        p = tmp_path / f"part{i}.bvh"
+        p.write_text(format_bvh(Bvh(b.joints, b.frame_time_s, b.motion[a:z])))
+        files.append(str(p))
+    out = tmp_path / "m.toml"
+    assert main(["fit-map", *files, "--out", str(out), "--evaluate"]) == 0
+    m = LinearMap.load(out)
+    assert m.method == "robust" and m.frames == 700
+    assert "10 groups (5 contiguous blocks per file)" in m.fitting
+    assert m.evaluation[0].startswith("clips (leave one block out): robust")
+    assert "contiguous blocks of the concatenated files" in capsys.readouterr().out
