@@ -119,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
               " as error): " + ", ".join(f"{n} {f:.0%} of frames" for f, n in far if f > 0))
     if res:
         print(f"unseen motion, {result['held_out']['scheme']} (RMS deg, every curve of the"
-              " hand; right-hand groups):")
+              " hand, and its curve groups):")
         for sp in splits:
             print(f"  {sp.name}: {sp.description}")
         print("\n".join(regime_table(res, splits)))
