@@ -3,15 +3,21 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
+from handrig import mocap
 from handrig.expand import DEFAULT_TWO_GLOVE_MAP, Expander
+from handrig.maps import LinearMap
 
 
-def _measure(ex: Expander, frames: int = 20000) -> tuple[float, float]:
-    rng = np.random.default_rng(0)
-    inputs = ex.control_means_deg + rng.normal(0.0, 10.0, size=(frames, len(ex.controls)))
+def _measure(ex: Expander, frames: int = 20000, inputs: np.ndarray | None = None
+             ) -> tuple[float, float]:
+    if inputs is None:
+        rng = np.random.default_rng(0)
+        inputs = ex.control_means_deg + rng.normal(0.0, 10.0, size=(frames, len(ex.controls)))
+    inputs = np.resize(inputs, (frames, inputs.shape[1]))
     out = np.empty(len(ex.curve_names))
     times = np.empty(frames)
     for row in inputs[:1000]:
@@ -32,6 +38,17 @@ def main() -> None:
         med, p99 = _measure(ex)
         print(f"expand one frame, two hands (50 curves), {label}: median {med:.2f} us,"
               f" p99 {p99:.2f} us (target: median <= 10 us)")
+    lm = LinearMap.load(DEFAULT_TWO_GLOVE_MAP)
+    with_range, without = Expander(lm), Expander(replace(lm, control_range_deg=None))
+    ref = mocap.load_reference().curves[:, lm.control_indices]
+    a_med, _ = _measure(with_range, inputs=ref)
+    b_med, _ = _measure(without, inputs=ref)
+    print(f"training-range count (two gloves, the reference capture's controls replayed):"
+          f" median {a_med:.2f} us with it, {b_med:.2f} us for the same map without a"
+          f" recorded range; {with_range.training_range().summary()}")
+    far = np.tile(lm.control_means_deg + 50.0, (100, 1))
+    c_med, _ = _measure(with_range, inputs=far)
+    print(f"  every control outside its range: median {c_med:.2f} us")
     ex = Expander.from_file()
     batch = np.tile(ex.control_means_deg, (10000, 1))
     out = np.empty((10000, 50))

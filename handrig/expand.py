@@ -3,10 +3,19 @@
 :class:`Expander` precomputes ``pose = bias + controls @ gains_t`` and clamps to the
 joint limits, all with ``out=`` numpy calls on preallocated buffers: no Python loop
 over curves, no allocation per frame (``bench/bench_expand.py`` measures it).
+
+A map records the range each control covered in training; the expander counts the
+calls whose controls leave it (by more than ``margin_deg``), per control too, so a run
+summary can say how often the live glove asked for hand shapes the map never saw (a
+glove calibration that is off shows up here first). :meth:`Expander.training_range`
+reads the counters. Every :meth:`Expander.expand` call counts as a frame; a caller whose
+own path precomposes the map counts frames with :meth:`Expander.note_controls` instead
+(one of the two per frame, not both).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +30,47 @@ FloatArray = NDArray[np.float64]
 DEFAULT_MAP = CONFIG_DIR / "maps" / "default.toml"
 """Right-glove map shipped with handrig (fitted on data/mocap/pn_gestures_reference.bvh)."""
 DEFAULT_TWO_GLOVE_MAP = CONFIG_DIR / "maps" / "default_two_gloves.toml"
+RANGE_MARGIN_DEG = 2.0
+"""A control counts as outside its training range beyond this many degrees past it."""
+
+
+@dataclass(frozen=True)
+class TrainingRangeReport:
+    """How often the controls left the map's training range (see :class:`Expander`).
+
+    ``known`` is False for a map without a recorded range (then every count is 0).
+    ``outside_by_control`` maps each control to the number of frames it was outside.
+    """
+
+    known: bool
+    frames: int
+    outside_frames: int
+    outside_by_control: dict[str, int]
+    margin_deg: float
+
+    @property
+    def outside_fraction(self) -> float:
+        return self.outside_frames / self.frames if self.frames else 0.0
+
+    def summary(self) -> str:
+        """One line for a run summary."""
+        if not self.known:
+            return "training range unknown (the map records none: refit it with handrig fit-map)"
+        if not self.outside_frames:
+            return (f"controls inside the map's training range in all {self.frames} frames"
+                    f" (margin {self.margin_deg:g} deg)")
+        worst = sorted(self.outside_by_control.items(), key=lambda kv: -kv[1])
+        shown = ", ".join(f"{c} {n / self.frames:.0%}" for c, n in worst[:3] if n)
+        return (f"controls outside the map's training range in {self.outside_frames} of"
+                f" {self.frames} frames ({self.outside_fraction:.1%}; {shown}): check the"
+                " glove calibration")
+
+    def to_json(self) -> dict[str, object]:
+        return {"known": self.known, "frames": self.frames,
+                "outside_frames": self.outside_frames,
+                "outside_fraction": round(self.outside_fraction, 6),
+                "outside_by_control": dict(self.outside_by_control),
+                "margin_deg": self.margin_deg}
 
 
 class Expander:
@@ -31,7 +81,8 @@ class Expander:
     control's mean in training (use it for a channel the glove lacks).
     """
 
-    def __init__(self, map: LinearMap, limits: JointLimits | None = None) -> None:
+    def __init__(self, map: LinearMap, limits: JointLimits | None = None, *,
+                 range_margin_deg: float = RANGE_MARGIN_DEG) -> None:
         self.map = map
         self.controls: tuple[str, ...] = tuple(map.controls)
         self.curve_names: tuple[str, ...] = hand.CURVE_NAMES
@@ -47,6 +98,33 @@ class Expander:
         )
         self._k = len(self.controls)
         self._out: FloatArray = np.zeros(len(self.curve_names))
+        # Training range counters: preallocated, updated with out= calls per frame.
+        self.range_margin_deg = float(range_margin_deg)
+        self._range_known = map.control_range_deg is not None
+        rng = (np.asarray(map.control_range_deg, dtype=np.float64) if self._range_known
+               else np.array([[-np.inf, np.inf]] * self._k))
+        self.train_low_deg: FloatArray = np.ascontiguousarray(rng[:, 0] - self.range_margin_deg)
+        self.train_high_deg: FloatArray = np.ascontiguousarray(rng[:, 1] + self.range_margin_deg)
+        self._below = np.zeros(self._k, dtype=bool)
+        self._above = np.zeros(self._k, dtype=bool)
+        self._outside_counts = np.zeros(self._k, dtype=np.int64)
+        self.frames = 0
+        self.outside_frames = 0
+        # One matrix product gives the curves and each control's distance inside its range
+        # (c - low, high - c; negative = outside), so the check costs one reduction.
+        eye = np.eye(self._k)
+        self._ext_gains_t: FloatArray = np.ascontiguousarray(
+            np.hstack([self._gains_t, eye, -eye]), dtype=np.float64)
+        fin_low = np.where(np.isfinite(self.train_low_deg), self.train_low_deg, 0.0)
+        fin_high = np.where(np.isfinite(self.train_high_deg), self.train_high_deg, 0.0)
+        self._ext_bias: FloatArray = np.ascontiguousarray(
+            np.concatenate([self._bias, -fin_low, fin_high]), dtype=np.float64)
+        self._ext: FloatArray = np.zeros(len(self.curve_names) + 2 * self._k)
+        self._ext_curves: FloatArray = self._ext[:len(self.curve_names)]
+        self._ext_inside: FloatArray = self._ext[len(self.curve_names):]
+        self._range_t: FloatArray = np.ascontiguousarray(np.hstack([eye, -eye]))
+        self._range_bias: FloatArray = np.ascontiguousarray(self._ext_bias[len(self.curve_names):])
+        self._gap: FloatArray = np.zeros(2 * self._k)
 
     @classmethod
     def from_file(cls, path: str | Path | None = None, limits: JointLimits | None = None
@@ -69,10 +147,37 @@ class Expander:
                 f"expected {self._k} control values ({', '.join(self.controls)}), got shape"
                 f" {c.shape}"
             )
-        np.dot(c, self._gains_t, out=out)
-        np.add(out, self._bias, out=out)
-        np.clip(out, self.low_deg, self.high_deg, out=out)
+        ext = self._ext
+        np.dot(c, self._ext_gains_t, out=ext)
+        np.add(ext, self._ext_bias, out=ext)
+        np.clip(self._ext_curves, self.low_deg, self.high_deg, out=out)
+        self.frames += 1
+        if self._range_known and self._ext_inside.min() < 0.0:
+            self._count_outside(c)
         return out
+
+    def note_controls(self, controls_deg: FloatArray) -> bool:
+        """Count one frame of controls against the training range without expanding it
+        (for a caller whose own path precomposes the map); True if any was outside."""
+        c = controls_deg
+        if c.shape != (self._k,):
+            raise DataError(f"expected {self._k} control values, got shape {c.shape}")
+        self.frames += 1
+        if not self._range_known:
+            return False
+        np.dot(c, self._range_t, out=self._gap)
+        np.add(self._gap, self._range_bias, out=self._gap)
+        if self._gap.min() < 0.0:
+            self._count_outside(c)
+            return True
+        return False
+
+    def _count_outside(self, c: FloatArray) -> None:
+        self.outside_frames += 1
+        np.less(c, self.train_low_deg, out=self._below)
+        np.greater(c, self.train_high_deg, out=self._above)
+        np.logical_or(self._below, self._above, out=self._below)
+        np.add(self._outside_counts, self._below, out=self._outside_counts)
 
     def expand_many(self, controls_deg: FloatArray, out: FloatArray | None = None) -> FloatArray:
         """Many frames: (n, k) -> (n, 50), clamped; ``out`` (n, 50) is reused if given."""
@@ -87,4 +192,23 @@ class Expander:
         np.matmul(c, self._gains_t, out=out)
         out += self._bias
         np.clip(out, self.low_deg, self.high_deg, out=out)
+        outside = (c < self.train_low_deg) | (c > self.train_high_deg)
+        self.frames += c.shape[0]
+        self.outside_frames += int(outside.any(axis=1).sum())
+        self._outside_counts += outside.sum(axis=0)
         return out
+
+    def training_range(self) -> TrainingRangeReport:
+        """The counters since construction (or :meth:`reset_training_range`)."""
+        return TrainingRangeReport(
+            known=self._range_known, frames=self.frames, outside_frames=self.outside_frames,
+            outside_by_control={c: int(n) for c, n in zip(
+                self.controls, self._outside_counts, strict=True)},
+            margin_deg=self.range_margin_deg,
+        )
+
+    def reset_training_range(self) -> None:
+        """Zero the training range counters."""
+        self.frames = 0
+        self.outside_frames = 0
+        self._outside_counts[:] = 0

@@ -18,15 +18,35 @@ much (degrees per degree). A control curve maps to itself (gain 1). Methods:
 * ``huber`` — the same multi-control fit with the Huber loss (iteratively reweighted
   least squares, robust scale from the median absolute deviation), so a few glitched or
   atypical frames do not pull the gains.
+* ``robust`` (the default) — for each curve, the least-squares map of all controls under
+  the assumption that every control is off by about ``control_noise_deg`` (1 deg) from
+  what the training capture showed (a calibration offset, a rest pose the capture did
+  not hold): the expected error ``E[(y - g.(x + e))^2]`` with independent offsets ``e``
+  of that size is the least-squares error plus ``noise^2 * |g|^2`` (Tikhonov
+  regularisation in degrees: C. Bishop, "Training with noise is equivalent to Tikhonov
+  regularization", Neural Computation 7, 1995). The
+  penalty is taken toward the ``paper`` gains rather than toward zero, so a curve that
+  copies one control keeps the copy. A gain on a control that moved little in training
+  (the left hand of a gesturing performer) then costs what it would cost when that
+  control sits a degree elsewhere, which keeps several controls from combining into a
+  large extrapolation. Then, per curve, leave-one-group-out cross-validation over the
+  training clips picks between that map and the constant mean: no curve follows the
+  controls unless doing so beat the mean on clips it was not fitted on.
 * ``mean`` — every non-control curve is its mean (the baseline).
 
-Fitting refuses unrepaired glitches (``MocapCurves.require_clean``).
+Fitting refuses unrepaired glitches (``MocapCurves.require_clean``). A map records the
+range each control covered in training (``control_range_deg``) so the runtime can count
+how often the live controls leave it, and loading refuses implausible maps (a gain
+beyond :data:`MAX_GAIN`, a curve the gains would swing far beyond its joint range over
+the training range of the controls) and warns (:class:`MapWarning`) about doubtful ones.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,10 +60,22 @@ from handrig.config import build, check_joint_name, load_toml
 from handrig.errors import ConfigError, DataError
 
 FloatArray = NDArray[np.float64]
-Method = Literal["paper", "ridge", "huber", "mean"]
-METHODS: tuple[str, ...] = ("paper", "ridge", "huber", "mean")
-DEFAULT_METHOD: Method = "ridge"
-"""Best on unseen gestures (leave-one-clip-out on the reference capture; see evaluate)."""
+Method = Literal["robust", "paper", "ridge", "huber", "mean"]
+METHODS: tuple[str, ...] = ("robust", "paper", "ridge", "huber", "mean")
+DEFAULT_METHOD: Method = "robust"
+"""Close to ridge on unseen gestures, never worse than the paper's map or the mean when
+the controls are off (``handrig evaluate`` prints the comparison)."""
+CONTROL_NOISE_DEG = 1.0
+"""How far (deg, per control) the ``robust`` fit assumes live controls can sit from where
+the training capture had them for the same hand shape."""
+DEFAULT_GROUPS = 5
+"""Contiguous blocks used as cross-validation groups when the clips are not given."""
+MAX_GAIN = 100.0
+"""A gain beyond this (deg per deg) is refused at load: no curve moves 100 times its control."""
+SWING_WARN = 2.0
+SWING_REFUSE = 10.0
+"""Over the controls' training range (else their joint range), a curve whose map swings
+more than these multiples of its joint range is warned about / refused at load."""
 # Right-hand RMS, leave-one-clip-out on the reference: alpha 0.001 -> 3.45, 0.003 -> 3.44,
 # 0.1 -> 4.02 deg.
 RIDGE_ALPHA = 0.003
@@ -77,6 +109,12 @@ class LinearMap:
     fps: float = 0.0
     description: str = ""
     fit_rms_deg: FloatArray | None = field(default=None, compare=False)
+    control_range_deg: FloatArray | None = field(default=None, compare=False)
+    """(k, 2) lowest and highest value of each control in the training data."""
+    fitting: str = ""
+    """How it was fit (method settings, cross-validation groups)."""
+    evaluation: tuple[str, ...] = ()
+    """Held-out figures measured when it was fit (``handrig fit-map --evaluate``)."""
 
     def __post_init__(self) -> None:
         k = len(self.controls)
@@ -84,6 +122,13 @@ class LinearMap:
             raise DataError(f"gains must be (50, {k}), got {self.gains.shape}")
         if self.control_means_deg.shape != (k,) or self.curve_means_deg.shape != (50,):
             raise DataError("control_means_deg must be (k,) and curve_means_deg (50,)")
+        if self.control_range_deg is not None and self.control_range_deg.shape != (k, 2):
+            raise DataError(f"control_range_deg must be ({k}, 2), got"
+                            f" {self.control_range_deg.shape}")
+        for name, arr in (("gains", self.gains), ("curve_means_deg", self.curve_means_deg),
+                          ("control_means_deg", self.control_means_deg)):
+            if not np.isfinite(arr).all():
+                raise DataError(f"map {name} contain NaN or inf")
 
     @property
     def control_indices(self) -> NDArray[np.intp]:
@@ -115,8 +160,19 @@ class LinearMap:
             f"fps = {_num(self.fps)}",
             f"controls = [{', '.join(q(c) for c in self.controls)}]",
             f"control_means_deg = [{', '.join(_num(v) for v in self.control_means_deg)}]",
-            "",
         ]
+        if self.control_range_deg is not None:
+            rng = ", ".join(f"[{_num(lo)}, {_num(hi)}]" for lo, hi in self.control_range_deg)
+            lines.append("# lowest and highest value of each control in the training data")
+            lines.append(f"control_range_deg = [{rng}]")
+        if self.fitting:
+            lines.append(f"fitting = {q(self.fitting)}")
+        if self.evaluation:
+            lines.append("# held-out RMS error (deg) measured when the map was fit")
+            lines.append("evaluation = [")
+            lines += [f"  {q(e)}," for e in self.evaluation]
+            lines.append("]")
+        lines.append("")
         for i, name in enumerate(hand.CURVE_NAMES):
             g = ", ".join(
                 f"{c} = {_num(self.gains[i, j], 5)}"
@@ -148,6 +204,8 @@ class LinearMap:
             mf = build(_MapFile, data)
         except ConfigError as exc:
             raise exc.located(str(path)) from None
+        except (TypeError, ValueError) as exc:  # a shape the builder cannot take
+            raise ConfigError(f"malformed map: {exc}", file=str(path)) from None
         k = len(mf.controls)
         gains = np.zeros((50, k))
         means = np.zeros(50)
@@ -159,12 +217,96 @@ class LinearMap:
                 gains[i, mf.controls.index(c)] = g
             if entry.fit_rms_deg is not None:
                 fit[i] = entry.fit_rms_deg
-        return cls(
-            controls=mf.controls, control_means_deg=np.array(mf.control_means_deg),
-            curve_means_deg=means, gains=gains, method=mf.method, trained_on=mf.trained_on,
-            profile=mf.profile, frames=mf.frames, fps=mf.fps, description=mf.description,
-            fit_rms_deg=None if np.isnan(fit).any() else fit,
-        )
+        rng = None if mf.control_range_deg is None else np.array(mf.control_range_deg,
+                                                                  dtype=np.float64)
+        try:
+            lm = cls(
+                controls=mf.controls, control_means_deg=np.array(mf.control_means_deg),
+                curve_means_deg=means, gains=gains, method=mf.method, trained_on=mf.trained_on,
+                profile=mf.profile, frames=mf.frames, fps=mf.fps, description=mf.description,
+                fit_rms_deg=None if np.isnan(fit).any() else fit, control_range_deg=rng,
+                fitting=mf.fitting, evaluation=mf.evaluation,
+            )
+        except DataError as exc:
+            raise ConfigError(str(exc), file=str(path)) from None
+        for msg in lm.check_plausible(str(path)):
+            warnings.warn(msg, MapWarning, stacklevel=2)
+        return lm
+
+    def swing_deg(self) -> FloatArray | None:
+        """How far (deg) each curve moves as the controls sweep their training range
+        (``sum |gain| * range``); None without a recorded range."""
+        if self.control_range_deg is None:
+            return None
+        out: FloatArray = np.abs(self.gains) @ (self.control_range_deg[:, 1]
+                                                - self.control_range_deg[:, 0])
+        return out
+
+    def check_plausible(self, source: str = "<map>") -> list[str]:
+        """Raise ConfigError (naming ``source`` and the key) for an implausible map;
+        return warnings for doubtful values (``load`` issues them as :class:`MapWarning`)."""
+        idx = set(int(i) for i in self.control_indices)
+        for i, name in enumerate(hand.CURVE_NAMES):
+            j = int(np.argmax(np.abs(self.gains[i])))
+            g = float(self.gains[i, j])
+            if i not in idx and abs(g) > MAX_GAIN:
+                raise ConfigError(
+                    "gain is implausible: no curve moves that many degrees per degree of a"
+                    " control (refit the map with handrig fit-map)",
+                    file=source, key=f"curves.{name}.gains.{self.controls[j]}", value=g,
+                    allowed=f"|gain| <= {MAX_GAIN:g}",
+                )
+        if self.control_range_deg is not None:
+            for j, c in enumerate(self.controls):
+                lo, hi = self.control_range_deg[j]
+                if not lo <= self.control_means_deg[j] <= hi:
+                    raise ConfigError(
+                        f"the mean of {c} ({self.control_means_deg[j]:.4g}) lies outside its"
+                        f" training range [{lo:.4g}, {hi:.4g}]", file=source,
+                        key=f"control_range_deg[{j}]", allowed="low <= mean <= high",
+                    )
+        lim = hand.curve_limits_deg()
+        span = lim[:, 1] - lim[:, 0]
+        means = self.curve_means_deg.copy()
+        means[self.control_indices] = self.control_means_deg
+        far = np.maximum(lim[:, 0] - means, means - lim[:, 1]) / span
+        if far.max() > 1.0:
+            i = int(np.argmax(far))
+            name = hand.CURVE_NAMES[i]
+            key = (f"control_means_deg[{self.controls.index(name)}]" if name in self.controls
+                   else f"curves.{name}.mean_deg")
+            raise ConfigError(
+                f"the mean of {name} lies more than its joint range beyond its joint limits"
+                f" [{lim[i, 0]:g}, {lim[i, 1]:g}] deg: not a pose of this hand (wrong"
+                " convention or a corrupt file)", file=source, key=key, value=float(means[i]),
+            )
+        swing = self.swing_deg()
+        if swing is None:
+            return []
+        ratio = swing / (lim[:, 1] - lim[:, 0])
+        doubtful = [i for i in np.argsort(-ratio) if i not in idx and ratio[i] > SWING_WARN]
+        if not doubtful:
+            return []
+        i = int(doubtful[0])
+        name = hand.CURVE_NAMES[i]
+        j = int(np.argmax(np.abs(self.gains[i])))
+        detail = (f"over the controls' training range the gains swing {name} by"
+                  f" {swing[i]:.0f} deg, {ratio[i]:.1f} times its joint range (largest gain"
+                  f" {self.gains[i, j]:.4g} on {self.controls[j]})")
+        if ratio[i] > SWING_REFUSE:
+            raise ConfigError(
+                f"{detail}: gains far beyond what the training data supports; refit the map",
+                file=source, key=f"curves.{name}.gains",
+                allowed=f"a swing of at most {SWING_REFUSE:g} joint ranges",
+            )
+        more = f" ({len(doubtful) - 1} more curve(s) above {SWING_WARN:g})" if len(
+            doubtful) > 1 else ""
+        return [f"{source}: key 'curves.{name}.gains': {detail}{more}; such outputs often"
+                " sit at the joint limits"]
+
+
+class MapWarning(UserWarning):
+    """A map loaded, but some of its values look doubtful (the message says which)."""
 
 
 def _num(v: float, decimals: int = 4) -> str:
@@ -194,6 +336,9 @@ class _MapFile:
     trained_on: tuple[str, ...] = ()
     frames: int = 0
     fps: float = 0.0
+    control_range_deg: tuple[tuple[float, float], ...] | None = None
+    fitting: str = ""
+    evaluation: tuple[str, ...] = ()
 
     def check(self) -> None:
         if not self.controls:
@@ -220,12 +365,31 @@ class _MapFile:
                         "gain on a name that is not a control", key=f"curves.{name}.gains.{c}",
                         allowed=", ".join(self.controls),
                     )
+        if self.control_range_deg is not None:
+            if len(self.control_range_deg) != len(self.controls):
+                raise ConfigError(
+                    f"needs one [low, high] per control ({len(self.controls)})",
+                    key="control_range_deg", value=[list(r) for r in self.control_range_deg],
+                )
+            for j, (lo, hi) in enumerate(self.control_range_deg):
+                if lo > hi:
+                    raise ConfigError("inverted range: low must not exceed high",
+                                      key=f"control_range_deg[{j}]", value=[lo, hi])
         missing = [n for n in hand.CURVE_NAMES if n not in self.curves]
         if missing:
             raise ConfigError(
                 f"{len(missing)} curve(s) missing, first {missing[0]}", key="curves",
                 allowed="a [curves.NAME] table for each of the 50 curves",
             )
+
+
+_FITTING = {
+    "ridge": "ridge: least squares on all controls, penalty alpha = {alpha:g} on standardised"
+             " controls",
+    "huber": "huber: Huber loss (delta {delta:g} robust std), penalty alpha = {alpha:g}",
+    "paper": "paper: each curve follows its best single control (Jörg & O'Sullivan 4.2)",
+    "mean": "mean: every curve that is not a control holds its training mean",
+}
 
 
 def _design(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -304,6 +468,49 @@ def _fit_paper(
     return gains, y.mean(axis=0)
 
 
+def _shrunk(x: FloatArray, y: FloatArray, noise_deg: float, prior: FloatArray) -> FloatArray:
+    """Gains (m, k) minimising ``mean((y - g.x)^2) + noise^2 |g - prior|^2`` (centred data)."""
+    xc = x - x.mean(axis=0)
+    yc = y - y.mean(axis=0)
+    n, k = x.shape
+    a = xc.T @ xc / n + noise_deg ** 2 * np.eye(k)
+    b = xc.T @ yc / n + noise_deg ** 2 * prior.T
+    g: FloatArray = np.linalg.solve(a, b).T
+    return g
+
+
+def _fit_robust(
+    x: FloatArray, y: FloatArray, groups: NDArray[np.intp], noise_deg: float,
+    paper_rmsd_max: float, range_min_deg: float,
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The ``robust`` method: shrunk multi-control gains, or the mean where held-out
+    groups say the mean does better. Returns gains, means and which curves follow."""
+    prior, means = _fit_paper(x, y, paper_rmsd_max, range_min_deg)
+    gains = _shrunk(x, y, noise_deg, prior)
+    err_fit = np.zeros(y.shape[1])
+    err_mean = np.zeros(y.shape[1])
+    for g in np.unique(groups):
+        tr, te = groups != g, groups == g
+        xt, yt = x[tr], y[tr]
+        p_tr, _ = _fit_paper(xt, yt, paper_rmsd_max, range_min_deg)
+        gt = _shrunk(xt, yt, noise_deg, p_tr)
+        pred = yt.mean(axis=0) + (x[te] - xt.mean(axis=0)) @ gt.T
+        err_fit += ((pred - y[te]) ** 2).sum(axis=0)
+        err_mean += ((yt.mean(axis=0) - y[te]) ** 2).sum(axis=0)
+    follows = err_fit < err_mean
+    gains[~follows] = 0.0
+    return gains, means, follows
+
+
+def block_groups(n_frames: int, count: int = DEFAULT_GROUPS) -> NDArray[np.intp]:
+    """Frame labels 0 .. count - 1 for ``count`` contiguous blocks (cross-validation groups)."""
+    edges = np.linspace(0, n_frames, count + 1).round().astype(np.intp)
+    labels = np.zeros(n_frames, dtype=np.intp)
+    for i, (a, b) in enumerate(itertools.pairwise(edges)):
+        labels[a:b] = i
+    return labels
+
+
 def fit_map(
     curves: FloatArray,
     controls: Sequence[str],
@@ -313,12 +520,18 @@ def fit_map(
     huber_delta: float = HUBER_DELTA,
     paper_rmsd_max: float = PAPER_RMSD_MAX,
     range_min_deg: float = 1.0,
+    control_noise_deg: float = CONTROL_NOISE_DEG,
+    groups: Sequence[int] | NDArray[np.intp] | None = None,
+    groups_name: str = "",
     **meta: object,
 ) -> LinearMap:
     """Fit a map from ``controls`` to all 50 curves on ``curves`` (frames x 50, vocabulary).
 
-    ``meta`` goes to the map's descriptive fields (trained_on, profile, frames, fps,
-    description).
+    ``groups``: one label per frame (e.g. the gesture clip), the units the ``robust``
+    method holds out in its per-curve cross-validation (None: :data:`DEFAULT_GROUPS`
+    contiguous blocks); ``groups_name`` says what they are in the map's ``fitting`` note
+    (default "clips", or "contiguous blocks" without groups). ``meta`` goes to the map's
+    descriptive fields (trained_on, profile, fps, description, evaluation).
     """
     if method not in METHODS:
         raise DataError(f"unknown method {method!r}; methods: {', '.join(METHODS)}")
@@ -337,7 +550,29 @@ def fit_map(
         raise DataError("curves contain NaN/inf: repair them first (--despike)")
     idx = np.array([hand.curve_index(c) for c in ctrl], dtype=np.intp)
     x = y[:, idx]
-    if method == "ridge":
+    fitting = ""
+    if method == "robust":
+        labels = (block_groups(y.shape[0]) if groups is None
+                  else np.asarray(groups, dtype=np.intp))
+        if labels.shape != (y.shape[0],):
+            raise DataError(f"groups needs one label per frame ({y.shape[0]}), got"
+                            f" {labels.shape}")
+        n_groups = len(np.unique(labels))
+        default_name = "clips" if groups is not None else "contiguous blocks"
+        if n_groups < 2:
+            raise DataError("the robust method needs at least 2 groups (clips) to hold out")
+        if not control_noise_deg > 0:
+            raise DataError(f"control noise must be positive, got {control_noise_deg}")
+        gains, means, follows = _fit_robust(x, y, labels, control_noise_deg, paper_rmsd_max,
+                                            range_min_deg)
+        held = [n for n, f in zip(hand.CURVE_NAMES, follows, strict=True)
+                if not f and n not in ctrl]
+        fitting = (f"robust: gains shrunk toward the paper map for controls off by"
+                   f" {control_noise_deg:g} deg; per curve, follow the controls or hold the mean"
+                   f" by leave-one-group-out over {n_groups} groups"
+                   f" ({groups_name or default_name});"
+                   f" {len(held)} curve(s) held at the mean")
+    elif method == "ridge":
         gains, means = _fit_ridge(x, y, alpha)
     elif method == "huber":
         gains, means = _fit_huber(x, y, alpha, huber_delta)
@@ -346,6 +581,7 @@ def fit_map(
     else:
         gains, means = np.zeros((50, len(ctrl))), y.mean(axis=0)
     x_mean = x.mean(axis=0)
+    means = means.copy()
     gains[idx] = np.eye(len(ctrl))  # a control passes through unchanged
     means[idx] = x_mean
     lm = LinearMap(
@@ -355,6 +591,9 @@ def fit_map(
         profile=str(meta.get("profile", "")), frames=int(y.shape[0]),
         fps=float(meta.get("fps", 0.0) or 0.0),  # type: ignore[arg-type]
         description=str(meta.get("description", "")),
+        control_range_deg=np.stack([x.min(axis=0), x.max(axis=0)], axis=1),
+        fitting=fitting or _FITTING.get(method, "").format(alpha=alpha, delta=huber_delta),
+        evaluation=tuple(str(e) for e in meta.get("evaluation", ()) or ()),  # type: ignore[attr-defined]
     )
     fit = np.sqrt(np.mean((lm.predict(x) - y) ** 2, axis=0))
     return LinearMap(**{**lm.__dict__, "fit_rms_deg": fit})

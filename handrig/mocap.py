@@ -41,6 +41,24 @@ REFERENCE_CLIPS: tuple[tuple[str, int, int], ...] = (
 )
 """Clip frame ranges of the reference file (0-based, inclusive), from its README."""
 
+REFERENCE_KINDS: dict[str, str] = {
+    "point_centre": "pointing", "point_here": "pointing", "point_left": "pointing",
+    "point_right": "pointing", "you": "pointing", "you2": "pointing",
+    "me": "self", "me2": "self", "us": "self", "we": "self",
+    "bigger": "shaping", "inclusivity": "shaping", "negation": "shaping",
+    "question": "shaping", "stop": "shaping",
+}
+"""Kind of gesture of each reference clip: pointing at a place or the listener, pointing
+at oneself or one's group, and shaping an idea (size, negation, a question, stop)."""
+
+
+def reference_clip_labels() -> NDArray[np.intp]:
+    """Per frame of the reference file, the index of its clip in :data:`REFERENCE_CLIPS`."""
+    labels = np.zeros(REFERENCE_CLIPS[-1][2] + 1, dtype=np.intp)
+    for i, (_, a, b) in enumerate(REFERENCE_CLIPS):
+        labels[a:b + 1] = i
+    return labels
+
 SPIKE_DEG = 45.0
 """A frame that jumps this far from both neighbours, the same way, is a single-frame spike."""
 ABSURD_DEG = 360.0

@@ -7,24 +7,44 @@ import json
 from pathlib import Path
 from typing import Any
 
-from handrig import hand, mocap
+from handrig import hand
 from handrig.commands import _mapio
 from handrig.commands._numbers import positive_int
-from handrig.evaluation import Errors, contiguous_folds, cross_validate, predict, rms_errors
+from handrig.errors import DataError
+from handrig.evaluation import (
+    REGIME_METHODS,
+    Errors,
+    Split,
+    block_splits,
+    group_rms,
+    out_of_regime,
+    predict,
+    reference_splits,
+    regime_table,
+    rms_errors,
+    write_error_figure,
+)
 from handrig.expand import DEFAULT_MAP
-from handrig.maps import LinearMap
+from handrig.maps import METHODS, LinearMap
 
-COMPARED = ("ridge", "huber", "paper", "mean")
+LABELS = {"ridge": "least squares on all controls, ridge penalty",
+          "huber": "robust (Huber) multi-control fit",
+          "paper": "the paper's single-controller map (4.2)",
+          "mean": "constant mean",
+          "robust": "shrunk toward the paper map for controls off by 1 deg, per-curve CV vs mean"}
 
 
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "evaluate", help="RMS error of a map against a BVH's own curves; methods side by side",
         description="1) the map's RMS reconstruction error per curve, per hand and overall"
-        " (degrees) against the file's own curves; 2) each method (ridge, huber, the paper's"
-        " single-controller map, the constant mean) with the map's controls, fitted without"
-        " and tested on each held-out segment (the reference file's gesture clips, else"
-        " --folds contiguous blocks): error on unseen motion.",
+        " (degrees) against the file's own curves; 2) each method (the constant mean, the"
+        " paper's single-controller map, ridge, robust) with the map's controls, fitted"
+        " without and tested on held-out data, split by split: leave one clip out (the"
+        " reference file's gesture clips, else --folds contiguous blocks), train on some"
+        " kinds of gesture and test on another, the calm frames of each held-out clip"
+        " (fit with and without calm frames), and held-out clips with every control off"
+        " by 2 deg.",
     )
     p.add_argument("file", metavar="FILE.bvh")
     p.add_argument("--map", default=str(DEFAULT_MAP), help="map TOML (default: shipped map)")
@@ -32,6 +52,11 @@ def register(sub: Any) -> None:
     p.add_argument("--folds", type=positive_int, default=5,
                    help="held-out blocks for files without known clips (default 5)")
     p.add_argument("--no-compare", action="store_true", help="skip the held-out comparison")
+    p.add_argument("--methods", default=",".join(REGIME_METHODS),
+                   help=f"methods compared (default {','.join(REGIME_METHODS)};"
+                   f" any of {','.join(METHODS)})")
+    p.add_argument("--figure", metavar="PNG", default=None,
+                   help="write the held-out RMS error per curve, per split and method")
     _mapio.add_input_args(p)
     p.set_defaults(func=run)
 
@@ -50,16 +75,35 @@ def run(args: argparse.Namespace) -> int:
         "truth_outside_limits": {n: round(float(f), 4) for n, f in zip(
             m.names, outside, strict=True) if f > 0},
     }
-    cv: dict[str, Errors] = {}
+    res: dict[str, dict[str, Errors]] = {}
+    splits: list[Split] = []
     if not args.no_compare:
+        methods = tuple(x.strip() for x in args.methods.split(",") if x.strip())
+        bad = [x for x in methods if x not in METHODS]
+        if bad or not methods:
+            raise DataError(f"--methods: unknown {', '.join(bad) or '(none)'}; methods:"
+                            f" {', '.join(METHODS)}")
         if _mapio.is_reference(args.file, m.n_frames) and args.fps is None:
-            folds = [(a, b + 1) for _, a, b in mocap.REFERENCE_CLIPS]
-            how = f"leave-one-clip-out over the {len(folds)} gesture clips of the README"
+            splits, groups = reference_splits(m.curves, m.fps)
+            how = f"leave-one-clip-out over the {len(set(groups))} gesture clips of the README"
         else:
-            folds = contiguous_folds(m.n_frames, args.folds)
-            how = f"leave-one-block-out over {len(folds)} contiguous blocks"
-        cv = cross_validate(m.curves, lm.controls, folds, COMPARED)
-        result["held_out"] = {"scheme": how, "methods": {k: v.to_json() for k, v in cv.items()}}
+            splits, groups = block_splits(m.curves, m.fps, args.folds)
+            how = f"leave-one-block-out over {args.folds} contiguous blocks"
+        res = out_of_regime(m.curves, lm.controls, splits, groups, methods)
+        result["held_out"] = {"scheme": how, "methods": {
+            k: v.to_json() for k, v in res["clips"].items()}}
+        result["out_of_regime"] = {sp.name: {
+            "description": sp.description,
+            "methods": {k: {"ri_rms_deg": round(v.ri, 4), "le_rms_deg": round(v.le, 4),
+                            "ri_groups_rms_deg": {g: round(x, 4)
+                                                  for g, x in group_rms(v).items()},
+                            "le_groups_rms_deg": {g: round(x, 4)
+                                                  for g, x in group_rms(v, "le").items()}}
+                        for k, v in res[sp.name].items()}} for sp in splits}
+        if args.figure:
+            fig = write_error_figure(res, args.figure, title=f"held-out RMS error per curve,"
+                                     f" controls {', '.join(lm.controls)}")
+            result["figure"] = str(fig)
     if args.json:
         print(json.dumps(result))
         return 0
@@ -74,13 +118,13 @@ def run(args: argparse.Namespace) -> int:
     if far[0][0] > 0:
         print("  the file itself leaves the joint limits (outputs are clamped, so this counts"
               " as error): " + ", ".join(f"{n} {f:.0%} of frames" for f, n in far if f > 0))
-    if cv:
-        print(f"unseen motion, {result['held_out']['scheme']}:")
-        print(f"  {'method':<8} {'right (deg)':>12} {'left (deg)':>11} {'overall':>8}")
-        for k, v in cv.items():
-            label = {"ridge": "least squares on all controls, ridge penalty",
-                     "huber": "robust (Huber) multi-control fit",
-                     "paper": "the paper's single-controller map (4.2)",
-                     "mean": "constant mean"}[k]
-            print(f"  {k:<8} {v.ri:>12.2f} {v.le:>11.2f} {v.overall:>8.2f}   {label}")
+    if res:
+        print(f"unseen motion, {result['held_out']['scheme']} (RMS deg, every curve of the"
+              " hand, and its curve groups):")
+        for sp in splits:
+            print(f"  {sp.name}: {sp.description}")
+        print("\n".join(regime_table(res, splits)))
+        print("  methods: " + "; ".join(f"{k} = {LABELS[k]}" for k in res["clips"]))
+        if args.figure:
+            print(f"figure: {result['figure']}")
     return 0

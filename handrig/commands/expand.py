@@ -51,6 +51,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if fh is not sys.stdout:
             fh.close()
+    summary = ex.training_range().summary()
     if args.out != "-":
         print(f"{pose.shape[0]} frames x {pose.shape[1]} curves -> {args.out}")
+        print(summary)
+    else:
+        print(summary, file=sys.stderr)
     return 0
