@@ -2,32 +2,11 @@
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 
 from handrig import kernels
-from handrig.app import build_parts
 from handrig.filters import OneEuroFilter
 from handrig.servo.packets import sdk_crc16
-
-
-def test_servo_targets_kernel_matches_the_numpy_step() -> None:
-    pipeline = build_parts().pipeline
-    reference = copy.deepcopy(pipeline)
-    rng = np.random.default_rng(7)
-    n_controls = len(pipeline.expander.controls)
-    for k in range(1500):
-        controls = rng.uniform(-30, 100, n_controls)
-        if k % 37 == 0:
-            controls[rng.integers(n_controls)] = np.nan if k % 2 else np.inf
-        inc, rot = rng.uniform(-90, 90), rng.uniform(-540, 540)
-        dt = rng.choice([0.005, 0.0, 0.05])
-        got = pipeline.servo_targets(controls, inc, rot, dt).copy()
-        want = reference._servo_targets_numpy(controls, inc, rot, dt)
-        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(pipeline._raw_targets, reference._raw_targets, atol=1e-9)
-    assert pipeline.rejected == reference.rejected > 0
 
 
 def test_kernel_crc_is_the_sdk_crc() -> None:
