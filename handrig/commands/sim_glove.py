@@ -29,13 +29,13 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sim.glove_emulator import GloveEmulator
+    from handrig import simulator
 
     rec = read_glove_recording(args.file)
     if args.rate is not None and not 1.0 <= args.rate <= 5000.0:
         raise DataError(f"--rate {args.rate} out of range: use 1..5000 Hz")
-    with GloveEmulator(rec, args.format, rate_hz=args.rate, loop=args.loop,
-                       analog_max=args.analog_max) as emu:
+    with simulator.glove_emulator(rec, args.format, rate_hz=args.rate, loop=args.loop,
+                                  analog_max=args.analog_max) as emu:
         print(f"port: {emu.port_path}", flush=True)
         rate = args.rate or rec.nominal_rate_hz
         print(f"streaming {len(rec)} samples ({rec.duration_s:.1f} s) as {args.format} at "
