@@ -71,6 +71,8 @@ class Cycle:
         self.controls = np.zeros(len(pipeline.expander.controls))
         self.angles: tuple[float, float] = (0.0, 0.0)  # forearm (inclination, rotation)
         self.sent = np.zeros(n)  # the goals last written
+        self._step = np.zeros(n)
+        self._max_step_deg = pipeline.slew_deg_s * period_s
         self.sample: Any = None  # the newest glove sample
         self.last_state: Any = None  # the newest ServoState read back
         self.t0_s = 0.0
@@ -113,10 +115,7 @@ class Cycle:
         elif mode is Mode.WAITING:
             goals = self.sent  # hold: keeps the watchdog fed
         elif mode is Mode.RESUMING:
-            if not self.resume.started:  # the slew limit starts from where the servos are
-                self.pipeline.seed(self.sent)
-            live = self.targets(self.controls, *self.angles, self.period_s)
-            goals, done = self.resume.goals(now, self.sent, self._pose, live)
+            goals, done = self._resume_goals(now)
         else:
             relaxed = self.pipeline.relaxed_targets(*self.angles)
             goals, done = self.relax.goals(now, self.sent, self._pose, relaxed)
@@ -128,6 +127,20 @@ class Cycle:
             elif mode is Mode.STOPPING:
                 return True
         return False
+
+    def _resume_goals(self, now: float) -> tuple[FloatArray, bool]:
+        """Easing from where the servos are to the glove's targets before the slew limit,
+        then the slew limit on the eased step: at the end of the easing the goals are the
+        pipeline's own slew-limited step, and following the glove takes over seamlessly."""
+        pipeline, sent = self.pipeline, self.sent
+        pipeline.seed(sent)  # the slew limit counts from what the servos were sent
+        self.targets(self.controls, *self.angles, self.period_s)
+        goals, done = self.resume.goals(now, sent, self._pose, pipeline.raw_targets)
+        step = self._step
+        np.subtract(goals, sent, out=step)
+        np.clip(step, -self._max_step_deg, self._max_step_deg, out=step)
+        np.add(sent, step, out=goals)
+        return goals, done
 
     def _after_write(self, tick: Tick, sample: Any, mode: Mode, goals: FloatArray,
                      bus_clamps: int) -> None:
@@ -159,7 +172,7 @@ class Cycle:
             self.last_state = state
             self._track(state, self.sent)
         self.sent[:] = goals
-        if mode is Mode.RELAXING or mode is Mode.STOPPING:
+        if mode is not Mode.RUNNING and mode is not Mode.WAITING:
             pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent
         stats.frames += 1
 

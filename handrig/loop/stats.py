@@ -61,6 +61,11 @@ class LogHistogram:
         self._m2 += d * (x - self._mean)
 
     @property
+    def n_buckets(self) -> int:
+        """How many buckets (fixed at construction)."""
+        return self._n_buckets
+
+    @property
     def mean(self) -> float:
         return self._mean if self.count else math.nan
 
