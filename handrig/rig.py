@@ -104,6 +104,7 @@ class Rig:
         self.machine = ModeMachine(
             glove_timeout_s=glove_timeout_s, relax_time_s=relax_time_s,
             resume_frames=resume_frames, resume_time_s=resume_time_s, event=self._event,
+            stats=self.stats,
         )
         self.cycle = Cycle(
             glove, bus, pipeline, clock, self.machine, self.stats,
@@ -171,7 +172,6 @@ class Rig:
             cycle.seed()
         except DeviceError as exc:
             machine.stop_reason = f"device error: {exc}"
-            self._sync_stats()
             self._event(f"not starting: {exc}")
             raise
         if not self._prepared:
@@ -214,15 +214,11 @@ class Rig:
             gc.unfreeze()
             self._prepared = False
             stats.duration_s = clock.now() - t0
-            self._sync_stats()
+            self._pipeline_figures()
         return stats
 
-    def _sync_stats(self) -> None:
-        stats, machine, pipeline = self.stats, self.machine, self.pipeline
-        stats.stop_reason = machine.stop_reason
-        stats.estop = machine.estop
-        stats.relax_events = machine.relax_events
-        stats.resumes = machine.resumes
+    def _pipeline_figures(self) -> None:
+        stats, pipeline = self.stats, self.pipeline
         stats.clamps = pipeline.clamps
         stats.servo_clamps = pipeline.servo_clamps
         stats.nonfinite = pipeline.rejected

@@ -23,6 +23,8 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable
 
+from handrig.loop.stats import RunStats
+
 
 class Mode(enum.Enum):
     WAITING = "waiting"  # no glove frame yet: hold where the servos are
@@ -39,7 +41,9 @@ class ModeMachine:
     """Mode transitions and the reasons for them.
 
     ``event(text)`` is told every transition worth a line in the log;
-    ``on_relax()`` / ``on_resume()`` when an easing must start over.
+    ``on_relax()`` / ``on_resume()`` when an easing must start over. The figures
+    (stop reason, e-stop, relax events, resumes) are kept in ``stats`` as they happen,
+    where a live display reads them.
     """
 
     def __init__(
@@ -52,6 +56,7 @@ class ModeMachine:
         event: Callable[[str], None] = lambda text: None,
         on_relax: Callable[[], None] = lambda: None,
         on_resume: Callable[[], None] = lambda: None,
+        stats: RunStats | None = None,
     ) -> None:
         self.glove_timeout_s = float(glove_timeout_s)
         self.relax_time_s = float(relax_time_s)
@@ -60,16 +65,33 @@ class ModeMachine:
         self.event = event
         self.on_relax = on_relax
         self.on_resume = on_resume
+        self.stats = stats if stats is not None else RunStats()
         self.mode = Mode.WAITING
-        self.relax_events = 0
-        self.resumes = 0
-        self.estop = False
-        self.stop_reason = ""
         self.stop_requests = 0
         self._requested: list[str] = []  # appended by request_stop, consumed by poll
         self._last_frame_s: float | None = None
         self._run = 0  # good frames in a row while relaxed
         self._t0 = 0.0
+
+    @property
+    def stop_reason(self) -> str:
+        return self.stats.stop_reason
+
+    @stop_reason.setter
+    def stop_reason(self, reason: str) -> None:
+        self.stats.stop_reason = reason
+
+    @property
+    def estop(self) -> bool:
+        return self.stats.estop
+
+    @property
+    def relax_events(self) -> int:
+        return self.stats.relax_events
+
+    @property
+    def resumes(self) -> int:
+        return self.stats.resumes
 
     # -- from outside the loop -------------------------------------------------------------
     def request_stop(self, reason: str) -> None:
@@ -107,7 +129,7 @@ class ModeMachine:
         previous = self._last_frame_s
         self._last_frame_s = now_s
         if estop and self.mode is not Mode.STOPPING:
-            self.estop = True
+            self.stats.estop = True
             self.stop_reason = "e-stop"
             self._relax(Mode.STOPPING, "e-stop pressed on the glove")
         mode = self.mode
@@ -119,7 +141,7 @@ class ModeMachine:
             if self._run >= self.resume_frames:
                 self._run = 0
                 self.mode = Mode.RESUMING
-                self.resumes += 1
+                self.stats.resumes += 1
                 self.on_resume()
                 self.event(f"glove is back: following it again, easing in over "
                            f"{self.resume_time_s:.2f} s")
@@ -146,7 +168,7 @@ class ModeMachine:
             return
         if self.mode in _FOLLOWING:
             if mode is Mode.RELAXING:
-                self.relax_events += 1
+                self.stats.relax_events += 1
             self.on_relax()
         self._run = 0
         self.mode = mode
