@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -22,6 +23,22 @@ if TYPE_CHECKING:
     from sim.dxl_bus import SimBus
     from sim.glove_emulator import EmulatorFormat, GloveEmulator
     from sim.puppet import Puppet
+
+
+def relaxed_hand() -> ModuleType:
+    """``sim.passive``: the relaxed-hand model (Neff & Seidel) with its config loader,
+    check and tune steps (``handrig passive``)."""
+    from sim import passive
+
+    return passive
+
+
+def baker() -> ModuleType:
+    """``sim.bake``: bakes the passive-sag grid from the relaxed-hand model
+    (``handrig bake``)."""
+    from sim import bake
+
+    return bake
 
 
 def demo_recording() -> Path:

@@ -29,7 +29,9 @@ def register(sub: Any) -> None:
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from sim import passive
+    from handrig import simulator
+
+    passive = simulator.relaxed_hand()
 
     cfg = passive.load_passive_params(args.config)
     result = passive.check(cfg)
@@ -52,7 +54,9 @@ def run_check(args: argparse.Namespace) -> int:
 
 
 def run_tune(args: argparse.Namespace) -> int:
-    from sim import passive
+    from handrig import simulator
+
+    passive = simulator.relaxed_hand()
 
     src = Path(args.config) if args.config else passive.PASSIVE_CONFIG
     cfg = passive.load_passive_params(src)
