@@ -34,7 +34,7 @@ import numpy as np
 from handrig import app
 from handrig.app import RigParts
 from handrig.clock import Clock, MonotonicClock
-from handrig.errors import HandrigError, SafetyStop
+from handrig.errors import DeviceError, HandrigError, SafetyStop
 from handrig.loop.stats import RunStats
 from handrig.realtime import pinned_loop, realtime_priority
 from handrig.servo import DynamixelBus
@@ -173,6 +173,8 @@ class _Session:
                 error = self._devices_open(stack, opened.bus)
         except HandrigError as exc:
             error = error or exc
+        except OSError as exc:  # a device call the driver did not wrap: still a summary
+            error = error or DeviceError(f"{type(exc).__name__}: {exc}")
         summary = app.summary_dict(self.stats, self.bus_stats, self.glove_stats,
                                    self.torque_off)
         if self.stages:

@@ -216,3 +216,24 @@ def test_json_prints_the_summary_with_the_error_when_a_run_fails(tmp_path) -> No
     assert str(missing) in summary["error"] and summary["frames"] == 0
     assert summary["torque_off"] is None  # never connected: unknown, not claimed off
     assert "handrig: error:" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_exit_signals_unwind_before_the_rig_stop_it_twice_then_raise_then_ignore() -> None:
+    from handrig.errors import SafetyStop
+    from handrig.live import EXIT_SIGNALS, ExitSignals
+
+    before = {s: signal.getsignal(s) for s in EXIT_SIGNALS}
+    stops: list[str] = []
+    with ExitSignals() as signals:
+        with pytest.raises(SafetyStop, match="SIGQUIT received before the rig started"):
+            signal.raise_signal(signal.SIGQUIT)
+        signals.arm(stops.append)
+        signal.raise_signal(signal.SIGHUP)
+        signal.raise_signal(signal.SIGINT)
+        assert stops == ["SIGHUP received", "SIGINT received"]
+        with pytest.raises(SafetyStop, match="SIGTERM received again"):
+            signal.raise_signal(signal.SIGTERM)
+        signals.disarm()  # torque going off: nothing may interrupt that
+        signal.raise_signal(signal.SIGINT)
+        assert signals.received == 5 and signals.last == "SIGINT"
+    assert {s: signal.getsignal(s) for s in EXIT_SIGNALS} == before
