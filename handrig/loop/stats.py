@@ -34,20 +34,23 @@ class LogHistogram:
         self._inv_log_ratio = 1.0 / math.log(ratio)
         self._n_buckets = math.ceil(math.log(high / low) * self._inv_log_ratio) + 2
         self._counts = array("q", bytes(8 * self._n_buckets))
+        self._log_low = math.log(self.low)
+        self._last = self._n_buckets - 1
         self.count = 0
         self.min = math.inf
         self.max = -math.inf
-        self._mean = 0.0  # Welford: running mean and sum of squared deviations
-        self._m2 = 0.0
+        self._shift = 0.0
+        self._sum = 0.0
+        self._sum_sq = 0.0
 
     def add(self, x: float) -> None:
         """Count one value (a NaN is ignored)."""
-        if x != x:
-            return
         if x > self.low:
-            i = int(math.log(x / self.low) * self._inv_log_ratio) + 1
-            if i >= self._n_buckets:
-                i = self._n_buckets - 1
+            i = int((math.log(x) - self._log_low) * self._inv_log_ratio) + 1
+            if i > self._last:
+                i = self._last
+        elif x != x:
+            return
         else:
             i = 0
         self._counts[i] += 1
@@ -56,9 +59,11 @@ class LogHistogram:
             self.min = x
         if x > self.max:
             self.max = x
-        d = x - self._mean
-        self._mean += d / self.count
-        self._m2 += d * (x - self._mean)
+        if self.count == 1:
+            self._shift = x  # sums of deviations from the first value: no cancellation
+        d = x - self._shift
+        self._sum += d
+        self._sum_sq += d * d
 
     @property
     def n_buckets(self) -> int:
@@ -67,12 +72,15 @@ class LogHistogram:
 
     @property
     def mean(self) -> float:
-        return self._mean if self.count else math.nan
+        return self._shift + self._sum / self.count if self.count else math.nan
 
     @property
     def std(self) -> float:
         """Population standard deviation (``numpy.std``'s default); NaN below 2 values."""
-        return math.sqrt(self._m2 / self.count) if self.count >= 2 else math.nan
+        if self.count < 2:
+            return math.nan
+        m = self._sum / self.count
+        return math.sqrt(max(0.0, self._sum_sq / self.count - m * m))
 
     def percentile(self, q: float) -> float:
         """The ``q``-th percentile (0..100): the geometric middle of the bucket holding it,
