@@ -59,8 +59,8 @@ def run(args: argparse.Namespace) -> int:
                 opts = LiveOptions(glove=glove_port, bus="sim", frames=args.frames,
                                    sim_faults=args.faults, log=log,
                                    snapshot_every=max(1, args.frames // 6) if args.render else 0)
+                signals.disarm()  # the session handles its own; after it: shut down, print
                 result = run_live(parts, opts)
-                signals.disarm()  # torque is off: stop the emulator, print the figures
         except HandrigError as exc:
             result = failed(exc, parts)
     if result.error is not None and not result.started and not args.json:
