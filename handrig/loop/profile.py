@@ -9,7 +9,6 @@ The cycle's code knows nothing of it; without a profile nothing is wrapped.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 from handrig.clock import Clock
@@ -28,49 +27,59 @@ class StageProfile:
         self._marks = [math.nan] * (len(STAGES) + 1)
 
     def wrap(self, cycle: Any) -> None:
-        """Replace ``cycle``'s stage callables by timed ones."""
-        cycle.latest = self._latest(cycle.latest)
-        cycle.controls_from_raw = self._mark(cycle.controls_from_raw, 2)
-        cycle.orientation = self._mark(cycle.orientation, 3)
-        cycle.targets = self._mark(cycle.targets, 4)
-        cycle.write = self._write(cycle.write)
-
-    def summary_us(self) -> dict[str, dict[str, float]]:
-        """``{stage: {"p50": us, "p99": us}}`` for the stages measured at least once."""
-        return {name: {"p50": round(h.percentile(50) * 1e6, 1),
-                       "p99": round(h.percentile(99) * 1e6, 1)}
-                for name, h in self.stages.items() if h.count}
-
-    def _latest(self, latest: Callable[[], Any]) -> Callable[[], Any]:
+        """Replace ``cycle``'s stage callables by timed ones. The timing costs one clock
+        read per stage inside the latency it measures; the bookkeeping runs before the
+        next glove read, outside it."""
         marks, now = self._marks, self.clock.now
+        latest, controls = cycle.latest, cycle.controls_from_raw
+        orientation, targets, write = cycle.orientation, cycle.targets, cycle.write
 
-        def timed() -> Any:
+        def timed_latest() -> Any:
+            self._flush()
             sample = latest()
-            for i in range(len(marks)):
-                marks[i] = math.nan
             if sample is not None:
                 marks[0] = sample.host_time_s
                 marks[1] = now()
             return sample
-        return timed
 
-    def _mark(self, fn: Callable[..., Any], slot: int) -> Callable[..., Any]:
-        marks, now = self._marks, self.clock.now
+        def timed_controls(raw: Any, t_s: float, out: Any) -> Any:
+            result = controls(raw, t_s, out)
+            marks[2] = now()
+            return result
 
-        def timed(*args: Any) -> Any:
-            out = fn(*args)
-            marks[slot] = now()
-            return out
-        return timed
+        def timed_orientation(sample: Any) -> tuple[float, float]:
+            result = orientation(sample)
+            marks[3] = now()
+            return result
 
-    def _write(self, write: Callable[[Any], int]) -> Callable[[Any], int]:
-        marks, now, hist = self._marks, self.clock.now, self._hist
+        def timed_targets(c: Any, inclination: float, rotation: float, dt_s: float) -> Any:
+            result = targets(c, inclination, rotation, dt_s)
+            marks[4] = now()
+            return result
 
-        def timed(goals: Any) -> int:
+        def timed_write(goals: Any) -> int:
             n = write(goals)
-            marks[-1] = now()
-            if not any(m != m for m in marks):  # every stage ran in this cycle
-                for i, h in enumerate(hist):
-                    h.add(marks[i + 1] - marks[i])
+            marks[5] = now()
             return n
-        return timed
+
+        cycle.latest = timed_latest
+        cycle.controls_from_raw = timed_controls
+        cycle.orientation = timed_orientation
+        cycle.targets = timed_targets
+        cycle.write = timed_write
+
+    def summary_us(self) -> dict[str, dict[str, float]]:
+        """``{stage: {"p50": us, "p99": us}}`` for the stages measured at least once."""
+        self._flush()
+        return {name: {"p50": round(h.percentile(50) * 1e6, 1),
+                       "p99": round(h.percentile(99) * 1e6, 1)}
+                for name, h in self.stages.items() if h.count}
+
+    def _flush(self) -> None:
+        """The last cycle's stage times into the histograms, if every stage ran in it."""
+        marks = self._marks
+        if not any(m != m for m in marks):
+            for i, h in enumerate(self._hist):
+                h.add(marks[i + 1] - marks[i])
+        for i in range(len(marks)):
+            marks[i] = math.nan

@@ -508,3 +508,18 @@ class _Last(list):
 
     def append(self, item):  # type: ignore[override]
         self[:] = [item]
+
+
+def test_the_profile_times_each_stage_outside_the_loop_code(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+                       write_cost_s=70e-6)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock, profile=True)
+    stats = rig.run(frames=100)
+    assert rig.stage_profile is not None
+    stages = rig.stage_profile.summary_us()
+    assert list(stages) == ["read+decode", "calibrate+filter", "orientation", "targets",
+                            "write"]
+    assert stages["write"]["p50"] == pytest.approx(70.0, rel=0.02)
+    assert stats.latency_us(50) == pytest.approx(70.0, abs=1.0)  # the profile adds nothing
