@@ -1,8 +1,12 @@
-"""The one factory: concrete devices and the pipeline built from config files.
+"""The one factory: concrete devices, outputs and the pipeline built from config files.
 
 Everything else takes its dependencies as arguments; only this module (and the
-commands that call it) decide which glove, bus, map and grid a run uses.
-``sim`` is imported only when the user asks for the simulated rig (``--bus sim``).
+commands that call it) decide which glove, bus, map, grid and outputs a run uses.
+The simulated rig's emulators run as subprocesses (``handrig sim-bus``,
+``handrig sim-glove``) started here, each in its own session so that a Ctrl-C
+in the terminal reaches the rig alone: the rig eases, turns torque off, and
+only then stops them. In-process simulator parts come through
+:mod:`handrig.simulator`.
 """
 
 from __future__ import annotations
@@ -10,9 +14,10 @@ from __future__ import annotations
 import contextlib
 import math
 import selectors
+import signal
 import subprocess
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,11 +33,15 @@ from handrig.expand import Expander
 from handrig.glove import GloveSample, GloveSource, ReplayGlove, SerialGlove
 from handrig.glove_calibration import GloveConfig, GloveControls, load_glove_config
 from handrig.glove_recording import read_glove_recording
+from handrig.loop.stats import RunStats
 from handrig.orientation import ForearmOrientation
 from handrig.pipeline import PosePipeline
 from handrig.realtime import helper_env
+from handrig.rig import Rig
 from handrig.rigconfig import RigConfig, load_rig_config
 from handrig.sag import SagGrid
+from handrig.servo import DynamixelBus
+from handrig.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 
 FloatArray = NDArray[np.float64]
 
@@ -132,18 +141,153 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock) -> GloveSource:
     return SerialGlove(spec, "frames", clock=clock, baud=cfg.glove.baud, reader="poll")
 
 
+def read_fields_for(rig: RigConfig) -> ReadFields:
+    """What the loop reads back: position, velocity and current when a goal write plus that
+    read fit in 70 % of a cycle on the wire, else position only (e.g. 20 servos at 1 Mbps
+    and 200 Hz: 4.4 ms of wire for the full read, 3.2 ms for positions, in a 5 ms cycle)."""
+    n, period = len(rig.servos), 1.0 / rig.loop.rate_hz
+    full = wire_time_s(cycle_bytes(n, data_len=10), rig.bus.baud)
+    return "motion" if full <= 0.7 * period else "position"
+
+
+@dataclass
+class OpenedBus:
+    """A servo bus the factory opened (not yet connected): the driver, its port, and the
+    emulator process behind it when the bus is simulated."""
+
+    bus: DynamixelBus
+    port: str
+    emulator: subprocess.Popen[str] | None = None
+
+    def emulator_output(self) -> str:
+        """What the emulator printed after its port line (read once it has stopped)."""
+        if self.emulator is None or self.emulator.stdout is None:
+            return ""
+        try:
+            return self.emulator.stdout.read() or ""
+        except (OSError, ValueError):
+            return ""
+
+
+@contextlib.contextmanager
+def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: bool = True,
+              viewer: bool = False, faults: str = "",
+              log: Callable[[str], None] = print) -> Iterator[OpenedBus]:
+    """The servo bus on ``spec`` (a port, ``"sim"``, None: rig.toml's port); closed on exit
+    (torque off if still on). ``"sim"`` starts ``handrig sim-bus`` (the MuJoCo puppet,
+    ``wire_timing``, ``viewer``, ``faults``) first and stops it after the bus is closed."""
+    rig_cfg = parts.rig_config
+    bus_spec = spec or rig_cfg.bus.port
+    with contextlib.ExitStack() as stack:
+        proc: subprocess.Popen[str] | None = None
+        if bus_spec == "sim":
+            argv = ["sim-bus", "--rig", str(parts.rig_file)]
+            if wire_timing:
+                argv.append("--wire-timing")
+            if viewer:
+                argv.append("--viewer")
+            if faults:
+                argv += ["--faults", faults]
+            proc, port = stack.enter_context(
+                port_process(argv, "the simulated servo bus (handrig sim-bus)"))
+            log(f"simulated servo bus (MuJoCo puppet) on {port}")
+        else:
+            port = bus_spec
+        # No reply poll (spin_s 0): the loop reads the servos once every few cycles, where
+        # the tens of microseconds a poll saves do not matter, and a SCHED_FIFO thread
+        # that polls holds back the kernel worker delivering the reply (and the glove's
+        # bytes) whenever that worker is queued on the loop's CPU.
+        bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=read_fields_for(rig_cfg),
+                           spin_s=0.0)
+        stack.callback(bus.close)
+        yield OpenedBus(bus, port, proc)
+
+
+def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
+            vmc: str | None = None, record: str | None = None,
+            log: Callable[[str], None] = print) -> list[Callable[[float, FloatArray], None]]:
+    """The outputs a run feeds the full pose to: a VMC sender (``HOST:PORT``), a
+    recorder (``.csv`` or ``.bvh``). Each is closed when ``stack`` unwinds."""
+    out: list[Callable[[float, FloatArray], None]] = []
+    if vmc:
+        from handrig.outputs.vmc import VmcSender, parse_host_port
+
+        host, port = parse_host_port(vmc)
+        sender = VmcSender(host, port, clock=clock)
+        stack.callback(sender.close)
+        out.append(sender)
+    if record:
+        from handrig.outputs.recorder import Recorder
+
+        recorder = Recorder(record, rate_hz=rig_cfg.loop.rate_hz)
+        stack.callback(lambda: log(f"recorded performance: {recorder.close()}"))
+        out.append(recorder)
+    return out
+
+
+@dataclass(frozen=True)
+class ResumeSettings:
+    """How the loop comes back after a glove loss: ``frames`` good frames in a row, then
+    easing to the glove's pose over ``time_s``. Read from ``[loop] resume_frames`` and
+    ``resume_time_s`` when the rig file has them."""
+
+    frames: int = 3
+    time_s: float = 0.3
+
+
+def resume_settings(rig_cfg: RigConfig) -> ResumeSettings:
+    loop = rig_cfg.loop
+    default = ResumeSettings()
+    return ResumeSettings(int(getattr(loop, "resume_frames", default.frames)),
+                          float(getattr(loop, "resume_time_s", default.time_s)))
+
+
+def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
+              outputs: Sequence[Callable[[float, FloatArray], None]] = (),
+              log: Callable[[str], None] = print, profile: bool = False) -> Rig:
+    """The loop on these devices, with the rig file's rates and safety timings."""
+    loop = parts.rig_config.loop
+    resume = resume_settings(parts.rig_config)
+    return Rig(
+        glove, bus, parts.pipeline, clock,
+        controls_from_raw=parts.controls, orientation=parts.orientation,
+        rate_hz=loop.rate_hz, read_every=parts.rig_config.bus.read_every,
+        glove_timeout_s=loop.glove_timeout_s, relax_time_s=loop.relax_time_s,
+        resume_frames=resume.frames, resume_time_s=resume.time_s,
+        outputs=outputs, log=log, profile=profile,
+    )
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """A ``preexec_fn`` that has the child get SIGTERM when this process dies (Linux
+    ``PR_SET_PDEATHSIG``): an emulator in its own session would otherwise outlive a
+    rig that was killed. None where there is no such thing."""
+    try:
+        import ctypes
+
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    pr_set_pdeathsig = 1
+
+    def preexec() -> None:
+        prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
+    return preexec
+
+
 @contextlib.contextmanager
 def port_process(argv: Sequence[str], what: str, timeout_s: float = 30.0
                  ) -> Iterator[tuple[subprocess.Popen[str], str]]:
     """Start a handrig subcommand that prints ``port: PATH`` first; stop it on exit.
 
-    Yields the process and the port path. The process gets SIGTERM on exit and is
-    waited for, so the emulators shut down cleanly.
+    Yields the process and the port path. The process runs in its own session (the
+    terminal's Ctrl-C does not reach it) and gets SIGTERM if this process dies; on
+    exit it gets SIGTERM and is waited for, so the emulators shut down cleanly.
     """
     cmd = [sys.executable, "-m", "handrig.cli", *argv]
     env = helper_env()  # off the loop's CPU
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env)
+                            env=env, start_new_session=True, preexec_fn=_die_with_parent())
     try:
         assert proc.stdout is not None
         sel = selectors.DefaultSelector()
@@ -182,10 +326,11 @@ def stop_process(proc: subprocess.Popen[str]) -> str:
     return (out or "") + (err or "")
 
 
-def summary_dict(rig: Any, bus_stats: Any, glove_stats: Any, torque_off: bool | None
+def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: bool | None
                  ) -> dict[str, Any]:
     """The run's figures as one JSON-able object (the keys ``handrig demo --json`` promises)."""
-    s = rig.stats
+    s = stats
+
     def num(x: float, nd: int = 3) -> float | None:
         return None if x is None or not math.isfinite(x) else round(float(x), nd)
     out: dict[str, Any] = {
@@ -194,7 +339,7 @@ def summary_dict(rig: Any, bus_stats: Any, glove_stats: Any, torque_off: bool | 
         "rate_hz": num(s.rate_hz, 2),
         "jitter_us": num(s.jitter_us, 1),
         "latency_us": {"p50": num(s.latency_us(50), 1), "p99": num(s.latency_us(99), 1),
-                       "max": num(s.latency_us(100), 1), "samples": len(s.latencies_s)},
+                       "max": num(s.latency_us(100), 1), "samples": s.latency.count},
         "overruns": s.overruns,
         "overrun_max_us": num(s.overrun_max_s * 1e6, 1),
         "missed_cycles": s.missed_cycles,
@@ -208,9 +353,11 @@ def summary_dict(rig: Any, bus_stats: Any, glove_stats: Any, torque_off: bool | 
         "reads": s.reads,
         "stale_reads": s.stale_reads,
         "relax_events": s.relax_events,
+        "resumes": s.resumes,
         "estop": s.estop,
         "stop_reason": s.stop_reason,
         "events": list(s.events),
+        "events_total": s.events.total,
         "torque_off": torque_off,
     }
     if glove_stats is not None:

@@ -1,9 +1,20 @@
 """One live session: devices opened, torque on, the loop run, torque off, figures out.
 
-Shared by ``handrig run`` and ``handrig demo``. Opens the glove and the servo bus
-(starting ``handrig sim-bus`` when the bus is ``"sim"``), commissions the
-servos, runs :class:`~handrig.rig.Rig` inside the bus's torque context, and
-checks afterwards, by reading every servo's Torque Enable, that torque is off.
+Shared by ``handrig run`` and ``handrig demo``. The factory (:mod:`handrig.app`)
+opens the glove, the servo bus (with its emulator for ``"sim"``) and the outputs
+and builds the rig; this module commissions the servos, runs the rig inside the
+bus's torque context, and checks afterwards, by reading every servo's Torque
+Enable, that torque is off. A session always returns its summary, with the error
+in it when there was one.
+
+Every way a user ends a run is handled alike (:class:`ExitSignals`): Ctrl-C
+(SIGINT), SIGTERM, SIGHUP (the terminal or the SSH session closed) and SIGQUIT.
+Before the rig is ready a signal unwinds (devices closed, emulators stopped,
+torque never on). While it runs, the first signal eases to the relaxed pose and
+stops, a second stops at the next cycle, a third raises at once (torque still
+goes off on the way out). During torque-off and shutdown signals are counted and
+ignored. The emulators run in sessions of their own, so a Ctrl-C reaches the rig
+alone and they are stopped after torque is off.
 """
 
 from __future__ import annotations
@@ -13,23 +24,25 @@ import gc
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from types import FrameType
+from types import FrameType, TracebackType
 from typing import Any
 
 import numpy as np
 
-from handrig.app import RigParts, open_glove, port_process, summary_dict
+from handrig import app
+from handrig.app import RigParts
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import DeviceError, HandrigError, SafetyStop
-from handrig.glove import GloveSource
+from handrig.loop.stats import RunStats
 from handrig.realtime import pinned_loop, realtime_priority
-from handrig.rig import Rig
-from handrig.rigconfig import RigConfig
 from handrig.servo import DynamixelBus
-from handrig.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 from handrig.servo.registers import Reg
+
+EXIT_SIGNALS: tuple[signal.Signals, ...] = tuple(
+    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
+    if hasattr(signal, name))
 
 
 @dataclass
@@ -46,25 +59,21 @@ class LiveOptions:
     sim_faults: str = ""
     snapshot_every: int = 0  # keep present positions every N frames (for rendering)
     verbose: bool = False  # log every commissioning step
-    profile: bool = False  # record per-stage times of the critical path (bench_rig)
+    profile: bool = False  # time the critical path's stages (bench_rig)
     log: Callable[[str], None] = field(default=lambda text: print(text, file=sys.stderr))
 
 
 @dataclass
 class LiveResult:
+    """``summary``: the figures (:func:`handrig.app.summary_dict`, plus ``error`` when the
+    session ended with one); ``started``: whether the rig got as far as torque-on."""
+
     summary: dict[str, Any]
     snapshots: list[np.ndarray]
     joint_names: tuple[str, ...]
     sim_output: str = ""
-
-
-def read_fields_for(rig: RigConfig) -> ReadFields:
-    """What the loop reads back: position, velocity and current when a goal write plus that
-    read fit in 70 % of a cycle on the wire, else position only (e.g. 20 servos at 1 Mbps
-    and 200 Hz: 4.4 ms of wire for the full read, 3.2 ms for positions, in a 5 ms cycle)."""
-    n, period = len(rig.servos), 1.0 / rig.loop.rate_hz
-    full = wire_time_s(cycle_bytes(n, data_len=10), rig.bus.baud)
-    return "motion" if full <= 0.7 * period else "position"
+    error: HandrigError | None = None
+    started: bool = False
 
 
 def torque_is_off(bus: DynamixelBus) -> bool | None:
@@ -75,134 +84,176 @@ def torque_is_off(bus: DynamixelBus) -> bool | None:
         return None
 
 
-@contextlib.contextmanager
-def _sigterm_unwinds() -> Iterator[None]:
-    """SIGTERM before torque is on (opening, commissioning) unwinds like Ctrl-C, so the
-    emulator subprocesses and ptys are closed; inside ``bus.torque()`` the bus's own
-    handler takes over (ease to relaxed, then torque off)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+class ExitSignals:
+    """SIGINT, SIGTERM, SIGHUP and SIGQUIT, handled alike for one session (main thread
+    only; elsewhere nothing is installed). See the module docstring for what each
+    phase does with them: :meth:`arm` when the rig can be asked to stop, :meth:`disarm`
+    when the loop is over."""
 
-    def handler(signum: int, frame: FrameType | None) -> None:
-        raise SafetyStop("SIGTERM received before the rig started: stopped, torque was off")
+    def __init__(self) -> None:
+        self.received = 0
+        self.last = ""
+        self._stop: Callable[[str], None] | None = None
+        self._ignoring = False
+        self._while_armed = 0
+        self._saved: dict[int, Any] = {}
 
-    old = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
+    def __enter__(self) -> ExitSignals:
+        if threading.current_thread() is threading.main_thread():
+            for sig in EXIT_SIGNALS:
+                self._saved[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        for sig, old in self._saved.items():
+            signal.signal(sig, old)
+        self._saved.clear()
+
+    def arm(self, stop: Callable[[str], None]) -> None:
+        """From now on a signal calls ``stop(reason)`` (twice at most), then raises."""
+        self._stop = stop
+
+    def disarm(self) -> None:
+        """The loop is over: torque-off and shutdown must finish; signals are ignored."""
+        self._stop = None
+        self._ignoring = True
+
+    def _handler(self, signum: int, frame: FrameType | None) -> None:
+        name = signal.Signals(signum).name
+        self.received += 1
+        self.last = name
+        if self._ignoring:
+            return
+        if self._stop is None:
+            raise SafetyStop(f"{name} received before the rig started: stopped, torque was off")
+        self._while_armed += 1
+        if self._while_armed <= 2:
+            self._stop(f"{name} received")
+            return
+        raise SafetyStop(f"{name} received again: stopping the servos with torque off")
+
+
+def _never_raises(log: Callable[[str], None]) -> Callable[[str], None]:
+    """``log`` that drops a line it cannot write (the terminal closed: SIGHUP)."""
+    def safe(text: str) -> None:
+        with contextlib.suppress(OSError, ValueError):
+            log(text)
+    return safe
 
 
 def run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None = None) -> LiveResult:
-    """Run the rig once with ``parts`` and ``opts``; returns the summary figures."""
-    with _sigterm_unwinds():
-        return _run_live(parts, opts, clock)
+    """Run the rig once with ``parts`` and ``opts``; returns the summary, also when the
+    session failed (``result.error``)."""
+    with ExitSignals() as signals:
+        return _Session(parts, opts, clock or MonotonicClock(), signals).run()
 
 
-def _run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None) -> LiveResult:
-    clock = clock or MonotonicClock()
-    rig_cfg = parts.rig_config
-    bus_spec = opts.bus or rig_cfg.bus.port
-    snapshots: list[np.ndarray] = []
-    sim_proc = None
-    with contextlib.ExitStack() as stack:
-        if bus_spec == "sim":
-            argv = ["sim-bus", "--rig", str(parts.rig_file)]
-            if opts.wire_timing:
-                argv.append("--wire-timing")
-            if opts.viewer:
-                argv.append("--viewer")
-            if opts.sim_faults:
-                argv += ["--faults", opts.sim_faults]
-            sim_proc, bus_port = stack.enter_context(
-                port_process(argv, "the simulated servo bus (handrig sim-bus)"))
-            opts.log(f"simulated servo bus (MuJoCo puppet) on {bus_port}")
-        else:
-            bus_port = bus_spec
-        glove: GloveSource = open_glove(opts.glove, parts.glove_config, clock)
-        stack.enter_context(glove)
-        read_fields = read_fields_for(rig_cfg)
-        # No reply poll: the loop reads the servos once every few 5 ms cycles, where the
-        # tens of microseconds a poll saves do not matter, and a SCHED_FIFO thread that
-        # polls holds back the kernel worker delivering the reply (and the glove's
-        # bytes) whenever that worker is queued on the loop's CPU (seen with ftrace).
-        bus = DynamixelBus(bus_port, rig_cfg, clock=clock, read_fields=read_fields, spin_s=0.0)
-        stack.callback(bus.close)
-        bus.connect()
-        if opts.verbose:
-            for line in bus.commissioning:
-                opts.log(line)
-        else:
-            opts.log(f"servo bus {bus_port}: {len(rig_cfg.servos)} servos commissioned "
-                     f"({len(bus.commissioning)} settings checked or changed)")
+class _Session:
+    def __init__(self, parts: RigParts, opts: LiveOptions, clock: Clock,
+                 signals: ExitSignals) -> None:
+        self.parts, self.opts, self.clock, self.signals = parts, opts, clock, signals
+        self.log = _never_raises(opts.log)
+        self.stats = RunStats()
+        self.bus_stats: Any = None
+        self.glove_stats: Any = None
+        self.torque_off: bool | None = None
+        self.stages: dict[str, dict[str, float]] | None = None
+        self.snapshots: list[np.ndarray] = []
+        self.started = False
 
-        outputs: list[Callable[[float, np.ndarray], None]] = []
-        if opts.vmc:
-            from handrig.outputs.vmc import VmcSender, parse_host_port
-
-            host, port = parse_host_port(opts.vmc)
-            vmc = VmcSender(host, port, clock=clock)
-            stack.callback(vmc.close)
-            outputs.append(vmc)
-        if opts.record:
-            from handrig.outputs.recorder import Recorder
-
-            recorder = Recorder(opts.record, rate_hz=rig_cfg.loop.rate_hz)
-            stack.callback(lambda: opts.log(f"recorded performance: {recorder.close()}"))
-            outputs.append(recorder)
-
-        rig = Rig(
-            glove, bus, parts.pipeline, clock,
-            controls_from_raw=parts.controls, orientation=parts.orientation,
-            rate_hz=rig_cfg.loop.rate_hz, read_every=rig_cfg.bus.read_every,
-            glove_timeout_s=rig_cfg.loop.glove_timeout_s,
-            relax_time_s=rig_cfg.loop.relax_time_s, outputs=outputs, log=opts.log,
-            profile=opts.profile,
-        )
-        if opts.snapshot_every > 0:
-            every = opts.snapshot_every
-            counter = [0]
-
-            def snap(t_s: float, pose: np.ndarray) -> None:
-                counter[0] += 1
-                state = rig.last_state
-                if counter[0] % every == 0 and state is not None:
-                    snapshots.append(np.array(state.positions_deg))
-            rig.outputs = (*rig.outputs, snap)
-
+    def run(self) -> LiveResult:
         error: HandrigError | None = None
-        rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
-        stack.callback(gc.unfreeze)  # also when torque-on fails and the loop never runs
-        with bus.torque(on_signal=lambda name: rig.request_stop(f"{name} received")):
-            # the Rig starts from bus.last_goals_deg: where torque-on holds every servo
-            panel = contextlib.nullcontext()
-            if opts.panel:
-                from handrig.panel import LivePanel
-
-                panel = LivePanel(rig)  # type: ignore[assignment]
-            try:
-                with (panel, pinned_loop(rig_cfg.loop.pin_cpu, opts.log),
-                      realtime_priority(rig_cfg.loop.realtime_priority, opts.log)):
-                    rig.run(frames=opts.frames, duration_s=opts.duration_s)
-            except DeviceError as exc:
-                error = exc
-        off = torque_is_off(bus)
-        summary = summary_dict(rig, bus.stats, glove.stats(), off)
-        if rig.stage_times:
-            t = np.diff(np.array(rig.stage_times), axis=1) * 1e6
-            names = ("read+decode", "calibrate+filter", "orientation", "targets", "write")
-            summary["stages_us"] = {
-                name: {"p50": round(float(np.percentile(t[:, i], 50)), 1),
-                       "p99": round(float(np.percentile(t[:, i], 99)), 1)}
-                for i, name in enumerate(names)}
+        opened: app.OpenedBus | None = None
+        try:
+            with contextlib.ExitStack() as stack:
+                opened = stack.enter_context(app.servo_bus(
+                    self.opts.bus, self.parts, self.clock, wire_timing=self.opts.wire_timing,
+                    viewer=self.opts.viewer, faults=self.opts.sim_faults, log=self.log))
+                error = self._devices_open(stack, opened.bus)
+        except HandrigError as exc:
+            error = error or exc
+        except OSError as exc:  # a device call the driver did not wrap: still a summary
+            error = error or DeviceError(f"{type(exc).__name__}: {exc}")
+        summary = app.summary_dict(self.stats, self.bus_stats, self.glove_stats,
+                                   self.torque_off)
+        if self.stages:
+            summary["stages_us"] = self.stages
+        if self.signals.received:
+            summary["signals"] = self.signals.received
         if error is not None:
             summary["error"] = str(error)
-    sim_output = ""
-    if sim_proc is not None and sim_proc.stdout is not None:
-        with contextlib.suppress(Exception):
-            sim_output = sim_proc.stdout.read() or ""
-    return LiveResult(summary, snapshots, tuple(s.joint for s in rig_cfg.servos), sim_output)
+        return LiveResult(summary, self.snapshots,
+                          tuple(s.joint for s in self.parts.rig_config.servos),
+                          opened.emulator_output() if opened is not None else "",
+                          error, self.started)
+
+    def _devices_open(self, stack: contextlib.ExitStack, bus: DynamixelBus
+                      ) -> HandrigError | None:
+        """With the bus open: the glove, commissioning, the outputs, the rig, the run.
+        Returns the error the run ended with (torque is off by then)."""
+        opts, parts, log = self.opts, self.parts, self.log
+        glove = app.open_glove(opts.glove, parts.glove_config, self.clock)
+        stack.enter_context(glove)
+        stack.callback(self._glove_figures, glove)
+        bus.connect()
+        stack.callback(self._bus_figures, bus)  # after torque-off, before the bus closes
+        if opts.verbose:
+            for line in bus.commissioning:
+                log(line)
+        else:
+            log(f"servo bus {bus.port}: {len(parts.rig_config.servos)} servos commissioned "
+                f"({len(bus.commissioning)} settings checked or changed)")
+        outputs = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
+                              record=opts.record, log=log)
+        rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=log,
+                            profile=opts.profile)
+        self.stats = rig.stats
+        if opts.snapshot_every > 0:
+            rig.outputs = (*rig.outputs, self._snapshots(rig, opts.snapshot_every))
+        rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
+        stack.callback(gc.unfreeze)  # also when torque-on fails and the loop never runs
+        loop = parts.rig_config.loop
+        self.signals.arm(rig.request_stop)
+        try:
+            # the Rig starts from bus.last_goals_deg: where torque-on holds every servo
+            with bus.torque(handle_signals=False):
+                self.started = True
+                panel: Any = contextlib.nullcontext()
+                if opts.panel:
+                    from handrig.panel import LivePanel
+
+                    panel = LivePanel(rig)
+                try:
+                    with (panel, pinned_loop(loop.pin_cpu, log),
+                          realtime_priority(loop.realtime_priority, log)):
+                        rig.run(frames=opts.frames, duration_s=opts.duration_s)
+                finally:
+                    self.signals.disarm()  # from here on: torque off, then shut down
+        except HandrigError as exc:
+            return exc
+        finally:
+            self.signals.disarm()
+            if rig.stage_profile is not None:
+                self.stages = rig.stage_profile.summary_us()
+        return None
+
+    def _bus_figures(self, bus: DynamixelBus) -> None:
+        self.torque_off = torque_is_off(bus)
+        self.bus_stats = bus.stats
+
+    def _glove_figures(self, glove: Any) -> None:
+        self.glove_stats = glove.stats()
+
+    def _snapshots(self, rig: Any, every: int) -> Callable[[float, np.ndarray], None]:
+        counter = [0]
+
+        def snap(t_s: float, pose: np.ndarray) -> None:
+            counter[0] += 1
+            state = rig.last_state
+            if counter[0] % every == 0 and state is not None:
+                self.snapshots.append(np.array(state.positions_deg))
+        return snap
 
 
 def format_summary(summary: dict[str, Any]) -> str:
@@ -231,10 +282,39 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"tracking          rms {summary['tracking_rms_deg']} deg, max "
         f"{summary['tracking_max_deg']} deg (present vs goal, {summary['reads']} reads, "
         f"{summary['stale_reads']} with stale servos)",
-        f"safety            {summary['relax_events']} relax events, e-stop "
+        f"safety            {summary['relax_events']} relax events, "
+        f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
         f"torque off        {summary['torque_off']}",
     ]
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
     return "\n".join(lines)
+
+
+def failed(error: HandrigError, parts: RigParts | None = None) -> LiveResult:
+    """The result of a session that could not begin (a config, an emulator, a port)."""
+    summary = app.summary_dict(RunStats(), None, None, None)
+    summary["error"] = str(error)
+    joints = tuple(s.joint for s in parts.rig_config.servos) if parts is not None else ()
+    return LiveResult(summary, [], joints, error=error)
+
+
+def print_result(result: LiveResult, as_json: bool) -> int:
+    """Print a session's summary (one JSON object with ``as_json``) and return the exit
+    status: 0 when it ended cleanly with torque off, 1 when the run ended with an error
+    or torque may still be on, 2 when it failed before the rig started. A summary that
+    cannot be written (the terminal is gone) is not an error."""
+    import json
+
+    summary = result.summary
+    with contextlib.suppress(OSError, ValueError):
+        if as_json:
+            print(json.dumps(summary), flush=True)
+        elif result.started:
+            print(format_summary(summary), flush=True)
+        if result.error is not None and (as_json or not result.started):
+            print(f"handrig: error: {result.error}", file=sys.stderr, flush=True)
+    if result.error is not None and not result.started:
+        return 2
+    return 1 if result.error is not None or summary["torque_off"] is not True else 0

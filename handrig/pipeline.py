@@ -10,16 +10,18 @@ Per loop cycle, :meth:`PosePipeline.servo_targets` (before the Sync Write) and
 The full pose is a 54-vector laid out as :data:`handrig.hand.ALL_JOINT_NAMES`
 (the 50 curves, then ``riWristFlexion, riWristDeviation, leWristFlexion,
 leWristDeviation``), degrees in the vocabulary convention. Every array is
-preallocated; :meth:`PosePipeline.servo_targets` allocates nothing.
+preallocated; :meth:`PosePipeline.servo_targets` allocates nothing. The loop
+rehearses the step on :meth:`PosePipeline.rehearsal_copy`.
 
 This module imports no device code (no serial, dynamixel_sdk or mujoco).
 """
 
 from __future__ import annotations
 
-import math
+import copy
 from collections.abc import Sequence
-from typing import Any, Literal, Protocol
+from dataclasses import dataclass
+from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,7 +30,7 @@ from handrig import hand
 from handrig import pose_kernels as kernels
 from handrig.config import JointLimits
 from handrig.errors import ConfigError
-from handrig.sag import SagGrid
+from handrig.sag import SagGrid, SagTables
 
 FloatArray = NDArray[np.float64]
 POSE_NAMES: tuple[str, ...] = hand.ALL_JOINT_NAMES
@@ -76,6 +78,22 @@ class SagLike(Protocol):
     def offsets(
         self, inclination_deg: float, rotation_deg: float, out: FloatArray | None = None
     ) -> FloatArray: ...
+
+    def kernel_tables(self) -> SagTables: ...
+
+
+@dataclass(frozen=True)
+class ServoPath:
+    """The servo step precomposed (:meth:`PosePipeline.servo_targets`): the targets before
+    limits are ``controls @ a + b + sag_gain * offsets[sag_slot]``, where ``offsets`` are
+    the right hand's sag offsets at the forearm orientation, looked up in ``sag``, and a
+    ``sag_slot`` of 23 (or more) means no sag for that servo. Read-only."""
+
+    a: FloatArray  # (k controls, n servos)
+    b: FloatArray  # (n,)
+    sag_slot: NDArray[np.int64]  # (n,)
+    sag_gain: float
+    sag: SagTables
 
 
 class PosePipeline:
@@ -142,29 +160,46 @@ class PosePipeline:
             view = getattr(sag, "for_hand", None)
             for h in hand.HANDS:
                 self._grids[h] = view(h) if callable(view) else sag
+        self._has_sag = "ri" in self._grids
         k = len(expander.controls)
         self.control_means_deg = (
             np.zeros(k) if control_means_deg is None
             else np.asarray(control_means_deg, dtype=np.float64).copy()
         )
-        # Preallocated work arrays.
+        self.clamps = 0  # pose values (all 54) clamped to joint limits, cumulative
+        self.servo_clamps = 0  # servo targets that needed clamping, cumulative
+        self.slewed = 0  # servo targets held back by the slew limit, cumulative
+        self.rejected = 0  # non-finite targets replaced by the last good one, cumulative
+        self._has_targets = False
+        self._allocate_work()
+        self.servo_path = self._build_servo_path()
+        kernels.warm_up()
+
+    def _allocate_work(self) -> None:
+        """The arrays a step writes (all of them: :meth:`rehearsal_copy` makes new ones)."""
+        n = len(self.servo_joints)
         self.curves = np.zeros(hand.CURVES_PER_HAND * 2)
         self.pose = np.zeros(POSE_SIZE)
         self.relaxed = np.zeros(POSE_SIZE)
+        self.targets = np.zeros(n)
+        self._relaxed_targets = np.zeros(n)
         self._sag_values = np.zeros(hand.DOFS_PER_HAND)
         self._sag_offsets = np.zeros(hand.DOFS_PER_HAND)
         self._clamped_pose = np.zeros(POSE_SIZE)
         self._raw_targets = np.zeros(n)
         self._step = np.zeros(n)
-        self.targets = np.zeros(n)
-        self._has_targets = False
-        self.clamps = 0  # pose values (all 54) clamped to joint limits, cumulative
-        self.servo_clamps = 0  # servo targets that needed clamping, cumulative
-        self.slewed = 0  # servo targets held back by the slew limit, cumulative
-        self.rejected = 0  # non-finite targets replaced by the last good one, cumulative
-        self._build_servo_path()
 
-    def _build_servo_path(self) -> None:
+    def rehearsal_copy(self) -> PosePipeline:
+        """A pipeline to rehearse the servo step on (the loop runs it just before a
+        deadline, to have the code warm): it shares this one's map, sag grid, limits and
+        servo path, which no step writes, and has its own work arrays, targets and
+        counters, so nothing it does shows here."""
+        other = copy.copy(self)
+        other._allocate_work()
+        other.targets[:] = self.targets
+        return other
+
+    def _build_servo_path(self) -> ServoPath:
         """Precompose the servo joints' targets as one affine map of the controls, plus the
         right forearm's sag offsets (the left forearm's are constant: no IMU there).
 
@@ -180,7 +215,7 @@ class PosePipeline:
         n, k = len(self.servo_joints), gains.shape[1]
         a = np.zeros((k, n))
         b = np.zeros(n)
-        slot = np.full(n, hand.DOFS_PER_HAND, dtype=np.intp)  # index 23 = a zero offset
+        slot = np.full(n, hand.DOFS_PER_HAND, dtype=np.int64)  # index 23 = no sag
         left_const = np.zeros(hand.DOFS_PER_HAND)
         left_rest = np.zeros(hand.DOFS_PER_HAND)
         left_grid = self._grids.get("le")
@@ -209,24 +244,9 @@ class PosePipeline:
                 b[j] += self.sag_gain * left_const[d]
                 if self.left_hand == "relaxed":
                     b[j] += left_rest[d]
-        self._servo_a = np.ascontiguousarray(a)
-        self._servo_b = b
-        self._servo_slot = slot
-        self._sag24 = np.zeros(hand.DOFS_PER_HAND + 1)
-        self._sag_servo = np.zeros(n)
-        # the compiled step (handrig.pose_kernels) when the right hand's sag is a baked grid
-        # or absent; any other SagLike takes the numpy step
         grid = self._grids.get("ri")
-        self._kernel = grid is None or isinstance(grid, SagGrid)
-        self._k_sag = grid is not None
-        if isinstance(grid, SagGrid):
-            self._k_grid: tuple[Any, ...] = (grid._inc_arr, grid._rot_arr, grid._rot0,
-                                             grid._cells_off)
-        else:
-            self._k_grid = (np.array([-90.0, 90.0]), np.array([0.0, 360.0]), 0.0,
-                            np.zeros((0, 1, 4, hand.DOFS_PER_HAND)))
-        self._k_slot = np.ascontiguousarray(slot, dtype=np.int64)
-        kernels.warm_up()
+        tables = grid.kernel_tables() if grid is not None else SagTables.empty()
+        return ServoPath(np.ascontiguousarray(a), b, slot, self.sag_gain, tables)
 
     # -- pieces ---------------------------------------------------------------------------
     def _add_sag(self, pose: FloatArray, h: str, inclination_deg: float,
@@ -279,55 +299,39 @@ class PosePipeline:
         self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, dt_s: float
     ) -> FloatArray:
         """The servo targets only (degrees, bus order): the short path the loop runs
-        between reading a glove frame and handing the Sync Write to the OS. Call
-        :meth:`account` afterwards for the full pose (outputs) and the statistics."""
-        if self._kernel:
-            if self._k_sag:
-                inclination_deg = SagGrid.checked_inclination(inclination_deg, rotation_deg)
-            inc_axis, rot_axis, rot0, cells = self._k_grid
-            first = not self._has_targets
-            self.rejected += kernels.servo_targets(
-                np.ascontiguousarray(controls_deg, dtype=np.float64), self._servo_a,
-                self._servo_b, inc_axis, rot_axis, rot0, cells,
-                self._k_slot, float(self.sag_gain), float(inclination_deg),
-                float(rotation_deg), self.servo_low, self.servo_high, self.targets,
-                float(self.slew_deg_s * max(dt_s, 0.0)), first, self._raw_targets)
-            self._has_targets = True
-            return self.targets
-        return self._servo_targets_numpy(controls_deg, inclination_deg, rotation_deg, dt_s)
-
-    def _servo_targets_numpy(
-        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, dt_s: float
-    ) -> FloatArray:
-        """:meth:`servo_targets` in numpy, for a sag source other than a baked grid
-        (and the reference the compiled kernel is tested against)."""
-        raw = self._raw_targets
-        np.dot(controls_deg, self._servo_a, out=raw)
-        raw += self._servo_b
-        grid = self._grids.get("ri")
-        if grid is not None:
-            grid.offsets(inclination_deg, rotation_deg, out=self._sag24[:23])
-            np.take(self._sag24, self._servo_slot, out=self._sag_servo)
-            if self.sag_gain != 1.0:
-                self._sag_servo *= self.sag_gain
-            raw += self._sag_servo
-        if not math.isfinite(raw.sum()):  # NaN or inf never reaches a servo: hold instead
-            bad = ~np.isfinite(raw)
-            self.rejected += int(bad.sum())
-            fallback = self.targets if self._has_targets else 0.5 * (
-                self.servo_low + self.servo_high)
-            np.copyto(raw, fallback, where=bad)
-        np.clip(raw, self.servo_low, self.servo_high, out=raw)
-        if not self._has_targets:
-            self.targets[:] = raw
-            self._has_targets = True
-            return self.targets
-        step = self._step
-        np.subtract(raw, self.targets, out=step)
-        limit = self.slew_deg_s * max(dt_s, 0.0)
-        np.clip(step, -limit, limit, out=step)
-        self.targets += step
+        between reading a glove frame and handing the Sync Write to the OS, one call of
+        the compiled step (:func:`handrig.kernels.servo_targets`) on :attr:`servo_path`.
+        A non-finite target holds the previous one (counted in ``rejected``); targets
+        move at most ``slew_deg_s * dt_s`` from the previous ones. Call :meth:`account`
+        afterwards for the full pose (outputs) and the statistics."""
+        path = self.servo_path
+        tables = path.sag
+        if self._has_sag:
+            inclination_deg = SagGrid.checked_inclination(inclination_deg, rotation_deg)
+        first = not self._has_targets
+        self.rejected += kernels.servo_targets(
+            np.ascontiguousarray(controls_deg, dtype=np.float64), path.a, path.b,
+            tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
+            tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
+            float(inclination_deg), float(rotation_deg), self.servo_low, self.servo_high,
+            self.targets, float(self.slew_deg_s * max(dt_s, 0.0)), first, self._raw_targets)
+        self._has_targets = True
         return self.targets
+
+    @property
+    def raw_targets(self) -> FloatArray:
+        """The last step's targets before the slew limit (clamped to the limits)."""
+        return self._raw_targets
+
+    def relaxed_targets(self, inclination_deg: float, rotation_deg: float) -> FloatArray:
+        """The servo targets of the relaxed hands at this orientation, clamped to the
+        joint and servo limits; :attr:`relaxed` then holds the clamped full pose."""
+        relaxed = self.relaxed_pose(inclination_deg, rotation_deg)
+        np.clip(relaxed, self.pose_low, self.pose_high, out=relaxed)
+        np.take(relaxed, self.servo_index, out=self._relaxed_targets)
+        np.clip(self._relaxed_targets, self.servo_low, self.servo_high,
+                out=self._relaxed_targets)
+        return self._relaxed_targets
 
     def account(
         self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float

@@ -1,8 +1,8 @@
 """Realtime scheduling for the loop thread, best effort.
 
 With ``SCHED_FIFO`` the loop is not preempted by ordinary processes (an emulator,
-a compiler, a browser on the show laptop): on a loaded 2-core machine the loop's
-p99 latency fell from about 4 ms to about 0.5 ms. It needs root or
+a compiler, a browser on the show laptop); ``docs/measurements.md`` has what that
+did to the loop's latency on a loaded machine. It needs root or
 ``CAP_SYS_NICE`` (or an rtprio limit); without it the loop runs at normal
 priority and says so. Only the calling thread is raised, and only inside the
 ``with`` block; threads started before keep their priority.
@@ -12,9 +12,9 @@ CPU split: with two or more CPUs the loop thread keeps the last one to itself
 servo bus and its MuJoCo puppet, the glove emulator) are told to stay off it
 through ``HANDRIG_CPUS`` (:func:`apply_cpus_from_env`, called first by the CLI).
 Real servos and a real glove cost the host nothing; their emulators must not steal
-the loop's CPU either. Measured on a 2-core VM with the bus emulator's SCHED_FIFO
-thread woken onto the loop's CPU, a 114-byte Sync Write's ``os.write`` took
-165-182 us (the emulator ran inside it); pinned apart, 3-21 us.
+the loop's CPU either: a pty write wakes the emulator's reader, and woken onto the
+loop's CPU it runs inside the loop's ``os.write`` (figures in
+``docs/measurements.md``).
 """
 
 from __future__ import annotations
@@ -94,9 +94,8 @@ def pinned_loop(
 
     The thread's timer slack is cut to 1 us in the block either way: the servo
     driver polls for a reply from shortly before its wire instant (DynamixelBus
-    ``spin_s``), and a wake-up 50 us late defeats that. Measured with ``handrig
-    bench bus`` (4 Mbps, 20 servos), a 30 us poll lead gave 0.81-0.85 of the wire
-    limit at the default slack and 0.88 with 1 us."""
+    ``spin_s``), and a wake-up 50 us late defeats that (``handrig bench bus`` shows
+    the difference; figures in ``docs/measurements.md``)."""
     slack_before = timer_slack_ns(LOOP_TIMER_SLACK_NS)
     try:
         with _pinned(enabled, log) as cpu:

@@ -22,9 +22,8 @@ The shipped grid is step 2.5 deg, refined to 1 deg where the pose bends fastest
 the lookup handles by bisection). The model has one stable equilibrium per
 orientation (``sim/passive.py``, "Raised hand": the fully relaxed fingers of the
 paper would buckle palm up with the forearm raised, so the gains rise above the
-horizontal); lookups agree with a direct solve to a median of 0.003 deg and at most
-0.27 deg over 1500 random orientations of the whole sphere (``python -m bench sag``
-prints the figures for 400).
+horizontal); ``python -m bench sag`` prints how closely lookups agree with a direct
+solve over random orientations of the whole sphere (``docs/measurements.md``).
 """
 
 from __future__ import annotations
@@ -35,6 +34,7 @@ import math
 import zipfile
 import zlib
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +49,30 @@ SAG_GRID = CONFIG_DIR / "sag_grid.npz"
 _AXIS_TOL_DEG = 1e-6
 _POLE_TOL_DEG = 1e-3
 _LIMIT_TOL_DEG = 1.0  # slack for the solver's equilibria at a joint's end stop
+
+
+@dataclass(frozen=True)
+class SagTables:
+    """A grid's lookup tables in the layout the compiled servo step reads
+    (``handrig.kernels.servo_targets``). Read-only; shared, never copied.
+
+    ``inclination_axis_deg`` (n_inc,); ``rotation_axis_deg`` (n_rot + 1,): the
+    rotation samples with the first repeated one turn up (rotation wraps);
+    ``rotation0_deg``: the first rotation sample; ``cell_offsets_deg``
+    (n_inc - 1, n_rot, 4, 23): for each cell its four corners' sag offsets (values
+    minus the rest pose), corners ordered (i, j), (i, j + 1), (i + 1, j), (i + 1, j + 1).
+    """
+
+    inclination_axis_deg: NDArray[np.float64]
+    rotation_axis_deg: NDArray[np.float64]
+    rotation0_deg: float
+    cell_offsets_deg: NDArray[np.float64]
+
+    @classmethod
+    def empty(cls, n_dofs: int = 23) -> SagTables:
+        """Tables that add no sag (no cells)."""
+        return cls(np.array([-90.0, 90.0]), np.array([0.0, 360.0]), 0.0,
+                   np.zeros((0, 1, 4, n_dofs)))
 
 
 class SagGrid:
@@ -118,7 +142,7 @@ class SagGrid:
         self._inc = [float(x) for x in inc_axis]
         self._rot = [float(x) for x in rot_axis] + [float(rot_axis[0]) + 360.0]
         self._rot0 = float(rot_axis[0])
-        self._inc_arr = np.array(self._inc)  # the same axes for handrig.pose_kernels
+        self._inc_arr = np.array(self._inc)  # the same axes, for kernel_tables()
         self._rot_arr = np.array(self._rot)
         # Cell tables: for cell (i, j) the 4 corner vectors, contiguous, rotation wrapped.
         wrapped = np.concatenate([vals, vals[:, :1]], axis=1)
@@ -126,6 +150,7 @@ class SagGrid:
                           wrapped[1:, 1:]], axis=2)
         self._cells = np.ascontiguousarray(cells)
         self._cells_off = np.ascontiguousarray(cells - rest)
+        self._tables = SagTables(self._inc_arr, self._rot_arr, self._rot0, self._cells_off)
         self._w = np.zeros(4)
 
     # -- construction
@@ -228,6 +253,10 @@ class SagGrid:
                 out: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """Sag offsets = :meth:`lookup` minus ``rest_deg`` (23,), degrees."""
         return self._interp(self._cells_off, inclination_deg, rotation_deg, out)
+
+    def kernel_tables(self) -> SagTables:
+        """The lookup tables for the compiled servo step (shared with this grid)."""
+        return self._tables
 
     @staticmethod
     def checked_inclination(inc: float, rot: float) -> float:

@@ -47,7 +47,8 @@ from numpy.typing import NDArray
 from handrig.errors import DataError
 from handrig.hand import DOF_NAMES, dof_limits_deg
 from sim.hand_model import hand_model_xml
-from sim.passive import PassiveHand, PassiveHandConfig, load_passive_params
+from sim.passive import PassiveHand
+from sim.passive_config import PassiveHandConfig, load_passive_params
 
 Progress = Callable[[int, int], None]
 GRID_FORMAT = 1

@@ -72,6 +72,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig.hand import DIGITS, DOF_NAMES, FINGERS, Hand, dof_limits_deg
+from sim.passive_config import PassiveParams, load_passive_params
 
 G_MPS2 = 9.81
 DENSITY_KG_M3 = 1100.0  # REFERENCE.md section 4: cylinders at 1.1 g/cm^3
@@ -121,18 +122,6 @@ _AXES_RI: dict[str, tuple[float, float, float]] = {
 }
 
 
-@dataclass(frozen=True)
-class PassiveParams:
-    """Per-DOF spring parameters keyed by the ``ri`` DOF names (``riIndexMCPy``); the
-    left hand uses the same values (the vocabulary convention is anatomical).
-
-    ``rest_deg``: set point (equation 1), vocabulary convention.
-    ``ks_nm_per_rad``: stiffness; ``kd_nms_per_rad``: damping.
-    """
-
-    rest_deg: Mapping[str, float]
-    ks_nm_per_rad: Mapping[str, float]
-    kd_nms_per_rad: Mapping[str, float]
 
 
 @dataclass(frozen=True)
@@ -299,9 +288,7 @@ def joint_axis(name: str, hand: Hand = "ri") -> tuple[float, float, float]:
 
 
 def default_passive() -> PassiveParams:
-    """The tuned relaxed-hand springs from ``config/passive_hand.toml`` (``sim.passive``)."""
-    from sim.passive import load_passive_params  # sim.passive imports this module
-
+    """The tuned relaxed-hand springs from ``config/passive_hand.toml``."""
     return load_passive_params().springs()
 
 
@@ -320,7 +307,7 @@ def hand_model_xml(
 
     ``passive``: springs per DOF (keys: ``ri`` DOF names, used for both hands); None
     loads the tuned defaults from ``config/passive_hand.toml`` via
-    ``sim.passive.load_passive_params``. ``actuated``: DOF name (of ``hand``) ->
+    ``sim.passive_config.load_passive_params``. ``actuated``: DOF name (of ``hand``) ->
     :class:`ActuatorParams`; the actuator is named like its joint. ``limits_deg``:
     (23, 2) ranges in DOF order (default ``handrig.hand.dof_limits_deg``).
     ``gravity``: initial ``opt.gravity`` (forearm frame), default palm down horizontal.

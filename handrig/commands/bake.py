@@ -54,8 +54,10 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from sim import bake
-    from sim.passive import load_passive_params
+    from handrig import simulator
+
+    bake = simulator.baker()
+    load_passive_params = simulator.relaxed_hand().load_passive_params
 
     fine = args.step_deg / 2.5 if args.fine_step_deg is None else args.fine_step_deg or None
     bake.grid_axes(args.step_deg, fine)  # validates the steps before any work

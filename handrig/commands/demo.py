@@ -11,14 +11,15 @@ at the rig's baud rate. Prints a summary of what was measured.
 from __future__ import annotations
 
 import argparse
-import json
+import contextlib
 import sys
 from typing import Any
 
+from handrig import simulator
 from handrig.app import build_parts, port_process
 from handrig.commands._numbers import positive_float, positive_int
 from handrig.errors import HandrigError
-from handrig.live import LiveOptions, format_summary, run_live
+from handrig.live import ExitSignals, LiveOptions, failed, print_result, run_live
 
 DEFAULT_FRAMES = 3000  # 15 s at 200 Hz
 
@@ -43,35 +44,34 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sim.demo_recording import DEMO_RECORDING
-
     def log(text: str) -> None:
         if not args.json:
-            print(text, flush=True)
+            with contextlib.suppress(OSError, ValueError):  # the terminal may be gone
+                print(text, flush=True)
 
-    recording = args.recording or str(DEMO_RECORDING)
+    recording = args.recording or str(simulator.demo_recording())
     parts = build_parts()
     log(f"demo: {recording} -> glove emulator -> pipeline -> Dynamixel driver -> MuJoCo puppet")
-    with port_process(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
-                      "the glove emulator (handrig sim-glove)") as (_, glove_port):
-        log(f"glove emulator streaming on {glove_port}")
-        opts = LiveOptions(glove=glove_port, bus="sim", frames=args.frames,
-                           sim_faults=args.faults, log=log,
-                           snapshot_every=max(1, args.frames // 6) if args.render else 0)
-        result = run_live(parts, opts)
-    summary = result.summary
-    if args.render:
-        from sim.render import render_strip
-
+    with ExitSignals() as signals:  # a Ctrl-C while the glove emulator starts unwinds
         try:
-            path = render_strip(result.snapshots, result.joint_names, args.render)
-            summary["render"] = str(path)
+            with port_process(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
+                              "the glove emulator (handrig sim-glove)") as (_, glove_port):
+                log(f"glove emulator streaming on {glove_port}")
+                opts = LiveOptions(glove=glove_port, bus="sim", frames=args.frames,
+                                   sim_faults=args.faults, log=log,
+                                   snapshot_every=max(1, args.frames // 6) if args.render else 0)
+                signals.disarm()  # the session handles its own; after it: shut down, print
+                result = run_live(parts, opts)
+        except HandrigError as exc:
+            result = failed(exc, parts)
+    if result.error is not None and not result.started and not args.json:
+        raise result.error
+    if args.render and result.started:
+        try:
+            path = simulator.render_strip(result.snapshots, result.joint_names, args.render)
+            result.summary["render"] = str(path)
             log(f"rendered {len(result.snapshots)} frames of the simulated hand to {path}")
         except HandrigError as exc:
-            summary["render"] = None
+            result.summary["render"] = None
             print(f"handrig demo: no render: {exc}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        print(format_summary(summary))
-    return 1 if "error" in summary or summary["torque_off"] is not True else 0
+    return print_result(result, as_json=args.json)

@@ -42,7 +42,9 @@ def register(sub: Any) -> None:
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from sim import passive
+    from handrig import simulator
+
+    passive = simulator.relaxed_hand()
 
     cfg = passive.load_passive_params(args.config or config_file("passive_hand.toml"))
     result = passive.check(cfg)
@@ -65,7 +67,9 @@ def run_check(args: argparse.Namespace) -> int:
 
 
 def run_tune(args: argparse.Namespace) -> int:
-    from sim import passive
+    from handrig import simulator
+
+    passive = simulator.relaxed_hand()
 
     src = Path(args.config) if args.config else config_file("passive_hand.toml")
     cfg = passive.load_passive_params(src)

@@ -3,20 +3,20 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from typing import Any
 
 from handrig.app import build_parts
 from handrig.commands._numbers import positive_float, positive_int
-from handrig.live import LiveOptions, format_summary, run_live
+from handrig.errors import HandrigError
+from handrig.live import LiveOptions, failed, print_result, run_live
 
 
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "run", help="run the live rig: glove -> full hands with sag -> servos",
-        description="Run the live rig. Ctrl-C or SIGTERM eases the puppet to its relaxed "
-        "pose, then disables torque; a second Ctrl-C stops at once.",
+        description="Run the live rig. Ctrl-C, SIGTERM, SIGHUP or SIGQUIT eases the puppet "
+        "to its relaxed pose, then disables torque; a second one stops at once.",
     )
     p.add_argument("--config", default=None, metavar="FILE",
                    help="rig file (default config/rig.toml)")
@@ -43,7 +43,12 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    parts = build_parts(args.config, args.glove_config)
+    try:
+        parts = build_parts(args.config, args.glove_config)
+    except HandrigError as exc:
+        if not args.json:
+            raise
+        return print_result(failed(exc), as_json=True)
     opts = LiveOptions(
         glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
         wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
@@ -51,8 +56,6 @@ def run(args: argparse.Namespace) -> int:
         verbose=not args.json,
     )
     result = run_live(parts, opts)
-    if args.json:
-        print(json.dumps(result.summary))
-    else:
-        print(format_summary(result.summary))
-    return 1 if "error" in result.summary or result.summary["torque_off"] is False else 0
+    if result.error is not None and not result.started and not args.json:
+        raise result.error
+    return print_result(result, as_json=args.json)

@@ -81,7 +81,7 @@ def _has_display() -> bool:
 
 def run(args: argparse.Namespace) -> int:
     from firmware_protocol.dynamixel import MODELS
-    from sim.dxl_bus import FaultSpec, SimBus, with_model
+    from handrig import simulator
 
     rig = load_rig_config(args.rig)
     ids: list[int] | None = None
@@ -96,24 +96,18 @@ def run(args: argparse.Namespace) -> int:
         if args.model not in MODELS:
             raise ConfigError("unknown servo model", file="--model", value=args.model,
                               allowed=", ".join(MODELS))
-        rig = with_model(rig, args.model)
-    faults = FaultSpec.parse(args.faults) if args.faults else None
+        rig = simulator.with_model(rig, args.model)
 
+    behind: list[float] = []
+    bus, puppet = simulator.servo_bus(
+        rig, ids=ids, model=args.model, puppet=not args.no_puppet, on_behind=behind.append,
+        wire_timing=args.wire_timing, faults=args.faults, realtime=not args.no_realtime)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         stop.set()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    behind: list[float] = []
-    puppet = None
-    if not args.no_puppet:
-        from sim.puppet import Puppet
-
-        puppet = Puppet(rig, on_behind=behind.append)
-    bus = SimBus.from_rig(rig, ids=ids, model=args.model, puppet=puppet or False,
-                          wire_timing=args.wire_timing, faults=faults,
-                          realtime=not args.no_realtime)
     try:
         bus.start()
         print(f"port: {bus.port_path}", flush=True)

@@ -85,11 +85,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_file(args: argparse.Namespace) -> int:
-    from sim.glove_emulator import GloveEmulator
+    from handrig import simulator
 
     rec = read_glove_recording(args.file)
-    with GloveEmulator(rec, args.format, rate_hz=args.rate, loop=args.loop,
-                       analog_max=args.analog_max) as emu:
+    with simulator.glove_emulator(rec, args.format, rate_hz=args.rate, loop=args.loop,
+                                  analog_max=args.analog_max) as emu:
         print(f"port: {emu.port_path}", flush=True)
         rate = args.rate or rec.nominal_rate_hz
         print(f"streaming {len(rec)} samples ({rec.duration_s:.1f} s) as {args.format} at "
@@ -110,16 +110,14 @@ def _say_sent(sent: int, dropped: int) -> None:
 
 
 def _run_calibration(args: argparse.Namespace) -> int:
+    from handrig import simulator
     from handrig.commands.calibrate_glove import DEFAULT_HOLD_S, DEFAULT_SETTLE_S, STEPS
     from handrig.glove_calibration import load_glove_config
     from handrig.paths import config_file
-    from sim.calibration_motion import (
-        POSE_NAMES,
-        ScriptedSensors,
-        move_recording,
-        timed_recording,
-    )
-    from sim.glove_emulator import GloveEmulator
+
+    motion = simulator.calibration_motion()
+    POSE_NAMES, ScriptedSensors = motion.POSE_NAMES, motion.ScriptedSensors
+    move_recording, timed_recording = motion.move_recording, motion.timed_recording
 
     cfg = load_glove_config(args.glove_config or config_file("glove.toml"))
     rate = args.rate or 200.0
@@ -132,12 +130,13 @@ def _run_calibration(args: argparse.Namespace) -> int:
     common = {"transition_s": args.transition_s, "rate_hz": rate, "noise_counts": args.noise}
     if args.cue:
         first = move_recording(sensors, POSE_NAMES[0], POSE_NAMES[0], seed=args.seed, **common)
-        emu = GloveEmulator(first, args.format, rate_hz=rate, loop=True,
-                            loop_from_s=args.transition_s, analog_max=args.analog_max)
+        emu = simulator.glove_emulator(first, args.format, rate_hz=rate, loop=True,
+                                       loop_from_s=args.transition_s,
+                                       analog_max=args.analog_max)
     else:
         rec = timed_recording(sensors, pose_s=pose_s, seed=args.seed, **common)
-        emu = GloveEmulator(rec, args.format, rate_hz=rate, loop=True,
-                            analog_max=args.analog_max)
+        emu = simulator.glove_emulator(rec, args.format, rate_hz=rate, loop=True,
+                                       analog_max=args.analog_max)
     with emu:
         print(f"port: {emu.port_path}", flush=True)
         print(f"scripted calibration as {args.format} at {rate:g} Hz, sensor noise "
@@ -171,8 +170,10 @@ def _announce_timed(emu: Any, names: tuple[str, ...], texts: dict[str, str],
 
 def _follow_cues(emu: Any, sensors: Any, texts: dict[str, str], args: argparse.Namespace,
                  common: dict[str, float]) -> None:
-    from sim.calibration_motion import POSE_NAMES, move_recording
+    from handrig import simulator
 
+    motion = simulator.calibration_motion()
+    POSE_NAMES, move_recording = motion.POSE_NAMES, motion.move_recording
     current = POSE_NAMES[0]
     print(f"pose {current} held; Enter moves to the next pose, a name "
           f"({', '.join(POSE_NAMES)}) to that one", flush=True)

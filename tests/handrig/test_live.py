@@ -11,6 +11,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from handrig.app import build_parts
 from handrig.glove_recording import read_glove_recording
@@ -136,3 +137,103 @@ def test_run_sends_vmc_and_records_the_performance(tmp_path):
     t, poses, wrist = load_performance(take)
     assert len(t) >= 300 and poses.shape == (len(t), 50) and wrist is not None
     assert np.all(np.diff(t) > 0)
+
+
+def _start_and_signal(argv: list[str], sig: signal.Signals, *, group: bool,
+                      watch_stdout: bool = False) -> tuple[int, str, str]:
+    """Start ``handrig ARGV`` in a session of its own, wait until its servos are
+    commissioned, let it run 1 s, then send ``sig`` to it (``group``: to its whole
+    process group, as a terminal's Ctrl-C does). Returns (status, stdout, stderr)."""
+    import os
+
+    proc = subprocess.Popen([*CLI, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    seen: list[str] = []
+    try:
+        stream = proc.stdout if watch_stdout else proc.stderr
+        assert stream is not None
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            line = stream.readline()
+            seen.append(line)
+            if "commissioned" in line or not line:
+                break
+        time.sleep(1.0)
+        if group:
+            os.killpg(proc.pid, sig)
+        else:
+            proc.send_signal(sig)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    if watch_stdout:
+        out = "".join(seen) + out
+    else:
+        err = "".join(seen) + err
+    return proc.returncode, out, err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGHUP, signal.SIGQUIT])
+def test_sighup_and_sigquit_are_handled_like_sigterm(sig: signal.Signals) -> None:
+    status, out, err = _start_and_signal(
+        ["run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--json"], sig,
+        group=False)
+    assert status == 0, err
+    summary = json.loads(out)
+    assert summary["stop_reason"] == f"{sig.name} received"
+    assert any(sig.name in e and "relaxed pose" in e for e in summary["events"])
+    assert summary["torque_off"] is True and "error" not in summary
+
+
+def test_ctrl_c_in_run_with_the_simulated_bus_ends_with_torque_off() -> None:
+    """SIGINT to the whole process group: the emulator must not die before torque off."""
+    status, out, err = _start_and_signal(
+        ["run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--json"],
+        signal.SIGINT, group=True)
+    assert status == 0, err
+    summary = json.loads(out)
+    assert summary["stop_reason"] == "SIGINT received" and summary["torque_off"] is True
+    assert "Input/output error" not in err
+
+
+def test_ctrl_c_in_the_demo_ends_with_torque_off() -> None:
+    status, out, err = _start_and_signal(["demo", "--frames", "100000"], signal.SIGINT,
+                                         group=True, watch_stdout=True)
+    assert status == 0, err
+    assert "stopped: SIGINT received" in out
+    assert "torque off        True" in out
+    assert "\nerror " not in out and "Input/output error" not in err
+
+
+def test_json_prints_the_summary_with_the_error_when_a_run_fails(tmp_path) -> None:
+    missing = tmp_path / "no-such-port"
+    out = subprocess.run([*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus",
+                          str(missing), "--json"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    summary = json.loads(out.stdout)
+    assert str(missing) in summary["error"] and summary["frames"] == 0
+    assert summary["torque_off"] is None  # never connected: unknown, not claimed off
+    assert "handrig: error:" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_exit_signals_unwind_before_the_rig_stop_it_twice_then_raise_then_ignore() -> None:
+    from handrig.errors import SafetyStop
+    from handrig.live import EXIT_SIGNALS, ExitSignals
+
+    before = {s: signal.getsignal(s) for s in EXIT_SIGNALS}
+    stops: list[str] = []
+    with ExitSignals() as signals:
+        with pytest.raises(SafetyStop, match="SIGQUIT received before the rig started"):
+            signal.raise_signal(signal.SIGQUIT)
+        signals.arm(stops.append)
+        signal.raise_signal(signal.SIGHUP)
+        signal.raise_signal(signal.SIGINT)
+        assert stops == ["SIGHUP received", "SIGINT received"]
+        with pytest.raises(SafetyStop, match="SIGTERM received again"):
+            signal.raise_signal(signal.SIGTERM)
+        signals.disarm()  # torque going off: nothing may interrupt that
+        signal.raise_signal(signal.SIGINT)
+        assert signals.received == 5 and signals.last == "SIGINT"
+    assert {s: signal.getsignal(s) for s in EXIT_SIGNALS} == before

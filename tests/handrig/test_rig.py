@@ -306,8 +306,7 @@ def test_servo_fast_path_equals_the_full_pipeline(parts_factory):
             c - parts.expander.map.control_means_deg)
         if not np.allclose(expanded, unclamped):
             continue  # the expander clamped a curve before sag: paths may differ there
-        pl._has_targets = False
-        fast = pl.servo_targets(c, inc, rot, 0.005).copy()
+        fast = pl.servo_targets(c, inc, rot, 1e6).copy()  # a step the slew limit never holds
         want = np.clip(pose[pl.servo_index], pl.servo_low, pl.servo_high)
         np.testing.assert_allclose(fast, want, atol=1e-9)
         compared += 1
@@ -329,7 +328,7 @@ def test_rehearsal_never_feeds_live_state(parts_factory):
     bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = Rig(glove, bus, parts.pipeline, clock, controls_from_raw=controls,
               orientation=parts.orientation, rate_hz=200.0, log=lambda s: None)
-    assert rig.warm_s > 0 and rig._r_controls is None
+    assert rig.rehearsal is not None and not rig.rehearsal.rehearses_controls
     stats = rig.run(frames=50)
     assert len(seen) == stats.glove_samples
 
@@ -382,3 +381,145 @@ def test_after_an_overrun_reads_get_a_deadline_in_the_future(parts_factory):
     stats = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock).run(frames=100)
     assert stats.overruns == 1
     assert min(bus.margins) > 0.001
+
+
+class SlowGlove(ScriptedGlove):
+    """A frame only when a new ``1 / rate_hz`` slot begins (a glove slower than the loop)."""
+
+    def __init__(self, clock: FakeClock, raw_at: Callable[[float], np.ndarray | None],
+                 rate_hz: float) -> None:
+        super().__init__(clock, raw_at)
+        self.rate_hz = rate_hz
+        self.slot = -1
+
+    def latest(self) -> GloveSample | None:
+        slot = int(self.clock.now() * self.rate_hz + 1e-9)
+        if slot == self.slot:
+            return None
+        self.slot = slot
+        return super().latest()
+
+
+FIST = np.array([2800.0, 1300.0, 3000.0, 3200.0, 3200.0])
+
+
+def test_a_1_hz_glove_does_not_make_the_puppet_twitch(parts_factory):
+    """Each frame of a 1 Hz glove is alone (no run of good frames): after the first loss
+    the puppet eases to relaxed and stays there, never pulled back for one frame."""
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, SlowGlove(clock, lambda t: FIST, 1.0), bus, clock)
+    stats = rig.run(duration_s=6.0)
+    goals = np.array(bus.goals)
+    relaxed = relaxed_targets(parts)
+    gap = np.abs(goals[int(0.25 * 200)] - relaxed).max()
+    steps = np.abs(np.diff(goals[int(0.25 * 200):], axis=0)).max()
+    assert steps <= 1.5 * gap / 0.5 * 0.005 + 1e-6  # a smoothstep over relax_time_s, no jump
+    np.testing.assert_allclose(goals[int(1.0 * 200):int(6.0 * 200)],
+                               np.broadcast_to(relaxed, goals[200:1200].shape), atol=1e-6)
+    assert stats.relax_events == 1 and stats.resumes == 0
+
+
+def test_resuming_needs_good_frames_in_a_row_then_eases_back(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    glove = ScriptedGlove(clock, lambda t: None if 0.5 <= t < 2.0 else FIST)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    events: list[str] = []
+    rig = make_rig(parts, glove, bus, clock, resume_frames=3, resume_time_s=0.3)
+    rig.log = events.append
+    stats = rig.run(frames=600)
+    goals = np.array(bus.goals)
+    relaxed = relaxed_targets(parts)
+    back = int(2.0 * 200)
+    # the first two frames back do not move the servos: relaxed still
+    np.testing.assert_allclose(goals[back:back + 2], np.broadcast_to(relaxed, (2, len(relaxed))),
+                               atol=1e-6)
+    # then eased: no step bigger than a smoothstep over 0.3 s allows, nowhere near the
+    # slew limit's 3.6 deg per 5 ms cycle
+    gap = np.abs(goals[int(0.45 * 200)] - relaxed).max()
+    steps = np.abs(np.diff(goals[back:back + 100], axis=0)).max()
+    assert steps <= 1.5 * gap / 0.3 * 0.005 + 1e-6 and steps < 3.6
+    # and following the fist again once the easing is over
+    np.testing.assert_allclose(goals[back + 2 + 62], goals[int(0.45 * 200)], atol=0.5)
+    assert stats.relax_events == 1 and stats.resumes == 1
+    assert any("glove is back" in e and "easing in over 0.30 s" in e for e in events)
+
+
+def test_resume_frames_1_follows_the_first_frame_back(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    glove = ScriptedGlove(clock, lambda t: None if 0.5 <= t < 2.0 else FIST)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock, resume_frames=1)
+    rig.run(frames=500)
+    goals = np.array(bus.goals)
+    back = int(2.0 * 200)
+    assert np.abs(goals[back + 1] - goals[back]).max() > 0.0  # moving from the first frame
+
+
+def test_the_trigger_is_a_part_that_can_be_swapped(parts_factory):
+    """A trigger other than the fixed-rate one drives the same loop."""
+    from handrig.loop.trigger import Tick, Trigger
+
+    class EveryOtherSlot(Trigger):
+        def __init__(self, clock: FakeClock) -> None:
+            self.clock, self.period_s, self.waits, self.k = clock, 0.01, 0, 0
+
+        def start(self, t0_s: float) -> None:
+            self.t0 = t0_s
+
+        def wait(self, tick: Tick, warm=None) -> Tick:
+            self.waits += 1
+            deadline = self.t0 + self.k * self.period_s
+            self.clock.sleep_until(deadline)
+            tick.index, tick.deadline_s, tick.now_s = self.k, deadline, self.clock.now()
+            tick.next_s, tick.late_s, tick.skipped = deadline + self.period_s, 0.0, 0
+            self.k += 1
+            return tick
+
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    trigger = EveryOtherSlot(clock)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock, trigger=trigger)
+    stats = rig.run(frames=100)
+    assert trigger.waits == stats.frames == len(bus.goals)
+    assert stats.rate_hz == pytest.approx(100.0, rel=0.02)
+
+
+def test_a_long_run_keeps_its_statistics_fixed_size(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+                       write_cost_s=40e-6)
+    bus.goals = _Last()  # type: ignore[assignment]  # the fake bus itself must not grow
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)
+    stats = rig.run(frames=6000)
+    assert stats.latency.count == stats.glove_samples >= 6000
+    assert len(stats.latencies_s) == stats.latencies_s.size < 6000
+    assert stats.period.count == stats.frames - 1
+    assert not any(isinstance(v, list) for v in vars(stats).values())
+
+
+class _Last(list):
+    """Keeps only the newest goal vector."""
+
+    def append(self, item):  # type: ignore[override]
+        self[:] = [item]
+
+
+def test_the_profile_times_each_stage_outside_the_loop_code(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+                       write_cost_s=70e-6)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock, profile=True)
+    stats = rig.run(frames=100)
+    assert rig.stage_profile is not None
+    stages = rig.stage_profile.summary_us()
+    assert list(stages) == ["read+decode", "calibrate+filter", "orientation", "targets",
+                            "write"]
+    assert stages["write"]["p50"] == pytest.approx(70.0, rel=0.02)
+    assert stats.latency_us(50) == pytest.approx(70.0, abs=1.0)  # the profile adds nothing

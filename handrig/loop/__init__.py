@@ -1,0 +1,9 @@
+"""The realtime loop's parts; :class:`handrig.rig.Rig` puts them together.
+
+``trigger`` (when a cycle runs), ``modes`` (what the puppet does: waiting, running,
+relaxing, resuming, stopping), ``cycle`` (one glove sample to one Sync Write and
+what follows it), ``easing`` (to the relaxed pose and back to the glove),
+``rehearsal`` (the critical path kept warm), ``stats`` (fixed-size figures),
+``profile`` (per-stage timing, for the benchmark), ``ports`` (what the loop needs
+from the glove, the bus and the control path).
+"""

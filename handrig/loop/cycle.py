@@ -1,0 +1,193 @@
+"""One cycle of the loop: a glove sample -> servo goals -> Sync Write -> outputs -> read.
+
+The critical path, from taking the newest glove sample to handing the Sync Write
+to the OS, is kept short: controls, forearm angles, the mode for the cycle, the
+servo step (or an easing), the write. Everything else (latency, the full pose for
+the outputs and the counters behind it, the outputs, the state read) comes after
+the write. Every ``read_every`` slots the servos' present state is read back,
+with a deadline that leaves the next cycle its time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from handrig.clock import Clock
+from handrig.errors import DeviceError
+from handrig.loop.easing import Easing
+from handrig.loop.modes import Mode, ModeMachine
+from handrig.loop.ports import BusLike, ControlsFromRaw, FloatArray, GloveLike, OrientationLike
+from handrig.loop.stats import RunStats
+from handrig.loop.trigger import Tick
+from handrig.pipeline import POSE_SIZE, PosePipeline
+
+READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the next cycle
+
+
+class Cycle:
+    """The work of one tick, on the parts it is given (nothing here opens a device).
+
+    ``latest``, ``controls_from_raw``, ``orientation``, ``targets`` and ``write`` are
+    the stage callables, attributes so that a profile can wrap them
+    (:class:`handrig.loop.profile.StageProfile`).
+    """
+
+    def __init__(
+        self,
+        glove: GloveLike,
+        bus: BusLike,
+        pipeline: PosePipeline,
+        clock: Clock,
+        machine: ModeMachine,
+        stats: RunStats,
+        *,
+        controls_from_raw: ControlsFromRaw,
+        orientation: OrientationLike,
+        period_s: float,
+        read_every: int,
+        relax_time_s: float,
+        resume_time_s: float,
+        outputs: Sequence[Callable[[float, FloatArray], None]] = (),
+    ) -> None:
+        self.bus = bus
+        self.pipeline = pipeline
+        self.clock = clock
+        self.machine = machine
+        self.stats = stats
+        self.period_s = period_s
+        self.read_every = max(1, int(read_every))
+        self.outputs = tuple(outputs)
+        self.latest: Callable[[], Any] = glove.latest
+        self.controls_from_raw: Callable[..., Any] = controls_from_raw
+        self.orientation: Callable[[Any], tuple[float, float]] = orientation
+        self.targets: Callable[..., FloatArray] = pipeline.servo_targets
+        self.write: Callable[[FloatArray], int] = bus.write_goals_deg
+        n = len(pipeline.servo_joints)
+        self.relax = Easing(n, POSE_SIZE, relax_time_s)
+        self.resume = Easing(n, POSE_SIZE, resume_time_s)
+        self.controls = np.zeros(len(pipeline.expander.controls))
+        self.angles: tuple[float, float] = (0.0, 0.0)  # forearm (inclination, rotation)
+        self.sent = np.zeros(n)  # the goals last written
+        self._step = np.zeros(n)
+        self._max_step_deg = pipeline.slew_deg_s * period_s
+        self.sample: Any = None  # the newest glove sample
+        self.last_state: Any = None  # the newest ServoState read back
+        self.t0_s = 0.0
+        self._pose: FloatArray | None = None  # the full pose last output
+
+    def seed(self) -> None:
+        """Start from where the servos are: the goals the bus holds them at, else a read.
+        DeviceError when neither is known (the loop must not start blind)."""
+        held = getattr(self.bus, "last_goals_deg", None)
+        pipeline = self.pipeline
+        if held is not None and np.all(np.isfinite(held)):
+            pipeline.seed(np.asarray(held, dtype=np.float64))
+        elif not pipeline.has_targets:
+            state = self.bus.read_state()
+            positions = np.asarray(getattr(state, "positions_deg", []), dtype=np.float64)
+            stale = np.asarray(getattr(state, "stale", []), dtype=bool)
+            if positions.shape == (len(self.sent),) and not stale.any() and np.all(
+                    np.isfinite(positions)):
+                pipeline.seed(positions)
+            else:
+                raise DeviceError(
+                    "cannot start the loop: the servos' present positions are unknown "
+                    "(a read came back stale); check the bus, then start again")
+        self.sent[:] = pipeline.targets
+
+    def run(self, tick: Tick) -> bool:
+        """One cycle at ``tick``; True when the run is over (the stop's easing is done)."""
+        now = tick.now_s
+        machine = self.machine
+        sample = self.latest()
+        if sample is not None:
+            self.controls_from_raw(sample.raw, now, self.controls)
+            self.angles = self.orientation(sample)
+            mode = machine.frame(now, sample.estop)
+        else:
+            mode = machine.silence(now)
+        done = False
+        if mode is Mode.RUNNING:
+            goals = self.targets(self.controls, *self.angles, self.period_s)
+        elif mode is Mode.WAITING:
+            goals = self.sent  # hold: keeps the watchdog fed
+        elif mode is Mode.RESUMING:
+            goals, done = self._resume_goals(now)
+        else:
+            relaxed = self.pipeline.relaxed_targets(*self.angles)
+            goals, done = self.relax.goals(now, self.sent, self._pose, relaxed)
+        bus_clamps = self.write(goals)
+        self._after_write(tick, sample, mode, goals, bus_clamps)
+        if done:
+            if mode is Mode.RESUMING:
+                machine.resumed()
+            elif mode is Mode.STOPPING:
+                return True
+        return False
+
+    def _resume_goals(self, now: float) -> tuple[FloatArray, bool]:
+        """Easing from where the servos are to the glove's targets before the slew limit,
+        then the slew limit on the eased step: at the end of the easing the goals are the
+        pipeline's own slew-limited step, and following the glove takes over seamlessly."""
+        pipeline, sent = self.pipeline, self.sent
+        pipeline.seed(sent)  # the slew limit counts from what the servos were sent
+        self.targets(self.controls, *self.angles, self.period_s)
+        goals, done = self.resume.goals(now, sent, self._pose, pipeline.raw_targets)
+        step = self._step
+        np.subtract(goals, sent, out=step)
+        np.clip(step, -self._max_step_deg, self._max_step_deg, out=step)
+        np.add(sent, step, out=goals)
+        return goals, done
+
+    def _after_write(self, tick: Tick, sample: Any, mode: Mode, goals: FloatArray,
+                     bus_clamps: int) -> None:
+        stats = self.stats
+        stats.bus_clamps += int(bus_clamps)
+        if sample is not None:
+            latency = self.clock.now() - sample.host_time_s
+            stats.latency.add(latency)
+            stats.latencies_s.append(latency)
+            stats.glove_samples += 1
+            self.sample = sample
+        pipeline = self.pipeline
+        pose: FloatArray | None
+        if mode is Mode.RUNNING:
+            pose = pipeline.account(self.controls, *self.angles)
+        elif mode is Mode.WAITING:
+            pose = None
+        elif mode is Mode.RESUMING:
+            pose = self.resume.pose(pipeline.account(self.controls, *self.angles))
+        else:
+            pose = self.relax.pose(pipeline.relaxed)  # clamped by relaxed_targets
+        if pose is not None:
+            self._pose = pose
+            t_s = tick.now_s - self.t0_s
+            for out in self.outputs:
+                out(t_s, pose)
+        if tick.index % self.read_every == 0:
+            state = self.bus.read_state(tick.next_s - READ_MARGIN_S)
+            self.last_state = state
+            self._track(state, self.sent)
+        self.sent[:] = goals
+        if mode is not Mode.RUNNING and mode is not Mode.WAITING:
+            pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent
+        stats.frames += 1
+
+    def _track(self, state: Any, goals: FloatArray) -> None:
+        stats = self.stats
+        stats.reads += 1
+        positions = getattr(state, "positions_deg", None)
+        stale = getattr(state, "stale", None)
+        if positions is None:
+            return
+        fresh = ~np.asarray(stale, dtype=bool) if stale is not None else np.ones(len(goals), bool)
+        if not fresh.all():
+            stats.stale_reads += 1
+        if fresh.any():
+            err = np.asarray(positions)[fresh] - goals[fresh]
+            stats.tracking_sq_sum += float(np.dot(err, err))
+            stats.tracking_n += int(fresh.sum())
+            stats.tracking_max_deg = max(stats.tracking_max_deg, float(np.abs(err).max()))

@@ -1,0 +1,175 @@
+"""The loop's mode machine: what the puppet should be doing this cycle.
+
+::
+
+    WAITING --first frame--> RUNNING
+    WAITING, RUNNING, RESUMING --no frame for glove_timeout_s--> RELAXING
+    RELAXING --resume_frames good frames in a row--> RESUMING --eased back--> RUNNING
+    any --e-stop, stop request, frames or time done--> STOPPING --eased--> (the run ends)
+
+"Good frames in a row": each within ``glove_timeout_s`` of the one before, so a
+glove that only sends now and then (1 Hz, say) stays relaxed instead of pulling
+the puppet back for one frame and letting it go again.
+
+The machine only decides; transitions happen in the loop's thread, between
+cycles. :meth:`ModeMachine.request_stop` may be called from a signal handler at
+any time: it records the request, the next :meth:`ModeMachine.poll` acts on it.
+Entering RELAXING or STOPPING from a mode that was following (or holding)
+calls ``on_relax``; entering RESUMING calls ``on_resume``: the easings restart.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+
+from handrig.loop.stats import RunStats
+
+
+class Mode(enum.Enum):
+    WAITING = "waiting"  # no glove frame yet: hold where the servos are
+    RUNNING = "running"
+    RELAXING = "relaxing"  # glove lost: easing to relaxed, resumes when the glove is back
+    RESUMING = "resuming"  # glove back: easing from where the servos are to the glove's pose
+    STOPPING = "stopping"  # e-stop or stop request: easing to relaxed, then the loop ends
+
+
+_FOLLOWING = (Mode.WAITING, Mode.RUNNING, Mode.RESUMING)
+
+
+class ModeMachine:
+    """Mode transitions and the reasons for them.
+
+    ``event(text)`` is told every transition worth a line in the log;
+    ``on_relax()`` / ``on_resume()`` when an easing must start over. The figures
+    (stop reason, e-stop, relax events, resumes) are kept in ``stats`` as they happen,
+    where a live display reads them.
+    """
+
+    def __init__(
+        self,
+        *,
+        glove_timeout_s: float,
+        relax_time_s: float,
+        resume_frames: int = 3,
+        resume_time_s: float = 0.3,
+        event: Callable[[str], None] = lambda text: None,
+        on_relax: Callable[[], None] = lambda: None,
+        on_resume: Callable[[], None] = lambda: None,
+        stats: RunStats | None = None,
+    ) -> None:
+        self.glove_timeout_s = float(glove_timeout_s)
+        self.relax_time_s = float(relax_time_s)
+        self.resume_frames = max(1, int(resume_frames))
+        self.resume_time_s = float(resume_time_s)
+        self.event = event
+        self.on_relax = on_relax
+        self.on_resume = on_resume
+        self.stats = stats if stats is not None else RunStats()
+        self.mode = Mode.WAITING
+        self.stop_requests = 0
+        self._requested: list[str] = []  # appended by request_stop, consumed by poll
+        self._last_frame_s: float | None = None
+        self._run = 0  # good frames in a row while relaxed
+        self._t0 = 0.0
+
+    @property
+    def stop_reason(self) -> str:
+        return self.stats.stop_reason
+
+    @stop_reason.setter
+    def stop_reason(self, reason: str) -> None:
+        self.stats.stop_reason = reason
+
+    @property
+    def estop(self) -> bool:
+        return self.stats.estop
+
+    @property
+    def relax_events(self) -> int:
+        return self.stats.relax_events
+
+    @property
+    def resumes(self) -> int:
+        return self.stats.resumes
+
+    # -- from outside the loop -------------------------------------------------------------
+    def request_stop(self, reason: str) -> None:
+        """Ease to the relaxed pose, then end the run; a second request ends it at once."""
+        self.stop_requests += 1
+        if self.stop_requests == 1:
+            self.stop_reason = self.stop_reason or reason
+        else:
+            self.stop_reason = f"{reason} (immediate)"
+        self._requested.append(reason)
+
+    @property
+    def stop_now(self) -> bool:
+        """A second stop request came: end without easing."""
+        return self.stop_requests > 1
+
+    # -- in the loop ---------------------------------------------------------------------------
+    def start(self, t0_s: float) -> None:
+        self._t0 = t0_s
+
+    def poll(self) -> None:
+        """Act on stop requests that arrived since the last call."""
+        while self._requested:
+            reason = self._requested.pop(0)
+            self._relax(Mode.STOPPING, reason)
+
+    def finish(self, reason: str) -> None:
+        """The run's length is reached (frames or time): stop, unless already stopping."""
+        if self.mode is not Mode.STOPPING:
+            self.stop_reason = reason
+            self._relax(Mode.STOPPING, reason)
+
+    def frame(self, now_s: float, estop: bool) -> Mode:
+        """A glove frame arrived in this cycle; returns the mode for the cycle."""
+        previous = self._last_frame_s
+        self._last_frame_s = now_s
+        if estop and self.mode is not Mode.STOPPING:
+            self.stats.estop = True
+            self.stop_reason = "e-stop"
+            self._relax(Mode.STOPPING, "e-stop pressed on the glove")
+        mode = self.mode
+        if mode is Mode.WAITING:
+            self.mode = Mode.RUNNING
+        elif mode is Mode.RELAXING:
+            in_a_row = previous is not None and now_s - previous <= self.glove_timeout_s
+            self._run = self._run + 1 if in_a_row else 1
+            if self._run >= self.resume_frames:
+                self._run = 0
+                self.mode = Mode.RESUMING
+                self.stats.resumes += 1
+                self.on_resume()
+                self.event(f"glove is back: following it again, easing in over "
+                           f"{self.resume_time_s:.2f} s")
+        return self.mode
+
+    def silence(self, now_s: float) -> Mode:
+        """No glove frame in this cycle; returns the mode for the cycle."""
+        if self.mode in _FOLLOWING:
+            since = now_s - (self._last_frame_s if self._last_frame_s is not None else self._t0)
+            if since > self.glove_timeout_s:
+                what = ("no glove frame yet" if self._last_frame_s is None
+                        else "glove silent or garbled")
+                self._relax(Mode.RELAXING, f"{what} for {since:.2f} s")
+        return self.mode
+
+    def resumed(self) -> None:
+        """The easing back to the glove is complete."""
+        if self.mode is Mode.RESUMING:
+            self.mode = Mode.RUNNING
+
+    # -- internals -----------------------------------------------------------------------------
+    def _relax(self, mode: Mode, reason: str) -> None:
+        if self.mode is Mode.STOPPING:
+            return
+        if self.mode in _FOLLOWING:
+            if mode is Mode.RELAXING:
+                self.stats.relax_events += 1
+            self.on_relax()
+        self._run = 0
+        self.mode = mode
+        self.event(f"{reason}: easing to the relaxed pose over {self.relax_time_s:.2f} s")

@@ -1,0 +1,95 @@
+"""The mode machine on its own: glove loss, hysteresis on the way back, stops."""
+
+from __future__ import annotations
+
+from handrig.loop.modes import Mode, ModeMachine
+
+
+def machine(**kw):
+    calls: list[str] = []
+    m = ModeMachine(glove_timeout_s=0.25, relax_time_s=1.0, event=calls.append,
+                    on_relax=lambda: calls.append("<relax>"),
+                    on_resume=lambda: calls.append("<resume>"), **kw)
+    m.start(0.0)
+    return m, calls
+
+
+def feed(m: ModeMachine, t0: float, t1: float, frame_every_s: float | None,
+         dt: float = 0.005) -> list[Mode]:
+    """Cycles every dt from t0 to t1, a frame every ``frame_every_s`` (None: silence)."""
+    modes = []
+    next_frame = t0
+    t = t0
+    while t < t1 - 1e-12:
+        if frame_every_s is not None and t >= next_frame - 1e-12:
+            modes.append(m.frame(t, False))
+            next_frame += frame_every_s
+        else:
+            modes.append(m.silence(t))
+        t += dt
+    return modes
+
+
+def test_first_frame_runs_and_silence_relaxes() -> None:
+    m, calls = machine()
+    assert m.mode is Mode.WAITING
+    feed(m, 0.0, 0.2, None)
+    assert m.mode is Mode.WAITING  # within glove_timeout_s of the start
+    feed(m, 0.2, 0.3, None)
+    assert m.mode is Mode.RELAXING and "no glove frame yet" in calls[-1]
+    assert calls[-2] == "<relax>" and m.relax_events == 1
+
+
+def test_back_after_a_short_run_of_good_frames_then_eased_in() -> None:
+    m, calls = machine(resume_frames=3)
+    feed(m, 0.0, 0.5, 0.005)
+    assert m.mode is Mode.RUNNING
+    feed(m, 0.5, 1.0, None)
+    assert m.mode is Mode.RELAXING
+    assert m.frame(1.0, False) is Mode.RELAXING
+    assert m.frame(1.005, False) is Mode.RELAXING
+    assert m.frame(1.010, False) is Mode.RESUMING  # the third in a row
+    assert calls[-2:] == ["<resume>", calls[-1]] and "glove is back" in calls[-1]
+    m.resumed()
+    assert m.mode is Mode.RUNNING and m.resumes == 1
+
+
+def test_a_glove_that_sends_now_and_then_stays_relaxed() -> None:
+    m, _ = machine(resume_frames=3)
+    feed(m, 0.0, 0.5, 0.005)
+    modes = feed(m, 0.5, 10.0, 1.0)  # a 1 Hz glove: every gap is longer than the timeout
+    assert Mode.RESUMING not in modes and m.mode is Mode.RELAXING
+    assert m.relax_events == 1 and m.resumes == 0
+
+
+def test_a_gap_breaks_the_run() -> None:
+    m, _ = machine(resume_frames=3)
+    feed(m, 0.0, 0.5, 0.005)
+    feed(m, 0.5, 1.0, None)
+    m.frame(1.0, False)
+    m.frame(1.005, False)
+    m.silence(1.1)
+    assert m.frame(1.3, False) is Mode.RELAXING  # 0.295 s after the last: starts over
+    assert m.frame(1.305, False) is Mode.RELAXING
+    assert m.frame(1.31, False) is Mode.RESUMING
+
+
+def test_stop_requests_act_between_cycles_and_the_second_is_immediate() -> None:
+    m, calls = machine()
+    feed(m, 0.0, 0.1, 0.005)
+    m.request_stop("SIGHUP received")
+    assert m.mode is Mode.RUNNING  # nothing happens inside a signal handler
+    m.poll()
+    assert m.mode is Mode.STOPPING and m.stop_reason == "SIGHUP received"
+    assert "<relax>" in calls and not m.stop_now
+    m.request_stop("SIGHUP received")
+    m.poll()
+    assert m.stop_now and m.stop_reason == "SIGHUP received (immediate)"
+
+
+def test_estop_stops_and_the_end_of_the_run_does_not_override_it() -> None:
+    m, _ = machine()
+    feed(m, 0.0, 0.1, 0.005)
+    assert m.frame(0.1, True) is Mode.STOPPING and m.estop
+    m.finish("100 frames done")
+    assert m.stop_reason == "e-stop"

@@ -1,0 +1,101 @@
+"""The pose pipeline's servo step (the compiled kernel) against a numpy reference written
+from its definition, and the rehearsal copy it offers the loop."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from handrig.app import build_parts
+from handrig.pipeline import PosePipeline, ServoPath
+from handrig.sag import SagGrid
+
+
+class NumpyServoStep:
+    """:meth:`PosePipeline.servo_targets` in plain numpy: ``controls @ a + b + gain *
+    offsets[slot]`` (offsets looked up with :meth:`SagGrid.offsets`, not the kernel's
+    tables), a non-finite target holds the previous one, clamp, slew limit."""
+
+    def __init__(self, path: ServoPath, sag: SagGrid | None, low: np.ndarray,
+                 high: np.ndarray, slew_deg_s: float) -> None:
+        self.path, self.sag, self.low, self.high = path, sag, low, high
+        self.slew_deg_s = slew_deg_s
+        self.targets: np.ndarray | None = None
+        self.raw = np.zeros(len(low))
+        self.rejected = 0
+
+    def __call__(self, controls: np.ndarray, inc: float, rot: float, dt: float) -> np.ndarray:
+        path = self.path
+        with np.errstate(invalid="ignore"):  # inf - inf: a NaN the step must hold
+            raw = controls @ path.a + path.b
+            if self.sag is not None:
+                offsets = np.append(self.sag.offsets(inc, rot), 0.0)  # slot 23: no sag
+                raw = raw + path.sag_gain * offsets[np.minimum(path.sag_slot, 23)]
+            total = raw.sum()
+        if not math.isfinite(total):
+            bad = ~np.isfinite(raw)
+            self.rejected += int(bad.sum())
+            fallback = self.targets if self.targets is not None else 0.5 * (
+                self.low + self.high)
+            raw = np.where(bad, fallback, raw)
+        raw = np.clip(raw, self.low, self.high)
+        self.raw = raw
+        if self.targets is None:
+            self.targets = raw.copy()
+        else:
+            limit = self.slew_deg_s * max(dt, 0.0)
+            self.targets = self.targets + np.clip(raw - self.targets, -limit, limit)
+        return self.targets
+
+
+def test_servo_targets_kernel_matches_the_numpy_reference() -> None:
+    parts = build_parts()
+    pipeline = parts.pipeline
+    reference = NumpyServoStep(pipeline.servo_path, parts.sag, pipeline.servo_low,
+                               pipeline.servo_high, pipeline.slew_deg_s)
+    rng = np.random.default_rng(7)
+    n_controls = len(pipeline.expander.controls)
+    for k in range(1500):
+        controls = rng.uniform(-30, 100, n_controls)
+        if k % 37 == 0:
+            controls[rng.integers(n_controls)] = np.nan if k % 2 else np.inf
+        inc, rot = rng.uniform(-90, 90), rng.uniform(-540, 540)
+        dt = rng.choice([0.005, 0.0, 0.05])
+        got = pipeline.servo_targets(controls, inc, rot, dt).copy()
+        want = reference(controls, inc, rot, dt)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(pipeline.raw_targets, reference.raw, atol=1e-9)
+    assert pipeline.rejected == reference.rejected > 0
+
+
+def test_a_rehearsal_copy_shares_the_tables_and_changes_nothing_here() -> None:
+    pipeline = build_parts().pipeline
+    means = pipeline.control_means_deg
+    pipeline.servo_targets(means, 0.0, 0.0, 0.005)
+    before = pipeline.targets.copy()
+    counters = (pipeline.rejected, pipeline.clamps, pipeline.servo_clamps, pipeline.slewed)
+    copy = pipeline.rehearsal_copy()
+    assert isinstance(copy, PosePipeline)
+    assert copy.servo_path is pipeline.servo_path and copy.expander is pipeline.expander
+    np.testing.assert_array_equal(copy.targets, before)
+    for _ in range(20):
+        wild = means + 40.0
+        wild[0] = np.nan
+        copy.servo_targets(wild, 60.0, 170.0, 0.005)
+        copy.account(wild, 60.0, 170.0)
+        copy.relaxed_targets(60.0, 170.0)
+    assert copy.targets is not pipeline.targets
+    np.testing.assert_array_equal(pipeline.targets, before)
+    assert (pipeline.rejected, pipeline.clamps, pipeline.servo_clamps,
+            pipeline.slewed) == counters
+    assert copy.rejected > pipeline.rejected
+
+
+def test_relaxed_targets_are_the_clamped_relaxed_pose() -> None:
+    pl = build_parts().pipeline
+    want_pose = np.clip(pl.relaxed_pose(30.0, 90.0), pl.pose_low, pl.pose_high)
+    got = pl.relaxed_targets(30.0, 90.0)
+    np.testing.assert_allclose(pl.relaxed, want_pose)
+    np.testing.assert_allclose(
+        got, np.clip(want_pose[pl.servo_index], pl.servo_low, pl.servo_high))
