@@ -1,8 +1,9 @@
 """The runtime half of the reduced hand: a few control angles -> the full 50-curve pose.
 
 :class:`Expander` precomputes ``pose = bias + controls @ gains_t`` and clamps to the
-joint limits, all with ``out=`` numpy calls on preallocated buffers: no Python loop
-over curves, no allocation per frame (``bench/bench_expand.py`` measures it).
+joint limits; one frame is one compiled loop (:func:`handrig.pose_kernels.expand_frame`,
+the training-range count included) on preallocated buffers, many frames are numpy
+calls (``bench/bench_expand.py`` measures both).
 
 A map records the range each control covered in training; the expander counts the
 calls whose controls leave it (by more than ``margin_deg``), per control too, so a run
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from handrig import hand
+from handrig import hand, pose_kernels
 from handrig.config import CONFIG_DIR, JointLimits, load_joint_limits
 from handrig.errors import DataError
 from handrig.maps import LinearMap
@@ -110,21 +111,13 @@ class Expander:
         self._outside_counts = np.zeros(self._k, dtype=np.int64)
         self.frames = 0
         self.outside_frames = 0
-        # One matrix product gives the curves and each control's distance inside its range
-        # (c - low, high - c; negative = outside), so the check costs one reduction.
-        eye = np.eye(self._k)
-        self._ext_gains_t: FloatArray = np.ascontiguousarray(
-            np.hstack([self._gains_t, eye, -eye]), dtype=np.float64)
-        fin_low = np.where(np.isfinite(self.train_low_deg), self.train_low_deg, 0.0)
-        fin_high = np.where(np.isfinite(self.train_high_deg), self.train_high_deg, 0.0)
-        self._ext_bias: FloatArray = np.ascontiguousarray(
-            np.concatenate([self._bias, -fin_low, fin_high]), dtype=np.float64)
-        self._ext: FloatArray = np.zeros(len(self.curve_names) + 2 * self._k)
-        self._ext_curves: FloatArray = self._ext[:len(self.curve_names)]
-        self._ext_inside: FloatArray = self._ext[len(self.curve_names):]
-        self._range_t: FloatArray = np.ascontiguousarray(np.hstack([eye, -eye]))
-        self._range_bias: FloatArray = np.ascontiguousarray(self._ext_bias[len(self.curve_names):])
+        self._range_t: FloatArray = np.ascontiguousarray(np.hstack([np.eye(self._k),
+                                                                   -np.eye(self._k)]))
+        self._range_bias: FloatArray = np.ascontiguousarray(np.concatenate([
+            -np.where(np.isfinite(self.train_low_deg), self.train_low_deg, 0.0),
+            np.where(np.isfinite(self.train_high_deg), self.train_high_deg, 0.0)]))
         self._gap: FloatArray = np.zeros(2 * self._k)
+        pose_kernels.warm_up()
 
     @classmethod
     def from_file(cls, path: str | Path | None = None, limits: JointLimits | None = None
@@ -147,13 +140,13 @@ class Expander:
                 f"expected {self._k} control values ({', '.join(self.controls)}), got shape"
                 f" {c.shape}"
             )
-        ext = self._ext
-        np.dot(c, self._ext_gains_t, out=ext)
-        np.add(ext, self._ext_bias, out=ext)
-        np.clip(self._ext_curves, self.low_deg, self.high_deg, out=out)
+        if c.dtype != np.float64 or not c.flags.c_contiguous:
+            c = np.ascontiguousarray(c, dtype=np.float64)
         self.frames += 1
-        if self._range_known and self._ext_inside.min() < 0.0:
-            self._count_outside(c)
+        if pose_kernels.expand_frame(c, self._gains_t, self._bias, self.low_deg, self.high_deg,
+                                     self.train_low_deg, self.train_high_deg, out,
+                                     self._outside_counts):
+            self.outside_frames += 1
         return out
 
     def note_controls(self, controls_deg: FloatArray) -> bool:

@@ -147,12 +147,44 @@ def glove_controls(
     return held
 
 
+@njit(cache=True, nogil=True)
+def expand_frame(
+    controls: Any, gains_t: Any, bias: Any, low: Any, high: Any, train_low: Any,
+    train_high: Any, out: Any, outside_counts: Any,
+) -> bool:  # pragma: no cover - compiled
+    """One frame of the map: ``out = clip(bias + controls @ gains_t, low, high)``; each
+    control below ``train_low`` or above ``train_high`` adds one to its
+    ``outside_counts``. Returns whether any control was outside (NaN never is)."""
+    k, m = gains_t.shape
+    for j in range(m):
+        out[j] = bias[j]
+    for i in range(k):
+        c = controls[i]
+        for j in range(m):
+            out[j] += c * gains_t[i, j]
+    for j in range(m):
+        v = out[j]
+        if v < low[j]:
+            out[j] = low[j]
+        elif v > high[j]:
+            out[j] = high[j]
+    outside = False
+    for i in range(k):
+        c = controls[i]
+        if c < train_low[i] or c > train_high[i]:
+            outside_counts[i] += 1
+            outside = True
+    return outside
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel with the types the loop uses."""
     f = np.zeros(2)
     servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]), 0.0,
                   np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, 0.5, 0.5, f - 1.0,
                   f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
+    expand_frame(f, np.zeros((2, 2)), f, f - 1.0, f + 1.0, f - 1.0, f + 1.0, np.zeros(2),
+                 np.zeros(2, np.int64))
     idx = np.zeros(2, np.intp)
     one_euro_step(f, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0)
     glove_controls(f, idx, f + 1.0, f, f - 1.0, f + 1.0, np.zeros(2), np.zeros(2), True,
