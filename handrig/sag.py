@@ -54,7 +54,7 @@ _LIMIT_TOL_DEG = 1.0  # slack for the solver's equilibria at a joint's end stop
 @dataclass(frozen=True)
 class SagTables:
     """A grid's lookup tables in the layout the compiled servo step reads
-    (``handrig.kernels.servo_targets``). Read-only; shared, never copied.
+    (``handrig.pose_kernels.servo_targets``). Read-only; shared, never copied.
 
     ``inclination_axis_deg`` (n_inc,); ``rotation_axis_deg`` (n_rot + 1,): the
     rotation samples with the first repeated one turn up (rotation wraps);
