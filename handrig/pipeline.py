@@ -300,7 +300,7 @@ class PosePipeline:
     ) -> FloatArray:
         """The servo targets only (degrees, bus order): the short path the loop runs
         between reading a glove frame and handing the Sync Write to the OS, one call of
-        the compiled step (:func:`handrig.kernels.servo_targets`) on :attr:`servo_path`.
+        the compiled step (:func:`handrig.pose_kernels.servo_targets`) on :attr:`servo_path`.
         A non-finite target holds the previous one (counted in ``rejected``); targets
         move at most ``slew_deg_s * dt_s`` from the previous ones. Call :meth:`account`
         afterwards for the full pose (outputs) and the statistics."""
