@@ -340,7 +340,9 @@ def test_two_threads_share_the_bus(bus: DynamixelBus) -> None:
     def reader() -> None:
         try:
             for _ in range(100):
-                assert bus.read_state(bus.clock.now() + 0.05).all_fresh
+                # the deadline is generous: this checks that the lock keeps the threads'
+                # requests and replies apart, not how fast a loaded machine answers
+                assert bus.read_state(bus.clock.now() + 0.5).all_fresh
         except BaseException as exc:  # reported below
             errors.append(exc)
 
@@ -352,6 +354,7 @@ def test_two_threads_share_the_bus(bus: DynamixelBus) -> None:
     for t in threads:
         t.join()
     assert not errors
+    assert bus.stats.malformed == bus.stats.crc_errors == bus.stats.late_replies == 0
 
 
 def test_transport_deadline_on_a_fake_clock(sim: SimBus) -> None:
