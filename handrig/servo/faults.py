@@ -180,13 +180,14 @@ class SilenceWatch:
                       "([silence] action)")
 
     def _recover(self, back: np.ndarray, silent_s: np.ndarray) -> None:
-        for i in back:
-            reads = int(self._reads[i])
-            self.stats.recoveries += 1
-            self.stats.recovery_reads_max = max(self.stats.recovery_reads_max, reads)
-            self._say(f"{self.roster.describe(int(i))} answers again after {reads} silent "
-                      "reads" + (": releasing it to its goals at the slew limit"
-                                 if self.holding[i] else ""))
+        reads = self._reads[back]
+        self.stats.recoveries += int(back.size)
+        self.stats.recovery_reads_max = max(self.stats.recovery_reads_max, int(reads.max()))
+        held = bool(self.holding[back].any())
+        who = ("every servo answers" if back.size == self.roster.n
+               else f"{self._names(back)} answer{'s' if back.size == 1 else ''}")
+        self._say(f"{who} again after {int(reads.max())} silent reads"
+                  + (": releasing to the goals at the slew limit" if held else ""))
         self.releasing[back] |= self.holding[back]
         self.holding[back] = False
         self.tier[back] = ANSWERING
