@@ -187,7 +187,7 @@ class Cycle:
             for text in drain():
                 machine.event(text)
         if hasattr(self.bus, "relax_reason"):
-            machine.servos_silent(getattr(self.bus, "relax_reason"))
+            machine.servos_silent(self.bus.relax_reason)
 
     def _track(self, state: Any, goals: FloatArray) -> None:
         stats = self.stats

@@ -23,6 +23,7 @@ import numpy as np
 
 from handrig.clock import Clock
 from handrig.errors import DeviceError, DeviceTimeoutError, ServoFault
+from handrig.rigconfig import SilenceConfig
 from handrig.servo.bus import BusStats, FaultPolicy
 from handrig.servo.codec import INST_PING, INST_REBOOT, build_instruction
 from handrig.servo.goals import GoalWriter
@@ -36,7 +37,6 @@ from handrig.servo.registers import (
     describe_hardware_error,
     describe_status_error,
 )
-from handrig.rigconfig import SilenceConfig
 from handrig.servo.roster import Roster
 from handrig.servo.sync_read import RegisterSweep
 
@@ -176,16 +176,16 @@ class SilenceWatch:
             self.relax_reason = f"{what}; {why}"
             self._say(f"{what}: relaxing every servo until it answers ([silence] action)")
         else:
-            self._say(f"{what}: {self._names(indices)} stays held, the others continue "
-                      "([silence] action)")
+            rest = ("stays held, the others continue" if len(indices) < self.roster.n
+                    else "stay held")
+            self._say(f"{what}: {self._names(indices)} {rest} ([silence] action)")
 
     def _recover(self, back: np.ndarray, silent_s: np.ndarray) -> None:
         reads = self._reads[back]
         self.stats.recoveries += int(back.size)
         self.stats.recovery_reads_max = max(self.stats.recovery_reads_max, int(reads.max()))
         held = bool(self.holding[back].any())
-        who = ("every servo answers" if back.size == self.roster.n
-               else f"{self._names(back)} answer{'s' if back.size == 1 else ''}")
+        who = f"{self._names(back)} answer{'s' if back.size in (1, self.roster.n) else ''}"
         self._say(f"{who} again after {int(reads.max())} silent reads"
                   + (": releasing to the goals at the slew limit" if held else ""))
         self.releasing[back] |= self.holding[back]
@@ -225,6 +225,8 @@ class SilenceWatch:
         return what, why
 
     def _names(self, indices: np.ndarray) -> str:
+        if len(indices) == self.roster.n:
+            return "every servo"
         return ", ".join(self.roster.describe(int(i)) for i in indices)
 
     def _say(self, text: str) -> None:

@@ -49,7 +49,7 @@ def test_silence_tiers_are_read_and_checked():
     assert load_rig_config().silence.action == "continue"
     with pytest.raises(ConfigError, match="tiers out of order"):
         build(RigConfig, {"servos": servos, "silence": {"warn_s": 2.0}})
-    with pytest.raises(ConfigError, match="silence.action"):
+    with pytest.raises(ConfigError, match=r"silence\.action"):
         build(RigConfig, {"servos": servos, "silence": {"action": "panic"}})
     with pytest.raises(ConfigError, match="out of range"):
         build(RigConfig, {"servos": servos, "silence": {"warn_s": 0.0}})
