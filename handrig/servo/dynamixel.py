@@ -281,7 +281,7 @@ class DynamixelBus(ServoBus):
         """
         with self._lock:
             self.faults.rearm_after_silence()
-            if self.faults.silence.steering:
+            if self.faults.silence.steering and self.faults.torque_on:
                 goals_deg = self.faults.silence.steer(goals_deg, self.writer.last_goal_deg)
             clamped = self.writer.build(goals_deg)
             self.writer.send_built()
@@ -297,7 +297,7 @@ class DynamixelBus(ServoBus):
         """
         with self._lock:
             self.faults.rearm_after_silence()
-            if self.faults.silence.steering:
+            if self.faults.silence.steering and self.faults.torque_on:
                 goals_deg = self.faults.silence.steer(goals_deg, self.writer.last_goal_deg)
             clamped = self.writer.build(goals_deg)
             self.writer.hold_built()

@@ -148,10 +148,10 @@ class SilenceWatch:
             return
         old = self.tier[rising].copy()
         self.tier[rising] = new[rising]
-        seconds = float(silent_s[rising].max())
-        what, why = self.describe(rising, seconds)
-        if (old < WARNED).any():
-            self.stats.silences += int((old < WARNED).sum())
+        warned = rising[old < WARNED]
+        if warned.size:
+            what, why = self.describe(warned, float(silent_s[warned].max()))
+            self.stats.silences += int(warned.size)
             self._say(f"{what}; {why}")
         newly_held = rising[(old < HELD) & (new[rising] >= HELD)]
         if newly_held.size:
@@ -240,6 +240,12 @@ class SilenceWatch:
         return out
 
     # ------------------------------------------------------------------ goals
+    def release_all(self) -> None:
+        """Nothing held or being released (torque went on or off)."""
+        self.holding[:] = False
+        self.releasing[:] = False
+        self.steering = False
+
     def steer(self, goals_deg: np.ndarray, last_goal_deg: np.ndarray) -> np.ndarray:
         """``goals_deg`` with held servos at ``last_goal_deg`` and released ones moving
         back at ``release_step_deg`` per write (a new array; the caller's is untouched)."""
@@ -283,12 +289,22 @@ class FaultHandler:
         self.watchdog_ms = roster.rig.bus.watchdog_ms
         self._watchdog_gap_s = (
             WATCHDOG_GAP_FRACTION * self.watchdog_ms / 1000.0 if self.watchdog_ms else np.inf)
-        self.torque_on = False
         self.skip_run = 0  # reads in a row not sent for lack of wire time
         rig = roster.rig
         self.silence = SilenceWatch(
             roster, readings, stats, policy.silence or rig.silence,
             rig.loop.slew_deg_s / rig.loop.rate_hz)
+        self._torque_on = False
+
+    @property
+    def torque_on(self) -> bool:
+        return self._torque_on
+
+    @torque_on.setter
+    def torque_on(self, on: bool) -> None:
+        # torque on or off: goals start from present positions, nothing held over
+        self.silence.release_all()
+        self._torque_on = bool(on)
 
     # ------------------------------------------------------------------ hardware errors
     def alerts_raised(self) -> None:

@@ -168,29 +168,34 @@ def test_a_held_servo_keeps_its_goal_the_others_continue_and_it_comes_back_at_th
 ) -> None:
     rig = small_rig()
     bus, _, peer = make_bus(rig, fault_policy=silence("continue"))
-    bus.read_state()
-    bus.write_goals_deg(np.zeros(6))
-    peer.servo(3).silent_until = math.inf
-    reads_until(bus, 0.3, np.zeros(6))  # past hold_s: servo 3 held at 0
-    goals = np.full(6, 10.0)
-    reads_until(bus, 0.4, goals)  # past action_s: continue
-    sent = bus.last_goals_deg
-    assert sent[2] == 0.0 and (np.delete(sent, 2) == 10.0).all()
-    assert peer.servo(3).goal == rig.servos[2].deg_to_ticks(0.0)
-    events = bus.drain_events()
-    assert any("stays held, the others continue" in e for e in events)
-    assert bus.relax_reason is None
-    peer.servo(3).silent_until = 0.0
-    bus.read_state()
-    assert bus.stats.recoveries == 1
-    assert any("answers again after" in e and "releasing" in e for e in bus.drain_events())
-    step = rig.loop.slew_deg_s / rig.loop.rate_hz
-    bus.write_goals_deg(goals)
-    assert bus.last_goals_deg[2] == pytest.approx(min(step, 10.0))
-    for _ in range(int(10.0 / step) + 2):
+    with bus.torque(handle_signals=False):
+        bus.write_goals_deg(np.zeros(6))
+        peer.servo(3).silent_until = math.inf
+        reads_until(bus, 0.3, np.zeros(6))  # past hold_s: servo 3 held at 0
+        goals = np.full(6, 10.0)
+        reads_until(bus, 0.4, goals)  # past action_s: continue
+        sent = bus.last_goals_deg
+        assert sent[2] == 0.0 and (np.delete(sent, 2) == 10.0).all()
+        assert peer.servo(3).goal == rig.servos[2].deg_to_ticks(0.0)
+        events = bus.drain_events()
+        assert any("stays held, the others continue" in e for e in events)
+        assert bus.relax_reason is None
+        peer.servo(3).silent_until = 0.0
+        bus.read_state()
+        assert bus.stats.recoveries == 1
+        assert any("answers again after" in e and "releasing" in e for e in bus.drain_events())
+        step = rig.loop.slew_deg_s / rig.loop.rate_hz
         bus.write_goals_deg(goals)
-    assert (bus.last_goals_deg == 10.0).all()
-    assert not bus.faults.silence.steering
+        assert bus.last_goals_deg[2] == pytest.approx(min(step, 10.0))
+        for _ in range(int(10.0 / step) + 2):
+            bus.write_goals_deg(goals)
+        assert (bus.last_goals_deg == 10.0).all()
+        assert not bus.faults.silence.steering
+        peer.servo(3).silent_until = math.inf
+        reads_until(bus, 0.3, goals)
+        assert bus.faults.silence.steering
+        peer.servo(3).silent_until = 0.0  # so that its torque-off is confirmed
+    assert not bus.faults.silence.steering  # torque off: nothing held over
 
 
 def test_relax_action_is_a_reason_until_the_servo_answers() -> None:
