@@ -1,4 +1,8 @@
-"""Run every ``bench/bench_*.py`` module's ``main()`` in turn and print its figures."""
+"""Run every ``bench/bench_*.py`` module's ``main()`` in turn and print its figures.
+
+``python -m bench NAME ...`` runs only those; the long ones (:data:`LONG`) run only
+when named (``python -m bench soak --seconds 60``: the options go to the soak).
+"""
 
 from __future__ import annotations
 
@@ -9,6 +13,8 @@ import time
 
 import bench
 
+LONG = frozenset({"bench_soak"})
+
 
 def main() -> int:
     modules = pkgutil.iter_modules(bench.__path__)
@@ -16,6 +22,8 @@ def main() -> int:
     only = set(sys.argv[1:])
     for name in names:
         if only and name not in only and name.removeprefix("bench_") not in only:
+            continue
+        if not only and name in LONG:
             continue
         print(f"== {name} ==", flush=True)
         t0 = time.perf_counter()

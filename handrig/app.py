@@ -138,7 +138,10 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock) -> GloveSource:
                            estop_letter=cfg.glove.estop_letter, reader="poll")
     # reader="poll": the loop itself reads the port without blocking, so a frame is
     # handled in the cycle that reads it (no reader thread competing for the GIL).
-    return SerialGlove(spec, "frames", clock=clock, baud=cfg.glove.baud, reader="poll")
+    # a frame with fewer raw channels than the calibration reads is never settled on
+    needed = max(ch.raw_index() for ch in cfg.channels) + 1
+    return SerialGlove(spec, "frames", clock=clock, baud=cfg.glove.baud, reader="poll",
+                       min_channels=needed)
 
 
 def read_fields_for(rig: RigConfig) -> ReadFields:
@@ -365,6 +368,10 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: 
             "frames_ok": glove_stats.frames_ok, "crc_errors": glove_stats.crc_errors,
             "decode_errors": glove_stats.decode_errors, "resyncs": glove_stats.resyncs,
             "seq_gaps": glove_stats.seq_gaps, "frames_used": s.glove_samples,
+            "channel_errors": getattr(glove_stats, "channel_errors", 0),
+            "disconnects": getattr(glove_stats, "disconnects", 0),
+            "reconnects": getattr(glove_stats, "reconnects", 0),
+            "last_outage_s": num(getattr(glove_stats, "last_outage_s", 0.0)),
         }
     if bus_stats is not None:
         bus: dict[str, Any] = {}

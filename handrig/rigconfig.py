@@ -157,6 +157,41 @@ class LoopConfig:
                               allowed="0..2")
 
 
+SilenceAction = Literal["continue", "relax", "stop"]
+
+
+@dataclass(frozen=True)
+class SilenceConfig:
+    """What the rig does about a servo with no valid reply (``[silence]``), in tiers.
+
+    After ``warn_s`` without a valid reading the servo is named in a warning; after
+    ``hold_s`` its goal is held where it was (goals still go out: a Sync Write
+    needs no reply, and the Bus Watchdogs stay fed); after ``action_s`` comes
+    ``action``: ``"continue"`` (the others keep following the glove, it stays
+    held until it answers), ``"relax"`` (every servo eases to the relaxed pose;
+    following resumes once it answers) or ``"stop"`` (the run ends, torque off).
+    A servo that answers again is released towards its goals at the slew limit.
+    """
+
+    warn_s: float = 0.1
+    hold_s: float = 0.25
+    action_s: float = 1.0
+    action: SilenceAction = "continue"
+
+    def check(self) -> None:
+        for name in ("warn_s", "hold_s", "action_s"):
+            value = getattr(self, name)
+            if not 0.0 < value <= 60.0:
+                raise ConfigError("out of range", key=name, value=value, allowed="0..60 s")
+        if not self.warn_s <= self.hold_s <= self.action_s:
+            raise ConfigError("tiers out of order", key="hold_s",
+                              value=[self.warn_s, self.hold_s, self.action_s],
+                              allowed="warn_s <= hold_s <= action_s")
+        if self.action not in ("continue", "relax", "stop"):
+            raise ConfigError("unknown action", key="action", value=self.action,
+                              allowed="continue, relax, stop")
+
+
 # ------------------------------------------------------------ servo settings
 # Operating Mode (11) values (REFERENCE.md section 2).
 OPERATING_MODES: dict[str, int] = {
@@ -300,12 +335,13 @@ def check_servo_settings(rig: RigConfig) -> None:
 
 @dataclass(frozen=True)
 class RigConfig:
-    """The whole rig file: ``[bus]``, ``[loop]`` and ``[[servos]]``."""
+    """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]`` and ``[[servos]]``."""
 
     bus: BusConfig = BusConfig()
     loop: LoopConfig = LoopConfig()
     servos: tuple[ServoCalibration, ...] = ()
     servo_settings: ServoSettings = ServoSettings()
+    silence: SilenceConfig = SilenceConfig()
 
     def check(self) -> None:
         if not self.servos:

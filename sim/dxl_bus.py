@@ -17,6 +17,11 @@ Faults (:class:`FaultSpec`): dropped, CRC-corrupted, wrong-ID, truncated and
 delayed replies with given probabilities (explicit seed), missing servos, and
 an overload hardware error on chosen servos; every fault is counted in
 :attr:`SimBus.fault_counts`.
+
+Goal audit: every Goal Position the bus decodes (Sync Write or Write) is
+counted in ``stats.goals_decoded``; with ``goal_limits`` (from the rig: each
+calibrated servo's ``[min_deg, max_deg]`` in ticks) one outside them is counted
+in ``stats.goals_outside``, the driver-side promise checked from the servo side.
 """
 
 from __future__ import annotations
@@ -220,6 +225,8 @@ class BusStats:
     late_total_s: float = 0.0
     late_max_s: float = 0.0
     by_instruction: Counter[int] = field(default_factory=Counter)
+    goals_decoded: int = 0  # Goal Position values received
+    goals_outside: int = 0  # of those, outside the servo's goal_limits
 
     @property
     def overhead_mean_s(self) -> float:
@@ -269,6 +276,7 @@ class SimBus:
         check_baud: bool = False,
         realtime: bool = True,
     ) -> None:
+        limits = goal_limits(servos) if isinstance(servos, RigConfig) else {}
         if isinstance(servos, RigConfig):
             servos = servos_from_rig(servos)
         if not servos:
@@ -304,6 +312,8 @@ class SimBus:
         self._partial_since: float | None = None
         self._feed_buf = bytearray()
         self.error: BaseException | None = None
+        self.goal_limits: dict[int, tuple[int, int]] = limits
+        """Servo ID -> (lowest, highest) Goal Position ticks it may be sent."""
 
     # --------------------------------------------------------------- building
 
@@ -339,8 +349,10 @@ class SimBus:
             the_puppet = None
         else:
             the_puppet = puppet
-        return cls(servos, wire_timing=wire_timing, faults=faults, puppet=the_puppet,
-                   clock=clock, realtime=realtime)
+        bus = cls(servos, wire_timing=wire_timing, faults=faults, puppet=the_puppet,
+                  clock=clock, realtime=realtime)
+        bus.goal_limits = goal_limits(config)
+        return bus
 
     @property
     def faults(self) -> FaultSpec:
@@ -658,6 +670,8 @@ class SimBus:
                 if len(params) < 3:
                     return self._error(servo, ErrorCode.DATA_LENGTH, level >= 2)
                 address = params[0] | params[1] << 8
+                if address == GOAL_POSITION_ADDRESS and len(params) == 6:
+                    self._audit_goal(servo.id, params[2:])
                 if inst == Instruction.WRITE:
                     err = servo.write(address, params[2:])
                 else:
@@ -684,6 +698,14 @@ class SimBus:
         except PacketError:
             return self._error(servo, ErrorCode.DATA_LENGTH, True)
 
+    def _audit_goal(self, servo_id: int, data: bytes) -> None:
+        self.stats.goals_decoded += 1
+        limits = self.goal_limits.get(servo_id)
+        if limits is not None:
+            goal = int.from_bytes(data, "little", signed=True)
+            if not limits[0] <= goal <= limits[1]:
+                self.stats.goals_outside += 1
+
     def _error(self, servo: EmulatedServo, code: int, reply: bool) -> list[_Reply]:
         return [self._reply(servo, servo.error_byte(code))] if reply else []
 
@@ -691,6 +713,9 @@ class SimBus:
         try:
             if inst == Instruction.SYNC_WRITE:
                 address, length, items = split_sync_write(params)
+                if address == GOAL_POSITION_ADDRESS and length == 4:
+                    for servo_id, data in items:
+                        self._audit_goal(servo_id, data)
                 for servo_id, data in items:
                     servo = self._servo_for(servo_id, now)
                     if servo is not None:
@@ -805,6 +830,18 @@ def with_model(config: RigConfig, model: str) -> RigConfig:
     name = cast(Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288"], model)
     return dataclasses.replace(config, servos=tuple(
         dataclasses.replace(s, model=name) for s in config.servos))
+
+
+GOAL_POSITION_ADDRESS = 116  # Goal Position (REFERENCE.md section 2)
+
+
+def goal_limits(config: RigConfig) -> dict[int, tuple[int, int]]:
+    """Each calibrated servo's ``[min_deg, max_deg]`` as (lowest, highest) goal ticks."""
+    out = {}
+    for s in config.servos:
+        a, b = s.deg_to_ticks(s.min_deg), s.deg_to_ticks(s.max_deg)
+        out[s.id] = (min(a, b), max(a, b))
+    return out
 
 
 def servos_from_rig(

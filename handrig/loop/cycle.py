@@ -65,6 +65,10 @@ class Cycle:
         self.orientation: Callable[[Any], tuple[float, float]] = orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
+        # port events of the glove, silence events of the bus: into the run's events
+        self._drains: tuple[Callable[[], list[str]], ...] = tuple(
+            d for d in (getattr(glove, "drain_events", None), getattr(bus, "drain_events", None))
+            if callable(d))
         n = len(pipeline.servo_joints)
         self.relax = Easing(n, POSE_SIZE, relax_time_s)
         self.resume = Easing(n, POSE_SIZE, resume_time_s)
@@ -171,10 +175,19 @@ class Cycle:
             state = self.bus.read_state(tick.next_s - READ_MARGIN_S)
             self.last_state = state
             self._track(state, self.sent)
+            self._take_events()
         self.sent[:] = goals
         if mode is not Mode.RUNNING and mode is not Mode.WAITING:
             pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent
         stats.frames += 1
+
+    def _take_events(self) -> None:
+        machine = self.machine
+        for drain in self._drains:
+            for text in drain():
+                machine.event(text)
+        if hasattr(self.bus, "relax_reason"):
+            machine.servos_silent(self.bus.relax_reason)
 
     def _track(self, state: Any, goals: FloatArray) -> None:
         stats = self.stats

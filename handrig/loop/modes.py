@@ -16,6 +16,10 @@ cycles. :meth:`ModeMachine.request_stop` may be called from a signal handler at
 any time: it records the request, the next :meth:`ModeMachine.poll` acts on it.
 Entering RELAXING or STOPPING from a mode that was following (or holding)
 calls ``on_relax``; entering RESUMING calls ``on_resume``: the easings restart.
+
+The servo bus can ask for RELAXING too (its ``[silence]`` action ``"relax"``,
+:meth:`ModeMachine.servos_silent`): no resume until it says the servos answer
+again, then the usual run of good frames.
 """
 
 from __future__ import annotations
@@ -72,6 +76,7 @@ class ModeMachine:
         self._last_frame_s: float | None = None
         self._run = 0  # good frames in a row while relaxed
         self._t0 = 0.0
+        self._servos_silent = False  # the bus asked to relax until its servos answer
 
     @property
     def stop_reason(self) -> str:
@@ -135,7 +140,7 @@ class ModeMachine:
         mode = self.mode
         if mode is Mode.WAITING:
             self.mode = Mode.RUNNING
-        elif mode is Mode.RELAXING:
+        elif mode is Mode.RELAXING and not self._servos_silent:
             in_a_row = previous is not None and now_s - previous <= self.glove_timeout_s
             self._run = self._run + 1 if in_a_row else 1
             if self._run >= self.resume_frames:
@@ -156,6 +161,21 @@ class ModeMachine:
                         else "glove silent or garbled")
                 self._relax(Mode.RELAXING, f"{what} for {since:.2f} s")
         return self.mode
+
+    def servos_silent(self, reason: str | None) -> None:
+        """The bus's word on its servos: ``reason`` while it wants the puppet relaxed
+        (servos without replies), None when they answer. Relaxes once, and blocks
+        resuming until None comes."""
+        if reason is not None:
+            if not self._servos_silent:
+                self._servos_silent = True
+                self._relax(Mode.RELAXING, reason)
+        elif self._servos_silent:
+            self._servos_silent = False
+            self._run = 0
+            if self.mode is Mode.RELAXING:
+                self.event(f"servos answer again: following the glove after "
+                           f"{self.resume_frames} good frames in a row")
 
     def resumed(self) -> None:
         """The easing back to the glove is complete."""

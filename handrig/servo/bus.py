@@ -15,6 +15,8 @@ from typing import Literal
 
 import numpy as np
 
+from handrig.rigconfig import SilenceConfig
+
 
 @dataclass
 class ServoState:
@@ -60,6 +62,11 @@ class BusStats:
     late_replies: int = 0  # intact replies to an earlier read, recognised and dropped
     watchdog_gaps: int = 0  # goal writes after a silence near the Bus Watchdog (re-armed)
     skipped_reads: int = 0  # reads not sent: the wire could not carry them by their deadline
+    late_reads: int = 0  # reads not sent: the caller came after the read's deadline
+    silences: int = 0  # servos past the silence warning (rig.toml [silence] warn_s)
+    held: int = 0  # servos whose goal was held for silence
+    recoveries: int = 0  # silent servos that answered again
+    recovery_reads_max: int = 0  # the longest silence that ended, in reads
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -85,7 +92,8 @@ class BusStats:
             f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
             f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
             f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, skipped reads "
-            f"{self.skipped_reads}, stale readings "
+            f"{self.skipped_reads}, late reads {self.late_reads}, silences {self.silences}, "
+            f"recoveries {self.recoveries}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )
@@ -97,8 +105,10 @@ class FaultPolicy:
 
     - ``read_retries``: extra attempts of a failed read, only while the read's
       deadline (``read_budget_s`` after the call, or the caller's) allows.
-    - ``max_stale_reads``: a servo stale this many reads in a row is a fault
-      (DeviceTimeoutError naming it): the loop's torque context then stops.
+    - ``max_stale_reads``: this many reads in a row that the wire could not carry
+      by their deadline (a configuration that does not fit) raise DeviceTimeoutError.
+    - ``silence``: the tiers for a servo with no valid reply (warn, hold, then the
+      action); None: the rig file's ``[silence]``.
     - ``on_hardware_error``: ``"reboot"`` the servo (at most ``max_reboots`` times
       per servo, then stop) or ``"stop"`` at once (ServoFault naming servo and bit).
     - ``fast_failures_before_fallback``: whole Fast Sync Reads failing in a row
@@ -112,6 +122,7 @@ class FaultPolicy:
     max_reboots: int = 3
     reboot_wait_s: float = 1.0
     fast_failures_before_fallback: int = 10
+    silence: SilenceConfig | None = None
 
     def __post_init__(self) -> None:
         if self.read_retries < 0 or self.max_stale_reads < 1 or self.max_reboots < 0:

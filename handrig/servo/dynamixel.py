@@ -275,10 +275,14 @@ class DynamixelBus(ServoBus):
         Each goal is clamped to the servo's ``[min_deg, max_deg]``; a non-finite
         goal is replaced by the last goal sent (or the servo's zero clamped into its
         limits). Returns how many goals were changed that way (also counted in
-        ``stats.clamps``). No reply is expected.
+        ``stats.clamps``). No reply is expected. A servo held for silence (rig.toml
+        ``[silence]``) keeps its last goal instead, and one that answers again is
+        moved back to its goals at the slew limit.
         """
         with self._lock:
             self.faults.rearm_after_silence()
+            if self.faults.silence.steering and self.faults.torque_on:
+                goals_deg = self.faults.silence.steer(goals_deg, self.writer.last_goal_deg)
             clamped = self.writer.build(goals_deg)
             self.writer.send_built()
         return clamped
@@ -293,6 +297,8 @@ class DynamixelBus(ServoBus):
         """
         with self._lock:
             self.faults.rearm_after_silence()
+            if self.faults.silence.steering and self.faults.torque_on:
+                goals_deg = self.faults.silence.steer(goals_deg, self.writer.last_goal_deg)
             clamped = self.writer.build(goals_deg)
             self.writer.hold_built()
             try:
@@ -319,14 +325,26 @@ class DynamixelBus(ServoBus):
         time remains. Servos without a valid reply are marked stale, never passed
         off as fresh. A read (or retry) whose request and reply could not both be
         on the wire before the deadline is not sent: its servos are marked stale
-        (``stats.skipped_reads``), not counted as a servo's stale run;
-        ``max_stale_reads`` skipped reads in a row raise DeviceTimeoutError. A
-        servo raising its Alert bit is handled per policy (reboot or ServoFault);
-        a servo stale ``max_stale_reads`` times in a row raises DeviceTimeoutError
-        naming it.
+        (``stats.skipped_reads``; ``stats.late_reads`` when the call came after the
+        deadline); ``max_stale_reads`` skipped reads in a row that were not late
+        raise DeviceTimeoutError. A servo raising its Alert bit is handled per
+        policy (reboot or ServoFault). A servo without a valid reading goes through
+        the ``[silence]`` tiers (warning, goal held, then the action; "stop" raises
+        DeviceTimeoutError naming it and what was seen); see :attr:`relax_reason`
+        and :meth:`drain_events`.
         """
         with self._lock:
             return self.reader.read(deadline_s)
+
+    @property
+    def relax_reason(self) -> str | None:
+        """Why the puppet should be relaxed while servos are silent (the ``[silence]``
+        action ``"relax"`` in force), else None."""
+        return self.faults.silence.relax_reason
+
+    def drain_events(self) -> list[str]:
+        """What the bus did about silent servos since the last call, one line each."""
+        return self.faults.silence.drain_events()
 
     def _read_every_servo(self, purpose: str) -> ServoState:
         """Read until every servo has given a valid reading (up to COMMAND_ATTEMPTS reads)."""

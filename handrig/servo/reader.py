@@ -66,19 +66,25 @@ class StateReader:
         """One present-state read (see :meth:`handrig.servo.DynamixelBus.read_state`)."""
         now = self.clock.now()
         n = self.readings.n
+        silence = self.faults.silence
         if deadline_s is None:
             # from when the wire is free of the goal Sync Write just sent
             deadline_s = self.link.request_start(now) + max(
                 self.policy.read_budget_s, self._min_budget_s)
         elif self.link.request_start(now) + self.read_wire_s(n) > deadline_s:
+            silence.note_read(now, late=deadline_s <= now)
             self.faults.read_skipped(self.read_wire_s(n), deadline_s - now)
+            silence.update(now)
             return self.readings.unread(now)
+        silence.note_read(now)
         self.faults.skip_run = 0
         self.stats.reads += 1
         self.readings.start_read()
         self.last_whole = False
         if self._attempts(deadline_s) and not (
                 self.temperature_every and self.stats.reads >= self._next_temperature_read):
+            if silence.active:
+                silence.update(self.fast.whole_at)
             return self.readings.take_whole(self.fast.whole_at)
         return self._finish(deadline_s)
 
@@ -139,8 +145,8 @@ class StateReader:
         if self._housekeeping_due() and deadline_s - self.clock.now() > self._temperature_wire_s:
             self._next_temperature_read = self.stats.reads + self.temperature_every
             self._housekeeping(deadline_s)
-        if stale.any():
-            self.faults.check_stale_runs()
+        if stale.any() or self.faults.silence.active:
+            self.faults.silence.update(now)
         return r.snapshot(now, stale, r.hw_err.copy())
 
     def _housekeeping(self, deadline_s: float) -> None:

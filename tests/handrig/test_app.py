@@ -1,4 +1,5 @@
-"""The factory: glove.toml's IMU settings reach the forearm angles."""
+"""The factory: glove.toml's IMU settings reach the forearm angles; the glove reader and
+the summary get what the calibration and the port counters say."""
 
 from __future__ import annotations
 
@@ -45,3 +46,24 @@ def test_a_rejected_quaternion_keeps_the_last_good_angles():
     assert angles(_sample(np.array([0.0, 0.0, 0.0, 0.0]))) == pytest.approx(good)
     assert angles(_sample(np.array([np.nan, 0.0, 0.0, 1.0]))) == pytest.approx(good)
     assert angles.orientation.rejected == 2
+
+
+def test_the_glove_reader_is_told_how_many_raw_channels_the_calibration_reads() -> None:
+    from handrig.app import open_glove
+    from handrig.clock import FakeClock
+
+    cfg = load_glove_config()
+    glove = open_glove("/dev/handrig-no-such-glove", cfg, FakeClock())
+    assert glove.min_channels == max(ch.raw_index() for ch in cfg.channels) + 1  # type: ignore[attr-defined]
+
+
+def test_the_summary_carries_the_glove_port_counters() -> None:
+    from handrig.app import summary_dict
+    from handrig.glove import GloveStats
+    from handrig.loop.stats import RunStats
+
+    stats = GloveStats(frames_ok=10, channel_errors=2, disconnects=1, reconnects=1,
+                       last_outage_s=1.25)
+    glove = summary_dict(RunStats(), None, stats, True)["glove"]
+    assert (glove["channel_errors"], glove["disconnects"], glove["reconnects"],
+            glove["last_outage_s"]) == (2, 1, 1, 1.25)

@@ -523,3 +523,57 @@ def test_the_profile_times_each_stage_outside_the_loop_code(parts_factory):
                             "write"]
     assert stages["write"]["p50"] == pytest.approx(70.0, rel=0.02)
     assert stats.latency_us(50) == pytest.approx(70.0, abs=1.0)  # the profile adds nothing
+
+
+class EventfulGlove(ScriptedGlove):
+    """Says once that its port went away and came back."""
+
+    def __init__(self, clock: FakeClock, raw_at: Callable[[float], np.ndarray | None]) -> None:
+        super().__init__(clock, raw_at)
+        self.pending = ["glove port /dev/ttyACM0 went away", "glove port /dev/ttyACM0 is back"]
+
+    def drain_events(self) -> list[str]:
+        out, self.pending = self.pending, []
+        return out
+
+
+class SilentServosBus(RecordingBus):
+    """Asks for the relaxed pose (the [silence] action "relax") between two times."""
+
+    def __init__(self, names: tuple[str, ...], clock: FakeClock, silent: tuple[float, float]
+                 ) -> None:
+        super().__init__(names, clock)
+        self.silent = silent
+        self.said = False
+
+    @property
+    def relax_reason(self) -> str | None:
+        t = self.clock.now()
+        return ("no valid reply from servo 7 for 1.00 s"
+                if self.silent[0] <= t < self.silent[1] else None)
+
+    def drain_events(self) -> list[str]:
+        if self.clock.now() >= self.silent[0] and not self.said:
+            self.said = True
+            return ["holding servo 7 (riRingPIPy) at the last goal sent"]
+        return []
+
+
+def test_bus_and_glove_events_reach_the_run_and_a_relax_request_relaxes(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    glove = EventfulGlove(clock, lambda t: MID)
+    names = tuple(s.joint for s in parts.rig_config.servos)
+    bus = SilentServosBus(names, clock, (0.5, 1.5))
+    rig = make_rig(parts, glove, bus, clock)
+    rig.run(frames=500)
+    events = list(rig.stats.events)
+    assert events[:2] == ["glove port /dev/ttyACM0 went away", "glove port /dev/ttyACM0 is back"]
+    assert any(e.startswith("holding servo 7") for e in events)
+    assert any(e.startswith("no valid reply from servo 7") and "relaxed pose" in e
+               for e in events)
+    assert any("servos answer again" in e for e in events)
+    assert rig.stats.relax_events == 1 and rig.stats.resumes == 1
+    relaxed = relaxed_targets(parts)
+    np.testing.assert_allclose(bus.goals[int(1.45 * 200)], relaxed, atol=1e-6)
+    assert np.abs(bus.goals[480] - relaxed).max() > 1.0

@@ -40,3 +40,16 @@ def test_bad_servo_entries_are_named():
     with pytest.raises(ConfigError, match="outside the servo's range"):
         build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0,
                                       "gear_ratio": 10.0}]})
+
+
+def test_silence_tiers_are_read_and_checked():
+    servos = [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0.0, "max_deg": 90.0}]
+    rig = build(RigConfig, {"servos": servos, "silence": {"action": "relax", "action_s": 2.0}})
+    assert rig.silence.action == "relax" and rig.silence.action_s == 2.0
+    assert load_rig_config().silence.action == "continue"
+    with pytest.raises(ConfigError, match="tiers out of order"):
+        build(RigConfig, {"servos": servos, "silence": {"warn_s": 2.0}})
+    with pytest.raises(ConfigError, match=r"silence\.action"):
+        build(RigConfig, {"servos": servos, "silence": {"action": "panic"}})
+    with pytest.raises(ConfigError, match="out of range"):
+        build(RigConfig, {"servos": servos, "silence": {"warn_s": 0.0}})

@@ -93,3 +93,27 @@ def test_estop_stops_and_the_end_of_the_run_does_not_override_it() -> None:
     assert m.frame(0.1, True) is Mode.STOPPING and m.estop
     m.finish("100 frames done")
     assert m.stop_reason == "e-stop"
+
+
+def test_servos_silent_relaxes_blocks_the_resume_then_lets_good_frames_bring_it_back() -> None:
+    m, calls = machine(resume_frames=3)
+    feed(m, 0.0, 0.5, 0.005)
+    m.servos_silent("no valid reply from servo 7 for 1.00 s")
+    assert m.mode is Mode.RELAXING and m.relax_events == 1
+    assert calls[-2] == "<relax>" and calls[-1].startswith("no valid reply from servo 7")
+    m.servos_silent("no valid reply from servo 7 for 1.20 s")  # still: said once
+    assert calls[-1].endswith("over 1.00 s") and len([c for c in calls if "servo 7" in c]) == 1
+    feed(m, 0.5, 1.0, 0.005)  # good frames, but the servos are silent
+    assert m.mode is Mode.RELAXING
+    m.servos_silent(None)
+    assert "servos answer again" in calls[-1]
+    assert [m.frame(1.0 + 0.005 * k, False) for k in range(3)][-1] is Mode.RESUMING
+
+
+def test_servos_silent_while_stopping_changes_nothing() -> None:
+    m, _ = machine()
+    feed(m, 0.0, 0.1, 0.005)
+    m.request_stop("test")
+    m.poll()
+    m.servos_silent("no valid reply from any servo")
+    assert m.mode is Mode.STOPPING

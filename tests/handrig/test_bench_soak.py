@@ -1,0 +1,33 @@
+"""``python -m bench soak``, short: the live rig with bus, host and glove faults and
+recording on ends with torque off, no goal outside the limits, and its figures."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_a_short_soak_prints_its_figures_with_no_goal_outside_the_limits() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "bench", "soak", "--seconds", "12", "--stall-every-s", "4"],
+        capture_output=True, text=True, timeout=240, cwd=ROOT)
+    text = out.stdout
+    assert out.returncode == 0, out.stderr[-2000:]
+    cycles = re.search(r"cycles\s+(\d+) in", text)
+    assert cycles and int(cycles.group(1)) > 1000, text
+    assert re.search(r"goals outside\s+0 of [1-9]\d* decoded", text), text
+    assert re.search(r"a 50 ms host stall every 4 s \([23] made\)", text), text
+    assert "bus injected    " in text and "(no count" not in text, text
+    assert re.search(r"rss\s+[\d.]+ MB at the start, [\d.]+ MB at the end; growth", text), text
+    assert re.search(r"stopped\s+12 s done\n", text), text
+    assert "torque off      True" in text, text
+
+
+def test_the_soak_is_not_part_of_a_plain_bench_run() -> None:
+    from bench.__main__ import LONG
+
+    assert "bench_soak" in LONG
