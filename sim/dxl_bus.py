@@ -90,9 +90,7 @@ KINEMATIC_STEP_S = 0.002
 # once overdue by HOUSEKEEPING_OVERDUE_S (or always without wire timing). Never
 # right after a reply: the pty hands bytes over through a kernel worker that may
 # be queued on this thread's CPU, and a SCHED_FIFO thread that keeps working holds
-# it back. Measured at 4 Mbps with 20 servos (driver and emulator pinned apart), the
-# reply's hand-over to the driver took a median 9-10 us against 15-16 us with
-# housekeeping after each reply; the cycle rate stayed the same within noise.
+# it back (docs/measurements.md has the hand-over times measured both ways).
 HOUSEKEEPING_SLOT_S = 0.0003
 HOUSEKEEPING_OVERDUE_S = 0.01
 # Replies are timed by sleeping, then spinning for the last SPIN_S (with the thread's
@@ -112,9 +110,8 @@ def _tighten_timer_slack() -> None:
 def _try_realtime() -> bool:
     """SCHED_FIFO for the calling thread where allowed; False when refused or unsupported.
 
-    On a loaded machine a normal thread wakes late from its sleeps: measured with
-    ``handrig sim-bus --wire-timing`` at 4 Mbps, 20 servos, replies left a mean 137-536 us
-    after their wire instant as a normal thread and 34-82 us with SCHED_FIFO."""
+    On a loaded machine a normal thread wakes late from its sleeps, and its replies
+    leave late (docs/measurements.md)."""
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
     except (OSError, AttributeError):
