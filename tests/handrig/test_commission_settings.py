@@ -60,7 +60,7 @@ def test_leap_commissioning_sets_every_servo_setting() -> None:
 
 def test_a_second_connect_finds_everything_set() -> None:
     rig = _leap()
-    bus, transport, peer = _bus(rig)
+    bus, _, peer = _bus(rig)
     bus.connect()
     bus.close()
     again, transport2, _ = _bus(rig, peer)
