@@ -125,6 +125,8 @@ class RobotPath:
     """A robot hand's servo step: ``human`` is the :class:`ServoPath` of the ``curves``
     (indices into the 50) that the retarget reads, clamped to ``[human_low, human_high]``;
     servo k's target is ``offset[k] + gain[k] @ that``. Rows in servo (bus) order.
+    The kernel reads ``gain``'s nonzero entries row by row: row k's are
+    ``gain_start[k]:gain_start[k + 1]`` of ``gain_curve`` (column) and ``gain_value``.
     ``full_gain`` (n, 50) is the same step over all 50 curves. Read-only."""
 
     human: ServoPath
@@ -132,6 +134,9 @@ class RobotPath:
     human_low: FloatArray  # (u,)
     human_high: FloatArray  # (u,)
     gain: FloatArray  # (n, u)
+    gain_start: NDArray[np.int64]  # (n + 1,)
+    gain_curve: NDArray[np.int64]  # (nonzero,)
+    gain_value: FloatArray  # (nonzero,)
     offset: FloatArray  # (n,)
     full_gain: FloatArray  # (n, 50)
 
@@ -273,9 +278,12 @@ class PosePipeline:
         if self.sag_gain == 0.0:
             human = ServoPath(human.a, human.b, human.sag_slot, 0.0, SagTables.empty())
         offset = np.asarray(rt.offset_deg, dtype=np.float64)[self._robot_rows].copy()
+        gain = np.ascontiguousarray(full[:, curves])
+        rows, cols = np.nonzero(gain)  # row-major order
+        start = np.searchsorted(rows, np.arange(len(gain) + 1)).astype(np.int64)
         return RobotPath(human, curves, self.pose_low[curves].copy(),
-                         self.pose_high[curves].copy(),
-                         np.ascontiguousarray(full[:, curves]), offset, full)
+                         self.pose_high[curves].copy(), gain, start, cols.astype(np.int64),
+                         np.ascontiguousarray(gain[rows, cols]), offset, full)
 
     def _build_servo_path(self, joints: Sequence[str]) -> ServoPath:
         """Precompose the servo joints' targets as one affine map of the controls, plus the
@@ -394,7 +402,8 @@ class PosePipeline:
                 tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
                 tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
                 float(inclination_deg), float(rotation_deg), robot.human_low,
-                robot.human_high, self._human, robot.gain, robot.offset, self.servo_low,
+                robot.human_high, self._human, robot.gain_start, robot.gain_curve,
+                robot.gain_value, robot.offset, self.servo_low,
                 self.servo_high, self.targets, float(self.slew_deg_s * max(dt_s, 0.0)), first,
                 self._raw_targets)
             self._has_targets = True

@@ -97,8 +97,8 @@ def servo_targets(
 def robot_servo_targets(
     controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
     slot: Any, gain: float, inclination: float, rotation: float, human_low: Any,
-    human_high: Any, human: Any, g: Any, offset: Any, low: Any, high: Any,
-    targets: Any, limit: float, first: bool, raw: Any,
+    human_high: Any, human: Any, g_start: Any, g_curve: Any, g_gain: Any, offset: Any,
+    low: Any, high: Any, targets: Any, limit: float, first: bool, raw: Any,
 ) -> int:  # pragma: no cover - compiled
     """A robot hand's servo targets in place: the human curves it reads, then the
     retarget step, then the slew limit.
@@ -106,8 +106,9 @@ def robot_servo_targets(
     ``human`` (u,) becomes ``controls @ a + b + gain * sag[slot]`` (the ``u`` curves the
     retarget reads, as in :func:`servo_targets`), each clamped to
     ``[human_low, human_high]``; a non-finite curve stays non-finite. Then servo k's
-    target is ``offset[k] + sum over m of g[k, m] * human[m]`` (terms with a zero gain
-    left out, so a bad curve reaches only the joints that read it), clamped to
+    target is ``offset[k] + sum of g_gain[e] * human[g_curve[e]]`` over the entries
+    ``e`` in ``g_start[k]:g_start[k + 1]`` (the table's nonzero gains, row by row, so a
+    bad curve reaches only the joints that read it), clamped to
     ``[low, high]`` and slew limited as :func:`servo_targets` does; a non-finite target
     holds the previous one. Returns how many did.
     """
@@ -129,10 +130,8 @@ def robot_servo_targets(
     held = 0
     for k in range(targets.shape[0]):
         v = offset[k]
-        for c in range(human.shape[0]):
-            w = g[k, c]
-            if w != 0.0:
-                v += w * human[c]
+        for e in range(g_start[k], g_start[k + 1]):
+            v += g_gain[e] * human[g_curve[e]]
         if not math.isfinite(v):
             held += 1
             v = 0.5 * (low[k] + high[k]) if first else targets[k]
@@ -214,7 +213,8 @@ def warm_up() -> None:
                   f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
     robot_servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]),
                         0.0, np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, 0.5, 0.5,
-                        f - 1.0, f + 1.0, np.zeros(2), np.zeros((2, 2)), f, f - 1.0, f + 1.0,
+                        f - 1.0, f + 1.0, np.zeros(2), np.arange(3, dtype=np.int64),
+                        np.arange(2, dtype=np.int64), f + 1.0, f, f - 1.0, f + 1.0,
                         np.zeros(2), 1.0, False, np.zeros(2))
     idx = np.zeros(2, np.intp)
     one_euro_step(f, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0)

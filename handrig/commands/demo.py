@@ -6,6 +6,11 @@ through the glove emulator on a pty, the real serial glove reader, the real
 pipeline (calibration, One Euro filter, map expansion, sag, limits, slew) and the
 real Dynamixel driver into ``handrig sim-bus``'s MuJoCo puppet, with wire timing
 at the rig's baud rate. Prints a summary of what was measured.
+
+``--rig leap`` (a robot rig preset, or any robot rig file) runs the same path
+into the robot: the pipeline ends in the rig's retarget table, the emulated
+servos are the rig's (XC330-M288s at 4 Mbps for LEAP) and the puppet is the
+robot's MJCF model, which ``--render`` draws.
 """
 
 from __future__ import annotations

@@ -103,11 +103,13 @@ def test_kernel_holds_the_previous_target_without_nan_leaking() -> None:
     f = np.zeros(2)
     a = np.eye(2)
     human, raw, targets = np.zeros(2), np.zeros(3), np.array([1.0, 2.0, 3.0])
-    g = np.array([[1.0, 0.0], [0.0, 1.0], [0.5, 0.5]])
+    # rows [1, 0], [0, 1], [0.5, 0.5] by their nonzero entries
+    start, curve = np.array([0, 1, 2, 4]), np.array([0, 1, 0, 1])
+    gain = np.array([1.0, 1.0, 0.5, 0.5])
     held = kernels.robot_servo_targets(
         np.array([0.0, 4.0]), a, np.array([np.inf, 0.0]), np.zeros(2), np.zeros(2), 0.0,
         np.zeros((0, 1, 4, 1)),
-        np.zeros(2, np.int64), 0.0, 0.0, 0.0, f - 100.0, f + 100.0, human, g,
+        np.zeros(2, np.int64), 0.0, 0.0, 0.0, f - 100.0, f + 100.0, human, start, curve, gain,
         np.array([0.0, 1.0, 0.0]), np.full(3, -50.0), np.full(3, 50.0), targets, 100.0,
         False, raw)
     assert held == 2  # rows 0 and 2 read the bad curve; row 1 does not
