@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from handrig import robotrig
 from handrig.clock import Clock
 from handrig.config import CONFIG_DIR, load_joint_limits
 from handrig.errors import ConfigError, DeviceError
@@ -38,7 +39,7 @@ from handrig.orientation import ForearmOrientation
 from handrig.pipeline import PosePipeline
 from handrig.realtime import helper_env
 from handrig.rig import Rig
-from handrig.rigconfig import RigConfig, load_rig_config
+from handrig.rigconfig import RigConfig
 from handrig.sag import SagGrid
 from handrig.servo import DynamixelBus
 from handrig.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
@@ -97,9 +98,15 @@ class ForearmAngles:
 
 def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | None = None
                 ) -> RigParts:
-    """Load the rig, glove, map and grid configs and build the pose pipeline."""
-    rig_path = Path(rig_file) if rig_file else CONFIG_DIR / "rig.toml"
-    rig = load_rig_config(rig_path)
+    """Load the rig, glove, map and grid configs and build the pose pipeline.
+
+    ``rig_file``: a rig file or a preset name (``"leap"``: ``config/rigs/leap.toml``);
+    None is ``config/rig.toml``. A robot rig's pipeline ends in its retarget table, with
+    the rig's effective sag gain (off unless ``[robot].sag`` is true)."""
+    rig_path = robotrig.rig_path(rig_file)
+    rig = robotrig.load_rig(rig_path)
+    retarget = (robotrig.robot_retarget(rig) if isinstance(rig, robotrig.RobotRigConfig)
+                else None)
     base = rig_path.resolve().parent
     loop = rig.loop
     glove_path = Path(glove_file) if glove_file else _resolve(
@@ -112,13 +119,18 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
     pipeline = PosePipeline(
         expander, sag, [s.joint for s in rig.servos],
         servo_limits_deg=np.array([[s.min_deg, s.max_deg] for s in rig.servos]),
-        limits=limits, slew_deg_s=loop.slew_deg_s, sag_gain=loop.sag_gain,
+        limits=limits, slew_deg_s=loop.slew_deg_s, sag_gain=rig.effective_sag_gain,
         left_hand=loop.left_hand, control_means_deg=expander.control_means_deg,
-        left_forearm_deg=loop.left_forearm_deg,
+        left_forearm_deg=loop.left_forearm_deg, retarget=retarget,
     )
     controls = GloveControls.from_config(glove_cfg, expander.controls)
     return RigParts(rig, rig_path, glove_cfg, expander, sag, pipeline, controls,
                     ForearmAngles(glove_cfg))
+
+
+def robot_model(rig: RigConfig) -> str | None:
+    """The MJCF model a robot rig drives (``[robot].model``, absolute); None for a human rig."""
+    return rig.robot.model if isinstance(rig, robotrig.RobotRigConfig) and rig.robot else None
 
 
 def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock) -> GloveSource:

@@ -13,6 +13,11 @@ leWristDeviation``), degrees in the vocabulary convention. Every array is
 preallocated; :meth:`PosePipeline.servo_targets` allocates nothing. The loop
 rehearses the step on :meth:`PosePipeline.rehearsal_copy`.
 
+A robot hand (``retarget`` given) drives the robot's joints instead: the servo
+step computes the human curves the retarget table reads, clamps them to their joint
+limits, then ``robot = clip(offset + G @ human50, robot range and servo limits)``
+(:class:`RobotPath`), in the same one compiled call; outputs still get the human pose.
+
 This module imports no device code (no serial, dynamixel_sdk or mujoco).
 """
 
@@ -96,6 +101,46 @@ class ServoPath:
     sag: SagTables
 
 
+class RetargetLike(Protocol):
+    """A compiled retarget table (:class:`handrig.retarget.Retarget`)."""
+
+    @property
+    def joint_names(self) -> tuple[str, ...]: ...
+
+    @property
+    def gain(self) -> FloatArray: ...  # (J, 50)
+
+    @property
+    def offset_deg(self) -> FloatArray: ...  # (J,)
+
+    @property
+    def low_deg(self) -> FloatArray: ...  # (J,)
+
+    @property
+    def high_deg(self) -> FloatArray: ...  # (J,)
+
+
+@dataclass(frozen=True)
+class RobotPath:
+    """A robot hand's servo step: ``human`` is the :class:`ServoPath` of the ``curves``
+    (indices into the 50) that the retarget reads, clamped to ``[human_low, human_high]``;
+    servo k's target is ``offset[k] + gain[k] @ that``. Rows in servo (bus) order.
+    The kernel reads ``gain``'s nonzero entries row by row: row k's are
+    ``gain_start[k]:gain_start[k + 1]`` of ``gain_curve`` (column) and ``gain_value``.
+    ``full_gain`` (n, 50) is the same step over all 50 curves. Read-only."""
+
+    human: ServoPath
+    curves: NDArray[np.intp]  # (u,)
+    human_low: FloatArray  # (u,)
+    human_high: FloatArray  # (u,)
+    gain: FloatArray  # (n, u)
+    gain_start: NDArray[np.int64]  # (n + 1,)
+    gain_curve: NDArray[np.int64]  # (nonzero,)
+    gain_value: FloatArray  # (nonzero,)
+    offset: FloatArray  # (n,)
+    full_gain: FloatArray  # (n, 50)
+
+
 class PosePipeline:
     """Turns control angles and a forearm orientation into servo joint targets.
 
@@ -106,6 +151,10 @@ class PosePipeline:
     are hand-independent), ``"relaxed"`` holds the left hand at its relaxed pose.
     ``left_forearm_deg`` (inclination, rotation) is where the left forearm is
     taken to be for its sag (default: hanging at rest).
+
+    ``retarget``: a robot hand; ``servo_joints`` then name the robot's joints (rows of
+    the table, in bus order) and the servo limits are intersected with the table's
+    ranges instead of the human joint limits.
     """
 
     def __init__(
@@ -121,6 +170,7 @@ class PosePipeline:
         left_hand: Literal["map", "mirror", "relaxed"] = "map",
         control_means_deg: FloatArray | None = None,
         left_forearm_deg: tuple[float, float] = (-90.0, 0.0),
+        retarget: RetargetLike | None = None,
     ) -> None:
         self.expander = expander
         self.sag = sag
@@ -129,13 +179,22 @@ class PosePipeline:
         self.sag_gain = float(sag_gain)
         self.left_hand = left_hand
         self.left_forearm_deg = left_forearm_deg
+        self.retarget = retarget
         limits = limits or JointLimits()
-        self.servo_index = np.array([pose_index(j) for j in self.servo_joints], dtype=np.intp)
         n = len(self.servo_joints)
         lim = np.array([limits.of(name) for name in POSE_NAMES], dtype=np.float64)
         self.pose_low, self.pose_high = lim[:, 0].copy(), lim[:, 1].copy()
-        self.servo_low = self.pose_low[self.servo_index].copy()
-        self.servo_high = self.pose_high[self.servo_index].copy()
+        if retarget is None:
+            self.servo_index = np.array([pose_index(j) for j in self.servo_joints],
+                                        dtype=np.intp)
+            self.servo_low = self.pose_low[self.servo_index].copy()
+            self.servo_high = self.pose_high[self.servo_index].copy()
+        else:
+            self.servo_index = np.zeros(0, dtype=np.intp)  # robot joints are not pose DOFs
+            self._robot_rows = np.array([_robot_row(retarget, j) for j in self.servo_joints],
+                                        dtype=np.intp)
+            self.servo_low = np.asarray(retarget.low_deg, dtype=np.float64)[self._robot_rows]
+            self.servo_high = np.asarray(retarget.high_deg, dtype=np.float64)[self._robot_rows]
         if servo_limits_deg is not None:
             sl = np.asarray(servo_limits_deg, dtype=np.float64)
             if sl.shape != (n, 2):
@@ -172,7 +231,13 @@ class PosePipeline:
         self.rejected = 0  # non-finite targets replaced by the last good one, cumulative
         self._has_targets = False
         self._allocate_work()
-        self.servo_path = self._build_servo_path()
+        self.robot_path: RobotPath | None = None
+        if retarget is None:
+            self.servo_path = self._build_servo_path(self.servo_joints)
+        else:
+            self.robot_path = self._build_robot_path(retarget)
+            self.servo_path = self.robot_path.human
+            self._human = np.zeros(len(self.robot_path.curves))
         kernels.warm_up()
 
     def _allocate_work(self) -> None:
@@ -196,10 +261,31 @@ class PosePipeline:
         counters, so nothing it does shows here."""
         other = copy.copy(self)
         other._allocate_work()
+        if self.robot_path is not None:
+            other._human = np.zeros(len(self.robot_path.curves))
         other.targets[:] = self.targets
         return other
 
-    def _build_servo_path(self) -> ServoPath:
+    def _build_robot_path(self, rt: RetargetLike) -> RobotPath:
+        """The retarget rows in servo order over the curves they read (a curve is read
+        when some row has a nonzero gain on it), and the human path of those curves. Sag
+        on them only with a nonzero ``sag_gain``."""
+        full = np.ascontiguousarray(np.asarray(rt.gain, dtype=np.float64)[self._robot_rows])
+        if full.shape[1] != hand.CURVES_PER_HAND * 2:
+            raise ConfigError(f"a retarget table reads the 50 curves, got {full.shape[1]}")
+        curves = np.flatnonzero(np.any(full != 0.0, axis=0)).astype(np.intp)
+        human = self._build_servo_path([POSE_NAMES[c] for c in curves])
+        if self.sag_gain == 0.0:
+            human = ServoPath(human.a, human.b, human.sag_slot, 0.0, SagTables.empty())
+        offset = np.asarray(rt.offset_deg, dtype=np.float64)[self._robot_rows].copy()
+        gain = np.ascontiguousarray(full[:, curves])
+        rows, cols = np.nonzero(gain)  # row-major order
+        start = np.searchsorted(rows, np.arange(len(gain) + 1)).astype(np.int64)
+        return RobotPath(human, curves, self.pose_low[curves].copy(),
+                         self.pose_high[curves].copy(), gain, start, cols.astype(np.int64),
+                         np.ascontiguousarray(gain[rows, cols]), offset, full)
+
+    def _build_servo_path(self, joints: Sequence[str]) -> ServoPath:
         """Precompose the servo joints' targets as one affine map of the controls, plus the
         right forearm's sag offsets (the left forearm's are constant: no IMU there).
 
@@ -212,7 +298,7 @@ class PosePipeline:
         gains = np.asarray(m.gains, dtype=np.float64)
         bias = np.asarray(m.curve_means_deg, dtype=np.float64) - gains @ np.asarray(
             m.control_means_deg, dtype=np.float64)
-        n, k = len(self.servo_joints), gains.shape[1]
+        n, k = len(joints), gains.shape[1]
         a = np.zeros((k, n))
         b = np.zeros(n)
         slot = np.full(n, hand.DOFS_PER_HAND, dtype=np.int64)  # index 23 = no sag
@@ -222,7 +308,7 @@ class PosePipeline:
         if left_grid is not None and self.left_hand != "mirror":
             left_grid.offsets(*self.left_forearm_deg, out=left_const)
             left_rest[:] = left_grid.rest_deg
-        for j, name in enumerate(self.servo_joints):
+        for j, name in enumerate(joints):
             i = pose_index(name)
             h = hand.hand_of(name)
             if i < 50:
@@ -309,6 +395,19 @@ class PosePipeline:
         if self._has_sag:
             inclination_deg = SagGrid.checked_inclination(inclination_deg, rotation_deg)
         first = not self._has_targets
+        robot = self.robot_path
+        if robot is not None:
+            self.rejected += kernels.robot_servo_targets(
+                np.ascontiguousarray(controls_deg, dtype=np.float64), path.a, path.b,
+                tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
+                tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
+                float(inclination_deg), float(rotation_deg), robot.human_low,
+                robot.human_high, self._human, robot.gain_start, robot.gain_curve,
+                robot.gain_value, robot.offset, self.servo_low,
+                self.servo_high, self.targets, float(self.slew_deg_s * max(dt_s, 0.0)), first,
+                self._raw_targets)
+            self._has_targets = True
+            return self.targets
         self.rejected += kernels.servo_targets(
             np.ascontiguousarray(controls_deg, dtype=np.float64), path.a, path.b,
             tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
@@ -328,7 +427,7 @@ class PosePipeline:
         joint and servo limits; :attr:`relaxed` then holds the clamped full pose."""
         relaxed = self.relaxed_pose(inclination_deg, rotation_deg)
         np.clip(relaxed, self.pose_low, self.pose_high, out=relaxed)
-        np.take(relaxed, self.servo_index, out=self._relaxed_targets)
+        self._servo_values(relaxed, self._relaxed_targets)
         np.clip(self._relaxed_targets, self.servo_low, self.servo_high,
                 out=self._relaxed_targets)
         return self._relaxed_targets
@@ -339,14 +438,27 @@ class PosePipeline:
         """After the write: the full 54-vector pose, clamped (for outputs), and the
         clamp and slew counters for this cycle."""
         pose = self.full_pose(controls_deg, inclination_deg, rotation_deg)
-        np.take(pose, self.servo_index, out=self._step)
+        np.clip(pose, self.pose_low, self.pose_high, out=self._clamped_pose)
+        # a robot's joints are retargeted from the clamped curves, a human rig's servos
+        # take the pose as it is
+        self._servo_values(pose if self.robot_path is None else self._clamped_pose,
+                           self._step)
         self.servo_clamps += int(np.count_nonzero(
             (self._step < self.servo_low) | (self._step > self.servo_high)))
-        np.clip(pose, self.pose_low, self.pose_high, out=self._clamped_pose)
         self.clamps += int(np.count_nonzero(self._clamped_pose != pose))
         self.slewed += int(np.count_nonzero(np.abs(self._raw_targets - self.targets) > 1e-9))
         pose[:] = self._clamped_pose
         return pose
+
+    def _servo_values(self, pose: FloatArray, out: FloatArray) -> None:
+        """The servos' joint values (unclamped) of a 54-vector pose, into ``out``: the
+        pose's own values, or a robot's retargeted joints."""
+        robot = self.robot_path
+        if robot is None:
+            np.take(pose, self.servo_index, out=out)
+            return
+        np.dot(robot.full_gain, pose[:50], out=out)
+        out += robot.offset
 
     @property
     def has_targets(self) -> bool:
@@ -357,3 +469,13 @@ class PosePipeline:
         """Start slew limiting from where the servos are (e.g. their present positions)."""
         self.targets[:] = np.clip(targets_deg, self.servo_low, self.servo_high)
         self._has_targets = True
+
+
+def _robot_row(rt: RetargetLike, joint: str) -> int:
+    """Row of robot joint ``joint`` in the retarget table; ConfigError when it has none."""
+    try:
+        return rt.joint_names.index(joint)
+    except ValueError:
+        raise ConfigError(f"the retarget table has no row for servo joint {joint!r}",
+                          key=f"joints.{joint}",
+                          allowed=f"one of {', '.join(rt.joint_names)}") from None

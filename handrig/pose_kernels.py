@@ -35,6 +35,22 @@ def _sag_cell(axis: Any, x: float) -> int:  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _sag_weights(use_sag: bool, inc_axis: Any, rot_axis: Any, rot0: float,
+                 inclination: float, rotation: float
+                 ) -> tuple[int, int, float, float, float, float]:  # pragma: no cover
+    """The grid cell (i, j) holding the forearm orientation and its four corners'
+    bilinear weights (all zero without sag)."""
+    if not use_sag:
+        return 0, 0, 0.0, 0.0, 0.0, 0.0
+    i = _sag_cell(inc_axis, inclination)
+    r = (rotation - rot0) % 360.0 + rot0
+    j = _sag_cell(rot_axis, r)
+    ti = (inclination - inc_axis[i]) / (inc_axis[i + 1] - inc_axis[i])
+    tj = (r - rot_axis[j]) / (rot_axis[j + 1] - rot_axis[j])
+    return (i, j, (1.0 - ti) * (1.0 - tj), (1.0 - ti) * tj, ti * (1.0 - tj), ti * tj)
+
+
+@njit(cache=True, nogil=True)
 def servo_targets(
     controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
     slot: Any, gain: float, inclination: float, rotation: float, low: Any, high: Any,
@@ -53,18 +69,8 @@ def servo_targets(
     n = targets.shape[0]
     n_dof = cells.shape[3]
     use_sag = cells.shape[0] > 0
-    w0 = w1 = w2 = w3 = 0.0
-    i = j = 0
-    if use_sag:
-        i = _sag_cell(inc_axis, inclination)
-        r = (rotation - rot0) % 360.0 + rot0
-        j = _sag_cell(rot_axis, r)
-        ti = (inclination - inc_axis[i]) / (inc_axis[i + 1] - inc_axis[i])
-        tj = (r - rot_axis[j]) / (rot_axis[j + 1] - rot_axis[j])
-        w0 = (1.0 - ti) * (1.0 - tj)
-        w1 = (1.0 - ti) * tj
-        w2 = ti * (1.0 - tj)
-        w3 = ti * tj
+    i, j, w0, w1, w2, w3 = _sag_weights(use_sag, inc_axis, rot_axis, rot0, inclination,
+                                        rotation)
     held = 0
     for k in range(n):
         v = b[k]
@@ -74,6 +80,58 @@ def servo_targets(
         if use_sag and s < n_dof:
             v += gain * (w0 * cells[i, j, 0, s] + w1 * cells[i, j, 1, s]
                          + w2 * cells[i, j, 2, s] + w3 * cells[i, j, 3, s])
+        if not math.isfinite(v):
+            held += 1
+            v = 0.5 * (low[k] + high[k]) if first else targets[k]
+        v = min(max(v, low[k]), high[k])
+        raw[k] = v
+        if first:
+            targets[k] = v
+        else:
+            step = min(max(v - targets[k], -limit), limit)
+            targets[k] = targets[k] + step
+    return held
+
+
+@njit(cache=True, nogil=True)
+def robot_servo_targets(
+    controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
+    slot: Any, gain: float, inclination: float, rotation: float, human_low: Any,
+    human_high: Any, human: Any, g_start: Any, g_curve: Any, g_gain: Any, offset: Any,
+    low: Any, high: Any, targets: Any, limit: float, first: bool, raw: Any,
+) -> int:  # pragma: no cover - compiled
+    """A robot hand's servo targets in place: the human curves it reads, then the
+    retarget step, then the slew limit.
+
+    ``human`` (u,) becomes ``controls @ a + b + gain * sag[slot]`` (the ``u`` curves the
+    retarget reads, as in :func:`servo_targets`), each clamped to
+    ``[human_low, human_high]``; a non-finite curve stays non-finite. Then servo k's
+    target is ``offset[k] + sum of g_gain[e] * human[g_curve[e]]`` over the entries
+    ``e`` in ``g_start[k]:g_start[k + 1]`` (the table's nonzero gains, row by row, so a
+    bad curve reaches only the joints that read it), clamped to
+    ``[low, high]`` and slew limited as :func:`servo_targets` does; a non-finite target
+    holds the previous one. Returns how many did.
+    """
+    n_dof = cells.shape[3]
+    use_sag = cells.shape[0] > 0
+    i, j, w0, w1, w2, w3 = _sag_weights(use_sag, inc_axis, rot_axis, rot0, inclination,
+                                        rotation)
+    for c in range(human.shape[0]):
+        v = b[c]
+        for m in range(controls.shape[0]):
+            v += controls[m] * a[m, c]
+        s = slot[c]
+        if use_sag and s < n_dof:
+            v += gain * (w0 * cells[i, j, 0, s] + w1 * cells[i, j, 1, s]
+                         + w2 * cells[i, j, 2, s] + w3 * cells[i, j, 3, s])
+        if math.isfinite(v):
+            v = min(max(v, human_low[c]), human_high[c])
+        human[c] = v
+    held = 0
+    for k in range(targets.shape[0]):
+        v = offset[k]
+        for e in range(g_start[k], g_start[k + 1]):
+            v += g_gain[e] * human[g_curve[e]]
         if not math.isfinite(v):
             held += 1
             v = 0.5 * (low[k] + high[k]) if first else targets[k]
@@ -185,6 +243,11 @@ def warm_up() -> None:
                   f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
     expand_frame(f, np.zeros((2, 2)), f, f - 1.0, f + 1.0, f - 1.0, f + 1.0, np.zeros(2),
                  np.zeros(2, np.int64))
+    robot_servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]),
+                        0.0, np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, 0.5, 0.5,
+                        f - 1.0, f + 1.0, np.zeros(2), np.arange(3, dtype=np.int64),
+                        np.arange(2, dtype=np.int64), f + 1.0, f, f - 1.0, f + 1.0,
+                        np.zeros(2), 1.0, False, np.zeros(2))
     idx = np.zeros(2, np.intp)
     one_euro_step(f, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0)
     glove_controls(f, idx, f + 1.0, f, f - 1.0, f + 1.0, np.zeros(2), np.zeros(2), True,

@@ -49,12 +49,13 @@ def demo_recording() -> Path:
 
 
 def render_strip(frames_deg: Sequence[np.ndarray], joint_names: Sequence[str],
-                 out: str | Path) -> Path:
+                 out: str | Path, *, model: str | Path | None = None) -> Path:
     """An image strip of the simulated hand at these servo positions (needs EGL or
-    OSMesa); HandrigError when it cannot render."""
+    OSMesa), or of the robot ``model`` (an MJCF file) when given; HandrigError when it
+    cannot render."""
     from sim.render import render_strip as render
 
-    return Path(render(frames_deg, joint_names, out))
+    return Path(render(frames_deg, joint_names, out, model=model))
 
 
 def servo_bus(

@@ -12,6 +12,12 @@ The camera looks from ahead of the fingers on the thumb's side, a little above
 the back of the hand, and follows the hand. The thumb is drawn in its own
 colour (:data:`THUMB_RGBA`), the other fingers in skin tones, the palm and
 forearm darker, on a light background.
+
+With ``model`` (a robot rig's MJCF file, e.g. the LEAP hand) the robot is drawn
+instead: its joints are named by the rig's servos. A model shipped without meshes
+(the LEAP preset) shows its collision boxes: the palm, each finger's links and
+its fingertip as boxes, thumb bodies (``th_*``) in the thumb colour, fingertips
+(white material) light, the rest in :data:`ROBOT_RGBA`.
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,6 +37,8 @@ THUMB_RGBA = (0.93, 0.45, 0.16, 1.0)
 FINGER_RGBA = (0.87, 0.72, 0.62, 1.0)
 PALM_RGBA = (0.72, 0.55, 0.46, 1.0)
 FOREARM_RGBA = (0.58, 0.47, 0.42, 1.0)
+ROBOT_RGBA = (0.30, 0.32, 0.36, 1.0)
+TIP_RGBA = (0.92, 0.92, 0.90, 1.0)
 BACKGROUND = '<texture type="skybox" builtin="gradient" rgb1="0.96 0.96 0.97" ' \
              'rgb2="0.78 0.81 0.86" width="64" height="64"/>'
 
@@ -68,13 +77,15 @@ def render_strip(
     *,
     times_s: Sequence[float] | None = None,
     size: tuple[int, int] = (320, 240),
+    model: str | Path | None = None,
 ) -> Path:
     """Pose the puppet hand at each of ``frames_deg`` and save the tiles as one PNG.
 
     ``frames_deg``: joint angles in degrees, one array per frame, in
     ``joint_names`` order (the rig's servo order); other joints stay at zero.
     ``len(picked(len(frames_deg)))`` tiles are drawn. ``times_s``: each frame's
-    time, written on its tile.
+    time, written on its tile. ``model``: an MJCF file to draw instead of the puppet
+    hand (a robot rig's ``[robot].model``).
     """
     _renderer_backend()
     if not frames_deg:
@@ -86,50 +97,95 @@ def render_strip(
         raise RenderUnavailable(
             f"mujoco does not load with MUJOCO_GL={os.environ.get('MUJOCO_GL')}: {exc!r}; "
             "`make render-deps` installs the EGL/OSMesa libraries") from None
-    from sim.hand_model import hand_model_xml
+    if model is None:
+        from sim.hand_model import hand_model_xml
 
-    xml = hand_model_xml("ri").replace("<worldbody>", f"<asset>{BACKGROUND}</asset><worldbody>",
-                                       1)
-    model = mujoco.MjModel.from_xml_string(xml)
-    data = mujoco.MjData(model)
-    _colour(model, mujoco)
+        xml = hand_model_xml("ri")
+    else:
+        try:
+            xml = Path(model).read_text()
+        except OSError as exc:
+            raise RenderUnavailable(f"cannot read the robot model {model}: {exc}") from None
+    xml = xml.replace("<worldbody>", f"<asset>{BACKGROUND}</asset><worldbody>", 1)
+    try:
+        mj_model = mujoco.MjModel.from_xml_string(xml)
+    except ValueError as exc:
+        raise RenderUnavailable(f"MuJoCo cannot load {model or 'the hand model'}: {exc}"
+                                ) from None
+    data = mujoco.MjData(mj_model)
+    if model is None:
+        _colour(mj_model, mujoco)
+        palm = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, "riPalm")
+        hand_bodies = [i for i in range(mj_model.nbody) if i >= palm > 0]
+        distance, azimuth, elevation = 0.30, -150.0, -20.0
+    else:
+        _colour_robot(mj_model, mujoco)
+        hand_bodies = list(range(1, mj_model.nbody))
+        distance, azimuth, elevation = 0.40, 150.0, -35.0
+    return _draw(mj_model, data, mujoco, frames_deg, joint_names, labels, hand_bodies,
+                 (distance, azimuth, elevation), size, Path(out), all_groups=model is not None)
+
+
+def _draw(model: object, data: object, mujoco: object, frames_deg: Sequence[np.ndarray],
+          joint_names: Sequence[str], labels: list[str], hand_bodies: list[int],
+          view: tuple[float, float, float], size: tuple[int, int], out: Path, *,
+          all_groups: bool = False) -> Path:
+    """Pose ``model`` at each picked frame, draw it from ``view`` (distance, azimuth,
+    elevation) looking at the mean of ``hand_bodies``, and save the strip;
+    ``all_groups``: draw every geom group (a robot model's collision boxes too)."""
+    m: Any = model
+    d: Any = data
+    mj: Any = mujoco
     qadr = []
     for name in joint_names:
-        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
-        qadr.append(int(model.jnt_qposadr[jid]) if jid >= 0 else -1)
+        jid = mj.mj_name2id(m, mj.mjtObj.mjOBJ_JOINT, name)
+        qadr.append(int(m.jnt_qposadr[jid]) if jid >= 0 else -1)
     width, height = size
     try:
-        renderer = mujoco.Renderer(model, height, width)
+        renderer = mj.Renderer(m, height, width)
     except Exception as exc:
         raise RenderUnavailable(
             f"offscreen rendering is not available (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): "
             f"{exc}; `make render-deps` installs the EGL/OSMesa libraries"
         ) from None
-    palm = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "riPalm")
-    hand_bodies = [i for i in range(model.nbody) if i >= palm > 0]
-    cam = mujoco.MjvCamera()
-    # ahead of the fingers on the thumb's side, a little above the back of the hand
-    cam.distance = 0.30
-    cam.azimuth = -150.0
-    cam.elevation = -20.0
-    model.vis.headlight.ambient[:] = (0.42, 0.42, 0.42)
-    model.vis.headlight.diffuse[:] = (0.62, 0.62, 0.62)
-    model.vis.headlight.specular[:] = (0.1, 0.1, 0.1)
+    cam = mj.MjvCamera()
+    cam.distance, cam.azimuth, cam.elevation = view
+    opt = mj.MjvOption()
+    if all_groups:
+        opt.geomgroup[:] = 1
+    m.vis.headlight.ambient[:] = (0.42, 0.42, 0.42)
+    m.vis.headlight.diffuse[:] = (0.62, 0.62, 0.62)
+    m.vis.headlight.specular[:] = (0.1, 0.1, 0.1)
     images = []
     try:
         for i in picked(len(frames_deg)):
             frame = frames_deg[i]
-            data.qpos[:] = 0.0
+            d.qpos[:] = 0.0
             for adr, value in zip(qadr, frame, strict=True):
                 if adr >= 0 and np.isfinite(value):
-                    data.qpos[adr] = np.radians(value)
-            mujoco.mj_forward(model, data)
-            cam.lookat[:] = data.xpos[hand_bodies].mean(axis=0)
-            renderer.update_scene(data, camera=cam)
+                    d.qpos[adr] = np.radians(value)
+            mj.mj_forward(m, d)
+            cam.lookat[:] = d.xpos[hand_bodies].mean(axis=0)
+            renderer.update_scene(d, camera=cam, scene_option=opt)
             images.append(renderer.render().copy())
     finally:
         renderer.close()
-    return _save(images, labels, Path(out))
+    return _save(images, labels, out)
+
+
+def _colour_robot(model: object, mujoco: object) -> None:
+    """A robot model's thumb bodies (``th_*``) in the thumb colour, white geoms (the
+    fingertips) light, everything else dark grey."""
+    m: Any = model
+    for g in range(m.ngeom):
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY,  # type: ignore[attr-defined]
+                                 int(m.geom_bodyid[g])) or ""
+        white = bool(np.all(m.geom_rgba[g][:3] > 0.95))
+        if m.geom_matid[g] >= 0:
+            white = bool(np.all(m.mat_rgba[m.geom_matid[g]][:3] > 0.95))
+        rgba = THUMB_RGBA if body.startswith("th_") else TIP_RGBA if white else ROBOT_RGBA
+        m.geom_rgba[g] = rgba
+        m.geom_matid[g] = -1
 
 
 def _colour(model: object, mujoco: object) -> None:

@@ -6,6 +6,11 @@ through the glove emulator on a pty, the real serial glove reader, the real
 pipeline (calibration, One Euro filter, map expansion, sag, limits, slew) and the
 real Dynamixel driver into ``handrig sim-bus``'s MuJoCo puppet, with wire timing
 at the rig's baud rate. Prints a summary of what was measured.
+
+``--rig leap`` (a robot rig preset, or any robot rig file) runs the same path
+into the robot: the pipeline ends in the rig's retarget table, the emulated
+servos are the rig's (XC330-M288s at 4 Mbps for LEAP) and the puppet is the
+robot's MJCF model, which ``--render`` draws.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ import sys
 from typing import Any
 
 from handrig import simulator
-from handrig.app import build_parts, port_process
+from handrig.app import build_parts, port_process, robot_model
 from handrig.commands._numbers import positive_float, positive_int
 from handrig.errors import HandrigError
 from handrig.live import ExitSignals, LiveOptions, failed, print_result, run_live
@@ -29,6 +34,9 @@ def register(sub: Any) -> None:
         "demo", help="the embedded demo: a recorded glove drives the simulated puppet",
         description=__doc__,
     )
+    p.add_argument("--rig", default=None, metavar="NAME|FILE",
+                   help="rig preset (e.g. 'leap': the LEAP robot hand) or rig file "
+                   "(default config/rig.toml, the human puppet)")
     p.add_argument("--frames", type=positive_int, default=DEFAULT_FRAMES, metavar="N",
                    help=f"loop cycles to run (default {DEFAULT_FRAMES}, 15 s at 200 Hz)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
@@ -50,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
                 print(text, flush=True)
 
     recording = args.recording or str(simulator.demo_recording())
-    parts = build_parts()
+    parts = build_parts(args.rig)
     log(f"demo: {recording} -> glove emulator -> pipeline -> Dynamixel driver -> MuJoCo puppet")
     with ExitSignals() as signals:  # a Ctrl-C while the glove emulator starts unwinds
         try:
@@ -68,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
         raise result.error
     if args.render and result.started:
         try:
-            path = simulator.render_strip(result.snapshots, result.joint_names, args.render)
+            path = simulator.render_strip(result.snapshots, result.joint_names, args.render,
+                                          model=robot_model(parts.rig_config))
             result.summary["render"] = str(path)
             log(f"rendered {len(result.snapshots)} frames of the simulated hand to {path}")
         except HandrigError as exc:

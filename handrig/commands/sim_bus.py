@@ -18,7 +18,7 @@ from typing import Any, TextIO
 
 from handrig.commands._numbers import whole_int
 from handrig.errors import ConfigError, HandrigError
-from handrig.rigconfig import load_rig_config
+from handrig.robotrig import load_rig
 
 REPORT_EVERY_S = 10.0
 
@@ -34,8 +34,9 @@ def register(sub: Any) -> None:
     who.add_argument("--servos", type=whole_int, metavar="N",
                      help="servos with IDs 1..N (default: the rig's servos)")
     who.add_argument("--ids", metavar="LIST", help="servo IDs, e.g. '1,2,5' or '1-16,20'")
-    p.add_argument("--rig", default=None, metavar="FILE",
-                   help="rig config (default config/rig.toml): which ID drives which joint")
+    p.add_argument("--rig", default=None, metavar="NAME|FILE",
+                   help="rig preset (e.g. 'leap': the LEAP hand's model) or rig file "
+                   "(default config/rig.toml): which ID drives which joint")
     p.add_argument("--model", default=None, metavar="NAME",
                    help="servo model for every servo (XL330-M288, XC330-T288, XM430-W350; "
                    "default: the rig's)")
@@ -83,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from firmware_protocol.dynamixel import MODELS
     from handrig import simulator
 
-    rig = load_rig_config(args.rig)
+    rig = load_rig(args.rig)
     ids: list[int] | None = None
     if args.servos is not None:
         if not 1 <= args.servos <= 253:

@@ -1,9 +1,14 @@
 """Commissioning: what ``connect()`` checks and sets on every servo before any cycle.
 
 Pings each configured servo and checks its model; sets Status Return Level 2,
-Return Delay Time 0 and position mode (torque off while doing so); clears the
-Bus Watchdog and handles a pending hardware error; checks or sets the USB
-latency timer; probes Fast Sync Read. Each finding is one line in ``notes``.
+then, with torque off, the rig file's ``[servo_settings]`` for that servo
+(:meth:`handrig.rigconfig.RigConfig.servo_settings_for`): Return Delay Time,
+Operating Mode and Current Limit (EEPROM), then Goal Current and Position P/D
+Gain, each only when the rig sets it. Every value is read first, written when it
+differs, and read back: a servo that keeps another value is a DeviceError naming
+the servo, the register, the value wanted and the value read. Then clears the Bus
+Watchdog and handles a pending hardware error; checks or sets the USB latency
+timer; probes Fast Sync Read. Each finding is one line in ``notes``.
 """
 
 from __future__ import annotations
@@ -12,20 +17,49 @@ from collections.abc import Callable
 
 from handrig.clock import Clock
 from handrig.errors import DeviceError, DeviceTimeoutError
-from handrig.rigconfig import MODEL_NUMBERS
+from handrig.rigconfig import MODEL_NUMBERS, RETURN_DELAY_UNIT_US, RigConfig
 from handrig.servo.bus import ServoState
 from handrig.servo.codec import INST_PING, INST_WRITE, build_instruction, u16
 from handrig.servo.fast_read import FastSyncRead
 from handrig.servo.faults import FaultHandler
 from handrig.servo.link import COMMAND_ATTEMPTS, COMMAND_TIMEOUT_S, Link
 from handrig.servo.readings import ReadPlan
-from handrig.servo.registers import OPERATING_MODE_POSITION, STATUS_RETURN_ALL, Reg
+from handrig.servo.registers import (
+    OPERATING_MODE_CURRENT_BASED_POSITION,
+    OPERATING_MODE_EXTENDED_POSITION,
+    OPERATING_MODE_POSITION,
+    STATUS_RETURN_ALL,
+    Reg,
+)
 from handrig.servo.roster import Roster
 
-SETTINGS: tuple[tuple[Reg, int, str], ...] = (
-    (Reg.RETURN_DELAY_TIME, 0, "return delay 0 us"),
-    (Reg.OPERATING_MODE, OPERATING_MODE_POSITION, "position control mode"),
-)
+MODE_NAMES: dict[int, str] = {
+    OPERATING_MODE_POSITION: "position control mode",
+    OPERATING_MODE_EXTENDED_POSITION: "extended position control mode",
+    OPERATING_MODE_CURRENT_BASED_POSITION: "current-based position control mode",
+}
+
+
+def servo_settings(rig: RigConfig, index: int) -> tuple[tuple[Reg, int, str], ...]:
+    """What commissioning writes to the servo at rig index ``index``, in order:
+    ``(register, value, why)``; EEPROM items first (written with torque off)."""
+    servo = rig.servos[index]
+    s = rig.servo_settings_for(servo.id)
+    delay = s.return_delay_us // RETURN_DELAY_UNIT_US
+    out: list[tuple[Reg, int, str]] = [
+        (Reg.RETURN_DELAY_TIME, delay, f"return delay {s.return_delay_us} us"),
+        (Reg.OPERATING_MODE, s.operating_mode,
+         MODE_NAMES.get(s.operating_mode, f"mode {s.operating_mode}")),
+    ]
+    current = s.current_limit_units(servo.model)
+    if current is not None:
+        out.append((Reg.CURRENT_LIMIT, current, f"current limit {s.current_limit_ma} mA"))
+        out.append((Reg.GOAL_CURRENT, current, f"goal current {s.current_limit_ma} mA"))
+    if s.position_p_gain is not None:
+        out.append((Reg.POSITION_P_GAIN, s.position_p_gain, "the rig's position P gain"))
+    if s.position_d_gain is not None:
+        out.append((Reg.POSITION_D_GAIN, s.position_d_gain, "the rig's position D gain"))
+    return tuple(out)
 
 
 class Commissioner:
@@ -57,7 +91,7 @@ class Commissioner:
         self.check_servos()
         for i in range(self.roster.n):
             self.configure(i)
-        self.notes.append("return delay 0, position mode, status level 2, watchdog cleared: done")
+        self.notes.append(self.settings_note())
         self.probe_fast_sync_read()
         self.read_every_servo("finish commissioning")
 
@@ -111,16 +145,38 @@ class Commissioner:
         link = self.link
         self.ensure_status_return_level(index)
         link.write_register(index, Reg.TORQUE_ENABLE, 0)
-        for reg, want, why in SETTINGS:
+        for reg, want, why in servo_settings(self.roster.rig, index):
             value = link.read_register(index, reg)
-            if value != want:
-                link.write_register(index, reg, want)
-                self.notes.append(
-                    f"{self.roster.describe(index)}: {reg.name} {value} -> {want} ({why})")
+            if value == want:
+                continue
+            link.write_register(index, reg, want)
+            now = link.read_register(index, reg)
+            if now != want:
+                raise DeviceError(
+                    f"{self.roster.describe(index)} {self.roster.where()}: {reg.name} "
+                    f"(address {reg.address}) reads {now} after writing {want} ({why}): "
+                    "check the value against the servo model's range and the rig's "
+                    "[servo_settings], or set it with DYNAMIXEL Wizard")
+            self.notes.append(
+                f"{self.roster.describe(index)}: {reg.name} {value} -> {want} ({why})")
         link.write_register(index, Reg.BUS_WATCHDOG, 0)
         hw = link.read_register(index, Reg.HARDWARE_ERROR_STATUS)
         if hw:
             self.faults.hardware_error(index, hw)
+
+    def settings_note(self) -> str:
+        """The one line saying what every servo was set to."""
+        rig = self.roster.rig
+        first = rig.servo_settings_for(rig.servos[0].id) if rig.servos else None
+        mode = (MODE_NAMES.get(first.operating_mode, "position control mode")
+                .replace(" control", "") if first else "")
+        delay = first.return_delay_us if first else 0
+        extra = ""
+        st = rig.servo_settings
+        if any(v is not None for v in (st.current_limit_ma, st.position_p_gain,
+                                       st.position_d_gain)) or st.groups:
+            extra = ", current limit and P/D gains of [servo_settings] checked"
+        return f"return delay {delay}, {mode}, status level 2, watchdog cleared{extra}: done"
 
     def ensure_status_return_level(self, index: int) -> None:
         """Status Return Level 2 (a status for every instruction), which the driver needs.

@@ -1,0 +1,110 @@
+"""The servo-target step (one compiled call a cycle): the human rig, the LEAP hand with its
+retarget step, and the same LEAP curves without the step."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from handrig import app
+from handrig import pose_kernels as kernels
+from handrig.pipeline import PosePipeline
+
+FRAMES = 20000
+
+
+def _time(step: Callable[[int], object], frames: int = FRAMES) -> tuple[float, float]:
+    for i in range(1000):
+        step(i)
+    clock = time.perf_counter_ns
+    times = np.empty(frames)
+    for i in range(frames):
+        t0 = clock()
+        step(i)
+        times[i] = clock() - t0
+    return float(np.median(times)) / 1e3, float(np.percentile(times, 99)) / 1e3
+
+
+def _inputs(pl: PosePipeline) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    means = pl.control_means_deg
+    return np.ascontiguousarray(means + rng.normal(0.0, 10.0, size=(256, len(means))))
+
+
+def _pipeline_step(pl: PosePipeline) -> Callable[[int], object]:
+    inputs = _inputs(pl)
+    return lambda i: pl.servo_targets(inputs[i & 255], -60.0, 20.0, 0.005)
+
+
+def _without_the_step(pl: PosePipeline) -> Callable[[int], object]:
+    """The kernel of a human rig on the curves the LEAP retarget reads: the LEAP path
+    minus the retarget step."""
+    robot = pl.robot_path
+    assert robot is not None
+    path, tables = robot.human, robot.human.sag
+    inputs = _inputs(pl)
+    u = len(robot.curves)
+    targets, raw = np.zeros(u), np.zeros(u)
+
+    def step(i: int) -> object:
+        return kernels.servo_targets(
+            inputs[i & 255], path.a, path.b, tables.inclination_axis_deg,
+            tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
+            path.sag_slot, float(path.sag_gain), -60.0, 20.0, robot.human_low,
+            robot.human_high, targets, 3.6, False, raw)
+    return step
+
+
+def _with_the_step(pl: PosePipeline) -> Callable[[int], object]:
+    """The LEAP kernel called directly (no pipeline method around it)."""
+    robot = pl.robot_path
+    assert robot is not None
+    path, tables = robot.human, robot.human.sag
+    inputs = _inputs(pl)
+    human = np.zeros(len(robot.curves))
+    n = len(pl.servo_joints)
+    targets, raw = np.zeros(n), np.zeros(n)
+
+    def step(i: int) -> object:
+        return kernels.robot_servo_targets(
+            inputs[i & 255], path.a, path.b, tables.inclination_axis_deg,
+            tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
+            path.sag_slot, float(path.sag_gain), -60.0, 20.0, robot.human_low,
+            robot.human_high, human, robot.gain_start, robot.gain_curve, robot.gain_value,
+            robot.offset, pl.servo_low, pl.servo_high, targets, 3.6, False, raw)
+    return step
+
+
+def _leap_with_sag(parts: app.RigParts) -> PosePipeline:
+    rig, old = parts.rig_config, parts.pipeline
+    return PosePipeline(
+        parts.expander, parts.sag, old.servo_joints,
+        servo_limits_deg=np.array([[s.min_deg, s.max_deg] for s in rig.servos]),
+        slew_deg_s=rig.loop.slew_deg_s, sag_gain=rig.loop.sag_gain,
+        left_hand=rig.loop.left_hand, control_means_deg=old.control_means_deg,
+        left_forearm_deg=rig.loop.left_forearm_deg, retarget=old.retarget)
+
+
+def main() -> None:
+    human = app.build_parts().pipeline
+    parts = app.build_parts("leap")
+    leap = parts.pipeline
+    assert leap.robot_path is not None
+    u = len(leap.robot_path.curves)
+    rows = (
+        (f"human rig, {len(human.servo_joints)} servos (sag on), pipeline call",
+         _pipeline_step(human)),
+        (f"LEAP, {len(leap.servo_joints)} servos: {u} curves + retarget (sag off), "
+         "pipeline call", _pipeline_step(leap)),
+        (f"LEAP, {u} curves + retarget, sag switched on, pipeline call",
+         _pipeline_step(_leap_with_sag(parts))),
+        (f"LEAP kernel with the retarget step ({u} curves -> {len(leap.servo_joints)} "
+         "joints, sag off), kernel call", _with_the_step(leap)),
+        (f"the same {u} curves without the retarget step (sag off), kernel call",
+         _without_the_step(leap)),
+    )
+    for label, step in rows:
+        med, p99 = _time(step)
+        print(f"servo targets, {label}: median {med:.2f} us, p99 {p99:.2f} us")
