@@ -7,6 +7,7 @@ ServoBus); the pipeline, map, sag grid and calibration are the real shipped ones
 from __future__ import annotations
 
 import contextlib
+import threading
 from collections.abc import Callable, Iterator
 
 import numpy as np
@@ -523,3 +524,29 @@ def test_the_profile_times_each_stage_outside_the_loop_code(parts_factory):
                             "write"]
     assert stages["write"]["p50"] == pytest.approx(70.0, rel=0.02)
     assert stats.latency_us(50) == pytest.approx(70.0, abs=1.0)  # the profile adds nothing
+
+
+def test_keys_from_another_thread_relax_resume_and_e_stop_without_easing(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    glove = ScriptedGlove(clock, lambda t: MID)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock)
+    modes: list[Mode] = []
+
+    def keys(t_s: float, pose: np.ndarray) -> None:
+        n = len(bus.goals)
+        modes.append(rig.mode)
+        key = {20: rig.toggle_relax, 300: rig.toggle_relax, 400: rig.estop}.get(n)
+        if key is not None:  # pressed on the key thread, acted on by the loop
+            thread = threading.Thread(target=key)
+            thread.start()
+            thread.join()
+    rig.outputs = (keys,)
+    stats = rig.run(frames=10_000)
+    assert Mode.RELAXING in modes[20:300] and modes[299] is Mode.RELAXING
+    np.testing.assert_allclose(bus.goals[299], relaxed_targets(parts), atol=1e-6)
+    assert Mode.RESUMING in modes[300:400] and modes[-2] is Mode.RUNNING
+    assert stats.estop and stats.stop_reason == "e-stop key" and stats.resumes == 1
+    assert stats.relax_events == 0
+    assert stats.frames <= 402  # ended within a cycle or two: no easing
