@@ -550,3 +550,24 @@ def test_keys_from_another_thread_relax_resume_and_e_stop_without_easing(parts_f
     assert stats.estop and stats.stop_reason == "e-stop key" and stats.resumes == 1
     assert stats.relax_events == 0
     assert stats.frames <= 402  # ended within a cycle or two: no easing
+
+
+def test_housekeeping_runs_midway_between_state_reads_with_a_deadline(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+
+    class KeepingBus(RecordingBus):
+        def __init__(self, *args):
+            super().__init__(*args)
+            self.calls: list[tuple[int, float, float]] = []  # (writes so far, now, deadline)
+
+        def housekeeping(self, deadline_s: float) -> bool:
+            self.calls.append((len(self.goals), self.clock.now(), deadline_s))
+            return True
+
+    bus = KeepingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)  # read_every 4
+    rig.run(frames=40)
+    writes = [w for w, _, _ in bus.calls]
+    assert writes[:3] == [3, 7, 11]  # cycles 2, 6, 10: between the reads of 0, 4, 8
+    assert all(now < deadline < now + 0.005 for _, now, deadline in bus.calls)
