@@ -40,11 +40,11 @@ from handrig.glove_calibration import (
 from handrig.glove_recording import read_glove_recording
 from handrig.loop.stats import RunStats
 from handrig.orientation import ForearmOrientation
+from handrig.paths import config_file
 from handrig.pipeline import PosePipeline
 from handrig.realtime import helper_env
 from handrig.rig import Rig
 from handrig.rigconfig import RigConfig, load_rig_config
-from handrig.paths import config_file
 from handrig.sag import SagGrid, default_grid_path
 from handrig.servo import DynamixelBus
 from handrig.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
@@ -62,7 +62,8 @@ def _resolve(base: Path, value: str, default: Path, *, rig_file: Path | None = N
     p = Path(value)
     p = p if p.is_absolute() else base / p
     if rig_file is not None and not p.is_file():
-        relative = "" if Path(value).is_absolute() else f" (relative to the rig file's folder {base})"
+        relative = ("" if Path(value).is_absolute()
+                    else f" (relative to the rig file's folder {base})")
         raise ConfigError(f"no such file: {p}{relative}", file=str(rig_file), key=key,
                           value=value, allowed="an existing file, or empty for the default")
     return p
@@ -422,7 +423,7 @@ def clamped_joints(pipeline: Any, top: int = TOP_CLAMPED) -> list[dict[str, Any]
     """The servo joints whose targets were clamped most often (most first, none at 0)."""
     counts = np.asarray(getattr(pipeline, "servo_clamps_by_servo", ()), dtype=np.int64)
     joints = tuple(getattr(pipeline, "servo_joints", ()))
-    order = np.argsort(-counts, kind="stable")[:top] if counts.size else []
+    order: list[int] = np.argsort(-counts, kind="stable")[:top].tolist() if counts.size else []
     return [{"joint": joints[i], "clamps": int(counts[i])} for i in order if counts[i] > 0]
 
 

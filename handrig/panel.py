@@ -60,7 +60,8 @@ HARDWARE_ERROR_LETTERS: tuple[tuple[int, str], ...] = (
 """Hardware Error Status bits as the panel's letters (the legend is on the panel)."""
 
 MODE_STYLES = {"running": "bold green", "waiting": "bold cyan", "relaxing": "bold yellow",
-               "resuming": "bold cyan", "stopping": "bold red", "e-stop": "bold white on red", "stopped": "bold"}
+               "resuming": "bold cyan", "stopping": "bold red", "e-stop": "bold white on red",
+               "stopped": "bold"}
 
 
 # -- the snapshot --------------------------------------------------------------------

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -178,7 +179,7 @@ def test_temperature_follows_the_current_within_a_minute() -> None:
     for _ in range(60):
         s.heat(1.0)
         temps.append(s.temperature_c)
-    assert all(b > a for a, b in zip(temps, temps[1:], strict=False))  # rising with current
+    assert all(b > a for a, b in itertools.pairwise(temps))  # rising with current
     target = idle_temperature_c(5.0) + 0.3**2 * (5.0 / 1.47) * THERMAL_RESISTANCE_K_PER_W
     assert temps[-1] == pytest.approx(30 + (target - 30) * (1 - math.exp(-1.0)), rel=1e-6)
     assert s.get(Reg.PRESENT_TEMPERATURE) == round(temps[-1]) > 30
