@@ -6,7 +6,7 @@ servo step (or an easing), the write. Everything else (latency, the full pose fo
 the outputs and the counters behind it, the outputs, the state read) comes after
 the write. Every ``read_every`` slots the servos' present state is read back,
 with a deadline that leaves the next cycle its time; midway between those reads
-the bus may do its housekeeping reads (temperatures, currents) in the same way.
+the bus may do its housekeeping reads (watchdogs, temperatures) in the same way.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ class Cycle:
         self.orientation: Callable[[Any], tuple[float, float]] = orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
-        # temperatures and currents, read midway between state reads (a bus may not have it)
+        # watchdogs and temperatures, read midway between state reads (a bus may not have it)
         self.housekeeping: Callable[[float], bool] | None = getattr(bus, "housekeeping", None)
         self._housekeeping_slot = self.read_every // 2 if self.read_every > 1 else -1
         n = len(pipeline.servo_joints)

@@ -329,10 +329,10 @@ class DynamixelBus(ServoBus):
             return self.reader.read(deadline_s)
 
     def housekeeping(self, deadline_s: float) -> bool:
-        """Between state reads: the Bus Watchdogs, then the temperatures (or, every other
-        time with position-only reads, the currents) when ``temperature_every`` reads
-        have passed and the wire can carry them by ``deadline_s``. The next
-        :meth:`read_state` returns what was read. True if something was read."""
+        """Between state reads: the Bus Watchdogs, then the temperatures, when
+        ``temperature_every`` reads have passed and the wire can carry them by
+        ``deadline_s``. The next :meth:`read_state` returns what was read. True if
+        they ran."""
         with self._lock:
             return self.reader.housekeeping(deadline_s)
 

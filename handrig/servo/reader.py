@@ -28,8 +28,8 @@ class StateReader:
 
     ``temperature_every``: every that many reads, when the deadline leaves time,
     the Bus Watchdogs (torque on) and then the temperatures are read too (0: never).
-    When the present-state read carries positions only, every other such slot reads
-    Present Current instead of the temperatures, so a panel shows both.
+    :meth:`housekeeping` does the same between state reads (the loop calls it in
+    cycles without a read, where the wire has room for it).
     """
 
     def __init__(
@@ -54,9 +54,6 @@ class StateReader:
         baud = link.budget.baud
         # a temperature Fast Sync Read: request 14 + N bytes, reply 8 + 5N
         self._temperature_wire_s = wire_time_s(22 + 6 * n, baud) + 0.0005
-        # a current Fast Sync Read: request 14 + N bytes, reply 8 + 6N
-        self._current_wire_s = wire_time_s(22 + 7 * n, baud) + 0.0005
-        self._current_turn = True  # the last slot read currents: the first reads temperatures
         # a read's default budget is never shorter than one reply on the wire plus slack
         self._min_budget_s = 1.5 * wire_time_s(read_bytes(n, plan.data_len, True), baud) + 0.001
         self.last_whole = False
@@ -164,15 +161,6 @@ class StateReader:
         if self.faults.torque_on and self.faults.watchdog_ms:
             self.faults.check_watchdogs(deadline_s)
             if deadline_s - self.clock.now() <= self._temperature_wire_s:
-                return
-        if self.plan.fields == "position":
-            self._current_turn = not self._current_turn
-            if self._current_turn:
-                if deadline_s - self.clock.now() > self._current_wire_s:
-                    currents, ma_per_unit = self.readings.currents_ma, self.sweep.roster.scale[3]
-                    for i, value in enumerate(self.sweep.read(Reg.PRESENT_CURRENT, deadline_s)):
-                        if value is not None:
-                            currents[i] = value * ma_per_unit[i]
                 return
         temps = self.readings.temperatures_c
         for i, value in enumerate(self.sweep.read(Reg.PRESENT_TEMPERATURE, deadline_s)):

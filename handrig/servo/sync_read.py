@@ -59,8 +59,8 @@ class SyncRead:
 
 
 class RegisterSweep:
-    """A control-table item (one or two bytes: temperature, current) of every servo in
-    one request (Fast Sync Read, or Sync Read after a fallback)."""
+    """A one-byte control-table item of every servo in one request (Fast Sync Read,
+    or Sync Read after a fallback)."""
 
     def __init__(self, roster: Roster, link: Link, plan: ReadPlan, stats: BusStats) -> None:
         self.roster = roster
@@ -81,22 +81,21 @@ class RegisterSweep:
         return out
 
     def _fast(self, reg: Reg, deadline: float) -> list[int | None]:
-        r, size = self.roster, reg.size
-        self.link.send(codec.read_request(codec.INST_FAST_SYNC_READ, reg.address, size,
-                                          r.ids_bytes))
-        raw = self.link.read_reply(codec.fast_reply_len(size, r.n), deadline)
+        r = self.roster
+        self.link.send(codec.read_request(codec.INST_FAST_SYNC_READ, reg.address, 1, r.ids_bytes))
+        raw = self.link.read_reply(codec.fast_reply_len(1, r.n), deadline)
         codec.fast_sync_check(np.frombuffer(raw, np.uint8), np.frombuffer(r.ids_bytes, np.uint8),
-                              size, self._valid)
+                              1, self._valid)
         out: list[int | None] = [None] * r.n
         for i in np.flatnonzero(self._valid).tolist():
-            err, _, data = codec.fast_block(raw, i, size)
+            err, _, data = codec.fast_block(raw, i, 1)
             if not err & 0x7F:
                 out[i] = reg.decode(data)
         return out
 
     def _sync(self, reg: Reg, deadline: float) -> list[int | None]:
-        r, size = self.roster, reg.size
-        self.link.send(codec.read_request(codec.INST_SYNC_READ, reg.address, size, r.ids_bytes))
+        r = self.roster
+        self.link.send(codec.read_request(codec.INST_SYNC_READ, reg.address, 1, r.ids_bytes))
         out: list[int | None] = [None] * r.n
         for _ in range(r.n):
             packet = self.link.transport.read_packet(deadline)
@@ -108,6 +107,6 @@ class RegisterSweep:
                 self.stats.crc_errors += 1
                 continue
             index = r.index_of_id.get(status.servo_id)
-            if index is not None and len(status.params) >= size and not status.error & 0x7F:
-                out[index] = reg.decode(status.params[:size])
+            if index is not None and status.params and not status.error & 0x7F:
+                out[index] = reg.decode(status.params[:1])
         return out

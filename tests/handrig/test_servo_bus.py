@@ -794,31 +794,6 @@ def test_after_a_failed_read_the_wait_for_a_quiet_line_counts_against_the_deadli
     assert not bus.read_state(bus.clock.now() + wire_s + 0.5 * bus.reply_gap_s).stale.any()
 
 
-@pytest.mark.parametrize("fast", [True, False], ids=["fast", "sync"])
-def test_position_only_reads_get_currents_every_other_housekeeping_slot(
-        sim: SimBus, fast: bool) -> None:
-    b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, temperature_every=1,
-                     read_fields="position")
-    b.connect()
-    try:
-        b.use_fast_sync_read = fast
-        with sim.lock:
-            for k, s in enumerate(sim.servos):
-                # the puppet's physics sets the current; the kinematic motion would zero it
-                s.advance = lambda dt_s: None  # type: ignore[method-assign]
-                s.set_motion(s.motor_ticks, 0.0, 40.0 * (k + 1))
-        inst = 0x8A if fast else 0x82
-        before = sim.stats.by_instruction[inst]
-        states = [b.read_state(b.clock.now() + 0.05) for _ in range(4)]
-        # four state reads, each with one housekeeping read: temperatures, currents, ...
-        assert sim.stats.by_instruction[inst] - before == 8
-        directions = np.array([s.direction for s in small_rig().servos])
-        np.testing.assert_allclose(states[-1].currents_ma * directions,
-                                   40.0 * np.arange(1, 7), atol=1.0)
-        assert np.isfinite(states[-1].temperatures_c).all()
-    finally:
-        b.close()
-
 
 def test_housekeeping_between_reads_when_due_and_when_the_wire_has_room(sim: SimBus) -> None:
     b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, temperature_every=2)
