@@ -259,7 +259,8 @@ class _Session:
         return None
 
     def _rig_log(self, text: str) -> None:
-        """The rig's lines: above the panel while it is up, else to the session's log."""
+        """The rig's lines: above the panel while it is up on a terminal, else to the
+        session's log."""
         panel = self.panel
         if panel is not None:
             with contextlib.suppress(OSError, ValueError):
@@ -280,9 +281,15 @@ class _Session:
                 stop=lambda: rig.request_stop("q pressed"), estop=rig.estop,
                 on_error=lambda exc: self._rig_log(f"key failed: {exc}"))
         snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None)
-        panel = LivePanel(snapshot, console=show_console(), header=header)
+        console = show_console()
+        if not console.is_terminal:  # plain status lines there; the log stays where it was
+            for line in header:
+                self.log(line)
+            header = []
+        panel = LivePanel(snapshot, console=console, header=header)
         with panel:
-            self.panel = panel
+            if console.is_terminal:
+                self.panel = panel
             try:
                 if keys is not None:
                     with keys.start():
