@@ -32,26 +32,42 @@ from handrig.config import CONFIG_DIR, load_joint_limits
 from handrig.errors import ConfigError, DeviceError
 from handrig.expand import Expander
 from handrig.glove import GloveSample, GloveSource, ReplayGlove, SerialGlove
-from handrig.glove_calibration import GloveConfig, GloveControls, load_glove_config
+from handrig.glove_calibration import (
+    GloveConfig,
+    GloveControls,
+    default_glove_path,
+    load_glove_config,
+)
 from handrig.glove_recording import read_glove_recording
 from handrig.loop.stats import RunStats
 from handrig.orientation import ForearmOrientation
+from handrig.paths import config_file
 from handrig.pipeline import PosePipeline
 from handrig.realtime import helper_env
 from handrig.rig import Rig
 from handrig.rigconfig import RigConfig
-from handrig.sag import SagGrid
+from handrig.sag import SagGrid, default_grid_path
 from handrig.servo import DynamixelBus
 from handrig.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 
 FloatArray = NDArray[np.float64]
 
 
-def _resolve(base: Path, value: str, default: Path) -> Path:
+def _resolve(base: Path, value: str, default: Path, *, rig_file: Path | None = None,
+             key: str = "") -> Path:
+    """``value`` of the rig file's ``key`` as a path (relative: to the rig file's folder
+    ``base``), ``default`` when empty; a named file that is not there is a ConfigError
+    saying which key pointed there."""
     if not value:
         return default
     p = Path(value)
-    return p if p.is_absolute() else base / p
+    p = p if p.is_absolute() else base / p
+    if rig_file is not None and not p.is_file():
+        relative = ("" if Path(value).is_absolute()
+                    else f" (relative to the rig file's folder {base})")
+        raise ConfigError(f"no such file: {p}{relative}", file=str(rig_file), key=key,
+                          value=value, allowed="an existing file, or empty for the default")
+    return p
 
 
 @dataclass
@@ -66,6 +82,7 @@ class RigParts:
     pipeline: PosePipeline
     controls: GloveControls
     orientation: ForearmAngles
+    glove_file: Path | None = None  # where glove_config was read from
 
 
 class ForearmAngles:
@@ -101,21 +118,23 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
     """Load the rig, glove, map and grid configs and build the pose pipeline.
 
     ``rig_file``: a rig file or a preset name (``"leap"``: ``config/rigs/leap.toml``);
-    None is ``config/rig.toml``. A robot rig's pipeline ends in its retarget table, with
+    None is the user's ``rig.toml`` (:func:`handrig.paths.config_file`), else the
+    installed ``config/rig.toml``. A robot rig's pipeline ends in its retarget table, with
     the rig's effective sag gain (off unless ``[robot].sag`` is true)."""
-    rig_path = robotrig.rig_path(rig_file)
+    rig_path = robotrig.rig_path(rig_file) if rig_file else config_file("rig.toml")
     rig = robotrig.load_rig(rig_path)
     retarget = (robotrig.robot_retarget(rig) if isinstance(rig, robotrig.RobotRigConfig)
                 else None)
     base = rig_path.resolve().parent
     loop = rig.loop
     glove_path = Path(glove_file) if glove_file else _resolve(
-        base, loop.glove, CONFIG_DIR / "glove.toml")
+        base, loop.glove, default_glove_path(), rig_file=rig_path, key="loop.glove")
     glove_cfg = load_glove_config(glove_path)
     limits = load_joint_limits()
-    expander = Expander.from_file(_resolve(base, loop.map, CONFIG_DIR / "maps" / "default.toml"),
-                                  limits)
-    sag = SagGrid.load(_resolve(base, loop.sag_grid, CONFIG_DIR / "sag_grid.npz"))
+    expander = Expander.from_file(_resolve(base, loop.map, CONFIG_DIR / "maps" / "default.toml",
+                                           rig_file=rig_path, key="loop.map"), limits)
+    sag = SagGrid.load(_resolve(base, loop.sag_grid, default_grid_path(), rig_file=rig_path,
+                                key="loop.sag_grid"))
     pipeline = PosePipeline(
         expander, sag, [s.joint for s in rig.servos],
         servo_limits_deg=np.array([[s.min_deg, s.max_deg] for s in rig.servos]),
@@ -125,7 +144,7 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
     )
     controls = GloveControls.from_config(glove_cfg, expander.controls)
     return RigParts(rig, rig_path, glove_cfg, expander, sag, pipeline, controls,
-                    ForearmAngles(glove_cfg))
+                    ForearmAngles(glove_cfg), glove_path)
 
 
 def robot_model(rig: RigConfig) -> str | None:
@@ -133,15 +152,65 @@ def robot_model(rig: RigConfig) -> str | None:
     return rig.robot.model if isinstance(rig, robotrig.RobotRigConfig) and rig.robot else None
 
 
-def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock) -> GloveSource:
-    """``PORT``, ``opengloves:PORT`` or ``replay:FILE`` (None: the port in glove.toml)."""
+REPLAY_SUFFIXES = (".csv", ".txt")  # what a glove recording is usually called
+
+
+def glove_spec(spec: str | None, cfg: GloveConfig, glove_file: Path | None = None) -> str:
+    """The glove a run opens: ``spec`` (``--glove``), else the port in the glove file;
+    checked without opening anything. ConfigError naming ``--glove`` or the glove
+    file's ``glove.port``, with the fix: a recording given as a port (it would fail
+    with the terminal's ``Inappropriate ioctl for device``), a port or recording that
+    is not there, no port at all."""
     if spec is None or spec == "":
         if not cfg.glove.port:
             raise ConfigError(
                 "no glove port given", key="glove.port",
-                allowed="pass --glove PORT (or replay:FILE) or set [glove] port in glove.toml",
-            )
+                file=str(glove_file) if glove_file is not None else "glove.toml",
+                allowed="pass --glove PORT (or replay:FILE.csv), or set [glove] port "
+                "in this file")
         spec = cfg.glove.port if cfg.glove.format == "frames" else f"opengloves:{cfg.glove.port}"
+    if spec.startswith("replay:"):
+        path = Path(spec.removeprefix("replay:"))
+        if not path.is_file():
+            raise ConfigError(f"glove recording not found: {path}", key="--glove", value=spec,
+                              allowed="replay:FILE with an existing recording "
+                              "(`handrig record` or `handrig sim-glove --save` make one)")
+        return spec
+    port = Path(spec.removeprefix("opengloves:"))
+    if port.is_file() or (port.suffix.lower() in REPLAY_SUFFIXES and not port.exists()):
+        raise ConfigError("a file, not a serial port", key="--glove", value=spec,
+                          allowed=f"a serial port such as /dev/ttyUSB0; to play a "
+                          f"recording pass --glove replay:{port}")
+    if port.is_absolute() and not port.exists():
+        raise ConfigError(f"no such port: {port}", key="--glove", value=spec,
+                          allowed="the glove's serial port (plugged in? `ls /dev/ttyUSB* "
+                          "/dev/ttyACM*`), or replay:FILE.csv")
+    return spec
+
+
+def check_outputs(vmc: str | None, record: str | None) -> None:
+    """``--vmc`` and ``--record`` checked before any device is opened: ConfigError naming
+    the flag (a VMC target without its port, a recording suffix that is neither .csv nor
+    .bvh)."""
+    if vmc:
+        from handrig.outputs.vmc import DEFAULT_PORT, parse_host_port
+
+        if ":" not in vmc:
+            raise ConfigError("no port given", key="--vmc", value=vmc,
+                              allowed=f"HOST:PORT, e.g. {vmc}:{DEFAULT_PORT} (VMC's usual port)")
+        parse_host_port(vmc)
+    if record:
+        suffix = Path(record).suffix.lower()
+        if suffix not in (".csv", ".bvh"):
+            raise ConfigError(f"unknown recording suffix {suffix or '(none)'!r}", key="--record",
+                              value=record, allowed="a file name ending in .csv or .bvh")
+
+
+def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
+               glove_file: Path | None = None) -> GloveSource:
+    """``PORT``, ``opengloves:PORT`` or ``replay:FILE`` (None: the port in glove.toml),
+    checked first (:func:`glove_spec`)."""
+    spec = glove_spec(spec, cfg, glove_file)
     if spec.startswith("replay:"):
         return ReplayGlove(read_glove_recording(spec.removeprefix("replay:")), clock)
     if spec.startswith("opengloves:"):
@@ -341,9 +410,70 @@ def stop_process(proc: subprocess.Popen[str]) -> str:
     return (out or "") + (err or "")
 
 
-def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: bool | None
+FAULT_WORDS: dict[str, str] = {
+    "timeouts": "read timeouts",
+    "retries": "read retries",
+    "crc_errors": "replies with a bad CRC",
+    "malformed": "malformed replies",
+    "status_errors": "readings refused by a servo",
+    "fallbacks": "fallbacks to plain Sync Read",
+    "watchdog_trips": "Bus Watchdog trips",
+    "watchdog_gaps": "writes close to the Bus Watchdog",
+    "late_replies": "late replies dropped",
+    "skipped_reads": "reads skipped (no room on the wire)",
+    "stale_readings": "stale servo readings",
+    "hardware_errors": "servo hardware errors",
+    "reboots": "servo reboots",
+}
+"""Bus counters that are faults, as the summary names them (in this order)."""
+
+TOP_CLAMPED = 3  # joints named in the summary's clamp line
+
+
+def bus_faults(bus: dict[str, Any]) -> dict[str, int]:
+    """The non-zero fault counters of a summary's ``bus`` figures, named in words."""
+    return {FAULT_WORDS[k]: int(bus[k]) for k in FAULT_WORDS if bus.get(k)}
+
+
+def clamped_joints(pipeline: Any, top: int = TOP_CLAMPED) -> list[dict[str, Any]]:
+    """The servo joints whose targets were clamped most often (most first, none at 0)."""
+    counts = np.asarray(getattr(pipeline, "servo_clamps_by_servo", ()), dtype=np.int64)
+    joints = tuple(getattr(pipeline, "servo_joints", ()))
+    order: list[int] = np.argsort(-counts, kind="stable")[:top].tolist() if counts.size else []
+    return [{"joint": joints[i], "clamps": int(counts[i])} for i in order if counts[i] > 0]
+
+
+def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, Any]:
+    """What a run sent besides the servos: ``vmc`` (target, bundles, rate, errors) and
+    ``recording`` (path, format, frames, duration, bytes), None when off."""
+    out: dict[str, Any] = {"vmc": None, "recording": None}
+    for o in outs:
+        if hasattr(o, "bundles_sent") and hasattr(o, "address"):
+            sent = int(o.bundles_sent)
+            out["vmc"] = {"target": f"{o.address[0]}:{o.address[1]}", "bundles_sent": sent,
+                          "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
+                          "errors": int(getattr(o, "errors", 0)),
+                          "last_error": str(getattr(o, "last_error", ""))}
+        elif hasattr(o, "frames_written") and hasattr(o, "path"):
+            frames = int(o.frames_written)
+            rate = float(getattr(o, "rate_hz", 0.0) or 0.0)
+            out["recording"] = {
+                "path": str(o.path), "format": str(getattr(o, "fmt", "")), "frames": frames,
+                "duration_s": round(frames / rate, 3) if rate > 0 else None,
+                "bytes": int(getattr(o, "bytes_written", 0)),
+                "frames_dropped": int(getattr(o, "frames_dropped", 0))}
+    return out
+
+
+def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: bool | None,
+                 *, outputs: dict[str, Any] | None = None,
+                 clamped: list[dict[str, Any]] | None = None, ease_s: float = 0.0
                  ) -> dict[str, Any]:
-    """The run's figures as one JSON-able object (the keys ``handrig demo --json`` promises)."""
+    """The run's figures as one JSON-able object (the keys ``handrig demo --json`` promises).
+
+    ``outputs``: :func:`outputs_summary`; ``clamped``: :func:`clamped_joints`;
+    ``ease_s``: how long the run eased to the relaxed pose at its end (included in
+    ``frames`` and ``duration_s``; 0 when it ended at once)."""
     s = stats
 
     def num(x: float, nd: int = 3) -> float | None:
@@ -374,6 +504,10 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: 
         "events": list(s.events),
         "events_total": s.events.total,
         "torque_off": torque_off,
+        "ease_s": num(ease_s),
+        "clamped_joints": list(clamped or []),
+        "outputs": outputs if outputs is not None else {"vmc": None, "recording": None},
+        "faults": {},
     }
     if glove_stats is not None:
         out["glove"] = {
@@ -395,4 +529,5 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: 
             elif isinstance(v, int | float):
                 bus[k] = v
         out["bus"] = bus
+        out["faults"] = bus_faults(bus)
     return out

@@ -232,5 +232,10 @@ class JointLimits:
 
 
 def load_joint_limits(path: str | Path | None = None) -> JointLimits:
-    """Load joint-limit overrides (default: ``config/joint_limits.toml``)."""
-    return load(path or CONFIG_DIR / "joint_limits.toml", JointLimits)
+    """Load joint-limit overrides (default: the user's ``joint_limits.toml`` when there is
+    one, :func:`handrig.paths.config_file`, else ``config/joint_limits.toml``)."""
+    if path is None:
+        from handrig.paths import config_file  # handrig.paths imports this module
+
+        path = config_file("joint_limits.toml")
+    return load(path, JointLimits)

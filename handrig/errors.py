@@ -33,7 +33,12 @@ class ConfigError(HandrigError):
 
     def _format(self) -> str:
         where = self.file or "<config>"
-        if self.key is not None:
+        if self.file is None and self.key is not None and self.key.startswith("-"):
+            text = self.key  # a command-line flag: named as typed
+            if self.value is not None:
+                text += f" {self.value!r}"
+            text += f": {self.detail}"
+        elif self.key is not None:
             text = f"{where}: key '{self.key}'"
             if self.value is not None:
                 text += f" = {self.value!r}"

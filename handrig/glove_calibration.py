@@ -236,9 +236,17 @@ class GloveConfig:
         return tuple(c.curve for c in self.channels)
 
 
+def default_glove_path() -> Path:
+    """The glove file read by default: the user's calibrated ``glove.toml``
+    (:func:`handrig.paths.config_file`) when there is one, else the installed one."""
+    from handrig.paths import config_file
+
+    return config_file(DEFAULT_GLOVE_PATH.name)
+
+
 def load_glove_config(path: str | Path | None = None) -> GloveConfig:
-    """Load ``config/glove.toml`` (or ``path``); errors name the file and key."""
-    return load(path or DEFAULT_GLOVE_PATH, GloveConfig)
+    """Load ``path`` (default :func:`default_glove_path`); errors name the file and key."""
+    return load(path or default_glove_path(), GloveConfig)
 
 
 def glove_config_to_toml(cfg: GloveConfig) -> dict[str, Any]:

@@ -24,7 +24,7 @@ import gc
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from types import FrameType, TracebackType
 from typing import Any
@@ -55,7 +55,8 @@ class LiveOptions:
     viewer: bool = False
     vmc: str | None = None
     record: str | None = None
-    panel: bool = False
+    panel: bool = False  # the live panel (plain lines when stdout is no terminal)
+    keys: bool = True  # with the panel: read the show keys when stdin is a terminal
     sim_faults: str = ""
     snapshot_every: int = 0  # keep present positions every N frames (for rendering)
     verbose: bool = False  # log every commissioning step
@@ -66,7 +67,9 @@ class LiveOptions:
 @dataclass
 class LiveResult:
     """``summary``: the figures (:func:`handrig.app.summary_dict`, plus ``error`` when the
-    session ended with one); ``started``: whether the rig got as far as torque-on."""
+    session ended with one); ``started``: whether the rig got as far as torque-on;
+    ``snapshots``: present positions kept every ``snapshot_every`` frames, taken at
+    ``snapshot_times_s`` (seconds since the loop started)."""
 
     summary: dict[str, Any]
     snapshots: list[np.ndarray]
@@ -74,6 +77,7 @@ class LiveResult:
     sim_output: str = ""
     error: HandrigError | None = None
     started: bool = False
+    snapshot_times_s: list[float] = field(default_factory=list)  # of each snapshot
 
 
 def torque_is_off(bus: DynamixelBus) -> bool | None:
@@ -134,6 +138,13 @@ class ExitSignals:
         raise SafetyStop(f"{name} received again: stopping the servos with torque off")
 
 
+def _is_terminal(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
 def _never_raises(log: Callable[[str], None]) -> Callable[[str], None]:
     """``log`` that drops a line it cannot write (the terminal closed: SIGHUP)."""
     def safe(text: str) -> None:
@@ -160,12 +171,19 @@ class _Session:
         self.torque_off: bool | None = None
         self.stages: dict[str, dict[str, float]] | None = None
         self.snapshots: list[np.ndarray] = []
+        self.snapshot_times_s: list[float] = []
+        self.outputs: list[Any] = []  # the VMC sender and recorder (closed by the end)
+        self.ease_s = 0.0  # the easing to relaxed that ended the run
+        self.panel: Any = None  # the LivePanel while it is up
         self.started = False
 
     def run(self) -> LiveResult:
         error: HandrigError | None = None
         opened: app.OpenedBus | None = None
         try:
+            # the checks that need no hardware, before the bus is opened and commissioned
+            app.glove_spec(self.opts.glove, self.parts.glove_config, self.parts.glove_file)
+            app.check_outputs(self.opts.vmc, self.opts.record)
             with contextlib.ExitStack() as stack:
                 opened = stack.enter_context(app.servo_bus(
                     self.opts.bus, self.parts, self.clock, wire_timing=self.opts.wire_timing,
@@ -175,8 +193,11 @@ class _Session:
             error = error or exc
         except OSError as exc:  # a device call the driver did not wrap: still a summary
             error = error or DeviceError(f"{type(exc).__name__}: {exc}")
+        outputs = app.outputs_summary(self.outputs, self.stats.duration_s)
         summary = app.summary_dict(self.stats, self.bus_stats, self.glove_stats,
-                                   self.torque_off)
+                                   self.torque_off, outputs=outputs,
+                                   clamped=app.clamped_joints(self.parts.pipeline),
+                                   ease_s=self.ease_s)
         if self.stages:
             summary["stages_us"] = self.stages
         if self.signals.received:
@@ -186,28 +207,30 @@ class _Session:
         return LiveResult(summary, self.snapshots,
                           tuple(s.joint for s in self.parts.rig_config.servos),
                           opened.emulator_output() if opened is not None else "",
-                          error, self.started)
+                          error, self.started, self.snapshot_times_s)
 
     def _devices_open(self, stack: contextlib.ExitStack, bus: DynamixelBus
                       ) -> HandrigError | None:
         """With the bus open: the glove, commissioning, the outputs, the rig, the run.
         Returns the error the run ended with (torque is off by then)."""
         opts, parts, log = self.opts, self.parts, self.log
-        glove = app.open_glove(opts.glove, parts.glove_config, self.clock)
+        glove = app.open_glove(opts.glove, parts.glove_config, self.clock, parts.glove_file)
         stack.enter_context(glove)
         stack.callback(self._glove_figures, glove)
         bus.connect()
         stack.callback(self._bus_figures, bus)  # after torque-off, before the bus closes
+        header = [f"servo bus {bus.port}: {len(parts.rig_config.servos)} servos commissioned "
+                  f"({len(bus.commissioning)} settings checked or changed)"]
         if opts.verbose:
-            for line in bus.commissioning:
+            header[:0] = bus.commissioning
+        if not opts.panel:
+            for line in header:
                 log(line)
-        else:
-            log(f"servo bus {bus.port}: {len(parts.rig_config.servos)} servos commissioned "
-                f"({len(bus.commissioning)} settings checked or changed)")
         outputs = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
                               record=opts.record, log=log)
-        rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=log,
+        rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=self._rig_log,
                             profile=opts.profile)
+        self.outputs = list(outputs)
         self.stats = rig.stats
         if opts.snapshot_every > 0:
             rig.outputs = (*rig.outputs, self._snapshots(rig, opts.snapshot_every))
@@ -219,15 +242,12 @@ class _Session:
             # the Rig starts from bus.last_goals_deg: where torque-on holds every servo
             with bus.torque(handle_signals=False):
                 self.started = True
-                panel: Any = contextlib.nullcontext()
-                if opts.panel:
-                    from handrig.panel import LivePanel
-
-                    panel = LivePanel(rig)
                 try:
-                    with (panel, pinned_loop(loop.pin_cpu, log),
-                          realtime_priority(loop.realtime_priority, log)):
+                    with (self._console(rig, header) if opts.panel else contextlib.nullcontext(),
+                          pinned_loop(loop.pin_cpu, self._rig_log),
+                          realtime_priority(loop.realtime_priority, self._rig_log)):
                         rig.run(frames=opts.frames, duration_s=opts.duration_s)
+                    self.ease_s = 0.0 if rig.machine.stop_now else rig.relax_time_s
                 finally:
                     self.signals.disarm()  # from here on: torque off, then shut down
         except HandrigError as exc:
@@ -237,6 +257,47 @@ class _Session:
             if rig.stage_profile is not None:
                 self.stages = rig.stage_profile.summary_us()
         return None
+
+    def _rig_log(self, text: str) -> None:
+        """The rig's lines: above the panel while it is up on a terminal, else to the
+        session's log."""
+        panel = self.panel
+        if panel is not None:
+            with contextlib.suppress(OSError, ValueError):
+                panel.log(text)
+        else:
+            self.log(text)
+
+    @contextlib.contextmanager
+    def _console(self, rig: Any, header: list[str]) -> Iterator[None]:
+        """The show console: the panel (on a terminal, else plain lines) and, when stdin
+        is a terminal, the show keys."""
+        from handrig.panel import KeyReader, LivePanel, RigSnapshot, show_console
+
+        keys: KeyReader | None = None
+        if self.opts.keys and _is_terminal(sys.stdin):
+            keys = KeyReader.for_show(
+                sys.stdin.fileno(), toggle_relax=rig.toggle_relax,
+                stop=lambda: rig.request_stop("q pressed"), estop=rig.estop,
+                on_error=lambda exc: self._rig_log(f"key failed: {exc}"))
+        snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None)
+        console = show_console()
+        if not console.is_terminal:  # plain status lines there; the log stays where it was
+            for line in header:
+                self.log(line)
+            header = []
+        panel = LivePanel(snapshot, console=console, header=header)
+        with panel:
+            if console.is_terminal:
+                self.panel = panel
+            try:
+                if keys is not None:
+                    with keys.start():
+                        yield
+                else:
+                    yield
+            finally:
+                self.panel = None
 
     def _bus_figures(self, bus: DynamixelBus) -> None:
         self.torque_off = torque_is_off(bus)
@@ -253,35 +314,65 @@ class _Session:
             state = rig.last_state
             if counter[0] % every == 0 and state is not None:
                 self.snapshots.append(np.array(state.positions_deg))
+                self.snapshot_times_s.append(float(t_s))
         return snap
 
 
+def _counts(items: dict[str, int]) -> str:
+    return ", ".join(f"{n} {what}" for what, n in items.items()) if items else "none"
+
+
+def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
+    vmc, rec = outputs.get("vmc"), outputs.get("recording")
+    if vmc:
+        rate = f", {vmc['rate_hz']} Hz" if vmc.get("rate_hz") is not None else ""
+        errors = f", {vmc['errors']} send errors" if vmc.get("errors") else ""
+        vmc_text = f"VMC to {vmc['target']}: {vmc['bundles_sent']} bundles{rate}{errors}"
+    else:
+        vmc_text = "VMC off"
+    if rec:
+        duration = f"{rec['duration_s']:.1f} s" if rec.get("duration_s") is not None else "-"
+        dropped = (f", {rec['frames_dropped']} frames dropped (disk too slow)"
+                   if rec.get("frames_dropped") else "")
+        rec_text = (f"recording {rec['path']}: {rec['frames']} frames, {duration}, "
+                    f"{rec['bytes']} bytes{dropped}")
+    else:
+        rec_text = "recording off"
+    return [f"outputs           {vmc_text}", f"                  {rec_text}"]
+
+
 def format_summary(summary: dict[str, Any]) -> str:
-    """The human-readable summary of a run."""
+    """The human-readable summary of a run (the same figures as ``--json``)."""
     lat = summary["latency_us"]
     glove = summary.get("glove", {})
-    bus = summary.get("bus", {})
-    faults = {k: v for k, v in bus.items()
-              if v and any(w in k for w in ("timeout", "crc", "error", "retr", "fault", "stale",
-                                            "skipped"))}
+    ease_s = summary.get("ease_s") or 0.0
+    ease = (f"; includes the {ease_s:g} s ease to the relaxed pose at the end" if ease_s
+            else "; ended at once, no ease")
+    clamped = summary.get("clamped_joints") or []
+    most = (", most at " + ", ".join(f"{c['joint']} ({c['clamps']})" for c in clamped)
+            if clamped else "")
     lines = [
         f"frames            {summary['frames']} in {summary['duration_s']} s "
-        f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us)",
+        f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us){ease}",
         f"latency           p50 {lat['p50']} us, p99 {lat['p99']} us, max {lat['max']} us "
         "(glove frame read -> Sync Write handed to the OS)",
         f"overruns          {summary['overruns']} (max {summary['overrun_max_us']} us late, "
         f"{summary['missed_cycles']} cycles missed)",
-        f"limit clamps      {summary['limit_clamps']} servo targets held at a joint limit "
-        f"(end stop), {summary['pose_clamps']} values of the full two-hand pose; "
-        f"{summary['bus_clamps']} goals clamped by the driver; slew-limited "
-        f"{summary['slew_limited']}; non-finite targets held {summary['nonfinite_targets']}",
+        f"limit clamps      {summary['limit_clamps']} servo targets held at a joint or servo "
+        f"limit{most}",
+        "                  (the glove asked past the limit: normal at a full fist or spread; "
+        "high all the time: recalibrate the glove or check the map)",
+        f"                  {summary['pose_clamps']} values of the full two-hand pose clamped, "
+        f"{summary['bus_clamps']} goals clamped by the driver, {summary['slew_limited']} "
+        f"slew-limited, {summary['nonfinite_targets']} non-finite targets held",
         f"glove             {glove.get('frames_ok', '-')} frames ok, "
         f"{glove.get('crc_errors', 0)} CRC errors, {glove.get('decode_errors', 0)} other "
         f"errors, {glove.get('resyncs', 0)} resyncs, used {glove.get('frames_used', '-')}",
-        f"faults            {faults if faults else 'none'}",
+        f"faults            {_counts(summary.get('faults', {}))}",
         f"tracking          rms {summary['tracking_rms_deg']} deg, max "
         f"{summary['tracking_max_deg']} deg (present vs goal, {summary['reads']} reads, "
         f"{summary['stale_reads']} with stale servos)",
+        *_outputs_lines(summary.get("outputs") or {}),
         f"safety            {summary['relax_events']} relax events, "
         f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",

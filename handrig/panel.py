@@ -60,7 +60,8 @@ HARDWARE_ERROR_LETTERS: tuple[tuple[int, str], ...] = (
 """Hardware Error Status bits as the panel's letters (the legend is on the panel)."""
 
 MODE_STYLES = {"running": "bold green", "waiting": "bold cyan", "relaxing": "bold yellow",
-               "stopping": "bold red", "e-stop": "bold white on red", "stopped": "bold"}
+               "resuming": "bold cyan", "stopping": "bold red", "e-stop": "bold white on red",
+               "stopped": "bold"}
 
 
 # -- the snapshot --------------------------------------------------------------------
@@ -123,7 +124,7 @@ class Outputs:
 class PanelSnapshot:
     """Everything the panel shows, at one moment. Times in seconds, rates in Hz."""
 
-    mode: str = "waiting"  # waiting, running, relaxing, stopping, e-stop, stopped
+    mode: str = "waiting"  # waiting, running, relaxing, resuming, stopping, e-stop, stopped
     reason: str = ""  # why the mode is what it is (relaxing, stopping)
     elapsed_s: float = 0.0
     loop_rate_hz: float = NAN
@@ -342,6 +343,14 @@ def plain_line(s: PanelSnapshot) -> str:
 # -- the live panel --------------------------------------------------------------------
 
 
+def show_console() -> Console:
+    """The console a show's panel draws on: stdout when it is a terminal; else plain
+    lines on stderr, so that stdout carries only the summary."""
+    out = Console()
+    return out if out.is_terminal else Console(stderr=True, force_terminal=False)
+
+
+
 class LivePanel:
     """Redraws a :class:`PanelSnapshot` from ``source`` while the show runs.
 
@@ -484,7 +493,7 @@ class RigSnapshot:
         reason = ""
         if mode in ("stopping", "e-stop"):
             reason = stats.stop_reason or (stats.events[-1] if stats.events else "")
-        elif mode == "relaxing" and stats.events:
+        elif mode in ("relaxing", "resuming") and stats.events:
             reason = stats.events[-1]
         elif mode == "waiting":
             reason = "no glove frame yet: holding where the servos are"

@@ -227,6 +227,8 @@ class PosePipeline:
         )
         self.clamps = 0  # pose values (all 54) clamped to joint limits, cumulative
         self.servo_clamps = 0  # servo targets that needed clamping, cumulative
+        # the same per servo (servo_joints order)
+        self.servo_clamps_by_servo = np.zeros(len(self.servo_joints), dtype=np.int64)
         self.slewed = 0  # servo targets held back by the slew limit, cumulative
         self.rejected = 0  # non-finite targets replaced by the last good one, cumulative
         self._has_targets = False
@@ -443,8 +445,9 @@ class PosePipeline:
         # take the pose as it is
         self._servo_values(pose if self.robot_path is None else self._clamped_pose,
                            self._step)
-        self.servo_clamps += int(np.count_nonzero(
-            (self._step < self.servo_low) | (self._step > self.servo_high)))
+        over = (self._step < self.servo_low) | (self._step > self.servo_high)
+        self.servo_clamps += int(np.count_nonzero(over))
+        self.servo_clamps_by_servo += over
         self.clamps += int(np.count_nonzero(self._clamped_pose != pose))
         self.slewed += int(np.count_nonzero(np.abs(self._raw_targets - self.targets) > 1e-9))
         pose[:] = self._clamped_pose

@@ -23,6 +23,9 @@ Safety (what a puppeteer relies on during a show):
 * the glove's e-stop button or a stop request (a signal, the UI): ease to the
   relaxed pose, then stop (the bus's torque context then disables torque); a
   second request stops at once;
+* the relax key (:meth:`Rig.toggle_relax`): ease to relaxed and hold there until
+  it is pressed again; the e-stop key (:meth:`Rig.estop`): end at the next cycle
+  with no easing, so torque goes off at once;
 * a lost servo port: stop cleanly with the device's message;
 * nothing outside the limits: the pipeline clamps to joint and servo limits, and
   the bus clamps again to each servo's configured range.
@@ -153,6 +156,16 @@ class Rig:
         """Ease to the relaxed pose, then end the run. A second request ends it at once.
         Safe from a signal handler: the loop acts on it between cycles."""
         self.machine.request_stop(reason)
+
+    def toggle_relax(self) -> None:
+        """Relax and hold the relaxed pose; called again, follow the glove again (easing
+        back in). Safe from another thread (the keys): the loop acts on it between cycles."""
+        self.machine.toggle_relax()
+
+    def estop(self, reason: str = "e-stop key") -> None:
+        """End the run at the next cycle without easing: the caller's torque context then
+        turns torque off at once. Safe from another thread or a signal handler."""
+        self.machine.request_estop(reason)
 
     # -- the loop ------------------------------------------------------------------------------
     def _event(self, text: str) -> None:

@@ -51,6 +51,16 @@ _POLE_TOL_DEG = 1e-3
 _LIMIT_TOL_DEG = 1.0  # slack for the solver's equilibria at a joint's end stop
 
 
+def default_grid_path() -> Path:
+    """The grid read by default: the user's baked ``sag_grid.npz``
+    (:func:`handrig.paths.user_data`, where ``handrig bake`` writes) when there is one,
+    else the installed ``config/sag_grid.npz``."""
+    from handrig.paths import user_data
+
+    mine = user_data(SAG_GRID.name)
+    return mine if mine.is_file() else SAG_GRID
+
+
 @dataclass(frozen=True)
 class SagTables:
     """A grid's lookup tables in the layout the compiled servo step reads
@@ -157,8 +167,8 @@ class SagGrid:
 
     @classmethod
     def load(cls, path: str | Path | None = None, *, hand: Hand = "ri") -> SagGrid:
-        """Load a baked grid (default ``config/sag_grid.npz``)."""
-        p = Path(path) if path is not None else SAG_GRID
+        """Load a baked grid (default :func:`default_grid_path`)."""
+        p = Path(path) if path is not None else default_grid_path()
         fix = f"re-bake it with `handrig bake --out {p}` or restore the shipped file"
         try:
             with np.load(p, allow_pickle=False) as z:

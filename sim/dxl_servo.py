@@ -68,11 +68,20 @@ CURRENT_MODE = 0
 CURRENT_BASED_POSITION_MODE = 5
 # Present Current (126, int16), Present Velocity (128, int32), Present Position (132, int32).
 _PRESENT = struct.Struct("<hii")
-# Thermal model: winding resistance from the datasheet's stall current at nominal
-# voltage (R = V / I_stall); thermal resistance and time constant are assumptions.
+# Thermal model, first order: dT/dt = (T_ambient + R_th x P - T) / tau, with P the
+# winding's I^2 R (R = V_nominal / I_stall, both from the datasheet) plus the
+# electronics' standby draw at the supply voltage. The standby current, R_th and tau
+# are assumptions of this emulator (no datasheet gives them): a small servo in free
+# air that warms by a few kelvin when idle and follows a change of load within minutes.
 AMBIENT_TEMPERATURE_C = 30
-THERMAL_RESISTANCE_K_PER_W = 20.0
-THERMAL_TIME_CONSTANT_S = 300.0
+STANDBY_CURRENT_A = 0.02
+THERMAL_RESISTANCE_K_PER_W = 50.0
+THERMAL_TIME_CONSTANT_S = 60.0
+
+
+def idle_temperature_c(volts: float) -> float:
+    """Where a powered servo's temperature settles with no motor current."""
+    return AMBIENT_TEMPERATURE_C + volts * STANDBY_CURRENT_A * THERMAL_RESISTANCE_K_PER_W
 
 
 def _defaults(info: ModelInfo, servo_id: int, baud: int) -> dict[Reg, int]:
@@ -253,16 +262,17 @@ class EmulatedServo:
         mem[122] = 1 if abs(velocity) > int.from_bytes(mem[24:28], "little") else 0
 
     def heat(self, dt_s: float) -> None:
-        """Warm the motor by I^2 R at the present current and cool it toward ambient;
-        above the Temperature Limit the servo reports overheating (torque off)."""
+        """Warm the servo by I^2 R at the present current plus its standby draw, and cool
+        it toward ambient (first order, see :data:`THERMAL_TIME_CONSTANT_S`); above the
+        Temperature Limit it reports overheating (torque off)."""
         if dt_s <= 0:
             return
         volts = self.mem[144] / 10.0
         resistance = volts / self.info.stall_current_a if volts else 1.0
         amps = self.motor_current_ma / 1000.0
-        rise = amps * amps * resistance * THERMAL_RESISTANCE_K_PER_W
-        target = AMBIENT_TEMPERATURE_C + rise
-        alpha = min(1.0, dt_s / THERMAL_TIME_CONSTANT_S)
+        power_w = amps * amps * resistance + volts * STANDBY_CURRENT_A
+        target = AMBIENT_TEMPERATURE_C + power_w * THERMAL_RESISTANCE_K_PER_W
+        alpha = 1.0 - math.exp(-dt_s / THERMAL_TIME_CONSTANT_S)  # exact for a constant P
         self.temperature_c += (target - self.temperature_c) * alpha
         self.mem[146] = max(0, min(255, round(self.temperature_c)))
         if self.mem[146] > self.mem[31] and not self.mem[70] & HardwareError.OVERHEATING:

@@ -35,3 +35,12 @@ def build_spec_c(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Path
         return exe
 
     return build
+
+
+@pytest.fixture(autouse=True)
+def _user_dirs(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every test (and the commands it starts) gets empty XDG config and data dirs: a
+    calibrated glove.toml or baked grid in the developer's home is never read."""
+    base = tmp_path_factory.mktemp("xdg")
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(base / "config"))
+    monkeypatch.setenv("XDG_DATA_HOME", str(base / "data"))

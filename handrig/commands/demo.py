@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
                               "the glove emulator (handrig sim-glove)") as (_, glove_port):
                 log(f"glove emulator streaming on {glove_port}")
                 opts = LiveOptions(glove=glove_port, bus="sim", frames=args.frames,
-                                   sim_faults=args.faults, log=log,
+                                   sim_faults=args.faults, log=log, panel=not args.json,
                                    snapshot_every=max(1, args.frames // 6) if args.render else 0)
                 signals.disarm()  # the session handles its own; after it: shut down, print
                 result = run_live(parts, opts)
@@ -77,9 +77,12 @@ def run(args: argparse.Namespace) -> int:
     if args.render and result.started:
         try:
             path = simulator.render_strip(result.snapshots, result.joint_names, args.render,
-                                          model=robot_model(parts.rig_config))
+                                          model=robot_model(parts.rig_config),
+                                          times_s=result.snapshot_times_s)
             result.summary["render"] = str(path)
-            log(f"rendered {len(result.snapshots)} frames of the simulated hand to {path}")
+            tiles = simulator.tiles_drawn(len(result.snapshots))
+            log(f"rendered {tiles} frames of the simulated hand to {path} "
+                f"(t = {result.snapshot_times_s[0]:.1f} to {result.snapshot_times_s[-1]:.1f} s)")
         except HandrigError as exc:
             result.summary["render"] = None
             print(f"handrig demo: no render: {exc}", file=sys.stderr)

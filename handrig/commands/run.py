@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
 from handrig.app import build_parts
@@ -15,8 +14,13 @@ from handrig.live import LiveOptions, failed, print_result, run_live
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "run", help="run the live rig: glove -> full hands with sag -> servos",
-        description="Run the live rig. Ctrl-C, SIGTERM, SIGHUP or SIGQUIT eases the puppet "
-        "to its relaxed pose, then disables torque; a second one stops at once.",
+        description="Run the live rig. On a terminal a live panel shows the glove link, "
+        "latency, bus health, each servo and the outputs, and keys act on the puppet: "
+        "space relaxes it (and resumes), q stops (eases to relaxed, then torque off), e is "
+        "the e-stop (torque off at once). Without a terminal the panel is a plain line "
+        "every few seconds. Ctrl-C, SIGTERM, SIGHUP or SIGQUIT eases the puppet to its "
+        "relaxed pose, then disables torque; a second one stops at once. --seconds and "
+        "--frames count the run before the ease to relaxed, which the summary includes.",
     )
     p.add_argument("--config", default=None, metavar="FILE",
                    help="rig file (default config/rig.toml)")
@@ -52,8 +56,7 @@ def run(args: argparse.Namespace) -> int:
     opts = LiveOptions(
         glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
         wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
-        record=args.record, panel=sys.stdout.isatty() and not args.json,
-        verbose=not args.json,
+        record=args.record, panel=not args.json, verbose=not args.json,
     )
     result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

@@ -5,7 +5,8 @@ to the OS, is kept short: controls, forearm angles, the mode for the cycle, the
 servo step (or an easing), the write. Everything else (latency, the full pose for
 the outputs and the counters behind it, the outputs, the state read) comes after
 the write. Every ``read_every`` slots the servos' present state is read back,
-with a deadline that leaves the next cycle its time.
+with a deadline that leaves the next cycle its time; midway between those reads
+the bus may do its housekeeping reads (watchdogs, temperatures) in the same way.
 """
 
 from __future__ import annotations
@@ -69,6 +70,9 @@ class Cycle:
         self._drains: tuple[Callable[[], list[str]], ...] = tuple(
             d for d in (getattr(glove, "drain_events", None), getattr(bus, "drain_events", None))
             if callable(d))
+        # watchdogs and temperatures, read midway between state reads (a bus may not have it)
+        self.housekeeping: Callable[[float], bool] | None = getattr(bus, "housekeeping", None)
+        self._housekeeping_slot = self.read_every // 2 if self.read_every > 1 else -1
         n = len(pipeline.servo_joints)
         self.relax = Easing(n, POSE_SIZE, relax_time_s)
         self.resume = Easing(n, POSE_SIZE, resume_time_s)
@@ -171,11 +175,14 @@ class Cycle:
             t_s = tick.now_s - self.t0_s
             for out in self.outputs:
                 out(t_s, pose)
-        if tick.index % self.read_every == 0:
+        slot = tick.index % self.read_every
+        if slot == 0:
             state = self.bus.read_state(tick.next_s - READ_MARGIN_S)
             self.last_state = state
             self._track(state, self.sent)
             self._take_events()
+        elif slot == self._housekeeping_slot and self.housekeeping is not None:
+            self.housekeeping(tick.next_s - READ_MARGIN_S)
         self.sent[:] = goals
         if mode is not Mode.RUNNING and mode is not Mode.WAITING:
             pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent

@@ -6,14 +6,21 @@
     WAITING, RUNNING, RESUMING --no frame for glove_timeout_s--> RELAXING
     RELAXING --resume_frames good frames in a row--> RESUMING --eased back--> RUNNING
     any --e-stop, stop request, frames or time done--> STOPPING --eased--> (the run ends)
+    any --e-stop key--> STOPPING, ended at once (no easing: torque goes off)
+
+The relax key (:meth:`ModeMachine.toggle_relax`) relaxes the puppet and holds it
+relaxed whatever the glove does; pressed again it lets go, and the glove's next
+``resume_frames`` good frames ease the puppet back (RESUMING) as after a loss.
 
 "Good frames in a row": each within ``glove_timeout_s`` of the one before, so a
 glove that only sends now and then (1 Hz, say) stays relaxed instead of pulling
 the puppet back for one frame and letting it go again.
 
 The machine only decides; transitions happen in the loop's thread, between
-cycles. :meth:`ModeMachine.request_stop` may be called from a signal handler at
-any time: it records the request, the next :meth:`ModeMachine.poll` acts on it.
+cycles. :meth:`ModeMachine.request_stop`, :meth:`ModeMachine.toggle_relax` and
+:meth:`ModeMachine.request_estop` may be called from a signal handler or another
+thread (the keys) at any time: each records the request, the next
+:meth:`ModeMachine.poll` acts on it.
 Entering RELAXING or STOPPING from a mode that was following (or holding)
 calls ``on_relax``; entering RESUMING calls ``on_resume``: the easings restart.
 
@@ -33,7 +40,7 @@ from handrig.loop.stats import RunStats
 class Mode(enum.Enum):
     WAITING = "waiting"  # no glove frame yet: hold where the servos are
     RUNNING = "running"
-    RELAXING = "relaxing"  # glove lost: easing to relaxed, resumes when the glove is back
+    RELAXING = "relaxing"  # glove lost or relax key: easing to relaxed, then holding there
     RESUMING = "resuming"  # glove back: easing from where the servos are to the glove's pose
     STOPPING = "stopping"  # e-stop or stop request: easing to relaxed, then the loop ends
 
@@ -73,6 +80,10 @@ class ModeMachine:
         self.mode = Mode.WAITING
         self.stop_requests = 0
         self._requested: list[str] = []  # appended by request_stop, consumed by poll
+        self._toggles: list[str] = []  # appended by toggle_relax, consumed by poll
+        self._estop_requested = ""  # set by request_estop, acted on by poll
+        self._halt = False  # an e-stop: end at once, no easing
+        self.held = False  # relaxed by the relax key: frames do not resume the puppet
         self._last_frame_s: float | None = None
         self._run = 0  # good frames in a row while relaxed
         self._t0 = 0.0
@@ -108,20 +119,37 @@ class ModeMachine:
             self.stop_reason = f"{reason} (immediate)"
         self._requested.append(reason)
 
+    def toggle_relax(self, reason: str = "relax key") -> None:
+        """Relax and hold (or, when held, let the glove take over again)."""
+        self._toggles.append(reason)
+
+    def request_estop(self, reason: str = "e-stop key") -> None:
+        """End the run at the next poll without easing (torque goes off at once)."""
+        self._estop_requested = reason or "e-stop"
+
     @property
     def stop_now(self) -> bool:
-        """A second stop request came: end without easing."""
-        return self.stop_requests > 1
+        """A second stop request or an e-stop came: end without easing."""
+        return self.stop_requests > 1 or self._halt
 
     # -- in the loop ---------------------------------------------------------------------------
     def start(self, t0_s: float) -> None:
         self._t0 = t0_s
 
     def poll(self) -> None:
-        """Act on stop requests that arrived since the last call."""
+        """Act on the requests (e-stop, stop, relax key) that arrived since the last call."""
+        if self._estop_requested and not self._halt:
+            reason, self._estop_requested = self._estop_requested, ""
+            self._halt = True
+            self.stats.estop = True
+            self.stop_reason = reason
+            self.mode = Mode.STOPPING
+            self.event(f"{reason}: torque off now, no easing")
         while self._requested:
             reason = self._requested.pop(0)
             self._relax(Mode.STOPPING, reason)
+        while self._toggles:
+            self._toggle(self._toggles.pop(0))
 
     def finish(self, reason: str) -> None:
         """The run's length is reached (frames or time): stop, unless already stopping."""
@@ -140,7 +168,7 @@ class ModeMachine:
         mode = self.mode
         if mode is Mode.WAITING:
             self.mode = Mode.RUNNING
-        elif mode is Mode.RELAXING and not self._servos_silent:
+        elif mode is Mode.RELAXING and not self._servos_silent and not self.held:
             in_a_row = previous is not None and now_s - previous <= self.glove_timeout_s
             self._run = self._run + 1 if in_a_row else 1
             if self._run >= self.resume_frames:
@@ -183,11 +211,26 @@ class ModeMachine:
             self.mode = Mode.RUNNING
 
     # -- internals -----------------------------------------------------------------------------
+    def _toggle(self, reason: str) -> None:
+        if self.mode is Mode.STOPPING:
+            return
+        if self.held:
+            self.held = False
+            self._run = 0
+            self.event(f"{reason}: resuming, easing back to the glove over "
+                       f"{self.resume_time_s:.2f} s once it sends")
+            return
+        self.held = True
+        if self.mode is Mode.RELAXING:
+            self.event(f"{reason}: staying relaxed until it is pressed again")
+            return
+        self._relax(Mode.RELAXING, f"{reason}: relaxed until it is pressed again")
+
     def _relax(self, mode: Mode, reason: str) -> None:
         if self.mode is Mode.STOPPING:
             return
         if self.mode in _FOLLOWING:
-            if mode is Mode.RELAXING:
+            if mode is Mode.RELAXING and not self.held:  # the glove was lost
                 self.stats.relax_events += 1
             self.on_relax()
         self._run = 0

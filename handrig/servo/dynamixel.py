@@ -346,6 +346,14 @@ class DynamixelBus(ServoBus):
         """What the bus did about silent servos since the last call, one line each."""
         return self.faults.silence.drain_events()
 
+    def housekeeping(self, deadline_s: float) -> bool:
+        """Between state reads: the Bus Watchdogs, then the temperatures, when
+        ``temperature_every`` reads have passed and the wire can carry them by
+        ``deadline_s``. The next :meth:`read_state` returns what was read. True if
+        they ran."""
+        with self._lock:
+            return self.reader.housekeeping(deadline_s)
+
     def _read_every_servo(self, purpose: str) -> ServoState:
         """Read until every servo has given a valid reading (up to COMMAND_ATTEMPTS reads)."""
         seen = np.zeros(self.roster.n, bool)

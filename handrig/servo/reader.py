@@ -28,6 +28,8 @@ class StateReader:
 
     ``temperature_every``: every that many reads, when the deadline leaves time,
     the Bus Watchdogs (torque on) and then the temperatures are read too (0: never).
+    :meth:`housekeeping` does the same between state reads (the loop calls it in
+    cycles without a read, where the wire has room for it).
     """
 
     def __init__(
@@ -148,6 +150,16 @@ class StateReader:
         if stale.any() or self.faults.silence.active:
             self.faults.silence.update(now)
         return r.snapshot(now, stale, r.hw_err.copy())
+
+    def housekeeping(self, deadline_s: float) -> bool:
+        """The housekeeping reads in a cycle without a state read, when due and when the
+        wire can carry them by ``deadline_s``; True if they ran."""
+        if not self._housekeeping_due() or (
+                deadline_s - self.clock.now() <= self._temperature_wire_s):
+            return False
+        self._next_temperature_read = self.stats.reads + self.temperature_every
+        self._housekeeping(deadline_s)
+        return True
 
     def _housekeeping(self, deadline_s: float) -> None:
         """With torque on, the Bus Watchdogs first, then the temperatures if the read's

@@ -7,6 +7,7 @@ ServoBus); the pipeline, map, sag grid and calibration are the real shipped ones
 from __future__ import annotations
 
 import contextlib
+import threading
 from collections.abc import Callable, Iterator
 
 import numpy as np
@@ -577,3 +578,50 @@ def test_bus_and_glove_events_reach_the_run_and_a_relax_request_relaxes(parts_fa
     relaxed = relaxed_targets(parts)
     np.testing.assert_allclose(bus.goals[int(1.45 * 200)], relaxed, atol=1e-6)
     assert np.abs(bus.goals[480] - relaxed).max() > 1.0
+
+
+def test_keys_from_another_thread_relax_resume_and_e_stop_without_easing(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+    glove = ScriptedGlove(clock, lambda t: MID)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock)
+    modes: list[Mode] = []
+
+    def keys(t_s: float, pose: np.ndarray) -> None:
+        n = len(bus.goals)
+        modes.append(rig.mode)
+        key = {20: rig.toggle_relax, 300: rig.toggle_relax, 400: rig.estop}.get(n)
+        if key is not None:  # pressed on the key thread, acted on by the loop
+            thread = threading.Thread(target=key)
+            thread.start()
+            thread.join()
+    rig.outputs = (keys,)
+    stats = rig.run(frames=10_000)
+    assert Mode.RELAXING in modes[20:300] and modes[299] is Mode.RELAXING
+    np.testing.assert_allclose(bus.goals[299], relaxed_targets(parts), atol=1e-6)
+    assert Mode.RESUMING in modes[300:400] and modes[-2] is Mode.RUNNING
+    assert stats.estop and stats.stop_reason == "e-stop key" and stats.resumes == 1
+    assert stats.relax_events == 0
+    assert stats.frames <= 402  # ended within a cycle or two: no easing
+
+
+def test_housekeeping_runs_midway_between_state_reads_with_a_deadline(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+
+    class KeepingBus(RecordingBus):
+        def __init__(self, *args):
+            super().__init__(*args)
+            self.calls: list[tuple[int, float, float]] = []  # (writes so far, now, deadline)
+
+        def housekeeping(self, deadline_s: float) -> bool:
+            self.calls.append((len(self.goals), self.clock.now(), deadline_s))
+            return True
+
+    bus = KeepingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)  # read_every 4
+    rig.run(frames=40)
+    writes = [w for w, _, _ in bus.calls]
+    assert writes[:3] == [3, 7, 11]  # cycles 2, 6, 10: between the reads of 0, 4, 8
+    assert all(now < deadline < now + 0.005 for _, now, deadline in bus.calls)

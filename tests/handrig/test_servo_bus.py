@@ -798,3 +798,21 @@ def test_after_a_failed_read_the_wait_for_a_quiet_line_counts_against_the_deadli
     # (counted from the failure, not from each request: no read is kept out for good)
     time.sleep(bus.reply_gap_s)
     assert not bus.read_state(bus.clock.now() + wire_s + 0.5 * bus.reply_gap_s).stale.any()
+
+
+
+def test_housekeeping_between_reads_when_due_and_when_the_wire_has_room(sim: SimBus) -> None:
+    b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, temperature_every=2)
+    b.connect()  # its read did the housekeeping: due again 2 reads later
+    try:
+        b.read_state(b.clock.now() + 0.05)
+        assert not b.housekeeping(b.clock.now() + 0.05)  # not due yet
+        b.reader.stats.reads += 1  # a read without time for the housekeeping leaves it due
+        assert not b.housekeeping(b.clock.now() + 0.0001)  # due, but no room on the wire
+        before = sim.stats.by_instruction[0x8A]
+        assert b.housekeeping(b.clock.now() + 0.05)
+        assert sim.stats.by_instruction[0x8A] - before == 1  # one temperature read
+        assert not b.housekeeping(b.clock.now() + 0.05)  # done: not due again
+        assert np.isfinite(b.read_state(b.clock.now() + 0.05).temperatures_c).all()
+    finally:
+        b.close()

@@ -2,8 +2,18 @@
 
 from __future__ import annotations
 
+import itertools
+import math
+
+import pytest
+
 from firmware_protocol.dynamixel import ERROR_ALERT, ErrorCode, HardwareError, Reg
-from sim.dxl_servo import REBOOT_S, EmulatedServo
+from sim.dxl_servo import (
+    REBOOT_S,
+    THERMAL_RESISTANCE_K_PER_W,
+    EmulatedServo,
+    idle_temperature_c,
+)
 
 
 def _w(servo: EmulatedServo, reg: Reg, value: int, size: int, signed: bool = False) -> int:
@@ -151,7 +161,7 @@ def test_current_heats_the_motor_and_overheating_stops_it() -> None:
     s = EmulatedServo(1)
     assert s.get(Reg.PRESENT_TEMPERATURE) == 30
     assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
-    s.set_motion(2048.0, 0.0, 1000.0)  # 1 A: 3.4 ohm x 1 A^2 x 20 K/W = 68 K above ambient
+    s.set_motion(2048.0, 0.0, 1000.0)  # 1 A: 3.4 ohm x 1 A^2 x 50 K/W = 170 K above ambient
     for _ in range(100):
         s.heat(60.0)
     assert s.hardware_error & HardwareError.OVERHEATING
@@ -159,7 +169,20 @@ def test_current_heats_the_motor_and_overheating_stops_it() -> None:
     s.set_motion(2048.0, 0.0, 0.0)
     for _ in range(100):
         s.heat(60.0)
-    assert s.get(Reg.PRESENT_TEMPERATURE) == 30
+    assert s.get(Reg.PRESENT_TEMPERATURE) == round(idle_temperature_c(5.0)) == 35
+
+
+def test_temperature_follows_the_current_within_a_minute() -> None:
+    s = EmulatedServo(1)  # XL330 at 5 V: 3.4 ohm winding
+    s.set_motion(2048.0, 0.0, 300.0)
+    temps = []
+    for _ in range(60):
+        s.heat(1.0)
+        temps.append(s.temperature_c)
+    assert all(b > a for a, b in itertools.pairwise(temps))  # rising with current
+    target = idle_temperature_c(5.0) + 0.3**2 * (5.0 / 1.47) * THERMAL_RESISTANCE_K_PER_W
+    assert temps[-1] == pytest.approx(30 + (target - 30) * (1 - math.exp(-1.0)), rel=1e-6)
+    assert s.get(Reg.PRESENT_TEMPERATURE) == round(temps[-1]) > 30
 
 
 def test_current_based_position_mode_caps_current_at_goal_current_and_current_limit() -> None:

@@ -117,3 +117,56 @@ def test_servos_silent_while_stopping_changes_nothing() -> None:
     m.poll()
     m.servos_silent("no valid reply from any servo")
     assert m.mode is Mode.STOPPING
+
+
+def test_relax_key_holds_the_puppet_relaxed_while_the_glove_sends() -> None:
+    m, calls = machine(resume_frames=3)
+    feed(m, 0.0, 0.5, 0.005)
+    m.toggle_relax()
+    assert m.mode is Mode.RUNNING  # a key only records the request
+    m.poll()
+    assert m.mode is Mode.RELAXING and m.held and "<relax>" in calls
+    assert "relax key: relaxed until it is pressed again" in calls[-1]
+    modes = feed(m, 0.5, 2.0, 0.005)  # good frames all along: still held
+    assert set(modes) == {Mode.RELAXING}
+    assert m.relax_events == 0  # a relax key is no glove loss
+    m.toggle_relax()
+    m.poll()
+    assert not m.held and "relax key: resuming" in calls[-1]
+    modes = feed(m, 2.0, 2.02, 0.005)
+    assert Mode.RESUMING in modes and m.resumes == 1
+    m.resumed()
+    assert m.mode is Mode.RUNNING
+
+
+def test_relax_key_while_the_glove_is_lost_keeps_it_relaxed_when_it_comes_back() -> None:
+    m, calls = machine(resume_frames=3)
+    feed(m, 0.0, 0.5, 0.005)
+    feed(m, 0.5, 1.0, None)
+    assert m.mode is Mode.RELAXING and m.relax_events == 1
+    m.toggle_relax()
+    m.poll()
+    assert "staying relaxed" in calls[-1]
+    assert set(feed(m, 1.0, 1.5, 0.005)) == {Mode.RELAXING}
+
+
+def test_relax_key_does_nothing_while_stopping() -> None:
+    m, _ = machine()
+    feed(m, 0.0, 0.1, 0.005)
+    m.request_stop("q pressed")
+    m.toggle_relax()
+    m.poll()
+    assert m.mode is Mode.STOPPING and not m.held and not m.stop_now
+
+
+def test_estop_key_ends_at_once_without_easing() -> None:
+    m, calls = machine()
+    feed(m, 0.0, 0.1, 0.005)
+    m.request_estop("e-stop key")
+    assert not m.stop_now
+    m.poll()
+    assert m.stop_now and m.estop and m.mode is Mode.STOPPING
+    assert m.stop_reason == "e-stop key" and "<relax>" not in calls
+    assert calls[-1] == "e-stop key: torque off now, no easing"
+    m.finish("100 frames done")
+    assert m.stop_reason == "e-stop key"

@@ -1,0 +1,182 @@
+"""What `handrig run` says: the summary in words, and messages that name the flag or the
+file and key, with the fix, checked before any hardware is touched."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from handrig import app
+from handrig.app import build_parts
+from handrig.config import CONFIG_DIR
+from handrig.errors import ConfigError
+from handrig.live import format_summary
+from handrig.loop.stats import RunStats
+from handrig.servo.bus import BusStats
+
+CLI = [sys.executable, "-m", "handrig.cli"]
+CHECKOUT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def parts() -> app.RigParts:
+    return build_parts()
+
+
+def _summary(**kw: object) -> dict:
+    stats = RunStats(frames=2200, duration_s=11.0)
+    bus = BusStats(20, reads=500, timeouts=19)
+    bus.stale_readings[:] = 19
+    return app.summary_dict(stats, bus, None, True, **kw)  # type: ignore[arg-type]
+
+
+# -- the summary ----------------------------------------------------------------------
+
+
+def test_faults_are_words_and_counts_not_a_dict() -> None:
+    text = format_summary(_summary(ease_s=1.0))
+    line = next(x for x in text.splitlines() if x.startswith("faults"))
+    assert line == "faults            19 read timeouts, 380 stale servo readings"
+    assert "{" not in text
+    clean = format_summary(app.summary_dict(RunStats(), BusStats(20), None, True))
+    assert "faults            none" in clean
+
+
+def test_the_ease_is_stated_and_json_carries_the_same() -> None:
+    summary = _summary(ease_s=1.0)
+    assert "11.0 s" in format_summary(summary)
+    assert "includes the 1 s ease to the relaxed pose at the end" in format_summary(summary)
+    assert "ended at once, no ease" in format_summary(_summary(ease_s=0.0))
+    back = json.loads(json.dumps(summary))
+    assert back["ease_s"] == 1.0
+    assert back["faults"] == {"read timeouts": 19, "stale servo readings": 380}
+    assert back["outputs"] == {"vmc": None, "recording": None}
+
+
+def test_clamps_say_what_they_mean_and_which_joints(parts: app.RigParts) -> None:
+    pipeline = parts.pipeline
+    counts = pipeline.servo_clamps_by_servo
+    saved = counts.copy()
+    try:
+        counts[:] = 0
+        counts[3], counts[7], counts[1], counts[0] = 50, 900, 20, 5
+        clamped = app.clamped_joints(pipeline)
+    finally:
+        counts[:] = saved
+    joints = pipeline.servo_joints
+    assert clamped == [{"joint": joints[7], "clamps": 900}, {"joint": joints[3], "clamps": 50},
+                       {"joint": joints[1], "clamps": 20}]
+    text = format_summary(_summary(clamped=clamped))
+    assert f"most at {joints[7]} (900), {joints[3]} (50), {joints[1]} (20)" in text
+    assert "normal at a full fist or spread" in text
+
+
+def test_outputs_are_listed() -> None:
+    class Sender:
+        address = ("127.0.0.1", 39539)
+        bundles_sent = 600
+        errors = 0
+        last_error = ""
+
+    class Rec:
+        path = Path("take.bvh")
+        fmt = "bvh"
+        frames_written = 2200
+        rate_hz = 200.0
+        bytes_written = 123_456
+        frames_dropped = 0
+
+    outputs = app.outputs_summary([Sender(), Rec()], duration_s=10.0)
+    assert outputs["vmc"]["target"] == "127.0.0.1:39539" and outputs["vmc"]["rate_hz"] == 60.0
+    assert outputs["recording"]["duration_s"] == 11.0
+    text = format_summary(_summary(outputs=outputs))
+    assert "outputs           VMC to 127.0.0.1:39539: 600 bundles, 60.0 Hz" in text
+    assert "recording take.bvh: 2200 frames, 11.0 s, 123456 bytes" in text
+    assert "VMC off" in format_summary(_summary()) and "recording off" in format_summary(_summary())
+
+
+# -- messages --------------------------------------------------------------------------
+
+
+def test_a_recording_given_as_a_port_suggests_replay(parts: app.RigParts, tmp_path: Path) -> None:
+    csv = tmp_path / "take.csv"
+    csv.write_text("# handrig glove recording 1\n")
+    for spec in (str(csv), "missing.csv"):
+        with pytest.raises(ConfigError) as err:
+            app.glove_spec(spec, parts.glove_config)
+        text = str(err.value)
+        assert text.startswith(f"--glove {spec!r}: a file, not a serial port")
+        assert f"--glove replay:{spec}" in text and "<config>" not in text
+    with pytest.raises(ConfigError, match=r"--glove 'replay:nope.csv': glove recording not found"):
+        app.glove_spec("replay:nope.csv", parts.glove_config)
+    with pytest.raises(ConfigError, match=r"--glove '/dev/ttyNOPE9': no such port"):
+        app.glove_spec("/dev/ttyNOPE9", parts.glove_config)
+
+
+def test_a_missing_glove_port_names_the_glove_file_and_key(parts: app.RigParts) -> None:
+    cfg = parts.glove_config
+    no_port = dataclasses.replace(cfg, glove=dataclasses.replace(cfg.glove, port=""))
+    with pytest.raises(ConfigError) as err:
+        app.glove_spec(None, no_port, Path("/home/me/glove.toml"))
+    text = str(err.value)
+    assert text.startswith("/home/me/glove.toml: key 'glove.port': no glove port given")
+    assert "--glove PORT (or replay:FILE.csv)" in text
+
+
+def test_vmc_needs_a_port_and_record_a_known_suffix() -> None:
+    with pytest.raises(ConfigError) as err:
+        app.check_outputs("localhost", None)
+    assert str(err.value).startswith("--vmc 'localhost': no port given")
+    assert "localhost:39539" in str(err.value)
+    with pytest.raises(ConfigError, match=r"^--vmc 'localhost:http': not a UDP destination"):
+        app.check_outputs("localhost:http", None)
+    with pytest.raises(ConfigError, match=r"^--record 'take.txt': unknown recording suffix '.txt'"):
+        app.check_outputs(None, "take.txt")
+    app.check_outputs("localhost:39539", "take.BVH")
+
+
+def test_a_missing_map_names_the_key_and_that_it_is_relative_to_the_rig_file(
+        tmp_path: Path) -> None:
+    rig = tmp_path / "rig.toml"
+    text = (CONFIG_DIR / "rig.toml").read_text().replace('map = ""', 'map = "maps/mine.toml"')
+    rig.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        build_parts(rig)
+    message = str(err.value)
+    assert message.startswith(f"{rig}: key 'loop.map' = 'maps/mine.toml': no such file: "
+                              f"{tmp_path / 'maps' / 'mine.toml'}")
+    assert f"relative to the rig file's folder {tmp_path}" in message
+
+
+@pytest.mark.parametrize("flags, says", [
+    (["--record", "take.txt"], "--record 'take.txt': unknown recording suffix"),
+    (["--vmc", "localhost"], "--vmc 'localhost': no port given"),
+    (["--glove", "config/recordings/demo_glove.csv"], "--glove replay:config/recordings/"),
+])
+def test_run_checks_what_needs_no_hardware_before_the_bus(flags: list[str], says: str) -> None:
+    glove = [] if "--glove" in flags else ["--glove", "replay:config/recordings/demo_glove.csv"]
+    start = time.monotonic()
+    out = subprocess.run([*CLI, "run", "--bus", "sim", *glove, *flags], capture_output=True,
+                         text=True, timeout=60, cwd=CHECKOUT)
+    assert out.returncode == 2, out.stderr
+    assert says in out.stderr and "Traceback" not in out.stderr
+    assert "Inappropriate ioctl" not in out.stderr
+    assert "simulated servo bus" not in out.stderr and "commissioned" not in out.stderr
+    assert time.monotonic() - start < 30  # no emulator was started
+
+
+def test_run_reads_the_users_calibrated_glove_file(tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    mine = tmp_path / "config" / "handrig" / "glove.toml"
+    mine.parent.mkdir(parents=True)
+    mine.write_text((CONFIG_DIR / "glove.toml").read_text())
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    assert build_parts().glove_file == mine
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "elsewhere"))
+    assert build_parts().glove_file == CONFIG_DIR / "glove.toml"
