@@ -256,6 +256,11 @@ class SimBus:
     default: servos follow whatever baud the client sets). ``realtime``: ask for
     SCHED_FIFO priority for the bus thread (best effort; ``realtime_granted`` says
     whether the OS agreed) so replies leave on time on a busy machine.
+
+    ``on_sync_write(t_s, address, items)``, if set, is called from the bus thread for
+    each Sync Write: ``t_s`` the clock time its bytes were read off the pty (with the
+    default clock, CLOCK_MONOTONIC on Linux), its start address and its
+    ``[(id, data bytes)]``. It is how a latency is measured from outside the rig.
     """
 
     def __init__(
@@ -304,6 +309,7 @@ class SimBus:
         self._partial_since: float | None = None
         self._feed_buf = bytearray()
         self.error: BaseException | None = None
+        self.on_sync_write: Callable[[float, int, list[tuple[int, bytes]]], None] | None = None
 
     # --------------------------------------------------------------- building
 
@@ -691,6 +697,8 @@ class SimBus:
         try:
             if inst == Instruction.SYNC_WRITE:
                 address, length, items = split_sync_write(params)
+                if self.on_sync_write is not None:
+                    self.on_sync_write(now, address, list(items))
                 for servo_id, data in items:
                     servo = self._servo_for(servo_id, now)
                     if servo is not None:
