@@ -150,7 +150,8 @@ def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
           emulator(["glove", str(rec_path), "--rate", f"{case.glove_hz:g}",
                     "--log", str(glove_log)], "the glove emulator") as glove_port):
         result = run_live(parts, LiveOptions(glove=glove_port, bus=bus_port,
-                                             duration_s=seconds, log=lambda s: None))
+                                             duration_s=seconds, log=lambda s: None,
+                                             profile=bool(os.environ.get("HANDRIG_BENCH_PROFILE"))))
     sends = [(float(a), int(c)) for a, _, c in
              (line.split() for line in glove_log.read_text().splitlines() if line)]
     writes = []
