@@ -4,7 +4,9 @@ Each case runs the real rig (SerialGlove reader, pipeline, Dynamixel driver) bet
 two emulators in processes of their own (:mod:`bench.latency_emulators`): a glove
 streaming a recording whose index channel steps every ``STEP_S`` (all other
 channels constant; the glove's One Euro filter off so a step moves the goals in the
-very next write) and 20 emulated servos with wire timing at 1 or 4 Mbps. For each
+very next write) and 20 emulated servos with wire timing at 1 or 4 Mbps (moving
+kinematically: no physics thread in the bus emulator's process to hold up its
+receipt stamps). For each
 of fixed-rate (at the glove's rate) and glove-triggered loops, at 200 and 500 Hz
 gloves, it reports:
 

@@ -68,8 +68,8 @@ class Rig:
     ``trigger``: what starts each cycle (default: by ``loop_mode``, a
     :class:`FixedRateTrigger` at ``rate_hz`` or a :class:`GloveTrigger` between
     ``floor_hz`` and ``ceiling_hz``; either rehearses ``warm_s`` before the next
-    tick, 0 turns the rehearsal off, and stamps the glove's frames as they arrive). ``profile``: time the critical path's stages
-    (:attr:`stage_profile`).
+    tick, 0 turns the rehearsal off, and stamps the glove's frames as they arrive).
+    ``profile``: time the critical path's stages (:attr:`stage_profile`).
     """
 
     def __init__(

@@ -32,6 +32,7 @@ from handrig.pipeline import POSE_SIZE, PosePipeline
 
 __all__ = ["READ_MARGIN_S", "Cycle"]
 READ_SMOOTHING = 0.2  # weight of the newest read's duration in the expected read time
+BITS_PER_BYTE = 10  # start bit, 8 data bits, stop bit (REFERENCE.md section 3)
 
 
 class Cycle:
@@ -64,6 +65,7 @@ class Cycle:
         self.trigger: Trigger = trigger or FixedRateTrigger(clock, 1.0 / period_s)
         self.read_s = 0.0  # expected duration of a present-state read (moving average)
         self._reads_due = 0  # cycles since the last read
+        self.read_wire_s = self._wire_floor(bus, len(pipeline.servo_joints))
         self.pipeline = pipeline
         self.clock = clock
         self.machine = machine
@@ -192,13 +194,24 @@ class Cycle:
             pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent
         stats.frames += 1
 
+    @staticmethod
+    def _wire_floor(bus: Any, n: int) -> float:
+        """The least a read right after a write can take: the write's Sync Write of Goal
+        Position (14 + 5N bytes) still on the wire, then the read's request and replies
+        (0 for a bus that does not say its baud rate and read wire time)."""
+        read_wire = getattr(bus, "read_wire_s", None)
+        baud = getattr(bus, "baud", None)
+        if read_wire is None or not isinstance(baud, int) or baud <= 0:
+            return 0.0
+        return float(read_wire(n)) + (14 + 5 * n) * BITS_PER_BYTE / baud
+
     def _read(self, tick: Tick) -> None:
         """The present-state read, if the trigger finds room for one in this cycle."""
         self._reads_due += 1
         trigger, clock = self.trigger, self.clock
         start = clock.now()
         deadline = trigger.read_deadline(tick, start, self._reads_due, self.read_every,
-                                         self.read_s)
+                                         max(self.read_s, self.read_wire_s))
         if deadline is None:
             return
         self._reads_due = 0

@@ -36,7 +36,7 @@ READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the nex
 PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's period estimate
 GAP_FACTOR = 4.0  # an interval this many times the estimate is a pause, not a period
 FORCED_READ_FACTOR = 4  # no gap fits for this many times read_every ticks: read anyway
-JITTER_MARGIN = 3.0  # a gap's read ends this many mean arrival deviations before the frame
+JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 
 
 @dataclass

@@ -570,3 +570,24 @@ def test_the_glove_triggered_loop_keeps_the_floor_and_relaxes_and_resumes(parts_
     assert stats.relax_events == 1 and stats.resumes == 1
     assert stats.cycles_without_frame == pytest.approx(100, abs=3)  # 1 s at the 100 Hz floor
     assert stats.period.max <= 0.010 + 1e-9  # never quieter than the floor
+
+
+class WiredBus(RecordingBus):
+    """A bus that says its baud rate and a read's wire time (Fast Sync Read, 4 bytes)."""
+
+    baud = 1_000_000
+
+    def read_wire_s(self, n: int) -> float:
+        return ((14 + n) + (8 + 8 * n)) * 10 / self.baud
+
+
+def test_no_gap_read_is_offered_that_the_wire_cannot_carry(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock(0.0)
+    glove = _replay(500.0, 2.0, clock)  # 2 ms gaps: the write and a read need 3.2 ms of wire
+    bus = WiredBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=100.0,
+                   ceiling_hz=1000.0)
+    stats = rig.run(duration_s=1.0)
+    # only the forced reads, one per FORCED_READ_FACTOR * read_every cycles
+    assert 0 < stats.reads <= stats.frames / 16 + 1
