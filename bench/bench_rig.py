@@ -1,53 +1,226 @@
-"""The realtime path, measured end to end on the simulated rig.
+"""Glove frame to servo command, as the puppeteer feels it: fixed-rate loop vs glove-triggered.
 
-A glove emulator (subprocess, 200 Hz handrig frames on a pty) feeds the real
-SerialGlove reader, pipeline and Dynamixel driver, which drive 20 emulated
-servos of ``handrig sim-bus`` (MuJoCo puppet, wire timing at 1 Mbps). Prints
-loop rate, jitter, host latency from a glove frame's last byte read to the Sync
-Write handed to the OS (percentiles, from the loop's fixed-size histograms),
-where that latency goes stage by stage, overruns and tracking.
+Each case runs the real rig (SerialGlove reader, pipeline, Dynamixel driver) between
+two emulators in processes of their own (:mod:`bench.latency_emulators`): a glove
+streaming a recording whose index channel steps every ``STEP_S`` (all other
+channels constant; the glove's One Euro filter off so a step moves the goals in the
+very next write) and 20 emulated servos with wire timing at 1 or 4 Mbps (moving
+kinematically: no physics thread in the bus emulator's process to hold up its
+receipt stamps). For each
+of fixed-rate (at the glove's rate) and glove-triggered loops, at 200 and 500 Hz
+gloves, it reports:
 
-Targets: latency median <= 100 us, p99 <= 300 us; 200 Hz with no overruns over
-60 s. ``HANDRIG_BENCH_QUICK=1`` runs 10 s instead of 60 s.
+* in process: end-to-end latency (a frame's arrival at the host to its Sync Write
+  handed to the OS) and its compute part, p50/p99/max;
+* from outside: the glove emulator's send time of the frame carrying a step to the
+  bus emulator's receipt of the first Sync Write whose goals moved (both
+  CLOCK_MONOTONIC; only steps that found the goals settled count);
+* writes and reads per second, writes delayed by reads, glove frames the loop
+  skipped, overruns, CPU of the loop's thread per cycle.
+
+``HANDRIG_BENCH_SECONDS`` sets each case's length (default 60 s;
+``HANDRIG_BENCH_QUICK=1``: 10 s); ``HANDRIG_BENCH_APPEND=1`` also appends the table
+as a dated section to ``docs/measurements.md``.
 """
 
 from __future__ import annotations
 
+import bisect
+import contextlib
+import datetime
 import os
+import re
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
-from handrig.app import build_parts, port_process
+import numpy as np
+
+from handrig.app import build_parts
+from handrig.config import CONFIG_DIR
+from handrig.errors import DeviceError
+from handrig.glove_recording import GloveRecording, write_glove_recording
 from handrig.live import LiveOptions, run_live
-from sim.demo_recording import DEMO_RECORDING
+from handrig.realtime import helper_env
+
+STEP_S = 0.25  # the index channel steps this often (the goals settle well within it)
+INDEX_CHANNEL = 3  # riIndexMCPy in config/glove.toml
+RAW_LOW, RAW_HIGH = 1800.0, 2200.0  # the step: about 18 deg of index MCP flexion
+SETTLE_WINDOW_S = 0.05  # how far after a step its first moving write is looked for
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def step_recording(channels: int = 5) -> GloveRecording:
+    """A looping 2 * STEP_S recording at 1 kHz: constant channels, the index stepping."""
+    t = np.arange(0.0, 2 * STEP_S, 0.001)
+    raw = np.full((len(t), channels), 2000.0)
+    raw[:, INDEX_CHANNEL] = np.where(t < STEP_S, RAW_LOW, RAW_HIGH)
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
+    return GloveRecording(t_s=t, raw=raw, buttons=np.zeros(len(t), dtype=np.int64),
+                          channel_names=tuple(f"ch{k}" for k in range(channels)),
+                          quat_xyzw=quat, rate_hz=1000.0)
+
+
+def outside_latencies(sends: Sequence[tuple[float, int]], values: np.ndarray,
+                      writes: Sequence[tuple[float, tuple[int, ...]]]) -> list[float]:
+    """Send time of each frame that carries a step (``values[index]`` differs from the
+    previous frame's) to the receipt of the first write whose goals differ from the
+    settled goals before it. ``sends``: (time, sample index); ``writes``: (time, goal
+    ticks), both sorted by time. Steps whose goals had not settled (the two writes
+    before the step differ) are left out."""
+    times = [t for t, _ in writes]
+    out: list[float] = []
+    previous = None
+    for t_send, index in sends:
+        v = values[index]
+        if previous is not None and v != previous:
+            j = bisect.bisect_right(times, t_send)
+            if j >= 2 and writes[j - 1][1] == writes[j - 2][1]:
+                settled = writes[j - 1][1]
+                for k in range(j, len(writes)):
+                    t_k, goals = writes[k]
+                    if t_k - t_send > SETTLE_WINDOW_S:
+                        break
+                    if goals != settled:
+                        out.append(t_k - t_send)
+                        break
+        previous = v
+    return out
+
+
+@contextlib.contextmanager
+def emulator(argv: list[str], what: str) -> Iterator[str]:
+    """``python -m bench.latency_emulators ARGV`` (off the loop's CPU); yields its port."""
+    proc = subprocess.Popen([sys.executable, "-m", "bench.latency_emulators", *argv],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=helper_env(), cwd=ROOT, start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline().strip()
+        if not line.startswith("port: "):
+            proc.kill()
+            _, err = proc.communicate(timeout=10)
+            raise DeviceError(f"{what} did not start: {(line + ' ' + err).strip()[-400:]}")
+        yield line.removeprefix("port: ")
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def _rig_file(folder: Path, mode: str, rate_hz: float, baud: int) -> Path:
+    text = (CONFIG_DIR / "rig.toml").read_text(encoding="utf-8")
+    text = re.sub(r"(?m)^baud = \d+", f"baud = {baud}", text, count=1)
+    text = re.sub(r"(?m)^rate_hz = [\d.]+", f"rate_hz = {rate_hz:g}", text, count=1)
+    text = text.replace("[loop]\n", f'[loop]\nmode = "{mode}"\n', 1)
+    path = folder / f"rig_{mode}_{rate_hz:g}_{baud}.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _glove_file(folder: Path) -> Path:
+    text = (CONFIG_DIR / "glove.toml").read_text(encoding="utf-8")
+    text = re.sub(r"(?ms)(^\[filter\].*?^enabled = )true", r"\1false", text, count=1)
+    path = folder / "glove_unfiltered.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@dataclass
+class Case:
+    mode: str
+    glove_hz: float
+    baud: int
+
+
+def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
+             values: np.ndarray) -> dict[str, Any]:
+    tag = f"{case.mode}_{case.glove_hz:g}_{case.baud}"
+    rig_path = _rig_file(folder, case.mode, case.glove_hz, case.baud)
+    glove_log, bus_log = folder / f"glove_{tag}.log", folder / f"bus_{tag}.log"
+    parts = build_parts(rig_path, _glove_file(folder))
+    with (emulator(["bus", "--rig", str(rig_path), "--log", str(bus_log)],
+                   "the bus emulator") as bus_port,
+          emulator(["glove", str(rec_path), "--rate", f"{case.glove_hz:g}",
+                    "--log", str(glove_log)], "the glove emulator") as glove_port):
+        result = run_live(parts, LiveOptions(glove=glove_port, bus=bus_port,
+                                             duration_s=seconds, log=lambda s: None,
+                                             profile=bool(os.environ.get("HANDRIG_BENCH_PROFILE"))))
+    sends = [(float(a), int(c)) for a, _, c in
+             (line.split() for line in glove_log.read_text().splitlines() if line)]
+    writes = []
+    for line in bus_log.read_text().splitlines():
+        fields = line.split()
+        if fields:
+            writes.append((float(fields[0]), tuple(int(v) for v in fields[1:])))
+    lat = np.array(outside_latencies(sends, values, writes)) * 1e6
+    s = result.summary
+    outside = ({"p50": round(float(np.percentile(lat, 50)), 1),
+                "p99": round(float(np.percentile(lat, 99)), 1),
+                "max": round(float(lat.max()), 1), "n": len(lat)}
+               if len(lat) else {"p50": None, "p99": None, "max": None, "n": 0})
+    return {"case": case, "summary": s, "outside_us": outside}
+
+
+def _row(r: dict[str, Any]) -> str:
+    c, s, o = r["case"], r["summary"], r["outside_us"]
+    lat, comp = s["latency_us"], s["compute_us"]
+    err = f" error: {s['error']}" if "error" in s else ""
+    return (f"| {c.mode} | {c.glove_hz:g} | {c.baud // 1_000_000} | "
+            f"{lat['p50']} / {lat['p99']} / {lat['max']} | {comp['p50']} / {comp['p99']} | "
+            f"{o['p50']} / {o['p99']} / {o['max']} ({o['n']}) | {s['writes_per_s']} | "
+            f"{s['reads_per_s']} | {s['writes_delayed_by_reads']} | {s['frames_skipped']} | "
+            f"{s['overruns']} | {s['cpu_per_cycle_us']} |{err}")
+
+
+HEADER = ("| loop | glove Hz | Mbps | in-process end to end p50 / p99 / max (us) | "
+          "compute p50 / p99 (us) | outside p50 / p99 / max (us) (steps) | writes/s | "
+          "reads/s | writes delayed by reads | frames skipped | overruns | "
+          "CPU/cycle (us) |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def main() -> None:
-    seconds = 10.0 if os.environ.get("HANDRIG_BENCH_QUICK") else 60.0
-    parts = build_parts()
-    rate = parts.rig_config.loop.rate_hz
-    n = len(parts.rig_config.servos)
-    baud = parts.rig_config.bus.baud
-    with port_process(["sim-glove", str(DEMO_RECORDING), "--rate", "200", "--loop"],
-                      "the glove emulator") as (_, glove_port):
-        result = run_live(parts, LiveOptions(glove=glove_port, bus="sim", profile=True,
-                                             duration_s=seconds, log=lambda s: None))
-    s = result.summary
-    lat = s["latency_us"]
-    print(f"rig loop: {n} servos, {baud} baud (wire timing on), target {rate:g} Hz, "
-          f"{seconds:g} s")
-    print(f"  rate            {s['rate_hz']} Hz over {s['frames']} cycles "
-          f"(jitter {s['jitter_us']} us)")
-    print(f"  overruns        {s['overruns']} (max {s['overrun_max_us']} us late, "
-          f"{s['missed_cycles']} cycles missed)")
-    print(f"  latency         p50 {lat['p50']} us, p99 {lat['p99']} us, max {lat['max']} us "
-          f"over {lat['samples']} glove frames (target p50 <= 100, p99 <= 300)")
-    stages = ", ".join(f"{k} {v['p50']}" for k, v in s.get("stages_us", {}).items())
-    print(f"  where (p50 us)  {stages}")
-    print(f"  tracking        rms {s['tracking_rms_deg']} deg (present vs goal), "
-          f"stale reads {s['stale_reads']}/{s['reads']}")
-    print(f"  glove           {s['glove']}")
-    print(f"  stopped         {s['stop_reason']}" + (f" (error: {s['error']})" if "error" in s
-                                                      else ""))
-    print(f"  torque off      {s['torque_off']}")
+    quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
+    seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 10.0 if quick else 60.0))
+    cases = [Case(mode, hz, baud) for hz in (200.0, 500.0) for baud in (1_000_000, 4_000_000)
+             for mode in ("fixed", "glove")]
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="bench_rig_") as tmp:
+        folder = Path(tmp)
+        rec = step_recording()
+        rec_path = folder / "steps.csv"
+        write_glove_recording(rec_path, rec)
+        values = rec.raw[:, INDEX_CHANNEL].copy()
+        print(f"rig loop, 20 emulated servos with wire timing, {seconds:g} s per case; "
+              f"index channel steps every {STEP_S:g} s", flush=True)
+        print(HEADER, flush=True)
+        for case in cases:
+            r = run_case(case, seconds, folder, rec_path, values)
+            rows.append(r)
+            print(_row(r), flush=True)
+    if os.environ.get("HANDRIG_BENCH_APPEND"):
+        env = " ".join(f"{k}={os.environ[k]}" for k in ("HANDRIG_BENCH_SECONDS",)
+                       if k in os.environ)
+        day = datetime.datetime.now(datetime.UTC).date().isoformat()
+        text = (f"\n### Glove frame to servo command, fixed-rate vs glove-triggered ({day})\n\n"
+                f"`{(env + ' ') if env else ''}HANDRIG_BENCH_APPEND=1 python -m bench rig` "
+                f"({seconds:g} s per case, 20 emulated servos with wire timing, the glove "
+                "emulator and the bus emulator in processes of their own, 2-core VM shared "
+                "with other jobs). Fixed-rate runs at the glove's rate. In process: from a "
+                "frame's arrival (stamped by the loop blocking on the port) to the Sync "
+                "Write handed to the OS; outside: glove emulator send time to the bus "
+                "emulator's receipt of the first Sync Write that moved, CLOCK_MONOTONIC.\n\n"
+                + HEADER + "\n" + "\n".join(_row(r) for r in rows) + "\n")
+        with (ROOT / "docs" / "measurements.md").open("a", encoding="utf-8") as f:
+            f.write(text)
 
 
 if __name__ == "__main__":

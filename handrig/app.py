@@ -329,9 +329,14 @@ def resume_settings(rig_cfg: RigConfig) -> ResumeSettings:
 def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
               outputs: Sequence[Callable[[float, FloatArray], None]] = (),
               log: Callable[[str], None] = print, profile: bool = False) -> Rig:
-    """The loop on these devices, with the rig file's rates and safety timings."""
+    """The loop on these devices, with the rig file's rates and safety timings. In loop
+    mode "glove" the ceiling is also held below the rate at which Sync Writes of Goal
+    Position fill the wire (``0.9 / wire time``), so writes never queue on the bus."""
     loop = parts.rig_config.loop
     resume = resume_settings(parts.rig_config)
+    rig_cfg = parts.rig_config
+    write_s = wire_time_s(14 + 5 * len(rig_cfg.servos), rig_cfg.bus.baud)  # 14 + 5N bytes
+    ceiling_hz = max(loop.floor_hz, min(loop.ceiling_hz, 0.9 / write_s))
     return Rig(
         glove, bus, parts.pipeline, clock,
         controls_from_raw=parts.controls, orientation=parts.orientation,
@@ -339,6 +344,7 @@ def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
         glove_timeout_s=loop.glove_timeout_s, relax_time_s=loop.relax_time_s,
         resume_frames=resume.frames, resume_time_s=resume.time_s,
         outputs=outputs, log=log, profile=profile,
+        loop_mode=loop.mode, floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz,
     )
 
 
@@ -485,6 +491,16 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: 
         "jitter_us": num(s.jitter_us, 1),
         "latency_us": {"p50": num(s.latency_us(50), 1), "p99": num(s.latency_us(99), 1),
                        "max": num(s.latency_us(100), 1), "samples": s.latency.count},
+        "loop_mode": s.loop_mode,
+        "compute_us": {"p50": num(s.compute_us(50), 1), "p99": num(s.compute_us(99), 1),
+                       "max": num(s.compute_us(100), 1)},
+        "writes_per_s": num(s.rate_hz, 2),
+        "reads_per_s": num(s.reads / s.duration_s if s.duration_s > 0 else math.nan, 2),
+        "writes_delayed_by_reads": s.writes_delayed,
+        "cycles_without_frame": s.cycles_without_frame,
+        "frames_skipped": s.frames_skipped,
+        "ceiling_waits": s.ceiling_waits,
+        "cpu_per_cycle_us": num(s.cpu_per_cycle_us, 1),
         "overruns": s.overruns,
         "overrun_max_us": num(s.overrun_max_s * 1e6, 1),
         "missed_cycles": s.missed_cycles,

@@ -61,6 +61,9 @@ LOCK_FRAMES = 3
 """Good frames in a row with one channel count that fix the count a glove sends."""
 MAX_EVENTS = 64
 """Port events kept for :meth:`GloveSource.drain_events` (the oldest go first)."""
+DUE_TOLERANCE_S = 1e-9
+""":meth:`ReplayGlove.next_due_s` is this much after the due time, so that the clock
+time it gives, less the start, does not round to just before the sample."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -165,6 +168,11 @@ class GloveSource(ABC):
     def peek(self) -> GloveSample | None:
         """The newest sample so far (new or not), without marking it taken."""
         return self._newest
+
+    def has_new(self) -> bool:
+        """Whether :meth:`latest` has a sample not returned before (without taking it)."""
+        s = self._newest
+        return s is not None and s.count != self._taken
 
     @abstractmethod
     def stats(self) -> GloveStats:
@@ -318,6 +326,25 @@ class SerialGlove(GloveSource):
         if self.reader == "poll":
             self._poll()
         return super().latest()
+
+    def fileno(self) -> int | None:
+        """The open port's descriptor with ``reader="poll"``, for a loop that blocks on it
+        until bytes arrive and then calls :meth:`pump`; None with a reader thread or while
+        the port is gone."""
+        ser = self._serial
+        if self.reader != "poll" or ser is None:
+            return None
+        try:
+            return int(ser.fileno())
+        except (OSError, ValueError, TypeError):
+            return None
+
+    def pump(self) -> None:
+        """Read and decode what has arrived, stamped with the clock now (``reader="poll"``;
+        never blocks). Called as soon as the descriptor turns readable, it stamps each
+        frame with the time its last byte arrived."""
+        if self.reader == "poll":
+            self._poll()
 
     def feed(self, data: bytes, now: float) -> None:
         """Decode ``data`` as bytes read from the port at clock time ``now`` (the reader
@@ -591,6 +618,44 @@ class ReplayGlove(GloveSource):
         self._taken = count
         self._served += 1
         return sample
+
+    def _due_index(self, elapsed: float) -> tuple[int, int]:
+        """(lap, index) of the newest recorded sample due ``elapsed`` s after the start."""
+        lap = 0
+        if self.loop:
+            lap = int(elapsed // self._period_s)
+            elapsed -= lap * self._period_s
+        return lap, int(np.searchsorted(self._t_rel, elapsed, side="right")) - 1
+
+    def _due_at(self, lap: int, i: int) -> float:
+        t0 = self._t0 if self._t0 is not None else self.clock.now()
+        return t0 + lap * self._period_s + float(self._t_rel[i])
+
+    def has_new(self) -> bool:
+        if self._t0 is None:
+            return False
+        lap, i = self._due_index(self.clock.now() - self._t0)
+        return i >= 0 and lap * len(self._t_rel) + i + 1 > self._taken
+
+    def newest_due_s(self) -> float:
+        """When the newest sample due by now came due (the clock now before any)."""
+        now = self.clock.now()
+        if self._t0 is None:
+            return now
+        lap, i = self._due_index(now - self._t0)
+        return self._due_at(lap, i) if i >= 0 else now
+
+    def next_due_s(self) -> float:
+        """When the next sample not yet returned comes due (inf after the last one)."""
+        if self._t0 is None:
+            self._t0 = self.clock.now()
+        n = len(self._t_rel)
+        lap, i = divmod(self._taken, n)  # the sample after the last one returned
+        if not self.loop and lap > 0:
+            return math.inf
+        due = self._due_at(lap, i) + DUE_TOLERANCE_S
+        now = self.clock.now()
+        return due if due > now else now
 
     def stats(self) -> GloveStats:
         since = math.inf

@@ -344,6 +344,7 @@ def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
 def format_summary(summary: dict[str, Any]) -> str:
     """The human-readable summary of a run (the same figures as ``--json``)."""
     lat = summary["latency_us"]
+    comp = summary.get("compute_us") or {}
     glove = summary.get("glove", {})
     ease_s = summary.get("ease_s") or 0.0
     ease = (f"; includes the {ease_s:g} s ease to the relaxed pose at the end" if ease_s
@@ -355,7 +356,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"frames            {summary['frames']} in {summary['duration_s']} s "
         f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us){ease}",
         f"latency           p50 {lat['p50']} us, p99 {lat['p99']} us, max {lat['max']} us "
-        "(glove frame read -> Sync Write handed to the OS)",
+        "(glove frame's arrival -> Sync Write handed to the OS)",
+        f"                  of which compute p50 {comp.get('p50')} us, p99 {comp.get('p99')} us "
+        f"(cycle start -> Sync Write; loop {summary.get('loop_mode', 'fixed')})",
         f"overruns          {summary['overruns']} (max {summary['overrun_max_us']} us late, "
         f"{summary['missed_cycles']} cycles missed)",
         f"limit clamps      {summary['limit_clamps']} servo targets held at a joint or servo "

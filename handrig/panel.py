@@ -129,7 +129,7 @@ class PanelSnapshot:
     elapsed_s: float = 0.0
     loop_rate_hz: float = NAN
     overruns: int = 0
-    latency_p50_us: float = NAN  # glove frame read -> Sync Write handed to the OS
+    latency_p50_us: float = NAN  # glove frame's arrival -> Sync Write handed to the OS
     latency_p99_us: float = NAN
     glove: GloveLink = field(default_factory=GloveLink)
     bus: BusHealth = field(default_factory=BusHealth)

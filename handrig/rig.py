@@ -1,13 +1,16 @@
 """The live rig: the realtime loop from glove to servos, with its safety behaviour.
 
-``Rig(glove, bus, pipeline, clock, ...)`` runs cycles at ``rate_hz`` on the
-injected :class:`~handrig.clock.Clock`. Each cycle it takes the newest glove
-sample without blocking, turns it into servo targets through the
+``Rig(glove, bus, pipeline, clock, ...)`` runs cycles on the injected
+:class:`~handrig.clock.Clock`: at ``rate_hz`` (``loop_mode="fixed"``), or one per
+glove frame as it arrives, between ``floor_hz`` and ``ceiling_hz``
+(``loop_mode="glove"``). Each cycle it takes the newest glove sample without
+blocking, turns it into servo targets through the
 :class:`~handrig.pipeline.PosePipeline`, hands one Sync Write to the bus, and
 every ``read_every`` cycles reads the servos' present state back.
 
 The loop is made of parts (:mod:`handrig.loop`): a trigger says when a cycle runs
-(:class:`~handrig.loop.trigger.FixedRateTrigger`), the mode machine what the
+(:class:`~handrig.loop.trigger.FixedRateTrigger`,
+:class:`~handrig.loop.trigger.GloveTrigger`), the mode machine what the
 puppet does (:mod:`handrig.loop.modes`), the cycle does one cycle's work
 (:mod:`handrig.loop.cycle`) with two easings (:mod:`handrig.loop.easing`), a
 rehearsal keeps the critical path warm (:mod:`handrig.loop.rehearsal`), and the
@@ -34,8 +37,9 @@ Safety (what a puppeteer relies on during a show):
 from __future__ import annotations
 
 import gc
+import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Literal
 
 from handrig.clock import Clock
 from handrig.errors import DeviceError
@@ -52,7 +56,7 @@ from handrig.loop.ports import (
 from handrig.loop.profile import StageProfile
 from handrig.loop.rehearsal import Rehearsal
 from handrig.loop.stats import RunStats
-from handrig.loop.trigger import FixedRateTrigger, Tick, Trigger
+from handrig.loop.trigger import FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pipeline import PosePipeline
 
 __all__ = ["BusLike", "ControlsFromRaw", "GloveLike", "Mode", "OrientationLike", "Rig",
@@ -64,10 +68,11 @@ WARM_S = 0.00035  # how long before a deadline the rehearsal runs
 class Rig:
     """The realtime loop. Dependencies are passed in; nothing here opens a device.
 
-    ``trigger``: what starts each cycle (default: a :class:`FixedRateTrigger` at
-    ``rate_hz`` that rehearses ``warm_s`` before each deadline; 0 turns the
-    rehearsal off). ``profile``: time the critical path's stages
-    (:attr:`stage_profile`).
+    ``trigger``: what starts each cycle (default: by ``loop_mode``, a
+    :class:`FixedRateTrigger` at ``rate_hz`` or a :class:`GloveTrigger` between
+    ``floor_hz`` and ``ceiling_hz``; either rehearses ``warm_s`` before the next
+    tick, 0 turns the rehearsal off, and stamps the glove's frames as they arrive).
+    ``profile``: time the critical path's stages (:attr:`stage_profile`).
     """
 
     def __init__(
@@ -90,18 +95,30 @@ class Rig:
         warm_s: float = WARM_S,
         profile: bool = False,
         trigger: Trigger | None = None,
+        loop_mode: Literal["fixed", "glove"] = "fixed",
+        floor_hz: float = 100.0,
+        ceiling_hz: float = 1000.0,
     ) -> None:
         self.glove = glove
         self.bus = bus
         self.pipeline = pipeline
         self.clock = clock
         self.warm_s = max(0.0, float(warm_s))
-        self.trigger = trigger or FixedRateTrigger(clock, rate_hz, warm_s=self.warm_s)
+        if trigger is None:
+            if loop_mode == "glove":
+                trigger = GloveTrigger(clock, glove, floor_hz=floor_hz, ceiling_hz=ceiling_hz,
+                                       warm_s=self.warm_s)
+            elif loop_mode == "fixed":
+                trigger = FixedRateTrigger(clock, rate_hz, warm_s=self.warm_s, glove=glove)
+            else:
+                raise ValueError(f"loop_mode {loop_mode!r} unknown: use 'fixed' or 'glove'")
+        self.trigger = trigger
         self.period_s = self.trigger.period_s
         self.glove_timeout_s = glove_timeout_s
         self.relax_time_s = relax_time_s
         self.log = log
-        self.stats = RunStats()
+        self.stats = RunStats(loop_mode="glove" if isinstance(self.trigger, GloveTrigger)
+                              else "fixed")
         self.started_at = 0.0
         self._prepared = False  # prepare() ran: garbage collected, start-up heap frozen
         self.machine = ModeMachine(
@@ -113,7 +130,7 @@ class Rig:
             glove, bus, pipeline, clock, self.machine, self.stats,
             controls_from_raw=controls_from_raw, orientation=orientation,
             period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
-            resume_time_s=resume_time_s, outputs=outputs,
+            resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
@@ -196,6 +213,7 @@ class Rig:
         cycle.t0_s = t0
         tick = Tick()
         rehearsal = self.rehearsal
+        cpu0 = time.thread_time()
         last_start: float | None = None
         try:
             while True:
@@ -227,6 +245,8 @@ class Rig:
             gc.unfreeze()
             self._prepared = False
             stats.duration_s = clock.now() - t0
+            stats.cpu_s = time.thread_time() - cpu0
+            stats.ceiling_waits = int(getattr(self.trigger, "ceiling_waits", 0))
             self._pipeline_figures()
         return stats
 

@@ -128,7 +128,10 @@ class LoopConfig:
     ``config/glove.toml``).
     """
 
-    rate_hz: float = 200.0
+    rate_hz: float = 200.0  # the fixed loop's rate (mode "fixed")
+    mode: Literal["glove", "fixed"] = "glove"  # a cycle per glove frame, or at rate_hz
+    floor_hz: float = 100.0  # mode "glove": a write at least this often, frame or not
+    ceiling_hz: float = 1000.0  # mode "glove": at most this many writes per second
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
     slew_deg_s: float = 720.0  # max joint speed commanded in normal running
@@ -145,6 +148,16 @@ class LoopConfig:
         if not 10.0 <= self.rate_hz <= 2000.0:
             raise ConfigError("loop rate out of range", key="rate_hz", value=self.rate_hz,
                               allowed="10..2000 Hz")
+        if self.mode not in ("glove", "fixed"):
+            raise ConfigError("loop mode unknown", key="mode", value=self.mode,
+                              allowed="'glove' (a cycle per glove frame) or 'fixed' (rate_hz)")
+        if not 10.0 <= self.floor_hz <= 2000.0:
+            raise ConfigError("floor rate out of range", key="floor_hz", value=self.floor_hz,
+                              allowed="10..2000 Hz")
+        if not self.floor_hz <= self.ceiling_hz <= 5000.0:
+            raise ConfigError("ceiling rate out of range", key="ceiling_hz",
+                              value=self.ceiling_hz,
+                              allowed=f"floor_hz ({self.floor_hz:g})..5000 Hz")
         for name in ("glove_timeout_s", "relax_time_s", "slew_deg_s"):
             value = getattr(self, name)
             if value <= 0:

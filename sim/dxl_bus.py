@@ -260,6 +260,11 @@ class SimBus:
     default: servos follow whatever baud the client sets). ``realtime``: ask for
     SCHED_FIFO priority for the bus thread (best effort; ``realtime_granted`` says
     whether the OS agreed) so replies leave on time on a busy machine.
+
+    ``on_sync_write(t_s, address, items)``, if set, is called from the bus thread for
+    each Sync Write: ``t_s`` the clock time its bytes were read off the pty (with the
+    default clock, CLOCK_MONOTONIC on Linux), its start address and its
+    ``[(id, data bytes)]``. It is how a latency is measured from outside the rig.
     """
 
     def __init__(
@@ -311,6 +316,7 @@ class SimBus:
         self.error: BaseException | None = None
         self.goal_limits: dict[int, tuple[int, int]] = limits
         """Servo ID -> (lowest, highest) Goal Position ticks it may be sent."""
+        self.on_sync_write: Callable[[float, int, list[tuple[int, bytes]]], None] | None = None
 
     # --------------------------------------------------------------- building
 
@@ -713,6 +719,8 @@ class SimBus:
                 if address == GOAL_POSITION_ADDRESS and length == 4:
                     for servo_id, data in items:
                         self._audit_goal(servo_id, data)
+                if self.on_sync_write is not None:
+                    self.on_sync_write(now, address, list(items))
                 for servo_id, data in items:
                     servo = self._servo_for(servo_id, now)
                     if servo is not None:

@@ -21,7 +21,9 @@ import contextlib
 import os
 import random
 import threading
+import time
 import tty
+from collections.abc import Callable
 from types import TracebackType
 from typing import Literal
 
@@ -47,6 +49,13 @@ class GloveEmulator:
     OpenGloves: the first five channels are the fingers (clipped to 0..analog_max),
     channels 5..9 if present the splays; buttons bit 0 is sent as
     ``estop_letter``, bits 1..8 as H..O.
+
+    ``on_send(t_s, seq, index)``, if given, is called from the streaming thread after
+    each frame was written to the pty: ``t_s`` (taken just before the write) on
+    CLOCK_MONOTONIC (the clock the rig's
+    :class:`~handrig.clock.MonotonicClock` reads on Linux), the frame's sequence number
+    and the recording's sample index. It is how a latency is measured from outside the
+    rig process.
     """
 
     def __init__(
@@ -61,7 +70,9 @@ class GloveEmulator:
         analog_max: int = 4095,
         estop_letter: str = "N",
         seed: int = 0,
+        on_send: Callable[[float, int, int], None] | None = None,
     ) -> None:
+        self.on_send = on_send
         if fmt not in ("frames", "opengloves"):
             raise DataError(f"glove format {fmt!r} unknown: use 'frames' or 'opengloves'")
         if estop_letter not in BUTTON_LETTERS:
@@ -304,11 +315,14 @@ class GloveEmulator:
             try:
                 for burst in garbage:
                     self._write(burst)
+                sent_at = time.clock_gettime(time.CLOCK_MONOTONIC)  # handed to the pty next
                 self._write(wire)
                 self._drain_input()
             except OSError:
                 return  # the pty was closed under us (hang_up)
             self.frames_sent += 1
+            if self.on_send is not None:
+                self.on_send(sent_at, (seq - 1) & 0xFFFF, i)
 
     def _sleep_until(self, t: float) -> None:
         # sleep in short slices so close() and hang_up() are prompt

@@ -4,9 +4,16 @@ The critical path, from taking the newest glove sample to handing the Sync Write
 to the OS, is kept short: controls, forearm angles, the mode for the cycle, the
 servo step (or an easing), the write. Everything else (latency, the full pose for
 the outputs and the counters behind it, the outputs, the state read) comes after
-the write. Every ``read_every`` slots the servos' present state is read back,
-with a deadline that leaves the next cycle its time; midway between those reads
-the bus may do its housekeeping reads (watchdogs, temperatures) in the same way.
+the write. About every ``read_every`` cycles the servos' present state is read
+back, when and with the deadline the trigger allows
+(:meth:`~handrig.loop.trigger.Trigger.read_deadline`), so that the next cycle
+keeps its time; a read after which the next write had to wait is counted.
+Between those reads the bus may do its housekeeping reads (watchdogs,
+temperatures) in the same way.
+
+Latency is measured twice per glove frame: end to end, from the frame's
+``host_time_s`` (its arrival) to the Sync Write handed to the OS, and the compute
+part of it, from the cycle's start to the same point.
 """
 
 from __future__ import annotations
@@ -22,10 +29,12 @@ from handrig.loop.easing import Easing
 from handrig.loop.modes import Mode, ModeMachine
 from handrig.loop.ports import BusLike, ControlsFromRaw, FloatArray, GloveLike, OrientationLike
 from handrig.loop.stats import RunStats
-from handrig.loop.trigger import Tick
+from handrig.loop.trigger import READ_MARGIN_S, FixedRateTrigger, Tick, Trigger
 from handrig.pipeline import POSE_SIZE, PosePipeline
 
-READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the next cycle
+__all__ = ["READ_MARGIN_S", "Cycle"]
+READ_SMOOTHING = 0.2  # weight of the newest read's duration in the expected read time
+BITS_PER_BYTE = 10  # start bit, 8 data bits, stop bit (REFERENCE.md section 3)
 
 
 class Cycle:
@@ -52,8 +61,13 @@ class Cycle:
         relax_time_s: float,
         resume_time_s: float,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
+        trigger: Trigger | None = None,
     ) -> None:
         self.bus = bus
+        self.trigger: Trigger = trigger or FixedRateTrigger(clock, 1.0 / period_s)
+        self.read_s = 0.0  # expected duration of a present-state read (moving average)
+        self._reads_due = 0  # cycles since the last read
+        self.read_wire_s = self._wire_floor(bus, len(pipeline.servo_joints))
         self.pipeline = pipeline
         self.clock = clock
         self.machine = machine
@@ -80,7 +94,7 @@ class Cycle:
         self.angles: tuple[float, float] = (0.0, 0.0)  # forearm (inclination, rotation)
         self.sent = np.zeros(n)  # the goals last written
         self._step = np.zeros(n)
-        self._max_step_deg = pipeline.slew_deg_s * period_s
+        self._slew_deg_s = pipeline.slew_deg_s
         self.sample: Any = None  # the newest glove sample
         self.last_state: Any = None  # the newest ServoState read back
         self.t0_s = 0.0
@@ -119,11 +133,11 @@ class Cycle:
             mode = machine.silence(now)
         done = False
         if mode is Mode.RUNNING:
-            goals = self.targets(self.controls, *self.angles, self.period_s)
+            goals = self.targets(self.controls, *self.angles, tick.dt_s)
         elif mode is Mode.WAITING:
             goals = self.sent  # hold: keeps the watchdog fed
         elif mode is Mode.RESUMING:
-            goals, done = self._resume_goals(now)
+            goals, done = self._resume_goals(now, tick.dt_s)
         else:
             relaxed = self.pipeline.relaxed_targets(*self.angles)
             goals, done = self.relax.goals(now, self.sent, self._pose, relaxed)
@@ -136,30 +150,38 @@ class Cycle:
                 return True
         return False
 
-    def _resume_goals(self, now: float) -> tuple[FloatArray, bool]:
+    def _resume_goals(self, now: float, dt_s: float) -> tuple[FloatArray, bool]:
         """Easing from where the servos are to the glove's targets before the slew limit,
         then the slew limit on the eased step: at the end of the easing the goals are the
         pipeline's own slew-limited step, and following the glove takes over seamlessly."""
         pipeline, sent = self.pipeline, self.sent
         pipeline.seed(sent)  # the slew limit counts from what the servos were sent
-        self.targets(self.controls, *self.angles, self.period_s)
+        self.targets(self.controls, *self.angles, dt_s)
         goals, done = self.resume.goals(now, sent, self._pose, pipeline.raw_targets)
         step = self._step
+        max_step = self._slew_deg_s * dt_s
         np.subtract(goals, sent, out=step)
-        np.clip(step, -self._max_step_deg, self._max_step_deg, out=step)
+        np.clip(step, -max_step, max_step, out=step)
         np.add(sent, step, out=goals)
         return goals, done
 
     def _after_write(self, tick: Tick, sample: Any, mode: Mode, goals: FloatArray,
                      bus_clamps: int) -> None:
         stats = self.stats
+        written = self.clock.now()
         stats.bus_clamps += int(bus_clamps)
         if sample is not None:
-            latency = self.clock.now() - sample.host_time_s
+            latency = written - sample.host_time_s
             stats.latency.add(latency)
+            stats.compute.add(written - tick.now_s)
             stats.latencies_s.append(latency)
             stats.glove_samples += 1
+            count, before = getattr(sample, "count", 0), getattr(self.sample, "count", 0)
+            if before and count > before + 1:
+                stats.frames_skipped += count - before - 1
             self.sample = sample
+        else:
+            stats.cycles_without_frame += 1
         pipeline = self.pipeline
         pose: FloatArray | None
         if mode is Mode.RUNNING:
@@ -175,14 +197,7 @@ class Cycle:
             t_s = tick.now_s - self.t0_s
             for out in self.outputs:
                 out(t_s, pose)
-        slot = tick.index % self.read_every
-        if slot == 0:
-            state = self.bus.read_state(tick.next_s - READ_MARGIN_S)
-            self.last_state = state
-            self._track(state, self.sent)
-            self._take_events()
-        elif slot == self._housekeeping_slot and self.housekeeping is not None:
-            self.housekeeping(tick.next_s - READ_MARGIN_S)
+        self._read(tick)
         self.sent[:] = goals
         if mode is not Mode.RUNNING and mode is not Mode.WAITING:
             pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent
@@ -195,6 +210,40 @@ class Cycle:
                 machine.event(text)
         if hasattr(self.bus, "relax_reason"):
             machine.servos_silent(self.bus.relax_reason)
+
+    @staticmethod
+    def _wire_floor(bus: Any, n: int) -> float:
+        """The least a read right after a write can take: the write's Sync Write of Goal
+        Position (14 + 5N bytes) still on the wire, then the read's request and replies
+        (0 for a bus that does not say its baud rate and read wire time)."""
+        read_wire = getattr(bus, "read_wire_s", None)
+        baud = getattr(bus, "baud", None)
+        if read_wire is None or not isinstance(baud, int) or baud <= 0:
+            return 0.0
+        return float(read_wire(n)) + (14 + 5 * n) * BITS_PER_BYTE / baud
+
+    def _read(self, tick: Tick) -> None:
+        """The present-state read, if the trigger finds room for one in this cycle."""
+        self._reads_due += 1
+        trigger, clock = self.trigger, self.clock
+        start = clock.now()
+        deadline = trigger.read_deadline(tick, start, self._reads_due, self.read_every,
+                                         max(self.read_s, self.read_wire_s))
+        if deadline is None:
+            if (self._reads_due == self._housekeeping_slot and self.housekeeping is not None):
+                self.housekeeping(tick.next_s - READ_MARGIN_S)
+            return
+        self._reads_due = 0
+        state = self.bus.read_state(deadline)
+        end = clock.now()
+        took = end - start
+        self.read_s = took if not self.read_s else self.read_s + READ_SMOOTHING * (
+            took - self.read_s)
+        if trigger.delayed(tick, end):
+            self.stats.writes_delayed += 1
+        self.last_state = state
+        self._track(state, self.sent)
+        self._take_events()
 
     def _track(self, state: Any, goals: FloatArray) -> None:
         stats = self.stats

@@ -148,15 +148,22 @@ KEPT_EVENTS = 200
 class RunStats:
     """What a run measured. Times in seconds unless the name says otherwise.
 
-    ``latency`` (glove frame read -> Sync Write handed to the OS) and ``period``
-    (between cycle starts) are histograms; ``latencies_s`` the newest latencies and
-    ``events`` the newest events, both of fixed size (``events.total`` counts all).
+    ``latency`` (end to end: a glove frame's arrival at the host, its last byte, to
+    the Sync Write carrying it handed to the OS), ``compute`` (the part of it from the
+    cycle's start to the same point) and ``period`` (between cycle starts) are
+    histograms; ``latencies_s`` the newest latencies and ``events`` the newest
+    events, both of fixed size (``events.total`` counts all). ``writes_delayed``:
+    reads after which the next write had to wait (a frame arrived during the read,
+    or the read ran past the next tick). ``cycles_without_frame``: writes with no new
+    glove frame (floor-rate ticks, fixed ticks between frames). ``cpu_s``: CPU time
+    of the loop's thread during the run.
     """
 
     frames: int = 0
     duration_s: float = 0.0
     glove_samples: int = 0
     latency: LogHistogram = field(default_factory=LogHistogram)
+    compute: LogHistogram = field(default_factory=LogHistogram)
     period: LogHistogram = field(default_factory=LogHistogram)
     latencies_s: Ring[float] = field(default_factory=lambda: Ring(RECENT_LATENCIES))
     overruns: int = 0
@@ -169,6 +176,12 @@ class RunStats:
     bus_clamps: int = 0
     reads: int = 0
     stale_reads: int = 0
+    writes_delayed: int = 0
+    frames_skipped: int = 0  # glove frames superseded before a cycle took them
+    cycles_without_frame: int = 0
+    ceiling_waits: int = 0
+    cpu_s: float = 0.0
+    loop_mode: str = ""  # "fixed" or "glove": what triggered the cycles
     tracking_sq_sum: float = 0.0
     tracking_n: int = 0
     tracking_max_deg: float = 0.0
@@ -185,6 +198,15 @@ class RunStats:
     def latency_us(self, q: float) -> float:
         """The ``q``-th latency percentile in microseconds (NaN before any)."""
         return self.latency.percentile(q) * 1e6
+
+    def compute_us(self, q: float) -> float:
+        """The ``q``-th percentile of the compute part of the latency, microseconds."""
+        return self.compute.percentile(q) * 1e6
+
+    @property
+    def cpu_per_cycle_us(self) -> float:
+        """CPU time of the loop's thread per cycle (NaN before any)."""
+        return self.cpu_s / self.frames * 1e6 if self.frames else math.nan
 
     @property
     def jitter_us(self) -> float:

@@ -2,38 +2,86 @@
 
 :class:`FixedRateTrigger` ticks at ``rate_hz`` on the injected clock; a tick
 that comes later than a whole period skips the slots it missed (an overrun,
-counted with its size). A trigger may run a rehearsal shortly before a tick (see
-:mod:`handrig.loop.rehearsal`). Another trigger (one woken by the glove's
-frames, say) subclasses :class:`Trigger`; nothing else in the loop changes.
+counted with its size). :class:`GloveTrigger` ticks when a glove frame arrives,
+with a floor rate (a tick at least every ``1 / floor_hz``, frame or not: the
+servos stay fed and their Bus Watchdog armed) and a ceiling (at most one tick
+every ``1 / ceiling_hz``; the cycle then takes the newest frame). A trigger may
+run a rehearsal shortly before a tick (see :mod:`handrig.loop.rehearsal`).
+
+Both triggers stamp frame arrivals when the glove offers a file descriptor
+(``fileno()``) and a non-blocking ``pump()`` (read what is there, stamp it
+with the clock): while they wait they block on the descriptor and pump as soon
+as bytes arrive, so a sample's ``host_time_s`` is the time its last byte became
+readable, not the time a cycle got round to it. A glove without a descriptor
+that says when its next sample is due (``next_due_s()``, a replay) is waited
+for by sleeping until then.
+
+The trigger also says whether a present-state read fits the time left before
+the next tick (:meth:`Trigger.read_deadline`) and whether a read delayed a
+write (:meth:`Trigger.delayed`).
 """
 
 from __future__ import annotations
 
+import math
+import select
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from handrig.clock import Clock
+
+READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the next tick
+PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's period estimate
+GAP_FACTOR = 4.0  # an interval this many times the estimate is a pause, not a period
+FORCED_READ_FACTOR = 4  # no gap fits for this many times read_every ticks: read anyway
+JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 
 
 @dataclass
 class Tick:
-    """One cycle's timing. ``deadline_s``: the slot the cycle runs in; ``now_s``: when it
-    started; ``next_s``: when the next cycle is due (a read must be done by then);
-    ``late_s``: how late the cycle started; ``skipped``: whole slots missed before it."""
+    """One cycle's timing. ``deadline_s``: the slot the cycle runs in (a fixed tick's
+    slot, a glove tick's arrival, a floor tick's deadline); ``now_s``: when it started;
+    ``next_s``: when the next cycle is expected (a read must be done by then);
+    ``floor_s``: the latest the next cycle may start (the floor rate);
+    ``late_s``: how late the cycle started; ``skipped``: whole slots missed before it;
+    ``dt_s``: time since the previous cycle started (the slew limit's step);
+    ``frame``: a glove frame triggered the cycle."""
 
     index: int = 0
     deadline_s: float = 0.0
     now_s: float = 0.0
     next_s: float = 0.0
+    floor_s: float = 0.0
     late_s: float = 0.0
     skipped: int = 0
+    dt_s: float = 0.0
+    frame: bool = False
+
+
+def _fd_of(glove: Any) -> int | None:
+    """The glove's descriptor when it offers one and a pump to read it, else None."""
+    fileno = getattr(glove, "fileno", None)
+    if fileno is None or getattr(glove, "pump", None) is None:
+        return None
+    fd = fileno()
+    return fd if isinstance(fd, int) and fd >= 0 else None
+
+
+def _readable(fd: int, timeout_s: float) -> bool:
+    try:
+        ready, _, _ = select.select([fd], [], [], max(0.0, timeout_s))
+    except (OSError, ValueError):
+        return False  # the port went away: the glove's own read reports it
+    return bool(ready)
 
 
 class Trigger(ABC):
     """What starts each cycle."""
 
     period_s: float
+    """The longest time between cycles (the fixed period, or the floor rate's)."""
 
     @abstractmethod
     def start(self, t0_s: float) -> None:
@@ -44,34 +92,67 @@ class Trigger(ABC):
         """Block until the next cycle is due and fill ``tick`` in (returned). ``warm(now)``,
         if given, may be called once shortly before that."""
 
+    def read_deadline(self, tick: Tick, now_s: float, reads_due: int, read_every: int,
+                      read_s: float) -> float | None:
+        """When a present-state read started at ``now_s`` must end, or None for no read
+        this cycle. ``reads_due``: cycles since the last read; ``read_s``: how long a
+        read is expected to take. Default: in every ``read_every``-th slot, ending
+        before the next tick."""
+        if tick.index % read_every:
+            return None
+        return tick.next_s - READ_MARGIN_S
+
+    def delayed(self, tick: Tick, now_s: float) -> bool:
+        """Whether the read that just ended at ``now_s`` delayed the next write."""
+        return now_s > tick.next_s
+
 
 class FixedRateTrigger(Trigger):
     """A tick every ``1 / rate_hz`` seconds from the start, on ``clock``.
 
     ``warm_s`` before each deadline the trigger wakes and calls ``warm``, then sleeps
-    out the rest; 0 skips that step.
+    out the rest; 0 skips that step. ``glove``: stamp its frames as they arrive while
+    waiting (see the module docstring); the cycle still runs on the fixed tick.
     """
 
-    def __init__(self, clock: Clock, rate_hz: float, *, warm_s: float = 0.0) -> None:
+    def __init__(self, clock: Clock, rate_hz: float, *, warm_s: float = 0.0,
+                 glove: Any = None) -> None:
         if not rate_hz > 0.0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         self.clock = clock
         self.period_s = 1.0 / rate_hz
         self.warm_s = max(0.0, float(warm_s))
+        self.glove = glove
         self._t0 = 0.0
         self._k = 0
+        self._last_start = math.nan
 
     def start(self, t0_s: float) -> None:
         self._t0 = t0_s
         self._k = 0
+        self._last_start = math.nan
+
+    def _sleep_until(self, t: float) -> None:
+        """Sleep until ``t``, pumping the glove's arrivals meanwhile."""
+        clock, glove = self.clock, self.glove
+        if glove is not None:
+            spin = float(getattr(clock, "spin_s", 0.0))
+            while True:
+                fd = _fd_of(glove)
+                left = t - clock.now() - spin
+                if fd is None or left <= 0.0:
+                    break
+                if _readable(fd, left):
+                    glove.pump()
+        clock.sleep_until(t)
 
     def wait(self, tick: Tick, warm: Callable[[float], None] | None = None) -> Tick:
         clock, period = self.clock, self.period_s
         deadline = self._t0 + self._k * period
         if warm is not None and self.warm_s > 0 and clock.now() < deadline - self.warm_s:
-            clock.sleep_until(deadline - self.warm_s)
+            self._sleep_until(deadline - self.warm_s)
             warm(clock.now())
-        clock.sleep_until(deadline)
+        self._sleep_until(deadline)
         now = clock.now()
         late = now - deadline
         skipped = 0
@@ -83,7 +164,176 @@ class FixedRateTrigger(Trigger):
         tick.deadline_s = deadline
         tick.now_s = now
         tick.next_s = deadline + period
+        tick.floor_s = tick.next_s
         tick.late_s = late
         tick.skipped = skipped
+        tick.dt_s = period
+        tick.frame = False
+        self._last_start = now
         self._k += 1
         return tick
+
+
+class GloveTrigger(Trigger):
+    """A tick per glove frame, between a floor and a ceiling rate (module docstring).
+
+    ``glove``: a source with ``fileno()`` and ``pump()`` (a serial glove read by the
+    loop), or with ``next_due_s()`` (a replay); a glove with neither gets the floor
+    rate only. ``warm_s`` before the predicted next frame the trigger calls ``warm``.
+
+    The glove's period is estimated from the arrivals (:attr:`frame_period_s`, with
+    their mean deviation :attr:`frame_jitter_s`); a present-state read is taken only
+    when it is expected to end before the next frame (less ``JITTER_MARGIN`` mean
+    deviations), and forced (ending before the floor deadline) when no gap fitted for
+    ``FORCED_READ_FACTOR * read_every`` cycles.
+    """
+
+    def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
+                 warm_s: float = 0.0) -> None:
+        if not 0.0 < floor_hz <= ceiling_hz:
+            raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
+        self.clock = clock
+        self.glove = glove
+        self.period_s = 1.0 / floor_hz
+        self.min_gap_s = 1.0 / ceiling_hz
+        self.warm_s = max(0.0, float(warm_s))
+        self.frame_period_s = math.nan
+        self.frame_jitter_s = 0.0  # mean deviation of the arrivals from the period
+        self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
+        self._k = 0
+        self._last_start = 0.0
+        self._last_frame = math.nan
+
+    def start(self, t0_s: float) -> None:
+        self._k = 0
+        self._last_start = t0_s - self.period_s  # the first floor tick is due at t0_s
+        self._last_frame = math.nan
+        self.frame_period_s = math.nan
+        self.frame_jitter_s = 0.0
+
+    @property
+    def predicted_frame_s(self) -> float:
+        """When the next frame is expected (NaN before the period is known)."""
+        return self._last_frame + self.frame_period_s
+
+    def _new_frame(self) -> bool:
+        has_new = getattr(self.glove, "has_new", None)
+        return bool(has_new()) if has_new is not None else False
+
+    def _wait_frame(self, until_s: float) -> float | None:
+        """Wait for a new frame until ``until_s``; its arrival time, or None if none came."""
+        clock, glove = self.clock, self.glove
+        if self._new_frame():
+            return self._arrival(clock.now())
+        fd = _fd_of(glove)
+        if fd is not None:
+            while True:
+                left = until_s - clock.now()
+                if left <= 0.0 or not _readable(fd, left):
+                    break
+                glove.pump()
+                if self._new_frame():
+                    return self._arrival(clock.now())
+                fd = _fd_of(glove)
+                if fd is None:
+                    break
+            return self._arrival(clock.now()) if self._new_frame() else None
+        due_of = getattr(glove, "next_due_s", None)
+        if due_of is not None:
+            due = float(due_of())
+            if due <= until_s:
+                clock.sleep_until(due)
+                return due
+        clock.sleep_until(until_s)
+        return None
+
+    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None) -> Tick:
+        clock = self.clock
+        floor_at = self._last_start + self.period_s
+        arrival: float | None = None
+        predicted = self.predicted_frame_s
+        if (warm is not None and self.warm_s > 0 and predicted == predicted
+                and clock.now() < predicted - self.warm_s < floor_at):
+            arrival = self._wait_frame(predicted - self.warm_s)
+            if arrival is None:
+                warm(clock.now())
+        if arrival is None:
+            arrival = self._wait_frame(floor_at)
+        now = clock.now()
+        frame = arrival is not None
+        if arrival is not None:
+            self._period_from(arrival)
+            earliest = self._last_start + self.min_gap_s
+            if now < earliest:  # the ceiling: the cycle then takes the newest frame
+                self.ceiling_waits += 1
+                clock.sleep_until(earliest)
+                now = clock.now()
+            deadline = arrival
+        else:
+            deadline = floor_at
+        late = now - floor_at if now > floor_at else 0.0
+        skipped = int(late / self.period_s) if late > self.period_s else 0
+        tick.index = self._k
+        tick.deadline_s = deadline
+        tick.now_s = now
+        tick.floor_s = now + self.period_s
+        predicted = self.predicted_frame_s
+        tick.next_s = (predicted if predicted == predicted and predicted > now
+                       else tick.floor_s)
+        tick.next_s = min(tick.next_s, tick.floor_s)
+        tick.late_s = late
+        tick.skipped = skipped
+        tick.dt_s = min(now - self._last_start, self.period_s)
+        tick.frame = frame
+        self._last_start = now
+        self._k += 1
+        return tick
+
+    def _arrival(self, now: float) -> float:
+        """The newest pumped sample's stamp (a replay: its due time), at most ``now``."""
+        due_of = getattr(self.glove, "next_due_s", None)
+        if due_of is not None and _fd_of(self.glove) is None:
+            t: Any = getattr(self.glove, "newest_due_s", lambda: now)()
+        else:
+            peek = getattr(self.glove, "peek", None)
+            t = getattr(peek() if peek is not None else None, "host_time_s", None)
+        return float(t) if t is not None and t <= now else now
+
+    def _period_from(self, arrival: float) -> None:
+        last, self._last_frame = self._last_frame, arrival
+        if last != last:
+            return
+        dt = arrival - last
+        if dt <= 0.0:
+            return
+        est = self.frame_period_s
+        if est != est:
+            self.frame_period_s = dt
+        elif dt < GAP_FACTOR * est:
+            self.frame_period_s = est + PERIOD_SMOOTHING * (dt - est)
+            self.frame_jitter_s += PERIOD_SMOOTHING * (abs(dt - est) - self.frame_jitter_s)
+
+    def read_deadline(self, tick: Tick, now_s: float, reads_due: int, read_every: int,
+                      read_s: float) -> float | None:
+        if reads_due < read_every or self.frame_waiting():
+            return None
+        end = tick.next_s - READ_MARGIN_S - JITTER_MARGIN * self.frame_jitter_s
+        if now_s + read_s <= end:
+            return end
+        if reads_due >= FORCED_READ_FACTOR * read_every:
+            return tick.floor_s - READ_MARGIN_S
+        return None
+
+    def delayed(self, tick: Tick, now_s: float) -> bool:
+        return self.frame_waiting()
+
+    def frame_waiting(self) -> bool:
+        """A glove frame (or some of it) is waiting to be read now."""
+        glove = self.glove
+        if self._new_frame():
+            return True
+        fd = _fd_of(glove)
+        if fd is not None:
+            return _readable(fd, 0.0)
+        due_of = getattr(glove, "next_due_s", None)
+        return due_of is not None and float(due_of()) <= self.clock.now()

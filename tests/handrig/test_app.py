@@ -49,10 +49,10 @@ def test_a_rejected_quaternion_keeps_the_last_good_angles():
 
 
 def test_the_glove_reader_is_told_how_many_raw_channels_the_calibration_reads() -> None:
+    import os
+
     from handrig.app import open_glove
     from handrig.clock import FakeClock
-
-    import os
 
     cfg = load_glove_config()
     master, slave = os.openpty()  # a port that exists (open_glove checks before opening)

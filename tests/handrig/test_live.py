@@ -27,9 +27,10 @@ def test_demo_reports_its_figures_and_ends_with_torque_off():
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout)
-    # 300 cycles following the glove, then relax_time_s (1 s at 200 Hz) easing to relaxed;
-    # on a real clock the easing ends on the cycle at or just after 1 s
-    assert 300 + 200 <= summary["frames"] <= 300 + 200 + 3
+    # 300 cycles following the glove, then relax_time_s (1 s of the 200 Hz glove's frames)
+    # easing to relaxed; on a real clock the easing ends on the cycle at or just after
+    # 1 s, and a frame the glove-triggered loop took late shares its cycle with the next
+    assert 300 + 195 <= summary["frames"] <= 300 + 200 + 3
     assert summary["stop_reason"] == "300 frames done" and summary["relax_events"] == 0
     assert summary["latency_us"]["p50"] > 0
     assert summary["latency_us"]["p99"] >= summary["latency_us"]["p50"]

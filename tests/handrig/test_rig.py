@@ -625,3 +625,71 @@ def test_housekeeping_runs_midway_between_state_reads_with_a_deadline(parts_fact
     writes = [w for w, _, _ in bus.calls]
     assert writes[:3] == [3, 7, 11]  # cycles 2, 6, 10: between the reads of 0, 4, 8
     assert all(now < deadline < now + 0.005 for _, now, deadline in bus.calls)
+
+
+def _replay(rate_hz: float, seconds: float, clock: FakeClock, gap: tuple[float, float] | None
+            = None):
+    from handrig.glove import ReplayGlove
+    from handrig.glove_recording import GloveRecording
+
+    t = np.arange(int(seconds * rate_hz)) / rate_hz
+    if gap is not None:
+        t = t[(t < gap[0]) | (t >= gap[1])]
+    rec = GloveRecording(t_s=t, raw=np.tile(MID, (len(t), 1)),
+                         buttons=np.zeros(len(t), dtype=np.int64),
+                         channel_names=tuple(f"c{k}" for k in range(5)),
+                         quat_xyzw=np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)), rate_hz=rate_hz)
+    return ReplayGlove(rec, clock)
+
+
+@pytest.mark.parametrize("rate_hz", [50.0, 200.0, 500.0])
+def test_the_glove_triggered_loop_writes_each_frame_once_as_it_comes(parts_factory, rate_hz):
+    parts = parts_factory()
+    clock = FakeClock(100.0)
+    glove = _replay(rate_hz, 2.0, clock)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+                       write_cost_s=50e-6)
+    rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=40.0,
+                   ceiling_hz=1000.0)
+    stats = rig.run(duration_s=1.0)
+    assert stats.loop_mode == "glove"
+    assert stats.frames_skipped == 0 and stats.overruns == 0
+    assert stats.glove_samples == pytest.approx(rate_hz * 1.5, abs=3)  # run, then stop easing
+    assert stats.latency_us(50) == pytest.approx(50.0, abs=1.0)  # arrival to write: its cost
+    assert stats.compute_us(50) == pytest.approx(50.0, abs=1.0)
+    assert stats.reads > 0 and stats.relax_events == 0
+    np.testing.assert_allclose(bus.goals[-1], relaxed_targets(parts), atol=1e-6)
+
+
+def test_the_glove_triggered_loop_keeps_the_floor_and_relaxes_and_resumes(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock(0.0)
+    glove = _replay(200.0, 3.0, clock, gap=(0.5, 1.5))  # a second of silence
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=100.0,
+                   ceiling_hz=1000.0)
+    stats = rig.run(duration_s=2.5)
+    assert stats.relax_events == 1 and stats.resumes == 1
+    assert stats.cycles_without_frame == pytest.approx(100, abs=3)  # 1 s at the 100 Hz floor
+    assert stats.period.max <= 0.010 + 1e-9  # never quieter than the floor
+
+
+class WiredBus(RecordingBus):
+    """A bus that says its baud rate and a read's wire time (Fast Sync Read, 4 bytes)."""
+
+    baud = 1_000_000
+
+    def read_wire_s(self, n: int) -> float:
+        return ((14 + n) + (8 + 8 * n)) * 10 / self.baud
+
+
+def test_no_gap_read_is_offered_that_the_wire_cannot_carry(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock(0.0)
+    glove = _replay(500.0, 2.0, clock)  # 2 ms gaps: the write and a read need 3.2 ms of wire
+    bus = WiredBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=100.0,
+                   ceiling_hz=1000.0)
+    stats = rig.run(duration_s=1.0)
+    # only the forced reads, one per FORCED_READ_FACTOR * read_every cycles
+    assert 0 < stats.reads <= stats.frames / 16 + 1

@@ -53,3 +53,17 @@ def test_silence_tiers_are_read_and_checked():
         build(RigConfig, {"servos": servos, "silence": {"action": "panic"}})
     with pytest.raises(ConfigError, match="out of range"):
         build(RigConfig, {"servos": servos, "silence": {"warn_s": 0.0}})
+
+
+def test_loop_mode_and_its_rates_are_checked():
+    servo = [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0}]
+    assert load_rig_config().loop.mode == "glove"
+    cfg = build(RigConfig, {"servos": servo, "loop": {"mode": "fixed", "floor_hz": 50.0,
+                                                       "ceiling_hz": 800.0}})
+    assert (cfg.loop.mode, cfg.loop.floor_hz, cfg.loop.ceiling_hz) == ("fixed", 50.0, 800.0)
+    with pytest.raises(ConfigError, match=r"loop.mode"):
+        build(RigConfig, {"servos": servo, "loop": {"mode": "fast"}})
+    with pytest.raises(ConfigError, match=r"loop.floor_hz.*out of range"):
+        build(RigConfig, {"servos": servo, "loop": {"floor_hz": 1.0}})
+    with pytest.raises(ConfigError, match=r"loop.ceiling_hz.*out of range"):
+        build(RigConfig, {"servos": servo, "loop": {"floor_hz": 200.0, "ceiling_hz": 100.0}})

@@ -246,3 +246,21 @@ def test_bus_watchdog_trips_when_the_host_goes_quiet(raw: tuple[SimBus, RawClien
     assert bus.servo(1).goal == bus.servo(1).present  # stopped where it was
     c.send(1, INST.WRITE, dx.write_params(116, (3000).to_bytes(4, "little")))
     assert c.statuses(c.collect(11))[0].error_code == dx.ErrorCode.DATA_RANGE
+
+
+def test_each_sync_write_is_reported_with_its_receipt_time(servos: list[EmulatedServo]) -> None:
+    seen: list[tuple[float, int, list[tuple[int, bytes]]]] = []
+    for bus, client in _bus(servos):
+        bus.on_sync_write = lambda t, a, items: seen.append((t, a, items))
+        goals = [(1, 1000), (2, 2000), (3, 3000)]
+        params = (116).to_bytes(2, "little") + (4).to_bytes(2, "little")  # Goal Position
+        params += b"".join(bytes((i,)) + v.to_bytes(4, "little") for i, v in goals)
+        sent = time.perf_counter()
+        client.send(dx.BROADCAST_ID, dx.Instruction.SYNC_WRITE, params)
+        end = time.monotonic() + 1.0
+        while not seen and time.monotonic() < end:
+            time.sleep(0.001)
+    assert len(seen) == 1
+    t, address, items = seen[0]
+    assert address == 116 and sent <= t < sent + 0.5
+    assert [(i, int.from_bytes(d, "little")) for i, d in items] == goals

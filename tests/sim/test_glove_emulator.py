@@ -239,3 +239,21 @@ def test_sim_glove_argument_mistakes_are_one_line(tmp_path: Path,
     assert "not both" in capsys.readouterr().err
     assert main(["sim-glove", "x.csv", "--cue"]) == 2
     assert "--cue is for --calibration" in capsys.readouterr().err
+
+
+def test_each_frame_sent_is_stamped_on_the_monotonic_clock() -> None:
+    rec = sweep_recording(0.2, 100.0, 5)
+    sent: list[tuple[float, int, int]] = []
+    with GloveEmulator(rec, "frames", on_send=lambda t, s, i: sent.append((t, s, i))) as emu:
+        fd = open_port(emu.port_path)
+        try:
+            before = time.clock_gettime(time.CLOCK_MONOTONIC)
+            assert emu.done.wait(2.0)
+            after = time.clock_gettime(time.CLOCK_MONOTONIC)
+            read_for(fd, 0.1)
+        finally:
+            os.close(fd)
+    assert [s for _, s, _ in sent] == list(range(len(rec)))
+    assert [i for _, _, i in sent] == list(range(len(rec)))
+    times = [t for t, _, _ in sent]
+    assert times == sorted(times) and before - 0.5 < times[0] and times[-1] <= after

@@ -1,0 +1,218 @@
+"""The triggers on their own: glove frames start cycles, the floor and the ceiling,
+arrival stamps, and where present-state reads fit."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+from handrig.clock import FakeClock, MonotonicClock
+from handrig.glove import GloveSample, ReplayGlove
+from handrig.glove_recording import GloveRecording
+from handrig.loop.trigger import (
+    FORCED_READ_FACTOR,
+    READ_MARGIN_S,
+    FixedRateTrigger,
+    GloveTrigger,
+    Tick,
+)
+
+
+def recording(rate_hz: float, n: int) -> GloveRecording:
+    t = np.arange(n) / rate_hz
+    return GloveRecording(t_s=t, raw=np.full((n, 5), 2000.0),
+                          buttons=np.zeros(n, dtype=np.int64),
+                          channel_names=tuple(f"c{k}" for k in range(5)), rate_hz=rate_hz)
+
+
+class PipeGlove:
+    """A glove on a pipe: ``pump()`` decodes each byte as one frame stamped now."""
+
+    def __init__(self, clock: MonotonicClock) -> None:
+        self.clock = clock
+        self.r, self.w = os.pipe()
+        os.set_blocking(self.r, False)
+        self.count = 0
+        self.taken = 0
+        self.newest: GloveSample | None = None
+        self.pumps = 0
+
+    def fileno(self) -> int:
+        return self.r
+
+    def pump(self) -> None:
+        self.pumps += 1
+        try:
+            data = os.read(self.r, 4096)
+        except BlockingIOError:
+            return
+        now = self.clock.now()
+        for _ in data:
+            self.count += 1
+            self.newest = GloveSample(np.zeros(5), None, 0, False, self.count, 0, now,
+                                      self.count)
+
+    def has_new(self) -> bool:
+        return self.newest is not None and self.count != self.taken
+
+    def peek(self) -> GloveSample | None:
+        return self.newest
+
+    def latest(self) -> GloveSample | None:
+        self.pump()
+        if not self.has_new():
+            return None
+        self.taken = self.count
+        return self.newest
+
+    def send(self, n: int = 1) -> float:
+        t = self.clock.now()
+        os.write(self.w, b"x" * n)
+        return t
+
+    def close(self) -> None:
+        os.close(self.r)
+        os.close(self.w)
+
+
+@pytest.fixture
+def pipe_glove():
+    g = PipeGlove(MonotonicClock(spin_s=0.0))
+    yield g
+    g.close()
+
+
+def test_a_replay_triggers_a_cycle_when_each_sample_comes_due() -> None:
+    clock = FakeClock(10.0)
+    glove = ReplayGlove(recording(200.0, 20), clock)
+    trig = GloveTrigger(clock, glove, floor_hz=50.0, ceiling_hz=1000.0)
+    glove.start()
+    trig.start(clock.now())
+    tick = Tick()
+    starts = []
+    for _ in range(10):
+        trig.wait(tick)
+        assert tick.frame
+        sample = glove.latest()
+        assert sample is not None and sample.host_time_s == pytest.approx(tick.now_s)
+        starts.append(tick.now_s - 10.0)
+    np.testing.assert_allclose(starts, np.arange(10) / 200.0, atol=1e-9)
+    assert trig.frame_period_s == pytest.approx(0.005)
+    assert tick.dt_s == pytest.approx(0.005)
+    assert tick.next_s == pytest.approx(tick.now_s + 0.005)  # the predicted next frame
+
+
+def test_a_silent_glove_gets_the_floor_rate() -> None:
+    clock = FakeClock(0.0)
+    glove = ReplayGlove(recording(200.0, 3), clock)  # three samples, then silence
+    trig = GloveTrigger(clock, glove, floor_hz=100.0, ceiling_hz=1000.0)
+    glove.start()
+    trig.start(0.0)
+    tick = Tick()
+    frames = []
+    for _ in range(8):
+        trig.wait(tick)
+        frames.append(tick.frame)
+        glove.latest()
+    assert frames[:3] == [True, True, True] and not any(frames[3:])
+    assert tick.now_s == pytest.approx(0.010 + 5 * 0.010)  # every 10 ms after the last frame
+    assert tick.dt_s == pytest.approx(0.010) and tick.skipped == 0
+
+
+def test_a_frame_wakes_the_loop_at_once_and_is_stamped_on_arrival(pipe_glove) -> None:
+    clock = pipe_glove.clock
+    trig = GloveTrigger(clock, pipe_glove, floor_hz=10.0, ceiling_hz=5000.0)
+    trig.start(clock.now())
+    tick = Tick()
+    trig.wait(tick)  # the first floor tick is due at the start
+    assert not tick.frame
+    sent = pipe_glove.send()
+    trig.wait(tick)
+    assert tick.frame
+    sample = pipe_glove.latest()
+    assert sample is not None and sent <= sample.host_time_s <= tick.now_s
+    assert tick.now_s - sent < 0.05  # woken by the frame, not by the 100 ms floor
+
+
+def test_no_frame_means_a_floor_tick_after_the_floor_period(pipe_glove) -> None:
+    clock = pipe_glove.clock
+    trig = GloveTrigger(clock, pipe_glove, floor_hz=50.0, ceiling_hz=1000.0)
+    t0 = clock.now()
+    trig.start(t0)
+    tick = Tick()
+    trig.wait(tick)
+    trig.wait(tick)
+    assert not tick.frame and tick.now_s >= t0 + 0.02 - 1e-4
+
+
+def test_the_ceiling_holds_a_fast_glove_back_and_the_newest_frame_is_taken(pipe_glove) -> None:
+    clock = pipe_glove.clock
+    trig = GloveTrigger(clock, pipe_glove, floor_hz=10.0, ceiling_hz=20.0)  # 50 ms gap
+    trig.start(clock.now())
+    tick = Tick()
+    trig.wait(tick)
+    first = tick.now_s
+    pipe_glove.send()
+    trig.wait(tick)
+    assert tick.frame and tick.now_s - first >= 0.05 - 1e-4
+    assert trig.ceiling_waits == 1
+    pipe_glove.latest()
+    start = tick.now_s
+    pipe_glove.send()
+    time.sleep(0.01)
+    pipe_glove.send()  # two frames within one ceiling gap: one cycle, the newest frame
+    trig.wait(tick)
+    assert tick.now_s - start >= 0.05 - 1e-4
+    sample = pipe_glove.latest()
+    assert sample is not None and sample.count == 3 and pipe_glove.latest() is None
+
+
+def test_the_fixed_trigger_stamps_frames_as_they_arrive(pipe_glove) -> None:
+    clock = pipe_glove.clock
+    trig = FixedRateTrigger(clock, 20.0, glove=pipe_glove)  # 50 ms ticks
+    trig.start(clock.now())
+    tick = Tick()
+    trig.wait(tick)
+    sent = pipe_glove.send()
+    trig.wait(tick)  # the cycle still waits for its tick
+    assert tick.now_s - sent > 0.03
+    sample = pipe_glove.latest()
+    assert sample is not None and sample.host_time_s - sent < 0.02  # stamped on arrival
+
+
+def test_reads_go_into_the_gap_before_the_next_frame_or_wait_for_one() -> None:
+    clock = FakeClock(0.0)
+    glove = ReplayGlove(recording(200.0, 100), clock)
+    trig = GloveTrigger(clock, glove, floor_hz=100.0, ceiling_hz=1000.0)
+    glove.start()
+    trig.start(0.0)
+    tick = Tick()
+    for _ in range(5):
+        trig.wait(tick)
+        glove.latest()
+    now = tick.now_s + 0.0005
+    end = trig.read_deadline(tick, now, reads_due=4, read_every=4, read_s=0.002)
+    assert end == pytest.approx(tick.next_s - READ_MARGIN_S)
+    assert trig.read_deadline(tick, now, reads_due=3, read_every=4, read_s=0.002) is None
+    assert trig.read_deadline(tick, now, reads_due=4, read_every=4, read_s=0.0045) is None
+    forced = trig.read_deadline(tick, now, reads_due=4 * FORCED_READ_FACTOR, read_every=4,
+                                read_s=0.0045)
+    assert forced == pytest.approx(tick.floor_s - READ_MARGIN_S)
+    assert not trig.delayed(tick, now)
+    clock.advance(0.006)  # the next sample came due while the read was on the wire
+    assert trig.delayed(tick, clock.now())
+
+
+def test_the_fixed_trigger_reads_every_read_every_slots_as_before() -> None:
+    clock = FakeClock(0.0)
+    trig = FixedRateTrigger(clock, 200.0)
+    trig.start(0.0)
+    tick = Tick()
+    due = []
+    for _ in range(8):
+        trig.wait(tick)
+        due.append(trig.read_deadline(tick, tick.now_s, 1, 4, 0.0) is not None)
+    assert due == [True, False, False, False, True, False, False, False]

@@ -1,0 +1,33 @@
+"""The outside latency measurement of ``python -m bench rig``: matching a glove step to
+the first Sync Write that moved."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.bench_rig import outside_latencies, step_recording
+
+
+def test_a_step_is_matched_to_the_first_write_that_moved() -> None:
+    values = np.array([0.0, 0.0, 1.0, 1.0, 0.0])
+    sends = [(1.000, 0), (1.005, 1), (1.010, 2), (1.015, 3), (1.020, 4)]
+    writes = [(1.0002, (5, 5)), (1.0052, (5, 5)), (1.0103, (5, 6)), (1.0153, (5, 7)),
+              (1.0202, (5, 7)), (1.0251, (5, 6))]
+    lat = outside_latencies(sends, values, writes)
+    # the step up at 1.010 moved the write at 1.0103; the step down at 1.020 finds the
+    # goals still moving (1.0153 != 1.0103) before it, so it is left out
+    assert lat == pytest.approx([0.0003])
+
+
+def test_a_step_is_matched_only_within_the_window() -> None:
+    values = np.array([0.0, 1.0])
+    sends = [(1.0, 0), (2.0, 1)]
+    writes = [(1.9, (1,)), (1.95, (1,)), (2.2, (2,))]
+    assert outside_latencies(sends, values, writes) == []
+
+
+def test_the_step_recording_steps_only_the_index_channel() -> None:
+    rec = step_recording()
+    changes = np.abs(np.diff(rec.raw, axis=0)).sum(axis=0)
+    assert changes[3] > 0 and np.count_nonzero(changes) == 1
