@@ -6,6 +6,7 @@ import contextlib
 import os
 import re
 import select
+import signal
 import subprocess
 import sys
 import time
@@ -20,6 +21,12 @@ from handrig.errors import DataError
 from handrig.glove_recording import GloveRecording, sweep_recording, write_glove_recording
 from sim.glove_emulator import GloveEmulator
 
+
+def _ctrl_c_as_from_a_shell() -> None:
+    """A child's Ctrl-C as a shell starts it: SIGINT at its default and not blocked,
+    whatever disposition this test process may have inherited."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 def read_for(fd: int, seconds: float) -> bytes:
     out = bytearray()
@@ -134,7 +141,7 @@ def test_sim_glove_command_prints_the_port_first(tmp_path: Path) -> None:
     proc = subprocess.Popen(
         [sys.executable, "-m", "handrig.cli", "sim-glove", str(p)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        cwd=Path(__file__).resolve().parents[2],
+        cwd=Path(__file__).resolve().parents[2], preexec_fn=_ctrl_c_as_from_a_shell,
     )
     try:
         assert proc.stdout is not None
@@ -201,7 +208,7 @@ def test_sim_glove_calibration_on_a_timer_announces_each_pose() -> None:
         [sys.executable, "-m", "handrig.cli", "sim-glove", "--calibration", "--pose-s", "0.8",
          "--transition-s", "0.2"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        cwd=Path(__file__).resolve().parents[2],
+        cwd=Path(__file__).resolve().parents[2], preexec_fn=_ctrl_c_as_from_a_shell,
     )
     lines: list[str] = []
     try:
