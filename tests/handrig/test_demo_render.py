@@ -33,6 +33,8 @@ def test_demo_render_says_how_many_tiles_and_when(tmp_path: Path) -> None:
                      r"\(t = ([\d.]+) to ([\d.]+) s\)", run.stdout)
     assert said, run.stdout[-2000:]
     assert Path(said[2]) == out and out.is_file()
-    if run.returncode == 0:  # 500 cycles (300 and the 1 s ease), a snapshot every 50
-        assert int(said[1]) == simulator.tiles_drawn(10) == 10
+    if run.returncode == 0:
+        # about 500 cycles (300 and the 1 s ease; glove-triggered, the ease's cycles follow
+        # the glove's frames: 495-503), a snapshot every 50: 9 or 10 tiles
+        assert int(said[1]) in {simulator.tiles_drawn(9), simulator.tiles_drawn(10)}
     assert float(said[3]) < float(said[4]) <= 3.0  # 300 frames at 200 Hz, then the ease
