@@ -30,8 +30,6 @@ import contextlib
 import datetime
 import os
 import re
-import subprocess
-import sys
 import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -40,12 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from handrig.app import build_parts
+from handrig.app import build_parts, port_process
 from handrig.config import CONFIG_DIR
-from handrig.errors import DeviceError
 from handrig.glove_recording import GloveRecording, write_glove_recording
 from handrig.live import LiveOptions, run_live
-from handrig.realtime import helper_env
 
 STEP_S = 0.25  # the index channel steps this often (the goals settle well within it)
 INDEX_CHANNEL = 3  # riIndexMCPy in config/glove.toml
@@ -95,25 +91,8 @@ def outside_latencies(sends: Sequence[tuple[float, int]], values: np.ndarray,
 @contextlib.contextmanager
 def emulator(argv: list[str], what: str) -> Iterator[str]:
     """``python -m bench.latency_emulators ARGV`` (off the loop's CPU); yields its port."""
-    proc = subprocess.Popen([sys.executable, "-m", "bench.latency_emulators", *argv],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=helper_env(), cwd=ROOT, start_new_session=True)
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline().strip()
-        if not line.startswith("port: "):
-            proc.kill()
-            _, err = proc.communicate(timeout=10)
-            raise DeviceError(f"{what} did not start: {(line + ' ' + err).strip()[-400:]}")
-        yield line.removeprefix("port: ")
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+    with port_process(argv, what, module="bench.latency_emulators", cwd=ROOT) as (_, port):
+        yield port
 
 
 def _rig_file(folder: Path, mode: str, rate_hz: float, baud: int) -> Path:

@@ -44,7 +44,7 @@ from handrig import app
 from handrig.clock import MonotonicClock
 from handrig.errors import HandrigError
 from handrig.live import torque_is_off
-from handrig.realtime import helper_env, pinned_loop, realtime_priority
+from handrig.realtime import pinned_loop, realtime_priority
 from sim.demo_recording import DEMO_RECORDING
 
 DEFAULT_SECONDS = 600.0
@@ -128,24 +128,10 @@ def glove_child(seconds: float, seed: int) -> int:
 @contextlib.contextmanager
 def faulty_glove(seconds: float, seed: int) -> Any:
     """The glove child process; yields (process, port)."""
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "bench.bench_soak", "--glove-child", "--seconds", str(seconds),
-         "--seed", str(seed)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=helper_env(), start_new_session=True, cwd=Path(__file__).resolve().parent.parent)
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline().strip()
-        if not line.startswith("port: "):
-            raise HandrigError(f"the glove emulator did not start: {line!r}")
-        yield proc, line.removeprefix("port: ")
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    with app.port_process(["--glove-child", "--seconds", str(seconds), "--seed", str(seed)],
+                      "the glove emulator", module="bench.bench_soak",
+                      cwd=Path(__file__).resolve().parent.parent) as child:
+        yield child
 
 
 # ---------------------------------------------------------------- what is watched

@@ -366,18 +366,21 @@ def _die_with_parent() -> Callable[[], None] | None:
 
 
 @contextlib.contextmanager
-def port_process(argv: Sequence[str], what: str, timeout_s: float = 30.0
+def port_process(argv: Sequence[str], what: str, timeout_s: float = 30.0, *,
+                 module: str = "handrig.cli", cwd: str | Path | None = None
                  ) -> Iterator[tuple[subprocess.Popen[str], str]]:
-    """Start a handrig subcommand that prints ``port: PATH`` first; stop it on exit.
+    """Start ``python -m module ARGV`` (a handrig subcommand by default) that prints
+    ``port: PATH`` first; stop it on exit.
 
     Yields the process and the port path. The process runs in its own session (the
     terminal's Ctrl-C does not reach it) and gets SIGTERM if this process dies; on
     exit it gets SIGTERM and is waited for, so the emulators shut down cleanly.
     """
-    cmd = [sys.executable, "-m", "handrig.cli", *argv]
+    cmd = [sys.executable, "-m", module, *argv]
     env = helper_env()  # off the loop's CPU
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env, start_new_session=True, preexec_fn=_die_with_parent())
+                            env=env, cwd=cwd, start_new_session=True,
+                            preexec_fn=_die_with_parent())
     try:
         assert proc.stdout is not None
         sel = selectors.DefaultSelector()
