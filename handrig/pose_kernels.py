@@ -50,6 +50,26 @@ def _sag_weights(use_sag: bool, inc_axis: Any, rot_axis: Any, rot0: float,
     return (i, j, (1.0 - ti) * (1.0 - tj), (1.0 - ti) * tj, ti * (1.0 - tj), ti * tj)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _hold_clamp_slew(k: int, v: float, low: Any, high: Any, targets: Any, first: bool,
+                     limit: float, raw: Any) -> int:  # pragma: no cover - compiled
+    """Servo ``k``'s new target ``v``: a non-finite one holds the previous target (the
+    middle of the range on the first step), clamped to ``[low, high]`` into ``raw``,
+    then slew limited into ``targets``; returns 1 if it was held."""
+    held = 0
+    if not math.isfinite(v):
+        held = 1
+        v = 0.5 * (low[k] + high[k]) if first else targets[k]
+    v = min(max(v, low[k]), high[k])
+    raw[k] = v
+    if first:
+        targets[k] = v
+    else:
+        step = min(max(v - targets[k], -limit), limit)
+        targets[k] = targets[k] + step
+    return held
+
+
 @njit(cache=True, nogil=True)
 def servo_targets(
     controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
@@ -80,16 +100,7 @@ def servo_targets(
         if use_sag and s < n_dof:
             v += gain * (w0 * cells[i, j, 0, s] + w1 * cells[i, j, 1, s]
                          + w2 * cells[i, j, 2, s] + w3 * cells[i, j, 3, s])
-        if not math.isfinite(v):
-            held += 1
-            v = 0.5 * (low[k] + high[k]) if first else targets[k]
-        v = min(max(v, low[k]), high[k])
-        raw[k] = v
-        if first:
-            targets[k] = v
-        else:
-            step = min(max(v - targets[k], -limit), limit)
-            targets[k] = targets[k] + step
+        held += _hold_clamp_slew(k, v, low, high, targets, first, limit, raw)
     return held
 
 
@@ -132,16 +143,7 @@ def robot_servo_targets(
         v = offset[k]
         for e in range(g_start[k], g_start[k + 1]):
             v += g_gain[e] * human[g_curve[e]]
-        if not math.isfinite(v):
-            held += 1
-            v = 0.5 * (low[k] + high[k]) if first else targets[k]
-        v = min(max(v, low[k]), high[k])
-        raw[k] = v
-        if first:
-            targets[k] = v
-        else:
-            step = min(max(v - targets[k], -limit), limit)
-            targets[k] = targets[k] + step
+        held += _hold_clamp_slew(k, v, low, high, targets, first, limit, raw)
     return held
 
 
