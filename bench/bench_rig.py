@@ -99,7 +99,9 @@ def _rig_file(folder: Path, mode: str, rate_hz: float, baud: int) -> Path:
     text = (CONFIG_DIR / "rig.toml").read_text(encoding="utf-8")
     text = re.sub(r"(?m)^baud = \d+", f"baud = {baud}", text, count=1)
     text = re.sub(r"(?m)^rate_hz = [\d.]+", f"rate_hz = {rate_hz:g}", text, count=1)
-    text = text.replace("[loop]\n", f'[loop]\nmode = "{mode}"\n', 1)
+    text, n = re.subn(r'(?m)^mode = "\w+"', f'mode = "{mode}"', text, count=1)
+    if not n:
+        text = text.replace("[loop]\n", f'[loop]\nmode = "{mode}"\n', 1)
     path = folder / f"rig_{mode}_{rate_hz:g}_{baud}.toml"
     path.write_text(text, encoding="utf-8")
     return path
@@ -156,13 +158,15 @@ def _row(r: dict[str, Any]) -> str:
     return (f"| {c.mode} | {c.glove_hz:g} | {c.baud // 1_000_000} | "
             f"{lat['p50']} / {lat['p99']} / {lat['max']} | {comp['p50']} / {comp['p99']} | "
             f"{o['p50']} / {o['p99']} / {o['max']} ({o['n']}) | {s['writes_per_s']} | "
-            f"{s['reads_per_s']} | {s['writes_delayed_by_reads']} | {s['frames_skipped']} | "
+            f"{s['reads_per_s']} | {s['writes_delayed_by_reads']} | {s['frames_skipped']} "
+            f"({s.get('frames_in_bursts', 0)}) | "
             f"{s['overruns']} | {s['cpu_per_cycle_us']} |{err}")
 
 
 HEADER = ("| loop | glove Hz | Mbps | in-process end to end p50 / p99 / max (us) | "
           "compute p50 / p99 (us) | outside p50 / p99 / max (us) (steps) | writes/s | "
-          "reads/s | writes delayed by reads | frames skipped | overruns | "
+          "reads/s | writes delayed by reads | frames skipped by the loop (in the glove's "
+          "bursts) | overruns | "
           "CPU/cycle (us) |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 

@@ -327,6 +327,12 @@ class SerialGlove(GloveSource):
             self._poll()
         return super().latest()
 
+    def take(self) -> GloveSample | None:
+        """:meth:`latest` without reading the port first: for a loop whose trigger has
+        just pumped it (a cycle started by a frame, or after waiting on the port until a
+        deadline with nothing arriving), which saves a system call on the frame's path."""
+        return super().latest()
+
     def fileno(self) -> int | None:
         """The open port's descriptor with ``reader="poll"``, for a loop that blocks on it
         until bytes arrive and then calls :meth:`pump`; None with a reader thread or while
@@ -345,6 +351,14 @@ class SerialGlove(GloveSource):
         frame with the time its last byte arrived."""
         if self.reader == "poll":
             self._poll()
+
+    def pump_at(self, stamp_s: float) -> None:
+        """:meth:`pump`, stamping what has arrived with ``stamp_s`` instead of now: a loop
+        that polls the port between other work knows the bytes came after its previous
+        poll, and stamps them with that time (the latency it reports then errs long,
+        by at most the time between two polls, never short)."""
+        if self.reader == "poll":
+            self._poll(stamp_s)
 
     def feed(self, data: bytes, now: float) -> None:
         """Decode ``data`` as bytes read from the port at clock time ``now`` (the reader
@@ -369,7 +383,7 @@ class SerialGlove(GloveSource):
             for line in self._scratch_lines.feed(chunk):
                 self._line_sample(line, now, 0)
 
-    def _poll(self) -> None:
+    def _poll(self, stamp_s: float | None = None) -> None:
         ser = self._serial
         if ser is None:
             now = self.clock.now()
@@ -383,7 +397,8 @@ class SerialGlove(GloveSource):
                 data = os.read(fd, 4096)  # EAGAIN when empty (VMIN 1, O_NONBLOCK)
                 if not data:
                     raise OSError("end of file: the device hung up")
-                self.feed(data, self.clock.now())
+                self.feed(data, self.clock.now() if stamp_s is None else stamp_s)
+                stamp_s = None  # a second chunk arrived while the first was decoded
                 if len(data) < 4096:
                     return
         except BlockingIOError:

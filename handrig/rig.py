@@ -98,6 +98,7 @@ class Rig:
         loop_mode: Literal["fixed", "glove"] = "fixed",
         floor_hz: float = 100.0,
         ceiling_hz: float = 1000.0,
+        spin_s: float = 0.0,
     ) -> None:
         self.glove = glove
         self.bus = bus
@@ -107,7 +108,8 @@ class Rig:
         if trigger is None:
             if loop_mode == "glove":
                 trigger = GloveTrigger(clock, glove, floor_hz=floor_hz, ceiling_hz=ceiling_hz,
-                                       warm_s=self.warm_s)
+                                       warm_s=self.warm_s,
+                                       spin_s=spin_s if self.warm_s > 0 else 0.0)
             elif loop_mode == "fixed":
                 trigger = FixedRateTrigger(clock, rate_hz, warm_s=self.warm_s, glove=glove)
             else:

@@ -29,7 +29,7 @@ from handrig.loop.easing import Easing
 from handrig.loop.modes import Mode, ModeMachine
 from handrig.loop.ports import BusLike, ControlsFromRaw, FloatArray, GloveLike, OrientationLike
 from handrig.loop.stats import RunStats
-from handrig.loop.trigger import READ_MARGIN_S, FixedRateTrigger, Tick, Trigger
+from handrig.loop.trigger import READ_MARGIN_S, FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pipeline import POSE_SIZE, PosePipeline
 
 __all__ = ["READ_MARGIN_S", "Cycle"]
@@ -65,6 +65,8 @@ class Cycle:
     ) -> None:
         self.bus = bus
         self.trigger: Trigger = trigger or FixedRateTrigger(clock, 1.0 / period_s)
+        # frames the glove sent back to back, superseded on arrival (not by a busy loop)
+        self._take_bursts: Callable[[], int] | None = getattr(self.trigger, "take_bursts", None)
         self.read_s = 0.0  # expected duration of a present-state read (moving average)
         self._reads_due = 0  # cycles since the last read
         self.read_wire_s = self._wire_floor(bus, len(pipeline.servo_joints))
@@ -75,7 +77,12 @@ class Cycle:
         self.period_s = period_s
         self.read_every = max(1, int(read_every))
         self.outputs = tuple(outputs)
-        self.latest: Callable[[], Any] = glove.latest
+        # a glove trigger pumps the port itself: the cycle then takes the newest sample
+        # without reading the port again
+        take = getattr(glove, "take", None)
+        self.latest: Callable[[], Any] = (
+            take if isinstance(self.trigger, GloveTrigger) and take is not None
+            else glove.latest)
         self.controls_from_raw: Callable[..., Any] = controls_from_raw
         self.orientation: Callable[[Any], tuple[float, float]] = orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
@@ -177,8 +184,12 @@ class Cycle:
             stats.latencies_s.append(latency)
             stats.glove_samples += 1
             count, before = getattr(sample, "count", 0), getattr(self.sample, "count", 0)
+            bursts = self._take_bursts() if self._take_bursts is not None else 0
             if before and count > before + 1:
-                stats.frames_skipped += count - before - 1
+                superseded = count - before - 1
+                bursts = min(superseded, bursts)
+                stats.frames_in_bursts += bursts
+                stats.frames_skipped += superseded - bursts
             self.sample = sample
         else:
             stats.cycles_without_frame += 1

@@ -12,6 +12,7 @@ hooks. Nothing it does reaches the rig, the glove or the bus.
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -47,14 +48,26 @@ class Rehearsal:
         return self.controls is not None
 
     def __call__(self, now_s: float) -> None:
+        for _ in self.steps(now_s):
+            pass
+
+    def steps(self, now_s: float) -> Iterator[None]:
+        """The rehearsal one stage at a time: yields after each stage (glove decode,
+        controls, orientation, servo step, goal packet), so that a caller can look at
+        the port between stages and stop as soon as a frame is there."""
         sample: Any = self.sample
         if sample is None:
             return
         if self._glove is not None:
             self._glove()
+            yield
+        out = self._out
         if self.controls is not None:
-            self.controls(sample.raw, now_s, self._out)
+            self.controls(sample.raw, now_s, out)
+            yield
         angles = self.orientation(sample) if self.orientation is not None else self.angles
-        targets = self.pipeline.servo_targets(self._out, *angles, self.period_s)
+        yield
+        targets = self.pipeline.servo_targets(out, *angles, self.period_s)
         if self._write is not None:
+            yield
             self._write(targets)

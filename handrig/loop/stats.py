@@ -177,7 +177,8 @@ class RunStats:
     reads: int = 0
     stale_reads: int = 0
     writes_delayed: int = 0
-    frames_skipped: int = 0  # glove frames superseded before a cycle took them
+    frames_skipped: int = 0  # glove frames superseded while the loop was busy
+    frames_in_bursts: int = 0  # glove frames superseded on arrival (sent back to back)
     cycles_without_frame: int = 0
     ceiling_waits: int = 0
     cpu_s: float = 0.0

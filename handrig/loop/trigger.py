@@ -36,6 +36,7 @@ READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the nex
 PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's period estimate
 GAP_FACTOR = 4.0  # an interval this many times the estimate is a pause, not a period
 FORCED_READ_FACTOR = 4  # no gap fits for this many times read_every ticks: read anyway
+REHEARSE_EVERY_S = 0.00015  # in a spin window: a rehearsal, then polls only for this long
 JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 
 
@@ -189,7 +190,7 @@ class GloveTrigger(Trigger):
     """
 
     def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
-                 warm_s: float = 0.0) -> None:
+                 warm_s: float = 0.0, spin_s: float = 0.0) -> None:
         if not 0.0 < floor_hz <= ceiling_hz:
             raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
         self.clock = clock
@@ -197,6 +198,11 @@ class GloveTrigger(Trigger):
         self.period_s = 1.0 / floor_hz
         self.min_gap_s = 1.0 / ceiling_hz
         self.warm_s = max(0.0, float(warm_s))
+        self.spin_s = max(0.0, float(spin_s))
+        self.spin_time_s = 0.0  # time spent polling and rehearsing in the spin windows
+        self.spin_frames = 0  # frames that arrived inside a spin window
+        self.burst_frames = 0  # frames superseded on arrival by a newer one in the same read
+        self.rehearse_every_s = REHEARSE_EVERY_S
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0  # mean deviation of the arrivals from the period
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
@@ -229,9 +235,12 @@ class GloveTrigger(Trigger):
         if fd is not None:
             while True:
                 left = until_s - clock.now()
-                if left <= 0.0 or not _readable(fd, left):
+                if left <= 0.0:
                     break
-                glove.pump()
+                idle = not _readable(fd, 0.0)  # else bytes were waiting: the loop was busy
+                if idle and not _readable(fd, left):
+                    break
+                self._pump(None, idle)
                 if self._new_frame():
                     return self._arrival(clock.now())
                 fd = _fd_of(glove)
@@ -247,12 +256,111 @@ class GloveTrigger(Trigger):
         clock.sleep_until(until_s)
         return None
 
+    def _count(self) -> int:
+        peek = getattr(self.glove, "peek", None)
+        return int(getattr(peek() if peek is not None else None, "count", 0) or 0)
+
+    def _pump(self, stamp_s: float | None, idle: bool) -> None:
+        """Read the port (stamping with ``stamp_s``, else now). ``idle``: the port was
+        seen empty since the loop began waiting, so frames that come together in this
+        read were sent together (a burst from the glove, counted in ``burst_frames``),
+        not left waiting by a busy loop."""
+        before = self._count()
+        if stamp_s is not None:
+            self.glove.pump_at(stamp_s)
+        else:
+            self.glove.pump()
+        if idle:
+            got = self._count() - before
+            if got > 1:
+                self.burst_frames += got - 1
+
+    def take_bursts(self) -> int:
+        """Frames superseded in bursts since the last call (see :meth:`_pump`)."""
+        n, self.burst_frames = self.burst_frames, 0
+        return n
+
+    def _spin_frame(self, until_s: float, warm: Callable[[float], None]) -> float | None:
+        """Poll for a new frame until ``until_s``, rehearsing between polls (the spin
+        window: the critical path stays warm in the caches until the frame is there); its
+        arrival, or None if none came. Bytes found by a poll are stamped with the time of
+        the previous poll, which found none: the arrival is no earlier than that."""
+        clock, glove = self.clock, self.glove
+        fd = _fd_of(glove)
+        begin = clock.now()
+        try:
+            if fd is None:
+                due_of = getattr(glove, "next_due_s", None)
+                if due_of is None:
+                    return None
+                due = float(due_of())
+                if due > until_s:
+                    return None
+                took = 0.0  # a rehearsal ends before the frame is due
+                t = begin
+                while t + took < due:
+                    warm(t)
+                    now = clock.now()
+                    if now <= t:
+                        break  # a clock that does not move on its own (a FakeClock)
+                    took, t = now - t, now
+                clock.sleep_until(due)
+                self.spin_frames += 1
+                return due
+            pump_at = getattr(glove, "pump_at", None)
+            steps = getattr(warm, "steps", None)
+            empty = [begin]  # when a poll last found the port empty
+            seen_empty = [False]
+            port = fd
+
+            def arrived() -> bool:
+                t = clock.now()
+                if _readable(port, 0.0):
+                    return True
+                empty[0] = t
+                seen_empty[0] = True
+                return False
+
+            next_warm = previous = begin
+            polls = 0
+            while True:
+                polls += 1
+                t = clock.now()
+                if arrived():  # the bytes came after empty[0], the last empty poll
+                    self._pump(empty[0] if pump_at is not None else None, seen_empty[0])
+                    if self._new_frame():
+                        self.spin_frames += 1
+                        return self._arrival(clock.now())
+                    fd = _fd_of(glove)
+                    if fd is None:
+                        return None
+                    port = fd
+                    continue
+                if t >= until_s or (polls > 1 and t <= previous):
+                    return None  # the window is over (or the clock does not move on its own)
+                previous = t
+                if t >= next_warm:
+                    if steps is None:
+                        warm(t)
+                    else:  # a stage at a time, looking at the port in between
+                        for _ in steps(t):
+                            if arrived():
+                                break
+                    next_warm = clock.now() + self.rehearse_every_s
+        finally:
+            self.spin_time_s += clock.now() - begin
+
     def wait(self, tick: Tick, warm: Callable[[float], None] | None = None) -> Tick:
         clock = self.clock
         floor_at = self._last_start + self.period_s
         arrival: float | None = None
         predicted = self.predicted_frame_s
-        if (warm is not None and self.warm_s > 0 and predicted == predicted
+        if warm is not None and predicted == predicted and self.spin_s > 0:
+            if clock.now() < predicted - self.spin_s < floor_at:
+                arrival = self._wait_frame(predicted - self.spin_s)
+            if arrival is None and clock.now() < floor_at:
+                arrival = self._spin_frame(min(predicted + self.spin_s, floor_at), warm)
+        elif (warm is not None and self.warm_s > 0 and predicted == predicted
                 and clock.now() < predicted - self.warm_s < floor_at):
             arrival = self._wait_frame(predicted - self.warm_s)
             if arrival is None:
@@ -321,7 +429,11 @@ class GloveTrigger(Trigger):
         if now_s + read_s <= end:
             return end
         if reads_due >= FORCED_READ_FACTOR * read_every:
-            return tick.floor_s - READ_MARGIN_S
+            # no gap fitted for long: read anyway, delaying the next frame's write but
+            # ending before the one after it is due (no frame is skipped for a read)
+            period = self.frame_period_s
+            latest = tick.next_s + period if period == period else tick.floor_s
+            return min(latest, tick.floor_s) - READ_MARGIN_S
         return None
 
     def delayed(self, tick: Tick, now_s: float) -> bool:

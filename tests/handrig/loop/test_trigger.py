@@ -200,7 +200,9 @@ def test_reads_go_into_the_gap_before_the_next_frame_or_wait_for_one() -> None:
     assert trig.read_deadline(tick, now, reads_due=4, read_every=4, read_s=0.0045) is None
     forced = trig.read_deadline(tick, now, reads_due=4 * FORCED_READ_FACTOR, read_every=4,
                                 read_s=0.0045)
-    assert forced == pytest.approx(tick.floor_s - READ_MARGIN_S)
+    # forced: the next frame's write waits, but the read ends before the frame after it
+    assert forced == pytest.approx(tick.next_s + trig.frame_period_s - READ_MARGIN_S)
+    assert forced <= tick.floor_s - READ_MARGIN_S
     assert not trig.delayed(tick, now)
     clock.advance(0.006)  # the next sample came due while the read was on the wire
     assert trig.delayed(tick, clock.now())
@@ -216,3 +218,115 @@ def test_the_fixed_trigger_reads_every_read_every_slots_as_before() -> None:
         trig.wait(tick)
         due.append(trig.read_deadline(tick, tick.now_s, 1, 4, 0.0) is not None)
     assert due == [True, False, False, False, True, False, False, False]
+
+
+class CountingWarm:
+    """A rehearsal that counts its calls and stages (the spin window's ``warm``)."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+        self.stages = 0
+
+    def __call__(self, now_s: float) -> None:
+        for _ in self.steps(now_s):
+            pass
+
+    def steps(self, now_s: float):
+        self.calls += 1
+        for _ in range(3):
+            time.sleep(20e-6)
+            self.stages += 1
+            yield
+
+
+def _settle_period(glove: PipeGlove, trig: GloveTrigger, tick: Tick, period_s: float,
+                   frames: int = 6) -> None:
+    """Frames every ``period_s`` until the trigger knows the period."""
+    for _ in range(frames):
+        time.sleep(period_s)
+        glove.send()
+        trig.wait(tick)
+        glove.latest()
+    assert trig.frame_period_s == pytest.approx(period_s, rel=0.5)
+
+
+def test_the_spin_window_rehearses_until_the_frame_and_stamps_it_no_later_than_its_arrival(
+        pipe_glove) -> None:
+    clock = pipe_glove.clock
+    trig = GloveTrigger(clock, pipe_glove, floor_hz=20.0, ceiling_hz=5000.0,
+                        spin_s=0.004)
+    warm = CountingWarm()
+    trig.start(clock.now())
+    tick = Tick()
+    trig.wait(tick, warm)
+    _settle_period(pipe_glove, trig, tick, 0.01)
+    spun = trig.spin_frames
+    # the next frame is due 10 ms after the last: send it 9 ms later, inside the window
+    time.sleep(0.009 - (clock.now() - tick.now_s))
+    before = warm.calls
+    import threading
+    sent = []
+    timer = threading.Timer(0.0005, lambda: sent.append(pipe_glove.send()))
+    timer.start()
+    trig.wait(tick, warm)
+    timer.join()
+    assert tick.frame and trig.spin_frames == spun + 1
+    assert warm.calls > before  # rehearsed while waiting for it
+    sample = pipe_glove.latest()
+    assert sample is not None
+    # stamped with the last poll that found the port empty: before the bytes were written
+    # (as seen by the writer, just before its write) at the latest, after the spin began
+    assert sample.host_time_s <= tick.now_s
+    assert sent and sample.host_time_s <= sent[0] + 0.0005
+    assert tick.now_s - sent[0] < 0.003  # found within the window, not at the floor
+    assert trig.spin_time_s > 0
+
+
+def test_no_spin_window_before_the_period_is_known_or_without_a_rehearsal(pipe_glove) -> None:
+    clock = pipe_glove.clock
+    trig = GloveTrigger(clock, pipe_glove, floor_hz=20.0, ceiling_hz=5000.0, spin_s=0.004)
+    trig.start(clock.now())
+    tick = Tick()
+    trig.wait(tick)
+    for _ in range(4):
+        time.sleep(0.01)
+        pipe_glove.send()
+        trig.wait(tick)  # no warm: the loop has no sample to rehearse yet
+        pipe_glove.latest()
+    assert trig.spin_frames == 0 and trig.spin_time_s == 0.0
+
+
+def test_a_spin_window_with_a_fake_clock_ends_instead_of_spinning_forever() -> None:
+    clock = FakeClock(0.0)
+    glove = ReplayGlove(recording(200.0, 50), clock)
+    trig = GloveTrigger(clock, glove, floor_hz=100.0, ceiling_hz=1000.0, spin_s=0.0005)
+    warm = CountingWarm()
+    glove.start()
+    trig.start(0.0)
+    tick = Tick()
+    starts = []
+    for _ in range(10):
+        trig.wait(tick, warm)
+        glove.latest()
+        starts.append(tick.now_s)
+    np.testing.assert_allclose(starts, np.arange(10) / 200.0, atol=1e-9)
+
+
+def test_frames_sent_back_to_back_count_as_a_burst_not_as_frames_the_loop_skipped(
+        pipe_glove) -> None:
+    clock = pipe_glove.clock
+    trig = GloveTrigger(clock, pipe_glove, floor_hz=20.0, ceiling_hz=5000.0)
+    trig.start(clock.now())
+    tick = Tick()
+    trig.wait(tick)
+    import threading
+    timer = threading.Timer(0.005, lambda: pipe_glove.send(3))  # while the loop waits
+    timer.start()
+    trig.wait(tick)
+    timer.join()
+    assert tick.frame and trig.take_bursts() == 2 and trig.take_bursts() == 0
+    pipe_glove.latest()
+    pipe_glove.send(2)  # while the loop is busy: waiting when it comes back
+    time.sleep(0.002)
+    trig.wait(tick)
+    assert tick.frame and trig.take_bursts() == 0  # the loop's own lateness
