@@ -97,11 +97,19 @@ class Trigger(ABC):
                       read_s: float) -> float | None:
         """When a present-state read started at ``now_s`` must end, or None for no read
         this cycle. ``reads_due``: cycles since the last read; ``read_s``: how long a
-        read is expected to take. Default: in every ``read_every``-th slot, ending
-        before the next tick."""
-        if tick.index % read_every:
+        read is expected to take. Default: in every ``read_every``-th slot (or the first
+        slot after it), ending before the next tick; when no slot has had room for one in
+        ``FORCED_READ_FACTOR * read_every`` slots (a read longer than a slot), the read is
+        taken anyway, ending before the slot after next: the next tick comes late, none
+        is skipped."""
+        if tick.index % read_every and reads_due <= read_every:
             return None
-        return tick.next_s - READ_MARGIN_S
+        end = tick.next_s - READ_MARGIN_S
+        if now_s + read_s <= end:
+            return end
+        if reads_due >= FORCED_READ_FACTOR * read_every:
+            return end + self.period_s
+        return None
 
     def delayed(self, tick: Tick, now_s: float) -> bool:
         """Whether the read that just ended at ``now_s`` delayed the next write."""

@@ -330,3 +330,20 @@ def test_frames_sent_back_to_back_count_as_a_burst_not_as_frames_the_loop_skippe
     time.sleep(0.002)
     trig.wait(tick)
     assert tick.frame and trig.take_bursts() == 0  # the loop's own lateness
+
+
+def test_the_fixed_trigger_reads_in_a_later_slot_or_forced_over_two_when_one_is_too_short(
+        ) -> None:
+    clock = FakeClock(0.0)
+    trig = FixedRateTrigger(clock, 500.0)  # 2 ms slots
+    trig.start(0.0)
+    tick = Tick()
+    trig.wait(tick)
+    # a read of 1 ms fits the slot it starts in
+    assert trig.read_deadline(tick, tick.now_s, 4, 4, 0.001) == pytest.approx(
+        tick.next_s - READ_MARGIN_S)
+    # a read of 3 ms never fits one slot: skipped, then forced ending before the slot
+    # after next (the next tick comes late, no slot is skipped)
+    assert trig.read_deadline(tick, tick.now_s, 5, 4, 0.003) is None
+    forced = trig.read_deadline(tick, tick.now_s, 4 * FORCED_READ_FACTOR, 4, 0.003)
+    assert forced == pytest.approx(tick.next_s + 0.002 - READ_MARGIN_S)
