@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
+from handrig import pose_kernels as kernels
 from handrig.errors import DataError
 from handrig.hand import Hand
 
@@ -92,7 +93,8 @@ class ForearmOrientation:
                                 " not all zero")
             self.mount = Rotation.from_quat(m, scalar_first=scalar_first)
         self._up = _UP[world]
-        self._mount_t = [[float(v) for v in row] for row in self.mount.as_matrix().T]
+        self._mount_m = np.ascontiguousarray(self.mount.as_matrix().T, dtype=np.float64)
+        self._up_sign = float(self._up[2])
         self._sign_y = -1.0 if hand == "le" else 1.0
         self.accepted = 0
         self.repaired = 0
@@ -100,59 +102,46 @@ class ForearmOrientation:
         self.last_error = ""
         self._last: tuple[float, float] | None = None
 
-    def _check(self, quat: ArrayLike) -> tuple[float, float, float, float] | None:
-        try:
-            a, b, c, d = (float(v) for v in quat)  # type: ignore[arg-type,union-attr]
-        except (TypeError, ValueError):
-            self.last_error = (f"quaternion must have 4 components, got shape"
-                               f" {np.shape(quat)}")
-            return None
-        if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)
-                and math.isfinite(d)):
-            self.last_error = f"quaternion {[a, b, c, d]} has NaN or infinite components"
-            return None
-        norm = math.sqrt(a * a + b * b + c * c + d * d)
-        if not self.min_norm <= norm <= self.max_norm:
-            self.last_error = (f"quaternion {[a, b, c, d]} has norm {norm:.3g}, outside"
-                               f" {self.min_norm}..{self.max_norm} (zero or corrupted)")
-            return None
-        if abs(norm - 1.0) > 1e-6:
-            self.repaired += 1
-            a, b, c, d = a / norm, b / norm, c / norm, d / norm
-        return a, b, c, d
-
     def angles(self, quat: ArrayLike) -> tuple[float, float]:
         """(inclination_deg, rotation_deg) for one IMU quaternion; a rejected quaternion
         raises :class:`DataError` (and counts in ``rejected``). The arithmetic is scipy's
-        ``(Rotation.from_quat(q) * mount).inv().apply(up)`` written out for speed
-        (:meth:`angles_reference` is the scipy version; the tests compare them)."""
-        q = self._check(quat)
-        if q is None:
+        ``(Rotation.from_quat(q) * mount).inv().apply(up)`` written out and compiled
+        (:func:`handrig.pose_kernels.forearm_angles`; :meth:`angles_reference` is the
+        scipy version, and the tests compare them)."""
+        q = quat if isinstance(quat, np.ndarray) and quat.dtype == np.float64 else None
+        if q is None or q.shape != (4,):
+            try:
+                q = np.asarray(quat, dtype=np.float64)
+            except (TypeError, ValueError):
+                q = np.zeros(0)
+            if q.shape != (4,):
+                self.rejected += 1
+                self.last_error = (f"quaternion must have 4 components, got shape"
+                                   f" {np.shape(quat)}")
+                raise DataError(self._rejection())
+        inc, rot, status = kernels.forearm_angles(
+            q, self.scalar_first, self._up_sign, self._mount_m, self._sign_y,
+            self.vertical_eps, self.min_norm, self.max_norm)
+        if status >= kernels.ANGLES_NONFINITE:
             self.rejected += 1
-            raise DataError(f"IMU orientation rejected ({self.rejected} so far):"
-                            f" {self.last_error}; check the IMU stream and its component"
-                            f" order (scalar_first={self.scalar_first})")
+            v = [float(x) for x in q]
+            if status == kernels.ANGLES_NONFINITE:
+                self.last_error = f"quaternion {v} has NaN or infinite components"
+            else:
+                norm = math.sqrt(sum(x * x for x in v))
+                self.last_error = (f"quaternion {v} has norm {norm:.3g}, outside"
+                                   f" {self.min_norm}..{self.max_norm} (zero or corrupted)")
+            raise DataError(self._rejection())
+        if status == kernels.ANGLES_REPAIRED:
+            self.repaired += 1
         self.accepted += 1
-        if self.scalar_first:
-            w, x, y, z = q
-        else:
-            x, y, z, w = q
-        # World up in the IMU frame = R_imu^T up_world: the world-z row of R_imu
-        # (scipy's quaternion-to-matrix formula), negated for NED.
-        s = float(self._up[2])
-        u0 = s * 2.0 * (x * z - w * y)
-        u1 = s * 2.0 * (y * z + w * x)
-        u2 = s * (1.0 - 2.0 * (x * x + y * y))
-        m = self._mount_t  # forearm <- IMU
-        up0 = m[0][0] * u0 + m[0][1] * u1 + m[0][2] * u2
-        up1 = m[1][0] * u0 + m[1][1] * u1 + m[1][2] * u2
-        up2 = m[2][0] * u0 + m[2][1] * u1 + m[2][2] * u2
-        y, z = self._sign_y * up1, up2
-        horizontal = math.hypot(y, z)
-        inc = math.degrees(math.atan2(up0, horizontal))  # = asin(up.x), better conditioned
-        rot = 0.0 if horizontal < self.vertical_eps else math.degrees(math.atan2(y, z))
         self._last = (inc, rot)
         return inc, rot
+
+    def _rejection(self) -> str:
+        return (f"IMU orientation rejected ({self.rejected} so far): {self.last_error}; "
+                f"check the IMU stream and its component order "
+                f"(scalar_first={self.scalar_first})")
 
     def angles_reference(self, quat: ArrayLike) -> tuple[float, float]:
         """:meth:`angles` computed with scipy ``Rotation`` objects (slower; for checks).

@@ -237,6 +237,50 @@ def expand_frame(
     return outside
 
 
+ANGLES_OK, ANGLES_REPAIRED, ANGLES_NONFINITE, ANGLES_BAD_NORM = 0, 1, 2, 3
+"""What :func:`forearm_angles` says of the quaternion it was given."""
+
+
+@njit(cache=True, nogil=True)
+def forearm_angles(quat: Any, scalar_first: bool, up_sign: float, mount_t: Any,
+                   sign_y: float, vertical_eps: float, min_norm: float, max_norm: float
+                   ) -> tuple[float, float, int]:  # pragma: no cover - compiled
+    """(inclination, rotation, status) in degrees of one IMU quaternion (4 components
+    in the order ``scalar_first`` says): world up (z times ``up_sign``) in the IMU
+    frame, into the forearm frame by ``mount_t`` (forearm <- IMU, 3x3), then
+    ``atan2(up.x, hypot(y, z))`` and ``atan2(sign_y * up.y, up.z)`` (0 near vertical).
+    Status: ANGLES_OK; ANGLES_REPAIRED (a norm off 1 by more than 1e-6, normalised);
+    ANGLES_NONFINITE or ANGLES_BAD_NORM (outside ``[min_norm, max_norm]``): rejected,
+    the angles are NaN. :meth:`handrig.orientation.ForearmOrientation.angles` is the
+    caller; its tests compare it with scipy's rotations."""
+    a, b, c, d = quat[0], quat[1], quat[2], quat[3]
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c) and math.isfinite(d)):
+        return math.nan, math.nan, ANGLES_NONFINITE
+    norm = math.sqrt(a * a + b * b + c * c + d * d)
+    if not (min_norm <= norm <= max_norm):
+        return math.nan, math.nan, ANGLES_BAD_NORM
+    status = ANGLES_OK
+    if abs(norm - 1.0) > 1e-6:
+        status = ANGLES_REPAIRED
+        a, b, c, d = a / norm, b / norm, c / norm, d / norm
+    if scalar_first:
+        w, x, y, z = a, b, c, d
+    else:
+        x, y, z, w = a, b, c, d
+    # world up in the IMU frame: the world-z row of R_imu, negated for NED
+    u0 = up_sign * 2.0 * (x * z - w * y)
+    u1 = up_sign * 2.0 * (y * z + w * x)
+    u2 = up_sign * (1.0 - 2.0 * (x * x + y * y))
+    up0 = mount_t[0, 0] * u0 + mount_t[0, 1] * u1 + mount_t[0, 2] * u2
+    up1 = mount_t[1, 0] * u0 + mount_t[1, 1] * u1 + mount_t[1, 2] * u2
+    up2 = mount_t[2, 0] * u0 + mount_t[2, 1] * u1 + mount_t[2, 2] * u2
+    py, pz = sign_y * up1, up2
+    horizontal = math.hypot(py, pz)
+    inc = math.degrees(math.atan2(up0, horizontal))
+    rot = 0.0 if horizontal < vertical_eps else math.degrees(math.atan2(py, pz))
+    return inc, rot, status
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel with the types the loop uses."""
     f = np.zeros(2)
@@ -250,6 +294,7 @@ def warm_up() -> None:
                         f - 1.0, f + 1.0, np.zeros(2), np.arange(3, dtype=np.int64),
                         np.arange(2, dtype=np.int64), f + 1.0, f, f - 1.0, f + 1.0,
                         np.zeros(2), 1.0, False, np.zeros(2))
+    forearm_angles(np.array([0.0, 0.0, 0.0, 1.0]), False, 1.0, np.eye(3), 1.0, 1e-6, 0.5, 1.5)
     idx = np.zeros(2, np.intp)
     one_euro_step(f, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0)
     glove_controls(f, idx, f + 1.0, f, f - 1.0, f + 1.0, np.zeros(2), np.zeros(2), True,
