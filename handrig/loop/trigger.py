@@ -37,6 +37,7 @@ PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's pe
 GAP_FACTOR = 4.0  # an interval this many times the estimate is a pause, not a period
 FORCED_READ_FACTOR = 4  # no gap fits for this many times read_every ticks: read anyway
 REHEARSE_EVERY_S = 0.00015  # in a spin window: a rehearsal, then polls only for this long
+ANCHOR_FOLLOW = 1.0 / 16.0  # how fast the glove's grid follows arrivals later than it
 JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 
 
@@ -217,18 +218,23 @@ class GloveTrigger(Trigger):
         self._k = 0
         self._last_start = 0.0
         self._last_frame = math.nan
+        self._anchor = math.nan  # the glove's time grid: an arrival on its early edge
 
     def start(self, t0_s: float) -> None:
         self._k = 0
         self._last_start = t0_s - self.period_s  # the first floor tick is due at t0_s
         self._last_frame = math.nan
+        self._anchor = math.nan
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0
 
     @property
     def predicted_frame_s(self) -> float:
-        """When the next frame is expected (NaN before the period is known)."""
-        return self._last_frame + self.frame_period_s
+        """When the next frame is expected (NaN before the period is known): one period
+        after the grid's early edge (:meth:`_period_from`), not after the last arrival,
+        so a frame that came late does not push the prediction (and the reads fitted
+        before it) late too."""
+        return self._anchor + self.frame_period_s
 
     def _new_frame(self) -> bool:
         has_new = getattr(self.glove, "has_new", None)
@@ -263,6 +269,20 @@ class GloveTrigger(Trigger):
                 return due
         clock.sleep_until(until_s)
         return None
+
+    def _next_frame_after(self, now: float) -> float:
+        """When the next frame is expected after ``now``: the predicted frame; when it is
+        overdue by less than a period, ``now`` (it may come at any moment: no gap to read
+        in); when overdue by more (a frame lost, a glove that paused), the grid's next
+        slot; infinity before the period is known."""
+        predicted, period = self.predicted_frame_s, self.frame_period_s
+        if predicted != predicted:
+            return math.inf
+        if predicted > now:
+            return predicted
+        if now - predicted < period:
+            return now
+        return predicted + math.ceil((now - predicted) / period) * period
 
     def _count(self) -> int:
         peek = getattr(self.glove, "peek", None)
@@ -393,10 +413,7 @@ class GloveTrigger(Trigger):
         tick.deadline_s = deadline
         tick.now_s = now
         tick.floor_s = now + self.period_s
-        predicted = self.predicted_frame_s
-        tick.next_s = (predicted if predicted == predicted and predicted > now
-                       else tick.floor_s)
-        tick.next_s = min(tick.next_s, tick.floor_s)
+        tick.next_s = min(self._next_frame_after(now), tick.floor_s)
         tick.late_s = late
         tick.skipped = skipped
         tick.dt_s = min(now - self._last_start, self.period_s)
@@ -416,8 +433,13 @@ class GloveTrigger(Trigger):
         return float(t) if t is not None and t <= now else now
 
     def _period_from(self, arrival: float) -> None:
+        """The period (mean interval), the arrivals' mean deviation from it, and the
+        grid's early edge: a glove samples on its own clock and the way to the host only
+        ever delays a frame, so the anchor moves to an arrival earlier than the grid
+        expects at once and follows later ones only slowly (ANCHOR_FOLLOW)."""
         last, self._last_frame = self._last_frame, arrival
         if last != last:
+            self._anchor = arrival
             return
         dt = arrival - last
         if dt <= 0.0:
@@ -425,9 +447,16 @@ class GloveTrigger(Trigger):
         est = self.frame_period_s
         if est != est:
             self.frame_period_s = dt
+            self._anchor = arrival
         elif dt < GAP_FACTOR * est:
             self.frame_period_s = est + PERIOD_SMOOTHING * (dt - est)
             self.frame_jitter_s += PERIOD_SMOOTHING * (abs(dt - est) - self.frame_jitter_s)
+            slots = max(1, round((arrival - self._anchor) / est))
+            expected = self._anchor + slots * est
+            self._anchor = (arrival if arrival <= expected
+                            else expected + ANCHOR_FOLLOW * (arrival - expected))
+        else:
+            self._anchor = arrival  # after a pause: a new grid
 
     def read_deadline(self, tick: Tick, now_s: float, reads_due: int, read_every: int,
                       read_s: float) -> float | None:

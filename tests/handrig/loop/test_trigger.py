@@ -3,6 +3,7 @@ arrival stamps, and where present-state reads fit."""
 
 from __future__ import annotations
 
+import math
 import os
 import time
 
@@ -347,3 +348,32 @@ def test_the_fixed_trigger_reads_in_a_later_slot_or_forced_over_two_when_one_is_
     assert trig.read_deadline(tick, tick.now_s, 5, 4, 0.003) is None
     forced = trig.read_deadline(tick, tick.now_s, 4 * FORCED_READ_FACTOR, 4, 0.003)
     assert forced == pytest.approx(tick.next_s + 0.002 - READ_MARGIN_S)
+
+
+def test_the_prediction_keeps_to_the_gloves_grid_when_frames_come_late() -> None:
+    clock = FakeClock(0.0)
+    trig = GloveTrigger(clock, object(), floor_hz=50.0, ceiling_hz=1000.0)
+    trig.start(0.0)
+    late = {3: 0.0012, 4: 0.0008, 7: 0.0015}  # frames delayed on the way, never early
+    for k in range(10):
+        trig._period_from(0.005 * k + late.get(k, 0.0))
+    # the late frames pull neither the period nor the next frame's prediction late by
+    # more than a sliver: the next frame is expected on the grid, at 50 ms
+    assert trig.frame_period_s == pytest.approx(0.005, abs=2e-4)
+    assert trig.predicted_frame_s == pytest.approx(0.050, abs=2e-4)
+    trig._period_from(0.0498)  # one earlier than the grid: the grid moves to it at once
+    assert trig.predicted_frame_s == pytest.approx(0.0548, abs=2e-4)
+
+
+def test_an_overdue_frame_leaves_no_gap_to_read_in_and_a_lost_one_the_next_slot() -> None:
+    clock = FakeClock(0.0)
+    trig = GloveTrigger(clock, object(), floor_hz=50.0, ceiling_hz=1000.0)
+    trig.start(0.0)
+    assert trig._next_frame_after(0.0) == math.inf  # no period yet
+    for k in range(6):
+        trig._period_from(0.005 * k)
+    predicted = trig.predicted_frame_s
+    assert predicted == pytest.approx(0.030)
+    assert trig._next_frame_after(0.028) == pytest.approx(predicted)
+    assert trig._next_frame_after(0.032) == pytest.approx(0.032)  # late: any moment now
+    assert trig._next_frame_after(0.0423) == pytest.approx(0.045)  # lost: the grid's slot
