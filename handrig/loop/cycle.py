@@ -34,6 +34,7 @@ from handrig.pipeline import POSE_SIZE, PosePipeline
 
 __all__ = ["READ_MARGIN_S", "Cycle"]
 READ_SMOOTHING = 0.2  # weight of the newest read's duration in the expected read time
+SKIP_GROWTH = 1.25  # a read the bus skipped: the next one needs this much more room
 BITS_PER_BYTE = 10  # start bit, 8 data bits, stop bit (REFERENCE.md section 3)
 
 
@@ -214,6 +215,10 @@ class Cycle:
             pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent
         stats.frames += 1
 
+    def _skipped_reads(self) -> int:
+        stats = getattr(self.bus, "stats", None)
+        return int(getattr(stats, "skipped_reads", 0))
+
     def _take_events(self) -> None:
         machine = self.machine
         for drain in self._drains:
@@ -244,9 +249,18 @@ class Cycle:
             if (self._reads_due == self._housekeeping_slot and self.housekeeping is not None):
                 self.housekeeping(tick.next_s - READ_MARGIN_S)
             return
-        self._reads_due = 0
+        due, self._reads_due = self._reads_due, 0
+        skipped_before = self._skipped_reads()
         state = self.bus.read_state(deadline)
         end = clock.now()
+        if self._skipped_reads() > skipped_before:
+            # the bus found no room for it after all (a line to let go quiet, replies
+            # slower than the wire): still due, so a forced read comes in time, and the
+            # next one is asked only with more room than this one had
+            self._reads_due = due
+            self.read_s = max(self.read_s, SKIP_GROWTH * (deadline - start))
+            self._take_events()
+            return
         took = end - start
         self.read_s = took if not self.read_s else self.read_s + READ_SMOOTHING * (
             took - self.read_s)

@@ -693,3 +693,32 @@ def test_no_gap_read_is_offered_that_the_wire_cannot_carry(parts_factory):
     stats = rig.run(duration_s=1.0)
     # only the forced reads, one per FORCED_READ_FACTOR * read_every cycles
     assert 0 < stats.reads <= stats.frames / 16 + 1
+
+
+def test_a_read_the_bus_found_no_room_for_stays_due_and_is_not_counted(parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+
+    class CrampedBus(RecordingBus):
+        """Skips every read asked with less than 10 ms to go (the way DynamixelBus does
+        when the wire or a line it must let go quiet leaves no room)."""
+
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            self.asked: list[float] = []
+
+        def read_state(self, deadline_s=None):
+            if deadline_s is not None:
+                self.asked.append(deadline_s - self.clock.now())
+                if deadline_s - self.clock.now() < 0.0075:
+                    self._stats.skipped_reads += 1
+                    return super().read_state(deadline_s)
+            return super().read_state(deadline_s)
+
+    bus = CrampedBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    stats = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock).run(frames=200)
+    # the regular reads (5 ms slots) are skipped: they stay due, so the forced read over
+    # two slots comes every FORCED_READ_FACTOR * read_every cycles and is the only one
+    # counted; a skipped read resetting the count would starve the loop of reads
+    assert bus.stats.skipped_reads > 0
+    assert stats.reads > 0 and stats.reads == sum(1 for a in bus.asked if a >= 0.0075)
