@@ -13,7 +13,7 @@ import time
 
 import bench
 
-LONG = frozenset({"bench_soak"})
+LONG = frozenset({"bench_soak", "bench_arrival"})
 
 
 def main() -> int:

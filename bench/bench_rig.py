@@ -122,6 +122,22 @@ class Case:
     baud: int
 
 
+def cpu_times() -> tuple[int, int]:
+    """(all, steal) jiffies of every CPU so far (``/proc/stat``; (0, 0) elsewhere)."""
+    try:
+        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]
+    except OSError:
+        return 0, 0
+    ticks = [int(v) for v in fields]
+    return sum(ticks[:8]), ticks[7] if len(ticks) > 7 else 0
+
+
+def steal_percent(before: tuple[int, int], after: tuple[int, int]) -> float | None:
+    """The share of CPU time the hypervisor gave to other guests between two samples."""
+    total = after[0] - before[0]
+    return round(100.0 * (after[1] - before[1]) / total, 1) if total > 0 else None
+
+
 def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
              values: np.ndarray) -> dict[str, Any]:
     tag = f"{case.mode}_{case.glove_hz:g}_{case.baud}"
@@ -132,9 +148,11 @@ def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
                    "the bus emulator") as bus_port,
           emulator(["glove", str(rec_path), "--rate", f"{case.glove_hz:g}",
                     "--log", str(glove_log)], "the glove emulator") as glove_port):
+        before = cpu_times()
         result = run_live(parts, LiveOptions(glove=glove_port, bus=bus_port,
                                              duration_s=seconds, log=lambda s: None,
                                              profile=bool(os.environ.get("HANDRIG_BENCH_PROFILE"))))
+        steal = steal_percent(before, cpu_times())
     sends = [(float(a), int(c)) for a, _, c in
              (line.split() for line in glove_log.read_text().splitlines() if line)]
     writes = []
@@ -148,7 +166,7 @@ def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
                 "p99": round(float(np.percentile(lat, 99)), 1),
                 "max": round(float(lat.max()), 1), "n": len(lat)}
                if len(lat) else {"p50": None, "p99": None, "max": None, "n": 0})
-    return {"case": case, "summary": s, "outside_us": outside}
+    return {"case": case, "summary": s, "outside_us": outside, "steal_pct": steal}
 
 
 def _row(r: dict[str, Any]) -> str:
@@ -160,14 +178,15 @@ def _row(r: dict[str, Any]) -> str:
             f"{o['p50']} / {o['p99']} / {o['max']} ({o['n']}) | {s['writes_per_s']} | "
             f"{s['reads_per_s']} | {s['writes_delayed_by_reads']} | {s['frames_skipped']} "
             f"({s.get('frames_in_bursts', 0)}) | "
-            f"{s['overruns']} | {s['cpu_per_cycle_us']} |{err}")
+            f"{s['overruns']} | {s['cpu_per_cycle_us']} | {r.get('steal_pct')} |{err}")
 
 
 HEADER = ("| loop | glove Hz | Mbps | in-process end to end p50 / p99 / max (us) | "
           "compute p50 / p99 (us) | outside p50 / p99 / max (us) (steps) | writes/s | "
           "reads/s | writes delayed by reads | frames skipped by the loop (in the glove's "
           "bursts) | overruns | "
-          "CPU/cycle (us) |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "CPU/cycle (us) | CPU stolen by the hypervisor (%) |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def main() -> None:

@@ -41,3 +41,12 @@ def test_each_case_gets_a_rig_file_that_loads_with_its_mode_rate_and_baud(
 
     cfg = load_rig_config(_rig_file(tmp_path, mode, 500.0, 4_000_000))
     assert (cfg.loop.mode, cfg.loop.rate_hz, cfg.bus.baud) == (mode, 500.0, 4_000_000)
+
+
+def test_the_steal_share_is_the_hypervisors_part_of_all_cpu_time() -> None:
+    from bench.bench_rig import cpu_times, steal_percent
+
+    assert steal_percent((1000, 10), (2000, 60)) == 5.0
+    assert steal_percent((1000, 10), (1000, 10)) is None
+    total, steal = cpu_times()
+    assert total >= steal >= 0
