@@ -108,3 +108,30 @@ def main() -> None:
     for label, step in rows:
         med, p99 = _time(step)
         print(f"servo targets, {label}: median {med:.2f} us, p99 {p99:.2f} us")
+    step = _pipeline_step(human)
+    for gap_s in GAPS_S:
+        med, again = _after_a_gap(step, gap_s)
+        print(f"servo targets, human rig, after the thread spun {gap_s * 1e3:g} ms on the "
+              f"clock: median {med:.2f} us (called again at once: {again:.2f} us)")
+
+
+GAPS_S = (0.0, 0.0001, 0.001, 0.004)  # 4 ms: about the gap between two 200 Hz frames
+
+
+def _after_a_gap(step: Callable[[int], object], gap_s: float, n: int = 300
+                 ) -> tuple[float, float]:
+    """Median time of ``step`` after the thread did nothing but read the clock for
+    ``gap_s``, and of a second call straight after: the cost of caches that went cold
+    meanwhile (on a VM, other guests share them) with no sleep or idle state involved."""
+    clock = time.perf_counter
+    first, second = np.empty(n), np.empty(n)
+    for i in range(n):
+        end = clock() + gap_s
+        while clock() < end:
+            pass
+        t0 = clock()
+        step(i)
+        t1 = clock()
+        step(i + 1)
+        first[i], second[i] = t1 - t0, clock() - t1
+    return float(np.median(first)) * 1e6, float(np.median(second)) * 1e6
