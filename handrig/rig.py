@@ -99,6 +99,7 @@ class Rig:
         floor_hz: float = 100.0,
         ceiling_hz: float = 1000.0,
         spin_s: float = 0.0,
+        read_parts: int = 1,
     ) -> None:
         self.glove = glove
         self.bus = bus
@@ -133,6 +134,7 @@ class Rig:
             controls_from_raw=controls_from_raw, orientation=orientation,
             period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
             resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
+            read_parts=read_parts,
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart

@@ -102,6 +102,7 @@ class BusConfig:
     port: str = "sim"
     baud: int = 1_000_000
     read_every: int = 4  # read present state every N cycles (Fast Sync Read)
+    read_parts: int = 1  # each read asks 1/N of the servos, in turn (shorter reads)
     watchdog_ms: int = 100  # Bus Watchdog (units of 20 ms on the wire); 0 disables
 
     def check(self) -> None:
@@ -112,6 +113,9 @@ class BusConfig:
             )
         if self.read_every < 1:
             raise ConfigError("must be at least 1", key="read_every", value=self.read_every)
+        if not 1 <= self.read_parts <= 8:
+            raise ConfigError("out of range", key="read_parts", value=self.read_parts,
+                              allowed="1 (every servo in each read) to 8")
         if not 0 <= self.watchdog_ms <= 127 * 20:
             raise ConfigError(
                 "watchdog out of range", key="watchdog_ms", value=self.watchdog_ms,

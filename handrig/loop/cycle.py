@@ -63,14 +63,19 @@ class Cycle:
         resume_time_s: float,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         trigger: Trigger | None = None,
+        read_parts: int = 1,
     ) -> None:
         self.bus = bus
+        # each read asks one part of the servos in turn (1: every servo at once)
+        self.read_parts = max(1, min(int(read_parts), len(pipeline.servo_joints)))
+        self._part = 0
         self.trigger: Trigger = trigger or FixedRateTrigger(clock, 1.0 / period_s)
         # frames the glove sent back to back, superseded on arrival (not by a busy loop)
         self._take_bursts: Callable[[], int] | None = getattr(self.trigger, "take_bursts", None)
         self.read_s = 0.0  # expected duration of a present-state read (moving average)
         self._reads_due = 0  # cycles since the last read
-        self.read_wire_s = self._wire_floor(bus, len(pipeline.servo_joints))
+        self.read_wire_s = self._wire_floor(
+            bus, -(-len(pipeline.servo_joints) // self.read_parts))
         self.pipeline = pipeline
         self.clock = clock
         self.machine = machine
@@ -251,7 +256,9 @@ class Cycle:
             return
         due, self._reads_due = self._reads_due, 0
         skipped_before = self._skipped_reads()
-        state = self.bus.read_state(deadline)
+        parts = self.read_parts
+        state = (self.bus.read_state(deadline, (self._part, parts)) if parts > 1
+                 else self.bus.read_state(deadline))
         end = clock.now()
         if self._skipped_reads() > skipped_before:
             # the bus found no room for it after all (a line to let go quiet, replies
@@ -261,6 +268,7 @@ class Cycle:
             self.read_s = max(self.read_s, SKIP_GROWTH * (deadline - start))
             self._take_events()
             return
+        self._part = (self._part + 1) % parts
         took = end - start
         self.read_s = took if not self.read_s else self.read_s + READ_SMOOTHING * (
             took - self.read_s)
@@ -278,6 +286,18 @@ class Cycle:
         if positions is None:
             return
         fresh = ~np.asarray(stale, dtype=bool) if stale is not None else np.ones(len(goals), bool)
+        asked = getattr(state, "asked", None)
+        if asked is not None:  # a read of a part: the others' readings are older
+            fresh &= np.asarray(asked, dtype=bool)
+            if not (fresh | ~np.asarray(asked, dtype=bool)).all():
+                stats.stale_reads += 1
+            if fresh.any():
+                err = np.asarray(positions)[fresh] - goals[fresh]
+                stats.tracking_sq_sum += float(np.dot(err, err))
+                stats.tracking_n += int(fresh.sum())
+                stats.tracking_max_deg = max(stats.tracking_max_deg,
+                                             float(np.abs(err).max()))
+            return
         if not fresh.all():
             stats.stale_reads += 1
         if fresh.any():

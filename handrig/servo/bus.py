@@ -38,6 +38,10 @@ class ServoState:
     age_s: np.ndarray  # (n,) float64, time since that servo's reading was taken (inf: never)
     timestamp_s: float  # clock time of this read
     stats: BusStats  # the bus's counters at the time of this read (a copy)
+    asked: np.ndarray | None = None
+    """(n,) bool: the servos this read asked for (a read of one part of the servos,
+    ``read_state(part=...)``); the others keep their last reading, ``age_s`` says how
+    old, and are not stale for it. None: every servo was asked."""
 
     @property
     def all_fresh(self) -> bool:

@@ -315,8 +315,13 @@ class DynamixelBus(ServoBus):
             self.writer.rehearse(goals_deg)
 
     # ------------------------------------------------------------------ present state
-    def read_state(self, deadline_s: float | None = None) -> ServoState:
+    def read_state(self, deadline_s: float | None = None,
+                   part: tuple[int, int] | None = None) -> ServoState:
         """Read present state (Fast Sync Read, or Sync Read after a fallback).
+
+        ``part=(i, m)`` reads only part ``i`` of ``m`` (the servos at rig indices
+        ``i, i + m, ...``): a shorter read that fits a shorter gap; the others keep
+        their last reading (``ServoState.asked`` says which were asked).
 
         ``deadline_s`` is a time on the bus clock by which the read must end
         (default: ``fault_policy.read_budget_s``, at least 1.5 times the reply's
@@ -334,7 +339,7 @@ class DynamixelBus(ServoBus):
         and :meth:`drain_events`.
         """
         with self._lock:
-            return self.reader.read(deadline_s)
+            return self.reader.read(deadline_s, part)
 
     @property
     def relax_reason(self) -> str | None:

@@ -50,6 +50,7 @@ class StateReader:
         self.temperature_every = int(temperature_every)
         self._next_temperature_read = 0
         self._fast_fail_run = 0
+        self._parts: dict[tuple[int, int], np.ndarray] = {}
         n = readings.n
         baud = link.budget.baud
         # a temperature Fast Sync Read: request 14 + N bytes, reply 8 + 5N
@@ -64,8 +65,11 @@ class StateReader:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
         return read_bytes(n, self.plan.data_len, self.plan.fast) * self.link.budget.byte_s
 
-    def read(self, deadline_s: float | None) -> ServoState:
+    def read(self, deadline_s: float | None, part: tuple[int, int] | None = None
+             ) -> ServoState:
         """One present-state read (see :meth:`handrig.servo.DynamixelBus.read_state`)."""
+        if part is not None and part[1] > 1:
+            return self._read_part(part, deadline_s)
         now = self.clock.now()
         n = self.readings.n
         silence = self.faults.silence
@@ -89,6 +93,54 @@ class StateReader:
                 silence.update(self.fast.whole_at)
             return self.readings.take_whole(self.fast.whole_at)
         return self._finish(deadline_s)
+
+    def part_indices(self, part: tuple[int, int]) -> np.ndarray:
+        """The servos of part ``i`` of ``m`` (rig indices ``i, i + m, i + 2m, ...``)."""
+        i, m = part
+        if not 0 < m <= self.readings.n:
+            raise ValueError(f"read parts must be 1..{self.readings.n}, got {m}")
+        key = (i % m, m)
+        got = self._parts.get(key)
+        if got is None:
+            got = self._parts[key] = np.arange(key[0], self.readings.n, m, dtype=np.intp)
+        return got
+
+    def _read_part(self, part: tuple[int, int], deadline_s: float | None) -> ServoState:
+        """A read of one part of the servos: the same checks, retries, stale marking and
+        silence tiers as a whole read, for the servos it asks; the others keep their
+        last reading and are not marked stale by it."""
+        now = self.clock.now()
+        indices = self.part_indices(part)
+        k = len(indices)
+        silence = self.faults.silence
+        start = self.link.request_start(now)
+        if deadline_s is None:
+            deadline_s = start + max(self.policy.read_budget_s, self._min_budget_s)
+        elif start + self.read_wire_s(k) > deadline_s:
+            silence.note_read(now, late=deadline_s <= now)
+            self.faults.read_skipped(self.read_wire_s(k), deadline_s - now)
+            silence.update(now)
+            return self.readings.unread(now)
+        silence.note_read(now)
+        self.faults.skip_run = 0
+        self.stats.reads += 1
+        self.readings.start_read()
+        self.last_whole = False
+        fresh = self.readings.fresh
+        pending = indices
+        for attempt in range(self.policy.read_retries + 1):
+            if attempt:
+                if (self.link.request_start(self.clock.now())
+                        + self.read_wire_s(len(pending)) > deadline_s):
+                    break
+                self.stats.retries += 1
+            self._attempt(pending, None, deadline_s)
+            # the first servo that did not answer goes last: in a Fast Sync Read the
+            # servos after a silent one in the chain fail with it
+            pending = np.roll(pending[~fresh[pending]], -1)
+            if not pending.size:
+                break
+        return self._finish(deadline_s, indices)
 
     def _attempts(self, deadline_s: float) -> bool:
         """The read and its retries; True when it was whole."""
@@ -134,14 +186,15 @@ class StateReader:
     def _housekeeping_due(self) -> bool:
         return bool(self.temperature_every) and self.stats.reads >= self._next_temperature_read
 
-    def _finish(self, deadline_s: float) -> ServoState:
-        """Stale marking, alerts, housekeeping and the stale-run check of a read."""
+    def _finish(self, deadline_s: float, asked: np.ndarray | None = None) -> ServoState:
+        """Stale marking, alerts, housekeeping and the stale-run check of a read
+        (``asked``: the servos a read of a part asked for)."""
         now = self.clock.now()
         r = self.readings
         whole = self.last_whole
-        if whole or r.fresh.all():
+        if whole or (r.fresh.all() if asked is None else r.fresh[asked].all()):
             self.link.budget.reply_in(now)
-        stale = r.mark(now)
+        stale = r.mark(now, asked)
         if not whole and r.status_err.any():
             self.faults.alerts_raised()
         if self._housekeeping_due() and deadline_s - self.clock.now() > self._temperature_wire_s:
@@ -149,7 +202,7 @@ class StateReader:
             self._housekeeping(deadline_s)
         if stale.any() or self.faults.silence.active:
             self.faults.silence.update(now)
-        return r.snapshot(now, stale, r.hw_err.copy())
+        return r.snapshot(now, stale, r.hw_err.copy(), asked)
 
     def housekeeping(self, deadline_s: float) -> bool:
         """The housekeeping reads in a cycle without a state read, when due and when the

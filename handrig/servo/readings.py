@@ -75,9 +75,21 @@ class Readings:
         self.status_err[:] = 0
         self.hw_err[:] = 0
 
-    def mark(self, now: float) -> np.ndarray:
-        """The read is over at ``now``: stale runs and times updated; returns ``stale``."""
+    def mark(self, now: float, asked: np.ndarray | None = None) -> np.ndarray:
+        """The read is over at ``now``: stale runs and times updated; returns ``stale``.
+        ``asked``: the indices a read of a part asked for (the others are left as they
+        were, and are not stale for this read)."""
         fresh = self.fresh
+        if asked is not None:
+            got = fresh[asked]
+            missing, answered = asked[~got], asked[got]
+            self.stale_run[missing] += 1
+            self.stale_run[answered] = 0
+            self.stats.stale_readings[missing] += 1
+            self.read_time[answered] = now
+            stale = np.zeros(self.n, bool)
+            stale[missing] = True
+            return stale
         stale = ~fresh
         if fresh.all():
             self.stale_run[:] = 0
@@ -89,8 +101,14 @@ class Readings:
             self.read_time[fresh] = now
         return stale
 
-    def snapshot(self, now: float, stale: np.ndarray, hardware_errors: np.ndarray) -> ServoState:
-        """A state of copies of the latest readings and counters, marked ``stale``."""
+    def snapshot(self, now: float, stale: np.ndarray, hardware_errors: np.ndarray,
+                 asked: np.ndarray | None = None) -> ServoState:
+        """A state of copies of the latest readings and counters, marked ``stale``
+        (``asked``: the indices a read of a part asked for)."""
+        mask = None
+        if asked is not None:
+            mask = np.zeros(self.n, bool)
+            mask[asked] = True
         return ServoState(
             positions_deg=self.positions_deg.copy(),
             velocities_dps=self.velocities_dps.copy(),
@@ -102,6 +120,7 @@ class Readings:
             age_s=now - self.read_time,
             timestamp_s=now,
             stats=self.stats.copy(),
+            asked=mask,
         )
 
     def unread(self, now: float) -> ServoState:

@@ -722,3 +722,31 @@ def test_a_read_the_bus_found_no_room_for_stays_due_and_is_not_counted(parts_fac
     # counted; a skipped read resetting the count would starve the loop of reads
     assert bus.stats.skipped_reads > 0
     assert stats.reads > 0 and stats.reads == sum(1 for a in bus.asked if a >= 0.0075)
+
+
+def test_reads_of_parts_take_the_parts_in_turn_and_track_only_the_servos_asked(
+        parts_factory):
+    parts = parts_factory()
+    clock = FakeClock()
+
+    class PartBus(RecordingBus):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            self.parts: list[tuple[int, int]] = []
+
+        def read_state(self, deadline_s=None, part=None):
+            state = super().read_state(deadline_s)
+            if part is not None:
+                self.parts.append(part)
+                asked = np.zeros(len(self._names), bool)
+                asked[part[0]::part[1]] = True
+                state.asked = asked
+                state.positions_deg[~asked] += 50.0  # old readings: far from the goals
+            return state
+
+    bus = PartBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock, read_parts=2)
+    stats = rig.run(frames=100)
+    assert bus.parts[:4] == [(0, 2), (1, 2), (0, 2), (1, 2)]
+    assert stats.reads == len(bus.parts) and stats.stale_reads == 0
+    assert stats.tracking_max_deg < 50.0  # only the servos each read asked for

@@ -67,3 +67,11 @@ def test_loop_mode_and_its_rates_are_checked():
         build(RigConfig, {"servos": servo, "loop": {"floor_hz": 1.0}})
     with pytest.raises(ConfigError, match=r"loop.ceiling_hz.*out of range"):
         build(RigConfig, {"servos": servo, "loop": {"floor_hz": 200.0, "ceiling_hz": 100.0}})
+
+
+def test_read_parts_default_one_and_checked() -> None:
+    servo = [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0}]
+    assert load_rig_config().bus.read_parts == 1
+    assert build(RigConfig, {"servos": servo, "bus": {"read_parts": 2}}).bus.read_parts == 2
+    with pytest.raises(ConfigError, match=r"bus.read_parts.*out of range"):
+        build(RigConfig, {"servos": servo, "bus": {"read_parts": 9}})

@@ -816,3 +816,26 @@ def test_housekeeping_between_reads_when_due_and_when_the_wire_has_room(sim: Sim
         assert np.isfinite(b.read_state(b.clock.now() + 0.05).temperatures_c).all()
     finally:
         b.close()
+
+
+def test_a_read_of_one_part_asks_only_those_servos_and_marks_only_them(
+        sim: SimBus, bus: DynamixelBus) -> None:
+    first = bus.read_state()
+    assert first.all_fresh and first.asked is None
+    sim.servo(5).silent_until = math.inf  # rig index 4: in part 0 of 2 (indices 0, 2, 4)
+    time.sleep(0.01)
+    odd = bus.read_state(part=(1, 2))  # indices 1, 3, 5: servo 5 is not asked
+    assert odd.asked.tolist() == [False, True, False, True, False, True]
+    assert not odd.stale.any()
+    assert odd.age_s[[1, 3, 5]].max() < odd.age_s[[0, 2, 4]].min()  # the others are older
+    even = bus.read_state(part=(0, 2))
+    assert even.asked.tolist() == [True, False, True, False, True, False]
+    assert even.stale.tolist() == [False, False, False, False, True, False]
+    assert even.positions_deg[4] == first.positions_deg[4]  # the last good value
+    assert bus.stats.stale_readings.tolist() == [0, 0, 0, 0, 1, 0]
+    sim.servo(5).silent_until = 0.0
+    # a part read is shorter on the wire than a whole one
+    reader = bus.reader
+    assert reader.read_wire_s(3) < reader.read_wire_s(6)
+    with pytest.raises(ValueError, match="read parts"):
+        bus.read_state(part=(0, 7))
