@@ -169,8 +169,9 @@ class Watch:
     def wrap_reads(self, bus: Any) -> None:
         read: Callable[..., Any] = bus.read_state
 
-        def read_state(deadline_s: float | None = None) -> Any:
-            state = read(deadline_s)
+        def read_state(deadline_s: float | None = None,
+                       part: tuple[int, int] | None = None) -> Any:
+            state = read(deadline_s) if part is None else read(deadline_s, part)
             if state.stale.any():
                 self._stale_run += 1
             elif self._stale_run:

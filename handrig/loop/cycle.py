@@ -288,17 +288,11 @@ class Cycle:
         fresh = ~np.asarray(stale, dtype=bool) if stale is not None else np.ones(len(goals), bool)
         asked = getattr(state, "asked", None)
         if asked is not None:  # a read of a part: the others' readings are older
-            fresh &= np.asarray(asked, dtype=bool)
-            if not (fresh | ~np.asarray(asked, dtype=bool)).all():
+            asked = np.asarray(asked, dtype=bool)
+            fresh &= asked
+            if not fresh[asked].all():
                 stats.stale_reads += 1
-            if fresh.any():
-                err = np.asarray(positions)[fresh] - goals[fresh]
-                stats.tracking_sq_sum += float(np.dot(err, err))
-                stats.tracking_n += int(fresh.sum())
-                stats.tracking_max_deg = max(stats.tracking_max_deg,
-                                             float(np.abs(err).max()))
-            return
-        if not fresh.all():
+        elif not fresh.all():
             stats.stale_reads += 1
         if fresh.any():
             err = np.asarray(positions)[fresh] - goals[fresh]

@@ -70,16 +70,31 @@ class StateReader:
         """One present-state read (see :meth:`handrig.servo.DynamixelBus.read_state`)."""
         if part is not None and part[1] > 1:
             return self._read_part(part, deadline_s)
-        now = self.clock.now()
-        n = self.readings.n
         silence = self.faults.silence
+        begun = self._begin(self.readings.n, deadline_s)
+        if isinstance(begun, ServoState):
+            return begun
+        deadline_s = begun
+        if self._attempts(deadline_s) and not (
+                self.temperature_every and self.stats.reads >= self._next_temperature_read):
+            if silence.active:
+                silence.update(self.fast.whole_at)
+            return self.readings.take_whole(self.fast.whole_at)
+        return self._finish(deadline_s)
+
+    def _begin(self, k: int, deadline_s: float | None) -> float | ServoState:
+        """The start of a read of ``k`` servos: its deadline (None: the default budget
+        from when the wire is free of the goal Sync Write just sent), or, when its
+        request and replies cannot be on the wire by then, the state of a read not sent
+        (counted as skipped)."""
+        now = self.clock.now()
+        silence = self.faults.silence
+        start = self.link.request_start(now)
         if deadline_s is None:
-            # from when the wire is free of the goal Sync Write just sent
-            deadline_s = self.link.request_start(now) + max(
-                self.policy.read_budget_s, self._min_budget_s)
-        elif self.link.request_start(now) + self.read_wire_s(n) > deadline_s:
+            deadline_s = start + max(self.policy.read_budget_s, self._min_budget_s)
+        elif start + self.read_wire_s(k) > deadline_s:
             silence.note_read(now, late=deadline_s <= now)
-            self.faults.read_skipped(self.read_wire_s(n), deadline_s - now)
+            self.faults.read_skipped(self.read_wire_s(k), deadline_s - now)
             silence.update(now)
             return self.readings.unread(now)
         silence.note_read(now)
@@ -87,12 +102,7 @@ class StateReader:
         self.stats.reads += 1
         self.readings.start_read()
         self.last_whole = False
-        if self._attempts(deadline_s) and not (
-                self.temperature_every and self.stats.reads >= self._next_temperature_read):
-            if silence.active:
-                silence.update(self.fast.whole_at)
-            return self.readings.take_whole(self.fast.whole_at)
-        return self._finish(deadline_s)
+        return deadline_s
 
     def part_indices(self, part: tuple[int, int]) -> np.ndarray:
         """The servos of part ``i`` of ``m`` (rig indices ``i, i + m, i + 2m, ...``)."""
@@ -109,23 +119,11 @@ class StateReader:
         """A read of one part of the servos: the same checks, retries, stale marking and
         silence tiers as a whole read, for the servos it asks; the others keep their
         last reading and are not marked stale by it."""
-        now = self.clock.now()
         indices = self.part_indices(part)
-        k = len(indices)
-        silence = self.faults.silence
-        start = self.link.request_start(now)
-        if deadline_s is None:
-            deadline_s = start + max(self.policy.read_budget_s, self._min_budget_s)
-        elif start + self.read_wire_s(k) > deadline_s:
-            silence.note_read(now, late=deadline_s <= now)
-            self.faults.read_skipped(self.read_wire_s(k), deadline_s - now)
-            silence.update(now)
-            return self.readings.unread(now)
-        silence.note_read(now)
-        self.faults.skip_run = 0
-        self.stats.reads += 1
-        self.readings.start_read()
-        self.last_whole = False
+        begun = self._begin(len(indices), deadline_s)
+        if isinstance(begun, ServoState):
+            return begun
+        deadline_s = begun
         fresh = self.readings.fresh
         pending = indices
         for attempt in range(self.policy.read_retries + 1):

@@ -69,9 +69,9 @@ def test_loop_mode_and_its_rates_are_checked():
         build(RigConfig, {"servos": servo, "loop": {"floor_hz": 200.0, "ceiling_hz": 100.0}})
 
 
-def test_read_parts_default_one_and_checked() -> None:
+def test_read_parts_shipped_and_checked() -> None:
     servo = [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0}]
-    assert load_rig_config().bus.read_parts == 1
+    assert load_rig_config().bus.read_parts == 2  # the shipped rig: half the servos a read
     assert build(RigConfig, {"servos": servo, "bus": {"read_parts": 2}}).bus.read_parts == 2
     with pytest.raises(ConfigError, match=r"bus.read_parts.*out of range"):
         build(RigConfig, {"servos": servo, "bus": {"read_parts": 9}})
