@@ -723,9 +723,11 @@ def test_servos_move_while_the_bus_is_busy_with_wire_timing(read: bool) -> None:
                             break
                 np.testing.assert_allclose(true, goals, atol=0.2)
                 assert b.stats.watchdog_gaps == 0
-                # every 2 ms in the replies' wire time; once overdue (10 ms) without replies
+                # every 2 ms in the replies' wire time; once overdue (10 ms) without replies.
+                # The bound with reads only has to tell the first from the second: a full
+                # fresh-clone run on a host losing CPU to other guests gave a 4.4 ms median
                 step = float(np.median(np.diff(advances[-50:])))
-                assert step < (0.004 if read else 0.015), step
+                assert step < (0.006 if read else 0.015), step
         finally:
             b.close()
 
