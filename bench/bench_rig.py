@@ -95,8 +95,11 @@ def emulator(argv: list[str], what: str) -> Iterator[str]:
         yield port
 
 
-def _rig_file(folder: Path, mode: str, rate_hz: float, baud: int) -> Path:
-    text = (CONFIG_DIR / "rig.toml").read_text(encoding="utf-8")
+def _rig_file(folder: Path, mode: str, rate_hz: float, baud: int,
+              source: Path | None = None) -> Path:
+    """A copy of ``source`` (default: the installed ``config/rig.toml``) with the case's
+    loop mode, fixed rate and baud rate."""
+    text = (source or CONFIG_DIR / "rig.toml").read_text(encoding="utf-8")
     text = re.sub(r"(?m)^baud = \d+", f"baud = {baud}", text, count=1)
     text = re.sub(r"(?m)^rate_hz = [\d.]+", f"rate_hz = {rate_hz:g}", text, count=1)
     text, n = re.subn(r'(?m)^mode = "\w+"', f'mode = "{mode}"', text, count=1)

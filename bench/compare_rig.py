@@ -7,15 +7,16 @@ each run in a fresh interpreter whose ``handrig`` is imported from that checkout
 and prints each run and the medians: in-process end to end, outside (the glove
 emulator's send to the bus emulator's receipt of the first Sync Write that moved),
 compute, reads, writes delayed, frames skipped, CPU per cycle and the hypervisor's
-steal share. NEW_CHECKOUT defaults to this one. The rig file is written here (the
-same text for both), so an old checkout whose own bench cannot write it still runs.
+steal share (taken around each run). NEW_CHECKOUT defaults to this one. Each
+checkout runs on its own ``config/rig.toml``, set to the case's loop mode and baud
+rate by this checkout's bench, the same way for both (an old checkout's own bench
+may not write it right).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import re
 import statistics
 import subprocess
 import sys
@@ -26,47 +27,28 @@ from typing import Any
 HERE = Path(__file__).resolve().parent.parent
 
 
-def child(root: str, mode: str, hz: float, baud: int, seconds: float) -> None:
-    """One run on ``root``'s code; prints one ``RESULT {json}`` line."""
+def child(root: str, rig_path: str, mode: str, hz: float, baud: int, seconds: float) -> None:
+    """One run on ``root``'s code with the rig file ``rig_path``; prints one
+    ``RESULT {json}`` line."""
     sys.path.insert(0, root)
     import handrig
     from bench import bench_rig as b
 
     if not str(Path(handrig.__file__).resolve()).startswith(str(Path(root).resolve())):
         raise SystemExit(f"handrig came from {handrig.__file__}, not {root}")
-
-    def rig_file(folder: Path, mode: str, rate_hz: float, baud: int) -> Path:
-        text = (b.CONFIG_DIR / "rig.toml").read_text(encoding="utf-8")
-        text = re.sub(r"(?m)^baud = \d+", f"baud = {baud}", text, count=1)
-        text = re.sub(r"(?m)^rate_hz = [\d.]+", f"rate_hz = {rate_hz:g}", text, count=1)
-        text, n = re.subn(r'(?m)^mode = "\w+"', f'mode = "{mode}"', text, count=1)
-        if not n:
-            text = text.replace("[loop]\n", f'[loop]\nmode = "{mode}"\n', 1)
-        path = folder / f"rig_{mode}_{rate_hz:g}_{baud}.toml"
-        path.write_text(text, encoding="utf-8")
-        return path
-
-    b._rig_file = rig_file
-
-    def steal() -> tuple[int, int]:
-        ticks = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
-        return sum(ticks), ticks[7]
+    b._rig_file = lambda *args, **kwargs: Path(rig_path)
     with tempfile.TemporaryDirectory(prefix="compare_rig_") as tmp:
         folder = Path(tmp)
         rec = b.step_recording()
         rec_path = folder / "steps.csv"
         b.write_glove_recording(rec_path, rec)
-        before = steal()
         r = b.run_case(b.Case(mode, hz, baud), seconds, folder, rec_path,
                        rec.raw[:, b.INDEX_CHANNEL].copy())
-        after = steal()
     s = r["summary"]
-    stolen = (round(100.0 * (after[1] - before[1]) / (after[0] - before[0]), 1)
-              if after[0] > before[0] else None)
     print("RESULT " + json.dumps({
         "lat": s["latency_us"], "comp": s["compute_us"], "out": r["outside_us"],
         "skipped": s["frames_skipped"], "delayed": s["writes_delayed_by_reads"],
-        "reads": s["reads_per_s"], "cpu": s["cpu_per_cycle_us"], "steal": stolen}), flush=True)
+        "reads": s["reads_per_s"], "cpu": s["cpu_per_cycle_us"]}), flush=True)
 
 
 def _median(runs: list[dict[str, Any]], key: str, sub: str) -> float | None:
@@ -76,9 +58,12 @@ def _median(runs: list[dict[str, Any]], key: str, sub: str) -> float | None:
 
 def main() -> int:
     if len(sys.argv) > 1 and sys.argv[1] == "child":
-        _, _, root, mode, hz, baud, seconds = sys.argv
-        child(root, mode, float(hz), int(baud), float(seconds))
+        _, _, root, rig_path, mode, hz, baud, seconds = sys.argv
+        child(root, rig_path, mode, float(hz), int(baud), float(seconds))
         return 0
+    sys.path.insert(0, str(HERE))
+    from bench.bench_rig import _rig_file, cpu_times, steal_percent
+
     p = argparse.ArgumentParser(prog="python bench/compare_rig.py")
     p.add_argument("old")
     p.add_argument("new", nargs="?", default=str(HERE))
@@ -92,23 +77,37 @@ def main() -> int:
     print(f"glove-triggered rig, {args.hz:g} Hz glove, {args.baud / 1e6:g} Mbps, "
           f"{args.seconds:g} s per run, old and new alternating, {args.rounds} rounds; "
           f"old {checkouts['old']}, new {checkouts['new']}", flush=True)
+    rigs = tempfile.TemporaryDirectory(prefix="compare_rig_rigs_")
+    # each checkout runs on its own rig.toml, written the same way for both (an old
+    # checkout's own bench may not write it right)
+    rig_paths = {}
+    for name, root in checkouts.items():
+        folder = Path(rigs.name) / name
+        folder.mkdir()
+        rig_paths[name] = _rig_file(folder, "glove", args.hz, args.baud,
+                                    Path(root) / "config" / "rig.toml")
     for k in range(args.rounds):
         for name, root in checkouts.items():
+            before = cpu_times()
             out = subprocess.run(
-                [sys.executable, str(Path(__file__).resolve()), "child", root, "glove",
-                 f"{args.hz:g}", str(args.baud), f"{args.seconds:g}"],
+                [sys.executable, str(Path(__file__).resolve()), "child", root,
+                 str(rig_paths[name]), "glove", f"{args.hz:g}", str(args.baud),
+                 f"{args.seconds:g}"],
                 capture_output=True, text=True, cwd=root)
+            stolen = steal_percent(before, cpu_times())
             line = [x for x in out.stdout.splitlines() if x.startswith("RESULT ")]
             if not line:
                 print(f"round {k} {name}: failed\n{out.stderr[-2000:]}", flush=True)
                 continue
             d = json.loads(line[0][len("RESULT "):])
+            d["steal"] = stolen
             runs[name].append(d)
             print(f"round {k} {name}: in-process p50 {d['lat']['p50']} p99 {d['lat']['p99']} "
                   f"| outside p50 {d['out']['p50']} p99 {d['out']['p99']} | compute p50 "
                   f"{d['comp']['p50']} | reads/s {d['reads']} | delayed {d['delayed']} | "
                   f"skipped {d['skipped']} | CPU/cycle {d['cpu']} us | steal {d['steal']} %",
                   flush=True)
+    rigs.cleanup()
     print("medians (us):")
     for name, rs in runs.items():
         if rs:
