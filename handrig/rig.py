@@ -232,13 +232,14 @@ class Rig:
                     rehearsal.sample = cycle.sample
                     rehearsal.angles = cycle.angles
                 warm = rehearsal if rehearsal is not None and cycle.sample is not None else None
-                self.trigger.wait(tick, warm)
+                self.trigger.wait(tick, warm, settle=False)  # settled by the read schedule
+                over = cycle.run(tick)  # straight away: the bookkeeping below is off the frame's path
                 if tick.skipped:
                     stats.add_overrun(tick.late_s, tick.skipped)
                 if last_start is not None:
                     stats.period.add(tick.now_s - last_start)
                 last_start = tick.now_s
-                if cycle.run(tick):
+                if over:
                     machine.stop_reason = machine.stop_reason or "stop requested"
                     break
         except DeviceError as exc:

@@ -182,6 +182,9 @@ class Cycle:
                      bus_clamps: int) -> None:
         stats = self.stats
         written = self.clock.now()
+        handed = getattr(self.bus, "last_write_s", None)  # the Sync Write's os.write returned
+        if handed is not None and handed == handed and tick.now_s <= handed <= written:
+            written = handed
         stats.bus_clamps += int(bus_clamps)
         if sample is not None:
             latency = written - sample.host_time_s

@@ -39,6 +39,7 @@ FORCED_READ_FACTOR = 4  # no gap fits for this many times read_every ticks: read
 REHEARSE_EVERY_S = 0.00015  # in a spin window: a rehearsal, then polls only for this long
 ANCHOR_FOLLOW = 1.0 / 16.0  # how fast the glove's grid follows arrivals later than it
 JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
+FORCED_READ_SHARE = 0.5  # a forced read ends this share of a period after the next frame
 
 
 @dataclass
@@ -90,9 +91,16 @@ class Trigger(ABC):
         """The first tick is due at ``t0_s``."""
 
     @abstractmethod
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None) -> Tick:
+    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
+             settle: bool = True) -> Tick:
         """Block until the next cycle is due and fill ``tick`` in (returned). ``warm(now)``,
-        if given, may be called once shortly before that."""
+        if given, may be called once shortly before that. ``settle=False``: return as
+        soon as the cycle may start and leave what only the read schedule needs
+        (``tick.next_s``, the glove's period estimate) to :meth:`settle`, which the
+        cycle calls once its write is out."""
+
+    def settle(self, tick: Tick) -> None:
+        """Finish the bookkeeping a ``wait(settle=False)`` left (nothing to do here)."""
 
     def read_deadline(self, tick: Tick, now_s: float, reads_due: int, read_every: int,
                       read_s: float) -> float | None:
@@ -156,7 +164,8 @@ class FixedRateTrigger(Trigger):
                     glove.pump()
         clock.sleep_until(t)
 
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None) -> Tick:
+    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
+             settle: bool = True) -> Tick:
         clock, period = self.clock, self.period_s
         deadline = self._t0 + self._k * period
         if warm is not None and self.warm_s > 0 and clock.now() < deadline - self.warm_s:
@@ -219,8 +228,14 @@ class GloveTrigger(Trigger):
         self._last_start = 0.0
         self._last_frame = math.nan
         self._anchor = math.nan  # the glove's time grid: an arrival on its early edge
+        self._unsettled: Tick | None = None  # a tick whose bookkeeping waits for settle()
+        self._unsettled_arrival: float | None = None
+        self._has_new = getattr(glove, "has_new", None)
+        self._peek = getattr(glove, "peek", None)
+        self._due_of = getattr(glove, "next_due_s", None)
 
     def start(self, t0_s: float) -> None:
+        self._unsettled = self._unsettled_arrival = None
         self._k = 0
         self._last_start = t0_s - self.period_s  # the first floor tick is due at t0_s
         self._last_frame = math.nan
@@ -237,7 +252,7 @@ class GloveTrigger(Trigger):
         return self._anchor + self.frame_period_s
 
     def _new_frame(self) -> bool:
-        has_new = getattr(self.glove, "has_new", None)
+        has_new = self._has_new
         return bool(has_new()) if has_new is not None else False
 
     def _wait_frame(self, until_s: float) -> float | None:
@@ -285,7 +300,7 @@ class GloveTrigger(Trigger):
         return predicted + math.ceil((now - predicted) / period) * period
 
     def _count(self) -> int:
-        peek = getattr(self.glove, "peek", None)
+        peek = self._peek
         return int(getattr(peek() if peek is not None else None, "count", 0) or 0)
 
     def _pump(self, stamp_s: float | None, idle: bool) -> None:
@@ -378,7 +393,10 @@ class GloveTrigger(Trigger):
         finally:
             self.spin_time_s += clock.now() - begin
 
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None) -> Tick:
+    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
+             settle: bool = True) -> Tick:
+        if self._unsettled is not None:
+            self.settle(self._unsettled)
         clock = self.clock
         floor_at = self._last_start + self.period_s
         arrival: float | None = None
@@ -398,7 +416,6 @@ class GloveTrigger(Trigger):
         now = clock.now()
         frame = arrival is not None
         if arrival is not None:
-            self._period_from(arrival)
             earliest = self._last_start + self.min_gap_s
             if now < earliest:  # the ceiling: the cycle then takes the newest frame
                 self.ceiling_waits += 1
@@ -413,22 +430,35 @@ class GloveTrigger(Trigger):
         tick.deadline_s = deadline
         tick.now_s = now
         tick.floor_s = now + self.period_s
-        tick.next_s = min(self._next_frame_after(now), tick.floor_s)
+        tick.next_s = tick.floor_s  # until settled: the period and grid are not updated yet
         tick.late_s = late
         tick.skipped = skipped
         tick.dt_s = min(now - self._last_start, self.period_s)
         tick.frame = frame
         self._last_start = now
         self._k += 1
+        self._unsettled, self._unsettled_arrival = tick, arrival
+        if settle:
+            self.settle(tick)
         return tick
+
+    def settle(self, tick: Tick) -> None:
+        """The arrival into the glove's period and grid, and ``tick.next_s`` (the next
+        frame expected, at most the floor): off the frame's path with ``wait(settle=False)``."""
+        if tick is not self._unsettled:
+            return
+        arrival, self._unsettled = self._unsettled_arrival, None
+        if arrival is not None:
+            self._period_from(arrival)
+        tick.next_s = min(self._next_frame_after(tick.now_s), tick.floor_s)
 
     def _arrival(self, now: float) -> float:
         """The newest pumped sample's stamp (a replay: its due time), at most ``now``."""
-        due_of = getattr(self.glove, "next_due_s", None)
-        if due_of is not None and _fd_of(self.glove) is None:
-            t: Any = getattr(self.glove, "newest_due_s", lambda: now)()
+        t: Any
+        if self._due_of is not None and _fd_of(self.glove) is None:
+            t = getattr(self.glove, "newest_due_s", lambda: now)()
         else:
-            peek = getattr(self.glove, "peek", None)
+            peek = self._peek
             t = getattr(peek() if peek is not None else None, "host_time_s", None)
         return float(t) if t is not None and t <= now else now
 
@@ -460,6 +490,7 @@ class GloveTrigger(Trigger):
 
     def read_deadline(self, tick: Tick, now_s: float, reads_due: int, read_every: int,
                       read_s: float) -> float | None:
+        self.settle(tick)
         if reads_due < read_every or self.frame_waiting():
             return None
         end = tick.next_s - READ_MARGIN_S - JITTER_MARGIN * self.frame_jitter_s
@@ -467,9 +498,12 @@ class GloveTrigger(Trigger):
             return end
         if reads_due >= FORCED_READ_FACTOR * read_every:
             # no gap fitted for long: read anyway, delaying the next frame's write but
-            # ending before the one after it is due (no frame is skipped for a read)
+            # ending early enough (half a period before the frame after it) for that
+            # delayed cycle, and a read that overruns its deadline, to be done before the
+            # frame after it is due: no frame is skipped for a read
             period = self.frame_period_s
-            latest = tick.next_s + period if period == period else tick.floor_s
+            latest = (tick.next_s + FORCED_READ_SHARE * period if period == period
+                      else tick.floor_s)
             return min(latest, tick.floor_s) - READ_MARGIN_S
         return None
 

@@ -161,6 +161,12 @@ class DynamixelBus(ServoBus):
         return self.writer.last_goal_deg.copy()
 
     @property
+    def last_write_s(self) -> float:
+        """When the last write (goals or a request) was handed to the OS, clock time
+        (NaN before the first): where the loop's latency figure ends."""
+        return self.link.sent_s
+
+    @property
     def models(self) -> dict[int, int]:
         return self.commissioner.models
 

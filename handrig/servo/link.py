@@ -53,6 +53,7 @@ class Link:
         self.stats = stats
         self.alerts = alerts
         self.held = b""  # a goal Sync Write to send with the next request
+        self.sent_s = float("nan")  # when the last write was handed to the OS
 
     # ------------------------------------------------------------------ sending
     def send(self, packet: bytes | memoryview) -> None:
@@ -60,7 +61,8 @@ class Link:
         data = self.held + bytes(packet) if self.held else packet
         self.held = b""
         self.transport.write(data)
-        self.budget.sent(len(data), self.clock.now())
+        self.sent_s = now = self.clock.now()
+        self.budget.sent(len(data), now)
 
     def quiet_line(self, deadline_s: float | None = None) -> None:
         """Before a request: drop old input; after a failed reply, wait for the line to

@@ -471,7 +471,7 @@ def test_the_trigger_is_a_part_that_can_be_swapped(parts_factory):
         def start(self, t0_s: float) -> None:
             self.t0 = t0_s
 
-        def wait(self, tick: Tick, warm=None) -> Tick:
+        def wait(self, tick: Tick, warm=None, *, settle: bool = True) -> Tick:
             self.waits += 1
             deadline = self.t0 + self.k * self.period_s
             self.clock.sleep_until(deadline)

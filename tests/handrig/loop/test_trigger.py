@@ -15,6 +15,7 @@ from handrig.glove import GloveSample, ReplayGlove
 from handrig.glove_recording import GloveRecording
 from handrig.loop.trigger import (
     FORCED_READ_FACTOR,
+    FORCED_READ_SHARE,
     READ_MARGIN_S,
     FixedRateTrigger,
     GloveTrigger,
@@ -201,8 +202,10 @@ def test_reads_go_into_the_gap_before_the_next_frame_or_wait_for_one() -> None:
     assert trig.read_deadline(tick, now, reads_due=4, read_every=4, read_s=0.0045) is None
     forced = trig.read_deadline(tick, now, reads_due=4 * FORCED_READ_FACTOR, read_every=4,
                                 read_s=0.0045)
-    # forced: the next frame's write waits, but the read ends before the frame after it
-    assert forced == pytest.approx(tick.next_s + trig.frame_period_s - READ_MARGIN_S)
+    # forced: the next frame's write waits, but the read ends half a period before the
+    # frame after it, so the delayed cycle is done before that frame comes
+    assert forced == pytest.approx(
+        tick.next_s + FORCED_READ_SHARE * trig.frame_period_s - READ_MARGIN_S)
     assert forced <= tick.floor_s - READ_MARGIN_S
     assert not trig.delayed(tick, now)
     clock.advance(0.006)  # the next sample came due while the read was on the wire
