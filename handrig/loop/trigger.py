@@ -4,8 +4,10 @@
 that comes later than a whole period skips the slots it missed (an overrun,
 counted with its size). :class:`GloveTrigger` ticks when a glove frame arrives,
 with a floor rate (a tick at least every ``1 / floor_hz``, frame or not: the
-servos stay fed and their Bus Watchdog armed) and a ceiling (at most one tick
-every ``1 / ceiling_hz``; the cycle then takes the newest frame). A trigger may
+servos stay fed and their Bus Watchdog armed) and a ceiling (at most ``ceiling_hz``
+ticks a second on average, ``CEILING_BURST`` of them back to back: a frame that came
+late and the one on time after it both get their cycle; a glove faster than the
+ceiling is held back, and its cycle takes the newest frame). A trigger may
 run a rehearsal shortly before a tick (see :mod:`handrig.loop.rehearsal`).
 
 Both triggers stamp frame arrivals when the glove offers a file descriptor
@@ -40,6 +42,7 @@ REHEARSE_EVERY_S = 0.00015  # in a spin window: a rehearsal, then polls only for
 ANCHOR_FOLLOW = 1.0 / 16.0  # how fast the glove's grid follows arrivals later than it
 JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 FORCED_READ_SHARE = 0.5  # a forced read ends this share of a period after the next frame
+CEILING_BURST = 2.0  # ticks the ceiling lets through back to back (after a quiet spell)
 
 
 @dataclass
@@ -224,6 +227,8 @@ class GloveTrigger(Trigger):
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0  # mean deviation of the arrivals from the period
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
+        self._credit = 1.0  # ticks the ceiling lets through now (a token bucket)
+        self._credit_at = 0.0
         self._k = 0
         self._last_start = 0.0
         self._last_frame = math.nan
@@ -236,6 +241,7 @@ class GloveTrigger(Trigger):
 
     def start(self, t0_s: float) -> None:
         self._unsettled = self._unsettled_arrival = None
+        self._credit, self._credit_at = CEILING_BURST, t0_s  # the bus has been idle
         self._k = 0
         self._last_start = t0_s - self.period_s  # the first floor tick is due at t0_s
         self._last_frame = math.nan
@@ -415,15 +421,19 @@ class GloveTrigger(Trigger):
             arrival = self._wait_frame(floor_at)
         now = clock.now()
         frame = arrival is not None
+        gap = self.min_gap_s
+        credit = min(CEILING_BURST, self._credit + (now - self._credit_at) / gap)
         if arrival is not None:
-            earliest = self._last_start + self.min_gap_s
-            if now < earliest:  # the ceiling: the cycle then takes the newest frame
+            if credit < 1.0:  # the ceiling: the cycle then takes the newest frame
                 self.ceiling_waits += 1
-                clock.sleep_until(earliest)
-                now = clock.now()
+                clock.sleep_until(now + (1.0 - credit) * gap)
+                later = clock.now()
+                credit = min(CEILING_BURST, credit + (later - now) / gap)
+                now = later
             deadline = arrival
         else:
             deadline = floor_at
+        self._credit, self._credit_at = max(0.0, credit - 1.0), now
         late = now - floor_at if now > floor_at else 0.0
         skipped = int(late / self.period_s) if late > self.period_s else 0
         tick.index = self._k

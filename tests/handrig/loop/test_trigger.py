@@ -155,7 +155,11 @@ def test_the_ceiling_holds_a_fast_glove_back_and_the_newest_frame_is_taken(pipe_
     trig = GloveTrigger(clock, pipe_glove, floor_hz=10.0, ceiling_hz=20.0)  # 50 ms gap
     trig.start(clock.now())
     tick = Tick()
+    trig.wait(tick)  # the floor tick at the start, then a frame: the start's credit
+    pipe_glove.send()
     trig.wait(tick)
+    assert tick.frame and trig.ceiling_waits == 0
+    pipe_glove.latest()
     first = tick.now_s
     pipe_glove.send()
     trig.wait(tick)
@@ -169,7 +173,41 @@ def test_the_ceiling_holds_a_fast_glove_back_and_the_newest_frame_is_taken(pipe_
     trig.wait(tick)
     assert tick.now_s - start >= 0.05 - 1e-4
     sample = pipe_glove.latest()
-    assert sample is not None and sample.count == 3 and pipe_glove.latest() is None
+    assert sample is not None and sample.count == 4 and pipe_glove.latest() is None
+
+
+def test_the_ceiling_lets_a_late_frame_and_the_next_through_but_holds_a_fast_glove_to_its_rate(
+        pipe_glove) -> None:
+    clock = pipe_glove.clock
+    trig = GloveTrigger(clock, pipe_glove, floor_hz=5.0, ceiling_hz=20.0)  # 50 ms on average
+    trig.start(clock.now())
+    tick = Tick()
+    trig.wait(tick)  # the floor tick at the start
+    pipe_glove.send()
+    trig.wait(tick)  # and a frame: the start's credit is used up
+    pipe_glove.latest()
+    time.sleep(0.15)  # a quiet spell: the ceiling has room for two ticks back to back
+    starts = []
+    for _ in range(2):  # a frame that came late, then the next one 10 ms after it
+        pipe_glove.send()
+        trig.wait(tick)
+        assert tick.frame and pipe_glove.latest() is not None
+        starts.append(tick.now_s)
+        time.sleep(0.01)
+    assert trig.ceiling_waits == 0 and starts[1] - starts[0] < 0.04
+    # a glove far faster than the ceiling: held back to 20 Hz, each cycle the newest frame
+    t0 = clock.now()
+    cycles = 0
+    while clock.now() - t0 < 0.5:
+        pipe_glove.send()
+        time.sleep(0.005)
+        if trig.frame_waiting():
+            trig.wait(tick)
+            sample = pipe_glove.latest()
+            assert sample is not None and sample.count == pipe_glove.count
+            cycles += 1
+    assert trig.ceiling_waits > 0
+    assert cycles <= 0.5 * 20.0 + 2  # the rate, and at most the one tick of credit left
 
 
 def test_the_fixed_trigger_stamps_frames_as_they_arrive(pipe_glove) -> None:
