@@ -236,7 +236,7 @@ class FrameDecoder:
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[GloveFrame]:
         """Frames completed by ``chunk`` (possibly none)."""
         out: list[GloveFrame] = []
-        data = bytes(chunk)
+        data = chunk if type(chunk) is bytes else bytes(chunk)
         end = len(data)
         if (not self._buf and not self._discarding and 1 < end <= MAX_ENCODED + 1
                 and data.find(b"\x00") == end - 1):

@@ -345,20 +345,30 @@ class SerialGlove(GloveSource):
         except (OSError, ValueError, TypeError):
             return None
 
-    def pump(self) -> None:
-        """Read and decode what has arrived, stamped with the clock now (``reader="poll"``;
-        never blocks). Called as soon as the descriptor turns readable, it stamps each
-        frame with the time its last byte arrived."""
-        if self.reader == "poll":
-            self._poll()
+    pump_counts = True
+    """:meth:`pump` and :meth:`pump_at` return how many good frames they decoded."""
 
-    def pump_at(self, stamp_s: float) -> None:
+    def pump(self) -> int:
+        """Read and decode what has arrived, stamped with the clock now (``reader="poll"``;
+        never blocks); returns how many good frames that gave. Called as soon as the
+        descriptor turns readable, it stamps each frame with the time its last byte
+        arrived."""
+        if self.reader == "poll":
+            before = self._count
+            self._poll()
+            return self._count - before
+        return 0
+
+    def pump_at(self, stamp_s: float) -> int:
         """:meth:`pump`, stamping what has arrived with ``stamp_s`` instead of now: a loop
         that polls the port between other work knows the bytes came after its previous
         poll, and stamps them with that time (the latency it reports then errs long,
         by at most the time between two polls, never short)."""
         if self.reader == "poll":
+            before = self._count
             self._poll(stamp_s)
+            return self._count - before
+        return 0
 
     def feed(self, data: bytes, now: float) -> None:
         """Decode ``data`` as bytes read from the port at clock time ``now`` (the reader

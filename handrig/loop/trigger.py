@@ -238,6 +238,7 @@ class GloveTrigger(Trigger):
         self._has_new = getattr(glove, "has_new", None)
         self._peek = getattr(glove, "peek", None)
         self._due_of = getattr(glove, "next_due_s", None)
+        self._pump_counts = bool(getattr(glove, "pump_counts", False))
 
     def start(self, t0_s: float) -> None:
         self._unsettled = self._unsettled_arrival = None
@@ -314,11 +315,17 @@ class GloveTrigger(Trigger):
         seen empty since the loop began waiting, so frames that come together in this
         read were sent together (a burst from the glove, counted in ``burst_frames``),
         not left waiting by a busy loop."""
+        glove = self.glove
+        if self._pump_counts:  # the glove says how many frames a pump gave
+            got = glove.pump_at(stamp_s) if stamp_s is not None else glove.pump()
+            if idle and got > 1:
+                self.burst_frames += got - 1
+            return
         before = self._count()
         if stamp_s is not None:
-            self.glove.pump_at(stamp_s)
+            glove.pump_at(stamp_s)
         else:
-            self.glove.pump()
+            glove.pump()
         if idle:
             got = self._count() - before
             if got > 1:
