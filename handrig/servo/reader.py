@@ -22,6 +22,9 @@ from handrig.servo.sync_read import RegisterSweep, SyncRead
 from handrig.servo.wire import read_bytes, wire_time_s
 
 
+HOUSEKEEPING_FORCE_S = 1.0  # housekeeping due this long runs where the wire has room
+
+
 class StateReader:
     """Present-state reads: Fast Sync Read, with a fallback to Sync Read for good after
     ``policy.fast_failures_before_fallback`` failures in a row while Sync Read works.
@@ -55,6 +58,11 @@ class StateReader:
         baud = link.budget.baud
         # a temperature Fast Sync Read: request 14 + N bytes, reply 8 + 5N
         self._temperature_wire_s = wire_time_s(22 + 6 * n, baud) + 0.0005
+        # how long housekeeping has taken here (its replies come no sooner than the wire
+        # allows, and later from a slow adapter or a busy emulator): it runs only where
+        # that much room is left, unless it has been due for HOUSEKEEPING_FORCE_S
+        self._housekeeping_s = 0.0
+        self._housekeeping_due_at: float | None = None
         # a read's default budget is never shorter than one reply on the wire plus slack
         self._min_budget_s = 1.5 * wire_time_s(read_bytes(n, plan.data_len, True), baud) + 0.001
         self.last_whole = False
@@ -184,6 +192,19 @@ class StateReader:
     def _housekeeping_due(self) -> bool:
         return bool(self.temperature_every) and self.stats.reads >= self._next_temperature_read
 
+    def _housekeeping_fits(self, deadline_s: float) -> bool:
+        """Whether the housekeeping due now may run before ``deadline_s``: the wire
+        must carry it, and the time it has taken here must fit too, unless it has been
+        due for ``HOUSEKEEPING_FORCE_S`` (it is not put off for ever)."""
+        now = self.clock.now()
+        left = deadline_s - now
+        if left <= self._temperature_wire_s:
+            return False
+        if self._housekeeping_due_at is None:
+            self._housekeeping_due_at = now
+        return (left > self._housekeeping_s
+                or now - self._housekeeping_due_at >= HOUSEKEEPING_FORCE_S)
+
     def _finish(self, deadline_s: float, asked: np.ndarray | None = None) -> ServoState:
         """Stale marking, alerts, housekeeping and the stale-run check of a read
         (``asked``: the servos a read of a part asked for)."""
@@ -195,7 +216,7 @@ class StateReader:
         stale = r.mark(now, asked)
         if not whole and r.status_err.any():
             self.faults.alerts_raised()
-        if self._housekeeping_due() and deadline_s - self.clock.now() > self._temperature_wire_s:
+        if self._housekeeping_due() and self._housekeeping_fits(deadline_s):
             self._next_temperature_read = self.stats.reads + self.temperature_every
             self._housekeeping(deadline_s)
         if stale.any() or self.faults.silence.active:
@@ -205,8 +226,7 @@ class StateReader:
     def housekeeping(self, deadline_s: float) -> bool:
         """The housekeeping reads in a cycle without a state read, when due and when the
         wire can carry them by ``deadline_s``; True if they ran."""
-        if not self._housekeeping_due() or (
-                deadline_s - self.clock.now() <= self._temperature_wire_s):
+        if not self._housekeeping_due() or not self._housekeeping_fits(deadline_s):
             return False
         self._next_temperature_read = self.stats.reads + self.temperature_every
         self._housekeeping(deadline_s)
@@ -215,6 +235,16 @@ class StateReader:
     def _housekeeping(self, deadline_s: float) -> None:
         """With torque on, the Bus Watchdogs first, then the temperatures if the read's
         deadline leaves time for them."""
+        start = self.clock.now()
+        self._housekeeping_due_at = None
+        try:
+            self._housekeeping_reads(deadline_s)
+        finally:
+            took = self.clock.now() - start
+            est = self._housekeeping_s  # a long one counts at once, short ones slowly
+            self._housekeeping_s = took if took > est else est + 0.125 * (took - est)
+
+    def _housekeeping_reads(self, deadline_s: float) -> None:
         if self.faults.torque_on and self.faults.watchdog_ms:
             self.faults.check_watchdogs(deadline_s)
             if deadline_s - self.clock.now() <= self._temperature_wire_s:

@@ -820,6 +820,25 @@ def test_housekeeping_between_reads_when_due_and_when_the_wire_has_room(sim: Sim
         b.close()
 
 
+def test_housekeeping_waits_for_the_room_it_took_before_but_not_for_ever(sim: SimBus) -> None:
+    from handrig.servo.reader import HOUSEKEEPING_FORCE_S
+
+    b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, temperature_every=2)
+    b.connect()  # its read did the housekeeping, and timed it
+    try:
+        r = b.reader
+        assert r._housekeeping_s > 0.0
+        r.stats.reads += 2  # due again
+        r._housekeeping_s = 0.2  # as if it had taken 200 ms on this bus
+        assert not b.housekeeping(b.clock.now() + 0.05)  # the wire has room; the past not
+        assert r._housekeeping_due() and r._housekeeping_due_at is not None
+        r._housekeeping_due_at -= HOUSEKEEPING_FORCE_S  # put off for a second: it runs
+        assert b.housekeeping(b.clock.now() + 0.05)
+        assert not r._housekeeping_due() and r._housekeeping_s < 0.2
+    finally:
+        b.close()
+
+
 def test_a_read_of_one_part_asks_only_those_servos_and_marks_only_them(
         sim: SimBus, bus: DynamixelBus) -> None:
     first = bus.read_state()
