@@ -239,6 +239,7 @@ class GloveTrigger(Trigger):
         self._peek = getattr(glove, "peek", None)
         self._due_of = getattr(glove, "next_due_s", None)
         self._pump_counts = bool(getattr(glove, "pump_counts", False))
+        self._drained_s = math.nan  # when a pump last emptied the port
 
     def start(self, t0_s: float) -> None:
         self._unsettled = self._unsettled_arrival = None
@@ -314,12 +315,22 @@ class GloveTrigger(Trigger):
         """Read the port (stamping with ``stamp_s``, else now). ``idle``: the port was
         seen empty since the loop began waiting, so frames that come together in this
         read were sent together (a burst from the glove, counted in ``burst_frames``),
-        not left waiting by a busy loop."""
+        not left waiting by a busy loop. When the loop was busy, only as many frames as
+        the glove's period fits into the time since the port was last emptied can have
+        come one by one; any more came in a burst."""
         glove = self.glove
         if self._pump_counts:  # the glove says how many frames a pump gave
+            drained = self._drained_s
             got = glove.pump_at(stamp_s) if stamp_s is not None else glove.pump()
-            if idle and got > 1:
-                self.burst_frames += got - 1
+            now = self.clock.now()
+            self._drained_s = now
+            if got > 1:
+                period = self.frame_period_s
+                if idle:
+                    self.burst_frames += got - 1
+                elif period == period and period > 0.0 and drained == drained:
+                    one_by_one = int((now - drained) / period)
+                    self.burst_frames += max(0, got - 1 - one_by_one)
             return
         before = self._count()
         if stamp_s is not None:

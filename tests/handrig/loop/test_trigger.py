@@ -374,6 +374,46 @@ def test_frames_sent_back_to_back_count_as_a_burst_not_as_frames_the_loop_skippe
     assert tick.frame and trig.take_bursts() == 0  # the loop's own lateness
 
 
+class CountingPipeGlove(PipeGlove):
+    """A :class:`PipeGlove` whose pump says how many frames it decoded (as SerialGlove)."""
+
+    pump_counts = True
+
+    def pump(self) -> int:
+        before = self.count
+        super().pump()
+        return self.count - before
+
+
+def test_frames_waiting_for_a_busy_loop_are_a_burst_beyond_what_the_period_fits() -> None:
+    glove = CountingPipeGlove(MonotonicClock(spin_s=0.0))
+    try:
+        clock = glove.clock
+        trig = GloveTrigger(clock, glove, floor_hz=5.0, ceiling_hz=5000.0)
+        trig.start(clock.now())
+        tick = Tick()
+        trig.wait(tick)
+        for _ in range(6):  # a 50 Hz glove: the trigger learns its period
+            time.sleep(0.02)
+            glove.send()
+            trig.wait(tick)
+            glove.latest()
+        assert trig.frame_period_s == pytest.approx(0.02, rel=0.3)
+        trig.take_bursts()
+        glove.send(3)  # three frames at once while the loop is busy for 3 ms
+        time.sleep(0.003)
+        trig.wait(tick)
+        assert tick.frame and glove.latest().count == glove.count
+        assert trig.take_bursts() == 2  # a 20 ms glove cannot send three in 3 ms one by one
+        for _ in range(3):  # three frames 20 ms apart while the loop is busy for ~60 ms
+            glove.send()
+            time.sleep(0.02)
+        trig.wait(tick)
+        assert tick.frame and trig.take_bursts() == 0  # the loop's own lateness
+    finally:
+        glove.close()
+
+
 def test_the_fixed_trigger_reads_in_a_later_slot_or_forced_over_two_when_one_is_too_short(
         ) -> None:
     clock = FakeClock(0.0)
