@@ -233,7 +233,7 @@ class Rig:
                     rehearsal.angles = cycle.angles
                 warm = rehearsal if rehearsal is not None and cycle.sample is not None else None
                 self.trigger.wait(tick, warm, settle=False)  # settled by the read schedule
-                over = cycle.run(tick)  # straight away: the bookkeeping below is off the frame's path
+                over = cycle.run(tick)  # at once: the bookkeeping below is off the frame's path
                 if tick.skipped:
                     stats.add_overrun(tick.late_s, tick.skipped)
                 if last_start is not None:

@@ -102,7 +102,7 @@ class Trigger(ABC):
         (``tick.next_s``, the glove's period estimate) to :meth:`settle`, which the
         cycle calls once its write is out."""
 
-    def settle(self, tick: Tick) -> None:
+    def settle(self, tick: Tick) -> None:  # noqa: B027 - a hook most triggers need not fill
         """Finish the bookkeeping a ``wait(settle=False)`` left (nothing to do here)."""
 
     def read_deadline(self, tick: Tick, now_s: float, reads_due: int, read_every: int,

@@ -21,7 +21,6 @@ from handrig.servo.registers import Reg
 from handrig.servo.sync_read import RegisterSweep, SyncRead
 from handrig.servo.wire import read_bytes, wire_time_s
 
-
 HOUSEKEEPING_FORCE_S = 1.0  # housekeeping due this long runs where the wire has room
 
 
