@@ -346,7 +346,7 @@ class SerialGlove(GloveSource):
             return None
 
     pump_counts = True
-    """:meth:`pump` and :meth:`pump_at` return how many good frames they decoded."""
+    """:meth:`pump` returns how many good frames it decoded."""
 
     def pump(self) -> int:
         """Read and decode what has arrived, stamped with the clock now (``reader="poll"``;
@@ -356,17 +356,6 @@ class SerialGlove(GloveSource):
         if self.reader == "poll":
             before = self._count
             self._poll()
-            return self._count - before
-        return 0
-
-    def pump_at(self, stamp_s: float) -> int:
-        """:meth:`pump`, stamping what has arrived with ``stamp_s`` instead of now: a loop
-        that polls the port between other work knows the bytes came after its previous
-        poll, and stamps them with that time (the latency it reports then errs long,
-        by at most the time between two polls, never short)."""
-        if self.reader == "poll":
-            before = self._count
-            self._poll(stamp_s)
             return self._count - before
         return 0
 
@@ -393,7 +382,7 @@ class SerialGlove(GloveSource):
             for line in self._scratch_lines.feed(chunk):
                 self._line_sample(line, now, 0)
 
-    def _poll(self, stamp_s: float | None = None) -> None:
+    def _poll(self) -> None:
         ser = self._serial
         if ser is None:
             now = self.clock.now()
@@ -407,8 +396,7 @@ class SerialGlove(GloveSource):
                 data = os.read(fd, 4096)  # EAGAIN when empty (VMIN 1, O_NONBLOCK)
                 if not data:
                     raise OSError("end of file: the device hung up")
-                self.feed(data, self.clock.now() if stamp_s is None else stamp_s)
-                stamp_s = None  # a second chunk arrived while the first was decoded
+                self.feed(data, self.clock.now())
                 if len(data) < 4096:
                     return
         except BlockingIOError:

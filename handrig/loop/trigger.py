@@ -277,7 +277,7 @@ class GloveTrigger(Trigger):
                 idle = not _readable(fd, 0.0)  # else bytes were waiting: the loop was busy
                 if idle and not _readable(fd, left):
                     break
-                self._pump(None, idle)
+                self._pump(idle)
                 if self._new_frame():
                     return self._arrival(clock.now())
                 fd = _fd_of(glove)
@@ -311,8 +311,8 @@ class GloveTrigger(Trigger):
         peek = self._peek
         return int(getattr(peek() if peek is not None else None, "count", 0) or 0)
 
-    def _pump(self, stamp_s: float | None, idle: bool) -> None:
-        """Read the port (stamping with ``stamp_s``, else now). ``idle``: the port was
+    def _pump(self, idle: bool) -> None:
+        """Read the port (the glove stamps what it decodes now). ``idle``: the port was
         seen empty since the loop began waiting, so frames that come together in this
         read were sent together (a burst from the glove, counted in ``burst_frames``),
         not left waiting by a busy loop. When the loop was busy, only as many frames as
@@ -321,7 +321,7 @@ class GloveTrigger(Trigger):
         glove = self.glove
         if self._pump_counts:  # the glove says how many frames a pump gave
             drained = self._drained_s
-            got = glove.pump_at(stamp_s) if stamp_s is not None else glove.pump()
+            got = glove.pump()
             now = self.clock.now()
             self._drained_s = now
             if got > 1:
@@ -333,10 +333,7 @@ class GloveTrigger(Trigger):
                     self.burst_frames += max(0, got - 1 - one_by_one)
             return
         before = self._count()
-        if stamp_s is not None:
-            glove.pump_at(stamp_s)
-        else:
-            glove.pump()
+        glove.pump()
         if idle:
             got = self._count() - before
             if got > 1:
@@ -350,8 +347,9 @@ class GloveTrigger(Trigger):
     def _spin_frame(self, until_s: float, warm: Callable[[float], None]) -> float | None:
         """Poll for a new frame until ``until_s``, rehearsing between polls (the spin
         window: the critical path stays warm in the caches until the frame is there); its
-        arrival, or None if none came. Bytes found by a poll are stamped with the time of
-        the previous poll, which found none: the arrival is no earlier than that."""
+        arrival, or None if none came. Bytes a poll finds are read at once and stamped at
+        that read, as a reader blocking on the port would stamp them (the previous poll,
+        which found none, is at most one rehearsal stage earlier)."""
         clock, glove = self.clock, self.glove
         fd = _fd_of(glove)
         begin = clock.now()
@@ -374,7 +372,6 @@ class GloveTrigger(Trigger):
                 clock.sleep_until(due)
                 self.spin_frames += 1
                 return due
-            pump_at = getattr(glove, "pump_at", None)
             steps = getattr(warm, "steps", None)
             empty = [begin]  # when a poll last found the port empty
             seen_empty = [False]
@@ -393,8 +390,8 @@ class GloveTrigger(Trigger):
             while True:
                 polls += 1
                 t = clock.now()
-                if arrived():  # the bytes came after empty[0], the last empty poll
-                    self._pump(empty[0] if pump_at is not None else None, seen_empty[0])
+                if arrived():  # read at once, stamped at the read (as a blocking reader)
+                    self._pump(seen_empty[0])
                     if self._new_frame():
                         self.spin_frames += 1
                         return self._arrival(clock.now())

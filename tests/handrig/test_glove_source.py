@@ -265,22 +265,22 @@ def test_a_fixed_channel_count_and_a_minimum() -> None:
         SerialGlove("/dev/null", clock=MonotonicClock(), channels=17)
 
 
-def test_pump_at_stamps_what_arrived_with_the_time_given_and_take_does_not_read() -> None:
+def test_pump_says_how_many_frames_it_decoded_and_take_does_not_read() -> None:
     import os
 
     master, glove = _pty_glove(channels=5)
     with glove:
-        os.write(master, _frame(0, 5))
         assert wait_for(lambda: glove.fileno() is not None)
+        os.write(master, _frame(0, 5) + _frame(1, 5))
         time.sleep(0.05)
-        glove.pump_at(123.5)  # a loop that polled the port empty at 123.5 s
+        assert glove.pump() == 2 and glove.pump() == 0
         first = glove.take()
-        assert first is not None and first.seq == 0 and first.host_time_s == 123.5
-        os.write(master, _frame(1, 5))
+        assert first is not None and first.seq == 1
+        os.write(master, _frame(2, 5))
         time.sleep(0.05)
         assert glove.take() is None  # take() never reads the port
         glove.pump()
         second = glove.take()
-        assert second is not None and second.seq == 1
+        assert second is not None and second.seq == 2 and second.count == first.count + 1
         assert abs(second.host_time_s - time.perf_counter()) < 1.0  # stamped now
     os.close(master)
