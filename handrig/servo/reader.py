@@ -22,6 +22,7 @@ from handrig.servo.sync_read import RegisterSweep, SyncRead
 from handrig.servo.wire import read_bytes, wire_time_s
 
 HOUSEKEEPING_FORCE_S = 1.0  # housekeeping due this long runs where the wire has room
+ATTEMPT_SMOOTHING = 0.125  # weight of the newest answered request in the retry estimate
 
 
 class StateReader:
@@ -62,6 +63,10 @@ class StateReader:
         # that much room is left, unless it has been due for HOUSEKEEPING_FORCE_S
         self._housekeeping_s = 0.0
         self._housekeeping_due_at: float | None = None
+        # how much longer than its wire time an answered request has taken here (the
+        # host's and the adapter's or emulator's share): a retry starts only with room
+        # for that too, else it would run past the read's deadline into the next write
+        self._attempt_extra_s = 0.0
         # a read's default budget is never shorter than one reply on the wire plus slack
         self._min_budget_s = 1.5 * wire_time_s(read_bytes(n, plan.data_len, True), baud) + 0.001
         self.last_whole = False
@@ -136,7 +141,7 @@ class StateReader:
         for attempt in range(self.policy.read_retries + 1):
             if attempt:
                 if (self.link.request_start(self.clock.now())
-                        + self.read_wire_s(len(pending)) > deadline_s):
+                        + self._retry_s(len(pending)) > deadline_s):
                     break
                 self.stats.retries += 1
             self._attempt(pending, None, deadline_s)
@@ -156,7 +161,7 @@ class StateReader:
         for attempt in range(self.policy.read_retries + 1):
             if attempt:
                 start = self.link.request_start(self.clock.now())
-                if start + self.read_wire_s(len(pending)) > deadline_s:
+                if start + self._retry_s(len(pending)) > deadline_s:
                     break
                 self.stats.retries += 1
             if self._attempt(pending, order, deadline_s) == WHOLE:
@@ -168,14 +173,29 @@ class StateReader:
             order = None
         return False
 
+    def _retry_s(self, k: int) -> float:
+        """The time a retry of ``k`` servos is expected to take: its wire time and what
+        answered requests have taken here beyond theirs."""
+        return self.read_wire_s(k) + self._attempt_extra_s
+
+    def _answered(self, start_s: float, k: int) -> None:
+        """A request for ``k`` servos sent at ``start_s`` was answered now."""
+        extra = max(0.0, self.clock.now() - start_s - self.read_wire_s(k))
+        self._attempt_extra_s += ATTEMPT_SMOOTHING * (extra - self._attempt_extra_s)
+
     def _attempt(self, indices: np.ndarray, order: Order | None, deadline_s: float) -> int:
         """One read of ``indices``: what :meth:`FastSyncRead.read` returns (Sync Read: 1/0)."""
-        deadline = min(deadline_s, self.link.budget.reply_deadline(self.clock.now()))
+        start = self.clock.now()
+        deadline = min(deadline_s, self.link.budget.reply_deadline(start))
         if not self.plan.fast:
-            return int(self.sync.read(indices, deadline))
+            got = int(self.sync.read(indices, deadline))
+            if got:
+                self._answered(start, len(indices))
+            return got
         got = self.fast.read(indices, deadline, order)
         if got:
             self._fast_fail_run = 0
+            self._answered(start, len(indices))
             return got
         self._fast_fail_run += 1
         if self._fast_fail_run >= self.policy.fast_failures_before_fallback:

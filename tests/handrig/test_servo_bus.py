@@ -839,6 +839,26 @@ def test_housekeeping_waits_for_the_room_it_took_before_but_not_for_ever(sim: Si
         b.close()
 
 
+def test_a_retry_starts_only_with_room_for_what_requests_have_taken_here(
+        sim: SimBus, bus: DynamixelBus) -> None:
+    reader = bus.reader
+    assert not bus.read_state().stale.any()
+    assert reader._attempt_extra_s >= 0.0  # learnt from the answered request
+    reader._attempt_extra_s = 0.0  # answers as fast as the wire
+    sim.servo(3).silent_until = math.inf  # one servo silent: every read fails on it
+    time.sleep(0.01)
+    before = bus.stats.retries
+    bus.read_state(bus.clock.now() + 0.1)  # room for a retry
+    assert bus.stats.retries > before
+    time.sleep(0.01)
+    reader._attempt_extra_s = 1.0  # as if answers took a second here
+    before = bus.stats.retries
+    state = bus.read_state(bus.clock.now() + 0.1)
+    assert bus.stats.retries == before  # the wire has room; what it has taken does not
+    assert state.stale.any()
+    sim.servo(3).silent_until = 0.0
+
+
 def test_a_read_of_one_part_asks_only_those_servos_and_marks_only_them(
         sim: SimBus, bus: DynamixelBus) -> None:
     first = bus.read_state()
