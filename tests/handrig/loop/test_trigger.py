@@ -163,7 +163,7 @@ def test_the_ceiling_holds_a_fast_glove_back_and_the_newest_frame_is_taken(pipe_
     first = tick.now_s
     pipe_glove.send()
     trig.wait(tick)
-    assert tick.frame and tick.now_s - first >= 0.05 - 1e-4
+    assert tick.frame and tick.now_s - first >= 0.05 - 2e-3
     assert trig.ceiling_waits == 1
     pipe_glove.latest()
     start = tick.now_s
@@ -171,7 +171,7 @@ def test_the_ceiling_holds_a_fast_glove_back_and_the_newest_frame_is_taken(pipe_
     time.sleep(0.01)
     pipe_glove.send()  # two frames within one ceiling gap: one cycle, the newest frame
     trig.wait(tick)
-    assert tick.now_s - start >= 0.05 - 1e-4
+    assert tick.now_s - start >= 0.05 - 2e-3  # the bucket keeps an oversleep as credit
     sample = pipe_glove.latest()
     assert sample is not None and sample.count == 4 and pipe_glove.latest() is None
 
