@@ -23,7 +23,6 @@ from handrig.servo.wire import read_bytes, wire_time_s
 
 HOUSEKEEPING_FORCE_S = 1.0  # housekeeping due this long runs where the wire has room
 ATTEMPT_SMOOTHING = 0.125  # weight of the newest answered request in the retry estimate
-FINISH_MAX_S = 0.001  # a read's finishing longer than this (a fault handled) is not learnt
 
 
 class StateReader:
@@ -68,11 +67,6 @@ class StateReader:
         # host's and the adapter's or emulator's share): a retry starts only with room
         # for that too, else it would run past the read's deadline into the next write
         self._attempt_extra_s = 0.0
-        # how long a read takes from its last reply to the state it hands back (decoding,
-        # stale marks, the snapshot; housekeeping not counted): replies are waited for
-        # only until that long before the read's deadline, so the read ends by it
-        self._finish_s = 0.0
-        self._housekeeping_took_s = 0.0
         # a read's default budget is never shorter than one reply on the wire plus slack
         self._min_budget_s = 1.5 * wire_time_s(read_bytes(n, plan.data_len, True), baud) + 0.001
         self.last_whole = False
@@ -93,22 +87,12 @@ class StateReader:
         if isinstance(begun, ServoState):
             return begun
         deadline_s = begun
-        whole = self._attempts(deadline_s - self._finish_s)
-        since = self.clock.now()
-        if whole and not (
+        if self._attempts(deadline_s) and not (
                 self.temperature_every and self.stats.reads >= self._next_temperature_read):
             if silence.active:
                 silence.update(self.fast.whole_at)
-            return self._finished(since, self.readings.take_whole(self.fast.whole_at))
-        return self._finished(since, self._finish(deadline_s))
-
-    def _finished(self, since_s: float, state: ServoState) -> ServoState:
-        """``state``, after learning how long the read took since its last reply."""
-        took = self.clock.now() - since_s - self._housekeeping_took_s
-        self._housekeeping_took_s = 0.0
-        if 0.0 <= took <= FINISH_MAX_S:  # not a reboot handled, nor a stalled host
-            self._finish_s += ATTEMPT_SMOOTHING * (took - self._finish_s)
-        return state
+            return self.readings.take_whole(self.fast.whole_at)
+        return self._finish(deadline_s)
 
     def _begin(self, k: int, deadline_s: float | None) -> float | ServoState:
         """The start of a read of ``k`` servos: its deadline (None: the default budget
@@ -127,7 +111,6 @@ class StateReader:
             return self.readings.unread(now)
         silence.note_read(now)
         self.faults.skip_run = 0
-        self._housekeeping_took_s = 0.0
         self.stats.reads += 1
         self.readings.start_read()
         self.last_whole = False
@@ -153,23 +136,21 @@ class StateReader:
         if isinstance(begun, ServoState):
             return begun
         deadline_s = begun
-        replies_by = deadline_s - self._finish_s
         fresh = self.readings.fresh
         pending = indices
         for attempt in range(self.policy.read_retries + 1):
             if attempt:
                 if (self.link.request_start(self.clock.now())
-                        + self._retry_s(len(pending)) > replies_by):
+                        + self._retry_s(len(pending)) > deadline_s):
                     break
                 self.stats.retries += 1
-            self._attempt(pending, None, replies_by)
+            self._attempt(pending, None, deadline_s)
             # the first servo that did not answer goes last: in a Fast Sync Read the
             # servos after a silent one in the chain fail with it
             pending = np.roll(pending[~fresh[pending]], -1)
             if not pending.size:
                 break
-        since = self.clock.now()
-        return self._finished(since, self._finish(deadline_s, indices))
+        return self._finish(deadline_s, indices)
 
     def _attempts(self, deadline_s: float) -> bool:
         """The read and its retries; True when it was whole."""
@@ -279,7 +260,6 @@ class StateReader:
             self._housekeeping_reads(deadline_s)
         finally:
             took = self.clock.now() - start
-            self._housekeeping_took_s += took
             est = self._housekeeping_s  # a long one counts at once, short ones slowly
             self._housekeeping_s = took if took > est else est + 0.125 * (took - est)
 
