@@ -100,7 +100,7 @@ class Trigger(ABC):
         if given, may be called once shortly before that. ``settle=False``: return as
         soon as the cycle may start and leave what only the read schedule needs
         (``tick.next_s``, the glove's period estimate) to :meth:`settle`, which the
-        cycle calls once its write is out."""
+        read schedule calls once the cycle's write is out (or the next wait does)."""
 
     def settle(self, tick: Tick) -> None:  # noqa: B027 - a hook most triggers need not fill
         """Finish the bookkeeping a ``wait(settle=False)`` left (nothing to do here)."""

@@ -23,6 +23,7 @@ from handrig.servo.wire import read_bytes, wire_time_s
 
 HOUSEKEEPING_FORCE_S = 1.0  # housekeeping due this long runs where the wire has room
 ATTEMPT_SMOOTHING = 0.125  # weight of the newest answered request in the retry estimate
+ATTEMPT_EXTRA_MAX_S = 0.005  # an answer later than this beyond the wire is not learnt
 
 
 class StateReader:
@@ -181,7 +182,8 @@ class StateReader:
     def _answered(self, start_s: float, k: int) -> None:
         """A request for ``k`` servos sent at ``start_s`` was answered now."""
         extra = max(0.0, self.clock.now() - start_s - self.read_wire_s(k))
-        self._attempt_extra_s += ATTEMPT_SMOOTHING * (extra - self._attempt_extra_s)
+        if extra <= ATTEMPT_EXTRA_MAX_S:  # longer: a stalled host, not the bus's way
+            self._attempt_extra_s += ATTEMPT_SMOOTHING * (extra - self._attempt_extra_s)
 
     def _attempt(self, indices: np.ndarray, order: Order | None, deadline_s: float) -> int:
         """One read of ``indices``: what :meth:`FastSyncRead.read` returns (Sync Read: 1/0)."""
