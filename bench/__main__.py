@@ -13,7 +13,7 @@ import time
 
 import bench
 
-LONG = frozenset({"bench_soak", "bench_arrival"})
+LONG = frozenset({"bench_soak", "bench_arrival", "bench_skips"})
 
 
 def main() -> int:
