@@ -525,10 +525,13 @@ class GloveTrigger(Trigger):
             # no gap fitted for long: read anyway, delaying the next frame's write but
             # ending early enough (half a period before the frame after it) for that
             # delayed cycle, and a read that overruns its deadline, to be done before the
-            # frame after it is due: no frame is skipped for a read
+            # frame after it is due: no frame is skipped for a read. It always has room
+            # for the read itself (a glove whose frames come close together must not
+            # keep the servos unread), never past the floor.
             period = self.frame_period_s
             latest = (tick.next_s + FORCED_READ_SHARE * period if period == period
                       else tick.floor_s)
+            latest = max(latest, now_s + read_s + READ_MARGIN_S)
             return min(latest, tick.floor_s) - READ_MARGIN_S
         return None
 

@@ -245,6 +245,12 @@ def test_reads_go_into_the_gap_before_the_next_frame_or_wait_for_one() -> None:
     assert forced == pytest.approx(
         tick.next_s + FORCED_READ_SHARE * trig.frame_period_s - READ_MARGIN_S)
     assert forced <= tick.floor_s - READ_MARGIN_S
+    # a read longer than that still gets room for itself, never past the floor
+    long_read = trig.read_deadline(tick, now, reads_due=4 * FORCED_READ_FACTOR,
+                                   read_every=4, read_s=0.008)
+    assert long_read == pytest.approx(now + 0.008)
+    assert trig.read_deadline(tick, now, reads_due=4 * FORCED_READ_FACTOR, read_every=4,
+                              read_s=0.02) == pytest.approx(tick.floor_s - READ_MARGIN_S)
     assert not trig.delayed(tick, now)
     clock.advance(0.006)  # the next sample came due while the read was on the wire
     assert trig.delayed(tick, clock.now())
