@@ -59,12 +59,8 @@ def _run(spin_us: float, seconds: float) -> dict[str, Any]:
     try:
         with tempfile.TemporaryDirectory(prefix="bench_arrival_") as tmp:
             folder = Path(tmp)
-            rec = bench_rig.step_recording()
-            rec_path = folder / "steps.csv"
-            bench_rig.write_glove_recording(rec_path, rec)
             case = bench_rig.Case("glove", 200.0, 1_000_000)
-            result = bench_rig.run_case(case, seconds, folder, rec_path,
-                                        rec.raw[:, bench_rig.INDEX_CHANNEL].copy())
+            result = bench_rig.run_step_case(case, seconds, folder)
             sends: dict[int, float] = {}
             log = folder / "glove_glove_200_1000000.log"
             for line in log.read_text().splitlines():

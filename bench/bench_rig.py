@@ -172,6 +172,14 @@ def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
     return {"case": case, "summary": s, "outside_us": outside, "steal_pct": steal}
 
 
+def run_step_case(case: Case, seconds: float, folder: Path) -> dict[str, Any]:
+    """:func:`run_case` on the stepping recording, written into ``folder``."""
+    rec = step_recording()
+    rec_path = folder / "steps.csv"
+    write_glove_recording(rec_path, rec)
+    return run_case(case, seconds, folder, rec_path, rec.raw[:, INDEX_CHANNEL].copy())
+
+
 def _row(r: dict[str, Any]) -> str:
     c, s, o = r["case"], r["summary"], r["outside_us"]
     lat, comp = s["latency_us"], s["compute_us"]

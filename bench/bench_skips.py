@@ -74,14 +74,9 @@ def main() -> None:
     cycle_module.Cycle._after_write = after_write  # type: ignore[method-assign]
     try:
         with tempfile.TemporaryDirectory(prefix="bench_skips_") as tmp:
-            folder = Path(tmp)
-            rec = bench_rig.step_recording()
-            rec_path = folder / "steps.csv"
-            bench_rig.write_glove_recording(rec_path, rec)
             before = bench_rig.cpu_times()
-            result = bench_rig.run_case(bench_rig.Case("glove", RATE_HZ, BAUD), seconds,
-                                        folder, rec_path,
-                                        rec.raw[:, bench_rig.INDEX_CHANNEL].copy())
+            result = bench_rig.run_step_case(bench_rig.Case("glove", RATE_HZ, BAUD),
+                                             seconds, Path(tmp))
             steal = bench_rig.steal_percent(before, bench_rig.cpu_times())
     finally:
         cycle_module.Cycle._after_write = original  # type: ignore[method-assign]
