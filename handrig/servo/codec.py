@@ -266,7 +266,7 @@ def warm_up() -> None:
     goal_packet(f, f - 1.0, f + 1.0, f, f, f + 1.0, f, np.zeros(2),
                 np.zeros(SYNC_WRITE_BODY + 12, np.uint8))
     idx = np.zeros(2, np.intp)
-    ids = np.zeros(2, np.uint8)
+    ids = np.frombuffer(bytes(2), np.uint8)  # read-only, as an Order's IDs are
     for read_len in (1, 4, 10):
         reply = np.frombuffer(bytes(8 + 2 * (read_len + 4)), np.uint8)  # read-only, as used
         fast_sync_check(reply, ids, read_len, np.zeros(2, np.bool_))

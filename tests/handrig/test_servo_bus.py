@@ -880,3 +880,39 @@ def test_a_read_of_one_part_asks_only_those_servos_and_marks_only_them(
     assert reader.read_wire_s(3) < reader.read_wire_s(6)
     with pytest.raises(ValueError, match="read parts"):
         bus.read_state(part=(0, 7))
+
+
+
+WARM_UP_CHECK = """
+import numpy as np
+from handrig.servo import DynamixelBus, codec
+from sim.dxl_bus import SimBus
+from tests.handrig.test_servo_bus import small_rig
+
+kernels = {n: k for n in dir(codec) if hasattr(k := getattr(codec, n), "signatures")}
+with SimBus.from_rig(small_rig()) as sim:
+    bus = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000)
+    bus.connect()  # warms the kernels up
+    before = {n: len(k.signatures) for n, k in kernels.items()}
+    assert before["fast_sync_whole"] and before["fast_sync_take"] and before["goal_packet"]
+    with bus.torque():
+        bus.write_goals_deg(np.zeros(6))
+        whole = bus.read_state()
+        assert bus.reader.last_whole  # the whole-reply kernel took it
+        part = bus.read_state(part=(1, 2))
+    bus.close()
+assert whole.all_fresh and not part.stale.any()
+print({n: [str(s) for s in k.signatures[before[n]:]] for n, k in kernels.items()
+       if len(k.signatures) > before[n]})
+"""
+
+
+def test_reads_and_writes_compile_nothing_after_the_warm_up() -> None:
+    """The bus warms every kernel with the argument types the driver passes, at
+    connect: a kernel compiled (or loaded from the cache) at the first real read would
+    cost that cycle milliseconds, and a 500 Hz glove's frames pile up meanwhile. In a
+    process of its own, so that no earlier test has compiled them already."""
+    out = subprocess.run([sys.executable, "-c", WARM_UP_CHECK], capture_output=True,
+                         text=True, timeout=120, cwd=Path(__file__).resolve().parents[2])
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "{}"
