@@ -76,6 +76,7 @@ class Cycle:
         self._reads_due = 0  # cycles since the last read
         self.read_wire_s = self._wire_floor(
             bus, -(-len(pipeline.servo_joints) // self.read_parts))
+        self._quiet_wait_s: Callable[[], float] | None = getattr(bus, "quiet_wait_s", None)
         self.pipeline = pipeline
         self.clock = clock
         self.machine = machine
@@ -251,8 +252,10 @@ class Cycle:
         self._reads_due += 1
         trigger, clock = self.trigger, self.clock
         start = clock.now()
-        deadline = trigger.read_deadline(tick, start, self._reads_due, self.read_every,
-                                         max(self.read_s, self.read_wire_s))
+        read_s = max(self.read_s, self.read_wire_s)
+        if self._quiet_wait_s is not None:
+            read_s += self._quiet_wait_s()  # a failed reply's quiet line, before the request
+        deadline = trigger.read_deadline(tick, start, self._reads_due, self.read_every, read_s)
         if deadline is None:
             if (self._reads_due == self._housekeeping_slot and self.housekeeping is not None):
                 self.housekeeping(tick.next_s - READ_MARGIN_S)

@@ -217,6 +217,12 @@ class DynamixelBus(ServoBus):
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
         return self.reader.read_wire_s(n)
 
+    def quiet_wait_s(self) -> float:
+        """How long a read asked now would wait, beyond the wire, for the line to go
+        quiet after a failed reply (0 almost always): a loop fitting reads into gaps
+        counts it, or the bus declines the read."""
+        return self.link.quiet_wait_s()
+
     @property
     def last_read_whole(self) -> bool:
         """Whether the last read got every servo at once, no Alert raised (the short way)."""

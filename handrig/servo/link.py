@@ -76,6 +76,15 @@ class Link:
         since, most = wait
         self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since)
 
+    def quiet_wait_s(self) -> float:
+        """What the quiet after a failed reply adds to a request's wait for the wire
+        (:meth:`WireBudget.quiet_wait_s`), counting the late bytes that have come in
+        meanwhile: they are taken in first, and the quiet runs from them."""
+        if self.budget.failed_at is None:
+            return 0.0
+        self.transport.discard_input()
+        return self.budget.quiet_wait_s(self.clock.now(), self.transport.last_rx_s)
+
     def request_start(self, now: float) -> float:
         """When a request written at ``now`` would start on the wire."""
         return self.budget.request_start(now, len(self.held), self.transport.last_rx_s)

@@ -695,6 +695,38 @@ def test_no_gap_read_is_offered_that_the_wire_cannot_carry(parts_factory):
     assert 0 < stats.reads <= stats.frames / 16 + 1
 
 
+
+def test_no_gap_read_is_offered_while_the_line_must_go_quiet(parts_factory):
+    """After a failed reply the bus must let the line go quiet before its next request
+    (DynamixelBus.quiet_wait_s): a read asked into a gap then waits out most of it and
+    runs past the next frame. The loop counts that wait: while it is longer than the
+    gaps, only the forced reads are asked."""
+    parts = parts_factory()
+    clock = FakeClock(0.0)
+    glove = _replay(200.0, 1.0, clock)
+
+    class QuietingBus(WiredBus):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            self.asked: list[float] = []
+
+        def quiet_wait_s(self) -> float:
+            return 0.010 if 0.2 <= self.clock.now() < 0.6 else 0.0
+
+        def read_state(self, deadline_s=None):
+            self.asked.append(self.clock.now())
+            return super().read_state(deadline_s)
+
+    bus = QuietingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=100.0,
+                   ceiling_hz=1000.0)
+    rig.run(duration_s=0.9)
+    asked = np.array(bus.asked)
+    quiet = np.sum((asked >= 0.2) & (asked < 0.6))  # 80 cycles: 20 gap reads otherwise
+    assert 0 < quiet <= 80 / 16 + 1  # one forced read per FORCED_READ_FACTOR * read_every
+    assert np.sum(asked < 0.2) >= 40 / 4 - 1  # before: a gap read every read_every cycles
+
+
 def test_a_read_the_bus_found_no_room_for_stays_due_and_is_not_counted(parts_factory):
     parts = parts_factory()
     clock = FakeClock()

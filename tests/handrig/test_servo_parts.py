@@ -273,6 +273,21 @@ def test_after_a_failed_reply_the_line_must_be_quiet_first() -> None:
     assert bus.read_state(bus.clock.now() + wire_s + 0.5 * bus.reply_gap_s).all_fresh
 
 
+
+def test_the_quiet_wait_a_loop_counts_runs_from_the_late_bytes_that_came() -> None:
+    bus, transport, _ = make_bus(temperature_every=0, reply_timeout_s=0.01,
+                                 fault_policy=FaultPolicy(read_retries=0))
+    assert bus.quiet_wait_s() == 0.0  # no reply failed
+    transport.extra_delay_s = 0.006  # the reply comes after its read gave up
+    assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    assert bus.quiet_wait_s() == pytest.approx(bus.reply_gap_s, abs=1e-4)
+    bus.clock.sleep(0.004)  # the late reply has come in meanwhile, unread
+    # counted from those bytes, taken in now: the quiet starts again
+    assert bus.quiet_wait_s() == pytest.approx(bus.reply_gap_s, abs=1e-4)
+    bus.clock.sleep(bus.reply_gap_s)
+    assert bus.quiet_wait_s() == 0.0
+
+
 def test_fallback_to_sync_read_at_connect() -> None:
     rig = small_rig()
     peer = PeerBus(rig)
@@ -354,6 +369,18 @@ def test_wire_budget_quiet_rule_counts_from_the_failure_or_the_last_byte() -> No
     assert b.take_quiet_wait(5.0005, deadline_s=5.002) == (5.0, pytest.approx(0.0015))
     assert b.take_quiet_wait(5.0005, None) is None  # taken once
     assert b.request_start(5.0005, 0, last_rx_s=5.001) == 5.0005
+    assert b.quiet_wait_s(5.0005, last_rx_s=5.001) == 0.0  # the quiet was taken
+
+
+def test_wire_budget_quiet_wait_is_what_the_quiet_adds_to_the_wire() -> None:
+    b = WireBudget(BAUD, reply_gap_s=0.002, reply_timeout_s=0.004)
+    assert b.quiet_wait_s(5.0, last_rx_s=4.0) == 0.0
+    b.sent(500, now=5.0)  # on the wire until 5.005
+    b.failed(5.0)
+    assert b.quiet_wait_s(5.0, last_rx_s=4.0) == 0.0  # quiet by 5.002, the wire busy longer
+    assert b.quiet_wait_s(5.0, last_rx_s=5.004) == pytest.approx(0.001)
+    b.reply_in(5.0)
+    assert b.quiet_wait_s(5.0005, last_rx_s=4.0) == pytest.approx(0.0015)
 
 
 def test_cycle_and_read_bytes() -> None:
