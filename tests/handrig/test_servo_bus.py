@@ -769,16 +769,27 @@ def test_a_read_the_wire_cannot_carry_by_its_deadline_is_not_sent(sim: SimBus) -
 def test_a_reply_behind_writes_still_on_the_wire_is_waited_for() -> None:
     """Torque-on arms the Bus Watchdogs by two broadcast Sync Writes, then reads them
     back: with wire timing the reply starts only once those writes are off the wire,
-    later than the reply gap after the request. It must not count as a timeout."""
+    later than the reply gap after the request. It must not count as a timeout.
+
+    Counting the writes wrong times every such read out; a host that stalls the
+    emulator's thread for tens of milliseconds (this machine does) times out one now
+    and then: of three rounds of three, one must be clean."""
     with SimBus.from_rig(RIG, wire_timing=True) as sim:
         b = DynamixelBus(sim.port_path, RIG, baud=1_000_000, read_fields="position")
         b.connect()
         try:
+            rounds = []
             for _ in range(3):
-                with b.torque():
-                    b.write_goals_deg(np.zeros(len(RIG.servos)))
-                    assert not b.read_state().stale.any()
-            assert b.stats.timeouts == 0, b.stats.summary()
+                before = b.stats.timeouts
+                stale = 0
+                for _ in range(3):
+                    with b.torque():
+                        b.write_goals_deg(np.zeros(len(RIG.servos)))
+                        stale += int(b.read_state().stale.any())
+                rounds.append((stale, b.stats.timeouts - before))
+                if rounds[-1] == (0, 0):
+                    break
+            assert rounds[-1] == (0, 0), (rounds, b.stats.summary())
         finally:
             b.close()
 
