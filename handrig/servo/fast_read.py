@@ -26,6 +26,7 @@ from handrig.servo.readings import Readings, ReadPlan
 from handrig.servo.roster import Roster
 
 ORDERS = 64  # servo orders a Fast Sync Read cycles through (late replies are told apart)
+ORDERS_KEPT = 256  # orders of parts and retries kept once built
 # Replies are polled for (spin_s) from spin_s before the instant the wire delivers
 # them until REPLY_POLL_AFTER_S after it (the pty or USB hand-over and the servos'
 # own lateness), then waited for asleep.
@@ -82,6 +83,7 @@ class FastSyncRead:
         self.orders = make_orders(roster, plan)
         self._whole_len = codec.fast_reply_len(plan.data_len, roster.n)
         self._valid = np.zeros(roster.n, np.bool_)
+        self._orders_of: dict[bytes, Order] = {}  # see _order_of
         self.whole_at = 0.0  # when the last whole reply was decoded
 
     def read(self, indices: np.ndarray, deadline: float, order: Order | None = None) -> int:
@@ -92,9 +94,7 @@ class FastSyncRead:
         reading, NONE when none did.
         """
         if order is None:
-            ids = bytes(self.roster.ids[int(i)] for i in indices)
-            order = Order(indices, np.frombuffer(ids, np.uint8), codec.read_request(
-                codec.INST_FAST_SYNC_READ, self.plan.address, self.plan.data_len, ids))
+            order = self._order_of(indices)
             whole_ok = False
         else:
             whole_ok = True
@@ -115,6 +115,19 @@ class FastSyncRead:
             self.readings.recount_whole()  # the late reply counted
             return WHOLE if alerts == 0 else SOME
         return SOME if self._take_partial(raw, order, expected) else NONE
+
+    def _order_of(self, indices: np.ndarray) -> Order:
+        """The order asking ``indices`` as they are ordered: built once, then kept (a
+        read of a part asks the same servos each time; retries ask fewer)."""
+        key = indices.tobytes()
+        order = self._orders_of.get(key)
+        if order is None:
+            ids = bytes(self.roster.ids[int(i)] for i in indices)
+            order = Order(indices.copy(), np.frombuffer(ids, np.uint8), codec.read_request(
+                codec.INST_FAST_SYNC_READ, self.plan.address, self.plan.data_len, ids))
+            if len(self._orders_of) < ORDERS_KEPT:
+                self._orders_of[key] = order
+        return order
 
     def _receive(self, expected: int, deadline: float) -> bytes | None:
         """The reply (up to ``expected`` bytes), or None when it is not a Fast Sync Read

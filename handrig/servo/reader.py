@@ -146,11 +146,12 @@ class StateReader:
                     break
                 self.stats.retries += 1
             self._attempt(pending, None, deadline_s)
+            left = pending[~fresh[pending]]
+            if not left.size:
+                break
             # the first servo that did not answer goes last: in a Fast Sync Read the
             # servos after a silent one in the chain fail with it
-            pending = np.roll(pending[~fresh[pending]], -1)
-            if not pending.size:
-                break
+            pending = np.roll(left, -1)
         return self._finish(deadline_s, indices)
 
     def _attempts(self, deadline_s: float) -> bool:

@@ -288,6 +288,33 @@ def test_the_quiet_wait_a_loop_counts_runs_from_the_late_bytes_that_came() -> No
     assert bus.quiet_wait_s() == 0.0
 
 
+
+def test_a_part_read_asks_its_servos_by_a_request_built_once() -> None:
+    from handrig.servo import codec as hcodec
+    from handrig.servo.fast_read import ORDERS_KEPT
+
+    rig = small_rig()
+    bus, transport, peer = make_bus(rig, temperature_every=0)
+    ids = [s.id for s in rig.servos]
+    requests = []
+    for k in range(4):
+        assert not bus.read_state(part=(k % 2, 2)).stale.any()
+        requests.append(transport.writes[-1])
+    plan = bus.reader.plan
+    want = [hcodec.read_request(hcodec.INST_FAST_SYNC_READ, plan.address, plan.data_len,
+                                bytes(ids[i::2])) for i in (0, 1)]
+    assert requests == want * 2
+    fast = bus.reader.fast
+    assert requests[0] is requests[2] and len(fast._orders_of) == 2  # built once each
+    peer.servo(ids[2]).silent_until = np.inf  # part 0's retry asks the servos it lost
+    state = bus.read_state(bus.clock.now() + 0.05, part=(0, 2))  # room for a retry
+    assert state.stale[2] and not state.stale[[0, 1, 3, 4, 5]].any()
+    assert bus.stats.retries >= 1 and 2 < len(fast._orders_of) <= ORDERS_KEPT
+    retry = [o for o in fast._orders_of.values() if o.ids.tobytes() not in
+             (bytes(ids[0::2]), bytes(ids[1::2]))]
+    assert retry and all(set(o.ids.tolist()) <= {ids[2], ids[4]} for o in retry)
+
+
 def test_fallback_to_sync_read_at_connect() -> None:
     rig = small_rig()
     peer = PeerBus(rig)
