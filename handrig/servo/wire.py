@@ -76,15 +76,19 @@ class WireBudget:
         start = max(now, self.free_at) + held_bytes * self.byte_s
         if self.failed_at is None:
             return start
-        return max(start, max(self.failed_at, last_rx_s) + self.reply_gap_s)
+        return max(start, self._quiet_from(last_rx_s))
 
     def quiet_wait_s(self, now: float, last_rx_s: float) -> float:
         """How much later than the wire alone allows a request must start for the quiet
         a failed reply asks (0 when no reply failed since the last request)."""
         if self.failed_at is None:
             return 0.0
-        quiet = max(self.failed_at, last_rx_s) + self.reply_gap_s
-        return max(0.0, quiet - max(now, self.free_at))
+        return max(0.0, self._quiet_from(last_rx_s) - max(now, self.free_at))
+
+    def _quiet_from(self, last_rx_s: float) -> float:
+        """When the line has been quiet long enough after the failed reply."""
+        assert self.failed_at is not None
+        return max(self.failed_at, last_rx_s) + self.reply_gap_s
 
     def fits(self, start_s: float, n_bytes: int, deadline_s: float) -> bool:
         """Whether ``n_bytes`` starting at ``start_s`` are off the wire by ``deadline_s``."""
