@@ -43,6 +43,9 @@ ANCHOR_FOLLOW = 1.0 / 16.0  # how fast the glove's grid follows arrivals later t
 JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 FORCED_READ_SHARE = 0.5  # a forced read ends this share of a period after the next frame
 CEILING_BURST = 2.0  # ticks the ceiling lets through back to back (after a quiet spell)
+BACKLOG_QUIET_S = 0.0005  # at the start, the port is read until quiet this long
+BACKLOG_MAX_S = 0.05  # ... but no longer than this (a glove that never pauses)
+BACKLOG_PUMPS_MAX = 256
 
 
 @dataclass
@@ -250,6 +253,25 @@ class GloveTrigger(Trigger):
         self._anchor = math.nan
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0
+        self._take_backlog()
+
+    def _take_backlog(self) -> None:
+        """Read what the glove sent before the loop began, until the port has been quiet
+        ``BACKLOG_QUIET_S`` (at most ``BACKLOG_MAX_S``): a pty or USB adapter hands a
+        backlog over in pieces, and the first cycle then takes the newest frame instead of
+        finding the rest of the backlog one cycle later (counted as frames it skipped)."""
+        glove, clock = self.glove, self.clock
+        fd = _fd_of(glove)
+        if fd is None:
+            return
+        end = clock.now() + BACKLOG_MAX_S
+        for _ in range(BACKLOG_PUMPS_MAX):  # bounded under a fake clock too
+            if not _readable(fd, BACKLOG_QUIET_S):
+                break
+            glove.pump()
+            if clock.now() >= end:
+                break
+        self._drained_s = clock.now()
 
     @property
     def predicted_frame_s(self) -> float:

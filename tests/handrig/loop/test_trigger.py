@@ -464,3 +464,24 @@ def test_an_overdue_frame_leaves_no_gap_to_read_in_and_a_lost_one_the_next_slot(
     assert trig._next_frame_after(0.028) == pytest.approx(predicted)
     assert trig._next_frame_after(0.032) == pytest.approx(0.032)  # late: any moment now
     assert trig._next_frame_after(0.0423) == pytest.approx(0.045)  # lost: the grid's slot
+
+
+def test_the_start_reads_the_whole_backlog_so_the_first_cycle_takes_the_newest_frame() -> None:
+    """A glove streaming before the loop starts leaves more than one read's worth on the
+    port (a pty hands it over in pieces): all of it is read at the start, so the cycle
+    after the first does not find the rest and count it as frames the loop skipped."""
+    glove = CountingPipeGlove(MonotonicClock(spin_s=0.0))
+    try:
+        clock = glove.clock
+        glove.send(6000)  # one pump reads at most 4096
+        trig = GloveTrigger(clock, glove, floor_hz=5.0, ceiling_hz=5000.0)
+        trig.start(clock.now())
+        assert glove.count == 6000 and glove.pumps >= 2
+        tick = Tick()
+        trig.wait(tick)
+        assert tick.frame and glove.latest().count == 6000
+        glove.send()
+        trig.wait(tick)
+        assert tick.frame and glove.latest().count == 6001  # the next one, none between
+    finally:
+        glove.close()
