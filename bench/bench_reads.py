@@ -33,7 +33,7 @@ def run(port: str, parts: int, seconds: float) -> tuple[int, float, float, int]:
         goals = np.zeros(N_SERVOS)
         for k in range(20):  # the path warm, as in a running loop
             bus.write_goals_deg(goals)
-            bus.read_state(part=(k % parts, parts)) if parts > 1 else bus.read_state()
+            bus.read_state(part=(k % parts, parts))  # part (0, 1): a whole read
         reads = stale = 0
         cpu = 0.0
         t0 = time.perf_counter()
@@ -41,8 +41,7 @@ def run(port: str, parts: int, seconds: float) -> tuple[int, float, float, int]:
         while time.perf_counter() < end:
             bus.write_goals_deg(goals)
             c0 = time.thread_time()
-            state = (bus.read_state(part=(reads % parts, parts)) if parts > 1
-                     else bus.read_state())
+            state = bus.read_state(part=(reads % parts, parts))
             cpu += time.thread_time() - c0
             reads += 1
             stale += bool(state.stale.any())

@@ -22,7 +22,7 @@ from handrig.servo.sync_read import RegisterSweep, SyncRead
 from handrig.servo.wire import read_bytes, wire_time_s
 
 HOUSEKEEPING_FORCE_S = 1.0  # housekeeping due this long runs where the wire has room
-ATTEMPT_SMOOTHING = 0.125  # weight of the newest answered request in the retry estimate
+SMOOTHING = 0.125  # weight of the newest figure in what a read learns (retries, housekeeping)
 ATTEMPT_EXTRA_MAX_S = 0.005  # an answer later than this beyond the wire is not learnt
 
 
@@ -184,7 +184,7 @@ class StateReader:
         """A request for ``k`` servos sent at ``start_s`` was answered now."""
         extra = max(0.0, self.clock.now() - start_s - self.read_wire_s(k))
         if extra <= ATTEMPT_EXTRA_MAX_S:  # longer: a stalled host, not the bus's way
-            self._attempt_extra_s += ATTEMPT_SMOOTHING * (extra - self._attempt_extra_s)
+            self._attempt_extra_s += SMOOTHING * (extra - self._attempt_extra_s)
 
     def _attempt(self, indices: np.ndarray, order: Order | None, deadline_s: float) -> int:
         """One read of ``indices``: what :meth:`FastSyncRead.read` returns (Sync Read: 1/0)."""
@@ -264,7 +264,7 @@ class StateReader:
         finally:
             took = self.clock.now() - start
             est = self._housekeeping_s  # a long one counts at once, short ones slowly
-            self._housekeeping_s = took if took > est else est + 0.125 * (took - est)
+            self._housekeeping_s = took if took > est else est + SMOOTHING * (took - est)
 
     def _housekeeping_reads(self, deadline_s: float) -> None:
         if self.faults.torque_on and self.faults.watchdog_ms:
