@@ -188,14 +188,14 @@ def _row(r: dict[str, Any]) -> str:
             f"{lat['p50']} / {lat['p99']} / {lat['max']} | {comp['p50']} / {comp['p99']} | "
             f"{o['p50']} / {o['p99']} / {o['max']} ({o['n']}) | {s['writes_per_s']} | "
             f"{s['reads_per_s']} | {s['writes_delayed_by_reads']} | {s['frames_skipped']} "
-            f"({s.get('frames_in_bursts', 0)}) | "
+            f"({s.get('frames_caught_up', 0)}; {s.get('frames_in_bursts', 0)}) | "
             f"{s['overruns']} | {s['cpu_per_cycle_us']} | {r.get('steal_pct')} |{err}")
 
 
 HEADER = ("| loop | glove Hz | Mbps | in-process end to end p50 / p99 / max (us) | "
           "compute p50 / p99 (us) | outside p50 / p99 / max (us) (steps) | writes/s | "
-          "reads/s | writes delayed by reads | frames skipped by the loop (in the glove's "
-          "bursts) | overruns | "
+          "reads/s | writes delayed by reads | frames skipped by the loop (caught up; in "
+          "the glove's bursts) | overruns | "
           "CPU/cycle (us) | CPU stolen by the hypervisor (%) |\n"
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 

@@ -1,22 +1,25 @@
 """The rig's glove-to-servo latency, two checkouts side by side in one run.
 
 ``python bench/compare_rig.py OLD_CHECKOUT [NEW_CHECKOUT] [--rounds N] [--seconds S]
-[--hz HZ] [--baud BAUD]`` runs :func:`bench.bench_rig.run_case` (glove-triggered
-loop, both emulators in processes of their own) alternately on each checkout's code,
-each run in a fresh interpreter whose ``handrig`` is imported from that checkout,
-and prints each run and the medians: in-process end to end, outside (the glove
-emulator's send to the bus emulator's receipt of the first Sync Write that moved),
-compute, reads, writes delayed, frames skipped, CPU per cycle and the hypervisor's
-steal share (taken around each run). NEW_CHECKOUT defaults to this one. Each
-checkout runs on its own ``config/rig.toml``, set to the case's loop mode and baud
-rate by this checkout's bench, the same way for both (an old checkout's own bench
-may not write it right).
+[--hz HZ] [--baud BAUD] [--old-set KEY=VALUE ...] [--new-set KEY=VALUE ...]`` runs
+:func:`bench.bench_rig.run_case` (glove-triggered loop, both emulators in processes
+of their own) alternately on each checkout's code, each run in a fresh interpreter
+whose ``handrig`` is imported from that checkout, and prints each run and the
+medians: in-process end to end, outside (the glove emulator's send to the bus
+emulator's receipt of the first Sync Write that moved), compute, reads, writes
+delayed, frames skipped (and caught up), CPU per cycle and the hypervisor's steal
+share (taken around each run). NEW_CHECKOUT defaults to this one. Each checkout runs
+on its own ``config/rig.toml``, set to the case's loop mode and baud rate by this
+checkout's bench, the same way for both (an old checkout's own bench may not write
+it right); ``--old-set`` / ``--new-set`` change a line of that side's rig file
+(``--old-set catch_up=false``: one checkout against itself, a setting apart).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import statistics
 import subprocess
 import sys
@@ -47,8 +50,23 @@ def child(root: str, rig_path: str, mode: str, hz: float, baud: int, seconds: fl
     s = r["summary"]
     print("RESULT " + json.dumps({
         "lat": s["latency_us"], "comp": s["compute_us"], "out": r["outside_us"],
-        "skipped": s["frames_skipped"], "delayed": s["writes_delayed_by_reads"],
+        "skipped": s["frames_skipped"], "caught": s.get("frames_caught_up", 0),
+        "delayed": s["writes_delayed_by_reads"],
         "reads": s["reads_per_s"], "cpu": s["cpu_per_cycle_us"]}), flush=True)
+
+
+def _set_lines(path: Path, settings: list[str]) -> None:
+    """Give each ``KEY=VALUE`` its value in the rig file at ``path`` (the key's first
+    line), or add it to ``[loop]`` when the file has no such key."""
+    text = path.read_text(encoding="utf-8")
+    for kv in settings:
+        key, sep, value = kv.partition("=")
+        if not sep or not re.fullmatch(r"\w+", key):
+            raise SystemExit(f"--old-set/--new-set takes KEY=VALUE, got {kv!r}")
+        text, n = re.subn(rf"(?m)^{key} = [^\s#]+", f"{key} = {value}", text, count=1)
+        if not n:
+            text = text.replace("[loop]\n", f"[loop]\n{key} = {value}\n", 1)
+    path.write_text(text, encoding="utf-8")
 
 
 def _median(runs: list[dict[str, Any]], key: str, sub: str) -> float | None:
@@ -71,12 +89,15 @@ def main() -> int:
     p.add_argument("--seconds", type=float, default=20.0)
     p.add_argument("--hz", type=float, default=200.0)
     p.add_argument("--baud", type=int, default=1_000_000)
+    p.add_argument("--old-set", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--new-set", action="append", default=[], metavar="KEY=VALUE")
     args = p.parse_args()
     checkouts = {"old": str(Path(args.old).resolve()), "new": str(Path(args.new).resolve())}
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in checkouts}
     print(f"glove-triggered rig, {args.hz:g} Hz glove, {args.baud / 1e6:g} Mbps, "
           f"{args.seconds:g} s per run, old and new alternating, {args.rounds} rounds; "
-          f"old {checkouts['old']}, new {checkouts['new']}", flush=True)
+          f"old {checkouts['old']} {' '.join(args.old_set)}, new {checkouts['new']} "
+          f"{' '.join(args.new_set)}", flush=True)
     rigs = tempfile.TemporaryDirectory(prefix="compare_rig_rigs_")
     # each checkout runs on its own rig.toml, written the same way for both (an old
     # checkout's own bench may not write it right)
@@ -86,6 +107,7 @@ def main() -> int:
         folder.mkdir()
         rig_paths[name] = _rig_file(folder, "glove", args.hz, args.baud,
                                     Path(root) / "config" / "rig.toml")
+        _set_lines(rig_paths[name], args.old_set if name == "old" else args.new_set)
     for k in range(args.rounds):
         for name, root in checkouts.items():
             before = cpu_times()
@@ -105,7 +127,8 @@ def main() -> int:
             print(f"round {k} {name}: in-process p50 {d['lat']['p50']} p99 {d['lat']['p99']} "
                   f"| outside p50 {d['out']['p50']} p99 {d['out']['p99']} | compute p50 "
                   f"{d['comp']['p50']} | reads/s {d['reads']} | delayed {d['delayed']} | "
-                  f"skipped {d['skipped']} | CPU/cycle {d['cpu']} us | steal {d['steal']} %",
+                  f"skipped {d['skipped']} (caught up {d.get('caught', 0)}) | CPU/cycle "
+                  f"{d['cpu']} us | steal {d['steal']} %",
                   flush=True)
     rigs.cleanup()
     print("medians (us):")

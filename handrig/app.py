@@ -345,7 +345,7 @@ def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
         resume_frames=resume.frames, resume_time_s=resume.time_s,
         outputs=outputs, log=log, profile=profile,
         loop_mode=loop.mode, floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz,
-        spin_s=loop.spin_us * 1e-6, read_parts=rig_cfg.bus.read_parts,
+        spin_s=loop.spin_us * 1e-6, catch_up=loop.catch_up, read_parts=rig_cfg.bus.read_parts,
     )
 
 
@@ -504,6 +504,7 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: 
         "cycles_without_frame": s.cycles_without_frame,
         "frames_skipped": s.frames_skipped,
         "frames_in_bursts": s.frames_in_bursts,
+        "frames_caught_up": s.frames_caught_up,
         "ceiling_waits": s.ceiling_waits,
         "cpu_per_cycle_us": num(s.cpu_per_cycle_us, 1),
         "overruns": s.overruns,

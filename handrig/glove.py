@@ -140,6 +140,7 @@ class GloveSource(ABC):
 
     def __init__(self) -> None:
         self._newest: GloveSample | None = None
+        self._behind: GloveSample | None = None  # the newest's predecessor, if never taken
         self._taken = 0
         self._failure: DeviceError | None = None
         self._events: deque[str] = deque(maxlen=MAX_EVENTS)
@@ -168,6 +169,30 @@ class GloveSource(ABC):
     def peek(self) -> GloveSample | None:
         """The newest sample so far (new or not), without marking it taken."""
         return self._newest
+
+    def _arrived(self, sample: GloveSample) -> None:
+        """``sample`` is the newest now; the one it replaces is kept behind it while it
+        has not been taken (one sample: a loop that fell further behind skips the rest)."""
+        old = self._newest
+        self._behind = old if old is not None and old.count != self._taken else None
+        self._newest = sample
+
+    def has_behind(self) -> bool:
+        """Whether the sample just before the newest came and was never taken (the loop
+        was busy when it arrived), while the newest is new too."""
+        b, s = self._behind, self._newest
+        return (b is not None and s is not None and b.count == s.count - 1
+                and b.count > self._taken)
+
+    def take_behind(self) -> GloveSample | None:
+        """The sample just before the newest, if it was never taken (:meth:`has_behind`),
+        marked taken so that the newest stays new; else ``None``."""
+        if not self.has_behind():
+            return None
+        b = self._behind
+        assert b is not None
+        self._taken = b.count
+        return b
 
     def has_new(self) -> bool:
         """Whether :meth:`latest` has a sample not returned before (without taking it)."""
@@ -540,13 +565,13 @@ class SerialGlove(GloveSource):
             if not self._channels_ok(len(fr.channels)):
                 continue
             self._count += 1
-            self._newest = self._frame_sample(fr, now, self._count)
+            self._arrived(self._frame_sample(fr, now, self._count))
             self._last_good_s = now
 
     def _feed_lines(self, data: bytes, now: float) -> None:
         for line in self._lines.feed(data):
             self._count += 1
-            self._newest = self._line_sample(line, now, self._count)
+            self._arrived(self._line_sample(line, now, self._count))
             self._last_good_s = now
 
 

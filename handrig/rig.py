@@ -99,6 +99,7 @@ class Rig:
         floor_hz: float = 100.0,
         ceiling_hz: float = 1000.0,
         spin_s: float = 0.0,
+        catch_up: bool = False,
         read_parts: int = 1,
     ) -> None:
         self.glove = glove
@@ -110,7 +111,8 @@ class Rig:
             if loop_mode == "glove":
                 trigger = GloveTrigger(clock, glove, floor_hz=floor_hz, ceiling_hz=ceiling_hz,
                                        warm_s=self.warm_s,
-                                       spin_s=spin_s if self.warm_s > 0 else 0.0)
+                                       spin_s=spin_s if self.warm_s > 0 else 0.0,
+                                       catch_up=catch_up)
             elif loop_mode == "fixed":
                 trigger = FixedRateTrigger(clock, rate_hz, warm_s=self.warm_s, glove=glove)
             else:

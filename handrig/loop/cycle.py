@@ -90,6 +90,8 @@ class Cycle:
         self.latest: Callable[[], Any] = (
             take if isinstance(self.trigger, GloveTrigger) and take is not None
             else glove.latest)
+        # a tick that catches up takes the frame behind the newest (see Tick.catch_up)
+        self._take_behind: Callable[[], Any] | None = getattr(glove, "take_behind", None)
         self.controls_from_raw: Callable[..., Any] = controls_from_raw
         self.orientation: Callable[[Any], tuple[float, float]] = orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
@@ -138,9 +140,16 @@ class Cycle:
         """One cycle at ``tick``; True when the run is over (the stop's easing is done)."""
         now = tick.now_s
         machine = self.machine
-        sample = self.latest()
+        sample, t_sample = None, now
+        if tick.catch_up and self._take_behind is not None:
+            sample = self._take_behind()
+            if sample is not None:  # its filter time: a period before the newest's
+                t_sample = now - tick.behind_s
+                self.stats.frames_caught_up += 1
+        if sample is None:
+            sample = self.latest()
         if sample is not None:
-            self.controls_from_raw(sample.raw, now, self.controls)
+            self.controls_from_raw(sample.raw, t_sample, self.controls)
             self.angles = self.orientation(sample)
             mode = machine.frame(now, sample.estop)
         else:

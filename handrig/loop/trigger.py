@@ -7,8 +7,12 @@ with a floor rate (a tick at least every ``1 / floor_hz``, frame or not: the
 servos stay fed and their Bus Watchdog armed) and a ceiling (at most ``ceiling_hz``
 ticks a second on average, ``CEILING_BURST`` of them back to back: a frame that came
 late and the one on time after it both get their cycle; a glove faster than the
-ceiling is held back, and its cycle takes the newest frame). A trigger may
-run a rehearsal shortly before a tick (see :mod:`handrig.loop.rehearsal`).
+ceiling is held back, and its cycle takes the newest frame). With ``catch_up``, a
+frame that came while the loop was busy and was superseded before its cycle began (a
+loop held up two periods, by a slow read or the host) still gets its cycle: the tick
+asks for the frame just behind the newest, and the newest's tick follows at once,
+the two within the ceiling's burst. A trigger may run a rehearsal shortly before a
+tick (see :mod:`handrig.loop.rehearsal`).
 
 Both triggers stamp frame arrivals when the glove offers a file descriptor
 (``fileno()``) and a non-blocking ``pump()`` (read what is there, stamp it
@@ -56,7 +60,10 @@ class Tick:
     ``floor_s``: the latest the next cycle may start (the floor rate);
     ``late_s``: how late the cycle started; ``skipped``: whole slots missed before it;
     ``dt_s``: time since the previous cycle started (the slew limit's step);
-    ``frame``: a glove frame triggered the cycle."""
+    ``frame``: a glove frame triggered the cycle; ``catch_up``: the cycle is to take the
+    frame just before the newest, which came while the loop was busy (the newest gets the
+    next cycle at once), and ``behind_s`` is how much earlier than ``now_s`` that frame
+    belongs on the glove's time grid (one period: its filter time)."""
 
     index: int = 0
     deadline_s: float = 0.0
@@ -67,6 +74,8 @@ class Tick:
     skipped: int = 0
     dt_s: float = 0.0
     frame: bool = False
+    catch_up: bool = False
+    behind_s: float = 0.0
 
 
 def _fd_of(glove: Any) -> int | None:
@@ -211,10 +220,16 @@ class GloveTrigger(Trigger):
     when it is expected to end before the next frame (less ``JITTER_MARGIN`` mean
     deviations), and forced (ending before the floor deadline) when no gap fitted for
     ``FORCED_READ_FACTOR * read_every`` cycles.
+
+    ``catch_up`` (a glove whose ``pump()`` counts its frames and that keeps the frame
+    behind the newest, ``has_behind()``): a frame the loop left waiting until a newer
+    one came gets a cycle of its own just before the newest's, when the ceiling's whole
+    burst is free (a glove faster than the ceiling never gets one); counted in
+    :attr:`catch_ups`. Frames the glove sent back to back are not caught up.
     """
 
     def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
-                 warm_s: float = 0.0, spin_s: float = 0.0) -> None:
+                 warm_s: float = 0.0, spin_s: float = 0.0, catch_up: bool = False) -> None:
         if not 0.0 < floor_hz <= ceiling_hz:
             raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
         self.clock = clock
@@ -230,6 +245,10 @@ class GloveTrigger(Trigger):
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0  # mean deviation of the arrivals from the period
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
+        self.catch_up = bool(catch_up)
+        self.catch_ups = 0  # ticks that took the frame behind the newest
+        self._late_frames = 0  # frames the last pump found superseded by a busy loop
+        self._has_behind = getattr(glove, "has_behind", None)
         self._credit = 1.0  # ticks the ceiling lets through now (a token bucket)
         self._credit_at = 0.0
         self._k = 0
@@ -254,6 +273,7 @@ class GloveTrigger(Trigger):
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0
         self._take_backlog()
+        self._late_frames = 0  # the backlog is history: nothing in it to catch up
 
     def _take_backlog(self) -> None:
         """Read what the glove sent before the loop began, until the port has been quiet
@@ -346,13 +366,17 @@ class GloveTrigger(Trigger):
             got = glove.pump()
             now = self.clock.now()
             self._drained_s = now
+            late = 0
             if got > 1:
                 period = self.frame_period_s
-                if idle:
-                    self.burst_frames += got - 1
-                elif period == period and period > 0.0 and drained == drained:
-                    one_by_one = int((now - drained) / period)
-                    self.burst_frames += max(0, got - 1 - one_by_one)
+                bursts = got - 1
+                if not idle:
+                    bursts = 0
+                    if period == period and period > 0.0 and drained == drained:
+                        bursts = max(0, got - 1 - int((now - drained) / period))
+                self.burst_frames += bursts
+                late = got - 1 - bursts
+            self._late_frames = late
             return
         before = self._count()
         glove.pump()
@@ -460,8 +484,16 @@ class GloveTrigger(Trigger):
         frame = arrival is not None
         gap = self.min_gap_s
         credit = min(CEILING_BURST, self._credit + (now - self._credit_at) / gap)
+        catch_up = False
         if arrival is not None:
-            if credit < 1.0:  # the ceiling: the cycle then takes the newest frame
+            # a frame the loop left waiting, superseded: its own cycle first, when the
+            # ceiling lets both it and the newest's through back to back
+            catch_up = (self.catch_up and self._late_frames > 0 and credit >= CEILING_BURST
+                        and self._has_behind is not None and bool(self._has_behind()))
+            self._late_frames = 0
+            if catch_up:
+                self.catch_ups += 1
+            elif credit < 1.0:  # the ceiling: the cycle then takes the newest frame
                 self.ceiling_waits += 1
                 clock.sleep_until(now + (1.0 - credit) * gap)
                 later = clock.now()
@@ -482,6 +514,9 @@ class GloveTrigger(Trigger):
         tick.skipped = skipped
         tick.dt_s = min(now - self._last_start, self.period_s)
         tick.frame = frame
+        tick.catch_up = catch_up
+        period = self.frame_period_s
+        tick.behind_s = period if catch_up and period == period else 0.0
         self._last_start = now
         self._k += 1
         self._unsettled, self._unsettled_arrival = tick, arrival

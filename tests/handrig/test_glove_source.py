@@ -284,3 +284,37 @@ def test_pump_says_how_many_frames_it_decoded_and_take_does_not_read() -> None:
         assert second is not None and second.seq == 2 and second.count == first.count + 1
         assert abs(second.host_time_s - time.perf_counter()) < 1.0  # stamped now
     os.close(master)
+
+
+def test_the_frame_behind_the_newest_is_kept_only_while_it_was_never_taken() -> None:
+    import os
+
+    master, glove = _pty_glove(channels=5)
+    with glove:
+        assert wait_for(lambda: glove.fileno() is not None)
+        os.write(master, _frame(0, 5))
+        time.sleep(0.02)
+        glove.pump()
+        assert not glove.has_behind()  # nothing before the first
+        assert glove.take() is not None
+        os.write(master, _frame(1, 5) + _frame(2, 5) + _frame(3, 5))
+        time.sleep(0.02)
+        glove.pump()
+        assert glove.has_behind()
+        behind = glove.take_behind()
+        assert behind is not None and behind.seq == 2  # the one just before the newest
+        assert not glove.has_behind() and glove.take_behind() is None  # taken once
+        assert glove.has_new()
+        newest = glove.take()
+        assert newest is not None and newest.seq == 3 and newest.count == behind.count + 1
+        os.write(master, _frame(4, 5))
+        time.sleep(0.02)
+        glove.pump()
+        assert not glove.has_behind()  # the one before it was taken: nothing to catch up
+        assert glove.take().seq == 4
+        os.write(master, _frame(5, 5) + _frame(6, 5))
+        time.sleep(0.02)
+        glove.pump()
+        assert glove.take().seq == 6  # the newest taken first: the one behind is gone
+        assert not glove.has_behind() and glove.take_behind() is None
+    os.close(master)

@@ -782,3 +782,72 @@ def test_reads_of_parts_take_the_parts_in_turn_and_track_only_the_servos_asked(
     assert bus.parts[:4] == [(0, 2), (1, 2), (0, 2), (1, 2)]
     assert stats.reads == len(bus.parts) and stats.stale_reads == 0
     assert stats.tracking_max_deg < 50.0  # only the servos each read asked for
+
+
+def test_a_loop_held_up_two_periods_writes_the_frame_it_was_late_for_then_the_newest(
+        parts_factory):
+    """A real glove on a pty at 100 Hz, each frame's index channel a step further; the bus
+    holds the loop up 25 ms once in a while (a slow read, the host): the frame that came
+    in the meantime is still written, filtered a period before the newest, and the next
+    cycle writes the newest at once. Every frame the glove sent is written, in order."""
+    import os
+    import time
+    import tty
+
+    from firmware_protocol.glove import GloveFrame, encode_frame
+    from handrig.clock import MonotonicClock
+    from handrig.glove import SerialGlove
+
+    parts = parts_factory()
+    clock = MonotonicClock(spin_s=0.0)
+    master, slave = os.openpty()
+    tty.setraw(master)
+    glove = SerialGlove(os.ttyname(slave), "frames", clock=clock, reader="poll", channels=5)
+    os.close(slave)
+
+    class HeldUpBus(RecordingBus):
+        def write_goals_deg(self, goals_deg: np.ndarray) -> int:
+            self.goals.append(np.array(goals_deg))
+            if len(self.goals) % 25 == 0:
+                time.sleep(0.025)  # two periods and a half: two frames come meanwhile
+            return 0
+
+    bus = HeldUpBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    filtered: list[float] = []
+    seen: list[int] = []
+    controls = parts.controls
+
+    def controls_from_raw(raw, t_s, out):
+        filtered.append(t_s)
+        seen.append(int(raw[0]))
+        return controls(raw, t_s, out)
+
+    sent = 120
+
+    def stream() -> None:
+        while not bus.goals:  # the loop has begun: nothing is left as a backlog
+            time.sleep(0.002)
+        t = time.monotonic()
+        for k in range(sent):
+            t += 0.01
+            time.sleep(max(0.0, t - time.monotonic()))
+            raw = (1500 + 5 * k, 2100, 2000, 2100, 2100)
+            os.write(master, encode_frame(GloveFrame(k, k * 10_000, raw, (0.0, 0.0, 0.0, 1.0))))
+
+    rig = Rig(glove, bus, parts.pipeline, clock, controls_from_raw=controls_from_raw,
+              orientation=parts.orientation, read_every=4, glove_timeout_s=0.25,
+              relax_time_s=0.05, log=lambda s: None, loop_mode="glove", floor_hz=20.0,
+              ceiling_hz=1000.0, catch_up=True)
+    with glove:
+        writer = threading.Thread(target=stream)
+        writer.start()
+        try:
+            stats = rig.run(duration_s=1.5)
+        finally:
+            writer.join()
+    os.close(master)
+    assert stats.frames_caught_up >= 2  # each hold-up left one frame behind the newest
+    assert stats.frames_skipped == 0 and stats.glove_samples == sent
+    assert rig.trigger.catch_ups == stats.frames_caught_up
+    assert [(r - 1500) // 5 for r in seen] == list(range(sent))  # each once, in order
+    assert np.all(np.diff(filtered) > 0.0)  # and at times that only move on

@@ -485,3 +485,84 @@ def test_the_start_reads_the_whole_backlog_so_the_first_cycle_takes_the_newest_f
         assert tick.frame and glove.latest().count == 6001  # the next one, none between
     finally:
         glove.close()
+
+
+def _pty_frames_glove():
+    """A real SerialGlove (poll reader, handrig frames) on a pty, and the pty's master."""
+    import tty
+
+    from handrig.glove import SerialGlove
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    glove = SerialGlove(os.ttyname(slave), "frames", clock=MonotonicClock(spin_s=0.0),
+                        reader="poll", channels=5)
+    os.close(slave)
+    glove.start()
+    seq = [0]
+
+    def send(n: int = 1) -> None:
+        from firmware_protocol.glove import GloveFrame, encode_frame
+
+        data = b""
+        for _ in range(n):
+            data += encode_frame(GloveFrame(seq[0], seq[0] * 20_000, (2000,) * 5))
+            seq[0] += 1
+        os.write(master, data)
+    return master, glove, send
+
+
+@pytest.mark.parametrize("catch_up", [True, False])
+def test_a_frame_the_loop_was_late_for_gets_its_cycle_just_before_the_newest(catch_up) -> None:
+    """Two frames one period apart came while the loop was busy: with catch_up the first
+    tick takes the older one (filtered a period earlier) and the next tick follows at
+    once with the newest; without, the newest only. A burst never gets a catch-up, nor
+    does a late pair when the ceiling's burst is spent."""
+    master, glove, send = _pty_frames_glove()
+    try:
+        clock = glove.clock
+        trig = GloveTrigger(clock, glove, floor_hz=5.0, ceiling_hz=60.0, catch_up=catch_up)
+        trig.start(clock.now())
+        tick = Tick()
+        trig.wait(tick)  # the first floor tick is due at the start
+        for _ in range(8):  # a 50 Hz glove: the period is learnt, the ceiling stays full
+            time.sleep(0.02)
+            send()
+            trig.wait(tick)
+            assert tick.frame and not tick.catch_up and glove.take() is not None
+        assert trig.frame_period_s == pytest.approx(0.02, rel=0.3)
+        send()  # the loop is busy for two periods: a frame, then the next one
+        time.sleep(0.02)
+        send()
+        time.sleep(0.003)
+        trig.wait(tick)
+        assert tick.frame and tick.catch_up is catch_up
+        if catch_up:
+            behind = glove.take_behind()
+            assert behind is not None and tick.behind_s == pytest.approx(0.02, rel=0.3)
+            begun = clock.now()
+            trig.wait(tick)  # the newest is there: its tick comes at once
+            assert tick.frame and not tick.catch_up and clock.now() - begun < 0.005
+            newest = glove.take()
+            assert newest is not None and newest.count == behind.count + 1
+            assert trig.catch_ups == 1
+            send()  # late again at once: the ceiling's burst is spent, the newest wins
+            time.sleep(0.02)
+            send()
+            time.sleep(0.003)
+            trig.wait(tick)
+            assert tick.frame and not tick.catch_up and glove.take() is not None
+        else:
+            assert glove.take() is not None and trig.catch_ups == 0
+        time.sleep(0.1)  # the ceiling fills up again
+        send()
+        trig.wait(tick)
+        assert tick.frame and glove.take() is not None
+        send(2)  # two frames sent together: a burst, nothing the loop was late for
+        time.sleep(0.003)
+        trig.wait(tick)
+        assert tick.frame and not tick.catch_up and trig.take_bursts() == 1
+        assert trig.catch_ups == (1 if catch_up else 0)
+    finally:
+        glove.close()
+        os.close(master)
