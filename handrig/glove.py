@@ -629,18 +629,16 @@ class ReplayGlove(GloveSource):
     def latest(self) -> GloveSample | None:
         if self._t0 is None:
             self._t0 = self.clock.now()
-        t0 = self._t0
-        elapsed = self.clock.now() - t0
-        lap, n = 0, len(self._t_rel)
-        if self.loop:
-            lap = int(elapsed // self._period_s)
-            elapsed -= lap * self._period_s
-        i = int(np.searchsorted(self._t_rel, elapsed, side="right")) - 1
+        lap, i = self._due_index(self.clock.now() - self._t0)
         if i < 0:
             return None
-        count = lap * n + i + 1
+        count = lap * len(self._t_rel) + i + 1
         if count <= self._taken:
             return None
+        return self._serve(lap, i, count)
+
+    def _serve(self, lap: int, i: int, count: int) -> GloveSample:
+        """Recorded sample ``i`` of lap ``lap`` (the ``count``-th), marked taken."""
         rec = self.recording
         q = None if rec.quat_xyzw is None else rec.quat_xyzw[i]
         if q is not None and np.isnan(q).any():
@@ -649,13 +647,35 @@ class ReplayGlove(GloveSource):
         sample = GloveSample(
             raw=rec.raw[i], quat=q, buttons=b, estop=bool(b & BUTTON_RELAX),
             seq=(count - 1) & 0xFFFF, sensor_time_us=int(self._t_rel[i] * 1e6) & 0xFFFFFFFF,
-            host_time_s=t0 + lap * self._period_s + float(self._t_rel[i]), count=count,
+            host_time_s=self._due_at(lap, i), count=count,
         )
         self._skipped += count - self._taken - 1
         self._newest = sample
         self._taken = count
         self._served += 1
         return sample
+
+    def _behind_index(self) -> tuple[int, int, int] | None:
+        """(lap, index, count) of the sample just before the newest due, when it came due
+        after the last one taken and strictly before the newest (not at the same time)."""
+        if self._t0 is None:
+            return None
+        n = len(self._t_rel)
+        lap, i = self._due_index(self.clock.now() - self._t0)
+        count = lap * n + i + 1
+        if i < 0 or count - 1 <= self._taken:
+            return None
+        b_lap, b_i = divmod(count - 2, n)
+        if self._due_at(b_lap, b_i) >= self._due_at(lap, i):
+            return None
+        return b_lap, b_i, count - 1
+
+    def has_behind(self) -> bool:
+        return self._behind_index() is not None
+
+    def take_behind(self) -> GloveSample | None:
+        behind = self._behind_index()
+        return None if behind is None else self._serve(*behind)
 
     def _due_index(self, elapsed: float) -> tuple[int, int]:
         """(lap, index) of the newest recorded sample due ``elapsed`` s after the start."""

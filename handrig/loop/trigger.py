@@ -221,11 +221,12 @@ class GloveTrigger(Trigger):
     deviations), and forced (ending before the floor deadline) when no gap fitted for
     ``FORCED_READ_FACTOR * read_every`` cycles.
 
-    ``catch_up`` (a glove whose ``pump()`` counts its frames and that keeps the frame
-    behind the newest, ``has_behind()``): a frame the loop left waiting until a newer
-    one came gets a cycle of its own just before the newest's, when the ceiling's whole
-    burst is free (a glove faster than the ceiling never gets one); counted in
-    :attr:`catch_ups`. Frames the glove sent back to back are not caught up.
+    ``catch_up`` (a glove that keeps the frame behind the newest, ``has_behind()``, and
+    either counts the frames a ``pump()`` gave or is a replay): a frame the loop left
+    waiting until a newer one came gets a cycle of its own just before the newest's,
+    when the ceiling's whole burst is free (a glove faster than the ceiling never gets
+    one); counted in :attr:`catch_ups`. Frames the glove sent back to back are not
+    caught up.
     """
 
     def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
@@ -260,6 +261,8 @@ class GloveTrigger(Trigger):
         self._has_new = getattr(glove, "has_new", None)
         self._peek = getattr(glove, "peek", None)
         self._due_of = getattr(glove, "next_due_s", None)
+        # a replay: a sample due behind the newest was left by the loop (no bursts there)
+        self._replay = self._due_of is not None and getattr(glove, "fileno", None) is None
         self._pump_counts = bool(getattr(glove, "pump_counts", False))
         self._drained_s = math.nan  # when a pump last emptied the port
 
@@ -468,7 +471,9 @@ class GloveTrigger(Trigger):
         floor_at = self._last_start + self.period_s
         arrival: float | None = None
         predicted = self.predicted_frame_s
-        if warm is not None and predicted == predicted and self.spin_s > 0:
+        if self._new_frame():  # read already (the newest, after a catch-up): no waiting
+            arrival = self._arrival(clock.now())
+        elif warm is not None and predicted == predicted and self.spin_s > 0:
             if clock.now() < predicted - self.spin_s < floor_at:
                 arrival = self._wait_frame(predicted - self.spin_s)
             if arrival is None and clock.now() < floor_at:
@@ -488,8 +493,9 @@ class GloveTrigger(Trigger):
         if arrival is not None:
             # a frame the loop left waiting, superseded: its own cycle first, when the
             # ceiling lets both it and the newest's through back to back
-            catch_up = (self.catch_up and self._late_frames > 0 and credit >= CEILING_BURST
-                        and self._has_behind is not None and bool(self._has_behind()))
+            catch_up = (self.catch_up and (self._late_frames > 0 or self._replay)
+                        and credit >= CEILING_BURST and self._has_behind is not None
+                        and bool(self._has_behind()))
             self._late_frames = 0
             if catch_up:
                 self.catch_ups += 1

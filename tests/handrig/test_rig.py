@@ -851,3 +851,28 @@ def test_a_loop_held_up_two_periods_writes_the_frame_it_was_late_for_then_the_ne
     assert rig.trigger.catch_ups == stats.frames_caught_up
     assert [(r - 1500) // 5 for r in seen] == list(range(sent))  # each once, in order
     assert np.all(np.diff(filtered) > 0.0)  # and at times that only move on
+
+
+@pytest.mark.parametrize("catch_up", [True, False])
+def test_a_replay_the_loop_falls_behind_on_still_has_every_sample_written(parts_factory,
+                                                                          catch_up):
+    parts = parts_factory()
+    clock = FakeClock(100.0)
+    glove = _replay(200.0, 2.0, clock)
+
+    class SlowAtTimesBus(RecordingBus):
+        def write_goals_deg(self, goals_deg: np.ndarray) -> int:
+            self.goals.append(np.array(goals_deg))
+            clock.advance(0.012 if len(self.goals) % 40 == 0 else 50e-6)  # 2 samples due
+            return 0
+
+    bus = SlowAtTimesBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=40.0,
+                   ceiling_hz=1000.0, catch_up=catch_up)
+    stats = rig.run(duration_s=1.0)
+    if catch_up:
+        assert stats.frames_caught_up >= 5 and stats.frames_skipped == 0
+        assert glove.stats().frames_lost == 0
+    else:
+        assert stats.frames_caught_up == 0 and stats.frames_skipped >= 5
+    assert stats.overruns == 0

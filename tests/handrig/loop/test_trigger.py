@@ -566,3 +566,61 @@ def test_a_frame_the_loop_was_late_for_gets_its_cycle_just_before_the_newest(cat
     finally:
         glove.close()
         os.close(master)
+
+
+def test_a_replay_sample_the_loop_was_late_for_gets_its_cycle_before_the_newest() -> None:
+    clock = FakeClock(10.0)
+    glove = ReplayGlove(recording(200.0, 40), clock)
+    trig = GloveTrigger(clock, glove, floor_hz=50.0, ceiling_hz=1000.0, catch_up=True)
+    glove.start()
+    trig.start(clock.now())
+    tick = Tick()
+    for _ in range(5):
+        trig.wait(tick)
+        assert tick.frame and not tick.catch_up and glove.latest() is not None
+    last = glove.peek().count
+    clock.advance(0.012)  # the loop was busy: two samples came due meanwhile
+    trig.wait(tick)
+    assert tick.catch_up and tick.behind_s == pytest.approx(0.005)
+    behind = glove.take_behind()
+    assert behind is not None and behind.count == last + 1
+    assert behind.host_time_s == pytest.approx(10.0 + last * 0.005)  # when it came due
+    trig.wait(tick)
+    assert tick.frame and not tick.catch_up
+    assert glove.latest().count == last + 2 and glove.stats().frames_lost == 0
+    clock.advance(0.017)  # three due: the one behind the newest is caught up, one is lost
+    trig.wait(tick)
+    assert tick.catch_up and glove.take_behind().count == last + 4
+    trig.wait(tick)
+    assert glove.latest().count == last + 5 and glove.stats().frames_lost == 1
+
+
+def test_after_a_catch_up_the_newest_is_not_held_in_a_spin_window() -> None:
+    """The newest frame is read already when its tick is asked for: it goes at once, not
+    when the spin window around the next predicted frame is over."""
+    master, glove, send = _pty_frames_glove()
+    try:
+        clock = glove.clock
+        trig = GloveTrigger(clock, glove, floor_hz=5.0, ceiling_hz=1000.0, catch_up=True,
+                            spin_s=0.019)  # nearly the whole 20 ms period is spin window
+        trig.start(clock.now())
+        tick = Tick()
+        trig.wait(tick)
+        for _ in range(8):
+            time.sleep(0.02)
+            send()
+            trig.wait(tick, lambda now: None)
+            glove.take()
+        send()
+        time.sleep(0.02)
+        send()
+        time.sleep(0.003)
+        trig.wait(tick, lambda now: None)
+        assert tick.catch_up and glove.take_behind() is not None
+        begun = clock.now()
+        trig.wait(tick, lambda now: None)
+        assert tick.frame and clock.now() - begun < 0.005
+        assert glove.take() is not None
+    finally:
+        glove.close()
+        os.close(master)
