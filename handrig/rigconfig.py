@@ -137,7 +137,7 @@ class LoopConfig:
     floor_hz: float = 100.0  # mode "glove": a write at least this often, frame or not
     ceiling_hz: float = 1000.0  # mode "glove": at most this many writes per second
     spin_us: float = 500.0  # mode "glove": poll the port this long either side of a frame
-    catch_up: bool = True  # mode "glove": a frame the loop was late for still gets written
+    catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
     slew_deg_s: float = 720.0  # max joint speed commanded in normal running

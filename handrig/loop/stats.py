@@ -179,7 +179,7 @@ class RunStats:
     writes_delayed: int = 0
     frames_skipped: int = 0  # glove frames superseded while the loop was busy
     frames_in_bursts: int = 0  # glove frames superseded on arrival (sent back to back)
-    frames_caught_up: int = 0  # frames written just before a newer one (the loop was late)
+    frames_caught_up: int = 0  # frames written just before a newer one that came with them
     cycles_without_frame: int = 0
     ceiling_waits: int = 0
     cpu_s: float = 0.0

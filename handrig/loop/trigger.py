@@ -8,8 +8,8 @@ servos stay fed and their Bus Watchdog armed) and a ceiling (at most ``ceiling_h
 ticks a second on average, ``CEILING_BURST`` of them back to back: a frame that came
 late and the one on time after it both get their cycle; a glove faster than the
 ceiling is held back, and its cycle takes the newest frame). With ``catch_up``, a
-frame that came while the loop was busy and was superseded before its cycle began (a
-loop held up two periods, by a slow read or the host) still gets its cycle: the tick
+frame superseded before its cycle began (a loop held up two periods, by a slow read
+or the host, or two frames the glove sent together) still gets its cycle: the tick
 asks for the frame just behind the newest, and the newest's tick follows at once,
 the two within the ceiling's burst. A trigger may run a rehearsal shortly before a
 tick (see :mod:`handrig.loop.rehearsal`).
@@ -222,11 +222,11 @@ class GloveTrigger(Trigger):
     ``FORCED_READ_FACTOR * read_every`` cycles.
 
     ``catch_up`` (a glove that keeps the frame behind the newest, ``has_behind()``, and
-    either counts the frames a ``pump()`` gave or is a replay): a frame the loop left
-    waiting until a newer one came gets a cycle of its own just before the newest's,
-    when the ceiling's whole burst is free (a glove faster than the ceiling never gets
-    one); counted in :attr:`catch_ups`. Frames the glove sent back to back are not
-    caught up.
+    either counts the frames a ``pump()`` gave or is a replay): a frame superseded
+    before its cycle (left waiting by a busy loop, or sent together with the next)
+    gets a cycle of its own just before the newest's, when the ceiling's whole burst
+    is free (a glove faster than the ceiling never gets one); counted in
+    :attr:`catch_ups`, and no longer in :attr:`burst_frames` when it came in a burst.
     """
 
     def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
@@ -248,7 +248,8 @@ class GloveTrigger(Trigger):
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
         self.catch_up = bool(catch_up)
         self.catch_ups = 0  # ticks that took the frame behind the newest
-        self._late_frames = 0  # frames the last pump found superseded by a busy loop
+        self._superseded = 0  # frames the last pump read that a newer one superseded
+        self._superseded_late = 0  # ... of them, left waiting by a busy loop (no burst)
         self._has_behind = getattr(glove, "has_behind", None)
         self._credit = 1.0  # ticks the ceiling lets through now (a token bucket)
         self._credit_at = 0.0
@@ -276,7 +277,7 @@ class GloveTrigger(Trigger):
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0
         self._take_backlog()
-        self._late_frames = 0  # the backlog is history: nothing in it to catch up
+        self._superseded = self._superseded_late = 0  # the backlog is history
 
     def _take_backlog(self) -> None:
         """Read what the glove sent before the loop began, until the port has been quiet
@@ -379,7 +380,7 @@ class GloveTrigger(Trigger):
                         bursts = max(0, got - 1 - int((now - drained) / period))
                 self.burst_frames += bursts
                 late = got - 1 - bursts
-            self._late_frames = late
+            self._superseded, self._superseded_late = max(0, got - 1), late
             return
         before = self._count()
         glove.pump()
@@ -491,15 +492,17 @@ class GloveTrigger(Trigger):
         credit = min(CEILING_BURST, self._credit + (now - self._credit_at) / gap)
         catch_up = False
         if arrival is not None:
-            # a frame the loop left waiting, superseded: its own cycle first, when the
-            # ceiling lets both it and the newest's through back to back
-            catch_up = (self.catch_up and (self._late_frames > 0 or self._replay)
+            # a frame superseded before its cycle: its own cycle first, when the ceiling
+            # lets both it and the newest's through back to back
+            catch_up = (self.catch_up and (self._superseded > 0 or self._replay)
                         and credit >= CEILING_BURST and self._has_behind is not None
                         and bool(self._has_behind()))
-            self._late_frames = 0
             if catch_up:
                 self.catch_ups += 1
-            elif credit < 1.0:  # the ceiling: the cycle then takes the newest frame
+                if self._superseded and not self._superseded_late:
+                    self.burst_frames -= 1  # it came in a burst: written after all
+            self._superseded = self._superseded_late = 0
+            if credit < 1.0:  # the ceiling: the cycle then takes the newest frame
                 self.ceiling_waits += 1
                 clock.sleep_until(now + (1.0 - credit) * gap)
                 later = clock.now()
