@@ -435,10 +435,12 @@ class PosePipeline:
         return self._relaxed_targets
 
     def account(
-        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float
+        self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float, *,
+        slewed: bool = True,
     ) -> FloatArray:
         """After the write: the full 54-vector pose, clamped (for outputs), and the
-        clamp and slew counters for this cycle."""
+        clamp and slew counters for this cycle (``slewed=False``: the slew counter was
+        counted already, :meth:`count_slewed`, and the targets are another cycle's)."""
         pose = self.full_pose(controls_deg, inclination_deg, rotation_deg)
         np.clip(pose, self.pose_low, self.pose_high, out=self._clamped_pose)
         # a robot's joints are retargeted from the clamped curves, a human rig's servos
@@ -449,9 +451,14 @@ class PosePipeline:
         self.servo_clamps += int(np.count_nonzero(over))
         self.servo_clamps_by_servo += over
         self.clamps += int(np.count_nonzero(self._clamped_pose != pose))
-        self.slewed += int(np.count_nonzero(np.abs(self._raw_targets - self.targets) > 1e-9))
+        if slewed:
+            self.count_slewed()
         pose[:] = self._clamped_pose
         return pose
+
+    def count_slewed(self) -> None:
+        """Count the servo targets the slew limit held back in the last step."""
+        self.slewed += int(np.count_nonzero(np.abs(self._raw_targets - self.targets) > 1e-9))
 
     def _servo_values(self, pose: FloatArray, out: FloatArray) -> None:
         """The servos' joint values (unclamped) of a 54-vector pose, into ``out``: the

@@ -115,6 +115,9 @@ class Cycle:
         self.last_state: Any = None  # the newest ServoState read back
         self.t0_s = 0.0
         self._pose: FloatArray | None = None  # the full pose last output
+        # a caught-up frame's full pose waits until the newest frame's write is out
+        self._deferred_controls = np.zeros_like(self.controls)
+        self._deferred: tuple[float, tuple[float, float]] | None = None  # (t_s, angles)
 
     def seed(self) -> None:
         """Start from where the servos are: the goals the bus holds them at, else a read.
@@ -213,8 +216,19 @@ class Cycle:
         else:
             stats.cycles_without_frame += 1
         pipeline = self.pipeline
+        t_s = tick.now_s - self.t0_s
+        if self._deferred is not None:  # the caught-up frame before this one, in order
+            (t_before, angles), self._deferred = self._deferred, None
+            self._output(t_before, pipeline.account(self._deferred_controls, *angles,
+                                                    slewed=False))
         pose: FloatArray | None
-        if mode is Mode.RUNNING:
+        if mode is Mode.RUNNING and tick.catch_up:
+            # the newest frame is waiting: its write first, this one's full pose after it
+            pipeline.count_slewed()
+            self._deferred_controls[:] = self.controls
+            self._deferred = (t_s, self.angles)
+            pose = None
+        elif mode is Mode.RUNNING:
             pose = pipeline.account(self.controls, *self.angles)
         elif mode is Mode.WAITING:
             pose = None
@@ -223,15 +237,20 @@ class Cycle:
         else:
             pose = self.relax.pose(pipeline.relaxed)  # clamped by relaxed_targets
         if pose is not None:
-            self._pose = pose
-            t_s = tick.now_s - self.t0_s
-            for out in self.outputs:
-                out(t_s, pose)
-        self._read(tick)
+            self._output(t_s, pose)
+        if tick.catch_up:  # no read: the newest frame is waiting
+            self._reads_due += 1
+        else:
+            self._read(tick)
         self.sent[:] = goals
         if mode is not Mode.RUNNING and mode is not Mode.WAITING:
             pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent
         stats.frames += 1
+
+    def _output(self, t_s: float, pose: FloatArray) -> None:
+        self._pose = pose
+        for out in self.outputs:
+            out(t_s, pose)
 
     def _skipped_reads(self) -> int:
         stats = getattr(self.bus, "stats", None)

@@ -823,6 +823,7 @@ def test_a_loop_held_up_two_periods_writes_the_frame_it_was_late_for_then_the_ne
         return controls(raw, t_s, out)
 
     sent = 120
+    output_at: list[tuple[float, float]] = []
 
     def stream() -> None:
         while not bus.goals:  # the loop has begun: nothing is left as a backlog
@@ -837,7 +838,8 @@ def test_a_loop_held_up_two_periods_writes_the_frame_it_was_late_for_then_the_ne
     rig = Rig(glove, bus, parts.pipeline, clock, controls_from_raw=controls_from_raw,
               orientation=parts.orientation, read_every=4, glove_timeout_s=0.25,
               relax_time_s=0.05, log=lambda s: None, loop_mode="glove", floor_hz=20.0,
-              ceiling_hz=1000.0, catch_up=True)
+              ceiling_hz=1000.0, catch_up=True,
+              outputs=[lambda t_s, pose: output_at.append((t_s, float(pose[0])))])
     with glove:
         writer = threading.Thread(target=stream)
         writer.start()
@@ -851,6 +853,10 @@ def test_a_loop_held_up_two_periods_writes_the_frame_it_was_late_for_then_the_ne
     assert rig.trigger.catch_ups == stats.frames_caught_up
     assert [(r - 1500) // 5 for r in seen] == list(range(sent))  # each once, in order
     assert np.all(np.diff(filtered) > 0.0)  # and at times that only move on
+    # every cycle's pose reaches the outputs in order, a caught-up frame's after the
+    # newest frame's write but before its pose
+    assert len(output_at) >= sent  # (cycles waiting for the first frame output none)
+    assert np.all(np.diff([t for t, _ in output_at]) > 0.0)
 
 
 @pytest.mark.parametrize("catch_up", [True, False])
