@@ -7,11 +7,11 @@ of their own) alternately on each checkout's code, each run in a fresh interpret
 whose ``handrig`` is imported from that checkout, and prints each run and the
 medians: in-process end to end, outside (the glove emulator's send to the bus
 emulator's receipt of the first Sync Write that moved), compute, reads, writes
-delayed, frames skipped (and caught up), CPU per cycle and the hypervisor's steal
-share (taken around each run). NEW_CHECKOUT defaults to this one. Each checkout runs
-on its own ``config/rig.toml``, set to the case's loop mode and baud rate by this
-checkout's bench, the same way for both (an old checkout's own bench may not write
-it right); ``--old-set`` / ``--new-set`` change a line of that side's rig file
+delayed, frames skipped (caught up, lost in the glove's bursts), CPU per cycle and
+the hypervisor's steal share (taken around each run). NEW_CHECKOUT defaults to this
+one. Each checkout runs on its own ``config/rig.toml``, set to the case's loop mode
+and baud rate by this checkout's bench, the same way for both (an old checkout's own
+bench may not write it right); ``--old-set`` / ``--new-set`` change a line of that side's rig file
 (``--old-set catch_up=false``: one checkout against itself, a setting apart).
 """
 
@@ -51,6 +51,7 @@ def child(root: str, rig_path: str, mode: str, hz: float, baud: int, seconds: fl
     print("RESULT " + json.dumps({
         "lat": s["latency_us"], "comp": s["compute_us"], "out": r["outside_us"],
         "skipped": s["frames_skipped"], "caught": s.get("frames_caught_up", 0),
+        "bursts": s.get("frames_in_bursts", 0),
         "delayed": s["writes_delayed_by_reads"],
         "reads": s["reads_per_s"], "cpu": s["cpu_per_cycle_us"]}), flush=True)
 
@@ -127,7 +128,8 @@ def main() -> int:
             print(f"round {k} {name}: in-process p50 {d['lat']['p50']} p99 {d['lat']['p99']} "
                   f"| outside p50 {d['out']['p50']} p99 {d['out']['p99']} | compute p50 "
                   f"{d['comp']['p50']} | reads/s {d['reads']} | delayed {d['delayed']} | "
-                  f"skipped {d['skipped']} (caught up {d.get('caught', 0)}) | CPU/cycle "
+                  f"skipped {d['skipped']} (caught up {d.get('caught', 0)}, lost in bursts "
+                  f"{d.get('bursts', 0)}) | CPU/cycle "
                   f"{d['cpu']} us | steal {d['steal']} %",
                   flush=True)
     rigs.cleanup()

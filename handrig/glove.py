@@ -59,6 +59,9 @@ GloveFormat = Literal["frames", "opengloves"]
 
 LOCK_FRAMES = 3
 """Good frames in a row with one channel count that fix the count a glove sends."""
+BEHIND_KEPT = 2
+"""Samples kept behind the newest while never handed out (:meth:`GloveSource.take_behind`:
+a loop held up catches up on them); older ones are superseded for good."""
 MAX_EVENTS = 64
 """Port events kept for :meth:`GloveSource.drain_events` (the oldest go first)."""
 DUE_TOLERANCE_S = 1e-9
@@ -140,7 +143,7 @@ class GloveSource(ABC):
 
     def __init__(self) -> None:
         self._newest: GloveSample | None = None
-        self._behind: GloveSample | None = None  # the newest's predecessor, if never taken
+        self._behind: deque[GloveSample] = deque(maxlen=BEHIND_KEPT)  # never taken
         self._taken = 0
         self._failure: DeviceError | None = None
         self._events: deque[str] = deque(maxlen=MAX_EVENTS)
@@ -172,25 +175,33 @@ class GloveSource(ABC):
 
     def _arrived(self, sample: GloveSample) -> None:
         """``sample`` is the newest now; the one it replaces is kept behind it while it
-        has not been taken (one sample: a loop that fell further behind skips the rest)."""
-        old = self._newest
-        self._behind = old if old is not None and old.count != self._taken else None
+        has not been taken (:data:`BEHIND_KEPT` of them: a loop that fell further behind
+        skips the older ones)."""
+        old, behind = self._newest, self._behind
+        if old is None or old.count == self._taken:
+            behind.clear()
+        else:
+            behind.append(old)
         self._newest = sample
 
     def has_behind(self) -> bool:
-        """Whether the sample just before the newest came and was never taken (the loop
-        was busy when it arrived), while the newest is new too."""
-        b, s = self._behind, self._newest
-        return (b is not None and s is not None and b.count == s.count - 1
-                and b.count > self._taken)
+        """Whether a sample before the newest came and was never taken (it was superseded
+        before the loop asked), while the newest is new too."""
+        s, taken = self._newest, self._taken
+        if s is None or s.count == taken:
+            return False
+        return any(b.count > taken for b in self._behind)
 
     def take_behind(self) -> GloveSample | None:
-        """The sample just before the newest, if it was never taken (:meth:`has_behind`),
-        marked taken so that the newest stays new; else ``None``."""
+        """The oldest sample kept behind the newest that was never taken
+        (:meth:`has_behind`), marked taken so that the ones after it and the newest stay
+        new; else ``None``."""
         if not self.has_behind():
             return None
-        b = self._behind
-        assert b is not None
+        behind = self._behind
+        while behind[0].count <= self._taken:
+            behind.popleft()
+        b = behind.popleft()
         self._taken = b.count
         return b
 
@@ -656,19 +667,21 @@ class ReplayGlove(GloveSource):
         return sample
 
     def _behind_index(self) -> tuple[int, int, int] | None:
-        """(lap, index, count) of the sample just before the newest due, when it came due
-        after the last one taken and strictly before the newest (not at the same time)."""
+        """(lap, index, count) of the oldest of the :data:`BEHIND_KEPT` samples due before
+        the newest that was not taken, when it came due strictly before the newest (a
+        recorded duplicate of the newest's time is not caught up)."""
         if self._t0 is None:
             return None
         n = len(self._t_rel)
         lap, i = self._due_index(self.clock.now() - self._t0)
         count = lap * n + i + 1
-        if i < 0 or count - 1 <= self._taken:
+        first = max(self._taken + 1, count - BEHIND_KEPT)
+        if i < 0 or first >= count:
             return None
-        b_lap, b_i = divmod(count - 2, n)
+        b_lap, b_i = divmod(first - 1, n)
         if self._due_at(b_lap, b_i) >= self._due_at(lap, i):
             return None
-        return b_lap, b_i, count - 1
+        return b_lap, b_i, first
 
     def has_behind(self) -> bool:
         return self._behind_index() is not None

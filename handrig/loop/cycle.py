@@ -92,6 +92,7 @@ class Cycle:
             else glove.latest)
         # a tick that catches up takes the frame behind the newest (see Tick.catch_up)
         self._take_behind: Callable[[], Any] | None = getattr(glove, "take_behind", None)
+        self._peek: Callable[[], Any] | None = getattr(glove, "peek", None)
         self.controls_from_raw: Callable[..., Any] = controls_from_raw
         self.orientation: Callable[[Any], tuple[float, float]] = orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
@@ -146,8 +147,10 @@ class Cycle:
         sample, t_sample = None, now
         if tick.catch_up and self._take_behind is not None:
             sample = self._take_behind()
-            if sample is not None:  # its filter time: a period before the newest's
-                t_sample = now - tick.behind_s
+            if sample is not None:  # its filter time: a period per frame before the newest
+                newest = self._peek() if self._peek is not None else None
+                behind = max(1, getattr(newest, "count", 0) - sample.count)
+                t_sample = now - behind * tick.behind_s
                 self.stats.frames_caught_up += 1
         if sample is None:
             sample = self.latest()

@@ -5,13 +5,14 @@ that comes later than a whole period skips the slots it missed (an overrun,
 counted with its size). :class:`GloveTrigger` ticks when a glove frame arrives,
 with a floor rate (a tick at least every ``1 / floor_hz``, frame or not: the
 servos stay fed and their Bus Watchdog armed) and a ceiling (at most ``ceiling_hz``
-ticks a second on average, ``CEILING_BURST`` of them back to back: a frame that came
-late and the one on time after it both get their cycle; a glove faster than the
+ticks a second on average, ``CEILING_BURST`` of them back to back: frames that came
+late and the one on time after them all get their cycle; a glove faster than the
 ceiling is held back, and its cycle takes the newest frame). With ``catch_up``, a
-frame superseded before its cycle began (a loop held up two periods, by a slow read
-or the host, or two frames the glove sent together) still gets its cycle: the tick
-asks for the frame just behind the newest, and the newest's tick follows at once,
-the two within the ceiling's burst. A trigger may run a rehearsal shortly before a
+frame superseded before its cycle began (a loop held up two periods or more, by a
+slow read or the host, or frames the glove sent together) still gets its cycle: the
+tick asks for the oldest frame the glove keeps behind the newest (up to
+``handrig.glove.BEHIND_KEPT``), and the ticks for the rest and the newest follow at
+once, all within the ceiling's burst. A trigger may run a rehearsal shortly before a
 tick (see :mod:`handrig.loop.rehearsal`).
 
 Both triggers stamp frame arrivals when the glove offers a file descriptor
@@ -46,7 +47,8 @@ REHEARSE_EVERY_S = 0.00015  # in a spin window: a rehearsal, then polls only for
 ANCHOR_FOLLOW = 1.0 / 16.0  # how fast the glove's grid follows arrivals later than it
 JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 FORCED_READ_SHARE = 0.5  # a forced read ends this share of a period after the next frame
-CEILING_BURST = 2.0  # ticks the ceiling lets through back to back (after a quiet spell)
+CEILING_BURST = 3.0  # ticks the ceiling lets through back to back (after a quiet spell)
+CATCH_UP_CREDIT = 2.0  # a catch-up tick leaves the ceiling room for the newest's right after
 BACKLOG_QUIET_S = 0.0005  # at the start, the port is read until quiet this long
 BACKLOG_MAX_S = 0.05  # ... but no longer than this (a glove that never pauses)
 BACKLOG_PUMPS_MAX = 256
@@ -61,9 +63,9 @@ class Tick:
     ``late_s``: how late the cycle started; ``skipped``: whole slots missed before it;
     ``dt_s``: time since the previous cycle started (the slew limit's step);
     ``frame``: a glove frame triggered the cycle; ``catch_up``: the cycle is to take the
-    frame just before the newest, which came while the loop was busy (the newest gets the
-    next cycle at once), and ``behind_s`` is how much earlier than ``now_s`` that frame
-    belongs on the glove's time grid (one period: its filter time)."""
+    oldest frame kept behind the newest (``take_behind()``; the newest gets a cycle right
+    after), and ``behind_s`` is the glove's period: that frame's filter time is this much
+    earlier than ``now_s`` for each frame it is behind the newest."""
 
     index: int = 0
     deadline_s: float = 0.0
@@ -221,12 +223,12 @@ class GloveTrigger(Trigger):
     deviations), and forced (ending before the floor deadline) when no gap fitted for
     ``FORCED_READ_FACTOR * read_every`` cycles.
 
-    ``catch_up`` (a glove that keeps the frame behind the newest, ``has_behind()``, and
-    either counts the frames a ``pump()`` gave or is a replay): a frame superseded
-    before its cycle (left waiting by a busy loop, or sent together with the next)
-    gets a cycle of its own just before the newest's, when the ceiling's whole burst
-    is free (a glove faster than the ceiling never gets one); counted in
-    :attr:`catch_ups`, and no longer in :attr:`burst_frames` when it came in a burst.
+    ``catch_up`` (a glove that keeps the frames behind the newest it never handed out,
+    ``has_behind()`` and ``take_behind()``): a frame superseded before its cycle (left
+    waiting by a busy loop, or sent together with the next) gets a cycle of its own
+    before the newest's, while the ceiling lets that tick and the newest's through
+    back to back (a glove faster than the ceiling gets none); counted in
+    :attr:`catch_ups`.
     """
 
     def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
@@ -248,8 +250,6 @@ class GloveTrigger(Trigger):
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
         self.catch_up = bool(catch_up)
         self.catch_ups = 0  # ticks that took the frame behind the newest
-        self._superseded = 0  # frames the last pump read that a newer one superseded
-        self._superseded_late = 0  # ... of them, left waiting by a busy loop (no burst)
         self._has_behind = getattr(glove, "has_behind", None)
         self._credit = 1.0  # ticks the ceiling lets through now (a token bucket)
         self._credit_at = 0.0
@@ -262,8 +262,6 @@ class GloveTrigger(Trigger):
         self._has_new = getattr(glove, "has_new", None)
         self._peek = getattr(glove, "peek", None)
         self._due_of = getattr(glove, "next_due_s", None)
-        # a replay: a sample due behind the newest was left by the loop (no bursts there)
-        self._replay = self._due_of is not None and getattr(glove, "fileno", None) is None
         self._pump_counts = bool(getattr(glove, "pump_counts", False))
         self._drained_s = math.nan  # when a pump last emptied the port
 
@@ -277,7 +275,6 @@ class GloveTrigger(Trigger):
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0
         self._take_backlog()
-        self._superseded = self._superseded_late = 0  # the backlog is history
 
     def _take_backlog(self) -> None:
         """Read what the glove sent before the loop began, until the port has been quiet
@@ -370,17 +367,13 @@ class GloveTrigger(Trigger):
             got = glove.pump()
             now = self.clock.now()
             self._drained_s = now
-            late = 0
             if got > 1:
                 period = self.frame_period_s
-                bursts = got - 1
-                if not idle:
-                    bursts = 0
-                    if period == period and period > 0.0 and drained == drained:
-                        bursts = max(0, got - 1 - int((now - drained) / period))
-                self.burst_frames += bursts
-                late = got - 1 - bursts
-            self._superseded, self._superseded_late = max(0, got - 1), late
+                if idle:
+                    self.burst_frames += got - 1
+                elif period == period and period > 0.0 and drained == drained:
+                    one_by_one = int((now - drained) / period)
+                    self.burst_frames += max(0, got - 1 - one_by_one)
             return
         before = self._count()
         glove.pump()
@@ -493,15 +486,11 @@ class GloveTrigger(Trigger):
         catch_up = False
         if arrival is not None:
             # a frame superseded before its cycle: its own cycle first, when the ceiling
-            # lets both it and the newest's through back to back
-            catch_up = (self.catch_up and (self._superseded > 0 or self._replay)
-                        and credit >= CEILING_BURST and self._has_behind is not None
-                        and bool(self._has_behind()))
+            # lets this tick and the newest's through back to back
+            catch_up = (self.catch_up and credit >= CATCH_UP_CREDIT
+                        and self._has_behind is not None and bool(self._has_behind()))
             if catch_up:
                 self.catch_ups += 1
-                if self._superseded and not self._superseded_late:
-                    self.burst_frames -= 1  # it came in a burst: written after all
-            self._superseded = self._superseded_late = 0
             if credit < 1.0:  # the ceiling: the cycle then takes the newest frame
                 self.ceiling_waits += 1
                 clock.sleep_until(now + (1.0 - credit) * gap)

@@ -286,9 +286,12 @@ def test_pump_says_how_many_frames_it_decoded_and_take_does_not_read() -> None:
     os.close(master)
 
 
-def test_the_frame_behind_the_newest_is_kept_only_while_it_was_never_taken() -> None:
+def test_the_frames_behind_the_newest_are_kept_only_while_they_were_never_taken() -> None:
     import os
 
+    from handrig.glove import BEHIND_KEPT
+
+    assert BEHIND_KEPT == 2
     master, glove = _pty_glove(channels=5)
     with glove:
         assert wait_for(lambda: glove.fileno() is not None)
@@ -297,24 +300,24 @@ def test_the_frame_behind_the_newest_is_kept_only_while_it_was_never_taken() -> 
         glove.pump()
         assert not glove.has_behind()  # nothing before the first
         assert glove.take() is not None
-        os.write(master, _frame(1, 5) + _frame(2, 5) + _frame(3, 5))
+        os.write(master, b"".join(_frame(k, 5) for k in range(1, 5)))
         time.sleep(0.02)
         glove.pump()
         assert glove.has_behind()
-        behind = glove.take_behind()
-        assert behind is not None and behind.seq == 2  # the one just before the newest
-        assert not glove.has_behind() and glove.take_behind() is None  # taken once
+        # the two before the newest, oldest first (the one before them is gone)
+        assert [glove.take_behind().seq, glove.take_behind().seq] == [2, 3]
+        assert not glove.has_behind() and glove.take_behind() is None  # each taken once
         assert glove.has_new()
         newest = glove.take()
-        assert newest is not None and newest.seq == 3 and newest.count == behind.count + 1
-        os.write(master, _frame(4, 5))
+        assert newest is not None and newest.seq == 4
+        os.write(master, _frame(5, 5))
         time.sleep(0.02)
         glove.pump()
         assert not glove.has_behind()  # the one before it was taken: nothing to catch up
-        assert glove.take().seq == 4
-        os.write(master, _frame(5, 5) + _frame(6, 5))
+        assert glove.take().seq == 5
+        os.write(master, _frame(6, 5) + _frame(7, 5))
         time.sleep(0.02)
         glove.pump()
-        assert glove.take().seq == 6  # the newest taken first: the one behind is gone
+        assert glove.take().seq == 7  # the newest taken first: the one behind is gone
         assert not glove.has_behind() and glove.take_behind() is None
     os.close(master)
