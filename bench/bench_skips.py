@@ -13,6 +13,9 @@ cycle whose sample superseded frames the loop should have written (the cycle's
 * ``host``: it was done in time, and the loop's thread used less than half the wall
   time until the next cycle: the frames waited while the thread was not running.
 
+It also prints what catching up costs (``[loop] catch_up``): for each cycle that wrote a
+frame a newer one had overtaken, how long after its write the next write went out.
+
 The cycle's code is wrapped in this process only (``Cycle._after_write``); nothing in
 the product changes. ``HANDRIG_BENCH_SECONDS`` sets the run's length (default 20 s).
 """
@@ -61,6 +64,7 @@ def classify(rows: np.ndarray, period_s: float) -> list[tuple[str, int, float, f
 def main() -> None:
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 20.0))
     rows: list[tuple[float, float, int, int, float]] = []
+    caught: list[int] = []  # the rows of catch-up cycles
     original = cycle_module.Cycle._after_write
 
     def after_write(self: Any, tick: Any, sample: Any, mode: Any, goals: Any,
@@ -70,6 +74,8 @@ def main() -> None:
         original(self, tick, sample, mode, goals, bus_clamps)
         rows.append((written, time.perf_counter(), self.stats.reads,
                      self.stats.frames_skipped, cpu))
+        if tick.catch_up:
+            caught.append(len(rows) - 1)
 
     cycle_module.Cycle._after_write = after_write  # type: ignore[method-assign]
     try:
@@ -85,7 +91,8 @@ def main() -> None:
     print(f"glove-triggered rig, {RATE_HZ:g} Hz glove, {BAUD // 1_000_000} Mbps, 20 emulated "
           f"servos, {seconds:g} s; steal {steal} %")
     print(f"frames {s['frames']}, skipped by the loop {s['frames_skipped']} "
-          f"(in the glove's bursts {s.get('frames_in_bursts', 0)}), reads/s "
+          f"(in the glove's bursts {s.get('frames_in_bursts', 0)}, caught up "
+          f"{s.get('frames_caught_up', 0)}), reads/s "
           f"{s['reads_per_s']}, writes delayed by reads {s['writes_delayed_by_reads']}")
     frames = Counter[str]()
     counts = Counter[str]()
@@ -99,6 +106,14 @@ def main() -> None:
         spread = (f"{np.median(after) * 1e3:.2f} / {max(after) * 1e3:.2f}" if after
                   else "-")
         print(f"| {cause} | {counts[cause]} | {frames[cause]} | {spread} |")
+    written = np.array([r[0] for r in rows])
+    gaps = np.array([written[i + 1] - written[i] for i in caught if i + 1 < len(written)])
+    if len(gaps):
+        print(f"catch-up cycles {len(gaps)}: the next write went out "
+              f"{np.median(gaps) * 1e6:.0f} us (p50), {np.percentile(gaps, 90) * 1e6:.0f} us "
+              f"(p90), {gaps.max() * 1e6:.0f} us (max) after the caught-up frame's")
+    else:
+        print("catch-up cycles 0")
 
 
 if __name__ == "__main__":

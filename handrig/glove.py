@@ -187,10 +187,13 @@ class GloveSource(ABC):
     def has_behind(self) -> bool:
         """Whether a sample before the newest came and was never taken (it was superseded
         before the loop asked), while the newest is new too."""
+        behind = self._behind
+        if not behind:  # the usual case: the loop took the one before the newest
+            return False
         s, taken = self._newest, self._taken
         if s is None or s.count == taken:
             return False
-        return any(b.count > taken for b in self._behind)
+        return any(b.count > taken for b in behind)
 
     def take_behind(self) -> GloveSample | None:
         """The oldest sample kept behind the newest that was never taken

@@ -359,9 +359,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         "(glove frame's arrival -> Sync Write handed to the OS)",
         f"                  of which compute p50 {comp.get('p50')} us, p99 {comp.get('p99')} us "
         f"(cycle start -> Sync Write; loop {summary.get('loop_mode', 'fixed')})",
-        f"glove frames      {summary.get('frames_skipped', 0)} skipped by the loop, "
-        f"{summary.get('frames_caught_up', 0)} written late just before a newer one, "
-        f"{summary.get('frames_in_bursts', 0)} superseded in the glove's own bursts",
+        f"frame losses      {summary.get('frames_skipped', 0)} skipped by the loop, "
+        f"{summary.get('frames_in_bursts', 0)} lost in the glove's own bursts (caught up: "
+        f"{summary.get('frames_caught_up', 0)} written just before a newer one)",
         f"overruns          {summary['overruns']} (max {summary['overrun_max_us']} us late, "
         f"{summary['missed_cycles']} cycles missed)",
         f"limit clamps      {summary['limit_clamps']} servo targets held at a joint or servo "
