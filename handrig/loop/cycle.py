@@ -9,7 +9,10 @@ back, when and with the deadline the trigger allows
 (:meth:`~handrig.loop.trigger.Trigger.read_deadline`), so that the next cycle
 keeps its time; a read after which the next write had to wait is counted.
 Between those reads the bus may do its housekeeping reads (watchdogs,
-temperatures) in the same way.
+temperatures) in the same way. A tick that catches up (``Tick.catch_up``) takes the
+oldest frame a newer one overtook instead of the newest, filtered at its place on the
+glove's grid; its full pose and outputs wait until the next cycle's write is out, and
+it asks no read (the newer frame is waiting).
 
 Latency is measured twice per glove frame: end to end, from the frame's
 ``host_time_s`` (its arrival) to the Sync Write handed to the OS, and the compute
