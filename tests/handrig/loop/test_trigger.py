@@ -633,3 +633,23 @@ def test_after_a_catch_up_the_newest_is_not_held_in_a_spin_window() -> None:
     finally:
         glove.close()
         os.close(master)
+
+
+def test_the_backlog_at_the_start_is_not_caught_up() -> None:
+    """Frames the glove sent before the loop began are history: the first cycle takes the
+    newest of them, not the ones before it."""
+    master, glove, send = _pty_frames_glove()
+    try:
+        clock = glove.clock
+        send(5)
+        time.sleep(0.02)
+        trig = GloveTrigger(clock, glove, floor_hz=5.0, ceiling_hz=1000.0, catch_up=True)
+        trig.start(clock.now())
+        assert glove.has_behind()  # the glove kept two of the backlog behind the newest
+        tick = Tick()
+        trig.wait(tick)
+        assert tick.frame and not tick.catch_up and trig.catch_ups == 0
+        assert glove.take().seq == 4 and not glove.has_behind()
+    finally:
+        glove.close()
+        os.close(master)
