@@ -19,8 +19,10 @@ gloves, it reports:
   skipped, overruns, CPU of the loop's thread per cycle.
 
 ``HANDRIG_BENCH_SECONDS`` sets each case's length (default 60 s;
-``HANDRIG_BENCH_QUICK=1``: 10 s); ``HANDRIG_BENCH_APPEND=1`` also appends the table
-as a dated section to ``docs/measurements.md``.
+``HANDRIG_BENCH_QUICK=1``: 10 s); ``HANDRIG_BENCH_CASES`` picks cases, as
+``MODE/GLOVE_HZ/MBPS`` separated by commas (``glove/500/4,glove/200/4``; default all
+eight); ``HANDRIG_BENCH_APPEND=1`` also appends the table as a dated section to
+``docs/measurements.md``.
 """
 
 from __future__ import annotations
@@ -200,11 +202,27 @@ HEADER = ("| loop | glove Hz | Mbps | in-process end to end p50 / p99 / max (us)
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
+def parse_cases(text: str) -> list[Case]:
+    """``MODE/GLOVE_HZ/MBPS,...`` as cases (empty: all eight, fixed and glove-triggered
+    at 200 and 500 Hz, 1 and 4 Mbps)."""
+    if not text.strip():
+        return [Case(mode, hz, baud) for hz in (200.0, 500.0)
+                for baud in (1_000_000, 4_000_000) for mode in ("fixed", "glove")]
+    cases = []
+    for item in text.split(","):
+        parts = item.strip().split("/")
+        if (len(parts) != 3 or parts[0] not in ("fixed", "glove")
+                or not parts[1].replace(".", "", 1).isdigit() or not parts[2].isdigit()):
+            raise SystemExit(f"HANDRIG_BENCH_CASES: {item!r} is not MODE/GLOVE_HZ/MBPS "
+                             "(MODE fixed or glove), e.g. glove/500/4")
+        cases.append(Case(parts[0], float(parts[1]), int(parts[2]) * 1_000_000))
+    return cases
+
+
 def main() -> None:
     quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 10.0 if quick else 60.0))
-    cases = [Case(mode, hz, baud) for hz in (200.0, 500.0) for baud in (1_000_000, 4_000_000)
-             for mode in ("fixed", "glove")]
+    cases = parse_cases(os.environ.get("HANDRIG_BENCH_CASES", ""))
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_rig_") as tmp:
         folder = Path(tmp)

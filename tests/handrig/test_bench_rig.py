@@ -50,3 +50,13 @@ def test_the_steal_share_is_the_hypervisors_part_of_all_cpu_time() -> None:
     assert steal_percent((1000, 10), (1000, 10)) is None
     total, steal = cpu_times()
     assert total >= steal >= 0
+
+
+def test_cases_are_picked_by_mode_rate_and_baud_or_all_eight() -> None:
+    from bench.bench_rig import Case, parse_cases
+
+    assert parse_cases("glove/500/4, fixed/200/1") == [Case("glove", 500.0, 4_000_000),
+                                                       Case("fixed", 200.0, 1_000_000)]
+    assert len(parse_cases("")) == 8
+    with pytest.raises(SystemExit, match="MODE/GLOVE_HZ/MBPS"):
+        parse_cases("glove/500")
