@@ -251,7 +251,6 @@ class GloveTrigger(Trigger):
         self.catch_up = bool(catch_up)
         self.catch_ups = 0  # ticks that took the frame behind the newest
         self._has_behind = getattr(glove, "has_behind", None)
-        self._started = False  # a frame tick since start(): the backlog is not caught up
         self._credit = 1.0  # ticks the ceiling lets through now (a token bucket)
         self._credit_at = 0.0
         self._k = 0
@@ -275,7 +274,6 @@ class GloveTrigger(Trigger):
         self._anchor = math.nan
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0
-        self._started = False
         self._take_backlog()
 
     def _take_backlog(self) -> None:
@@ -489,9 +487,9 @@ class GloveTrigger(Trigger):
         if arrival is not None:
             # a frame superseded before its cycle: its own cycle first, when the ceiling
             # lets this tick and the newest's through back to back
-            catch_up = (self.catch_up and credit >= CATCH_UP_CREDIT and self._started
+            # (not the first tick: the backlog read at the start is history, its newest wins)
+            catch_up = (self.catch_up and credit >= CATCH_UP_CREDIT and self._k > 0
                         and self._has_behind is not None and bool(self._has_behind()))
-            self._started = True  # the first frame tick takes the newest of the backlog
             if catch_up:
                 self.catch_ups += 1
             if credit < 1.0:  # the ceiling: the cycle then takes the newest frame
