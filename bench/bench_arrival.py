@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from bench import bench_rig
-from handrig import glove as glove_module
+from handrig.devices import glove as glove_module
 
 SPINS_US = (0.0, 500.0)
 

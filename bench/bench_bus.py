@@ -6,7 +6,7 @@ with the plain dynamixel-sdk way.
 
 from __future__ import annotations
 
-from handrig.commands.bench_bus import bench
+from handrig.cli.bench_bus import bench
 
 
 def main() -> None:

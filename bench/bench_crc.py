@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from handrig.servo import codec
+from handrig.devices.servo import codec
 
 
 def _per_call_ns(fn: Callable[[], object], n: int = 20_000, repeats: int = 5) -> float:

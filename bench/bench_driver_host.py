@@ -16,9 +16,9 @@ import numpy as np
 
 from firmware_protocol import dynamixel as dx
 from handrig.clock import MonotonicClock
-from handrig.rigconfig import load_rig_config
-from handrig.servo import DynamixelBus
-from handrig.servo.transport import Transport
+from handrig.config.rig import load_rig_config
+from handrig.devices.servo import DynamixelBus
+from handrig.devices.servo.transport import Transport
 
 
 class InstantTransport(Transport):

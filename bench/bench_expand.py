@@ -7,9 +7,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from handrig import mocap
-from handrig.expand import DEFAULT_TWO_GLOVE_MAP, Expander
-from handrig.maps import LinearMap
+from handrig.offline import mocap
+from handrig.pose.expand import DEFAULT_TWO_GLOVE_MAP, Expander
+from handrig.pose.maps import LinearMap
 
 
 def _measure(ex: Expander, frames: int = 20000, inputs: np.ndarray | None = None

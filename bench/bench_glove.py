@@ -14,10 +14,10 @@ import numpy as np
 from firmware_protocol.glove import FrameDecoder, GloveFrame, decode_frame, encode_frame
 from firmware_protocol.opengloves import LineDecoder, OpenGlovesLine, encode_line
 from handrig.clock import MonotonicClock
-from handrig.filters import OneEuroFilter
-from handrig.glove import SerialGlove
-from handrig.glove_calibration import GloveControls, load_glove_config
-from handrig.glove_recording import sweep_recording, write_glove_recording
+from handrig.devices.glove import SerialGlove
+from handrig.devices.glove_calibration import GloveControls, load_glove_config
+from handrig.devices.glove_recording import sweep_recording, write_glove_recording
+from handrig.pose.filters import OneEuroFilter
 
 
 def _per_call_us(fn: object, number: int) -> float:
@@ -79,7 +79,7 @@ def main() -> None:
 
 def _loop_figures(path: Path, reader: str) -> None:
     code = ("import sys\n"
-            "from handrig.glove_recording import read_glove_recording\n"
+            "from handrig.devices.glove_recording import read_glove_recording\n"
             "from sim.glove_emulator import GloveEmulator\n"
             "with GloveEmulator(read_glove_recording(sys.argv[1])) as e:\n"
             "    print(e.port_path, flush=True)\n"

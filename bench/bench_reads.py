@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
-from handrig.commands.bench_bus import EmulatorProcess, bench_rig
+from handrig.cli.bench_bus import EmulatorProcess, bench_rig
+from handrig.devices.servo import DynamixelBus
 from handrig.realtime import pinned_loop
-from handrig.servo import DynamixelBus
 
 N_SERVOS = 20
 BAUD = 4_000_000

@@ -40,10 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from handrig.app import build_parts, port_process
-from handrig.config import CONFIG_DIR
-from handrig.glove_recording import GloveRecording, write_glove_recording
-from handrig.live import LiveOptions, run_live
+from handrig.app.factory import build_parts, port_process
+from handrig.app.session import LiveOptions, run_live
+from handrig.config.loading import CONFIG_DIR
+from handrig.devices.glove_recording import GloveRecording, write_glove_recording
 
 STEP_S = 0.25  # the index channel steps this often (the goals settle well within it)
 INDEX_CHANNEL = 3  # riIndexMCPy in config/glove.toml

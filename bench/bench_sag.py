@@ -9,8 +9,8 @@ import time
 
 import numpy as np
 
-from handrig.orientation import ForearmOrientation
-from handrig.sag import SagGrid
+from handrig.pose.orientation import ForearmOrientation
+from handrig.pose.sag import SagGrid
 
 
 def _median_us(fn: object, calls: int = 2000, batches: int = 25) -> float:

@@ -8,9 +8,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from handrig import app
-from handrig import pose_kernels as kernels
-from handrig.pipeline import PosePipeline
+from handrig.app import factory as app
+from handrig.pose import kernels
+from handrig.pose.pipeline import PosePipeline
 
 FRAMES = 20000
 

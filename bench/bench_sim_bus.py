@@ -19,7 +19,7 @@ from collections.abc import Callable
 import numpy as np
 
 from firmware_protocol import dynamixel as dx
-from handrig.rigconfig import load_rig_config
+from handrig.config.rig import load_rig_config
 from sim.dxl_bus import SimBus
 from sim.dxl_servo import EmulatedServo
 

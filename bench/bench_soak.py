@@ -40,10 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from handrig import app
+from handrig.app import factory as app
+from handrig.app.session import torque_is_off
 from handrig.clock import MonotonicClock
 from handrig.errors import HandrigError
-from handrig.live import torque_is_off
 from handrig.realtime import pinned_loop, realtime_priority
 from sim.demo_recording import DEMO_RECORDING
 
@@ -83,7 +83,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 def glove_child(seconds: float, seed: int) -> int:
     """The glove emulator with its fault schedule, in this process until SIGTERM;
     prints ``port: PATH`` first and what it injected last."""
-    from handrig.glove_recording import read_glove_recording
+    from handrig.devices.glove_recording import read_glove_recording
     from sim.glove_emulator import GloveEmulator
 
     stop = [False]

@@ -35,7 +35,7 @@ def _wait_for_signal() -> None:
 
 
 def _glove(args: argparse.Namespace) -> int:
-    from handrig.glove_recording import read_glove_recording
+    from handrig.devices.glove_recording import read_glove_recording
     from sim.glove_emulator import GloveEmulator
 
     rec = read_glove_recording(args.recording)
@@ -52,8 +52,8 @@ def _glove(args: argparse.Namespace) -> int:
 
 
 def _bus(args: argparse.Namespace) -> int:
-    from handrig import simulator
-    from handrig.rigconfig import load_rig_config
+    from handrig.app import simulator
+    from handrig.config.rig import load_rig_config
 
     rig = load_rig_config(args.rig)
     # kinematic servos: no physics thread in this process to hold up the receipt stamps

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from handrig.commands.calibrate_glove import STEPS
+from handrig.cli.calibrate_glove import STEPS
+from handrig.devices.glove_calibration import GloveConfig
+from handrig.devices.glove_recording import GloveRecording
 from handrig.errors import DataError
-from handrig.glove_calibration import GloveConfig
-from handrig.glove_recording import GloveRecording
 
 POSE_NAMES: tuple[str, ...] = tuple(name for name, _ in STEPS)
 """The poses in the order ``handrig calibrate glove`` asks for them."""

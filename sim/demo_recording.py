@@ -24,17 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
-from handrig.config import CONFIG_DIR
-from handrig.glove_calibration import (
+from handrig.config.loading import CONFIG_DIR
+from handrig.config.paths import DATA_HOME_HELP, user_data
+from handrig.devices.glove_calibration import (
     GloveCalibration,
     load_glove_config,
     recording_from_degrees,
 )
-from handrig.glove_recording import GloveRecording, write_glove_recording
+from handrig.devices.glove_recording import GloveRecording, write_glove_recording
 from handrig.hand import curve_index
-from handrig.mocap import load_reference
-from handrig.orientation import ForearmOrientation
-from handrig.paths import DATA_HOME_HELP, user_data
+from handrig.offline.mocap import load_reference
+from handrig.pose.orientation import ForearmOrientation
 
 DEMO_RECORDING = CONFIG_DIR / "recordings" / "demo_glove.csv"
 ADC_MAX = 4095

@@ -58,11 +58,11 @@ from firmware_protocol.dynamixel import (
     split_sync_read,
     split_sync_write,
 )
+from handrig.app.robots import load_rig
 from handrig.clock import Clock, MonotonicClock
+from handrig.config.rig import RigConfig
 from handrig.errors import ConfigError
 from handrig.realtime import LOOP_TIMER_SLACK_NS, timer_slack_ns
-from handrig.rigconfig import RigConfig
-from handrig.robotrig import load_rig
 from sim.dxl_servo import READABLE_BYTES, EmulatedServo
 
 

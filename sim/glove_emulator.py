@@ -32,8 +32,8 @@ import numpy as np
 from firmware_protocol.glove import MAX_CHANNELS, GloveFrame, encode_frame
 from firmware_protocol.opengloves import BUTTON_LETTERS, OpenGlovesLine, encode_line
 from handrig.clock import Clock, MonotonicClock
+from handrig.devices.glove_recording import GloveRecording
 from handrig.errors import DataError
-from handrig.glove_recording import GloveRecording
 
 EmulatorFormat = Literal["frames", "opengloves"]
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from handrig.config import CONFIG_DIR, check_joint_name, load
+from handrig.config.loading import CONFIG_DIR, check_joint_name, load
 from handrig.errors import ConfigError
 from handrig.hand import DOF_NAMES
 

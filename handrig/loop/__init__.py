@@ -1,4 +1,4 @@
-"""The realtime loop's parts; :class:`handrig.rig.Rig` puts them together.
+"""The realtime loop's parts; :class:`handrig.loop.rig.Rig` puts them together.
 
 ``trigger`` (when a cycle runs), ``modes`` (what the puppet does: waiting, running,
 relaxing, resuming, stopping), ``cycle`` (one glove sample to one Sync Write and

@@ -33,7 +33,7 @@ from handrig.loop.modes import Mode, ModeMachine
 from handrig.loop.ports import BusLike, ControlsFromRaw, FloatArray, GloveLike, OrientationLike
 from handrig.loop.stats import RunStats
 from handrig.loop.trigger import READ_MARGIN_S, FixedRateTrigger, GloveTrigger, Tick, Trigger
-from handrig.pipeline import POSE_SIZE, PosePipeline
+from handrig.pose.pipeline import POSE_SIZE, PosePipeline
 
 __all__ = ["READ_MARGIN_S", "Cycle"]
 READ_SMOOTHING = 0.2  # weight of the newest read's duration in the expected read time

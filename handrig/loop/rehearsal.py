@@ -4,7 +4,7 @@ A glove frame is handled by code that ran 5 ms earlier at the latest; in between
 the CPU's caches fill with other work (the emulators, the kernel), and a cold
 pass costs several times a warm one. So shortly before each deadline the loop
 runs the same path (glove decode, controls, orientation, servo step, goal
-packet) once on copies: :meth:`handrig.pipeline.PosePipeline.rehearsal_copy`,
+packet) once on copies: :meth:`handrig.pose.pipeline.PosePipeline.rehearsal_copy`,
 copies of the control and orientation objects, and the devices' own ``rehearse``
 hooks. Nothing it does reaches the rig, the glove or the bus.
 """
@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from handrig.loop.ports import BusLike, ControlsFromRaw, GloveLike, OrientationLike, SampleLike
-from handrig.pipeline import PosePipeline
+from handrig.pose.pipeline import PosePipeline
 
 
 class Rehearsal:

@@ -11,7 +11,7 @@ ceiling is held back, and its cycle takes the newest frame). With ``catch_up``, 
 frame superseded before its cycle began (a loop held up two periods or more, by a
 slow read or the host, or frames the glove sent together) still gets its cycle: the
 tick asks for the oldest frame the glove keeps behind the newest (up to
-``handrig.glove.BEHIND_KEPT``), and the ticks for the rest and the newest follow at
+``handrig.devices.glove.BEHIND_KEPT``), and the ticks for the rest and the newest follow at
 once, all within the ceiling's burst. A trigger may run a rehearsal shortly before a
 tick (see :mod:`handrig.loop.rehearsal`).
 

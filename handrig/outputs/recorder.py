@@ -21,7 +21,7 @@ BVH (for animators)
     ``channel = sign * (value - offset_deg)`` (e.g. ``riIndexMCPy`` is the Zrotation
     of ``RightHandIndex1``, sign +1; ``leIndexMCPy`` the Zrotation of
     ``LeftHandIndex1``, sign -1). So the file reads back with the same profile,
-    here or with ``handrig.mocap.load_curves(path, "perception_neuron")``, to the same
+    here or with ``handrig.offline.mocap.load_curves(path, "perception_neuron")``, to the same
     curves, and looks in a BVH viewer as the reference capture does. The wrist
     (not in the profile): ``<S>Hand`` Zrotation = flexion and Yrotation = deviation,
     sign +1 on the right and -1 on the left (the skeleton mirrors across X).
@@ -49,10 +49,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig import hand
-from handrig.bvh import UNFINISHED_HINT, BvhJoint, format_hierarchy, parse_hierarchy, read_bvh
 from handrig.clock import Clock
 from handrig.errors import DataError
-from handrig.mocap import Profile, load_profile
+from handrig.offline.bvh import (
+    UNFINISHED_HINT,
+    BvhJoint,
+    format_hierarchy,
+    parse_hierarchy,
+    read_bvh,
+)
+from handrig.offline.mocap import Profile, load_profile
 from handrig.outputs import skeleton
 from handrig.outputs.vmc import WRIST_NAMES
 

@@ -14,8 +14,8 @@ from collections import deque
 from collections.abc import Sequence
 
 from handrig.clock import FakeClock
-from handrig.rigconfig import RigConfig
-from handrig.servo.transport import Transport
+from handrig.config.rig import RigConfig
+from handrig.devices.servo.transport import Transport
 from sim.dxl_bus import FaultSpec, SimBus, _Reply
 
 BITS_PER_BYTE = 10

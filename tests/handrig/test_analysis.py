@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig import analysis, hand, mocap
+from handrig import hand
 from handrig.cli import main
+from handrig.offline import analysis, mocap
 
 N = 400
 T = 2 * np.pi * np.arange(N) / N
@@ -163,7 +164,7 @@ def test_agrees_with_a_naive_pairwise_implementation(seed: int) -> None:
 def test_analyze_reports_glitches_and_despikes(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from handrig.bvh import Bvh, format_bvh, read_bvh
+    from handrig.offline.bvh import Bvh, format_bvh, read_bvh
 
     b = read_bvh(mocap.REFERENCE_BVH)
     motion = b.motion[:120].copy()

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from handrig.app import ForearmAngles
-from handrig.glove import GloveSample
-from handrig.glove_calibration import ImuSettings, load_glove_config
-from handrig.orientation import ForearmOrientation
+from handrig.app.factory import ForearmAngles
+from handrig.devices.glove import GloveSample
+from handrig.devices.glove_calibration import ImuSettings, load_glove_config
+from handrig.pose.orientation import ForearmOrientation
 
 ENU_TO_NED = Rotation.from_matrix([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
@@ -51,7 +51,7 @@ def test_a_rejected_quaternion_keeps_the_last_good_angles():
 def test_the_glove_reader_is_told_how_many_raw_channels_the_calibration_reads() -> None:
     import os
 
-    from handrig.app import open_glove
+    from handrig.app.factory import open_glove
     from handrig.clock import FakeClock
 
     cfg = load_glove_config()
@@ -65,8 +65,8 @@ def test_the_glove_reader_is_told_how_many_raw_channels_the_calibration_reads() 
 
 
 def test_the_summary_carries_the_glove_port_counters() -> None:
-    from handrig.app import summary_dict
-    from handrig.glove import GloveStats
+    from handrig.app.factory import summary_dict
+    from handrig.devices.glove import GloveStats
     from handrig.loop.stats import RunStats
 
     stats = GloveStats(frames_ok=10, channel_errors=2, disconnects=1, reconnects=1,

@@ -6,7 +6,7 @@ import io
 
 import pytest
 
-from handrig.commands.bench_bus import bench, wire_limit_hz
+from handrig.cli.bench_bus import bench, wire_limit_hz
 
 
 @pytest.mark.parametrize("puppet", [False, True])

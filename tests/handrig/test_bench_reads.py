@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from bench.bench_reads import BAUD, N_SERVOS, run
-from handrig.commands.bench_bus import EmulatorProcess
+from handrig.cli.bench_bus import EmulatorProcess
 
 
 def test_both_ways_read_and_count_their_cpu() -> None:

@@ -37,7 +37,7 @@ def test_the_step_recording_steps_only_the_index_channel() -> None:
 def test_each_case_gets_a_rig_file_that_loads_with_its_mode_rate_and_baud(
         tmp_path, mode: str) -> None:
     from bench.bench_rig import _rig_file
-    from handrig.rigconfig import load_rig_config
+    from handrig.config.rig import load_rig_config
 
     cfg = load_rig_config(_rig_file(tmp_path, mode, 500.0, 4_000_000))
     assert (cfg.loop.mode, cfg.loop.rate_hz, cfg.bus.baud) == (mode, 500.0, 4_000_000)

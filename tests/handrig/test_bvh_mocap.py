@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig import hand, mocap
-from handrig.bvh import format_bvh, make_bvh, parse_bvh, read_bvh
+from handrig import hand
 from handrig.errors import ConfigError, DataError
+from handrig.offline import mocap
+from handrig.offline.bvh import format_bvh, make_bvh, parse_bvh, read_bvh
 
 REF = mocap.REFERENCE_BVH
 

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig.commands import calibrate_glove
-from handrig.commands.calibrate_glove import STEPS, derive
+from handrig.cli import calibrate_glove
+from handrig.cli.calibrate_glove import STEPS, derive
+from handrig.devices.glove_calibration import load_glove_config
+from handrig.devices.glove_recording import GloveRecording
 from handrig.errors import DataError, HandrigError
-from handrig.glove_calibration import load_glove_config
-from handrig.glove_recording import GloveRecording
 from sim.glove_emulator import GloveEmulator
 
 

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from handrig.commands.calibrate_glove import STEPS
-from handrig.glove_calibration import load_glove_config
-from handrig.paths import installed_config
+from handrig.cli.calibrate_glove import STEPS
+from handrig.config.paths import installed_config
+from handrig.devices.glove_calibration import load_glove_config
 from sim.calibration_motion import ScriptedSensors
 
 CHECKOUT = Path(__file__).resolve().parents[2]

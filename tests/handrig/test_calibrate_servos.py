@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from handrig.commands.calibrate_servos import calibrate, calibration_rig, update_zero_ticks
-from handrig.config import CONFIG_DIR
+from handrig.cli.calibrate_servos import calibrate, calibration_rig, update_zero_ticks
+from handrig.config.loading import CONFIG_DIR
+from handrig.config.rig import RigConfig, load_rig_config
+from handrig.devices.servo import DynamixelBus
 from handrig.errors import ConfigError
-from handrig.rigconfig import RigConfig, load_rig_config
-from handrig.servo import DynamixelBus
 from sim.dxl_bus import SimBus
 
 

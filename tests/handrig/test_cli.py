@@ -63,7 +63,7 @@ def test_numeric_flags_accept_good_values():
 
 
 def test_no_flag_takes_a_bare_float_or_int():
-    """Every numeric flag goes through a check in handrig.commands._numbers."""
+    """Every numeric flag goes through a check in handrig.cli._numbers."""
     import argparse
 
     from handrig.cli import build_parser

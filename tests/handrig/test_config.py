@@ -3,7 +3,7 @@ from typing import Literal
 
 import pytest
 
-from handrig.config import JointLimits, build, load, load_joint_limits
+from handrig.config.loading import JointLimits, build, load, load_joint_limits
 from handrig.errors import ConfigError
 
 

@@ -16,14 +16,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig.bvh import read_bvh
-from handrig.config import CONFIG_DIR, load_joint_limits
+from handrig.config.loading import CONFIG_DIR, load_joint_limits
+from handrig.config.rig import load_rig_config
+from handrig.devices.glove_calibration import load_glove_config
+from handrig.devices.glove_recording import read_glove_recording
 from handrig.errors import HandrigError
-from handrig.glove_calibration import load_glove_config
-from handrig.glove_recording import read_glove_recording
+from handrig.offline.bvh import read_bvh
 from handrig.outputs.recorder import Recorder, load_performance
-from handrig.rigconfig import load_rig_config
-from handrig.sag import SagGrid
+from handrig.pose.sag import SagGrid
 
 MUTATIONS = 40  # of each kind per file
 

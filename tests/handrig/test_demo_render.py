@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from handrig import simulator
+from handrig.app import simulator
 from sim.render import MAX_TILES, picked
 
 CLI = [sys.executable, "-m", "handrig.cli"]

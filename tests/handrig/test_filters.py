@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from handrig.filters import OneEuroFilter
+from handrig.pose.filters import OneEuroFilter
 
 
 def scalar_one_euro(xs, ts, min_cutoff, beta, d_cutoff):  # type: ignore[no-untyped-def]

@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 import tomli_w
 
-from handrig.config import CONFIG_DIR
-from handrig.errors import ConfigError, DataError
-from handrig.glove_calibration import (
+from handrig.config.loading import CONFIG_DIR
+from handrig.devices.glove_calibration import (
     ChannelCalibration,
     FilterSettings,
     GloveCalibration,
@@ -20,6 +19,7 @@ from handrig.glove_calibration import (
     load_glove_config,
     recording_from_degrees,
 )
+from handrig.errors import ConfigError, DataError
 
 DEFAULT_CONTROLS = ("riThumbCMCx", "riThumbCMCy", "riThumbCMCz", "riIndexMCPy", "riPinkyMCPy")
 
@@ -142,7 +142,7 @@ def test_recording_from_degrees_reads_back_as_the_same_degrees() -> None:
 
 
 def test_a_nan_reading_holds_the_channel_and_never_poisons_the_filter() -> None:
-    from handrig.glove_calibration import GloveControls
+    from handrig.devices.glove_calibration import GloveControls
 
     cfg = load_glove_config()
     controls = GloveControls.from_config(cfg, cfg.curves)

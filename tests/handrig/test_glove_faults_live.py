@@ -8,8 +8,8 @@ import time
 import tty
 
 from firmware_protocol.glove import GloveFrame, encode_frame
-from handrig.app import build_parts
-from handrig.live import LiveOptions, run_live
+from handrig.app.factory import build_parts
+from handrig.app.session import LiveOptions, run_live
 
 
 def test_valid_frames_with_the_wrong_channel_count_are_dropped_not_fatal() -> None:

@@ -23,8 +23,8 @@ from hypothesis import strategies as st
 
 from firmware_protocol.glove import MAX_CHANNELS, GloveFrame, encode_frame
 from handrig.clock import FakeClock
-from handrig.glove import LOCK_FRAMES, SerialGlove
-from handrig.glove_calibration import GloveCalibration, load_glove_config
+from handrig.devices.glove import LOCK_FRAMES, SerialGlove
+from handrig.devices.glove_calibration import GloveCalibration, load_glove_config
 
 FULL = os.environ.get("HANDRIG_FUZZ") == "full"
 TARGET_BYTES = 10**6

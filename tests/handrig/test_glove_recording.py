@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig.errors import DataError
-from handrig.glove_recording import (
+from handrig.devices.glove_recording import (
     GloveRecording,
     read_glove_recording,
     sweep_recording,
     write_glove_recording,
 )
+from handrig.errors import DataError
 
 
 def test_round_trip(tmp_path: Path) -> None:

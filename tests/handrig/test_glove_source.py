@@ -10,9 +10,9 @@ import pytest
 
 from firmware_protocol.opengloves import CHANNEL_KEYS
 from handrig.clock import FakeClock, MonotonicClock
+from handrig.devices.glove import GloveSample, GloveSource, ReplayGlove, SerialGlove
+from handrig.devices.glove_recording import GloveRecording, sweep_recording
 from handrig.errors import DeviceError
-from handrig.glove import GloveSample, GloveSource, ReplayGlove, SerialGlove
-from handrig.glove_recording import GloveRecording, sweep_recording
 from sim.glove_emulator import GloveEmulator
 
 
@@ -289,7 +289,7 @@ def test_pump_says_how_many_frames_it_decoded_and_take_does_not_read() -> None:
 def test_the_frames_behind_the_newest_are_kept_only_while_they_were_never_taken() -> None:
     import os
 
-    from handrig.glove import BEHIND_KEPT
+    from handrig.devices.glove import BEHIND_KEPT
 
     assert BEHIND_KEPT == 2
     master, glove = _pty_glove(channels=5)

@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from handrig import app, simulator
+from handrig.app import factory as app
+from handrig.app import simulator
+from handrig.app.session import torque_is_off
 from handrig.clock import MonotonicClock
-from handrig.live import torque_is_off
 from handrig.loop.modes import Mode
 
 pytest.importorskip("mujoco")

@@ -13,9 +13,9 @@ import time
 import numpy as np
 import pytest
 
-from handrig.app import build_parts
-from handrig.glove_recording import read_glove_recording
-from handrig.live import LiveOptions, run_live
+from handrig.app.factory import build_parts
+from handrig.app.session import LiveOptions, run_live
+from handrig.devices.glove_recording import read_glove_recording
 from sim.demo_recording import DEMO_RECORDING
 from sim.glove_emulator import GloveEmulator
 
@@ -220,8 +220,8 @@ def test_json_prints_the_summary_with_the_error_when_a_run_fails(tmp_path) -> No
 
 
 def test_exit_signals_unwind_before_the_rig_stop_it_twice_then_raise_then_ignore() -> None:
+    from handrig.app.session import EXIT_SIGNALS, ExitSignals
     from handrig.errors import SafetyStop
-    from handrig.live import EXIT_SIGNALS, ExitSignals
 
     before = {s: signal.getsignal(s) for s in EXIT_SIGNALS}
     stops: list[str] = []

@@ -9,19 +9,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig import hand, mocap
+from handrig import hand
 from handrig.cli import main
-from handrig.config import JointLimits
+from handrig.config.loading import JointLimits
 from handrig.errors import ConfigError, HandrigError
-from handrig.evaluation import (
+from handrig.offline import mocap
+from handrig.offline.evaluation import (
     block_splits,
     calm_frames,
     out_of_regime,
     reference_splits,
     write_error_figure,
 )
-from handrig.expand import DEFAULT_MAP, DEFAULT_TWO_GLOVE_MAP, Expander
-from handrig.maps import DEFAULT_TWO_GLOVE_CONTROLS, LinearMap, MapWarning, fit_map
+from handrig.pose.expand import DEFAULT_MAP, DEFAULT_TWO_GLOVE_MAP, Expander
+from handrig.pose.maps import DEFAULT_TWO_GLOVE_CONTROLS, LinearMap, MapWarning, fit_map
 
 CTRL = ("riIndexMCPy", "riPinkyMCPy", "leIndexMCPy")
 I0, I1, I2 = (hand.curve_index(c) for c in CTRL)
@@ -245,7 +246,7 @@ def test_randomly_damaged_map_files_never_raise_anything_but_a_handrig_error(
 def test_fit_map_on_two_files_groups_each_files_blocks(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from handrig.bvh import Bvh, format_bvh, read_bvh
+    from handrig.offline.bvh import Bvh, format_bvh, read_bvh
 
     b = read_bvh(mocap.REFERENCE_BVH)
     files = []

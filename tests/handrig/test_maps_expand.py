@@ -9,14 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig import hand, mocap
-from handrig.bvh import Bvh, format_bvh, read_bvh
+from handrig import hand
 from handrig.cli import main
-from handrig.config import JointLimits
+from handrig.config.loading import JointLimits
 from handrig.errors import ConfigError, DataError
-from handrig.evaluation import cross_validate
-from handrig.expand import DEFAULT_MAP, DEFAULT_TWO_GLOVE_MAP, Expander
-from handrig.maps import DEFAULT_RIGHT_CONTROLS, LinearMap, fit_map
+from handrig.offline import mocap
+from handrig.offline.bvh import Bvh, format_bvh, read_bvh
+from handrig.offline.evaluation import cross_validate
+from handrig.pose.expand import DEFAULT_MAP, DEFAULT_TWO_GLOVE_MAP, Expander
+from handrig.pose.maps import DEFAULT_RIGHT_CONTROLS, LinearMap, fit_map
 
 CTRL = ("riIndexMCPy", "riPinkyMCPy")
 I0, I1 = hand.curve_index(CTRL[0]), hand.curve_index(CTRL[1])
@@ -65,7 +66,7 @@ def test_huber_resists_outliers_that_pull_least_squares() -> None:
     assert abs(ridge.predict(at_truth)[0, T] - 5.0) > 4.0
 
 
-@pytest.mark.filterwarnings("ignore::handrig.maps.MapWarning")  # synthetic gains swing widely
+@pytest.mark.filterwarnings("ignore::handrig.pose.maps.MapWarning")  # synthetic gains swing widely
 def test_map_file_round_trip_is_readable(tmp_path: Path) -> None:
     m = fit_map(_data(), CTRL, "ridge", alpha=0.0, trained_on=("a.bvh",))
     p = m.save(tmp_path / "m.toml")

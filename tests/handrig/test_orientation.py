@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from handrig.errors import DataError
-from handrig.orientation import ForearmOrientation
+from handrig.pose.orientation import ForearmOrientation
 
 ANGLE = st.floats(-89.0, 89.0)
 ROT = st.floats(-179.0, 179.0)

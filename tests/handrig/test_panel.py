@@ -14,10 +14,8 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from handrig.app import build_parts
-from handrig.clock import FakeClock
-from handrig.glove import GloveSample, GloveSource, GloveStats
-from handrig.panel import (
+from handrig.app.factory import build_parts
+from handrig.app.panel import (
     BusHealth,
     GloveLink,
     KeyReader,
@@ -29,9 +27,11 @@ from handrig.panel import (
     plain_line,
     render,
 )
-from handrig.rig import Rig
-from handrig.rigconfig import load_rig_config
-from handrig.servo.bus import BusStats, ServoBus, ServoState
+from handrig.clock import FakeClock
+from handrig.config.rig import load_rig_config
+from handrig.devices.glove import GloveSample, GloveSource, GloveStats
+from handrig.devices.servo.bus import BusStats, ServoBus, ServoState
+from handrig.loop.rig import Rig
 
 
 def show_snapshot(**kw: object) -> PanelSnapshot:

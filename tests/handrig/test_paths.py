@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from handrig import paths
 from handrig.cli import main
+from handrig.config import paths
 
 CHECKOUT = Path(__file__).resolve().parents[2]
 

@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from handrig.app import build_parts
-from handrig.pipeline import PosePipeline, ServoPath
-from handrig.sag import SagGrid
+from handrig.app.factory import build_parts
+from handrig.pose.pipeline import PosePipeline, ServoPath
+from handrig.pose.sag import SagGrid
 
 
 class NumpyServoStep:

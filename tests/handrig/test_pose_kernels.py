@@ -8,8 +8,8 @@ import sys
 
 import numpy as np
 
-from handrig import pose_kernels as kernels
-from handrig.filters import OneEuroFilter
+from handrig.pose import kernels
+from handrig.pose.filters import OneEuroFilter
 
 
 def test_calibrate_and_filter_kernel_matches_numpy() -> None:
@@ -46,8 +46,9 @@ def test_calibrate_and_filter_kernel_matches_numpy() -> None:
 
 
 def test_the_pose_pipeline_imports_no_wire_code() -> None:
-    code = ("import sys, handrig.pipeline, handrig.glove_calibration, handrig.filters; "
-            "print(sorted(m for m in sys.modules if m.startswith(('handrig.servo', "
+    code = ("import sys, handrig.pose.pipeline, handrig.devices.glove_calibration, "
+            "handrig.pose.filters; "
+            "print(sorted(m for m in sys.modules if m.startswith(('handrig.devices.servo', "
             "'dynamixel_sdk', 'serial'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout

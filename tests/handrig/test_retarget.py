@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from handrig import hand
-from handrig.config import CONFIG_DIR
+from handrig.config.loading import CONFIG_DIR
 from handrig.errors import ConfigError, DataError
-from handrig.mjcf import MjcfJoint
-from handrig.retarget import Retarget, check_joints, load_retarget, retarget
+from handrig.pose.mjcf import MjcfJoint
+from handrig.pose.retarget import Retarget, check_joints, load_retarget, retarget
 
 LEAP_TABLE = CONFIG_DIR / "rigs" / "leap_retarget.toml"
 HEADER = 'format = "handrig-retarget"\nversion = 1\n'

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from handrig.cli import main
-from handrig.config import CONFIG_DIR
+from handrig.config.loading import CONFIG_DIR
 
 LEAP_JOINTS = ["if_mcp", "if_rot", "if_pip", "if_dip", "mf_mcp", "mf_rot", "mf_pip", "mf_dip",
                "rf_mcp", "rf_rot", "rf_pip", "rf_dip", "th_cmc", "th_axl", "th_mcp", "th_ipl"]

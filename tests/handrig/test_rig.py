@@ -13,12 +13,12 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 
-from handrig.app import build_parts
+from handrig.app.factory import build_parts
 from handrig.clock import FakeClock
+from handrig.devices.glove import GloveSample, GloveSource, GloveStats
+from handrig.devices.servo.bus import BusStats, ServoBus, ServoState
 from handrig.errors import DeviceError
-from handrig.glove import GloveSample, GloveSource, GloveStats
-from handrig.rig import Mode, Rig
-from handrig.servo.bus import BusStats, ServoBus, ServoState
+from handrig.loop.rig import Mode, Rig
 
 
 class ScriptedGlove(GloveSource):
@@ -629,8 +629,8 @@ def test_housekeeping_runs_midway_between_state_reads_with_a_deadline(parts_fact
 
 def _replay(rate_hz: float, seconds: float, clock: FakeClock, gap: tuple[float, float] | None
             = None):
-    from handrig.glove import ReplayGlove
-    from handrig.glove_recording import GloveRecording
+    from handrig.devices.glove import ReplayGlove
+    from handrig.devices.glove_recording import GloveRecording
 
     t = np.arange(int(seconds * rate_hz)) / rate_hz
     if gap is not None:
@@ -795,7 +795,7 @@ def test_a_loop_held_up_writes_the_frames_it_was_late_for_then_the_newest(parts_
 
     from firmware_protocol.glove import GloveFrame, encode_frame
     from handrig.clock import MonotonicClock
-    from handrig.glove import SerialGlove
+    from handrig.devices.glove import SerialGlove
 
     parts = parts_factory()
     clock = MonotonicClock(spin_s=0.0)

@@ -1,8 +1,8 @@
 import pytest
 
-from handrig.config import build
+from handrig.config.loading import build
+from handrig.config.rig import RigConfig, ServoCalibration, load_rig_config
 from handrig.errors import ConfigError
-from handrig.rigconfig import RigConfig, ServoCalibration, load_rig_config
 
 
 def test_shipped_rig_has_twenty_servos():

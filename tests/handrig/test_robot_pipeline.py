@@ -8,12 +8,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from handrig import app
-from handrig import pose_kernels as kernels
+from handrig.app import factory as app
+from handrig.app.robots import RobotRigConfig, robot_retarget
 from handrig.errors import ConfigError
-from handrig.pipeline import PosePipeline
-from handrig.retarget import retarget
-from handrig.robotrig import RobotRigConfig, robot_retarget
+from handrig.pose import kernels
+from handrig.pose.pipeline import PosePipeline
+from handrig.pose.retarget import retarget
 
 
 @pytest.fixture(scope="module")

@@ -8,11 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from handrig.config import REPO_ROOT, build
-from handrig.errors import ConfigError
-from handrig.mjcf import read_joints
-from handrig.rigconfig import RigConfig, ServoSettings, load_rig_config
-from handrig.robotrig import (
+from handrig.app.robots import (
     RIGS_DIR,
     RobotRigConfig,
     load_rig,
@@ -20,6 +16,10 @@ from handrig.robotrig import (
     rig_path,
     robot_retarget,
 )
+from handrig.config.loading import REPO_ROOT, build
+from handrig.config.rig import RigConfig, ServoSettings, load_rig_config
+from handrig.errors import ConfigError
+from handrig.pose.mjcf import read_joints
 
 LEAP_RIG = RIGS_DIR / "leap.toml"
 LEAP_MODEL = REPO_ROOT / "data" / "robots" / "leap_hand" / "right_hand.xml"

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 
-from handrig import app
-from handrig.app import build_parts
-from handrig.config import CONFIG_DIR
+from handrig.app import factory as app
+from handrig.app.factory import build_parts
+from handrig.app.session import format_summary
+from handrig.config.loading import CONFIG_DIR
+from handrig.devices.servo.bus import BusStats
 from handrig.errors import ConfigError
-from handrig.live import format_summary
 from handrig.loop.stats import RunStats
-from handrig.servo.bus import BusStats
 
 CLI = [sys.executable, "-m", "handrig.cli"]
 CHECKOUT = Path(__file__).resolve().parents[2]

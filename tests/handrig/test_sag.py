@@ -10,7 +10,7 @@ import pytest
 
 from handrig.errors import DataError
 from handrig.hand import DOF_NAMES, dof_limits_deg
-from handrig.sag import SAG_GRID, SagGrid
+from handrig.pose.sag import SAG_GRID, SagGrid
 
 # Table 2 in the vocabulary convention: DOF -> (value in its calibration orientation).
 CALIBRATED = {
@@ -168,7 +168,7 @@ def test_runtime_modules_do_not_import_mujoco() -> None:
     import subprocess
     import sys
 
-    code = ("import sys, handrig.sag, handrig.orientation;"
+    code = ("import sys, handrig.pose.sag, handrig.pose.orientation;"
             " print(sorted(m for m in ('mujoco', 'sim') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()

@@ -58,7 +58,7 @@ def test_passive_check_json_keys(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_passive_tune_rewrites_an_equal_config(tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
-    from handrig.config import CONFIG_DIR, load_toml
+    from handrig.config.loading import CONFIG_DIR, load_toml
 
     out = tmp_path / "passive.toml"
     assert main(["passive", "tune", "--out", str(out)]) == 0

@@ -24,10 +24,10 @@ import pytest
 from firmware_protocol.dynamixel import HardwareError
 from firmware_protocol.dynamixel import Reg as SimReg
 from handrig.clock import FakeClock
+from handrig.config.rig import RigConfig, SilenceConfig, load_rig_config
+from handrig.devices.servo import DynamixelBus, FaultPolicy, ServoBus
+from handrig.devices.servo.transport import SerialTransport
 from handrig.errors import DeviceError, DeviceTimeoutError, SafetyStop, ServoFault
-from handrig.rigconfig import RigConfig, SilenceConfig, load_rig_config
-from handrig.servo import DynamixelBus, FaultPolicy, ServoBus
-from handrig.servo.transport import SerialTransport
 from sim.dxl_bus import FaultSpec, SimBus
 
 REPO = Path(__file__).resolve().parents[2]
@@ -376,8 +376,8 @@ def test_transport_deadline_on_a_fake_clock(sim: SimBus) -> None:
 DRIVER_LOOP = textwrap.dedent("""
     import dataclasses, sys
     import numpy as np
-    from handrig.rigconfig import load_rig_config
-    from handrig.servo import DynamixelBus
+    from handrig.config.rig import load_rig_config
+    from handrig.devices.servo import DynamixelBus
     rig = load_rig_config()
     rig = dataclasses.replace(rig, servos=rig.servos[:6])
     bus = DynamixelBus(sys.argv[1], rig, baud=1_000_000)
@@ -832,7 +832,7 @@ def test_housekeeping_between_reads_when_due_and_when_the_wire_has_room(sim: Sim
 
 
 def test_housekeeping_waits_for_the_room_it_took_before_but_not_for_ever(sim: SimBus) -> None:
-    from handrig.servo.reader import HOUSEKEEPING_FORCE_S
+    from handrig.devices.servo.reader import HOUSEKEEPING_FORCE_S
 
     b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, temperature_every=2)
     b.connect()  # its read did the housekeeping, and timed it
@@ -896,7 +896,7 @@ def test_a_read_of_one_part_asks_only_those_servos_and_marks_only_them(
 
 WARM_UP_CHECK = """
 import numpy as np
-from handrig.servo import DynamixelBus, codec
+from handrig.devices.servo import DynamixelBus, codec
 from sim.dxl_bus import SimBus
 from tests.handrig.test_servo_bus import small_rig
 

@@ -14,9 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from firmware_protocol import dynamixel as dx
-from handrig.errors import ProtocolError
-from handrig.servo import codec
-from handrig.servo.codec import (
+from handrig.devices.servo import codec
+from handrig.devices.servo.codec import (
     build_instruction,
     crc16,
     fast_sync_intact,
@@ -24,7 +23,8 @@ from handrig.servo.codec import (
     stuff,
     unstuff,
 )
-from handrig.servo.registers import Reg, describe_hardware_error, describe_status_error
+from handrig.devices.servo.registers import Reg, describe_hardware_error, describe_status_error
+from handrig.errors import ProtocolError
 
 SDK = Protocol2PacketHandler()
 

@@ -13,8 +13,8 @@ import os
 import numpy as np
 import pytest
 
-from handrig.rigconfig import load_rig_config
-from handrig.servo import DynamixelBus
+from handrig.config.rig import load_rig_config
+from handrig.devices.servo import DynamixelBus
 
 PORT = os.environ.get("HANDRIG_PORT", "")
 

@@ -18,11 +18,11 @@ import pytest
 
 from firmware_protocol import dynamixel as dx
 from handrig.clock import FakeClock
+from handrig.config.rig import RigConfig, SilenceConfig, load_rig_config
+from handrig.devices.servo import DynamixelBus, FaultPolicy
+from handrig.devices.servo.transport import Transport
+from handrig.devices.servo.wire import WireBudget, cycle_bytes, read_bytes, wire_time_s
 from handrig.errors import DeviceTimeoutError, SafetyStop, ServoFault
-from handrig.rigconfig import RigConfig, SilenceConfig, load_rig_config
-from handrig.servo import DynamixelBus, FaultPolicy
-from handrig.servo.transport import Transport
-from handrig.servo.wire import WireBudget, cycle_bytes, read_bytes, wire_time_s
 from sim.dxl_bus import FaultSpec
 from tests.handrig.servo_fakes import EmulatorTransport, PeerBus
 
@@ -290,8 +290,8 @@ def test_the_quiet_wait_a_loop_counts_runs_from_the_late_bytes_that_came() -> No
 
 
 def test_a_part_read_asks_its_servos_by_a_request_built_once() -> None:
-    from handrig.servo import codec as hcodec
-    from handrig.servo.fast_read import ORDERS_KEPT
+    from handrig.devices.servo import codec as hcodec
+    from handrig.devices.servo.fast_read import ORDERS_KEPT
 
     rig = small_rig()
     bus, transport, peer = make_bus(rig, temperature_every=0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from firmware_protocol import dynamixel as dx
-from handrig.servo.registers import Reg
+from handrig.devices.servo.registers import Reg
 
 
 @pytest.mark.parametrize("reg", list(Reg), ids=lambda r: r.name)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from firmware_protocol.dynamixel import Reg
+from handrig.config.rig import RigConfig, load_rig_config
+from handrig.devices.servo import DynamixelBus
 from handrig.errors import DeviceError
-from handrig.rigconfig import RigConfig, load_rig_config
-from handrig.servo import DynamixelBus
 from sim.dxl_bus import SimBus
 from sim.dxl_servo import EmulatedServo
 

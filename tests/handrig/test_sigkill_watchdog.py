@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from firmware_protocol import dynamixel as dx
-from handrig.rigconfig import load_rig_config
+from handrig.config.rig import load_rig_config
 from sim.demo_recording import DEMO_RECORDING
 from sim.dxl_bus import SimBus
 

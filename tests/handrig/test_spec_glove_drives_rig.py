@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig.app import build_parts
-from handrig.live import LiveOptions, run_live
+from handrig.app.factory import build_parts
+from handrig.app.session import LiveOptions, run_live
 
 FIRMWARE = r"""
 #include <stdio.h>

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from handrig.errors import DataError
 from handrig.hand import DOF_NAMES
-from handrig.sag import SagGrid
+from handrig.pose.sag import SagGrid
 from sim import bake
 from sim.hand_model import hand_geometry
 from sim.passive import PassiveHand, load_passive_params

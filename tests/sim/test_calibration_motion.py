@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from handrig.commands.calibrate_glove import STEPS, derive
+from handrig.cli.calibrate_glove import STEPS, derive
+from handrig.config.paths import installed_config
+from handrig.devices.glove_calibration import load_glove_config
 from handrig.errors import DataError
-from handrig.glove_calibration import load_glove_config
-from handrig.paths import installed_config
 from sim.calibration_motion import (
     POSE_NAMES,
     ScriptedSensors,

@@ -17,8 +17,8 @@ import pytest
 
 from firmware_protocol.glove import FrameDecoder, GloveFrame
 from firmware_protocol.opengloves import LineDecoder
+from handrig.devices.glove_recording import GloveRecording, sweep_recording, write_glove_recording
 from handrig.errors import DataError
-from handrig.glove_recording import GloveRecording, sweep_recording, write_glove_recording
 from sim.glove_emulator import GloveEmulator
 
 

@@ -7,7 +7,7 @@ import threading
 import pytest
 
 from firmware_protocol.dynamixel import Reg
-from handrig.rigconfig import RigConfig, ServoCalibration, load_rig_config
+from handrig.config.rig import RigConfig, ServoCalibration, load_rig_config
 from sim.dxl_bus import servos_from_rig
 from sim.dxl_servo import EmulatedServo
 from sim.puppet import Puppet, kp_from_p_gain

@@ -26,7 +26,7 @@ from sim.render import (
 DRAW = """
 import json, sys
 import numpy as np
-from handrig.rigconfig import load_rig_config
+from handrig.config.rig import load_rig_config
 from sim.render import RenderUnavailable, render_strip
 rig = load_rig_config()
 names = [s.joint for s in rig.servos]

@@ -19,7 +19,7 @@ from dynamixel_sdk import (
     PortHandler,
 )
 
-from handrig.rigconfig import load_rig_config
+from handrig.config.rig import load_rig_config
 
 ADDR_TORQUE, ADDR_GOAL, ADDR_PRESENT, ADDR_RDT = 64, 116, 132, 9
 

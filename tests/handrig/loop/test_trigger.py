@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from handrig.clock import FakeClock, MonotonicClock
-from handrig.glove import GloveSample, ReplayGlove
-from handrig.glove_recording import GloveRecording
+from handrig.devices.glove import GloveSample, ReplayGlove
+from handrig.devices.glove_recording import GloveRecording
 from handrig.loop.trigger import (
     FORCED_READ_FACTOR,
     FORCED_READ_SHARE,
@@ -492,7 +492,7 @@ def _pty_frames_glove():
     """A real SerialGlove (poll reader, handrig frames) on a pty, and the pty's master."""
     import tty
 
-    from handrig.glove import SerialGlove
+    from handrig.devices.glove import SerialGlove
 
     master, slave = os.openpty()
     tty.setraw(master)

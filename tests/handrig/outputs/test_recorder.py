@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig import hand, mocap
-from handrig.bvh import read_bvh
+from handrig import hand
 from handrig.clock import FakeClock
 from handrig.errors import DataError
+from handrig.offline import mocap
+from handrig.offline.bvh import read_bvh
 from handrig.outputs import recorder
 from handrig.outputs.recorder import Playback, Recorder, load_performance
 

@@ -1,0 +1,555 @@
+"""The one factory: concrete devices, outputs and the pipeline built from config files.
+
+Everything else takes its dependencies as arguments; only this module (and the
+commands that call it) decide which glove, bus, map, grid and outputs a run uses.
+The simulated rig's emulators run as subprocesses (``handrig sim-bus``,
+``handrig sim-glove``) started here, each in its own session so that a Ctrl-C
+in the terminal reaches the rig alone: the rig eases, turns torque off, and
+only then stops them. In-process simulator parts come through
+:mod:`handrig.app.simulator`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import selectors
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from handrig.app import robots as robotrig
+from handrig.clock import Clock
+from handrig.config.loading import CONFIG_DIR, load_joint_limits
+from handrig.config.paths import config_file
+from handrig.config.rig import RigConfig
+from handrig.devices.glove import GloveSample, GloveSource, ReplayGlove, SerialGlove
+from handrig.devices.glove_calibration import (
+    GloveConfig,
+    GloveControls,
+    default_glove_path,
+    load_glove_config,
+)
+from handrig.devices.glove_recording import read_glove_recording
+from handrig.devices.servo import DynamixelBus
+from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
+from handrig.errors import ConfigError, DeviceError
+from handrig.loop.rig import Rig
+from handrig.loop.stats import RunStats
+from handrig.pose.expand import Expander
+from handrig.pose.orientation import ForearmOrientation
+from handrig.pose.pipeline import PosePipeline
+from handrig.pose.sag import SagGrid, default_grid_path
+from handrig.realtime import helper_env
+
+FloatArray = NDArray[np.float64]
+
+
+def _resolve(base: Path, value: str, default: Path, *, rig_file: Path | None = None,
+             key: str = "") -> Path:
+    """``value`` of the rig file's ``key`` as a path (relative: to the rig file's folder
+    ``base``), ``default`` when empty; a named file that is not there is a ConfigError
+    saying which key pointed there."""
+    if not value:
+        return default
+    p = Path(value)
+    p = p if p.is_absolute() else base / p
+    if rig_file is not None and not p.is_file():
+        relative = ("" if Path(value).is_absolute()
+                    else f" (relative to the rig file's folder {base})")
+        raise ConfigError(f"no such file: {p}{relative}", file=str(rig_file), key=key,
+                          value=value, allowed="an existing file, or empty for the default")
+    return p
+
+
+@dataclass
+class RigParts:
+    """The configured, device-free parts of a run."""
+
+    rig_config: RigConfig
+    rig_file: Path
+    glove_config: GloveConfig
+    expander: Expander
+    sag: SagGrid
+    pipeline: PosePipeline
+    controls: GloveControls
+    orientation: ForearmAngles
+    glove_file: Path | None = None  # where glove_config was read from
+
+
+class ForearmAngles:
+    """Glove sample -> (inclination, rotation) of the forearm, in degrees.
+
+    Uses the sample's IMU quaternion through :class:`ForearmOrientation` (mount and
+    convention from glove.toml); a glove without an IMU (OpenGloves), or a sample
+    whose quaternion was rejected, gets the last good orientation, or the fixed
+    ``[forearm]`` of glove.toml before any.
+    """
+
+    def __init__(self, cfg: GloveConfig) -> None:
+        imu = cfg.imu
+        self.orientation = ForearmOrientation(
+            Rotation.from_quat(np.asarray(imu.mount_xyzw, dtype=np.float64)),
+            scalar_first=imu.order == "wxyz",
+            world=imu.world,
+        )
+        self.last = (cfg.forearm.inclination_deg, cfg.forearm.rotation_deg)
+        self.fixed = cfg.glove.format == "opengloves"
+
+    def __call__(self, sample: GloveSample) -> tuple[float, float]:
+        if self.fixed or sample.quat is None:
+            return self.last
+        inclination, rotation, ok = self.orientation.update(sample.quat)
+        if ok:
+            self.last = (inclination, rotation)
+        return self.last
+
+
+def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | None = None
+                ) -> RigParts:
+    """Load the rig, glove, map and grid configs and build the pose pipeline.
+
+    ``rig_file``: a rig file or a preset name (``"leap"``: ``config/rigs/leap.toml``);
+    None is the user's ``rig.toml`` (:func:`handrig.config.paths.config_file`), else the
+    installed ``config/rig.toml``. A robot rig's pipeline ends in its retarget table, with
+    the rig's effective sag gain (off unless ``[robot].sag`` is true)."""
+    rig_path = robotrig.rig_path(rig_file) if rig_file else config_file("rig.toml")
+    rig = robotrig.load_rig(rig_path)
+    retarget = (robotrig.robot_retarget(rig) if isinstance(rig, robotrig.RobotRigConfig)
+                else None)
+    base = rig_path.resolve().parent
+    loop = rig.loop
+    glove_path = Path(glove_file) if glove_file else _resolve(
+        base, loop.glove, default_glove_path(), rig_file=rig_path, key="loop.glove")
+    glove_cfg = load_glove_config(glove_path)
+    limits = load_joint_limits()
+    expander = Expander.from_file(_resolve(base, loop.map, CONFIG_DIR / "maps" / "default.toml",
+                                           rig_file=rig_path, key="loop.map"), limits)
+    sag = SagGrid.load(_resolve(base, loop.sag_grid, default_grid_path(), rig_file=rig_path,
+                                key="loop.sag_grid"))
+    pipeline = PosePipeline(
+        expander, sag, [s.joint for s in rig.servos],
+        servo_limits_deg=np.array([[s.min_deg, s.max_deg] for s in rig.servos]),
+        limits=limits, slew_deg_s=loop.slew_deg_s, sag_gain=rig.effective_sag_gain,
+        left_hand=loop.left_hand, control_means_deg=expander.control_means_deg,
+        left_forearm_deg=loop.left_forearm_deg, retarget=retarget,
+    )
+    controls = GloveControls.from_config(glove_cfg, expander.controls)
+    return RigParts(rig, rig_path, glove_cfg, expander, sag, pipeline, controls,
+                    ForearmAngles(glove_cfg), glove_path)
+
+
+def robot_model(rig: RigConfig) -> str | None:
+    """The MJCF model a robot rig drives (``[robot].model``, absolute); None for a human rig."""
+    return rig.robot.model if isinstance(rig, robotrig.RobotRigConfig) and rig.robot else None
+
+
+REPLAY_SUFFIXES = (".csv", ".txt")  # what a glove recording is usually called
+
+
+def glove_spec(spec: str | None, cfg: GloveConfig, glove_file: Path | None = None) -> str:
+    """The glove a run opens: ``spec`` (``--glove``), else the port in the glove file;
+    checked without opening anything. ConfigError naming ``--glove`` or the glove
+    file's ``glove.port``, with the fix: a recording given as a port (it would fail
+    with the terminal's ``Inappropriate ioctl for device``), a port or recording that
+    is not there, no port at all."""
+    if spec is None or spec == "":
+        if not cfg.glove.port:
+            raise ConfigError(
+                "no glove port given", key="glove.port",
+                file=str(glove_file) if glove_file is not None else "glove.toml",
+                allowed="pass --glove PORT (or replay:FILE.csv), or set [glove] port "
+                "in this file")
+        spec = cfg.glove.port if cfg.glove.format == "frames" else f"opengloves:{cfg.glove.port}"
+    if spec.startswith("replay:"):
+        path = Path(spec.removeprefix("replay:"))
+        if not path.is_file():
+            raise ConfigError(f"glove recording not found: {path}", key="--glove", value=spec,
+                              allowed="replay:FILE with an existing recording "
+                              "(`handrig record` or `handrig sim-glove --save` make one)")
+        return spec
+    port = Path(spec.removeprefix("opengloves:"))
+    if port.is_file() or (port.suffix.lower() in REPLAY_SUFFIXES and not port.exists()):
+        raise ConfigError("a file, not a serial port", key="--glove", value=spec,
+                          allowed=f"a serial port such as /dev/ttyUSB0; to play a "
+                          f"recording pass --glove replay:{port}")
+    if port.is_absolute() and not port.exists():
+        raise ConfigError(f"no such port: {port}", key="--glove", value=spec,
+                          allowed="the glove's serial port (plugged in? `ls /dev/ttyUSB* "
+                          "/dev/ttyACM*`), or replay:FILE.csv")
+    return spec
+
+
+def check_outputs(vmc: str | None, record: str | None) -> None:
+    """``--vmc`` and ``--record`` checked before any device is opened: ConfigError naming
+    the flag (a VMC target without its port, a recording suffix that is neither .csv nor
+    .bvh)."""
+    if vmc:
+        from handrig.outputs.vmc import DEFAULT_PORT, parse_host_port
+
+        if ":" not in vmc:
+            raise ConfigError("no port given", key="--vmc", value=vmc,
+                              allowed=f"HOST:PORT, e.g. {vmc}:{DEFAULT_PORT} (VMC's usual port)")
+        parse_host_port(vmc)
+    if record:
+        suffix = Path(record).suffix.lower()
+        if suffix not in (".csv", ".bvh"):
+            raise ConfigError(f"unknown recording suffix {suffix or '(none)'!r}", key="--record",
+                              value=record, allowed="a file name ending in .csv or .bvh")
+
+
+def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
+               glove_file: Path | None = None) -> GloveSource:
+    """``PORT``, ``opengloves:PORT`` or ``replay:FILE`` (None: the port in glove.toml),
+    checked first (:func:`glove_spec`)."""
+    spec = glove_spec(spec, cfg, glove_file)
+    if spec.startswith("replay:"):
+        return ReplayGlove(read_glove_recording(spec.removeprefix("replay:")), clock)
+    if spec.startswith("opengloves:"):
+        return SerialGlove(spec.removeprefix("opengloves:"), "opengloves", clock=clock,
+                           baud=cfg.glove.baud, analog_max=cfg.glove.analog_max,
+                           estop_letter=cfg.glove.estop_letter, reader="poll")
+    # reader="poll": the loop itself reads the port without blocking, so a frame is
+    # handled in the cycle that reads it (no reader thread competing for the GIL).
+    # a frame with fewer raw channels than the calibration reads is never settled on
+    needed = max(ch.raw_index() for ch in cfg.channels) + 1
+    return SerialGlove(spec, "frames", clock=clock, baud=cfg.glove.baud, reader="poll",
+                       min_channels=needed)
+
+
+def read_fields_for(rig: RigConfig) -> ReadFields:
+    """What the loop reads back: position, velocity and current when a goal write plus that
+    read fit in 70 % of a cycle on the wire, else position only (e.g. 20 servos at 1 Mbps
+    and 200 Hz: 4.4 ms of wire for the full read, 3.2 ms for positions, in a 5 ms cycle)."""
+    n, period = len(rig.servos), 1.0 / rig.loop.rate_hz
+    full = wire_time_s(cycle_bytes(n, data_len=10), rig.bus.baud)
+    return "motion" if full <= 0.7 * period else "position"
+
+
+@dataclass
+class OpenedBus:
+    """A servo bus the factory opened (not yet connected): the driver, its port, and the
+    emulator process behind it when the bus is simulated."""
+
+    bus: DynamixelBus
+    port: str
+    emulator: subprocess.Popen[str] | None = None
+
+    def emulator_output(self) -> str:
+        """What the emulator printed after its port line (read once it has stopped)."""
+        if self.emulator is None or self.emulator.stdout is None:
+            return ""
+        try:
+            return self.emulator.stdout.read() or ""
+        except (OSError, ValueError):
+            return ""
+
+
+@contextlib.contextmanager
+def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: bool = True,
+              viewer: bool = False, faults: str = "",
+              log: Callable[[str], None] = print) -> Iterator[OpenedBus]:
+    """The servo bus on ``spec`` (a port, ``"sim"``, None: rig.toml's port); closed on exit
+    (torque off if still on). ``"sim"`` starts ``handrig sim-bus`` (the MuJoCo puppet,
+    ``wire_timing``, ``viewer``, ``faults``) first and stops it after the bus is closed."""
+    rig_cfg = parts.rig_config
+    bus_spec = spec or rig_cfg.bus.port
+    with contextlib.ExitStack() as stack:
+        proc: subprocess.Popen[str] | None = None
+        if bus_spec == "sim":
+            argv = ["sim-bus", "--rig", str(parts.rig_file)]
+            if wire_timing:
+                argv.append("--wire-timing")
+            if viewer:
+                argv.append("--viewer")
+            if faults:
+                argv += ["--faults", faults]
+            proc, port = stack.enter_context(
+                port_process(argv, "the simulated servo bus (handrig sim-bus)"))
+            log(f"simulated servo bus (MuJoCo puppet) on {port}")
+        else:
+            port = bus_spec
+        # No reply poll (spin_s 0): the loop reads the servos once every few cycles, where
+        # the tens of microseconds a poll saves do not matter, and a SCHED_FIFO thread
+        # that polls holds back the kernel worker delivering the reply (and the glove's
+        # bytes) whenever that worker is queued on the loop's CPU.
+        bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=read_fields_for(rig_cfg),
+                           spin_s=0.0)
+        stack.callback(bus.close)
+        yield OpenedBus(bus, port, proc)
+
+
+def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
+            vmc: str | None = None, record: str | None = None,
+            log: Callable[[str], None] = print) -> list[Callable[[float, FloatArray], None]]:
+    """The outputs a run feeds the full pose to: a VMC sender (``HOST:PORT``), a
+    recorder (``.csv`` or ``.bvh``). Each is closed when ``stack`` unwinds."""
+    out: list[Callable[[float, FloatArray], None]] = []
+    if vmc:
+        from handrig.outputs.vmc import VmcSender, parse_host_port
+
+        host, port = parse_host_port(vmc)
+        sender = VmcSender(host, port, clock=clock)
+        stack.callback(sender.close)
+        out.append(sender)
+    if record:
+        from handrig.outputs.recorder import Recorder
+
+        recorder = Recorder(record, rate_hz=rig_cfg.loop.rate_hz)
+        stack.callback(lambda: log(f"recorded performance: {recorder.close()}"))
+        out.append(recorder)
+    return out
+
+
+@dataclass(frozen=True)
+class ResumeSettings:
+    """How the loop comes back after a glove loss: ``frames`` good frames in a row, then
+    easing to the glove's pose over ``time_s``. Read from ``[loop] resume_frames`` and
+    ``resume_time_s`` when the rig file has them."""
+
+    frames: int = 3
+    time_s: float = 0.3
+
+
+def resume_settings(rig_cfg: RigConfig) -> ResumeSettings:
+    loop = rig_cfg.loop
+    default = ResumeSettings()
+    return ResumeSettings(int(getattr(loop, "resume_frames", default.frames)),
+                          float(getattr(loop, "resume_time_s", default.time_s)))
+
+
+def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
+              outputs: Sequence[Callable[[float, FloatArray], None]] = (),
+              log: Callable[[str], None] = print, profile: bool = False) -> Rig:
+    """The loop on these devices, with the rig file's rates and safety timings. In loop
+    mode "glove" the ceiling is also held below the rate at which Sync Writes of Goal
+    Position fill the wire (``0.9 / wire time``), so writes never queue on the bus."""
+    loop = parts.rig_config.loop
+    resume = resume_settings(parts.rig_config)
+    rig_cfg = parts.rig_config
+    write_s = wire_time_s(14 + 5 * len(rig_cfg.servos), rig_cfg.bus.baud)  # 14 + 5N bytes
+    ceiling_hz = max(loop.floor_hz, min(loop.ceiling_hz, 0.9 / write_s))
+    return Rig(
+        glove, bus, parts.pipeline, clock,
+        controls_from_raw=parts.controls, orientation=parts.orientation,
+        rate_hz=loop.rate_hz, read_every=parts.rig_config.bus.read_every,
+        glove_timeout_s=loop.glove_timeout_s, relax_time_s=loop.relax_time_s,
+        resume_frames=resume.frames, resume_time_s=resume.time_s,
+        outputs=outputs, log=log, profile=profile,
+        loop_mode=loop.mode, floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz,
+        spin_s=loop.spin_us * 1e-6, catch_up=loop.catch_up, read_parts=rig_cfg.bus.read_parts,
+    )
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """A ``preexec_fn`` that has the child get SIGTERM when this process dies (Linux
+    ``PR_SET_PDEATHSIG``): an emulator in its own session would otherwise outlive a
+    rig that was killed. None where there is no such thing."""
+    try:
+        import ctypes
+
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    pr_set_pdeathsig = 1
+
+    def preexec() -> None:
+        prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
+    return preexec
+
+
+@contextlib.contextmanager
+def port_process(argv: Sequence[str], what: str, timeout_s: float = 30.0, *,
+                 module: str = "handrig.cli", cwd: str | Path | None = None
+                 ) -> Iterator[tuple[subprocess.Popen[str], str]]:
+    """Start ``python -m module ARGV`` (a handrig subcommand by default) that prints
+    ``port: PATH`` first; stop it on exit.
+
+    Yields the process and the port path. The process runs in its own session (the
+    terminal's Ctrl-C does not reach it) and gets SIGTERM if this process dies; on
+    exit it gets SIGTERM and is waited for, so the emulators shut down cleanly.
+    """
+    cmd = [sys.executable, "-m", module, *argv]
+    env = helper_env()  # off the loop's CPU
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, cwd=cwd, start_new_session=True,
+                            preexec_fn=_die_with_parent())
+    try:
+        assert proc.stdout is not None
+        sel = selectors.DefaultSelector()
+        sel.register(proc.stdout, selectors.EVENT_READ)
+        line = ""
+        if sel.select(timeout_s):
+            line = proc.stdout.readline().strip()
+        sel.close()
+        if not line.startswith("port: "):
+            proc.kill()
+            _, err = proc.communicate(timeout=5)
+            raise DeviceError(
+                f"{what} did not start ({' '.join(argv)}): "
+                f"{(line + ' ' + err).strip()[-400:] or 'no output'}"
+            )
+        yield proc, line.removeprefix("port: ")
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def stop_process(proc: subprocess.Popen[str]) -> str:
+    """SIGTERM a port process, wait, and return what it printed after its port line."""
+    if proc.poll() is None:
+        proc.terminate()
+    try:
+        out, err = proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+    return (out or "") + (err or "")
+
+
+FAULT_WORDS: dict[str, str] = {
+    "timeouts": "read timeouts",
+    "retries": "read retries",
+    "crc_errors": "replies with a bad CRC",
+    "malformed": "malformed replies",
+    "status_errors": "readings refused by a servo",
+    "fallbacks": "fallbacks to plain Sync Read",
+    "watchdog_trips": "Bus Watchdog trips",
+    "watchdog_gaps": "writes close to the Bus Watchdog",
+    "late_replies": "late replies dropped",
+    "skipped_reads": "reads skipped (no room on the wire)",
+    "stale_readings": "stale servo readings",
+    "hardware_errors": "servo hardware errors",
+    "reboots": "servo reboots",
+}
+"""Bus counters that are faults, as the summary names them (in this order)."""
+
+TOP_CLAMPED = 3  # joints named in the summary's clamp line
+
+
+def bus_faults(bus: dict[str, Any]) -> dict[str, int]:
+    """The non-zero fault counters of a summary's ``bus`` figures, named in words."""
+    return {FAULT_WORDS[k]: int(bus[k]) for k in FAULT_WORDS if bus.get(k)}
+
+
+def clamped_joints(pipeline: Any, top: int = TOP_CLAMPED) -> list[dict[str, Any]]:
+    """The servo joints whose targets were clamped most often (most first, none at 0)."""
+    counts = np.asarray(getattr(pipeline, "servo_clamps_by_servo", ()), dtype=np.int64)
+    joints = tuple(getattr(pipeline, "servo_joints", ()))
+    order: list[int] = np.argsort(-counts, kind="stable")[:top].tolist() if counts.size else []
+    return [{"joint": joints[i], "clamps": int(counts[i])} for i in order if counts[i] > 0]
+
+
+def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, Any]:
+    """What a run sent besides the servos: ``vmc`` (target, bundles, rate, errors) and
+    ``recording`` (path, format, frames, duration, bytes), None when off."""
+    out: dict[str, Any] = {"vmc": None, "recording": None}
+    for o in outs:
+        if hasattr(o, "bundles_sent") and hasattr(o, "address"):
+            sent = int(o.bundles_sent)
+            out["vmc"] = {"target": f"{o.address[0]}:{o.address[1]}", "bundles_sent": sent,
+                          "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
+                          "errors": int(getattr(o, "errors", 0)),
+                          "last_error": str(getattr(o, "last_error", ""))}
+        elif hasattr(o, "frames_written") and hasattr(o, "path"):
+            frames = int(o.frames_written)
+            rate = float(getattr(o, "rate_hz", 0.0) or 0.0)
+            out["recording"] = {
+                "path": str(o.path), "format": str(getattr(o, "fmt", "")), "frames": frames,
+                "duration_s": round(frames / rate, 3) if rate > 0 else None,
+                "bytes": int(getattr(o, "bytes_written", 0)),
+                "frames_dropped": int(getattr(o, "frames_dropped", 0))}
+    return out
+
+
+def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: bool | None,
+                 *, outputs: dict[str, Any] | None = None,
+                 clamped: list[dict[str, Any]] | None = None, ease_s: float = 0.0
+                 ) -> dict[str, Any]:
+    """The run's figures as one JSON-able object (the keys ``handrig demo --json`` promises).
+
+    ``outputs``: :func:`outputs_summary`; ``clamped``: :func:`clamped_joints`;
+    ``ease_s``: how long the run eased to the relaxed pose at its end (included in
+    ``frames`` and ``duration_s``; 0 when it ended at once)."""
+    s = stats
+
+    def num(x: float, nd: int = 3) -> float | None:
+        return None if x is None or not math.isfinite(x) else round(float(x), nd)
+    out: dict[str, Any] = {
+        "frames": s.frames,
+        "duration_s": num(s.duration_s),
+        "rate_hz": num(s.rate_hz, 2),
+        "jitter_us": num(s.jitter_us, 1),
+        "latency_us": {"p50": num(s.latency_us(50), 1), "p99": num(s.latency_us(99), 1),
+                       "max": num(s.latency_us(100), 1), "samples": s.latency.count},
+        "loop_mode": s.loop_mode,
+        "compute_us": {"p50": num(s.compute_us(50), 1), "p99": num(s.compute_us(99), 1),
+                       "max": num(s.compute_us(100), 1)},
+        "writes_per_s": num(s.rate_hz, 2),
+        "reads_per_s": num(s.reads / s.duration_s if s.duration_s > 0 else math.nan, 2),
+        "writes_delayed_by_reads": s.writes_delayed,
+        "cycles_without_frame": s.cycles_without_frame,
+        "frames_skipped": s.frames_skipped,
+        "frames_in_bursts": s.frames_in_bursts,
+        "frames_caught_up": s.frames_caught_up,
+        "ceiling_waits": s.ceiling_waits,
+        "cpu_per_cycle_us": num(s.cpu_per_cycle_us, 1),
+        "overruns": s.overruns,
+        "overrun_max_us": num(s.overrun_max_s * 1e6, 1),
+        "missed_cycles": s.missed_cycles,
+        "limit_clamps": s.servo_clamps,
+        "pose_clamps": s.clamps,
+        "nonfinite_targets": s.nonfinite,
+        "bus_clamps": s.bus_clamps,
+        "slew_limited": s.slewed,
+        "tracking_rms_deg": num(s.tracking_rms_deg),
+        "tracking_max_deg": num(s.tracking_max_deg),
+        "reads": s.reads,
+        "stale_reads": s.stale_reads,
+        "relax_events": s.relax_events,
+        "resumes": s.resumes,
+        "estop": s.estop,
+        "stop_reason": s.stop_reason,
+        "events": list(s.events),
+        "events_total": s.events.total,
+        "torque_off": torque_off,
+        "ease_s": num(ease_s),
+        "clamped_joints": list(clamped or []),
+        "outputs": outputs if outputs is not None else {"vmc": None, "recording": None},
+        "faults": {},
+    }
+    if glove_stats is not None:
+        out["glove"] = {
+            "frames_ok": glove_stats.frames_ok, "crc_errors": glove_stats.crc_errors,
+            "decode_errors": glove_stats.decode_errors, "resyncs": glove_stats.resyncs,
+            "seq_gaps": glove_stats.seq_gaps, "frames_used": s.glove_samples,
+            "channel_errors": getattr(glove_stats, "channel_errors", 0),
+            "disconnects": getattr(glove_stats, "disconnects", 0),
+            "reconnects": getattr(glove_stats, "reconnects", 0),
+            "last_outage_s": num(getattr(glove_stats, "last_outage_s", 0.0)),
+        }
+    if bus_stats is not None:
+        bus: dict[str, Any] = {}
+        for k, v in vars(bus_stats).items():
+            if k.startswith("_") or k == "n_servos":
+                continue
+            if isinstance(v, np.ndarray):
+                bus[k] = int(v.sum())
+            elif isinstance(v, int | float):
+                bus[k] = v
+        out["bus"] = bus
+        out["faults"] = bus_faults(bus)
+    return out

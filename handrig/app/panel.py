@@ -1,0 +1,715 @@
+"""The show console of ``handrig run``: a live panel and the keys a puppeteer presses.
+
+The panel draws a :class:`PanelSnapshot`, a plain record of figures (mode and
+its reason, glove link, latency, bus health, per-servo state, outputs), so it
+is tested without a rig and fed by whatever runs the loop:
+
+* :func:`render` lays a snapshot out for a terminal of 80 x 24 (:mod:`rich`);
+* :func:`plain_line` is the same as one line of text, for a log or a pipe;
+* :class:`LivePanel` redraws from a snapshot source a few times a second from
+  its own thread (the realtime loop never waits for the terminal): on a
+  terminal below the lines printed before it (commissioning, once), else as a
+  plain line every few seconds;
+* :class:`RigSnapshot` takes the snapshot of a running :class:`~handrig.loop.rig.Rig`;
+* :class:`KeyReader` reads keys from a terminal without blocking and calls
+  their callbacks: space relaxes or resumes, ``q`` stops (ease, then torque
+  off), ``e`` is the e-stop (torque off at once) (:data:`SHOW_KEYS`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import select
+import termios
+import threading
+import tty
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from rich.console import Console, Group
+from rich.live import Live
+from rich.text import Text
+
+from firmware_protocol.dynamixel import HardwareError
+
+WIDTH = 80
+HEIGHT = 24
+SERVO_COLUMNS = 2
+NAN = math.nan
+
+SHOW_KEYS: dict[str, str] = {
+    " ": "relax/resume",
+    "q": "stop (ease, torque off)",
+    "e": "e-stop (torque off now)",
+}
+"""The show's keys and what each does (the callbacks are the loop's)."""
+
+HARDWARE_ERROR_LETTERS: tuple[tuple[int, str], ...] = (
+    (HardwareError.INPUT_VOLTAGE, "V"),
+    (HardwareError.OVERHEATING, "H"),
+    (HardwareError.MOTOR_ENCODER, "E"),
+    (HardwareError.ELECTRICAL_SHOCK, "S"),
+    (HardwareError.OVERLOAD, "L"),
+)
+"""Hardware Error Status bits as the panel's letters (the legend is on the panel)."""
+
+MODE_STYLES = {"running": "bold green", "waiting": "bold cyan", "relaxing": "bold yellow",
+               "resuming": "bold cyan", "stopping": "bold red", "e-stop": "bold white on red",
+               "stopped": "bold"}
+
+
+# -- the snapshot --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GloveLink:
+    """The glove as the loop sees it."""
+
+    source: str = ""  # port, opengloves:PORT or replay:FILE
+    rate_hz: float = NAN  # good frames per second, recently
+    frames_ok: int = 0
+    errors: int = 0  # rejected frames of every kind (CRC, decoding)
+    last_frame_age_s: float = math.inf  # since the last good frame arrived
+    reconnects: int = 0
+    failure: str = ""  # why the link is down, if it is
+
+
+@dataclass(frozen=True)
+class BusHealth:
+    """The servo bus: rates and faults."""
+
+    port: str = ""
+    read_rate_hz: float = NAN  # present-state reads per second, recently
+    write_rate_hz: float = NAN  # goal Sync Writes per second, recently
+    timeouts: int = 0
+    errors: int = 0  # CRC, malformed and refused replies
+    stale_servos: int = 0  # servos whose newest reading is stale
+    stale_worst_age_s: float = 0.0  # age of the oldest of those readings
+
+
+@dataclass(frozen=True)
+class ServoLine:
+    """One servo's row. NaN: never read."""
+
+    id: int
+    joint: str
+    goal_deg: float = NAN
+    present_deg: float = NAN  # the newest good reading (stale ones are marked by ``stale``)
+    stale: bool = False
+    temperature_c: float = NAN
+    temperature_limit_c: float = NAN  # the servo's Temperature Limit, if known
+    current_ma: float = NAN  # Present Current (or load, as mA equivalent)
+    hardware_error: int = 0  # Hardware Error Status bits, 0 = none
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """Where the performance goes besides the servos ("" = off)."""
+
+    vmc_target: str = ""  # HOST:PORT
+    vmc_rate_hz: float = NAN  # bundles sent per second, recently
+    vmc_errors: int = 0
+    record_path: str = ""
+    record_bytes: int = 0  # on disk so far
+    record_duration_s: float = 0.0  # of performance recorded
+
+
+@dataclass(frozen=True)
+class PanelSnapshot:
+    """Everything the panel shows, at one moment. Times in seconds, rates in Hz."""
+
+    mode: str = "waiting"  # waiting, running, relaxing, resuming, stopping, e-stop, stopped
+    reason: str = ""  # why the mode is what it is (relaxing, stopping)
+    elapsed_s: float = 0.0
+    loop_rate_hz: float = NAN
+    overruns: int = 0
+    latency_p50_us: float = NAN  # glove frame's arrival -> Sync Write handed to the OS
+    latency_p99_us: float = NAN
+    glove: GloveLink = field(default_factory=GloveLink)
+    bus: BusHealth = field(default_factory=BusHealth)
+    servos: tuple[ServoLine, ...] = ()
+    outputs: Outputs = field(default_factory=Outputs)
+    events: tuple[str, ...] = ()  # the newest last
+    keys: bool = True  # whether the show keys are read (a KeyReader on a terminal)
+
+
+# -- formatting -----------------------------------------------------------------------
+
+
+def _num(value: float, spec: str = ".0f", missing: str = "-") -> str:
+    return missing if value is None or not math.isfinite(value) else format(value, spec)
+
+
+def _age(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "never"
+    if seconds < 1.0:
+        return f"{seconds * 1e3:.0f} ms"
+    if seconds < 120:
+        return f"{seconds:.1f} s"
+    return _clock(seconds)
+
+
+def _clock(seconds: float) -> str:
+    s = int(max(seconds, 0.0))
+    h, rem = divmod(s, 3600)
+    return f"{h}:{rem // 60:02d}:{rem % 60:02d}" if h else f"{rem // 60:d}:{rem % 60:02d}"
+
+
+def _size(n_bytes: int) -> str:
+    value, unit = float(n_bytes), "B"
+    for bigger in ("kB", "MB", "GB"):
+        if value < 1024:
+            break
+        value, unit = value / 1024, bigger
+    return f"{value:.0f} {unit}" if unit == "B" else f"{value:.1f} {unit}"
+
+
+def _fit(text: str, width: int) -> str:
+    """``text`` cut to ``width`` characters, the cut marked with an ellipsis."""
+    return text if len(text) <= width else text[: max(width - 1, 0)] + "…"
+
+
+def _fit_left(text: str, width: int) -> str:
+    """Like :func:`_fit`, keeping the end (a path's file name)."""
+    return text if len(text) <= width else "…" + text[len(text) - width + 1:]
+
+
+def short_joint(name: str) -> str:
+    """A joint name for a 10-character column: no hand prefix, long words shortened."""
+    stem = name[2:] if name[:2] in ("ri", "le") else name
+    stem = stem.replace("Flexion", "Flex").replace("Deviation", "Dev")
+    return _fit(stem, 10)
+
+
+def error_letters(bits: int) -> str:
+    """Hardware Error Status as letters (:data:`HARDWARE_ERROR_LETTERS`), "" for none."""
+    return "".join(letter for bit, letter in HARDWARE_ERROR_LETTERS if bits & bit)
+
+
+def _deg(value: float) -> str:
+    if not math.isfinite(value):
+        return "-"
+    return f"{value:+.0f}" if abs(value) >= 99.95 else f"{value:+.1f}"
+
+
+def mode_line(s: PanelSnapshot) -> Text:
+    mode = s.mode.upper()
+    text = Text.assemble(("handrig ", "bold"), (f" {mode} ", MODE_STYLES.get(s.mode, "bold")))
+    right = f"  {_clock(s.elapsed_s)}"
+    room = WIDTH - len(text.plain) - len(right) - 2
+    if s.reason and room > 3:
+        text.append("  " + _fit(s.reason, room), style="yellow" if s.mode != "running" else "")
+    text.append(" " * max(0, WIDTH - len(text.plain) - len(right)) + right)
+    return text
+
+
+def glove_line(g: GloveLink) -> Text:
+    age_style = "" if g.last_frame_age_s < 0.1 else "bold yellow"
+    text = Text.assemble(
+        ("glove  ", "bold"), _fit_left(g.source or "-", 22),
+        f"  {_num(g.rate_hz, '.1f')} Hz  errors ",
+        (str(g.errors), "bold red" if g.errors else ""),
+        "  last ", (_age(g.last_frame_age_s), age_style),
+        f"  reconnects {g.reconnects}",
+    )
+    if g.failure:
+        text.append("  " + _fit(g.failure, max(0, WIDTH - len(text.plain) - 2)), "bold red")
+    return text
+
+
+def loop_line(s: PanelSnapshot) -> Text:
+    return Text.assemble(
+        ("loop   ", "bold"), f"{_num(s.loop_rate_hz, '.1f')} Hz  latency p50 ",
+        (f"{_num(s.latency_p50_us)} us", "bold"), f"  p99 {_num(s.latency_p99_us)} us"
+        "  overruns ", (str(s.overruns), "bold red" if s.overruns else ""),
+    )
+
+
+def bus_line(b: BusHealth) -> Text:
+    stale = (Text(f"{b.stale_servos} (worst {_age(b.stale_worst_age_s)})", "bold yellow")
+             if b.stale_servos else Text("none"))
+    return Text.assemble(
+        ("bus    ", "bold"), _fit_left(b.port or "-", 14),
+        f"  reads {_num(b.read_rate_hz)}/s  timeouts ",
+        (str(b.timeouts), "yellow" if b.timeouts else ""), "  errors ",
+        (str(b.errors), "bold red" if b.errors else ""), "  stale ", stale,
+    )
+
+
+def outputs_line(o: Outputs) -> Text:
+    text = Text.assemble(("out    ", "bold"))
+    if o.vmc_target:
+        text.append(f"VMC {_fit(o.vmc_target, 21)} {_num(o.vmc_rate_hz)} Hz")
+        if o.vmc_errors:
+            text.append(f" {o.vmc_errors} err", "bold red")
+    else:
+        text.append("VMC off", "dim")
+    text.append("  |  ")
+    if o.record_path:
+        name = _fit_left(o.record_path, 20)
+        text.append(f"rec {name} {_size(o.record_bytes)} {_clock(o.record_duration_s)}")
+    else:
+        text.append("rec off", "dim")
+    return text
+
+
+def _servo_cell(sv: ServoLine | None) -> Text:
+    if sv is None:
+        return Text(" " * 37)
+    hot = ""
+    if math.isfinite(sv.temperature_c) and math.isfinite(sv.temperature_limit_c):
+        hot = ("bold red" if sv.temperature_c >= sv.temperature_limit_c else
+               "yellow" if sv.temperature_c >= sv.temperature_limit_c - 10 else "")
+    err = error_letters(sv.hardware_error)
+    current = abs(sv.current_ma) if math.isfinite(sv.current_ma) else NAN
+    return Text.assemble(
+        f"{sv.id:>2} {short_joint(sv.joint):<10} {_deg(sv.goal_deg):>5} ",
+        (f"{_deg(sv.present_deg):>5}", "dim" if sv.stale else ""), " ",
+        (f"{_num(sv.temperature_c):>3}", hot), f" {_num(current):>4} ",
+        (f"{err or '-':<2}", "bold red" if err else "dim"),
+    )
+
+
+SERVO_HEADER = " id joint       goal   now  °C   mA er"
+
+
+def servo_rows(servos: Sequence[ServoLine]) -> list[Text]:
+    """The servo table: a header, then two servos per line (first half left)."""
+    half = -(-len(servos) // SERVO_COLUMNS)
+    gap = " │ "
+    rows = [Text(_fit(SERVO_HEADER[1:] + " " + gap + SERVO_HEADER[1:], WIDTH), "bold dim")]
+    for r in range(half):
+        left = servos[r]
+        right = servos[r + half] if r + half < len(servos) else None
+        rows.append(Text.assemble(_servo_cell(left), gap, _servo_cell(right)))
+    return rows
+
+
+LEGEND = "er: V voltage H overheating E encoder S shock L overload; now dimmed: stale"
+
+
+def keys_line(s: PanelSnapshot) -> Text:
+    if not s.keys:
+        return Text("keys off: Ctrl-C stops (ease, then torque off)", "dim")
+    text = Text()
+    for key, what in SHOW_KEYS.items():
+        text.append(" space " if key == " " else f" {key} ", "reverse")
+        text.append(f" {what} ")
+    return text
+
+
+def render(s: PanelSnapshot, height: int = HEIGHT) -> Group:
+    """One frame of the panel: at most 80 columns and ``height`` lines."""
+    lines = [mode_line(s), glove_line(s.glove), loop_line(s), bus_line(s.bus),
+             outputs_line(s.outputs), *servo_rows(s.servos), Text(_fit(LEGEND, WIDTH), "dim")]
+    room = height - len(lines) - 1
+    for event in s.events[-max(0, min(room, 3)):] if room > 0 else ():
+        lines.append(Text(_fit(event, WIDTH), "yellow"))
+    lines.append(keys_line(s))
+    for line in lines:
+        line.truncate(WIDTH)
+    return Group(*lines[:height])
+
+
+def plain_line(s: PanelSnapshot) -> str:
+    """The snapshot as one line of text (no terminal: a log, a pipe)."""
+    g, b, o = s.glove, s.bus, s.outputs
+    hot = max((sv.temperature_c for sv in s.servos if math.isfinite(sv.temperature_c)),
+              default=NAN)
+    faults = sum(1 for sv in s.servos if sv.hardware_error)
+    parts = [
+        f"{_clock(s.elapsed_s)} {s.mode}" + (f" ({s.reason})" if s.reason else ""),
+        f"glove {_num(g.rate_hz, '.0f')} Hz err {g.errors} last {_age(g.last_frame_age_s)}"
+        f" reconnects {g.reconnects}",
+        f"latency p50 {_num(s.latency_p50_us)} p99 {_num(s.latency_p99_us)} us",
+        f"bus {_num(b.read_rate_hz)} reads/s timeouts {b.timeouts} errors {b.errors} stale "
+        + (f"{b.stale_servos} (worst {_age(b.stale_worst_age_s)})" if b.stale_servos
+           else "none"),
+        f"servos max {_num(hot)} C, {faults} with errors",
+        f"vmc {o.vmc_target} {_num(o.vmc_rate_hz)} Hz" if o.vmc_target else "vmc off",
+        (f"rec {o.record_path} {_size(o.record_bytes)} {_clock(o.record_duration_s)}"
+         if o.record_path else "rec off"),
+    ]
+    return " | ".join(parts)
+
+
+# -- the live panel --------------------------------------------------------------------
+
+
+def show_console() -> Console:
+    """The console a show's panel draws on: stdout when it is a terminal; else plain
+    lines on stderr, so that stdout carries only the summary."""
+    out = Console()
+    return out if out.is_terminal else Console(stderr=True, force_terminal=False)
+
+
+
+class LivePanel:
+    """Redraws a :class:`PanelSnapshot` from ``source`` while the show runs.
+
+    ``source``: a callable returning the current snapshot (called from the
+    panel's thread), or a :class:`~handrig.loop.rig.Rig` (wrapped in :class:`RigSnapshot`).
+    ``header``: lines printed once, above the panel (the commissioning report).
+    On a terminal the panel redraws at ``refresh_hz`` below what was printed
+    before it; :meth:`log` prints above it. Without a terminal it prints
+    :func:`plain_line` every ``plain_every_s`` seconds and once at the end.
+    """
+
+    def __init__(
+        self,
+        source: Callable[[], PanelSnapshot] | Any,
+        refresh_hz: float = 4.0,
+        console: Console | None = None,
+        *,
+        header: Sequence[str] = (),
+        plain_every_s: float = 5.0,
+    ) -> None:
+        if not callable(source):
+            source = RigSnapshot(source)
+        self.source: Callable[[], PanelSnapshot] = source
+        self.refresh_s = 1.0 / refresh_hz
+        self.plain_every_s = plain_every_s
+        self.console = console or Console()
+        self.header = tuple(header)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._live: Live | None = None
+        self.failure = ""  # the source's error, if it raised (the panel then stops)
+
+    def _snapshot(self) -> PanelSnapshot | None:
+        try:
+            return self.source()
+        except Exception as exc:  # the panel must never take the show down with it
+            self.failure = f"panel stopped: the snapshot failed: {exc!r}"
+            return None
+
+    def log(self, text: str) -> None:
+        """Print a line above the panel (or as a line without a terminal)."""
+        self.console.print(text, markup=False, highlight=False, soft_wrap=True)
+
+    def _loop_live(self) -> None:
+        first = self._snapshot()
+        if first is None:
+            return
+        height = min(HEIGHT, self.console.size.height)
+        with Live(render(first, height), console=self.console, auto_refresh=False,
+                  transient=False, vertical_overflow="crop") as live:
+            self._live = live
+            while not self._stop.wait(self.refresh_s):
+                snap = self._snapshot()
+                if snap is None:
+                    break
+                live.update(render(snap, min(HEIGHT, self.console.size.height)), refresh=True)
+            snap = self._snapshot()
+            if snap is not None:
+                live.update(render(snap, height), refresh=True)
+            self._live = None
+        if self.failure:
+            self.log(self.failure)
+
+    def _loop_plain(self) -> None:
+        while not self._stop.wait(self.plain_every_s):
+            snap = self._snapshot()
+            if snap is None:
+                break
+            self.log(plain_line(snap))
+        snap = self._snapshot()
+        if snap is not None:
+            self.log(plain_line(snap))
+        if self.failure:
+            self.log(self.failure)
+
+    def __enter__(self) -> LivePanel:
+        for line in self.header:
+            self.log(line)
+        target = self._loop_live if self.console.is_terminal else self._loop_plain
+        self._thread = threading.Thread(target=target, name="handrig-panel", daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+
+
+# -- a rig's snapshot -------------------------------------------------------------------
+
+
+class _Rate:
+    """Events per second of a growing counter, over the last ``window_s`` or more."""
+
+    def __init__(self, window_s: float = 1.0) -> None:
+        self.window_s = window_s
+        self._marks: list[tuple[float, int]] = []
+        self.value = NAN
+
+    def update(self, now: float, count: int) -> float:
+        self._marks.append((now, count))
+        while len(self._marks) > 2 and now - self._marks[1][0] >= self.window_s:
+            self._marks.pop(0)
+        t0, c0 = self._marks[0]
+        if now - t0 > 0:
+            self.value = (count - c0) / (now - t0)
+        return self.value
+
+
+class RigSnapshot:
+    """``RigSnapshot(rig)()``: the :class:`PanelSnapshot` of a running rig.
+
+    Reads the rig's counters, its glove's and bus's statistics, its newest
+    servo state, and the VMC sender and recorder among its outputs. Rates are
+    taken over the last second between calls. ``glove_source`` and
+    ``temperature_limit_c`` (servo id -> limit) are shown when given; ``keys``:
+    whether a :class:`KeyReader` is listening (the panel says so either way).
+    """
+
+    def __init__(self, rig: Any, *, glove_source: str = "",
+                 temperature_limit_c: Mapping[int, float] | None = None,
+                 keys: bool = False) -> None:
+        self.rig = rig
+        self.glove_source = glove_source
+        self.keys = keys
+        self.temperature_limit_c = dict(temperature_limit_c or {})
+        self._rates = {k: _Rate() for k in ("loop", "glove", "reads", "writes", "vmc")}
+
+    def __call__(self) -> PanelSnapshot:
+        rig = self.rig
+        now = rig.clock.now()
+        stats = rig.stats
+        elapsed = now - rig.started_at if stats.frames else 0.0  # started_at is set by then
+        lat = np.asarray(stats.latencies_s[-2000:], dtype=np.float64)
+        p50, p99 = (np.percentile(lat, [50, 99]) * 1e6) if lat.size else (NAN, NAN)
+        mode = getattr(rig.mode, "value", str(rig.mode))
+        if stats.estop:
+            mode = "e-stop"
+        reason = ""
+        if mode in ("stopping", "e-stop"):
+            reason = stats.stop_reason or (stats.events[-1] if stats.events else "")
+        elif mode in ("relaxing", "resuming") and stats.events:
+            reason = stats.events[-1]
+        elif mode == "waiting":
+            reason = "no glove frame yet: holding where the servos are"
+        return PanelSnapshot(
+            mode=mode, reason=reason, elapsed_s=elapsed,
+            loop_rate_hz=self._rates["loop"].update(now, stats.frames),
+            overruns=stats.overruns, latency_p50_us=float(p50), latency_p99_us=float(p99),
+            glove=self._glove(now), bus=self._bus(now), servos=self._servos(now),
+            outputs=self._outputs(now), events=tuple(stats.events[-3:]), keys=self.keys,
+        )
+
+    def _glove(self, now: float) -> GloveLink:
+        stats_fn = getattr(self.rig.glove, "stats", None)
+        if stats_fn is None:
+            return GloveLink(self.glove_source)
+        g = stats_fn()
+        return GloveLink(
+            source=self.glove_source or str(getattr(self.rig.glove, "port", "")),
+            rate_hz=self._rates["glove"].update(now, g.frames_ok), frames_ok=g.frames_ok,
+            errors=g.errors, last_frame_age_s=g.time_since_last_good_s,
+            reconnects=g.reconnects, failure=g.failure)
+
+    def _bus(self, now: float) -> BusHealth:
+        bus = self.rig.bus
+        b = getattr(bus, "stats", None)
+        state = self.rig.last_state
+        stale_n, worst = 0, 0.0
+        if state is not None:
+            stale = np.asarray(state.stale, dtype=bool)
+            stale_n = int(stale.sum())
+            if stale_n:
+                since = max(0.0, now - float(state.timestamp_s))
+                worst = float(np.max(np.asarray(state.age_s)[stale])) + since
+        if b is None:
+            return BusHealth(stale_servos=stale_n, stale_worst_age_s=worst)
+        return BusHealth(
+            port=str(getattr(bus, "port", "")),
+            read_rate_hz=self._rates["reads"].update(now, b.reads),
+            write_rate_hz=self._rates["writes"].update(now, b.writes),
+            timeouts=b.timeouts, errors=b.crc_errors + b.malformed + b.status_errors,
+            stale_servos=stale_n, stale_worst_age_s=worst)
+
+    def _servos(self, now: float) -> tuple[ServoLine, ...]:
+        rig = self.rig
+        joints = tuple(rig.pipeline.servo_joints)
+        ids = list(getattr(rig.bus, "ids", None) or range(1, len(joints) + 1))
+        goals = np.asarray(rig.pipeline.targets, dtype=np.float64)
+        state = rig.last_state
+
+        def column(name: str, default: float = NAN) -> np.ndarray:
+            arr = getattr(state, name, None)
+            return (np.full(len(joints), default) if arr is None
+                    else np.asarray(arr, dtype=np.float64))
+
+        pos, temp, cur = (column("positions_deg"), column("temperatures_c"),
+                          column("currents_ma"))
+        hw = column("hardware_errors", 0.0)
+        stale = column("stale", 0.0)
+        return tuple(
+            ServoLine(int(ids[i]), joint, float(goals[i]), float(pos[i]), bool(stale[i]),
+                      float(temp[i]), self.temperature_limit_c.get(int(ids[i]), NAN),
+                      float(cur[i]), int(hw[i]))
+            for i, joint in enumerate(joints))
+
+    def _outputs(self, now: float) -> Outputs:
+        vmc_target, vmc_rate, vmc_err = "", NAN, 0
+        rec_path, rec_bytes, rec_s = "", 0, 0.0
+        for out in self.rig.outputs:
+            address = getattr(out, "address", None)
+            if address is not None and hasattr(out, "bundles_sent"):
+                vmc_target = f"{address[0]}:{address[1]}"
+                vmc_rate = self._rates["vmc"].update(now, out.bundles_sent)
+                vmc_err = int(getattr(out, "errors", 0))
+            elif hasattr(out, "n_frames") and hasattr(out, "path"):
+                rec_path = str(out.path)
+                rec_s = out.n_frames / float(getattr(out, "rate_hz", 0.0) or 1.0)
+                rec_bytes = _bytes_on_disk(Path(out.path))
+        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s)
+
+
+def _bytes_on_disk(path: Path) -> int:
+    """Size of a recording being written (its ``.partial`` file until it is closed)."""
+    total = 0
+    for p in (path, path.with_name(path.name + ".partial")):
+        with contextlib.suppress(OSError):
+            total = max(total, p.stat().st_size)
+    return total
+
+
+# -- keys -------------------------------------------------------------------------------
+
+
+class KeyReader:
+    """Single keys from a terminal, read without blocking, each calling its callback.
+
+    ``bindings``: key -> callable (e.g. ``{" ": toggle_relax, "q": stop, "e":
+    estop}``, see :meth:`for_show`); letters match either case. Within ``with``
+    (or between :meth:`open` and :meth:`close`) the terminal on ``fd`` is in
+    cbreak mode: keys arrive one at a time and are not echoed, Ctrl-C still
+    interrupts; the previous settings are restored on close, also after an
+    error. :meth:`poll` handles what has arrived and never waits; :meth:`start`
+    polls from a thread. Escape sequences (arrow keys) are ignored. A callback
+    that raises is reported to ``on_error``; without one it is re-raised from
+    :meth:`poll`, and the thread keeps it in :attr:`error` and stops reading.
+    """
+
+    def __init__(self, fd: int, bindings: Mapping[str, Callable[[], None]], *,
+                 poll_s: float = 0.05,
+                 on_error: Callable[[BaseException], None] | None = None) -> None:
+        self.fd = fd
+        self.bindings = {(k if len(k) == 1 and not k.isalpha() else k.lower()): v
+                         for k, v in bindings.items()}
+        self.poll_s = poll_s
+        self.on_error = on_error
+        self.pressed: list[str] = []  # every bound key handled, in order
+        self.eof = False  # the terminal went away
+        self.error: BaseException | None = None  # what stopped the thread
+        self._saved: list[Any] | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @classmethod
+    def for_show(cls, fd: int, *, toggle_relax: Callable[[], None], stop: Callable[[], None],
+                 estop: Callable[[], None], **kwargs: Any) -> KeyReader:
+        """The show's keys (:data:`SHOW_KEYS`): space, ``q`` and ``e``."""
+        return cls(fd, {" ": toggle_relax, "q": stop, "e": estop}, **kwargs)
+
+    def open(self) -> KeyReader:
+        """Put the terminal in cbreak mode (nothing happens if ``fd`` is no terminal)."""
+        if self._saved is None and os.isatty(self.fd):
+            self._saved = termios.tcgetattr(self.fd)
+            tty.setcbreak(self.fd, termios.TCSANOW)
+        return self
+
+    def close(self) -> None:
+        """Stop the thread and restore the terminal. Idempotent."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        self._thread = None
+        if self._saved is not None:
+            with contextlib.suppress(termios.error, OSError):
+                termios.tcsetattr(self.fd, termios.TCSADRAIN, self._saved)
+            self._saved = None
+
+    def __enter__(self) -> KeyReader:
+        return self.open()
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def poll(self, timeout_s: float = 0.0) -> int:
+        """Handle the keys that arrived (waiting at most ``timeout_s`` for the first);
+        returns how many bound keys were handled."""
+        handled = 0
+        wait = timeout_s
+        while not self.eof:
+            try:
+                ready, _, _ = select.select([self.fd], [], [], wait)
+            except (OSError, ValueError):
+                self.eof = True
+                break
+            if not ready:
+                break
+            wait = 0.0
+            try:
+                data = os.read(self.fd, 64)
+            except BlockingIOError:
+                break
+            except OSError:
+                data = b""
+            if not data:
+                self.eof = True
+                break
+            handled += self._dispatch(data.decode("utf-8", errors="ignore"))
+        return handled
+
+    def _dispatch(self, text: str) -> int:
+        handled = 0
+        i = 0
+        while i < len(text):
+            ch = text[i]
+            i += 1
+            if ch == "\x1b":  # an escape sequence: skip to its final byte
+                while i < len(text) and not (text[i].isalpha() or text[i] == "~"):
+                    i += 1
+                i += 1
+                continue
+            fn = self.bindings.get(ch.lower() if ch.isalpha() else ch)
+            if fn is None:
+                continue
+            self.pressed.append(ch)
+            handled += 1
+            try:
+                fn()
+            except Exception as exc:
+                if self.on_error is None:
+                    raise
+                self.on_error(exc)
+        return handled
+
+    def start(self) -> KeyReader:
+        """Poll from a background thread until :meth:`close` (opens the terminal first)."""
+        self.open()
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="handrig-keys",
+                                            daemon=True)
+            self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.is_set() and not self.eof:
+            try:
+                self.poll(self.poll_s)
+            except Exception as exc:  # a callback failed and there is no on_error
+                self.error = exc
+                return

@@ -1,0 +1,197 @@
+"""Robot-hand rig files: servos that drive the joints of a robot's MJCF model.
+
+A robot rig is a rig file (see :mod:`handrig.config.rig`) with a ``[robot]`` table::
+
+    [robot]
+    name = "LEAP hand (right)"
+    model = "../../data/robots/leap_hand/right_hand.xml"  # MJCF, relative to this file
+    retarget = "leap_retarget.toml"                        # human curves -> robot joints
+    sag = false                                            # passive sag off unless true
+
+and ``[[servos]]`` whose ``joint`` is a joint of that model (``if_mcp``), its angle
+in degrees as the model measures it, instead of a human curve. Loading checks what
+a rig file is checked for, and also that every servo's joint is a hinge of the
+model within whose range the servo's limits lie, that the retarget table agrees
+with the model, and that every servo's joint has a row in the table. Paths in
+the loaded config are absolute.
+
+Presets live in ``config/rigs/``: ``load_rig("leap")`` is ``config/rigs/leap.toml``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from handrig.config.loading import CONFIG_DIR, load, load_toml
+from handrig.config.rig import (
+    POSITION_TICKS_MAX,
+    POSITION_TICKS_MIN,
+    RigConfig,
+    ServoCalibration,
+    load_rig_config,
+)
+from handrig.errors import ConfigError
+from handrig.hand import is_joint_name
+from handrig.pose.mjcf import MjcfJoint, read_joints
+from handrig.pose.retarget import Retarget, load_retarget
+
+RIGS_DIR = CONFIG_DIR / "rigs"
+"""Shipped rig presets (``config/rigs/<name>.toml``)."""
+_JOINT_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+RANGE_TOLERANCE_DEG = 0.05  # servo limits may round the model's range by this much
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """``[robot]``: the model the servos drive and the retarget table that feeds them."""
+
+    model: str
+    retarget: str
+    name: str = ""
+    sag: bool = False  # robot servos hold position: no passive sag unless switched on
+
+    def check(self) -> None:
+        for key in ("model", "retarget"):
+            if not getattr(self, key):
+                raise ConfigError("must name a file", key=key)
+
+
+@dataclass(frozen=True)
+class RobotServoCalibration(ServoCalibration):
+    """A servo of a robot rig: ``joint`` is a joint of the robot's model, degrees as the
+    model measures them. Same mapping to ticks as :class:`ServoCalibration`."""
+
+    def check(self) -> None:
+        if not 0 <= self.id <= 252:
+            raise ConfigError("servo ID out of range", key="id", value=self.id, allowed="0..252")
+        if not _JOINT_NAME.match(self.joint):
+            raise ConfigError("not a joint name", key="joint", value=self.joint,
+                              allowed="a joint of the robot's MJCF model, e.g. if_mcp")
+        if is_joint_name(self.joint):
+            raise ConfigError(
+                "a human curve in a robot rig", key="joint", value=self.joint,
+                allowed="a joint of the robot's model; human curves reach it through "
+                "[robot].retarget",
+            )
+        if not POSITION_TICKS_MIN <= self.zero_ticks <= POSITION_TICKS_MAX:
+            raise ConfigError("zero outside the position range", key="zero_ticks",
+                              value=self.zero_ticks,
+                              allowed=f"{POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}")
+        if not 0.1 <= self.gear_ratio <= 20.0:
+            raise ConfigError("implausible gear ratio", key="gear_ratio", value=self.gear_ratio,
+                              allowed="0.1..20 servo turns per joint turn")
+        if self.min_deg >= self.max_deg:
+            raise ConfigError("inverted limit: min_deg must be below max_deg", key="min_deg",
+                              value=[self.min_deg, self.max_deg], allowed="min_deg < max_deg")
+        for key, bound in (("min_deg", self.min_deg), ("max_deg", self.max_deg)):
+            tick = self.deg_to_ticks_exact(bound)
+            if not POSITION_TICKS_MIN <= tick <= POSITION_TICKS_MAX:
+                raise ConfigError(
+                    f"limit {bound} deg maps to {tick:.0f} ticks, outside the servo's range",
+                    key=key, value=bound,
+                    allowed=f"limits whose ticks lie in {POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}",
+                )
+
+
+@dataclass(frozen=True)
+class RobotRigConfig(RigConfig):
+    """A rig file with ``[robot]``: servos drive a robot model's joints."""
+
+    servos: tuple[RobotServoCalibration, ...] = ()
+    robot: RobotConfig | None = None
+
+    @property
+    def effective_sag_gain(self) -> float:
+        """The sag gain the pipeline uses: 0 unless ``[robot].sag`` is true."""
+        return self.loop.sag_gain if self.robot is not None and self.robot.sag else 0.0
+
+
+def rig_path(name_or_path: str | Path | None) -> Path:
+    """A preset name (``"leap"`` -> ``config/rigs/leap.toml``) or a path, as a path;
+    None is the default human rig ``config/rig.toml``."""
+    if name_or_path is None:
+        return CONFIG_DIR / "rig.toml"
+    text = str(name_or_path)
+    preset = RIGS_DIR / f"{text}.toml"
+    if "/" not in text and not text.endswith(".toml") and preset.exists():
+        return preset
+    if "/" not in text and not text.endswith(".toml"):
+        known = sorted(p.stem for p in RIGS_DIR.glob("*.toml") if not p.stem.endswith("_retarget"))
+        raise ConfigError(f"no rig preset {text!r}", file=str(preset),
+                          allowed=f"a preset ({', '.join(known)}) or a path to a rig file")
+    return Path(text)
+
+
+def load_rig(name_or_path: str | Path | None = None) -> RigConfig:
+    """Load a rig file or preset: a :class:`RobotRigConfig` when it has ``[robot]``,
+    else the human rig of :func:`handrig.config.rig.load_rig_config`."""
+    path = rig_path(name_or_path)
+    if "robot" not in load_toml(path):
+        return load_rig_config(path)
+    return load_robot_rig(path)
+
+
+def load_robot_rig(path: str | Path) -> RobotRigConfig:
+    """Load and cross-check a robot rig file (model, retarget table, servos)."""
+    p = Path(path)
+    rig = load(p, RobotRigConfig)
+    if rig.robot is None:
+        raise ConfigError("missing table [robot]", file=str(p),
+                          allowed="[robot] with model and retarget")
+    base = p.resolve().parent
+    robot = dataclasses.replace(
+        rig.robot, model=str((base / rig.robot.model).resolve()),
+        retarget=str((base / rig.robot.retarget).resolve()),
+    )
+    rig = dataclasses.replace(rig, robot=robot)
+    joints = read_joints(robot.model)
+    check_servos_against_model(rig, joints, file=str(p))
+    table = load_retarget(robot.retarget)
+    table.check_against_model(joints, file=robot.retarget)
+    check_servos_against_retarget(rig, table, file=str(p))
+    return rig
+
+
+def robot_retarget(rig: RobotRigConfig) -> Retarget:
+    """The compiled retarget table of a loaded robot rig."""
+    if rig.robot is None:
+        raise ConfigError("not a robot rig (no [robot] table)")
+    return load_retarget(rig.robot.retarget)
+
+
+def check_servos_against_model(rig: RigConfig, joints: dict[str, MjcfJoint], *,
+                               file: str) -> None:
+    """Each servo drives a hinge of the model, within its range."""
+    for i, s in enumerate(rig.servos):
+        j = joints.get(s.joint)
+        if j is None or j.type != "hinge":
+            import difflib
+
+            close = difflib.get_close_matches(s.joint, list(joints), n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise ConfigError("no such hinge joint in the robot model", file=file,
+                              key=f"servos[{i}].joint", value=s.joint,
+                              allowed=f"{hint}one of {', '.join(joints)}")
+        if j.range is not None:
+            low, high = j.range
+            tol = RANGE_TOLERANCE_DEG
+            for key, bad in (("min_deg", s.min_deg < low - tol),
+                             ("max_deg", s.max_deg > high + tol)):
+                if bad:
+                    raise ConfigError(
+                        f"servo limit exceeds the model's range of {s.joint}", file=file,
+                        key=f"servos[{i}].{key}", value=getattr(s, key),
+                        allowed=f"within [{low:.2f}, {high:.2f}] deg",
+                    )
+
+
+def check_servos_against_retarget(rig: RigConfig, table: Retarget, *, file: str) -> None:
+    """Every servo's joint has a row in the retarget table."""
+    for i, s in enumerate(rig.servos):
+        if s.joint not in table.joint_names:
+            raise ConfigError("the retarget table has no row for this joint", file=file,
+                              key=f"servos[{i}].joint", value=s.joint,
+                              allowed=f"add [joints.{s.joint}] to the retarget table")

@@ -1,0 +1,89 @@
+"""``handrig demo``: the embedded default run, no hardware and no display needed.
+
+A glove recording shipped with handrig (the reference mocap's right-hand control
+curves as raw sensor counts, plus a forearm path that sweeps the sag) streams
+through the glove emulator on a pty, the real serial glove reader, the real
+pipeline (calibration, One Euro filter, map expansion, sag, limits, slew) and the
+real Dynamixel driver into ``handrig sim-bus``'s MuJoCo puppet, with wire timing
+at the rig's baud rate. Prints a summary of what was measured.
+
+``--rig leap`` (a robot rig preset, or any robot rig file) runs the same path
+into the robot: the pipeline ends in the rig's retarget table, the emulated
+servos are the rig's (XC330-M288s at 4 Mbps for LEAP) and the puppet is the
+robot's MJCF model, which ``--render`` draws.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+from typing import Any
+
+from handrig.app import simulator
+from handrig.app.factory import build_parts, port_process, robot_model
+from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
+from handrig.cli._numbers import positive_float, positive_int
+from handrig.errors import HandrigError
+
+DEFAULT_FRAMES = 3000  # 15 s at 200 Hz
+
+
+def register(sub: Any) -> None:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "demo", help="the embedded demo: a recorded glove drives the simulated puppet",
+        description=__doc__,
+    )
+    p.add_argument("--rig", default=None, metavar="NAME|FILE",
+                   help="rig preset (e.g. 'leap': the LEAP robot hand) or rig file "
+                   "(default config/rig.toml, the human puppet)")
+    p.add_argument("--frames", type=positive_int, default=DEFAULT_FRAMES, metavar="N",
+                   help=f"loop cycles to run (default {DEFAULT_FRAMES}, 15 s at 200 Hz)")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.add_argument("--render", default=None, metavar="FILE.png",
+                   help="also write an image strip of the simulated hand")
+    p.add_argument("--recording", default=None, metavar="FILE.csv",
+                   help="glove recording to stream (default config/recordings/demo_glove.csv)")
+    p.add_argument("--glove-rate", type=positive_float, default=200.0, metavar="HZ",
+                   help="rate the emulated glove sends at (default 200)")
+    p.add_argument("--faults", default="", metavar="SPEC",
+                   help="switch on emulated bus faults (see handrig sim-bus --help)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    def log(text: str) -> None:
+        if not args.json:
+            with contextlib.suppress(OSError, ValueError):  # the terminal may be gone
+                print(text, flush=True)
+
+    recording = args.recording or str(simulator.demo_recording())
+    parts = build_parts(args.rig)
+    log(f"demo: {recording} -> glove emulator -> pipeline -> Dynamixel driver -> MuJoCo puppet")
+    with ExitSignals() as signals:  # a Ctrl-C while the glove emulator starts unwinds
+        try:
+            with port_process(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
+                              "the glove emulator (handrig sim-glove)") as (_, glove_port):
+                log(f"glove emulator streaming on {glove_port}")
+                opts = LiveOptions(glove=glove_port, bus="sim", frames=args.frames,
+                                   sim_faults=args.faults, log=log, panel=not args.json,
+                                   snapshot_every=max(1, args.frames // 6) if args.render else 0)
+                signals.disarm()  # the session handles its own; after it: shut down, print
+                result = run_live(parts, opts)
+        except HandrigError as exc:
+            result = failed(exc, parts)
+    if result.error is not None and not result.started and not args.json:
+        raise result.error
+    if args.render and result.started:
+        try:
+            path = simulator.render_strip(result.snapshots, result.joint_names, args.render,
+                                          model=robot_model(parts.rig_config),
+                                          times_s=result.snapshot_times_s)
+            result.summary["render"] = str(path)
+            tiles = simulator.tiles_drawn(len(result.snapshots))
+            log(f"rendered {tiles} frames of the simulated hand to {path} "
+                f"(t = {result.snapshot_times_s[0]:.1f} to {result.snapshot_times_s[-1]:.1f} s)")
+        except HandrigError as exc:
+            result.summary["render"] = None
+            print(f"handrig demo: no render: {exc}", file=sys.stderr)
+    return print_result(result, as_json=args.json)

@@ -1,0 +1,64 @@
+"""``handrig run``: the live rig, glove in, servos (or the simulated puppet) out."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from handrig.app.factory import build_parts
+from handrig.app.session import LiveOptions, failed, print_result, run_live
+from handrig.cli._numbers import positive_float, positive_int
+from handrig.errors import HandrigError
+
+
+def register(sub: Any) -> None:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "run", help="run the live rig: glove -> full hands with sag -> servos",
+        description="Run the live rig. On a terminal a live panel shows the glove link, "
+        "latency, bus health, each servo and the outputs, and keys act on the puppet: "
+        "space relaxes it (and resumes), q stops (eases to relaxed, then torque off), e is "
+        "the e-stop (torque off at once). Without a terminal the panel is a plain line "
+        "every few seconds. Ctrl-C, SIGTERM, SIGHUP or SIGQUIT eases the puppet to its "
+        "relaxed pose, then disables torque; a second one stops at once. --seconds and "
+        "--frames count the run before the ease to relaxed, which the summary includes.",
+    )
+    p.add_argument("--config", default=None, metavar="FILE",
+                   help="rig file (default config/rig.toml)")
+    p.add_argument("--glove-config", default=None, metavar="FILE",
+                   help="glove file (default: the rig file's [loop] glove, else config/glove.toml)")
+    p.add_argument("--glove", default=None, metavar="SPEC",
+                   help="PORT (handrig frames), opengloves:PORT, or replay:FILE.csv")
+    p.add_argument("--bus", default=None, metavar="PORT",
+                   help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
+    p.add_argument("--viewer", action="store_true",
+                   help="with --bus sim: show the simulated puppet (needs a display)")
+    p.add_argument("--vmc", default=None, metavar="HOST:PORT",
+                   help="also send the hands to a VMC receiver (VSeeFace, Unity, Blender)")
+    p.add_argument("--record", default=None, metavar="FILE",
+                   help="record the performance (.csv or .bvh)")
+    p.add_argument("--frames", type=positive_int, default=None, metavar="N",
+                   help="stop after N cycles")
+    p.add_argument("--seconds", type=positive_float, default=None, metavar="S",
+                   help="stop after S s")
+    p.add_argument("--no-wire-timing", action="store_true",
+                   help="with --bus sim: answer instantly instead of at the wire's speed")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        parts = build_parts(args.config, args.glove_config)
+    except HandrigError as exc:
+        if not args.json:
+            raise
+        return print_result(failed(exc), as_json=True)
+    opts = LiveOptions(
+        glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
+        wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
+        record=args.record, panel=not args.json, verbose=not args.json,
+    )
+    result = run_live(parts, opts)
+    if result.error is not None and not result.started and not args.json:
+        raise result.error
+    return print_result(result, as_json=args.json)

@@ -1,1 +1,0 @@
-"""Subcommands of the ``handrig`` CLI; each module provides ``register(subparsers)``."""

@@ -1,0 +1,2 @@
+"""Configuration: loading and checking TOML into frozen dataclasses, the rig file,
+and the user directories."""

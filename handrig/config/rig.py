@@ -1,0 +1,413 @@
+"""The rig config: which servo drives which joint, and how (``config/rig.toml``).
+
+Shared by the servo driver (degrees -> goal ticks) and the bus emulator (ticks ->
+the simulated joint), so both sides of the loopback use one calibration.
+
+A servo's position in ticks relates to the joint angle in degrees
+(vocabulary convention, flexion positive) by::
+
+    ticks = zero_ticks + direction * deg * gear_ratio * 4096 / 360
+
+``gear_ratio`` is servo turns per joint turn (a tendon or gear reduction); a
+servo never receives a goal outside ``[min_deg, max_deg]`` nor outside the
+servo's own 0..4095 position range.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from handrig.config.loading import CONFIG_DIR, check_joint_name, load
+from handrig.errors import ConfigError
+from handrig.hand import anatomical_limits_deg
+
+TICKS_PER_TURN = 4096
+TICKS_PER_DEG = TICKS_PER_TURN / 360.0
+POSITION_TICKS_MIN = 0
+POSITION_TICKS_MAX = 4095
+
+# Model numbers of the X-series servos we know (REFERENCE.md section 2).
+MODEL_NUMBERS: dict[str, int] = {"XL330-M288": 1200, "XC330-T288": 1220, "XM430-W350": 1020}
+MODEL_NUMBERS["XC330-M288"] = 1240  # the LEAP hand's servo
+# Baud rates the X series and dynamixel-sdk both accept.
+BAUD_RATES: tuple[int, ...] = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000)
+
+
+@dataclass(frozen=True)
+class ServoCalibration:
+    """One servo: its bus ID, the joint it drives, and the mapping between them."""
+
+    id: int
+    joint: str
+    model: Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288"] = "XL330-M288"
+    zero_ticks: int = 2048
+    direction: Literal[1, -1] = 1
+    gear_ratio: float = 1.0
+    min_deg: float = -90.0
+    max_deg: float = 90.0
+
+    def check(self) -> None:
+        if not 0 <= self.id <= 252:
+            raise ConfigError("servo ID out of range", key="id", value=self.id, allowed="0..252")
+        check_joint_name(self.joint, "joint")
+        if not POSITION_TICKS_MIN <= self.zero_ticks <= POSITION_TICKS_MAX:
+            raise ConfigError(
+                "zero outside the position range", key="zero_ticks", value=self.zero_ticks,
+                allowed=f"{POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}",
+            )
+        if not 0.1 <= self.gear_ratio <= 20.0:
+            raise ConfigError(
+                "implausible gear ratio", key="gear_ratio", value=self.gear_ratio,
+                allowed="0.1..20 servo turns per joint turn",
+            )
+        if self.min_deg >= self.max_deg:
+            raise ConfigError(
+                "inverted limit: min_deg must be below max_deg", key="min_deg",
+                value=[self.min_deg, self.max_deg], allowed="min_deg < max_deg",
+            )
+        for bound in (self.min_deg, self.max_deg):
+            tick = self.deg_to_ticks_exact(bound)
+            if not POSITION_TICKS_MIN <= tick <= POSITION_TICKS_MAX:
+                raise ConfigError(
+                    f"limit {bound} deg maps to {tick:.0f} ticks, outside the servo's range",
+                    key="min_deg" if bound == self.min_deg else "max_deg", value=bound,
+                    allowed=f"limits whose ticks lie in {POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}",
+                )
+        low, high = anatomical_limits_deg(self.joint)
+        if self.min_deg < low or self.max_deg > high:
+            raise ConfigError(
+                f"servo limits exceed the anatomical range of {self.joint}",
+                key="min_deg", value=[self.min_deg, self.max_deg], allowed=f"[{low}, {high}]",
+            )
+
+    def deg_to_ticks_exact(self, deg: float) -> float:
+        return self.zero_ticks + self.direction * deg * self.gear_ratio * TICKS_PER_DEG
+
+    def deg_to_ticks(self, deg: float) -> int:
+        """Goal ticks for a joint angle, clamped to ``[min_deg, max_deg]`` first."""
+        clamped = min(max(deg, self.min_deg), self.max_deg)
+        return round(self.deg_to_ticks_exact(clamped))
+
+    def ticks_to_deg(self, ticks: float) -> float:
+        """Joint angle in degrees for a servo position in ticks (not clamped)."""
+        return (ticks - self.zero_ticks) / (self.direction * self.gear_ratio * TICKS_PER_DEG)
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """The serial bus: port path (or ``"sim"``), baud rate, timing."""
+
+    port: str = "sim"
+    baud: int = 1_000_000
+    read_every: int = 4  # read present state every N cycles (Fast Sync Read)
+    read_parts: int = 1  # each read asks 1/N of the servos, in turn (shorter reads)
+    watchdog_ms: int = 100  # Bus Watchdog (units of 20 ms on the wire); 0 disables
+
+    def check(self) -> None:
+        if self.baud not in BAUD_RATES:
+            raise ConfigError(
+                "unsupported baud rate", key="baud", value=self.baud,
+                allowed=", ".join(str(b) for b in BAUD_RATES),
+            )
+        if self.read_every < 1:
+            raise ConfigError("must be at least 1", key="read_every", value=self.read_every)
+        if not 1 <= self.read_parts <= 8:
+            raise ConfigError("out of range", key="read_parts", value=self.read_parts,
+                              allowed="1 (every servo in each read) to 8")
+        if not 0 <= self.watchdog_ms <= 127 * 20:
+            raise ConfigError(
+                "watchdog out of range", key="watchdog_ms", value=self.watchdog_ms,
+                allowed="0 (off) or 20..2540 ms",
+            )
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """The realtime loop: rate, safety timings, slew limit, sag and the files it uses.
+
+    Paths are relative to the rig file's folder unless absolute; empty means the
+    shipped default (``config/maps/default.toml``, ``config/sag_grid.npz``,
+    ``config/glove.toml``).
+    """
+
+    rate_hz: float = 200.0  # the fixed loop's rate (mode "fixed")
+    mode: Literal["glove", "fixed"] = "glove"  # a cycle per glove frame, or at rate_hz
+    floor_hz: float = 100.0  # mode "glove": a write at least this often, frame or not
+    ceiling_hz: float = 1000.0  # mode "glove": at most this many writes per second
+    spin_us: float = 500.0  # mode "glove": poll the port this long either side of a frame
+    catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
+    glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
+    relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
+    slew_deg_s: float = 720.0  # max joint speed commanded in normal running
+    sag_gain: float = 1.0  # 0 = no passive sag, 1 = the full baked sag
+    left_hand: Literal["mirror", "map", "relaxed"] = "map"
+    left_forearm_deg: tuple[float, float] = (-90.0, 0.0)  # no IMU there: assumed hanging
+    realtime_priority: int = 20  # SCHED_FIFO priority of the loop thread; 0 = normal
+    pin_cpu: bool = True  # loop thread on the last CPU, emulators it starts on the others
+    map: str = ""
+    sag_grid: str = ""
+    glove: str = ""
+
+    def check(self) -> None:
+        if not 10.0 <= self.rate_hz <= 2000.0:
+            raise ConfigError("loop rate out of range", key="rate_hz", value=self.rate_hz,
+                              allowed="10..2000 Hz")
+        if self.mode not in ("glove", "fixed"):
+            raise ConfigError("loop mode unknown", key="mode", value=self.mode,
+                              allowed="'glove' (a cycle per glove frame) or 'fixed' (rate_hz)")
+        if not 10.0 <= self.floor_hz <= 2000.0:
+            raise ConfigError("floor rate out of range", key="floor_hz", value=self.floor_hz,
+                              allowed="10..2000 Hz")
+        if not self.floor_hz <= self.ceiling_hz <= 5000.0:
+            raise ConfigError("ceiling rate out of range", key="ceiling_hz",
+                              value=self.ceiling_hz,
+                              allowed=f"floor_hz ({self.floor_hz:g})..5000 Hz")
+        if not 0.0 <= self.spin_us <= 5000.0:
+            raise ConfigError("spin window out of range", key="spin_us", value=self.spin_us,
+                              allowed="0 (off: sleep until the frame) ..5000 us")
+        for name in ("glove_timeout_s", "relax_time_s", "slew_deg_s"):
+            value = getattr(self, name)
+            if value <= 0:
+                raise ConfigError("must be positive", key=name, value=value)
+        if not 0 <= self.realtime_priority <= 99:
+            raise ConfigError("out of range", key="realtime_priority",
+                              value=self.realtime_priority, allowed="0 (off) or 1..99")
+        if not 0.0 <= self.sag_gain <= 2.0:
+            raise ConfigError("sag gain out of range", key="sag_gain", value=self.sag_gain,
+                              allowed="0..2")
+
+
+SilenceAction = Literal["continue", "relax", "stop"]
+
+
+@dataclass(frozen=True)
+class SilenceConfig:
+    """What the rig does about a servo with no valid reply (``[silence]``), in tiers.
+
+    After ``warn_s`` without a valid reading the servo is named in a warning; after
+    ``hold_s`` its goal is held where it was (goals still go out: a Sync Write
+    needs no reply, and the Bus Watchdogs stay fed); after ``action_s`` comes
+    ``action``: ``"continue"`` (the others keep following the glove, it stays
+    held until it answers), ``"relax"`` (every servo eases to the relaxed pose;
+    following resumes once it answers) or ``"stop"`` (the run ends, torque off).
+    A servo that answers again is released towards its goals at the slew limit.
+    """
+
+    warn_s: float = 0.1
+    hold_s: float = 0.25
+    action_s: float = 1.0
+    action: SilenceAction = "continue"
+
+    def check(self) -> None:
+        for name in ("warn_s", "hold_s", "action_s"):
+            value = getattr(self, name)
+            if not 0.0 < value <= 60.0:
+                raise ConfigError("out of range", key=name, value=value, allowed="0..60 s")
+        if not self.warn_s <= self.hold_s <= self.action_s:
+            raise ConfigError("tiers out of order", key="hold_s",
+                              value=[self.warn_s, self.hold_s, self.action_s],
+                              allowed="warn_s <= hold_s <= action_s")
+        if self.action not in ("continue", "relax", "stop"):
+            raise ConfigError("unknown action", key="action", value=self.action,
+                              allowed="continue, relax, stop")
+
+
+# ------------------------------------------------------------ servo settings
+# Operating Mode (11) values (REFERENCE.md section 2).
+OPERATING_MODES: dict[str, int] = {
+    "position": 3, "extended_position": 4, "current_based_position": 5,
+}
+# Current Limit (38) maximum per model, mA: XL330-M288 1750 x 1 mA, XC330-T288 910 x 1 mA,
+# XC330-M288 2352 x 1 mA, XM430-W350 1193 x 2.69 mA (ROBOTIS e-manual control tables).
+CURRENT_LIMIT_MAX_MA: dict[str, float] = {
+    "XL330-M288": 1750.0, "XC330-T288": 910.0, "XC330-M288": 2352.0, "XM430-W350": 1193 * 2.69,
+}
+CURRENT_UNIT_MA: dict[str, float] = {
+    "XL330-M288": 1.0, "XC330-T288": 1.0, "XC330-M288": 1.0, "XM430-W350": 2.69,
+}
+GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
+RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
+RETURN_DELAY_MAX_US = 254 * RETURN_DELAY_UNIT_US
+
+
+def _check_gain(value: int | None, key: str) -> None:
+    if value is not None and not 0 <= value <= GAIN_MAX:
+        raise ConfigError("gain out of range", key=key, value=value, allowed=f"0..{GAIN_MAX}")
+
+
+def _check_current(value: int | None, key: str) -> None:
+    if value is not None and not 1 <= value <= max(CURRENT_LIMIT_MAX_MA.values()):
+        raise ConfigError("current limit out of range", key=key, value=value,
+                          allowed=f"1..{max(CURRENT_LIMIT_MAX_MA.values()):.0f} mA "
+                          "(and at most the servo model's own maximum)")
+
+
+@dataclass(frozen=True)
+class ServoSettingsGroup:
+    """Settings for some servos that differ from ``[servo_settings]`` (e.g. side-to-side
+    joints with lower gains). ``None`` keeps the value of ``[servo_settings]``."""
+
+    ids: tuple[int, ...]
+    current_limit_ma: int | None = None
+    position_p_gain: int | None = None
+    position_d_gain: int | None = None
+
+    def check(self) -> None:
+        if not self.ids:
+            raise ConfigError("a group needs at least one servo ID", key="ids")
+        _check_current(self.current_limit_ma, "current_limit_ma")
+        _check_gain(self.position_p_gain, "position_p_gain")
+        _check_gain(self.position_d_gain, "position_d_gain")
+
+
+@dataclass(frozen=True)
+class ServoSettings:
+    """What commissioning writes to every servo (``[servo_settings]``).
+
+    ``operating_mode``: ``"position"`` (3, the default), ``"extended_position"`` (4) or
+    ``"current_based_position"`` (5: position control whose torque is capped by the
+    current limit). ``current_limit_ma``: written to Current Limit (38) and Goal
+    Current (102); ``None`` leaves the servo's own. Position P/D Gain (84/80): ``None``
+    leaves the servo's own. ``return_delay_us``: Return Delay Time (9), even, 0..508.
+    ``groups``: per-servo differences.
+    """
+
+    operating_mode: Literal["position", "extended_position", "current_based_position"] = (
+        "position")
+    current_limit_ma: int | None = None
+    position_p_gain: int | None = None
+    position_d_gain: int | None = None
+    return_delay_us: int = 0
+    groups: tuple[ServoSettingsGroup, ...] = ()
+
+    def check(self) -> None:
+        _check_current(self.current_limit_ma, "current_limit_ma")
+        _check_gain(self.position_p_gain, "position_p_gain")
+        _check_gain(self.position_d_gain, "position_d_gain")
+        if (not 0 <= self.return_delay_us <= RETURN_DELAY_MAX_US
+                or self.return_delay_us % RETURN_DELAY_UNIT_US):
+            raise ConfigError("return delay out of range", key="return_delay_us",
+                              value=self.return_delay_us,
+                              allowed=f"0..{RETURN_DELAY_MAX_US} us in steps of "
+                              f"{RETURN_DELAY_UNIT_US} (0 is what a fast loop wants)")
+        seen: dict[int, int] = {}
+        for g, group in enumerate(self.groups):
+            for servo_id in group.ids:
+                if servo_id in seen:
+                    raise ConfigError(f"servo ID in two groups (also groups[{seen[servo_id]}])",
+                                      key=f"groups[{g}].ids", value=servo_id)
+                seen[servo_id] = g
+
+    @property
+    def operating_mode_value(self) -> int:
+        """The Operating Mode (11) register value."""
+        return OPERATING_MODES[self.operating_mode]
+
+
+@dataclass(frozen=True)
+class ResolvedServoSettings:
+    """The settings of one servo, groups applied (what commissioning writes and checks)."""
+
+    servo_id: int
+    operating_mode: int  # Operating Mode (11) value
+    current_limit_ma: int | None
+    position_p_gain: int | None
+    position_d_gain: int | None
+    return_delay_us: int
+
+    def current_limit_units(self, model: str) -> int | None:
+        """Current Limit / Goal Current in the register's units for servo ``model``."""
+        if self.current_limit_ma is None:
+            return None
+        return round(self.current_limit_ma / CURRENT_UNIT_MA[model])
+
+
+def resolve_servo_settings(settings: ServoSettings, servo_id: int) -> ResolvedServoSettings:
+    """``[servo_settings]`` for one servo, with its group's values where it has one."""
+    current, p_gain, d_gain = (settings.current_limit_ma, settings.position_p_gain,
+                               settings.position_d_gain)
+    for group in settings.groups:
+        if servo_id in group.ids:
+            current = group.current_limit_ma if group.current_limit_ma is not None else current
+            p_gain = group.position_p_gain if group.position_p_gain is not None else p_gain
+            d_gain = group.position_d_gain if group.position_d_gain is not None else d_gain
+    return ResolvedServoSettings(servo_id, settings.operating_mode_value, current, p_gain,
+                                 d_gain, settings.return_delay_us)
+
+
+def check_servo_settings(rig: RigConfig) -> None:
+    """Groups name servos of the rig; current limits fit each servo's model."""
+    ids = {s.id: s for s in rig.servos}
+    for g, group in enumerate(rig.servo_settings.groups):
+        for servo_id in group.ids:
+            if servo_id not in ids:
+                raise ConfigError("no servo with this ID in [[servos]]",
+                                  key=f"servo_settings.groups[{g}].ids", value=servo_id,
+                                  allowed=", ".join(str(i) for i in sorted(ids)))
+    for s in rig.servos:
+        resolved = resolve_servo_settings(rig.servo_settings, s.id)
+        top = CURRENT_LIMIT_MAX_MA[s.model]
+        if resolved.current_limit_ma is not None and resolved.current_limit_ma > top:
+            raise ConfigError(f"current limit above the {s.model}'s maximum for servo {s.id}",
+                              key="servo_settings.current_limit_ma",
+                              value=resolved.current_limit_ma, allowed=f"1..{top:.0f} mA")
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]`` and ``[[servos]]``."""
+
+    bus: BusConfig = BusConfig()
+    loop: LoopConfig = LoopConfig()
+    servos: tuple[ServoCalibration, ...] = ()
+    servo_settings: ServoSettings = ServoSettings()
+    silence: SilenceConfig = SilenceConfig()
+
+    def check(self) -> None:
+        if not self.servos:
+            raise ConfigError(
+                "no [[servos]]: the rig drives no servo", key="servos",
+                allowed="one [[servos]] table per servo (id, joint, zero_ticks, limits);"
+                " see config/rig.toml")
+        seen_ids: dict[int, int] = {}
+        seen_joints: dict[str, int] = {}
+        for i, s in enumerate(self.servos):
+            if s.id in seen_ids:
+                raise ConfigError(
+                    f"servo ID used twice (also servos[{seen_ids[s.id]}])",
+                    key=f"servos[{i}].id", value=s.id,
+                )
+            if s.joint in seen_joints:
+                raise ConfigError(
+                    f"joint driven twice (also servos[{seen_joints[s.joint]}])",
+                    key=f"servos[{i}].joint", value=s.joint,
+                )
+            seen_ids[s.id] = i
+            seen_joints[s.joint] = i
+        check_servo_settings(self)
+
+    def servo(self, servo_id: int) -> ServoCalibration:
+        for s in self.servos:
+            if s.id == servo_id:
+                return s
+        raise KeyError(servo_id)
+
+    @property
+    def effective_sag_gain(self) -> float:
+        """The sag gain the pipeline uses ([loop].sag_gain; a robot rig turns it off
+        unless its ``[robot].sag`` is true, see :mod:`handrig.app.robots`)."""
+        return self.loop.sag_gain
+
+    def servo_settings_for(self, servo_id: int) -> ResolvedServoSettings:
+        """What commissioning writes to servo ``servo_id`` ([servo_settings], groups applied)."""
+        return resolve_servo_settings(self.servo_settings, servo_id)
+
+
+DEFAULT_RIG = CONFIG_DIR / "rig.toml"
+
+
+def load_rig_config(path: str | Path | None = None) -> RigConfig:
+    """Load the rig file (default ``config/rig.toml``)."""
+    return load(path or DEFAULT_RIG, RigConfig)

@@ -1,0 +1,1 @@
+"""Devices the loop talks to: glove sources and the servo bus package."""

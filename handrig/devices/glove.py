@@ -1,0 +1,739 @@
+"""Glove sources: where the realtime loop gets raw glove samples.
+
+:class:`GloveSource` is the abstract device. The loop calls :meth:`~GloveSource.latest`
+once per cycle: it returns the newest sample not handed out before, or ``None``
+when nothing new has arrived, and never blocks. Concrete sources:
+
+* :class:`SerialGlove`: a serial port (or pty) read by a background thread, in
+  the handrig frame format (``firmware_protocol/SPEC.md``) or the OpenGloves
+  alpha line format;
+* :class:`ReplayGlove`: a :class:`~handrig.devices.glove_recording.GloveRecording`
+  played against the injected clock (no thread, deterministic with a FakeClock).
+
+Each source keeps :class:`GloveStats` (good frames, CRC and other errors,
+frames dropped for an unexpected channel count, resyncs, garbage bytes, sequence
+gaps, disconnects and reconnects, time since the last good frame). A port that
+goes away sets :attr:`GloveSource.failure` to a :class:`DeviceError` with a
+clear message; ``latest()`` then simply returns ``None`` (the loop's glove
+timeout eases the puppet to the relaxed pose) and :meth:`GloveSource.check`
+raises it for callers that prefer to stop. What happened to the port (gone,
+back after how long) is also queued as text for :meth:`GloveSource.drain_events`.
+
+A frame's channel count is checked before it becomes a sample: ``channels`` if
+given, else the count the glove settles on (:data:`LOCK_FRAMES` good frames in a
+row with the same count, at least ``min_channels``, after each open). A frame
+with another count, valid CRC or not, is counted in ``channel_errors`` and
+dropped: to the loop it looks like a garbled glove, never like a sample.
+
+``SerialGlove(reader="poll")`` reads without a thread instead: each ``latest()``
+does one non-blocking read and decodes what is there (a few microseconds, no
+GIL hand-over between threads); the frame's ``host_time_s`` is then the time of
+that read.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import select
+import termios
+import threading
+from abc import ABC, abstractmethod
+from collections import deque
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from firmware_protocol.glove import BUTTON_RELAX, MAX_CHANNELS, FrameDecoder
+from firmware_protocol.opengloves import BUTTON_LETTERS, CHANNEL_KEYS, LineDecoder
+from handrig.clock import Clock
+from handrig.devices.glove_recording import GloveRecording
+from handrig.errors import DeviceError
+
+FloatArray = NDArray[np.float64]
+GloveFormat = Literal["frames", "opengloves"]
+
+LOCK_FRAMES = 3
+"""Good frames in a row with one channel count that fix the count a glove sends."""
+BEHIND_KEPT = 2
+"""Samples kept behind the newest while never handed out (:meth:`GloveSource.take_behind`:
+a loop held up catches up on them); older ones are superseded for good."""
+MAX_EVENTS = 64
+"""Port events kept for :meth:`GloveSource.drain_events` (the oldest go first)."""
+DUE_TOLERANCE_S = 1e-9
+""":meth:`ReplayGlove.next_due_s` is this much after the due time, so that the clock
+time it gives, less the start, does not round to just before the sample."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GloveSample:
+    """One glove sample as the loop sees it.
+
+    ``raw`` (k,) float64: raw channel counts in the glove's channel order (for
+    OpenGloves the 13 channels of ``firmware_protocol.opengloves.CHANNEL_KEYS``).
+    ``quat`` (4,) float64: forearm IMU orientation x, y, z, w (scalar last, ENU
+    world frame, IMU body to world), or ``None`` when the glove has no valid IMU
+    reading. ``buttons``: bitfield, bit 0 = relax / e-stop (``estop``).
+    ``seq``: the glove's sequence number (wraps at 65536; for OpenGloves, lines
+    received). ``sensor_time_us``: the glove's timestamp (wraps at 2**32; 0 for
+    OpenGloves). ``host_time_s``: Clock time at which the read that delivered the
+    frame's last byte returned (glove-to-servo latency is measured from it).
+    ``count``: 1-based running count of samples from this source.
+    """
+
+    raw: FloatArray
+    quat: FloatArray | None
+    buttons: int
+    estop: bool
+    seq: int
+    sensor_time_us: int
+    host_time_s: float
+    count: int
+
+
+@dataclass(frozen=True)
+class GloveStats:
+    """A snapshot of a source's counters (monotonic since it was opened).
+
+    For :class:`ReplayGlove`, ``frames_lost`` counts recorded samples that came
+    due but were superseded before the loop asked (the loop ran slower than the
+    recording).
+    """
+
+    frames_ok: int = 0
+    crc_errors: int = 0
+    decode_errors: int = 0
+    """Rejected frames other than CRC mismatches (bad stuffing, length, version,
+    malformed or cut OpenGloves lines, overlong runs)."""
+    resyncs: int = 0
+    garbage_bytes: int = 0
+    seq_gaps: int = 0
+    frames_lost: int = 0
+    bytes_read: int = 0
+    reconnects: int = 0
+    """Times the port came back after it went away."""
+    time_since_last_good_s: float = math.inf
+    failure: str = ""
+    channel_errors: int = 0
+    """Frames dropped for a channel count other than :attr:`expected_channels`
+    (also counted in ``decode_errors``)."""
+    expected_channels: int = 0
+    """The channel count frames must have; 0 until the glove has settled on one."""
+    disconnects: int = 0
+    """Times the port went away (unplugged, hung up, unreadable)."""
+    last_outage_s: float = 0.0
+    """How long the port was gone the last time it came back, seconds."""
+
+    @property
+    def errors(self) -> int:
+        """Rejected frames of every kind."""
+        return self.crc_errors + self.decode_errors
+
+
+class GloveSource(ABC):
+    """A glove: raw samples in, without ever blocking the loop.
+
+    Use as a context manager (``with SerialGlove(...) as glove:``), which calls
+    :meth:`start` and :meth:`close`.
+    """
+
+    def __init__(self) -> None:
+        self._newest: GloveSample | None = None
+        self._behind: deque[GloveSample] = deque(maxlen=BEHIND_KEPT)  # never taken
+        self._taken = 0
+        self._failure: DeviceError | None = None
+        self._events: deque[str] = deque(maxlen=MAX_EVENTS)
+
+    def start(self) -> None:  # noqa: B027 - optional hook
+        """Begin reading (open the port, start the thread). Idempotent."""
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Stop reading and release the device. Idempotent."""
+
+    def latest(self) -> GloveSample | None:
+        """The newest sample not returned before, or ``None`` if nothing new. Never blocks."""
+        s = self._newest
+        if s is None or s.count == self._taken:
+            return None
+        self._taken = s.count
+        return s
+
+    def rehearse(self) -> None:  # noqa: B027 - optional hook
+        """Run the decode path once on scratch state, with no effect on the source.
+
+        The loop calls it shortly before each deadline so the code that turns the
+        next frame into a sample is warm in the CPU's caches when the frame is read.
+        """
+
+    def peek(self) -> GloveSample | None:
+        """The newest sample so far (new or not), without marking it taken."""
+        return self._newest
+
+    def _arrived(self, sample: GloveSample) -> None:
+        """``sample`` is the newest now; the one it replaces is kept behind it while it
+        has not been taken (:data:`BEHIND_KEPT` of them: a loop that fell further behind
+        skips the older ones)."""
+        old, behind = self._newest, self._behind
+        if old is None or old.count == self._taken:
+            behind.clear()
+        else:
+            behind.append(old)
+        self._newest = sample
+
+    def has_behind(self) -> bool:
+        """Whether a sample before the newest came and was never taken (it was superseded
+        before the loop asked), while the newest is new too."""
+        behind = self._behind
+        if not behind:  # the usual case: the loop took the one before the newest
+            return False
+        s, taken = self._newest, self._taken
+        if s is None or s.count == taken:
+            return False
+        return any(b.count > taken for b in behind)
+
+    def take_behind(self) -> GloveSample | None:
+        """The oldest sample kept behind the newest that was never taken
+        (:meth:`has_behind`), marked taken so that the ones after it and the newest stay
+        new; else ``None``."""
+        if not self.has_behind():
+            return None
+        behind = self._behind
+        while behind[0].count <= self._taken:
+            behind.popleft()
+        b = behind.popleft()
+        self._taken = b.count
+        return b
+
+    def has_new(self) -> bool:
+        """Whether :meth:`latest` has a sample not returned before (without taking it)."""
+        s = self._newest
+        return s is not None and s.count != self._taken
+
+    @abstractmethod
+    def stats(self) -> GloveStats:
+        """A snapshot of the counters."""
+
+    @property
+    def failure(self) -> DeviceError | None:
+        """Why the device stopped delivering (port gone, unreadable), or ``None``."""
+        return self._failure
+
+    def check(self) -> None:
+        """Raise :attr:`failure` if the device has failed."""
+        if self._failure is not None:
+            raise self._failure
+
+    def drain_events(self) -> list[str]:
+        """What happened to the device since the last call (port gone, port back), oldest
+        first; at most :data:`MAX_EVENTS` are kept. Safe to call from any thread."""
+        out = []
+        while self._events:
+            try:
+                out.append(self._events.popleft())
+            except IndexError:
+                break
+        return out
+
+    def __enter__(self) -> GloveSource:
+        self.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class SerialGlove(GloveSource):
+    """A glove on a serial port (USB CDC, UART, or a pty from the glove emulator).
+
+    ``fmt`` is ``"frames"`` (handrig frames, ``firmware_protocol/SPEC.md``) or
+    ``"opengloves"`` (alpha lines; ``analog_max`` 1023 or 4095; the button letter
+    ``estop_letter`` becomes buttons bit 0, the letters H..O bits 1..8). A
+    background thread reads whatever bytes arrive, stamps them with ``clock.now()``
+    and decodes them. If the port goes away the source records a
+    :class:`DeviceError` and, with ``reconnect_s`` > 0, tries to reopen the same
+    path every ``reconnect_s`` seconds (a replugged USB glove usually returns there).
+
+    ``reader="thread"`` (default) reads on a background thread; ``reader="poll"``
+    reads inside :meth:`latest` with non-blocking reads (no thread).
+    """
+
+    def __init__(
+        self,
+        port: str,
+        fmt: GloveFormat = "frames",
+        *,
+        clock: Clock,
+        baud: int = 115200,
+        analog_max: int = 4095,
+        estop_letter: str = "N",
+        reconnect_s: float = 0.5,
+        poll_s: float = 0.05,
+        reader: Literal["thread", "poll"] = "thread",
+        channels: int | None = None,
+        min_channels: int = 1,
+    ) -> None:
+        super().__init__()
+        if channels is not None and not 0 <= channels <= MAX_CHANNELS:
+            raise DeviceError(f"glove channels {channels}: a frame carries 0..{MAX_CHANNELS}")
+        if not 0 <= min_channels <= MAX_CHANNELS:
+            raise DeviceError(f"glove min_channels {min_channels}: use 0..{MAX_CHANNELS}")
+        if channels is not None and channels < min_channels:
+            raise DeviceError(f"glove channels {channels} is below min_channels {min_channels}")
+        self.channels = channels
+        self.min_channels = min_channels
+        if fmt not in ("frames", "opengloves"):
+            raise DeviceError(f"glove format {fmt!r} unknown: use 'frames' or 'opengloves'")
+        if estop_letter not in BUTTON_LETTERS:
+            raise DeviceError(f"e-stop letter {estop_letter!r} is not an OpenGloves button "
+                              f"(one of {BUTTON_LETTERS})")
+        self.port = port
+        self.fmt: GloveFormat = fmt
+        self.clock = clock
+        self.baud = baud
+        self.analog_max = analog_max
+        self.reconnect_s = reconnect_s
+        self.poll_s = poll_s
+        if reader not in ("thread", "poll"):
+            raise DeviceError(f"glove reader {reader!r} unknown: use 'thread' or 'poll'")
+        self.reader = reader
+        self._next_reopen_s = -math.inf
+        self._estop_bit = 1 << BUTTON_LETTERS.index(estop_letter)
+        self._frames = FrameDecoder()
+        self._lines = LineDecoder(analog_max)
+        self._scratch_frames = FrameDecoder()  # for rehearse(): never touches live state
+        self._scratch_lines = LineDecoder(analog_max)
+        self._last_chunk = b""
+        self._serial: Any = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._count = 0
+        self._bytes = 0
+        self._reconnects = 0
+        self._disconnects = 0
+        self._lost_at_s = 0.0
+        self._last_outage_s = 0.0
+        self._channel_errors = 0
+        self._expected = channels if channels is not None else 0
+        self._candidate = -1  # the count of the good frames in a row before it is fixed
+        self._run_length = 0
+        self._last_good_s = -math.inf
+        self._lock = threading.Lock()
+
+    def _open(self) -> Any:
+        import serial  # adapter module: the only place the glove side touches pyserial
+
+        try:
+            return serial.Serial(self.port, self.baud, timeout=0, exclusive=False)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise DeviceError(
+                f"cannot open glove port {self.port}: {exc}; is the glove plugged in? "
+                "(pass the right port with --glove PORT; on Linux add your user to 'dialout')"
+            ) from None
+
+    def start(self) -> None:
+        if self._thread is not None or self._serial is not None:
+            return
+        self._serial = self._open()
+        _nonblocking(self._serial.fileno())
+        if self.reader == "poll":
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=f"glove:{self.port}",
+                                        daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._serial is not None:
+            with contextlib.suppress(Exception):  # the port may already be gone
+                self._serial.close()
+            self._serial = None
+
+    def latest(self) -> GloveSample | None:
+        if self.reader == "poll":
+            self._poll()
+        return super().latest()
+
+    def take(self) -> GloveSample | None:
+        """:meth:`latest` without reading the port first: for a loop whose trigger has
+        just pumped it (a cycle started by a frame, or after waiting on the port until a
+        deadline with nothing arriving), which saves a system call on the frame's path."""
+        return super().latest()
+
+    def fileno(self) -> int | None:
+        """The open port's descriptor with ``reader="poll"``, for a loop that blocks on it
+        until bytes arrive and then calls :meth:`pump`; None with a reader thread or while
+        the port is gone."""
+        ser = self._serial
+        if self.reader != "poll" or ser is None:
+            return None
+        try:
+            return int(ser.fileno())
+        except (OSError, ValueError, TypeError):
+            return None
+
+    pump_counts = True
+    """:meth:`pump` returns how many good frames it decoded."""
+
+    def pump(self) -> int:
+        """Read and decode what has arrived, stamped with the clock now (``reader="poll"``;
+        never blocks); returns how many good frames that gave. Called as soon as the
+        descriptor turns readable, it stamps each frame with the time its last byte
+        arrived."""
+        if self.reader == "poll":
+            before = self._count
+            self._poll()
+            return self._count - before
+        return 0
+
+    def feed(self, data: bytes, now: float) -> None:
+        """Decode ``data`` as bytes read from the port at clock time ``now`` (the reader
+        thread and :meth:`latest` with ``reader="poll"`` call this; tests may too)."""
+        with self._lock:
+            self._bytes += len(data)
+            self._last_chunk = data
+            if self.fmt == "frames":
+                self._feed_frames(data, now)
+            else:
+                self._feed_lines(data, now)
+
+    def rehearse(self) -> None:
+        chunk = self._last_chunk
+        if not chunk:
+            return
+        now = self.clock.now()
+        if self.fmt == "frames":
+            for fr in self._scratch_frames.feed(chunk):
+                self._frame_sample(fr, now, 0)
+        else:
+            for line in self._scratch_lines.feed(chunk):
+                self._line_sample(line, now, 0)
+
+    def _poll(self) -> None:
+        ser = self._serial
+        if ser is None:
+            now = self.clock.now()
+            if self.reconnect_s > 0 and now >= self._next_reopen_s:
+                self._next_reopen_s = now + self.reconnect_s
+                self._reopen_now()
+            return
+        try:
+            fd = ser.fileno()
+            for _ in range(8):  # bounded: at most 32 KiB per call
+                data = os.read(fd, 4096)  # EAGAIN when empty (VMIN 1, O_NONBLOCK)
+                if not data:
+                    raise OSError("end of file: the device hung up")
+                self.feed(data, self.clock.now())
+                if len(data) < 4096:
+                    return
+        except BlockingIOError:
+            return
+        except (OSError, ValueError, TypeError) as exc:
+            self._lost(exc)
+            self._next_reopen_s = self.clock.now() + self.reconnect_s
+
+    def stats(self) -> GloveStats:
+        with self._lock:
+            since = self.clock.now() - self._last_good_s
+            failure = str(self._failure) if self._failure else ""
+            if self.fmt == "frames":
+                f = self._frames.stats
+                return GloveStats(
+                    frames_ok=f.frames_ok - self._channel_errors, crc_errors=f.crc_errors,
+                    decode_errors=f.errors - f.crc_errors + self._channel_errors,
+                    resyncs=f.resyncs + self._channel_errors,
+                    garbage_bytes=f.garbage_bytes, seq_gaps=f.seq_gaps,
+                    frames_lost=f.frames_lost, bytes_read=self._bytes,
+                    reconnects=self._reconnects, time_since_last_good_s=since,
+                    failure=failure, channel_errors=self._channel_errors,
+                    expected_channels=self._expected, disconnects=self._disconnects,
+                    last_outage_s=self._last_outage_s,
+                )
+            g = self._lines.stats
+            return GloveStats(
+                frames_ok=g.lines_ok, decode_errors=g.errors, resyncs=g.errors,
+                garbage_bytes=g.garbage_bytes, bytes_read=self._bytes,
+                reconnects=self._reconnects, time_since_last_good_s=since, failure=failure,
+                expected_channels=len(CHANNEL_KEYS), disconnects=self._disconnects,
+                last_outage_s=self._last_outage_s,
+            )
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            ser = self._serial
+            if ser is None:
+                if not self._try_reopen():
+                    continue
+                ser = self._serial
+            try:
+                fd = ser.fileno()
+                ready, _, _ = select.select([fd], [], [], self.poll_s)
+                if not ready:
+                    continue
+                data = os.read(fd, 4096)
+                if not data:
+                    raise OSError("device reports readiness to read but returned no data")
+            except BlockingIOError:
+                continue
+            except (OSError, ValueError, TypeError) as exc:
+                if self._stop.is_set():
+                    return
+                self._lost(exc)
+                continue
+            self.feed(data, self.clock.now())
+
+    def _lost(self, exc: BaseException) -> None:
+        self._failure = DeviceError(
+            f"glove port {self.port} went away ({exc}); "
+            + ("retrying every " + f"{self.reconnect_s:g} s" if self.reconnect_s > 0
+               else "check the cable and restart")
+        )
+        self._disconnects += 1
+        self._lost_at_s = self.clock.now()
+        self._events.append(str(self._failure))
+        with contextlib.suppress(Exception):  # the port is already gone
+            self._serial.close()
+        self._serial = None
+
+    def _try_reopen(self) -> bool:
+        if self.reconnect_s <= 0:
+            self._stop.wait(self.poll_s)
+            return False
+        if self._stop.wait(self.reconnect_s):
+            return False
+        return self._reopen_now()
+
+    def _reopen_now(self) -> bool:
+        try:
+            ser = self._open()
+            _nonblocking(ser.fileno())
+        except (DeviceError, OSError):
+            return False
+        with self._lock:
+            self._serial = ser
+            self._frames.reset()
+            self._reconnects += 1
+            self._last_outage_s = self.clock.now() - self._lost_at_s
+            if self.channels is None:  # the glove may come back reflashed: settle again
+                self._expected, self._candidate, self._run_length = 0, -1, 0
+            self._failure = None
+        self._events.append(
+            f"glove port {self.port} is back after {self._last_outage_s:.2f} s"
+            f" (reconnect {self._reconnects}, {self._disconnects} disconnects so far)")
+        return True
+
+    @staticmethod
+    def _frame_sample(fr: Any, now: float, count: int) -> GloveSample:
+        q = fr.quat_xyzw
+        return GloveSample(
+            raw=np.array(fr.channels, dtype=np.float64),
+            quat=None if q is None else np.array(q, dtype=np.float64),
+            buttons=fr.buttons, estop=bool(fr.buttons & BUTTON_RELAX), seq=fr.seq,
+            sensor_time_us=fr.timestamp_us, host_time_s=now, count=count,
+        )
+
+    def _line_sample(self, line: Any, now: float, count: int) -> GloveSample:
+        bits = line.button_bits()
+        estop = bool(bits & self._estop_bit)
+        return GloveSample(
+            raw=np.array(line.channels(self.analog_max), dtype=np.float64), quat=None,
+            buttons=int(estop) | (bits << 1), estop=estop, seq=count & 0xFFFF,
+            sensor_time_us=0, host_time_s=now, count=count,
+        )
+
+    def _channels_ok(self, n: int) -> bool:
+        """Whether a decoded frame with ``n`` channels may become a sample (settling the
+        expected count first, see the module docstring)."""
+        if self._expected or self.channels is not None:
+            if n == self._expected:
+                return True
+            self._channel_errors += 1
+            return False
+        if n < self.min_channels:
+            self._channel_errors += 1
+            self._candidate, self._run_length = -1, 0
+            return False
+        if n == self._candidate:
+            self._run_length += 1
+        else:
+            self._candidate, self._run_length = n, 1
+        if self._run_length >= LOCK_FRAMES:
+            self._expected = n
+            return True
+        return False
+
+    def _feed_frames(self, data: bytes, now: float) -> None:
+        for fr in self._frames.feed(data):
+            if not self._channels_ok(len(fr.channels)):
+                continue
+            self._count += 1
+            self._arrived(self._frame_sample(fr, now, self._count))
+            self._last_good_s = now
+
+    def _feed_lines(self, data: bytes, now: float) -> None:
+        for line in self._lines.feed(data):
+            self._count += 1
+            self._arrived(self._line_sample(line, now, self._count))
+            self._last_good_s = now
+
+
+def _nonblocking(fd: int) -> None:
+    """O_NONBLOCK and VMIN 1, VTIME 0: a read of an empty port fails with EAGAIN and
+    only a hang-up reads as end of file (pyserial leaves VMIN 0, where both read b"")."""
+    os.set_blocking(fd, False)
+    try:
+        attrs = termios.tcgetattr(fd)
+        attrs[6][termios.VMIN] = 1
+        attrs[6][termios.VTIME] = 0
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    except termios.error:
+        pass  # not a terminal (a pipe or socket): O_NONBLOCK alone does it
+
+
+class ReplayGlove(GloveSource):
+    """A recording played against the injected clock.
+
+    :meth:`start` (or the first :meth:`latest`) pins recording time ``t_s[0]`` to
+    ``clock.now()``; from then ``latest()`` returns the newest recorded sample at or
+    before the current time, once. Its ``host_time_s`` is the clock time at which
+    that sample was due, so latency measured from it includes how late the loop
+    picked it up. With ``loop=True`` the recording repeats (one median sample
+    period between the last and the first sample); otherwise :attr:`finished`
+    turns true after the last sample and ``latest()`` returns ``None``.
+    """
+
+    def __init__(self, recording: GloveRecording, clock: Clock, *, loop: bool = False) -> None:
+        super().__init__()
+        if len(recording) == 0:
+            raise DeviceError("glove recording is empty: nothing to replay")
+        self.recording = recording
+        self.clock = clock
+        self.loop = loop
+        t = recording.t_s
+        gap = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
+        self._period_s = float(t[-1] - t[0]) + gap
+        self._t_rel = t - t[0]
+        self._t0: float | None = None
+        self._served = 0
+        self._skipped = 0
+
+    def start(self) -> None:
+        if self._t0 is None:
+            self._t0 = self.clock.now()
+
+    @property
+    def finished(self) -> bool:
+        """Not looping and the last sample has been due."""
+        if self.loop or self._t0 is None:
+            return False
+        return self.clock.now() - self._t0 >= self._t_rel[-1]
+
+    def latest(self) -> GloveSample | None:
+        if self._t0 is None:
+            self._t0 = self.clock.now()
+        lap, i = self._due_index(self.clock.now() - self._t0)
+        if i < 0:
+            return None
+        count = lap * len(self._t_rel) + i + 1
+        if count <= self._taken:
+            return None
+        return self._serve(lap, i, count)
+
+    def _serve(self, lap: int, i: int, count: int) -> GloveSample:
+        """Recorded sample ``i`` of lap ``lap`` (the ``count``-th), marked taken."""
+        rec = self.recording
+        q = None if rec.quat_xyzw is None else rec.quat_xyzw[i]
+        if q is not None and np.isnan(q).any():
+            q = None
+        b = int(rec.buttons[i])
+        sample = GloveSample(
+            raw=rec.raw[i], quat=q, buttons=b, estop=bool(b & BUTTON_RELAX),
+            seq=(count - 1) & 0xFFFF, sensor_time_us=int(self._t_rel[i] * 1e6) & 0xFFFFFFFF,
+            host_time_s=self._due_at(lap, i), count=count,
+        )
+        self._skipped += count - self._taken - 1
+        self._newest = sample
+        self._taken = count
+        self._served += 1
+        return sample
+
+    def _behind_index(self) -> tuple[int, int, int] | None:
+        """(lap, index, count) of the oldest of the :data:`BEHIND_KEPT` samples due before
+        the newest that was not taken, when it came due strictly before the newest (a
+        recorded duplicate of the newest's time is not caught up)."""
+        if self._t0 is None:
+            return None
+        n = len(self._t_rel)
+        lap, i = self._due_index(self.clock.now() - self._t0)
+        count = lap * n + i + 1
+        first = max(self._taken + 1, count - BEHIND_KEPT)
+        if i < 0 or first >= count:
+            return None
+        b_lap, b_i = divmod(first - 1, n)
+        if self._due_at(b_lap, b_i) >= self._due_at(lap, i):
+            return None
+        return b_lap, b_i, first
+
+    def has_behind(self) -> bool:
+        return self._behind_index() is not None
+
+    def take_behind(self) -> GloveSample | None:
+        behind = self._behind_index()
+        return None if behind is None else self._serve(*behind)
+
+    def _due_index(self, elapsed: float) -> tuple[int, int]:
+        """(lap, index) of the newest recorded sample due ``elapsed`` s after the start."""
+        lap = 0
+        if self.loop:
+            lap = int(elapsed // self._period_s)
+            elapsed -= lap * self._period_s
+        return lap, int(np.searchsorted(self._t_rel, elapsed, side="right")) - 1
+
+    def _due_at(self, lap: int, i: int) -> float:
+        t0 = self._t0 if self._t0 is not None else self.clock.now()
+        return t0 + lap * self._period_s + float(self._t_rel[i])
+
+    def has_new(self) -> bool:
+        if self._t0 is None:
+            return False
+        lap, i = self._due_index(self.clock.now() - self._t0)
+        return i >= 0 and lap * len(self._t_rel) + i + 1 > self._taken
+
+    def newest_due_s(self) -> float:
+        """When the newest sample due by now came due (the clock now before any)."""
+        now = self.clock.now()
+        if self._t0 is None:
+            return now
+        lap, i = self._due_index(now - self._t0)
+        return self._due_at(lap, i) if i >= 0 else now
+
+    def next_due_s(self) -> float:
+        """When the next sample not yet returned comes due (inf after the last one)."""
+        if self._t0 is None:
+            self._t0 = self.clock.now()
+        n = len(self._t_rel)
+        lap, i = divmod(self._taken, n)  # the sample after the last one returned
+        if not self.loop and lap > 0:
+            return math.inf
+        due = self._due_at(lap, i) + DUE_TOLERANCE_S
+        now = self.clock.now()
+        return due if due > now else now
+
+    def stats(self) -> GloveStats:
+        since = math.inf
+        if self._newest is not None:
+            since = self.clock.now() - self._newest.host_time_s
+        return GloveStats(frames_ok=self._served, time_since_last_good_s=since,
+                          frames_lost=self._skipped)

@@ -1,0 +1,184 @@
+"""The abstract servo bus the realtime loop drives, and what it returns.
+
+Units: joint angles in degrees (vocabulary convention: flexion positive, radial
+positive), joint velocities in degrees per second, currents in milliamperes,
+temperatures in degrees Celsius, times in seconds on the bus's :class:`Clock`.
+Arrays are in rig order (``RigConfig.servos``), one entry per servo.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from contextlib import AbstractContextManager
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from handrig.config.rig import SilenceConfig
+
+
+@dataclass
+class ServoState:
+    """One read of the servos' present state, in rig order.
+
+    ``stale[i]`` is True when servo ``i`` did not give a valid reading in this
+    read: its entries then hold the last good reading (NaN if there never was
+    one) and ``age_s[i]`` says how old that is. Nothing stale is passed off as
+    fresh.
+    """
+
+    positions_deg: np.ndarray  # (n,) float64, joint angle
+    velocities_dps: np.ndarray  # (n,) float64, joint velocity
+    currents_ma: np.ndarray  # (n,) float64, motor current (signed)
+    temperatures_c: np.ndarray  # (n,) float64, last temperature read (NaN if never)
+    status_errors: np.ndarray  # (n,) uint8, ERR byte of the servo's last status
+    hardware_errors: np.ndarray  # (n,) uint8, Hardware Error Status read in this read (0 = none)
+    stale: np.ndarray  # (n,) bool
+    age_s: np.ndarray  # (n,) float64, time since that servo's reading was taken (inf: never)
+    timestamp_s: float  # clock time of this read
+    stats: BusStats  # the bus's counters at the time of this read (a copy)
+    asked: np.ndarray | None = None
+    """(n,) bool: the servos this read asked for (a read of one part of the servos,
+    ``read_state(part=...)``); the others keep their last reading, ``age_s`` says how
+    old, and are not stale for it. None: every servo was asked."""
+
+    @property
+    def all_fresh(self) -> bool:
+        return not bool(self.stale.any())
+
+
+@dataclass
+class BusStats:
+    """Counters of a bus since it was connected (``per-servo`` arrays in rig order)."""
+
+    n_servos: int
+    writes: int = 0  # goal Sync Writes sent
+    reads: int = 0  # present-state reads attempted
+    retries: int = 0  # extra read attempts within a cycle
+    timeouts: int = 0  # replies (or parts of replies) missing at the deadline
+    crc_errors: int = 0  # replies or per-servo blocks failing their CRC
+    malformed: int = 0  # replies with a wrong id, length or header
+    status_errors: int = 0  # readings refused with an error number (range, access, ...)
+    clamps: int = 0  # goal values clamped into a servo's limits (incl. NaN replaced)
+    fallbacks: int = 0  # switches from Fast Sync Read to plain Sync Read
+    watchdog_trips: int = 0  # servos found with a tripped Bus Watchdog (then re-armed)
+    late_replies: int = 0  # intact replies to an earlier read, recognised and dropped
+    watchdog_gaps: int = 0  # goal writes after a silence near the Bus Watchdog (re-armed)
+    skipped_reads: int = 0  # reads not sent: the wire could not carry them by their deadline
+    late_reads: int = 0  # reads not sent: the caller came after the read's deadline
+    silences: int = 0  # servos past the silence warning (rig.toml [silence] warn_s)
+    held: int = 0  # servos whose goal was held for silence
+    recoveries: int = 0  # silent servos that answered again
+    recovery_reads_max: int = 0  # the longest silence that ended, in reads
+    stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    def __post_init__(self) -> None:
+        for name in ("stale_readings", "hardware_errors", "reboots"):
+            if len(getattr(self, name)) != self.n_servos:
+                setattr(self, name, np.zeros(self.n_servos, np.int64))
+
+    def copy(self) -> BusStats:
+        new = object.__new__(BusStats)  # every read takes one: no __init__ round trip
+        new.__dict__.update(self.__dict__)
+        new.stale_readings = self.stale_readings.copy()
+        new.hardware_errors = self.hardware_errors.copy()
+        new.reboots = self.reboots.copy()
+        return new
+
+    def summary(self) -> str:
+        """One line for logs."""
+        return (
+            f"writes {self.writes}, reads {self.reads}, retries {self.retries}, "
+            f"timeouts {self.timeouts}, crc errors {self.crc_errors}, malformed "
+            f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
+            f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
+            f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, skipped reads "
+            f"{self.skipped_reads}, late reads {self.late_reads}, silences {self.silences}, "
+            f"recoveries {self.recoveries}, stale readings "
+            f"{int(self.stale_readings.sum())}, hardware errors "
+            f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
+        )
+
+
+@dataclass(frozen=True)
+class FaultPolicy:
+    """What the bus does about faults. Times in seconds.
+
+    - ``read_retries``: extra attempts of a failed read, only while the read's
+      deadline (``read_budget_s`` after the call, or the caller's) allows.
+    - ``max_stale_reads``: this many reads in a row that the wire could not carry
+      by their deadline (a configuration that does not fit) raise DeviceTimeoutError.
+    - ``silence``: the tiers for a servo with no valid reply (warn, hold, then the
+      action); None: the rig file's ``[silence]``.
+    - ``on_hardware_error``: ``"reboot"`` the servo (at most ``max_reboots`` times
+      per servo, then stop) or ``"stop"`` at once (ServoFault naming servo and bit).
+    - ``fast_failures_before_fallback``: whole Fast Sync Reads failing in a row
+      before switching to plain Sync Read for good (ROBOTIS' ROS 2 driver uses 10).
+    """
+
+    read_retries: int = 1
+    read_budget_s: float = 0.004
+    max_stale_reads: int = 50
+    on_hardware_error: Literal["reboot", "stop"] = "reboot"
+    max_reboots: int = 3
+    reboot_wait_s: float = 1.0
+    fast_failures_before_fallback: int = 10
+    silence: SilenceConfig | None = None
+
+    def __post_init__(self) -> None:
+        if self.read_retries < 0 or self.max_stale_reads < 1 or self.max_reboots < 0:
+            raise ValueError(f"invalid fault policy {self}")
+        if self.read_budget_s <= 0 or self.reboot_wait_s <= 0:
+            raise ValueError(f"fault policy times must be positive: {self}")
+
+
+class ServoBus(ABC):
+    """A bus of position servos, one per joint, in rig order.
+
+    The realtime loop calls ``write_goals_deg`` every cycle and ``read_state``
+    every few; torque is on only inside ``with bus.torque():``.
+    """
+
+    @property
+    @abstractmethod
+    def joint_names(self) -> tuple[str, ...]:
+        """The joint each servo drives, in rig order."""
+
+    @property
+    @abstractmethod
+    def stats(self) -> BusStats:
+        """Live counters (the object is updated in place)."""
+
+    @abstractmethod
+    def connect(self) -> None:
+        """Open the port and commission every servo; DeviceError says what is wrong."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Torque off if still on, close the port. Safe to call twice."""
+
+    @abstractmethod
+    def torque(self) -> AbstractContextManager[ServoBus]:
+        """Context manager: torque on inside, off on every way out."""
+
+    @abstractmethod
+    def write_goals_deg(self, goals_deg: np.ndarray) -> int:
+        """Send one goal per servo (degrees, rig order); return how many were clamped."""
+
+    @abstractmethod
+    def read_state(self, deadline_s: float | None = None) -> ServoState:
+        """Read present state; servos without a valid reply are marked stale."""
+
+    @property
+    def n_servos(self) -> int:
+        return len(self.joint_names)
+
+    def __enter__(self) -> ServoBus:
+        self.connect()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

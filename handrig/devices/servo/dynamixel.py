@@ -1,0 +1,421 @@
+"""``DynamixelBus``: X-series servos on one Protocol 2.0 bus, a facade over its parts.
+
+What this adds to dynamixel-sdk (REFERENCE.md section 1): deadlines on the
+injected monotonic clock instead of the SDK's busy-wait; each servo's ERR byte
+kept from a Fast Sync Read, whose per-servo running CRCs are checked so a
+truncated or partly corrupted reply still yields the servos before the damage;
+no crash on a malformed or short reply; a lock instead of the ``is_using`` flag;
+stale readings marked; late replies recognised; faults counted, decoded and
+handled by a :class:`FaultPolicy`; torque only inside :meth:`DynamixelBus.torque`,
+with the Bus Watchdog armed, checked and re-armed.
+
+The parts, one job each: :mod:`~handrig.devices.servo.link` (requests and replies over
+the :mod:`~handrig.devices.servo.transport`, with the :mod:`~handrig.devices.servo.wire` budget),
+:mod:`~handrig.devices.servo.commissioning`, :mod:`~handrig.devices.servo.goals` (the goal
+writer), :mod:`~handrig.devices.servo.reader` (the state reader, over
+:mod:`~handrig.devices.servo.fast_read` and :mod:`~handrig.devices.servo.sync_read`),
+:mod:`~handrig.devices.servo.faults` and :mod:`~handrig.devices.servo.torque`; packets are
+built and parsed by :mod:`~handrig.devices.servo.codec` alone.
+
+Units: see :mod:`handrig.devices.servo.bus`. Goal positions go out as ticks
+(``RigConfig`` calibration) and are clamped to each servo's ``[min_deg, max_deg]``
+and to 0..4095 ticks whatever the caller asks.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+
+import numpy as np
+
+from handrig.clock import Clock, MonotonicClock
+from handrig.config.rig import RigConfig
+from handrig.devices.servo import codec
+from handrig.devices.servo.bus import BusStats, FaultPolicy, ServoBus, ServoState
+from handrig.devices.servo.commissioning import Commissioner
+from handrig.devices.servo.fast_read import FastSyncRead
+from handrig.devices.servo.faults import FaultHandler
+from handrig.devices.servo.goals import GoalWriter
+from handrig.devices.servo.link import COMMAND_ATTEMPTS, COMMAND_TIMEOUT_S, Link
+from handrig.devices.servo.reader import StateReader
+from handrig.devices.servo.readings import ReadFields, Readings, ReadPlan
+from handrig.devices.servo.registers import Reg
+from handrig.devices.servo.roster import Roster
+from handrig.devices.servo.sync_read import RegisterSweep, SyncRead
+from handrig.devices.servo.torque import TorqueContext, TorqueControl
+from handrig.devices.servo.transport import SerialTransport, Transport
+from handrig.devices.servo.wire import WireBudget, cycle_bytes, read_bytes, wire_time_s
+from handrig.errors import DeviceError
+
+__all__ = ["DynamixelBus", "ReadFields", "cycle_bytes", "wire_time_s"]
+
+log = logging.getLogger("handrig.devices.servo")
+
+REPLY_POLL_LEAD_S = 50e-6  # default spin_s
+
+
+class DynamixelBus(ServoBus):
+    """The servos of ``rig`` on the serial port ``port`` (a path such as ``/dev/ttyUSB0``).
+
+    ``baud`` defaults to ``rig.bus.baud``; ``clock`` to :class:`MonotonicClock`;
+    ``transport`` to a :class:`~handrig.devices.servo.transport.SerialTransport` on ``port``
+    (tests pass a fake). ``read_fields`` picks what each read fetches:
+    ``"motion"`` (current, velocity and position, 10 bytes per servo) or
+    ``"position"`` (4 bytes: the shortest cycle). ``temperature_every``: every that
+    many state reads, when the read's deadline leaves time, one more Fast Sync
+    Read fetches the temperatures and, with torque on, another checks the Bus
+    Watchdogs and re-arms any that tripped (0: never). ``reply_timeout_s`` bounds
+    the wait for one reply (default: twice its wire time plus 2 ms);
+    ``reply_gap_s`` ends a reply that stops flowing (default 1.5 ms, a USB
+    adapter's latency-timer period with margin, plus 32 byte times). ``spin_s``:
+    poll for a Fast Sync Read reply, instead of sleeping, from ``spin_s`` before
+    the instant the wire would deliver it until shortly after (0: always sleep).
+    A sleeping thread takes tens of microseconds to wake, with cold caches; the
+    poll costs about ``spin_s`` plus the reply's lateness in CPU per read
+    (``handrig bench bus`` measures both ways). Pass 0 from a SCHED_FIFO thread
+    that shares its CPU with the kernel's workers: while it polls, the worker
+    that would deliver the reply cannot run there.
+    """
+
+    def __init__(
+        self,
+        port: str,
+        rig: RigConfig,
+        *,
+        baud: int | None = None,
+        clock: Clock | None = None,
+        fault_policy: FaultPolicy | None = None,
+        read_fields: ReadFields = "motion",
+        temperature_every: int = 100,
+        reply_timeout_s: float | None = None,
+        spin_s: float = REPLY_POLL_LEAD_S,
+        reply_gap_s: float | None = None,
+        transport: Transport | None = None,
+    ) -> None:
+        self.port = port
+        self.rig = rig
+        self.baud = int(baud if baud is not None else rig.bus.baud)
+        self.clock = clock or MonotonicClock()
+        self.policy = fault_policy or FaultPolicy()
+        self.roster = Roster(rig, port, self.baud)
+        self._stats = BusStats(self.roster.n)
+        self.commissioning: list[str] = []  # what connect() found and did, one line each
+        self.plan = ReadPlan(read_fields, self._stats, self.roster.where(), self.commissioning)
+        codec.warm_up()
+        self._lock = threading.RLock()
+        self._connected = False
+        self._build_parts(transport, reply_timeout_s, reply_gap_s, spin_s, temperature_every)
+
+    def _build_parts(
+        self, transport: Transport | None, reply_timeout_s: float | None,
+        reply_gap_s: float | None, spin_s: float, temperature_every: int,
+    ) -> None:
+        roster, stats, clock, plan = self.roster, self._stats, self.clock, self.plan
+        if reply_timeout_s is None:
+            wire = wire_time_s(read_bytes(roster.n, plan.data_len, True), self.baud)
+            reply_timeout_s = 2.0 * wire + 0.002
+        if reply_gap_s is None:
+            reply_gap_s = 0.0015 + wire_time_s(32, self.baud)
+        self.budget = WireBudget(self.baud, float(reply_gap_s), float(reply_timeout_s))
+        self.transport = transport or SerialTransport(self.port, self.baud, clock)
+        self.readings = Readings(roster.n, stats)
+        self.link = Link(self.transport, self.budget, roster, clock, stats,
+                         self.readings.status_err)
+        self.writer = GoalWriter(roster, self.link, stats)
+        self.sweep = RegisterSweep(roster, self.link, plan, stats)
+        self.faults = FaultHandler(roster, self.link, self.writer, self.sweep, self.readings,
+                                   self.policy, stats, clock)
+        self.fast = FastSyncRead(roster, self.link, self.readings, plan, stats, float(spin_s))
+        self.reader = StateReader(
+            self.link, self.readings, plan, self.fast, SyncRead(roster, self.link, self.readings,
+                                                                plan, stats),
+            self.sweep, self.faults, self.policy, stats, clock, temperature_every)
+        self.commissioner = Commissioner(roster, self.link, plan, self.fast, self.faults, clock,
+                                         self.commissioning, self._read_every_servo)
+        self.torque_control = TorqueControl(
+            roster, self.link, self.writer, self.faults, clock, self.commissioning,
+            self._read_every_servo, self.read_state, self.write_goals_deg)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.roster.names
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        return self.roster.ids
+
+    @property
+    def stats(self) -> BusStats:
+        return self._stats
+
+    @property
+    def torque_enabled(self) -> bool:
+        return self.faults.torque_on
+
+    @property
+    def last_goals_deg(self) -> np.ndarray:
+        """The goals last sent, after clamping (NaN before the first write)."""
+        return self.writer.last_goal_deg.copy()
+
+    @property
+    def last_write_s(self) -> float:
+        """When the last write (goals or a request) was handed to the OS, clock time
+        (NaN before the first): where the loop's latency figure ends."""
+        return self.link.sent_s
+
+    @property
+    def models(self) -> dict[int, int]:
+        return self.commissioner.models
+
+    @property
+    def firmware(self) -> dict[int, int]:
+        return self.commissioner.firmware
+
+    @property
+    def read_fields(self) -> ReadFields:
+        return self.plan.fields
+
+    @property
+    def use_fast_sync_read(self) -> bool:
+        """Whether present state is read by Fast Sync Read (False: plain Sync Read)."""
+        return self.plan.fast
+
+    @use_fast_sync_read.setter
+    def use_fast_sync_read(self, fast: bool) -> None:
+        self.plan.fast = bool(fast)
+
+    @property
+    def hold_outside_limits(self) -> bool:
+        """Torque-on with a servo outside [min_deg, max_deg] holds it where it is instead
+        of refusing (for ``handrig calibrate servos``, where the zero is being found)."""
+        return self.torque_control.hold_outside_limits
+
+    @hold_outside_limits.setter
+    def hold_outside_limits(self, hold: bool) -> None:
+        self.torque_control.hold_outside_limits = bool(hold)
+
+    @property
+    def reply_timeout_s(self) -> float:
+        return self.budget.reply_timeout_s
+
+    @property
+    def reply_gap_s(self) -> float:
+        return self.budget.reply_gap_s
+
+    @property
+    def spin_s(self) -> float:
+        return self.fast.spin_s
+
+    def describe(self, index: int) -> str:
+        """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""
+        return self.roster.describe(index)
+
+    def read_wire_s(self, n: int) -> float:
+        """Wire time of a present-state read of ``n`` servos: the request and every reply."""
+        return self.reader.read_wire_s(n)
+
+    def quiet_wait_s(self) -> float:
+        """How long a read asked now would wait, beyond the wire, for the line to go
+        quiet after a failed reply (0 almost always): a loop fitting reads into gaps
+        counts it, or the bus declines the read."""
+        return self.link.quiet_wait_s()
+
+    @property
+    def last_read_whole(self) -> bool:
+        """Whether the last read got every servo at once, no Alert raised (the short way)."""
+        return self.reader.last_whole
+
+    # ------------------------------------------------------------------ connect, close
+    def connect(self) -> None:
+        """Open the port and commission every servo (:mod:`handrig.devices.servo.commissioning`).
+
+        Raises DeviceError listing every servo that is missing or wrong.
+        """
+        with self._lock:
+            if self._connected:
+                return
+            self.transport.open()
+            try:
+                self.commissioner.run()
+            except BaseException:
+                self.transport.close()
+                raise
+            self._connected = True
+
+    def close(self) -> None:
+        """Torque off (if on) and close the port. Safe to call more than once."""
+        with self._lock:
+            try:
+                if self.faults.torque_on:
+                    self.disable_torque()
+            finally:
+                self.transport.close()
+                self._connected = False
+
+    def __enter__(self) -> DynamixelBus:
+        self.connect()
+        return self
+
+    # ------------------------------------------------------------------ registers
+    def read_register(self, index: int, reg: Reg) -> int:
+        """Read one control-table item of servo ``index`` (rig order)."""
+        with self._lock:
+            return self.link.read_register(index, reg)
+
+    def write_register(self, index: int, reg: Reg, value: int) -> None:
+        """Write one control-table item of servo ``index`` and check the reply."""
+        with self._lock:
+            self.link.write_register(index, reg, value)
+
+    def reboot(self, index: int) -> None:
+        """Reboot servo ``index`` (clears a hardware error), then restore its settings.
+
+        If torque is on, the servo gets its last goal and torque back, and the Bus
+        Watchdog is re-armed. Raises ServoFault if it does not come back within
+        ``fault_policy.reboot_wait_s``.
+        """
+        with self._lock:
+            self.faults.reboot(index)
+
+    # ------------------------------------------------------------------ goals
+    def write_goals_deg(self, goals_deg: np.ndarray) -> int:
+        """Send one goal per servo (joint degrees, rig order) in one Sync Write.
+
+        Each goal is clamped to the servo's ``[min_deg, max_deg]``; a non-finite
+        goal is replaced by the last goal sent (or the servo's zero clamped into its
+        limits). Returns how many goals were changed that way (also counted in
+        ``stats.clamps``). No reply is expected. A servo held for silence (rig.toml
+        ``[silence]``) keeps its last goal instead, and one that answers again is
+        moved back to its goals at the slew limit.
+        """
+        with self._lock:
+            self.faults.rearm_after_silence()
+            if self.faults.silence.steering and self.faults.torque_on:
+                goals_deg = self.faults.silence.steer(goals_deg, self.writer.last_goal_deg)
+            clamped = self.writer.build(goals_deg)
+            self.writer.send_built()
+        return clamped
+
+    def write_and_read(
+        self, goals_deg: np.ndarray, deadline_s: float | None = None
+    ) -> tuple[int, ServoState]:
+        """``write_goals_deg`` then ``read_state``, both requests in one write to the port.
+
+        The same bytes go on the wire in the same order; the host saves a system
+        call and the adapter (or emulator) one wake-up. Returns (clamped, state).
+        """
+        with self._lock:
+            self.faults.rearm_after_silence()
+            if self.faults.silence.steering and self.faults.torque_on:
+                goals_deg = self.faults.silence.steer(goals_deg, self.writer.last_goal_deg)
+            clamped = self.writer.build(goals_deg)
+            self.writer.hold_built()
+            try:
+                state = self.reader.read(deadline_s)
+            finally:
+                self.writer.send_held()  # not sent by the read: send it on its own
+        return clamped, state
+
+    def rehearse_write(self, goals_deg: np.ndarray) -> None:
+        """Build the goal Sync Write for ``goals_deg`` without sending it, counting or
+        remembering anything: the loop calls it shortly before a deadline so the write
+        path is warm in the CPU's caches when the real goals come (see handrig.loop.rig)."""
+        with self._lock:
+            self.writer.rehearse(goals_deg)
+
+    # ------------------------------------------------------------------ present state
+    def read_state(self, deadline_s: float | None = None,
+                   part: tuple[int, int] | None = None) -> ServoState:
+        """Read present state (Fast Sync Read, or Sync Read after a fallback).
+
+        ``part=(i, m)`` reads only part ``i`` of ``m`` (the servos at rig indices
+        ``i, i + m, ...``): a shorter read that fits a shorter gap; the others keep
+        their last reading (``ServoState.asked`` says which were asked).
+
+        ``deadline_s`` is a time on the bus clock by which the read must end
+        (default: ``fault_policy.read_budget_s``, at least 1.5 times the reply's
+        wire time plus 1 ms, from when the wire is free of the last goal write);
+        failed servos are retried up to ``fault_policy.read_retries`` times while
+        time remains. Servos without a valid reply are marked stale, never passed
+        off as fresh. A read (or retry) whose request and reply could not both be
+        on the wire before the deadline is not sent: its servos are marked stale
+        (``stats.skipped_reads``; ``stats.late_reads`` when the call came after the
+        deadline); ``max_stale_reads`` skipped reads in a row that were not late
+        raise DeviceTimeoutError. A servo raising its Alert bit is handled per
+        policy (reboot or ServoFault). A servo without a valid reading goes through
+        the ``[silence]`` tiers (warning, goal held, then the action; "stop" raises
+        DeviceTimeoutError naming it and what was seen); see :attr:`relax_reason`
+        and :meth:`drain_events`.
+        """
+        with self._lock:
+            return self.reader.read(deadline_s, part)
+
+    @property
+    def relax_reason(self) -> str | None:
+        """Why the puppet should be relaxed while servos are silent (the ``[silence]``
+        action ``"relax"`` in force), else None."""
+        return self.faults.silence.relax_reason
+
+    def drain_events(self) -> list[str]:
+        """What the bus did about silent servos since the last call, one line each."""
+        return self.faults.silence.drain_events()
+
+    def housekeeping(self, deadline_s: float) -> bool:
+        """Between state reads: the Bus Watchdogs, then the temperatures, when
+        ``temperature_every`` reads have passed and the wire can carry them by
+        ``deadline_s``. The next :meth:`read_state` returns what was read. True if
+        they ran."""
+        with self._lock:
+            return self.reader.housekeeping(deadline_s)
+
+    def _read_every_servo(self, purpose: str) -> ServoState:
+        """Read until every servo has given a valid reading (up to COMMAND_ATTEMPTS reads)."""
+        seen = np.zeros(self.roster.n, bool)
+        for _ in range(COMMAND_ATTEMPTS):
+            state = self.read_state(self.clock.now() + 4 * COMMAND_TIMEOUT_S)
+            seen |= ~state.stale
+            if seen.all():
+                return state
+        bad = [self.describe(int(i)) for i in np.flatnonzero(~seen)]
+        raise DeviceError(
+            f"cannot {purpose}: no valid present position from {', '.join(bad)} "
+            f"{self.roster.where()} in {COMMAND_ATTEMPTS} reads")
+
+    # ------------------------------------------------------------------ torque
+    def torque(
+        self, *, handle_signals: bool = True, on_signal: Callable[[str], None] | None = None
+    ) -> TorqueContext:
+        """Context manager: torque on inside, off on every way out.
+
+        On entry every servo gets its present position (clamped) as goal, then
+        torque on, then the Bus Watchdog (``rig.bus.watchdog_ms``). On exit, normal
+        or by exception, torque goes off on every servo and the watchdog is
+        cleared. With ``handle_signals`` (main thread only) SIGTERM, SIGINT, SIGHUP
+        and SIGQUIT are caught while inside: the first calls ``on_signal(name)`` if
+        given (e.g. a loop's graceful stop) or else raises KeyboardInterrupt
+        (SIGINT) / SafetyStop (the others); a second signal raises at once;
+        signals during the torque-off are ignored until it is done.
+        """
+        return TorqueContext(self, handle_signals, on_signal)
+
+    def enable_torque(self) -> None:
+        """Torque on (what entering :meth:`torque` does); DeviceError if not connected."""
+        with self._lock:
+            if not self._connected:
+                raise DeviceError(f"servo bus {self.port} is not connected: call connect()")
+            self.torque_control.enable()
+
+    def disable_torque(self) -> list[str]:
+        """Torque off on every servo and watchdog cleared; returns the servos that failed.
+
+        A broadcast Sync Write first (reaches every servo at once), then a checked
+        write per servo. Never raises for a servo that does not answer.
+        """
+        with self._lock:
+            failed = self.torque_control.disable()
+        for f in failed:
+            log.error("torque off failed: %s", f)
+        return failed

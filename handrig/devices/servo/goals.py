@@ -1,0 +1,81 @@
+"""The goal writer: goals clamped, built into the compiled goal Sync Write, and sent.
+
+The Sync Write of Goal Position is preallocated once and rebuilt in place each
+cycle by :func:`handrig.devices.servo.codec.goal_packet` (clamp, ticks and CRC in one
+compiled loop), then written to the port in one write. Ticks in 0..4095 and IDs
+<= 252 never form ``FF FF FD``: the packet needs no stuffing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handrig.devices.servo import codec
+from handrig.devices.servo.bus import BusStats
+from handrig.devices.servo.link import Link
+from handrig.devices.servo.registers import Reg
+from handrig.devices.servo.roster import Roster
+
+
+class GoalWriter:
+    """Goal Sync Writes for the servos of ``roster`` through ``link``."""
+
+    def __init__(self, roster: Roster, link: Link, stats: BusStats) -> None:
+        self.roster = roster
+        self.link = link
+        self.stats = stats
+        n = roster.n
+        prefix = codec.sync_write_prefix(Reg.GOAL_POSITION.address, 4, n)
+        self.packet = np.zeros(codec.SYNC_WRITE_BODY + 5 * n + 2, np.uint8)
+        self.packet[: len(prefix)] = np.frombuffer(prefix, np.uint8)
+        self.packet[codec.SYNC_WRITE_BODY :: 5][:n] = roster.ids
+        self._view = self.packet.data  # a memoryview: what is written to the port
+        self._rehearsal_packet = self.packet.copy()
+        self._goal_deg = np.zeros(n, np.float64)
+        self._rehearsal_goal = np.zeros(n, np.float64)
+        self.last_goal_deg = np.full(n, np.nan)
+        """The goals last sent, after clamping (NaN before the first write)."""
+
+    def build(self, goals_deg: np.ndarray) -> int:
+        """Clamp ``goals_deg`` and build the goal Sync Write; returns (and counts) how
+        many goals changed. Nothing is sent."""
+        clamped = self._clamp_into(goals_deg, self._goal_deg, self.packet)
+        self.stats.clamps += clamped
+        return clamped
+
+    def send_built(self) -> None:
+        """Send the Sync Write :meth:`build` built."""
+        self.link.send(self._view)
+        self.stats.writes += 1
+        self.last_goal_deg[:] = self._goal_deg
+
+    def hold_built(self) -> None:
+        """Hand the built Sync Write to the link, to go out with the next request."""
+        self.link.held = self.packet.tobytes()
+        self.last_goal_deg[:] = self._goal_deg
+        self.stats.writes += 1
+
+    def send_held(self) -> None:
+        """Send a held Sync Write that no request took along."""
+        if self.link.held:
+            self.link.send(b"")
+
+    def resend(self, goal_deg: np.ndarray) -> None:
+        """Send ``goal_deg`` (already within limits) as the goal Sync Write, uncounted
+        as a clamp (keeps the Bus Watchdogs fed while a servo restarts)."""
+        self._clamp_into(goal_deg, self._goal_deg, self.packet)
+        self.send_built()
+
+    def rehearse(self, goals_deg: np.ndarray) -> None:
+        """Build a Sync Write for ``goals_deg`` into a scratch packet: nothing is sent,
+        counted or remembered (the write path gets warm in the CPU's caches)."""
+        self._clamp_into(goals_deg, self._rehearsal_goal, self._rehearsal_packet)
+
+    def _clamp_into(self, goals_deg: np.ndarray, goal: np.ndarray, packet: np.ndarray) -> int:
+        r = self.roster
+        g = np.ascontiguousarray(goals_deg, dtype=np.float64)
+        if g.shape != (r.n,):
+            raise ValueError(f"goals_deg must have shape ({r.n},), got {g.shape}")
+        return int(codec.goal_packet(
+            g, r.min_deg, r.max_deg, self.last_goal_deg, r.hold_deg, r.ticks_per_deg,
+            r.zero_ticks, goal, packet))

@@ -1,0 +1,210 @@
+"""The link: requests out and status replies in over one transport, with the wire budget.
+
+Every request goes out through :meth:`Link.send`, after any goal Sync Write held
+back to share its port write, and after the line has gone quiet when a reply
+failed (:class:`~handrig.devices.servo.wire.WireBudget`). Single-servo commands are
+retried a bounded number of times and must be answered by the servo asked.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handrig.clock import Clock
+from handrig.devices.servo.bus import BusStats
+from handrig.devices.servo.codec import (
+    BROADCAST_ID,
+    INST_PING,
+    INST_READ,
+    INST_SYNC_WRITE,
+    INST_WRITE,
+    StatusPacket,
+    build_instruction,
+    parse_status,
+    u16,
+)
+from handrig.devices.servo.registers import ERR_ALERT, Reg, describe_status_error
+from handrig.devices.servo.roster import Roster
+from handrig.devices.servo.transport import Transport
+from handrig.devices.servo.wire import WireBudget
+from handrig.errors import DeviceTimeoutError, ProtocolError, ServoFault
+
+COMMAND_TIMEOUT_S = 0.05  # a single command's reply: RDT 0.5 ms + a 16 ms latency timer, ample
+# Commissioning sends ~6 commands per servo: with 20 servos and one reply in five
+# lost, 3 attempts would fail a connect more often than not; 8 make it rare.
+COMMAND_ATTEMPTS = 8
+
+
+class Link:
+    """Requests and replies for the servos of ``roster`` over ``transport``.
+
+    ``alerts`` (uint8, rig order): a command answered with the Alert bit raised ORs
+    it into the servo's entry, for the fault handler to look at after the read.
+    """
+
+    def __init__(
+        self, transport: Transport, budget: WireBudget, roster: Roster, clock: Clock,
+        stats: BusStats, alerts: np.ndarray,
+    ) -> None:
+        self.transport = transport
+        self.budget = budget
+        self.roster = roster
+        self.clock = clock
+        self.stats = stats
+        self.alerts = alerts
+        self.held = b""  # a goal Sync Write to send with the next request
+        self.sent_s = float("nan")  # when the last write was handed to the OS
+
+    # ------------------------------------------------------------------ sending
+    def send(self, packet: bytes | memoryview) -> None:
+        """Write ``packet`` after any held goal Sync Write, in one port write."""
+        data = self.held + bytes(packet) if self.held else packet
+        self.held = b""
+        self.transport.write(data)
+        self.sent_s = now = self.clock.now()
+        self.budget.sent(len(data), now)
+
+    def quiet_line(self, deadline_s: float | None = None) -> None:
+        """Before a request: drop old input; after a failed reply, wait for the line to
+        have been quiet ``reply_gap_s`` (at most ``reply_timeout_s``, not past
+        ``deadline_s``)."""
+        if self.budget.failed_at is None:
+            self.transport.discard_input()
+            return
+        wait = self.budget.take_quiet_wait(self.clock.now(), deadline_s)
+        assert wait is not None
+        since, most = wait
+        self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since)
+
+    def quiet_wait_s(self) -> float:
+        """What the quiet after a failed reply adds to a request's wait for the wire
+        (:meth:`WireBudget.quiet_wait_s`), counting the late bytes that have come in
+        meanwhile: they are taken in first, and the quiet runs from them."""
+        if self.budget.failed_at is None:
+            return 0.0
+        self.transport.discard_input()
+        return self.budget.quiet_wait_s(self.clock.now(), self.transport.last_rx_s)
+
+    def request_start(self, now: float) -> float:
+        """When a request written at ``now`` would start on the wire."""
+        return self.budget.request_start(now, len(self.held), self.transport.last_rx_s)
+
+    def failed(self) -> None:
+        """The reply being read failed now."""
+        self.budget.failed(self.clock.now())
+
+    def sync_write(self, reg: Reg, values: list[int]) -> None:
+        """One broadcast Sync Write of ``reg`` (one value per servo, rig order)."""
+        params = u16(reg.address) + u16(reg.size) + b"".join(
+            bytes((sid,)) + reg.encode(v) for sid, v in zip(self.roster.ids, values, strict=True))
+        self.send(build_instruction(BROADCAST_ID, INST_SYNC_WRITE, params))
+
+    # ------------------------------------------------------------------ replies
+    def next_status(self, deadline: float) -> StatusPacket | None:
+        """The next status packet that passes its CRC before ``deadline``. Packets failing
+        it are counted and skipped; none in time counts a timeout, marks the line
+        failed (a late reply may still arrive) and returns None."""
+        while True:
+            raw = self.transport.read_packet(deadline)
+            if raw is None:
+                self.stats.timeouts += 1
+                self.failed()
+                return None
+            try:
+                return parse_status(raw)
+            except ProtocolError:
+                self.stats.crc_errors += 1
+
+    def read_reply(self, n: int, deadline: float) -> bytes:
+        """Up to ``n`` bytes of a reply: its start may take until ``deadline`` (the wire
+        can still be busy with earlier packets); once it has started, a gap of
+        ``reply_gap_s`` ends it (counted from the start, not from the request)."""
+        t = self.transport
+        head = t.read_exact(min(n, 7), deadline)
+        if len(head) < min(n, 7):
+            return head
+        return head + t.read_exact(n - len(head), deadline, gap_s=self.budget.reply_gap_s)
+
+    def broadcast_ping(self, wait_s: float = 0.1) -> dict[int, int]:
+        """{ID: model number} of every servo answering a broadcast ping within ``wait_s``."""
+        t = self.transport
+        self.quiet_line()
+        self.send(build_instruction(BROADCAST_ID, INST_PING))
+        deadline = self.clock.now() + wait_s
+        found: dict[int, int] = {}
+        while (raw := t.read_packet(deadline)) is not None:
+            try:
+                status = parse_status(raw)
+            except ProtocolError:
+                continue
+            if len(status.params) >= 2:
+                found[status.servo_id] = status.params[0] | status.params[1] << 8
+        return found
+
+    # ------------------------------------------------------------------ commands
+    def transact(
+        self, packet: bytes, servo_id: int, *, timeout_s: float = COMMAND_TIMEOUT_S,
+        attempts: int = COMMAND_ATTEMPTS, n_params: int | None = None,
+    ) -> StatusPacket | None:
+        """Send ``packet`` and return ``servo_id``'s status reply, or None after ``attempts``.
+
+        ``n_params``: the reply's parameter count when it succeeds (a status with
+        another count and no error is a reply to something else, e.g. late).
+        """
+        for attempt in range(attempts):
+            if attempt:
+                self.stats.retries += 1
+            self.quiet_line()
+            self.send(packet)
+            deadline = self.clock.now() + timeout_s
+            while (status := self.next_status(deadline)) is not None:
+                if status.servo_id != servo_id or (
+                    n_params is not None and not status.error & 0x7F
+                    and len(status.params) != n_params
+                ):
+                    self.stats.malformed += 1
+                    continue
+                return status
+        return None
+
+    def command(
+        self, index: int, instruction: int, params: bytes, what: str, n_params: int = 0
+    ) -> StatusPacket:
+        """One instruction to servo ``index`` that must be answered without an error number."""
+        r = self.roster
+        sid = r.ids[index]
+        status = self.transact(build_instruction(sid, instruction, params), sid, n_params=n_params)
+        if status is None:
+            raise DeviceTimeoutError(
+                f"{r.describe(index)} did not answer {what} {r.where()} after "
+                f"{COMMAND_ATTEMPTS} attempts: check power, cable and ID"
+            )
+        if status.error & 0x7F:
+            raise ServoFault(
+                f"{r.describe(index)} refused {what}: {describe_status_error(status.error)}",
+                servo_id=sid, bits=status.error,
+            )
+        if status.error & ERR_ALERT:
+            self.alerts[index] |= ERR_ALERT
+        return status
+
+    def read_register(self, index: int, reg: Reg) -> int:
+        """Read one control-table item of servo ``index`` (rig order)."""
+        status = self.command(
+            index, INST_READ, u16(reg.address) + u16(reg.size), f"a read of {reg.name}",
+            n_params=reg.size,
+        )
+        if len(status.params) < reg.size:
+            self.stats.malformed += 1
+            raise ProtocolError(
+                f"{self.roster.describe(index)} sent {len(status.params)} bytes for {reg.name} "
+                f"({reg.size} expected) {self.roster.where()}"
+            )
+        return reg.decode(status.params)
+
+    def write_register(self, index: int, reg: Reg, value: int) -> None:
+        """Write one control-table item of servo ``index`` and check the reply."""
+        self.command(
+            index, INST_WRITE, u16(reg.address) + reg.encode(value),
+            f"a write of {reg.name} = {value}",
+        )

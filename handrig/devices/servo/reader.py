@@ -1,0 +1,277 @@
+"""The state reader: one present-state read with its retries, stale marking and checks.
+
+A read (or retry) whose request and reply could not both be on the wire before
+its deadline is not sent: on a half-duplex bus its reply would still be arriving
+when the caller's next goals go out. Failed servos are retried while the
+deadline allows; a Fast Sync Read reply stops at the first servo that does not
+answer, so a retry asks the rest first and the one where it stopped last.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handrig.clock import Clock
+from handrig.devices.servo.bus import BusStats, FaultPolicy, ServoState
+from handrig.devices.servo.fast_read import WHOLE, FastSyncRead, Order
+from handrig.devices.servo.faults import FaultHandler
+from handrig.devices.servo.link import Link
+from handrig.devices.servo.readings import Readings, ReadPlan
+from handrig.devices.servo.registers import Reg
+from handrig.devices.servo.sync_read import RegisterSweep, SyncRead
+from handrig.devices.servo.wire import read_bytes, wire_time_s
+
+HOUSEKEEPING_FORCE_S = 1.0  # housekeeping due this long runs where the wire has room
+SMOOTHING = 0.125  # weight of the newest figure in what a read learns (retries, housekeeping)
+ATTEMPT_EXTRA_MAX_S = 0.005  # an answer later than this beyond the wire is not learnt
+
+
+class StateReader:
+    """Present-state reads: Fast Sync Read, with a fallback to Sync Read for good after
+    ``policy.fast_failures_before_fallback`` failures in a row while Sync Read works.
+
+    ``temperature_every``: every that many reads, when the deadline leaves time,
+    the Bus Watchdogs (torque on) and then the temperatures are read too (0: never).
+    :meth:`housekeeping` does the same between state reads (the loop calls it in
+    cycles without a read, where the wire has room for it).
+    """
+
+    def __init__(
+        self, link: Link, readings: Readings, plan: ReadPlan, fast: FastSyncRead,
+        sync: SyncRead, sweep: RegisterSweep, faults: FaultHandler, policy: FaultPolicy,
+        stats: BusStats, clock: Clock, temperature_every: int,
+    ) -> None:
+        self.link = link
+        self.readings = readings
+        self.plan = plan
+        self.fast = fast
+        self.sync = sync
+        self.sweep = sweep
+        self.faults = faults
+        self.policy = policy
+        self.stats = stats
+        self.clock = clock
+        self.temperature_every = int(temperature_every)
+        self._next_temperature_read = 0
+        self._fast_fail_run = 0
+        self._parts: dict[tuple[int, int], np.ndarray] = {}
+        n = readings.n
+        baud = link.budget.baud
+        # a temperature Fast Sync Read: request 14 + N bytes, reply 8 + 5N
+        self._temperature_wire_s = wire_time_s(22 + 6 * n, baud) + 0.0005
+        # how long housekeeping has taken here (its replies come no sooner than the wire
+        # allows, and later from a slow adapter or a busy emulator): it runs only where
+        # that much room is left, unless it has been due for HOUSEKEEPING_FORCE_S
+        self._housekeeping_s = 0.0
+        self._housekeeping_due_at: float | None = None
+        # how much longer than its wire time an answered request has taken here (the
+        # host's and the adapter's or emulator's share): a retry starts only with room
+        # for that too, else it would run past the read's deadline into the next write
+        self._attempt_extra_s = 0.0
+        # a read's default budget is never shorter than one reply on the wire plus slack
+        self._min_budget_s = 1.5 * wire_time_s(read_bytes(n, plan.data_len, True), baud) + 0.001
+        self.last_whole = False
+        """Whether the last read got every servo at once with no Alert bit raised (the
+        short way: one compiled pass decoded the reply into the returned state)."""
+
+    def read_wire_s(self, n: int) -> float:
+        """Wire time of a present-state read of ``n`` servos: the request and every reply."""
+        return read_bytes(n, self.plan.data_len, self.plan.fast) * self.link.budget.byte_s
+
+    def read(self, deadline_s: float | None, part: tuple[int, int] | None = None
+             ) -> ServoState:
+        """One present-state read (see :meth:`handrig.devices.servo.DynamixelBus.read_state`)."""
+        if part is not None and part[1] > 1:
+            return self._read_part(part, deadline_s)
+        silence = self.faults.silence
+        begun = self._begin(self.readings.n, deadline_s)
+        if isinstance(begun, ServoState):
+            return begun
+        deadline_s = begun
+        if self._attempts(deadline_s) and not (
+                self.temperature_every and self.stats.reads >= self._next_temperature_read):
+            if silence.active:
+                silence.update(self.fast.whole_at)
+            return self.readings.take_whole(self.fast.whole_at)
+        return self._finish(deadline_s)
+
+    def _begin(self, k: int, deadline_s: float | None) -> float | ServoState:
+        """The start of a read of ``k`` servos: its deadline (None: the default budget
+        from when the wire is free of the goal Sync Write just sent), or, when its
+        request and replies cannot be on the wire by then, the state of a read not sent
+        (counted as skipped)."""
+        now = self.clock.now()
+        silence = self.faults.silence
+        start = self.link.request_start(now)
+        if deadline_s is None:
+            deadline_s = start + max(self.policy.read_budget_s, self._min_budget_s)
+        elif start + self.read_wire_s(k) > deadline_s:
+            silence.note_read(now, late=deadline_s <= now)
+            self.faults.read_skipped(self.read_wire_s(k), deadline_s - now)
+            silence.update(now)
+            return self.readings.unread(now)
+        silence.note_read(now)
+        self.faults.skip_run = 0
+        self.stats.reads += 1
+        self.readings.start_read()
+        self.last_whole = False
+        return deadline_s
+
+    def part_indices(self, part: tuple[int, int]) -> np.ndarray:
+        """The servos of part ``i`` of ``m`` (rig indices ``i, i + m, i + 2m, ...``)."""
+        i, m = part
+        if not 0 < m <= self.readings.n:
+            raise ValueError(f"read parts must be 1..{self.readings.n}, got {m}")
+        key = (i % m, m)
+        got = self._parts.get(key)
+        if got is None:
+            got = self._parts[key] = np.arange(key[0], self.readings.n, m, dtype=np.intp)
+        return got
+
+    def _read_part(self, part: tuple[int, int], deadline_s: float | None) -> ServoState:
+        """A read of one part of the servos: the same checks, retries, stale marking and
+        silence tiers as a whole read, for the servos it asks; the others keep their
+        last reading and are not marked stale by it."""
+        indices = self.part_indices(part)
+        begun = self._begin(len(indices), deadline_s)
+        if isinstance(begun, ServoState):
+            return begun
+        deadline_s = begun
+        fresh = self.readings.fresh
+        pending = indices
+        for attempt in range(self.policy.read_retries + 1):
+            if attempt:
+                if (self.link.request_start(self.clock.now())
+                        + self._retry_s(len(pending)) > deadline_s):
+                    break
+                self.stats.retries += 1
+            self._attempt(pending, None, deadline_s)
+            left = pending[~fresh[pending]]
+            if not left.size:
+                break
+            # the first servo that did not answer goes last: in a Fast Sync Read the
+            # servos after a silent one in the chain fail with it
+            pending = np.roll(left, -1)
+        return self._finish(deadline_s, indices)
+
+    def _attempts(self, deadline_s: float) -> bool:
+        """The read and its retries; True when it was whole."""
+        fresh = self.readings.fresh
+        first = self.fast.orders[self.stats.reads % len(self.fast.orders)]
+        order: Order | None = first
+        pending = first.indices
+        for attempt in range(self.policy.read_retries + 1):
+            if attempt:
+                start = self.link.request_start(self.clock.now())
+                if start + self._retry_s(len(pending)) > deadline_s:
+                    break
+                self.stats.retries += 1
+            if self._attempt(pending, order, deadline_s) == WHOLE:
+                self.last_whole = True
+                return True
+            if fresh.all():
+                break
+            pending = np.roll(pending[~fresh[pending]], -1)
+            order = None
+        return False
+
+    def _retry_s(self, k: int) -> float:
+        """The time a retry of ``k`` servos is expected to take: its wire time and what
+        answered requests have taken here beyond theirs."""
+        return self.read_wire_s(k) + self._attempt_extra_s
+
+    def _answered(self, start_s: float, k: int) -> None:
+        """A request for ``k`` servos sent at ``start_s`` was answered now."""
+        extra = max(0.0, self.clock.now() - start_s - self.read_wire_s(k))
+        if extra <= ATTEMPT_EXTRA_MAX_S:  # longer: a stalled host, not the bus's way
+            self._attempt_extra_s += SMOOTHING * (extra - self._attempt_extra_s)
+
+    def _attempt(self, indices: np.ndarray, order: Order | None, deadline_s: float) -> int:
+        """One read of ``indices``: what :meth:`FastSyncRead.read` returns (Sync Read: 1/0)."""
+        start = self.clock.now()
+        deadline = min(deadline_s, self.link.budget.reply_deadline(start))
+        if not self.plan.fast:
+            got = int(self.sync.read(indices, deadline))
+            if got:
+                self._answered(start, len(indices))
+            return got
+        got = self.fast.read(indices, deadline, order)
+        if got:
+            self._fast_fail_run = 0
+            self._answered(start, len(indices))
+            return got
+        self._fast_fail_run += 1
+        if self._fast_fail_run >= self.policy.fast_failures_before_fallback:
+            self._fast_fail_run = 0
+            deadline = min(deadline_s, self.link.budget.reply_deadline(self.clock.now()))
+            if self.sync.read(indices, deadline):
+                self.plan.fall_back(
+                    f"{self.policy.fast_failures_before_fallback} Fast Sync Reads "
+                    "failed in a row while Sync Read works")
+                return 1
+        return got
+
+    def _housekeeping_due(self) -> bool:
+        return bool(self.temperature_every) and self.stats.reads >= self._next_temperature_read
+
+    def _housekeeping_fits(self, deadline_s: float) -> bool:
+        """Whether the housekeeping due now may run before ``deadline_s``: the wire
+        must carry it, and the time it has taken here must fit too, unless it has been
+        due for ``HOUSEKEEPING_FORCE_S`` (it is not put off for ever)."""
+        now = self.clock.now()
+        left = deadline_s - now
+        if left <= self._temperature_wire_s:
+            return False
+        if self._housekeeping_due_at is None:
+            self._housekeeping_due_at = now
+        return (left > self._housekeeping_s
+                or now - self._housekeeping_due_at >= HOUSEKEEPING_FORCE_S)
+
+    def _finish(self, deadline_s: float, asked: np.ndarray | None = None) -> ServoState:
+        """Stale marking, alerts, housekeeping and the stale-run check of a read
+        (``asked``: the servos a read of a part asked for)."""
+        now = self.clock.now()
+        r = self.readings
+        whole = self.last_whole
+        if whole or (r.fresh.all() if asked is None else r.fresh[asked].all()):
+            self.link.budget.reply_in(now)
+        stale = r.mark(now, asked)
+        if not whole and r.status_err.any():
+            self.faults.alerts_raised()
+        if self._housekeeping_due() and self._housekeeping_fits(deadline_s):
+            self._next_temperature_read = self.stats.reads + self.temperature_every
+            self._housekeeping(deadline_s)
+        if stale.any() or self.faults.silence.active:
+            self.faults.silence.update(now)
+        return r.snapshot(now, stale, r.hw_err.copy(), asked)
+
+    def housekeeping(self, deadline_s: float) -> bool:
+        """The housekeeping reads in a cycle without a state read, when due and when the
+        wire can carry them by ``deadline_s``; True if they ran."""
+        if not self._housekeeping_due() or not self._housekeeping_fits(deadline_s):
+            return False
+        self._next_temperature_read = self.stats.reads + self.temperature_every
+        self._housekeeping(deadline_s)
+        return True
+
+    def _housekeeping(self, deadline_s: float) -> None:
+        """With torque on, the Bus Watchdogs first, then the temperatures if the read's
+        deadline leaves time for them."""
+        start = self.clock.now()
+        self._housekeeping_due_at = None
+        try:
+            self._housekeeping_reads(deadline_s)
+        finally:
+            took = self.clock.now() - start
+            est = self._housekeeping_s  # a long one counts at once, short ones slowly
+            self._housekeeping_s = took if took > est else est + SMOOTHING * (took - est)
+
+    def _housekeeping_reads(self, deadline_s: float) -> None:
+        if self.faults.torque_on and self.faults.watchdog_ms:
+            self.faults.check_watchdogs(deadline_s)
+            if deadline_s - self.clock.now() <= self._temperature_wire_s:
+                return
+        temps = self.readings.temperatures_c
+        for i, value in enumerate(self.sweep.read(Reg.PRESENT_TEMPERATURE, deadline_s)):
+            if value is not None:
+                temps[i] = value

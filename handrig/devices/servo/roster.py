@@ -1,0 +1,58 @@
+"""The servos of one rig as the driver sees them: IDs, names, limits and unit conversions.
+
+Arrays are in rig order (``RigConfig.servos``). Joint degrees become ticks as
+``zero_ticks + deg * ticks_per_deg``, where ``ticks_per_deg`` carries the
+direction and gear ratio (4096 ticks per servo turn).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handrig.config.rig import MODEL_NUMBERS, POSITION_TICKS_MAX, TICKS_PER_DEG, RigConfig
+from handrig.devices.servo.registers import CURRENT_MA_PER_UNIT, VELOCITY_DPS_PER_UNIT
+from handrig.errors import DeviceError
+
+
+class Roster:
+    """IDs, joint names and calibration of the servos of ``rig`` on ``port``."""
+
+    def __init__(self, rig: RigConfig, port: str, baud: int) -> None:
+        if not rig.servos:
+            raise DeviceError("the rig config lists no servos: add [[servos]] to config/rig.toml")
+        servos = rig.servos
+        self.rig = rig
+        self.port = port
+        self.baud = baud
+        self.n = len(servos)
+        self.ids: tuple[int, ...] = tuple(s.id for s in servos)
+        self.ids_bytes = bytes(self.ids)
+        self.names: tuple[str, ...] = tuple(s.joint for s in servos)
+        self.index_of_id = {s.id: i for i, s in enumerate(servos)}
+        self.min_deg = np.array([s.min_deg for s in servos], np.float64)
+        self.max_deg = np.array([s.max_deg for s in servos], np.float64)
+        self.hold_deg = np.clip(0.0, self.min_deg, self.max_deg)
+        self.expected_models = tuple(MODEL_NUMBERS[s.model] for s in servos)
+        ticks_per_deg = np.array(
+            [s.direction * s.gear_ratio * TICKS_PER_DEG for s in servos], np.float64)
+        # the codec kernels' scale rows: zero ticks, ticks per joint degree, joint deg/s
+        # per Present Velocity unit, mA per Present Current unit
+        self.scale = np.stack([
+            np.array([s.zero_ticks for s in servos], np.float64),
+            ticks_per_deg,
+            VELOCITY_DPS_PER_UNIT * TICKS_PER_DEG / ticks_per_deg,
+            np.array([CURRENT_MA_PER_UNIT.get(m, 1.0) for m in self.expected_models]),
+        ])
+        self.zero_ticks, self.ticks_per_deg = self.scale[0], self.scale[1]
+
+    def describe(self, index: int) -> str:
+        """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""
+        return f"servo {self.ids[index]} ({self.names[index]})"
+
+    def where(self) -> str:
+        return f"on {self.port} at {self.baud} baud"
+
+    def ticks(self, index: int, deg: float) -> int:
+        """Goal Position ticks of servo ``index`` for joint angle ``deg`` (0..4095)."""
+        t = round(self.zero_ticks[index] + deg * self.ticks_per_deg[index])
+        return int(min(max(t, 0), POSITION_TICKS_MAX))

@@ -1,0 +1,228 @@
+"""Torque: on only inside a context, off on every way out, signals included.
+
+Torque-on gives every servo its present position (clamped into its limits) as
+goal first; a servo resting slightly outside its limits is brought in slowly
+(Profile Velocity), one far outside is refused (likely a wrong zero). Torque-off
+is a broadcast Sync Write, then a checked write per servo.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import signal
+import threading
+from collections.abc import Callable
+from types import FrameType, TracebackType
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from handrig.clock import Clock
+from handrig.config.rig import TICKS_PER_DEG
+from handrig.devices.servo.bus import ServoState
+from handrig.devices.servo.faults import FaultHandler
+from handrig.devices.servo.goals import GoalWriter
+from handrig.devices.servo.link import Link
+from handrig.devices.servo.registers import VELOCITY_DPS_PER_UNIT, Reg
+from handrig.devices.servo.roster import Roster
+from handrig.errors import DeviceError, SafetyStop
+
+if TYPE_CHECKING:
+    from handrig.devices.servo.dynamixel import DynamixelBus
+
+log = logging.getLogger("handrig.devices.servo")
+
+TORQUE_ON_SLACK_DEG = 1.0  # torque-on tolerates this much outside the limits (then clamps)
+MAX_APPROACH_DEG = 20.0  # further out than this at torque-on: refuse (likely a wrong zero)
+APPROACH_DPS = 30.0  # joint speed that brings a servo resting outside its limits back in
+# Caught inside a torque context: the loop's graceful stop (on_signal), else an exception.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT)
+
+
+class TorqueControl:
+    """Torque on and off for the servos of ``roster``.
+
+    ``read_every_servo(purpose)`` reads until every servo has answered; ``read`` is
+    one state read; ``write_goals`` the bus's goal write (clamped, counted).
+    """
+
+    def __init__(
+        self, roster: Roster, link: Link, writer: GoalWriter, faults: FaultHandler,
+        clock: Clock, notes: list[str], read_every_servo: Callable[[str], ServoState],
+        read: Callable[[], ServoState], write_goals: Callable[[np.ndarray], int],
+    ) -> None:
+        self.roster = roster
+        self.link = link
+        self.writer = writer
+        self.faults = faults
+        self.clock = clock
+        self.notes = notes
+        self.read_every_servo = read_every_servo
+        self.read = read
+        self.write_goals = write_goals
+        self.hold_outside_limits = False
+        # Profile Velocity units (0.229 rpm of the servo) for APPROACH_DPS of the joint
+        self._approach_units = [
+            max(1, round(APPROACH_DPS * abs(t) / TICKS_PER_DEG / VELOCITY_DPS_PER_UNIT))
+            for t in roster.ticks_per_deg]
+
+    @property
+    def enabled(self) -> bool:
+        return self.faults.torque_on
+
+    def enable(self) -> None:
+        """Goals where the servos are, torque on, watchdog armed (DeviceError if refused)."""
+        r = self.roster
+        # Profile Velocity is RAM: clear what an earlier run that died mid-approach left
+        self.link.sync_write(Reg.PROFILE_VELOCITY, [0] * r.n)
+        pos = self.read_every_servo("enable torque").positions_deg
+        excess = np.maximum(r.min_deg - pos, pos - r.max_deg)
+        outside = excess > TORQUE_ON_SLACK_DEG
+        slow: list[int] = []  # servos given an approach speed, to be reset
+        try:
+            if outside.any() and self.hold_outside_limits:  # calibration: hold them
+                for i in range(r.n):
+                    self.link.write_register(i, Reg.GOAL_POSITION, r.ticks(i, float(pos[i])))
+                self.writer.last_goal_deg[:] = pos  # a reboot re-sends where they were held
+            else:
+                self._refuse_far(pos, excess)
+                # a joint slightly out (a limp puppet on its stop) is brought in slowly
+                for j in np.flatnonzero(outside).tolist():
+                    slow.append(j)
+                    self.link.write_register(j, Reg.PROFILE_VELOCITY, self._approach_units[j])
+                self.write_goals(pos)  # hold where they are, clamped into the limits
+            self.faults.torque_on = True
+            for i in range(r.n):
+                self.link.write_register(i, Reg.TORQUE_ENABLE, 1)
+            self.faults.arm_watchdog()
+            if slow:
+                self._finish_approach(np.array(slow), float(excess.max()))
+        finally:
+            for j in slow:  # best effort: never leave a servo speed-limited
+                with contextlib.suppress(DeviceError):
+                    self.link.write_register(j, Reg.PROFILE_VELOCITY, 0)
+
+    def _refuse_far(self, pos: np.ndarray, excess: np.ndarray) -> None:
+        r = self.roster
+        far = excess > MAX_APPROACH_DEG
+        if not far.any():
+            return
+        bad = [f"{r.describe(int(i))} is at {pos[i]:.1f} deg, outside its limits "
+               f"[{r.min_deg[i]:g}, {r.max_deg[i]:g}]" for i in np.flatnonzero(far)]
+        raise DeviceError(
+            f"cannot enable torque {r.where()}: {'; '.join(bad)}. That is more than "
+            f"{MAX_APPROACH_DEG:g} deg out (a wrong zero?): move the joint into range by "
+            "hand, or re-zero it with `handrig calibrate servos`")
+
+    def _finish_approach(self, indices: np.ndarray, excess_deg: float) -> None:
+        """Wait (bounded) for servos brought in slowly to reach their limits; a servo that
+        does not get there in time (blocked, or not answering) is a DeviceError, so torque
+        goes off rather than the servo finishing the move at full speed."""
+        r = self.roster
+        lo = r.min_deg[indices] - TORQUE_ON_SLACK_DEG
+        hi = r.max_deg[indices] + TORQUE_ON_SLACK_DEG
+        end = self.clock.now() + excess_deg / APPROACH_DPS * 2.0 + 0.5
+        while True:
+            self.write_goals(self.writer.last_goal_deg)  # keeps the watchdog fed
+            state = self.read()
+            pos = state.positions_deg[indices]
+            inside = ~state.stale[indices] & (pos >= lo) & (pos <= hi)
+            if inside.all():
+                break
+            if self.clock.now() >= end:
+                late = [r.describe(int(i)) for i in indices[~inside]]
+                raise DeviceError(
+                    f"torque-on {r.where()}: {', '.join(late)} did not come into its "
+                    f"limits at {APPROACH_DPS:g} deg/s: blocked or not answering? "
+                    "Torque is off again; free the joint and retry")
+            self.clock.sleep(0.01)
+        for i in indices:
+            self.notes.append(f"{r.describe(int(i))} rested outside its limits at torque-on: "
+                              f"brought in at {APPROACH_DPS:g} deg/s")
+
+    def disable(self) -> list[str]:
+        """Torque off on every servo and watchdog cleared; returns the servos that failed."""
+        r = self.roster
+        failed: list[str] = []
+        if not self.link.transport.is_open:
+            was_on, self.faults.torque_on = self.faults.torque_on, False
+            return [f"all servos: port {r.port} is closed"] if was_on else []
+        try:
+            self.link.sync_write(Reg.TORQUE_ENABLE, [0] * r.n)
+        except DeviceError as exc:
+            return [f"all servos: {exc}"]
+        for i in range(r.n):
+            try:
+                self.link.write_register(i, Reg.TORQUE_ENABLE, 0)
+                self.link.write_register(i, Reg.BUS_WATCHDOG, 0)
+            except DeviceError as exc:
+                failed.append(f"{r.describe(i)}: {exc}")
+        self.faults.torque_on = False
+        return failed
+
+
+class TorqueContext:
+    """What :meth:`DynamixelBus.torque` returns (see there)."""
+
+    def __init__(
+        self, bus: DynamixelBus, handle_signals: bool, on_signal: Callable[[str], None] | None
+    ) -> None:
+        self.bus = bus
+        self.handle_signals = handle_signals
+        self.on_signal = on_signal
+        self.signals_seen = 0
+        self._cleaning = False
+        self._saved: dict[int, object] = {}
+        self.failed: list[str] = []
+
+    def _handler(self, signum: int, frame: FrameType | None) -> None:
+        name = signal.Signals(signum).name
+        if self._cleaning:
+            log.warning("%s during torque-off: finishing the torque-off first", name)
+            return
+        self.signals_seen += 1
+        if self.on_signal is not None and self.signals_seen == 1:
+            self.on_signal(name)
+            return
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise SafetyStop(f"{name} received: stopping the servos with torque off")
+
+    def _install(self) -> None:
+        if not self.handle_signals or threading.current_thread() is not threading.main_thread():
+            return
+        for sig in STOP_SIGNALS:
+            self._saved[sig] = signal.signal(sig, self._handler)
+
+    def _restore(self) -> None:
+        for sig, old in self._saved.items():
+            signal.signal(sig, old)  # type: ignore[arg-type]
+        self._saved.clear()
+
+    def __enter__(self) -> DynamixelBus:
+        if self.bus.torque_enabled:
+            raise DeviceError("torque is already on: torque() contexts do not nest")
+        self._install()
+        try:
+            self.bus.enable_torque()
+        except BaseException:
+            self._off()
+            raise
+        return self.bus
+
+    def _off(self) -> None:
+        self._cleaning = True
+        try:
+            self.failed = self.bus.disable_torque()
+        finally:
+            self._restore()
+            self._cleaning = False
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._off()
+        if self.failed and exc_type is None:
+            raise DeviceError("torque off failed: " + "; ".join(self.failed))

@@ -1,0 +1,357 @@
+"""Transports: bytes in and out of a Dynamixel bus, with deadlines.
+
+:class:`Transport` is the ABC the driver talks to: it frames packets and reads
+against deadlines on the injected :class:`Clock`; a concrete transport only says
+how bytes are sent and how to wait for the next ones (tests pass a fake one).
+:class:`SerialTransport` is the real port: it is opened with dynamixel-sdk's
+``PortHandler`` (pyserial underneath, the SDK's list of baud rates); reading and
+waiting are done here on the port's file descriptor with ``select``, in place of
+the SDK's busy-wait on wall time.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import select
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+from dynamixel_sdk.port_handler import PortHandler
+
+from handrig.clock import Clock
+from handrig.devices.servo.codec import HEADER, MAX_PACKET_LEN, packet_length
+from handrig.errors import DeviceError
+
+# FTDI adapters' default latency timer is 16 ms; 1 ms is the usual setting (REFERENCE.md 1).
+LATENCY_TIMER_WANTED_MS = 1
+MAX_POLLS = 100_000  # bounds a poll loop even on a clock that does not move
+_SYSFS_LATENCY = "/sys/bus/usb-serial/devices/{name}/latency_timer"
+
+
+@dataclass(frozen=True)
+class LatencyReport:
+    """What was found and done about the USB adapter's latency timer."""
+
+    path: str | None  # the sysfs file, or None when the port has none
+    before_ms: int | None
+    after_ms: int | None
+    note: str
+
+
+class Transport(ABC):
+    """Bytes to and from one bus, read against deadlines on ``clock``.
+
+    ``read_packet(deadline_s)`` returns one framed packet (header, LEN-sized body)
+    or ``None`` when the deadline passes; garbage before a header is skipped and
+    counted in ``skipped_bytes``. A subclass says how bytes go out (``write``) and
+    how to wait for the next ones (``_receive``, ``_take_pending``). Not thread-safe
+    on its own: the bus holds a lock.
+    """
+
+    def __init__(self, port: str, baud: int, clock: Clock) -> None:
+        self.port = port
+        self.baud = baud
+        self.clock = clock
+        self._buf = bytearray()
+        self.skipped_bytes = 0
+        self.bytes_written = 0
+        self.bytes_read = 0
+        self.last_rx_s = -np.inf  # clock time bytes last came in
+
+    @property
+    @abstractmethod
+    def is_open(self) -> bool:
+        """True between ``open()`` and ``close()``."""
+
+    @abstractmethod
+    def open(self) -> None:
+        """Open the bus; DeviceError naming the port and the fix if impossible."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Close the bus (safe to call twice)."""
+
+    @abstractmethod
+    def write(self, data: bytes | memoryview) -> None:
+        """Send ``data`` completely (counted in ``bytes_written``); DeviceError if not."""
+
+    @abstractmethod
+    def _receive(
+        self, deadline_s: float, spin_from_s: float | None, spin_until_s: float
+    ) -> bytes:
+        """The next bytes to arrive, or b"" once ``deadline_s`` passes without any.
+
+        From ``spin_from_s`` until ``spin_until_s`` (clock times) a transport may
+        poll instead of sleeping; a fake may ignore both."""
+
+    @abstractmethod
+    def _take_pending(self) -> bytes:
+        """Bytes that have already arrived, without waiting (b"" if none)."""
+
+    def latency_timer(self, *, set_to_ms: int = LATENCY_TIMER_WANTED_MS) -> LatencyReport:
+        """The USB adapter's latency timer, checked and set (none by default)."""
+        return LatencyReport(None, None, None, f"no USB latency timer on {self.port}: skipped")
+
+    def _check_open(self) -> None:
+        if not self.is_open:
+            raise DeviceError(f"servo port {self.port} is not open (call connect() first)")
+
+    def _fill(
+        self, deadline_s: float, spin_from_s: float | None = None, spin_until_s: float = np.inf
+    ) -> bool:
+        """Wait until bytes arrive (appended to the buffer) or the deadline; True if some did."""
+        chunk = self._receive(deadline_s, spin_from_s, spin_until_s)
+        if not chunk:
+            return False
+        self.last_rx_s = self.clock.now()
+        self.bytes_read += len(chunk)
+        self._buf += chunk
+        return True
+
+    def discard_input(self) -> int:
+        """Drop everything already received (buffered and pending); return how many bytes."""
+        self._check_open()
+        n = len(self._buf)
+        self._buf.clear()
+        while chunk := self._take_pending():
+            n += len(chunk)
+            self.last_rx_s = self.clock.now()
+        return n
+
+    def wait_quiet(self, quiet_s: float, max_s: float, since_s: float = -np.inf) -> int:
+        """Discard input until none has come for ``quiet_s``, counting from ``since_s``
+        or the last byte received, whichever is later (at most ``max_s``); return bytes.
+
+        The bus is half duplex: a request sent while a late reply is still coming
+        would collide with it on a real bus (and queue behind it in the emulator).
+        """
+        self._check_open()
+        n = self.discard_input()
+        end = self.clock.now() + max_s
+        while True:
+            now = self.clock.now()
+            quiet_until = max(since_s, self.last_rx_s) + quiet_s
+            if now >= quiet_until or now >= end:
+                return n
+            if not self._fill(min(end, quiet_until)):
+                return n
+            n += len(self._buf)
+            self._buf.clear()
+
+    def read_exact(
+        self, n: int, deadline_s: float, spin_from_s: float | None = None,
+        gap_s: float | None = None, spin_until_s: float = np.inf,
+    ) -> bytes:
+        """Up to ``n`` bytes: all ``n`` unless the deadline passed first (then fewer).
+
+        ``spin_from_s``: poll instead of sleeping from that clock time on (see
+        ``_fill``). ``gap_s``: once bytes flow, give up when none arrive for this
+        long, counting from the call (for the rest of a reply whose start has come:
+        a reply cut short then ends early instead of at the deadline).
+        """
+        self._check_open()
+        buf = self._buf
+        if gap_s is not None and len(buf) < n:
+            deadline_s = min(deadline_s, self.clock.now() + gap_s)
+        while len(buf) < n:
+            if not self._fill(deadline_s, spin_from_s, spin_until_s):
+                break
+            if gap_s is not None:
+                deadline_s = min(deadline_s, self.clock.now() + gap_s)
+        out = bytes(buf[:n])
+        del buf[:n]
+        return out
+
+    def read_packet(self, deadline_s: float) -> bytes | None:
+        """The next framed packet (not CRC-checked), or None at the deadline.
+
+        Bytes before a ``FF FF FD 00`` header are skipped; a LEN beyond the
+        protocol's maximum is taken as a false header and skipped too. A packet cut
+        short by the deadline is left in the buffer and None is returned.
+        """
+        self._check_open()
+        buf = self._buf
+        while True:
+            start = buf.find(HEADER)
+            if start < 0:
+                keep = min(len(buf), 3)
+                self.skipped_bytes += len(buf) - keep
+                del buf[: len(buf) - keep]
+            elif start > 0:
+                self.skipped_bytes += start
+                del buf[:start]
+                continue
+            elif len(buf) >= 7:
+                total = packet_length(buf)
+                if total > MAX_PACKET_LEN or total < 10:
+                    self.skipped_bytes += 1
+                    del buf[:1]
+                    continue
+                if len(buf) >= total:
+                    out = bytes(buf[:total])
+                    del buf[:total]
+                    return out
+            if not self._fill(deadline_s):
+                return None
+
+
+class SerialTransport(Transport):
+    """One serial port (dynamixel-sdk's PortHandler), waited on with ``select``."""
+
+    def __init__(self, port: str, baud: int, clock: Clock) -> None:
+        super().__init__(port, baud, clock)
+        self._handler: PortHandler | None = None
+        self._fd = -1
+
+    @property
+    def is_open(self) -> bool:
+        return self._handler is not None
+
+    def _check_open(self) -> None:
+        if self._handler is None:  # the base class's check, without the property call
+            raise DeviceError(f"servo port {self.port} is not open (call connect() first)")
+
+    def open(self) -> None:
+        """Open the port at ``baud`` (SDK PortHandler); DeviceError if impossible."""
+        handler = PortHandler(self.port)
+        try:
+            ok = handler.setBaudRate(self.baud)
+        except Exception as exc:  # pyserial raises SerialException, OSError, ValueError
+            raise DeviceError(
+                f"cannot open servo port {self.port}: {exc} (check the cable, the path and "
+                "that you may use it: e.g. add yourself to the 'dialout' group)"
+            ) from None
+        if not ok:
+            raise DeviceError(
+                f"dynamixel-sdk refuses baud {self.baud} on {self.port} "
+                "(allowed: 9600 ... 4000000 from the SDK's list)"
+            )
+        self._handler = handler
+        self._fd = handler.ser.fileno()
+        os.set_blocking(self._fd, False)
+        self._buf.clear()
+
+    def close(self) -> None:
+        if self._handler is not None:
+            try:
+                self._handler.closePort()
+            finally:
+                self._handler = None
+                self._fd = -1
+
+    def write(self, data: bytes | memoryview) -> None:
+        """Send ``data`` completely; DeviceError if the port went away. One ``os.write``
+        in the usual case: the goals' write is on the cycle's critical path."""
+        view = data
+        try:
+            while True:
+                try:
+                    n = os.write(self._fd, view)
+                except BlockingIOError:
+                    select.select([], [self._fd], [], 0.01)
+                    continue
+                if n == len(view):
+                    break
+                view = memoryview(view)[n:]
+        except OSError as exc:
+            self._check_open()  # closed: say so rather than "bad file descriptor"
+            raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
+        self.bytes_written += len(data)
+
+    def _receive(
+        self, deadline_s: float, spin_from_s: float | None, spin_until_s: float
+    ) -> bytes:
+        """Wait for bytes until the deadline (b"" if none came).
+
+        From ``spin_from_s`` until ``spin_until_s`` (clock times), poll without
+        sleeping: a wake-up from ``select`` costs tens of microseconds, which a
+        cycle near the wire-time limit notices. The poll is bounded by that window
+        and by ``MAX_POLLS`` as well as the deadline.
+        """
+        fd = self._fd
+        polls = 0
+        while True:
+            now = self.clock.now()
+            remaining = deadline_s - now
+            if remaining <= 0:
+                return b""
+            if spin_from_s is not None and now >= spin_until_s:
+                spin_from_s = None
+            if spin_from_s is not None and now >= spin_from_s:
+                try:
+                    chunk = os.read(fd, 4096)
+                except BlockingIOError:
+                    chunk = b""
+                except OSError as exc:
+                    raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
+                if not chunk:  # nothing yet (termios VMIN=0 reads return empty)
+                    polls += 1
+                    if polls >= MAX_POLLS:
+                        spin_from_s = None
+                    continue
+            else:
+                wait = remaining if spin_from_s is None else min(remaining, spin_from_s - now)
+                try:
+                    ready, _, _ = select.select([fd], [], [], wait)
+                except InterruptedError:
+                    continue
+                if not ready:
+                    # No bytes for `wait` seconds: let a fake clock know that time passed.
+                    if wait < remaining:
+                        self.clock.sleep_until(now + wait)
+                        continue
+                    self.clock.sleep_until(deadline_s)
+                    return b""
+                try:
+                    chunk = os.read(fd, 4096)
+                except BlockingIOError:
+                    continue
+                except OSError as exc:
+                    raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
+            if not chunk:
+                raise DeviceError(f"servo port {self.port} closed (adapter unplugged?)")
+            return chunk
+
+    def _take_pending(self) -> bytes:
+        try:
+            return os.read(self._fd, 4096)
+        except BlockingIOError:
+            return b""
+        except OSError as exc:
+            raise DeviceError(f"read from servo port {self.port} failed: {exc}") from None
+
+    def latency_timer(self, *, set_to_ms: int = LATENCY_TIMER_WANTED_MS) -> LatencyReport:
+        """Check the USB adapter's latency timer in sysfs and set it to ``set_to_ms``.
+
+        Only FTDI-style adapters (``/dev/ttyUSBn``) have one; a pseudo-terminal or
+        an ACM device does not, which the report says.
+        """
+        real = os.path.realpath(self.port)
+        name = os.path.basename(real)
+        if not re.fullmatch(r"ttyUSB\d+", name):
+            kind = "a pseudo-terminal" if real.startswith("/dev/pts/") else f"{real}"
+            return LatencyReport(
+                None, None, None, f"no USB latency timer on {kind}: skipped"
+            )
+        path = _SYSFS_LATENCY.format(name=name)
+        try:
+            with open(path) as f:
+                before = int(f.read().strip())
+        except (OSError, ValueError) as exc:
+            return LatencyReport(path, None, None, f"cannot read {path}: {exc}: skipped")
+        if before <= set_to_ms:
+            return LatencyReport(path, before, before, f"latency timer {before} ms: ok")
+        try:
+            with open(path, "w") as f:
+                f.write(f"{set_to_ms}\n")
+        except OSError as exc:
+            return LatencyReport(
+                path, before, before,
+                f"latency timer is {before} ms and could not be set ({exc}): every read "
+                f"waits up to {before} ms; fix: echo {set_to_ms} | sudo tee {path}",
+            )
+        return LatencyReport(
+            path, before, set_to_ms, f"latency timer set from {before} to {set_to_ms} ms"
+        )

@@ -1,0 +1,265 @@
+"""The live rig: the realtime loop from glove to servos, with its safety behaviour.
+
+``Rig(glove, bus, pipeline, clock, ...)`` runs cycles on the injected
+:class:`~handrig.clock.Clock`: at ``rate_hz`` (``loop_mode="fixed"``), or one per
+glove frame as it arrives, between ``floor_hz`` and ``ceiling_hz``
+(``loop_mode="glove"``). Each cycle it takes the newest glove sample without
+blocking, turns it into servo targets through the
+:class:`~handrig.pose.pipeline.PosePipeline`, hands one Sync Write to the bus, and
+every ``read_every`` cycles reads the servos' present state back.
+
+The loop is made of parts (:mod:`handrig.loop`): a trigger says when a cycle runs
+(:class:`~handrig.loop.trigger.FixedRateTrigger`,
+:class:`~handrig.loop.trigger.GloveTrigger`), the mode machine what the
+puppet does (:mod:`handrig.loop.modes`), the cycle does one cycle's work
+(:mod:`handrig.loop.cycle`) with two easings (:mod:`handrig.loop.easing`), a
+rehearsal keeps the critical path warm (:mod:`handrig.loop.rehearsal`), and the
+statistics are fixed-size (:mod:`handrig.loop.stats`). :class:`Rig` puts them
+together.
+
+Safety (what a puppeteer relies on during a show):
+
+* glove silent or garbled for longer than ``glove_timeout_s``: the puppet eases
+  to the relaxed pose over ``relax_time_s`` and the rig says so; after
+  ``resume_frames`` good frames in a row it eases back to the glove's pose over
+  ``resume_time_s``;
+* the glove's e-stop button or a stop request (a signal, the UI): ease to the
+  relaxed pose, then stop (the bus's torque context then disables torque); a
+  second request stops at once;
+* the relax key (:meth:`Rig.toggle_relax`): ease to relaxed and hold there until
+  it is pressed again; the e-stop key (:meth:`Rig.estop`): end at the next cycle
+  with no easing, so torque goes off at once;
+* a lost servo port: stop cleanly with the device's message;
+* nothing outside the limits: the pipeline clamps to joint and servo limits, and
+  the bus clamps again to each servo's configured range.
+"""
+
+from __future__ import annotations
+
+import gc
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+from handrig.clock import Clock
+from handrig.errors import DeviceError
+from handrig.loop.cycle import Cycle
+from handrig.loop.modes import Mode, ModeMachine
+from handrig.loop.ports import (
+    BusLike,
+    ControlsFromRaw,
+    FloatArray,
+    GloveLike,
+    OrientationLike,
+    SampleLike,
+)
+from handrig.loop.profile import StageProfile
+from handrig.loop.rehearsal import Rehearsal
+from handrig.loop.stats import RunStats
+from handrig.loop.trigger import FixedRateTrigger, GloveTrigger, Tick, Trigger
+from handrig.pose.pipeline import PosePipeline
+
+__all__ = ["BusLike", "ControlsFromRaw", "GloveLike", "Mode", "OrientationLike", "Rig",
+           "RunStats", "SampleLike"]
+
+WARM_S = 0.00035  # how long before a deadline the rehearsal runs
+
+
+class Rig:
+    """The realtime loop. Dependencies are passed in; nothing here opens a device.
+
+    ``trigger``: what starts each cycle (default: by ``loop_mode``, a
+    :class:`FixedRateTrigger` at ``rate_hz`` or a :class:`GloveTrigger` between
+    ``floor_hz`` and ``ceiling_hz``; either rehearses ``warm_s`` before the next
+    tick, 0 turns the rehearsal off, and stamps the glove's frames as they arrive).
+    ``profile``: time the critical path's stages (:attr:`stage_profile`).
+    """
+
+    def __init__(
+        self,
+        glove: GloveLike,
+        bus: BusLike,
+        pipeline: PosePipeline,
+        clock: Clock,
+        *,
+        controls_from_raw: ControlsFromRaw,
+        orientation: OrientationLike,
+        rate_hz: float = 200.0,
+        read_every: int = 4,
+        glove_timeout_s: float = 0.25,
+        relax_time_s: float = 1.0,
+        resume_frames: int = 3,
+        resume_time_s: float = 0.3,
+        outputs: Sequence[Callable[[float, FloatArray], None]] = (),
+        log: Callable[[str], None] = print,
+        warm_s: float = WARM_S,
+        profile: bool = False,
+        trigger: Trigger | None = None,
+        loop_mode: Literal["fixed", "glove"] = "fixed",
+        floor_hz: float = 100.0,
+        ceiling_hz: float = 1000.0,
+        spin_s: float = 0.0,
+        catch_up: bool = False,
+        read_parts: int = 1,
+    ) -> None:
+        self.glove = glove
+        self.bus = bus
+        self.pipeline = pipeline
+        self.clock = clock
+        self.warm_s = max(0.0, float(warm_s))
+        if trigger is None:
+            if loop_mode == "glove":
+                trigger = GloveTrigger(clock, glove, floor_hz=floor_hz, ceiling_hz=ceiling_hz,
+                                       warm_s=self.warm_s,
+                                       spin_s=spin_s if self.warm_s > 0 else 0.0,
+                                       catch_up=catch_up)
+            elif loop_mode == "fixed":
+                trigger = FixedRateTrigger(clock, rate_hz, warm_s=self.warm_s, glove=glove)
+            else:
+                raise ValueError(f"loop_mode {loop_mode!r} unknown: use 'fixed' or 'glove'")
+        self.trigger = trigger
+        self.period_s = self.trigger.period_s
+        self.glove_timeout_s = glove_timeout_s
+        self.relax_time_s = relax_time_s
+        self.log = log
+        self.stats = RunStats(loop_mode="glove" if isinstance(self.trigger, GloveTrigger)
+                              else "fixed")
+        self.started_at = 0.0
+        self._prepared = False  # prepare() ran: garbage collected, start-up heap frozen
+        self.machine = ModeMachine(
+            glove_timeout_s=glove_timeout_s, relax_time_s=relax_time_s,
+            resume_frames=resume_frames, resume_time_s=resume_time_s, event=self._event,
+            stats=self.stats,
+        )
+        self.cycle = Cycle(
+            glove, bus, pipeline, clock, self.machine, self.stats,
+            controls_from_raw=controls_from_raw, orientation=orientation,
+            period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
+            resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
+            read_parts=read_parts,
+        )
+        self.machine.on_relax = self.cycle.relax.restart
+        self.machine.on_resume = self.cycle.resume.restart
+        self.rehearsal = (Rehearsal(glove, bus, pipeline, controls_from_raw, orientation,
+                                    self.period_s) if self.warm_s > 0 else None)
+        self.stage_profile = StageProfile(clock) if profile else None
+        if self.stage_profile is not None:
+            self.stage_profile.wrap(self.cycle)
+
+    # -- what callers read or set ------------------------------------------------------------
+    @property
+    def mode(self) -> Mode:
+        return self.machine.mode
+
+    @property
+    def last_state(self) -> Any:
+        """The newest ServoState read back (None before the first read)."""
+        return self.cycle.last_state
+
+    @property
+    def outputs(self) -> tuple[Callable[[float, FloatArray], None], ...]:
+        """Called after each write with (seconds since the start, the full pose)."""
+        return self.cycle.outputs
+
+    @outputs.setter
+    def outputs(self, outputs: Sequence[Callable[[float, FloatArray], None]]) -> None:
+        self.cycle.outputs = tuple(outputs)
+
+    def prepare(self) -> None:
+        """Collect the garbage and freeze the start-up heap. Call it before torque goes
+        on: collecting a large heap can pause the process for longer than the servos'
+        Bus Watchdog. Afterwards collections mid-run are short: the start-up heap
+        (numpy, scipy, the map and grid) sits in the permanent generation and only what
+        the run allocates is walked. :meth:`run` calls it if nobody did."""
+        gc.collect()
+        gc.freeze()
+        self._prepared = True
+
+    def request_stop(self, reason: str = "stop requested") -> None:
+        """Ease to the relaxed pose, then end the run. A second request ends it at once.
+        Safe from a signal handler: the loop acts on it between cycles."""
+        self.machine.request_stop(reason)
+
+    def toggle_relax(self) -> None:
+        """Relax and hold the relaxed pose; called again, follow the glove again (easing
+        back in). Safe from another thread (the keys): the loop acts on it between cycles."""
+        self.machine.toggle_relax()
+
+    def estop(self, reason: str = "e-stop key") -> None:
+        """End the run at the next cycle without easing: the caller's torque context then
+        turns torque off at once. Safe from another thread or a signal handler."""
+        self.machine.request_estop(reason)
+
+    # -- the loop ------------------------------------------------------------------------------
+    def _event(self, text: str) -> None:
+        self.stats.events.append(text)
+        self.log(text)
+
+    def run(self, frames: int | None = None, duration_s: float | None = None) -> RunStats:
+        """Run ``frames`` cycles or ``duration_s`` seconds (counted from the start, waiting
+        for the glove included), then ease to the relaxed pose and return; an e-stop or a
+        stop request eases and returns early.
+
+        Until the first glove frame the servos hold where they are; no frame within
+        ``glove_timeout_s`` eases them to the relaxed pose.
+        """
+        stats, clock, machine, cycle = self.stats, self.clock, self.machine, self.cycle
+        try:
+            cycle.seed()
+        except DeviceError as exc:
+            machine.stop_reason = f"device error: {exc}"
+            self._event(f"not starting: {exc}")
+            raise
+        if not self._prepared:
+            self.prepare()
+        t0 = clock.now()
+        self.started_at = t0
+        self.trigger.start(t0)
+        machine.start(t0)
+        cycle.t0_s = t0
+        tick = Tick()
+        rehearsal = self.rehearsal
+        cpu0 = time.thread_time()
+        last_start: float | None = None
+        try:
+            while True:
+                machine.poll()
+                if machine.stop_now:
+                    break
+                if frames is not None and stats.frames >= frames:
+                    machine.finish(f"{frames} frames done")
+                elif duration_s is not None and clock.now() - t0 >= duration_s:
+                    machine.finish(f"{duration_s:g} s done")
+                if rehearsal is not None:
+                    rehearsal.sample = cycle.sample
+                    rehearsal.angles = cycle.angles
+                warm = rehearsal if rehearsal is not None and cycle.sample is not None else None
+                self.trigger.wait(tick, warm, settle=False)  # settled by the read schedule
+                over = cycle.run(tick)  # at once: the bookkeeping below is off the frame's path
+                if tick.skipped:
+                    stats.add_overrun(tick.late_s, tick.skipped)
+                if last_start is not None:
+                    stats.period.add(tick.now_s - last_start)
+                last_start = tick.now_s
+                if over:
+                    machine.stop_reason = machine.stop_reason or "stop requested"
+                    break
+        except DeviceError as exc:
+            machine.stop_reason = f"device error: {exc}"
+            self._event(f"stopping: {exc}")
+            raise
+        finally:
+            gc.unfreeze()
+            self._prepared = False
+            stats.duration_s = clock.now() - t0
+            stats.cpu_s = time.thread_time() - cpu0
+            stats.ceiling_waits = int(getattr(self.trigger, "ceiling_waits", 0))
+            self._pipeline_figures()
+        return stats
+
+    def _pipeline_figures(self) -> None:
+        stats, pipeline = self.stats, self.pipeline
+        stats.clamps = pipeline.clamps
+        stats.servo_clamps = pipeline.servo_clamps
+        stats.nonfinite = pipeline.rejected
+        stats.slewed = pipeline.slewed
