@@ -16,7 +16,7 @@ from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.commissioning import servo_settings
 from handrig.errors import DeviceError
 from sim.dxl_servo import EmulatedServo
-from tests.handrig.servo_fakes import EmulatorTransport, PeerBus
+from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
 
 BAUD = 4_000_000
 

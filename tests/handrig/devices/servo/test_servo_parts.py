@@ -1,6 +1,6 @@
 """The driver's parts through their public interfaces, with a fake transport: no pty, no thread.
 
-The fake (tests/handrig/servo_fakes.py) subclasses the driver's Transport ABC and
+The fake (tests/handrig/devices/servo/servo_fakes.py) subclasses the driver's Transport ABC and
 feeds every write to the byte-level emulator in-process; replies arrive at wire
 time on a FakeClock. What the servos got is read from the emulated servos.
 """
@@ -24,7 +24,7 @@ from handrig.devices.servo.transport import Transport
 from handrig.devices.servo.wire import WireBudget, cycle_bytes, read_bytes, wire_time_s
 from handrig.errors import DeviceTimeoutError, SafetyStop, ServoFault
 from sim.dxl_bus import FaultSpec
-from tests.handrig.servo_fakes import EmulatorTransport, PeerBus
+from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
 
 RIG = load_rig_config()
 BAUD = 1_000_000

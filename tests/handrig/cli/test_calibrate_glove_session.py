@@ -22,7 +22,7 @@ from handrig.config.paths import installed_config
 from handrig.devices.glove_calibration import load_glove_config
 from sim.calibration_motion import ScriptedSensors
 
-CHECKOUT = Path(__file__).resolve().parents[2]
+CHECKOUT = Path(__file__).resolve().parents[3]
 TIMEOUT_S = 60.0
 
 

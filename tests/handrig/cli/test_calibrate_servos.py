@@ -111,7 +111,7 @@ def test_default_output_is_the_users_copy_and_the_checkout_stays_clean(tmp_path:
     import subprocess
     import sys
 
-    checkout = Path(__file__).resolve().parents[2]
+    checkout = Path(__file__).resolve().parents[3]
 
     def status() -> str:
         res = subprocess.run(["git", "status", "--porcelain", "--untracked-files=all",

@@ -10,7 +10,7 @@ import pytest
 from handrig.cli import main
 from handrig.config import paths
 
-CHECKOUT = Path(__file__).resolve().parents[2]
+CHECKOUT = Path(__file__).resolve().parents[3]
 
 
 def config_status() -> str:

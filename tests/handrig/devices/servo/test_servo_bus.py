@@ -30,7 +30,7 @@ from handrig.devices.servo.transport import SerialTransport
 from handrig.errors import DeviceError, DeviceTimeoutError, SafetyStop, ServoFault
 from sim.dxl_bus import FaultSpec, SimBus
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[4]
 RIG = load_rig_config()
 
 
@@ -898,7 +898,7 @@ WARM_UP_CHECK = """
 import numpy as np
 from handrig.devices.servo import DynamixelBus, codec
 from sim.dxl_bus import SimBus
-from tests.handrig.test_servo_bus import small_rig
+from tests.handrig.devices.servo.test_servo_bus import small_rig
 
 kernels = {n: k for n in dir(codec) if hasattr(k := getattr(codec, n), "signatures")}
 with SimBus.from_rig(small_rig()) as sim:
@@ -924,6 +924,6 @@ def test_reads_and_writes_compile_nothing_after_the_warm_up() -> None:
     cost that cycle milliseconds, and a 500 Hz glove's frames pile up meanwhile. In a
     process of its own, so that no earlier test has compiled them already."""
     out = subprocess.run([sys.executable, "-c", WARM_UP_CHECK], capture_output=True,
-                         text=True, timeout=120, cwd=Path(__file__).resolve().parents[2])
+                         text=True, timeout=120, cwd=Path(__file__).resolve().parents[4])
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "{}"

@@ -16,7 +16,7 @@ import pytest
 
 pexpect = pytest.importorskip("pexpect")
 
-CHECKOUT = Path(__file__).resolve().parents[2]
+CHECKOUT = Path(__file__).resolve().parents[3]
 RECORDING = "replay:config/recordings/demo_glove.csv"
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
 START_S = 120  # the simulated bus starts and is commissioned (slow on a busy machine)

@@ -21,7 +21,7 @@ from handrig.errors import ConfigError
 from handrig.loop.stats import RunStats
 
 CLI = [sys.executable, "-m", "handrig.cli"]
-CHECKOUT = Path(__file__).resolve().parents[2]
+CHECKOUT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")
