@@ -26,11 +26,18 @@ if TYPE_CHECKING:
 
 
 def relaxed_hand() -> ModuleType:
-    """``sim.passive``: the relaxed-hand model (Neff & Seidel) with its config loader,
-    check and tune steps (``handrig passive``)."""
+    """``sim.passive``: the relaxed-hand model (Neff & Seidel) with its config loader."""
     from sim import passive
 
     return passive
+
+
+def relaxed_hand_tuning() -> ModuleType:
+    """``sim.passive_tuning``: the relaxed hand's check, tune and config-writing steps
+    (``handrig passive``)."""
+    from sim import passive_tuning
+
+    return passive_tuning
 
 
 def baker() -> ModuleType:

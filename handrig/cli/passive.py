@@ -43,10 +43,9 @@ def register(sub: Any) -> None:
 
 def run_check(args: argparse.Namespace) -> int:
     from handrig.app import simulator
-    passive = simulator.relaxed_hand()
-
-    cfg = passive.load_passive_params(args.config or config_file("passive_hand.toml"))
-    result = passive.check(cfg)
+    cfg = simulator.relaxed_hand().load_passive_params(
+        args.config or config_file("passive_hand.toml"))
+    result = simulator.relaxed_hand_tuning().check(cfg)
     ok = all(bool(v["ok"]) for part in result.values() for v in part.values())
     if args.json:
         print(json.dumps(result))
@@ -67,14 +66,14 @@ def run_check(args: argparse.Namespace) -> int:
 
 def run_tune(args: argparse.Namespace) -> int:
     from handrig.app import simulator
-    passive = simulator.relaxed_hand()
+    tuning = simulator.relaxed_hand_tuning()
 
     src = Path(args.config) if args.config else config_file("passive_hand.toml")
-    cfg = passive.load_passive_params(src)
-    tuned = passive.tune_config(cfg)
+    cfg = simulator.relaxed_hand().load_passive_params(src)
+    tuned = tuning.tune_config(cfg)
     out = Path(args.out) if args.out else output_for(src, "passive_hand.toml")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(passive.render_config(tuned), encoding="utf-8")
+    out.write_text(tuning.render_config(tuned), encoding="utf-8")
     factors = tuned.tuned.kd_per_ks_s if tuned.tuned is not None else {}
     print(f"wrote {out}: damping factors kd/ks (s) "
           + ", ".join(f"{k}={v:.4f}" for k, v in factors.items()))

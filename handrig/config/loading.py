@@ -25,14 +25,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+from handrig.config.paths import CONFIG_DIR, REPO_ROOT, config_file
 from handrig.errors import ConfigError
 from handrig.hand import ALL_JOINT_NAMES, anatomical_limits_deg, is_joint_name
 
 T = TypeVar("T")
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-CONFIG_DIR = REPO_ROOT / "config"
-"""Where the shipped configs, maps and baked grid live (``config/`` of the checkout)."""
+__all__ = ["CONFIG_DIR", "REPO_ROOT", "JointLimits", "build", "check_joint_name", "load",
+           "load_joint_limits", "load_toml"]
+"""``CONFIG_DIR`` (where the shipped configs, maps and baked grid live) and ``REPO_ROOT``
+are :mod:`handrig.config.paths`' and are named here too, beside the loaders that read them."""
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
@@ -235,7 +237,5 @@ def load_joint_limits(path: str | Path | None = None) -> JointLimits:
     """Load joint-limit overrides (default: the user's ``joint_limits.toml`` when there is
     one, :func:`handrig.config.paths.config_file`, else ``config/joint_limits.toml``)."""
     if path is None:
-        from handrig.config.paths import config_file  # handrig.config.paths imports this module
-
         path = config_file("joint_limits.toml")
     return load(path, JointLimits)

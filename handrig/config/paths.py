@@ -24,8 +24,9 @@ import shutil
 from collections.abc import Mapping
 from pathlib import Path
 
-from handrig.config.loading import CONFIG_DIR
-
+REPO_ROOT = Path(__file__).resolve().parents[2]
+"""The checkout (an editable install reads ``config/`` and ``data/`` from here)."""
+CONFIG_DIR = REPO_ROOT / "config"
 INSTALLED_CONFIG_DIR = CONFIG_DIR
 """The installed configuration (read only)."""
 

@@ -16,9 +16,11 @@ from sim.passive import (
     Calibration,
     PassiveHand,
     StaticSolution,
+    load_passive_params,
+)
+from sim.passive_tuning import (
     check,
     default_config,
-    load_passive_params,
     release_test,
     time_to_relaxed,
     tune_stiffness,
