@@ -24,8 +24,9 @@ from handrig.offline.evaluation import (
     rms_errors,
     write_error_figure,
 )
+from handrig.offline.fitting import METHODS
 from handrig.pose.expand import DEFAULT_MAP
-from handrig.pose.maps import METHODS, LinearMap
+from handrig.pose.maps import LinearMap
 
 LABELS = {"ridge": "least squares on all controls, ridge penalty",
           "huber": "robust (Huber) multi-control fit",

@@ -34,8 +34,9 @@ from handrig import hand
 from handrig.config.loading import JointLimits
 from handrig.errors import DataError
 from handrig.offline import mocap
+from handrig.offline.fitting import block_groups, fit_map
 from handrig.pose.expand import Expander
-from handrig.pose.maps import LinearMap, block_groups, fit_map
+from handrig.pose.maps import LinearMap
 
 FloatArray = NDArray[np.float64]
 _RI = slice(0, hand.CURVES_PER_HAND)

@@ -16,8 +16,9 @@ from handrig.errors import ConfigError, DataError
 from handrig.offline import mocap
 from handrig.offline.bvh import Bvh, format_bvh, read_bvh
 from handrig.offline.evaluation import cross_validate
+from handrig.offline.fitting import fit_map
 from handrig.pose.expand import DEFAULT_MAP, DEFAULT_TWO_GLOVE_MAP, Expander
-from handrig.pose.maps import DEFAULT_RIGHT_CONTROLS, LinearMap, fit_map
+from handrig.pose.maps import DEFAULT_RIGHT_CONTROLS, LinearMap
 
 CTRL = ("riIndexMCPy", "riPinkyMCPy")
 I0, I1 = hand.curve_index(CTRL[0]), hand.curve_index(CTRL[1])
