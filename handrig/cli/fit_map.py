@@ -50,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
     labels: list[NDArray[np.intp]] = []
     fps = None
     reference = False
+    conditioned: list[str] = []
     for f in args.files:
         m = _mapio.load(f, args)
         m.require_clean("fitting a map")
@@ -59,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
         labels.append(base + (mocap.reference_clip_labels() if reference
                               else fitting.block_groups(m.n_frames)))
         parts.append(m.curves)
+        if m.offsets_deg is not None:
+            conditioned.append(f"{f}: {int((m.offsets_deg != 0).sum())} curves")
         fps = m.fps if fps is None else fps
     curves = np.concatenate(parts)
     groups = np.concatenate(labels)
@@ -83,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
             else f"{fitting.DEFAULT_GROUPS} contiguous blocks per file"),
         trained_on=tuple(args.files), profile=str(args.profile),
         fps=fps or 0.0, description=args.description, evaluation=tuple(evaluation),
+        conditioning=(f"trained on conditioned curves (calibration offsets of profile"
+                      f" {args.profile}: {'; '.join(conditioned)})" if conditioned else ""),
     )
     path = lm.save(args.out)
     if lm.fit_rms_deg is None:

@@ -58,12 +58,12 @@ def find_offsets(curves: FloatArray, limits_deg: FloatArray | None = None, *,
     need_up = np.maximum(lim[:, 0] - lo, 0.0)
     need_down = np.maximum(hi - lim[:, 1], 0.0)
     # a curve wider than its range: centre it rather than push one end out
-    off = np.where((need_up > 0) & (need_down > 0), (need_up - need_down) / 2.0,
+    off: FloatArray = np.where((need_up > 0) & (need_down > 0), (need_up - need_down) / 2.0,
                    need_up - need_down)
     for members in copy_groups(y):
         pick = members[int(np.argmax(np.abs(off[members])))]
         off[members] = off[pick]
-    out: FloatArray = np.round(off, 1) + 0.0
+    out: FloatArray = np.asarray(np.round(off, 1) + 0.0, dtype=np.float64)
     return out
 
 

@@ -5,7 +5,11 @@ Every map has the same readable form, per curve::
     curve = mean_deg + sum over controls c of gains[c] * (c - control_mean_deg[c])
 
 so a person can open the TOML file and see which curve follows which control and how
-much (degrees per degree). A control curve maps to itself (gain 1). The maps are fit
+much (degrees per degree). A control curve maps to itself (gain 1). A curve may also
+carry ``range_deg = [low, high]``, the range it covered in training: the map's output
+for that curve is clipped to it (a clipped-linear map: the hand never takes a shape
+beyond what the capture showed, however far the controls extrapolate), before passive
+sag and the joint limits. The maps are fit
 offline from mocap (:mod:`handrig.offline.fitting`, where the methods are described).
 
 A map records the range each control covered in training (``control_range_deg``) so the
@@ -68,6 +72,8 @@ class LinearMap:
     fit_rms_deg: FloatArray | None = field(default=None, compare=False)
     control_range_deg: FloatArray | None = field(default=None, compare=False)
     """(k, 2) lowest and highest value of each control in the training data."""
+    curve_range_deg: FloatArray | None = field(default=None, compare=False)
+    """(50, 2) the range each curve's output is clipped to (-inf/inf: not clipped)."""
     fitting: str = ""
     """How it was fit (method settings, cross-validation groups)."""
     evaluation: tuple[str, ...] = ()
@@ -82,6 +88,10 @@ class LinearMap:
         if self.control_range_deg is not None and self.control_range_deg.shape != (k, 2):
             raise DataError(f"control_range_deg must be ({k}, 2), got"
                             f" {self.control_range_deg.shape}")
+        if self.curve_range_deg is not None:
+            r = self.curve_range_deg
+            if r.shape != (50, 2) or np.isnan(r).any() or np.any(r[:, 0] > r[:, 1]):
+                raise DataError("curve_range_deg must be (50, 2) low <= high, no NaN")
         for name, arr in (("gains", self.gains), ("curve_means_deg", self.curve_means_deg),
                           ("control_means_deg", self.control_means_deg)):
             if not np.isfinite(arr).all():
@@ -92,10 +102,19 @@ class LinearMap:
         return np.array([hand.curve_index(c) for c in self.controls], dtype=np.intp)
 
     def predict(self, controls_deg: FloatArray) -> FloatArray:
-        """(n, k) control values -> (n, 50) curves, unclamped (see :class:`Expander`)."""
+        """(n, k) control values -> (n, 50) curves, clipped to :meth:`output_range_deg`
+        but not to the joint limits (see :class:`Expander`)."""
         x = np.asarray(controls_deg, dtype=np.float64)
         out: FloatArray = self.curve_means_deg + (x - self.control_means_deg) @ self.gains.T
+        if self.curve_range_deg is not None:
+            np.clip(out, self.curve_range_deg[:, 0], self.curve_range_deg[:, 1], out=out)
         return out
+
+    def output_range_deg(self) -> FloatArray:
+        """(50, 2) the range each curve's output is clipped to; -inf/inf where none."""
+        if self.curve_range_deg is None:
+            return np.tile([-np.inf, np.inf], (50, 1))
+        return self.curve_range_deg.copy()
 
     def to_toml(self) -> str:
         """The map as a commented, human-readable TOML document."""
@@ -138,6 +157,9 @@ class LinearMap:
             lines.append(f"[curves.{name}]")
             lines.append(f"mean_deg = {_num(self.curve_means_deg[i])}")
             lines.append(f"gains = {{ {g} }}" if g else "gains = {}")
+            if self.curve_range_deg is not None and np.isfinite(self.curve_range_deg[i]).all():
+                lo, hi = self.curve_range_deg[i]
+                lines.append(f"range_deg = [{_num(lo)}, {_num(hi)}]")
             if self.fit_rms_deg is not None:
                 lines.append(f"fit_rms_deg = {_num(self.fit_rms_deg[i], 3)}")
             lines.append("")
@@ -167,6 +189,7 @@ class LinearMap:
         gains = np.zeros((50, k))
         means = np.zeros(50)
         fit = np.full(50, np.nan)
+        crange = np.tile([-np.inf, np.inf], (50, 1))
         for i, name in enumerate(hand.CURVE_NAMES):
             entry = mf.curves[name]
             means[i] = entry.mean_deg
@@ -174,6 +197,8 @@ class LinearMap:
                 gains[i, mf.controls.index(c)] = g
             if entry.fit_rms_deg is not None:
                 fit[i] = entry.fit_rms_deg
+            if entry.range_deg is not None:
+                crange[i] = entry.range_deg
         rng = None if mf.control_range_deg is None else np.array(mf.control_range_deg,
                                                                   dtype=np.float64)
         try:
@@ -182,6 +207,7 @@ class LinearMap:
                 curve_means_deg=means, gains=gains, method=mf.method, trained_on=mf.trained_on,
                 profile=mf.profile, frames=mf.frames, fps=mf.fps, description=mf.description,
                 fit_rms_deg=None if np.isnan(fit).any() else fit, control_range_deg=rng,
+                curve_range_deg=crange if np.isfinite(crange).any() else None,
                 fitting=mf.fitting, evaluation=mf.evaluation,
             )
         except DataError as exc:
@@ -277,6 +303,7 @@ class _CurveEntry:
     mean_deg: float
     gains: dict[str, float] = field(default_factory=dict)
     fit_rms_deg: float | None = None
+    range_deg: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -316,6 +343,9 @@ class _MapFile:
             if name not in hand.CURVE_NAMES:
                 check_joint_name(name, f"curves.{name}")
                 raise ConfigError("not one of the 50 curves", key=f"curves.{name}")
+            if entry.range_deg is not None and not entry.range_deg[0] <= entry.range_deg[1]:
+                raise ConfigError("inverted range: low must not exceed high",
+                                  key=f"curves.{name}.range_deg", value=list(entry.range_deg))
             for c in entry.gains:
                 if c not in self.controls:
                     raise ConfigError(
