@@ -28,10 +28,11 @@ Methods:
   controls unless doing so beat the mean on clips it was not fitted on.
 * ``mean`` — every non-control curve is its mean (the baseline).
 
-Every method records each non-control curve's training range in the map
-(``curve_range_deg``): the runtime clips the curve's output to it (a clipped-linear map),
-so controls beyond what the capture showed do not extrapolate the hand past any shape in
-it. Fitting refuses unrepaired glitches (``MocapCurves.require_clean``).
+Every method records each non-control curve's training range, inside its anatomical
+range, in the map (``curve_range_deg``): the runtime clips the curve's output to it (a
+clipped-linear map), so controls beyond what the capture showed do not extrapolate the
+hand past any shape in it, nor past its joints. Fitting refuses unrepaired glitches
+(``MocapCurves.require_clean``).
 """
 
 from __future__ import annotations
@@ -264,7 +265,9 @@ def fit_map(
     else:
         gains, means = np.zeros((50, len(ctrl))), y.mean(axis=0)
     x_mean = x.mean(axis=0)
-    curve_range = np.stack([y.min(axis=0), y.max(axis=0)], axis=1)
+    lim = hand.curve_limits_deg()  # the training range inside the anatomical one
+    curve_range = np.clip(np.stack([y.min(axis=0), y.max(axis=0)], axis=1),
+                          lim[:, :1], lim[:, 1:])
     curve_range[idx] = (-np.inf, np.inf)  # a control passes through, never clipped
     means = means.copy()
     gains[idx] = np.eye(len(ctrl))  # a control passes through unchanged
