@@ -52,8 +52,8 @@ def _without_the_step(pl: PosePipeline) -> Callable[[int], object]:
         return kernels.servo_targets(
             inputs[i & 255], path.a, path.b, tables.inclination_axis_deg,
             tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
-            path.sag_slot, float(path.sag_gain), -60.0, 20.0, robot.human_low,
-            robot.human_high, targets, 3.6, False, raw)
+            path.sag_slot, float(path.sag_gain), path.map_low, path.map_high, -60.0, 20.0,
+            robot.human_low, robot.human_high, targets, 3.6, False, raw)
     return step
 
 
@@ -71,9 +71,9 @@ def _with_the_step(pl: PosePipeline) -> Callable[[int], object]:
         return kernels.robot_servo_targets(
             inputs[i & 255], path.a, path.b, tables.inclination_axis_deg,
             tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
-            path.sag_slot, float(path.sag_gain), -60.0, 20.0, robot.human_low,
-            robot.human_high, human, robot.gain_start, robot.gain_curve, robot.gain_value,
-            robot.offset, pl.servo_low, pl.servo_high, targets, 3.6, False, raw)
+            path.sag_slot, float(path.sag_gain), path.map_low, path.map_high, -60.0, 20.0,
+            robot.human_low, robot.human_high, human, robot.gain_start, robot.gain_curve,
+            robot.gain_value, robot.offset, pl.servo_low, pl.servo_high, targets, 3.6, False, raw)
     return step
 
 

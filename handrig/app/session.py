@@ -48,6 +48,7 @@ EXIT_SIGNALS: tuple[signal.Signals, ...] = tuple(
 @dataclass
 class LiveOptions:
     glove: str | None = None  # PORT, opengloves:PORT, replay:FILE (None: glove.toml)
+    recorded: str = ""  # the recording an emulated glove on ``glove`` streams (handrig demo)
     bus: str | None = None  # PORT or "sim" (None: rig.toml)
     frames: int | None = None
     duration_s: float | None = None
@@ -198,6 +199,11 @@ class _Session:
                                    self.torque_off, outputs=outputs,
                                    clamped=app.clamped_joints(self.parts.pipeline),
                                    ease_s=self.ease_s)
+        glove = self.opts.glove or ""
+        recorded = self.opts.recorded or (
+            glove.removeprefix("replay:") if glove.startswith("replay:") else "")
+        summary["clamp_advice"] = clamp_advice(summary, recorded, self.parts.expander.controls,
+                                               self.parts.expander.training_range())
         if self.stages:
             summary["stages_us"] = self.stages
         if self.signals.received:
@@ -341,6 +347,37 @@ def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
     return [f"outputs           {vmc_text}", f"                  {rec_text}"]
 
 
+CLAMP_RANGE_FRACTION = 0.05
+"""Controls outside the map's training range in more than this fraction of frames: the
+map is a likely cause of clamps."""
+
+
+def clamp_advice(summary: dict[str, Any], recording: str, controls: tuple[str, ...],
+                 training: Any) -> str:
+    """The likely causes of the run's clamps that it can tell: a recorded performance
+    (``recording``: the file a replayed or emulated glove streamed), a glove past its
+    calibration (a control curve's own servo clamped), a map outside its training range
+    (``training``: :meth:`handrig.pose.expand.Expander.training_range`)."""
+    if not summary.get("limit_clamps"):
+        return "no clamps"
+    causes = []
+    past = [c["joint"] for c in summary.get("clamped_joints") or [] if c["joint"] in controls]
+    at = f" ({', '.join(past)}: a control asked past its joint)" if past else ""
+    if recording:
+        causes.append(f"a recorded performance ({recording}): the clamps come from the"
+                      f" recording{at} and the map, not from a glove on a hand")
+    elif past:
+        causes.append(f"a glove past its calibration{at}: recalibrate the glove")
+    if training.known and training.outside_fraction > CLAMP_RANGE_FRACTION:
+        causes.append(f"a map outside its training range (controls beyond it in"
+                      f" {training.outside_fraction:.0%} of frames; refit the map on motion"
+                      " like this, or check the glove calibration)")
+    if not causes:
+        causes.append("the map asks for poses past the joints inside its training range"
+                      " (check it with handrig evaluate)")
+    return "likely: " + "; ".join(causes)
+
+
 def format_summary(summary: dict[str, Any]) -> str:
     """The human-readable summary of a run (the same figures as ``--json``)."""
     lat = summary["latency_us"]
@@ -366,8 +403,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['missed_cycles']} cycles missed)",
         f"limit clamps      {summary['limit_clamps']} servo targets held at a joint or servo "
         f"limit{most}",
-        "                  (the glove asked past the limit: normal at a full fist or spread; "
-        "high all the time: recalibrate the glove or check the map)",
+        "                  (the pose asked past the limit: normal at a full fist or spread; "
+        "high all the time: " + summary.get("clamp_advice", "recalibrate the glove or check the"
+                                            " map") + ")",
         f"                  {summary['pose_clamps']} values of the full two-hand pose clamped, "
         f"{summary['bus_clamps']} goals clamped by the driver, {summary['slew_limited']} "
         f"slew-limited, {summary['nonfinite_targets']} non-finite targets held",

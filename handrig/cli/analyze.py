@@ -8,8 +8,10 @@ import math
 import sys
 from typing import Any
 
+import numpy as np
+
 from handrig.cli._numbers import nonnegative_float, positive_float
-from handrig.offline import mocap
+from handrig.offline import conditioning, mocap
 from handrig.offline.analysis import Thresholds, analyze
 from handrig.offline.report import tables_markdown, write_report
 
@@ -51,6 +53,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"handrig: warning: {notes[-1]}", file=sys.stderr)
     th = Thresholds(args.range_small, args.rmsd_strict, args.range_large, args.rmsd_loose)
     an = analyze(m.curves, th)
+    cond = _conditioning(args, m, th)
+    notes.append(cond["text"])
     if args.out:
         path = write_report(an, m.curves, args.out, title=str(args.file), fps=m.fps, notes=notes)
         if not args.json:
@@ -59,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
         obj = an.to_json()
         obj["fps"] = m.fps
         obj["profile"] = m.profile
+        obj["conditioning"] = {k: v for k, v in cond.items() if k != "text"}
         obj["glitches"] = [
             {"curve": g.curve, "frame": g.frame, "kind": g.kind, "repaired": m.repaired,
              "value": g.value if math.isfinite(g.value) else str(g.value)}
@@ -68,4 +73,35 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         print(tables_markdown(an))
+        print(f"\n{cond['text']}")
     return 0
+
+
+def _conditioning(args: argparse.Namespace, m: mocap.MocapCurves, th: Thresholds
+                  ) -> dict[str, Any]:
+    """The profile's calibration offsets, the offsets this file suggests, and the check
+    that the analysis is the same on the conditioned curves (it works on raw curves:
+    an offset of ``o`` deg in the vocabulary is ``sign * o`` on the raw channel)."""
+    prof = mocap.load_profile(args.profile)
+    sign, _ = mocap.profile_affine(prof)
+    applied = prof.calibration.vector()
+    voc = mocap.to_vocabulary(m.curves, prof)
+    finite = bool(np.isfinite(voc).all())
+    suggested = conditioning.find_offsets(voc) if finite else np.zeros(len(m.names))
+    same, moved = conditioning.analysis_unchanged(m.curves, sign * applied, th)
+    same_s, moved_s = conditioning.analysis_unchanged(m.curves, sign * suggested, th)
+
+    def named(v: np.ndarray) -> dict[str, float]:
+        return {n: round(float(x), 2) for n, x in zip(m.names, v, strict=True) if x}
+
+    ok = same and same_s
+    shown = ", ".join(f"{n} {v:+.1f}" for n, v in named(suggested).items()) or "none"
+    text = (f"calibration offsets (vocabulary deg): profile {prof.name} adds"
+            f" {len(named(applied))} ({prof.calibration.how or 'none recorded'}); offsets"
+            f" this file suggests: {shown}"
+            + ("" if finite else " (not computed: NaN/inf in the curves, pass --despike)")
+            + f". The analysis of the conditioned curves is {'the same' if ok else 'NOT the same'}"
+            f" (every stage's constant curves, links and DOFs; ranges and rmsds move by at"
+            f" most {max(moved, moved_s):.1g})")
+    return {"profile_offsets_deg": named(applied), "suggested_offsets_deg": named(suggested),
+            "analysis_unchanged": ok, "max_change": max(moved, moved_s), "text": text}

@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
             with port_process(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
                               "the glove emulator (handrig sim-glove)") as (_, glove_port):
                 log(f"glove emulator streaming on {glove_port}")
-                opts = LiveOptions(glove=glove_port, bus="sim", frames=args.frames,
+                opts = LiveOptions(glove=glove_port, recorded=recording, bus="sim",
+                                   frames=args.frames,
                                    sim_faults=args.faults, log=log, panel=not args.json,
                                    snapshot_every=max(1, args.frames // 6) if args.render else 0)
                 signals.disarm()  # the session handles its own; after it: shut down, print

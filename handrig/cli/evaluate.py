@@ -16,6 +16,7 @@ from handrig.offline.evaluation import (
     Errors,
     Split,
     block_splits,
+    clamped_fractions,
     group_rms,
     out_of_regime,
     predict,
@@ -24,14 +25,16 @@ from handrig.offline.evaluation import (
     rms_errors,
     write_error_figure,
 )
+from handrig.offline.fitting import CONTROL_NOISE_DEG, METHODS
 from handrig.pose.expand import DEFAULT_MAP
-from handrig.pose.maps import METHODS, LinearMap
+from handrig.pose.maps import LinearMap
 
 LABELS = {"ridge": "least squares on all controls, ridge penalty",
           "huber": "robust (Huber) multi-control fit",
           "paper": "the paper's single-controller map (4.2)",
           "mean": "constant mean",
-          "robust": "shrunk toward the paper map for controls off by 1 deg, per-curve CV vs mean"}
+          "robust": f"shrunk toward the paper map for controls off by {CONTROL_NOISE_DEG:g} deg,"
+                    " per-curve CV vs mean"}
 
 
 def register(sub: Any) -> None:
@@ -68,10 +71,15 @@ def run(args: argparse.Namespace) -> int:
     own = rms_errors(predict(lm, m.curves), m.curves)
     lim = hand.curve_limits_deg()
     outside = ((m.curves < lim[:, 0]) | (m.curves > lim[:, 1])).mean(axis=0)
+    cond, cond_lines = _mapio.conditioning_report(args.file, m, args)
+    ri_c, le_c = clamped_fractions(lm, m.curves)
     in_sample = any(Path(t).name == Path(args.file).name for t in lm.trained_on)
     result: dict[str, Any] = {
         "file": args.file, "map": args.map, "method": lm.method, "controls": list(lm.controls),
-        "frames": m.n_frames, "in_sample": in_sample, "map_errors": own.to_json(),
+        "frames": m.n_frames, "in_sample": in_sample,
+        "map_errors": {**own.to_json(), "ri_clamped_fraction": round(ri_c, 6),
+                       "le_clamped_fraction": round(le_c, 6)},
+        "conditioning": cond,
         "truth_outside_limits": {n: round(float(f), 4) for n, f in zip(
             m.names, outside, strict=True) if f > 0},
     }
@@ -95,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         result["out_of_regime"] = {sp.name: {
             "description": sp.description,
             "methods": {k: {"ri_rms_deg": round(v.ri, 4), "le_rms_deg": round(v.le, 4),
+                            **v.clamped_json(),
                             "ri_groups_rms_deg": {g: round(x, 4)
                                                   for g, x in group_rms(v).items()},
                             "le_groups_rms_deg": {g: round(x, 4)
@@ -110,20 +119,23 @@ def run(args: argparse.Namespace) -> int:
     note = " (the map was trained on this file: in-sample)" if in_sample else ""
     print(f"map {args.map} ({lm.method}, controls {', '.join(lm.controls)}) on {args.file},"
           f" {m.n_frames} frames{note}")
+    print("\n".join(cond_lines))
     print(f"  RMS error: right hand {own.ri:.2f} deg, left hand {own.le:.2f} deg,"
-          f" overall {own.overall:.2f} deg")
+          f" overall {own.overall:.2f} deg; the map's output outside the joint limits (then"
+          f" clamped): right {ri_c:.2%}, left {le_c:.2%} of values")
     worst = sorted(zip(own.per_curve, m.names, strict=True), reverse=True)[:5]
     print("  worst curves: " + ", ".join(f"{n} {v:.1f}" for v, n in worst))
     far = sorted(zip(outside, m.names, strict=True), reverse=True)[:3]
     if far[0][0] > 0:
         print("  the file itself leaves the joint limits (outputs are clamped, so this counts"
-              " as error): " + ", ".join(f"{n} {f:.0%} of frames" for f, n in far if f > 0))
+              " as error): " + ", ".join(f"{n} {f:.1%} of frames" for f, n in far if f > 0))
     if res:
         print(f"unseen motion, {result['held_out']['scheme']} (RMS deg, every curve of the"
               " hand, and its curve groups):")
         for sp in splits:
             print(f"  {sp.name}: {sp.description}")
         print("\n".join(regime_table(res, splits)))
+        print("  clamp% = the hand's predicted values the joint limits clamped")
         print("  methods: " + "; ".join(f"{k} = {LABELS[k]}" for k in res["clips"]))
         if args.figure:
             print(f"figure: {result['figure']}")

@@ -12,7 +12,7 @@ from handrig.cli import _mapio
 from handrig.cli._numbers import nonnegative_float
 from handrig.errors import DataError
 from handrig.offline import evaluation as evaluation_mod
-from handrig.offline import mocap
+from handrig.offline import fitting, mocap
 from handrig.pose import maps
 
 
@@ -27,14 +27,14 @@ def register(sub: Any) -> None:
                    help="comma-separated control curves (default: the paper's right-glove set"
                    f" {','.join(maps.DEFAULT_RIGHT_CONTROLS)})")
     p.add_argument("--out", required=True, help="map TOML file to write")
-    p.add_argument("--method", choices=maps.METHODS, default=maps.DEFAULT_METHOD,
-                   help=f"fitting method (default {maps.DEFAULT_METHOD}: close to ridge on unseen"
-                   " gestures, not hurt when the controls are off)")
-    p.add_argument("--alpha", type=nonnegative_float, default=maps.RIDGE_ALPHA,
-                   help=f"ridge penalty for ridge/huber (default {maps.RIDGE_ALPHA:g})")
-    p.add_argument("--noise", type=nonnegative_float, default=maps.CONTROL_NOISE_DEG,
+    p.add_argument("--method", choices=fitting.METHODS, default=fitting.DEFAULT_METHOD,
+                   help=f"fitting method (default {fitting.DEFAULT_METHOD}: close to ridge on"
+                   " unseen gestures, not hurt when the controls are off)")
+    p.add_argument("--alpha", type=nonnegative_float, default=fitting.RIDGE_ALPHA,
+                   help=f"ridge penalty for ridge/huber (default {fitting.RIDGE_ALPHA:g})")
+    p.add_argument("--noise", type=nonnegative_float, default=fitting.CONTROL_NOISE_DEG,
                    help="robust: how far (deg) live controls may sit from the training data"
-                   f" (default {maps.CONTROL_NOISE_DEG:g})")
+                   f" (default {fitting.CONTROL_NOISE_DEG:g})")
     p.add_argument("--evaluate", action="store_true",
                    help="also measure the held-out errors (handrig evaluate's splits) of this"
                    " method, mean, paper and ridge on the training data and record them in"
@@ -50,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
     labels: list[NDArray[np.intp]] = []
     fps = None
     reference = False
+    conditioned: list[str] = []
     for f in args.files:
         m = _mapio.load(f, args)
         m.require_clean("fitting a map")
@@ -57,8 +58,10 @@ def run(args: argparse.Namespace) -> int:
             args.fps is None)
         base = int(sum(int(lb.max()) + 1 for lb in labels))
         labels.append(base + (mocap.reference_clip_labels() if reference
-                              else maps.block_groups(m.n_frames)))
+                              else fitting.block_groups(m.n_frames)))
         parts.append(m.curves)
+        if m.offsets_deg is not None:
+            conditioned.append(f"{f}: {int((m.offsets_deg != 0).sum())} curves")
         fps = m.fps if fps is None else fps
     curves = np.concatenate(parts)
     groups = np.concatenate(labels)
@@ -67,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         if reference:
             splits, _ = evaluation_mod.reference_splits(curves, fps or 0.0)
         else:
-            splits = evaluation_mod.block_splits(curves, fps or 0.0, maps.DEFAULT_GROUPS)[0]
+            splits = evaluation_mod.block_splits(curves, fps or 0.0, fitting.DEFAULT_GROUPS)[0]
             if len(args.files) > 1:
                 print("note: held-out figures over contiguous blocks of the concatenated files")
         methods = tuple(dict.fromkeys((args.method, "mean", "paper", "ridge")))
@@ -76,13 +79,15 @@ def run(args: argparse.Namespace) -> int:
             cells = "; ".join(f"{k} {v.ri:.2f} right, {v.le:.2f} left"
                               for k, v in res[sp.name].items())
             evaluation.append(f"{sp.name} ({sp.description}): {cells}")
-    lm = maps.fit_map(
+    lm = fitting.fit_map(
         curves, controls, args.method, alpha=args.alpha, control_noise_deg=args.noise,
         groups=groups, groups_name=(
             "the gesture clips of the README" if reference
-            else f"{maps.DEFAULT_GROUPS} contiguous blocks per file"),
+            else f"{fitting.DEFAULT_GROUPS} contiguous blocks per file"),
         trained_on=tuple(args.files), profile=str(args.profile),
         fps=fps or 0.0, description=args.description, evaluation=tuple(evaluation),
+        conditioning=(f"trained on conditioned curves (calibration offsets of profile"
+                      f" {args.profile}: {'; '.join(conditioned)})" if conditioned else ""),
     )
     path = lm.save(args.out)
     if lm.fit_rms_deg is None:

@@ -18,13 +18,17 @@ and pool the held-out errors.
   control, ``OFFSET_DRAWS`` patterns per clip, fixed seed): a glove calibration that is
   off, or a rest pose of the controls that the capture never held. The truth is the
   capture's own curves.
+
+Beside each RMS error, the fraction of the hand's predicted values that the joint limits
+clamped (``clamp%``: the map asked for a pose outside the joints; what a run counts as
+pose clamps).
 """
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -34,8 +38,9 @@ from handrig import hand
 from handrig.config.loading import JointLimits
 from handrig.errors import DataError
 from handrig.offline import mocap
+from handrig.offline.fitting import block_groups, fit_map
 from handrig.pose.expand import Expander
-from handrig.pose.maps import LinearMap, block_groups, fit_map
+from handrig.pose.maps import LinearMap
 
 FloatArray = NDArray[np.float64]
 _RI = slice(0, hand.CURVES_PER_HAND)
@@ -44,20 +49,43 @@ _LE = slice(hand.CURVES_PER_HAND, 2 * hand.CURVES_PER_HAND)
 
 @dataclass(frozen=True)
 class Errors:
-    """RMS errors in degrees: ``per_curve`` (50,), ``ri``, ``le`` and ``overall``."""
+    """RMS errors in degrees: ``per_curve`` (50,), ``ri``, ``le`` and ``overall``;
+    ``ri_clamped``/``le_clamped``: the fraction of the hand's predicted values that the
+    joint limits clamped (the map asked for a pose outside the joints), when known."""
 
     per_curve: FloatArray
     ri: float
     le: float
     overall: float
+    ri_clamped: float | None = None
+    le_clamped: float | None = None
 
     def to_json(self) -> dict[str, object]:
         return {
             "ri_rms_deg": round(self.ri, 4), "le_rms_deg": round(self.le, 4),
             "overall_rms_deg": round(self.overall, 4),
+            **self.clamped_json(),
             "per_curve_rms_deg": {n: round(float(v), 4)
                                   for n, v in zip(hand.CURVE_NAMES, self.per_curve, strict=True)},
         }
+
+
+    def clamped_json(self) -> dict[str, float]:
+        if self.ri_clamped is None or self.le_clamped is None:
+            return {}
+        return {"ri_clamped_fraction": round(self.ri_clamped, 6),
+                "le_clamped_fraction": round(self.le_clamped, 6)}
+
+
+def clamped_fractions(map_: LinearMap, curves: FloatArray, limits: JointLimits | None = None
+                      ) -> tuple[float, float]:
+    """Right and left hand: the fraction of values of the map's output for ``curves``'
+    controls (clipped to the map's own range) that lie outside the joint limits."""
+    lim = (hand.curve_limits_deg() if limits is None
+           else np.array([limits.of(n) for n in hand.CURVE_NAMES], dtype=np.float64))
+    raw = map_.predict(curves[:, map_.control_indices])
+    out = (raw < lim[:, 0]) | (raw > lim[:, 1])
+    return float(out[:, _RI].mean()), float(out[:, _LE].mean())
 
 
 def rms_errors(pred: FloatArray, truth: FloatArray) -> Errors:
@@ -234,7 +262,7 @@ def out_of_regime(
                    for _ in sp.folds]
         res: dict[str, Errors] = {}
         for method in methods:
-            preds, truth = [], []
+            preds, truth, clamped = [], [], []
             for (train, test), offs in zip(sp.folds, offsets, strict=True):
                 key = (method, np.packbits(train).tobytes())
                 m = cache.get(key)
@@ -246,7 +274,10 @@ def out_of_regime(
                     seen[:, m.control_indices] += off
                     preds.append(predict(m, seen, limits))
                     truth.append(y[test])
-            res[method] = rms_errors(np.concatenate(preds), np.concatenate(truth))
+                    clamped.append(np.array(clamped_fractions(m, seen, limits)) * len(seen))
+            err = rms_errors(np.concatenate(preds), np.concatenate(truth))
+            ri_c, le_c = np.sum(clamped, axis=0) / sum(len(t) for t in truth)
+            res[method] = replace(err, ri_clamped=float(ri_c), le_clamped=float(le_c))
         out[sp.name] = res
     return out
 
@@ -254,15 +285,18 @@ def out_of_regime(
 def regime_table(results: dict[str, dict[str, Errors]], splits: Sequence[Split]) -> list[str]:
     """The results as aligned text lines: split, method, each hand and its curve groups."""
     groups = tuple(CURVE_GROUPS)
-    cols = " ".join(f"{g:>7}" for g in groups)
-    lines = [f"  {'':<12} {'':<7} {'right hand':^32}   {'left hand':^32}",
+    cols = " ".join(f"{g:>7}" for g in groups) + f" {'clamp%':>6}"
+    lines = [f"  {'':<12} {'':<7} {'right hand':^39}   {'left hand':^39}",
              f"  {'split':<12} {'method':<7} {'all':>7} {cols}   {'all':>7} {cols}"]
     for sp in splits:
         for method, err in results[sp.name].items():
             cells = []
-            for side, total in (("ri", err.ri), ("le", err.le)):
+            for side, total, clamped in (("ri", err.ri, err.ri_clamped),
+                                         ("le", err.le, err.le_clamped)):
                 g = group_rms(err, side)
-                cells.append(f"{total:>7.2f} " + " ".join(f"{g[k]:>7.2f}" for k in groups))
+                pct = "-" if clamped is None else f"{100 * clamped:.2f}"
+                cells.append(f"{total:>7.2f} " + " ".join(f"{g[k]:>7.2f}" for k in groups)
+                             + f" {pct:>6}")
             lines.append(f"  {sp.name:<12} {method:<7} {cells[0]}   {cells[1]}")
     return lines
 

@@ -10,6 +10,11 @@ Real captures have glitches: NaN or absurd values and single-frame spikes of 100
 degrees and more. :func:`find_glitches` reports them (curve, frame, value);
 ``despike=True`` repairs them by linear interpolation from the neighbouring good
 frames; :meth:`MocapCurves.require_clean` refuses unrepaired data for learning.
+
+A profile's ``[calibration]`` table holds the per-curve offsets of a capture's
+calibration (found by :func:`handrig.offline.conditioning.find_offsets`, with how and on
+which capture); vocabulary curves are loaded with them added (``condition=False`` to see
+the capture as it is). Raw curves never get them.
 """
 
 from __future__ import annotations
@@ -65,6 +70,8 @@ ABSURD_DEG = 360.0
 """A joint angle beyond +-360 degrees is not a joint angle."""
 
 _SIDES = ("ri", "le")
+MAX_OFFSET_DEG = 90.0
+"""A calibration offset beyond this is refused: it would be a convention error."""
 
 
 @dataclass(frozen=True)
@@ -103,6 +110,34 @@ class CurveSource:
 
 
 @dataclass(frozen=True)
+class Calibration:
+    """Per-curve offsets (deg, vocabulary convention) of a capture's calibration, added to
+    the vocabulary curves on load; ``found_on`` and ``how`` say where they come from."""
+
+    offsets_deg: dict[str, float] = field(default_factory=dict)
+    found_on: str = ""
+    how: str = ""
+
+    def check(self) -> None:
+        for name, v in self.offsets_deg.items():
+            if name not in hand.CURVE_NAMES:
+                raise ConfigError("unknown curve", key=f"calibration.offsets_deg.{name}",
+                                  allowed="a curve name, e.g. riIndexPIPy")
+            if not np.isfinite(v) or abs(v) > MAX_OFFSET_DEG:
+                raise ConfigError(
+                    "not a calibration offset", key=f"calibration.offsets_deg.{name}",
+                    value=v, allowed=f"a finite offset within +-{MAX_OFFSET_DEG:g} deg")
+        if self.offsets_deg and not self.how:
+            raise ConfigError("offsets need a note of how they were found",
+                              key="calibration.how")
+
+    def vector(self) -> NDArray[np.float64]:
+        """The offsets as a (50,) array in canonical curve order (0 where none)."""
+        return np.array([self.offsets_deg.get(n, 0.0) for n in hand.CURVE_NAMES],
+                        dtype=np.float64)
+
+
+@dataclass(frozen=True)
 class Profile:
     """A joint-mapping profile: BVH skeleton -> the 50 curves (see the module docstring)."""
 
@@ -112,6 +147,7 @@ class Profile:
     sides: dict[str, str] = field(default_factory=lambda: {"ri": "Right", "le": "Left"})
     template: dict[str, CurveSource] = field(default_factory=dict)
     curves: dict[str, CurveSource] = field(default_factory=dict)
+    calibration: Calibration = field(default_factory=Calibration)
     source: str = "<profile>"
 
     def check(self) -> None:
@@ -197,6 +233,8 @@ class MocapCurves:
     glitches: tuple[Glitch, ...] = ()
     repaired: bool = False
     names: tuple[str, ...] = hand.CURVE_NAMES
+    offsets_deg: NDArray[np.float64] | None = field(default=None, compare=False)
+    """The calibration offsets added on load (:class:`Calibration`), None when none were."""
 
     @property
     def n_frames(self) -> int:
@@ -354,6 +392,7 @@ def load_curves(
     despike: bool = False,
     *,
     spike_deg: float = SPIKE_DEG,
+    condition: bool = True,
 ) -> MocapCurves:
     """Read a BVH file into the 50 curves (degrees).
 
@@ -361,6 +400,8 @@ def load_curves(
     (the channel angles as the profile's table defines them). ``fps``: resample to this
     rate (None keeps the file's). ``despike``: interpolate glitches away (they are still
     listed in ``glitches``). Glitch frame numbers refer to the file's own frames.
+    ``condition``: add the profile's calibration offsets to vocabulary curves (raw
+    curves never get them).
     """
     prof = profile if isinstance(profile, Profile) else load_profile(profile)
     if convention not in ("vocabulary", "raw"):
@@ -371,6 +412,10 @@ def load_curves(
     if despike:
         raw = repair(raw, glitches)
     curves = to_vocabulary(raw, prof) if convention == "vocabulary" else raw
+    offsets = None
+    if convention == "vocabulary" and condition and prof.calibration.offsets_deg:
+        offsets = prof.calibration.vector()
+        curves = curves + offsets
     rate = bvh.fps
     if fps is not None:
         if glitches and not despike:
@@ -386,9 +431,11 @@ def load_curves(
     return MocapCurves(
         curves=np.ascontiguousarray(curves, dtype=np.float64), fps=rate, convention=convention,
         profile=prof.name, source=str(path), glitches=tuple(glitches), repaired=despike,
+        offsets_deg=offsets,
     )
 
 
-def load_reference(convention: Convention = "vocabulary") -> MocapCurves:
-    """The shipped reference capture at its own 24 fps."""
-    return load_curves(REFERENCE_BVH, "perception_neuron", convention)
+def load_reference(convention: Convention = "vocabulary", *, condition: bool = True
+                   ) -> MocapCurves:
+    """The shipped reference capture at its own 24 fps (conditioned, see load_curves)."""
+    return load_curves(REFERENCE_BVH, "perception_neuron", convention, condition=condition)

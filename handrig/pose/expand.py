@@ -1,9 +1,11 @@
 """The runtime half of the reduced hand: a few control angles -> the full 50-curve pose.
 
-:class:`Expander` precomputes ``pose = bias + controls @ gains_t`` and clamps to the
-joint limits; one frame is one compiled loop (:func:`handrig.pose.kernels.expand_frame`,
-the training-range count included) on preallocated buffers, many frames are numpy
-calls (``bench/bench_expand.py`` measures both).
+:class:`Expander` precomputes ``pose = bias + controls @ gains_t`` and clamps each
+curve to its joint limits and to the map's output range of that curve
+(:meth:`LinearMap.output_range_deg`, a clipped-linear map); one frame is one compiled
+loop (:func:`handrig.pose.kernels.expand_frame`, the training-range count included) on
+preallocated buffers, many frames are numpy calls (``bench/bench_expand.py`` measures
+both).
 
 A map records the range each control covered in training; the expander counts the
 calls whose controls leave it (by more than ``margin_deg``), per control too, so a run
@@ -91,8 +93,12 @@ class Expander:
         self.control_means_deg: FloatArray = np.array(map.control_means_deg, dtype=np.float64)
         lim = limits if limits is not None else load_joint_limits()
         bounds = np.array([lim.of(n) for n in hand.CURVE_NAMES], dtype=np.float64)
-        self.low_deg: FloatArray = np.ascontiguousarray(bounds[:, 0])
-        self.high_deg: FloatArray = np.ascontiguousarray(bounds[:, 1])
+        clip = map.output_range_deg()
+        # the map's range inside the joint limits (a range wholly outside them: the limit)
+        low = np.minimum(np.maximum(bounds[:, 0], clip[:, 0]), bounds[:, 1])
+        high = np.maximum(np.minimum(bounds[:, 1], clip[:, 1]), low)
+        self.low_deg: FloatArray = np.ascontiguousarray(low)
+        self.high_deg: FloatArray = np.ascontiguousarray(high)
         # pose = curve_means + gains @ (c - control_means) = bias + c @ gains.T
         self._gains_t: FloatArray = np.ascontiguousarray(map.gains.T, dtype=np.float64)
         self._bias: FloatArray = np.ascontiguousarray(

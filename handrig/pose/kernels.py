@@ -73,11 +73,13 @@ def _hold_clamp_slew(k: int, v: float, low: Any, high: Any, targets: Any, first:
 @njit(cache=True, nogil=True)
 def servo_targets(
     controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
-    slot: Any, gain: float, inclination: float, rotation: float, low: Any, high: Any,
-    targets: Any, limit: float, first: bool, raw: Any,
+    slot: Any, gain: float, map_low: Any, map_high: Any, inclination: float,
+    rotation: float, low: Any, high: Any, targets: Any, limit: float, first: bool, raw: Any,
 ) -> int:  # pragma: no cover - compiled
     """The servo targets in place: ``targets`` (n,) becomes the slew-limited step toward
-    ``controls @ a + b + gain * sag[slot]``, clamped to ``[low, high]``.
+    ``clip(controls @ a + b, map_low, map_high) + gain * sag[slot]``, clamped to
+    ``[low, high]`` (``map_low``/``map_high``: the map's output range, -inf/inf for none;
+    a non-finite value stays non-finite).
 
     ``cells`` (n_inc-1, n_rot-1, 4, n_dof): each grid cell's four corner offsets
     (:class:`handrig.pose.sag.SagGrid`); ``slot[k] >= n_dof`` means no sag for servo k;
@@ -96,6 +98,8 @@ def servo_targets(
         v = b[k]
         for m in range(controls.shape[0]):
             v += controls[m] * a[m, k]
+        if math.isfinite(v):  # a non-finite value stays so: the step holds the target
+            v = min(max(v, map_low[k]), map_high[k])
         s = slot[k]
         if use_sag and s < n_dof:
             v += gain * (w0 * cells[i, j, 0, s] + w1 * cells[i, j, 1, s]
@@ -107,15 +111,17 @@ def servo_targets(
 @njit(cache=True, nogil=True)
 def robot_servo_targets(
     controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
-    slot: Any, gain: float, inclination: float, rotation: float, human_low: Any,
+    slot: Any, gain: float, map_low: Any, map_high: Any, inclination: float,
+    rotation: float, human_low: Any,
     human_high: Any, human: Any, g_start: Any, g_curve: Any, g_gain: Any, offset: Any,
     low: Any, high: Any, targets: Any, limit: float, first: bool, raw: Any,
 ) -> int:  # pragma: no cover - compiled
     """A robot hand's servo targets in place: the human curves it reads, then the
     retarget step, then the slew limit.
 
-    ``human`` (u,) becomes ``controls @ a + b + gain * sag[slot]`` (the ``u`` curves the
-    retarget reads, as in :func:`servo_targets`), each clamped to
+    ``human`` (u,) becomes ``clip(controls @ a + b, map_low, map_high) + gain *
+    sag[slot]`` (the ``u`` curves the retarget reads, as in :func:`servo_targets`), each
+    clamped to
     ``[human_low, human_high]``; a non-finite curve stays non-finite. Then servo k's
     target is ``offset[k] + sum of g_gain[e] * human[g_curve[e]]`` over the entries
     ``e`` in ``g_start[k]:g_start[k + 1]`` (the table's nonzero gains, row by row, so a
@@ -131,6 +137,8 @@ def robot_servo_targets(
         v = b[c]
         for m in range(controls.shape[0]):
             v += controls[m] * a[m, c]
+        if math.isfinite(v):  # a non-finite value stays so: the step holds the target
+            v = min(max(v, map_low[c]), map_high[c])
         s = slot[c]
         if use_sag and s < n_dof:
             v += gain * (w0 * cells[i, j, 0, s] + w1 * cells[i, j, 1, s]
@@ -285,13 +293,14 @@ def warm_up() -> None:
     """Compile (or load from the cache) every kernel with the types the loop uses."""
     f = np.zeros(2)
     servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]), 0.0,
-                  np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, 0.5, 0.5, f - 1.0,
-                  f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
+                  np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, f - 2.0, f + 2.0, 0.5,
+                  0.5, f - 1.0, f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
     expand_frame(f, np.zeros((2, 2)), f, f - 1.0, f + 1.0, f - 1.0, f + 1.0, np.zeros(2),
                  np.zeros(2, np.int64))
     robot_servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]),
-                        0.0, np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, 0.5, 0.5,
-                        f - 1.0, f + 1.0, np.zeros(2), np.arange(3, dtype=np.int64),
+                        0.0, np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, f - 2.0,
+                        f + 2.0, 0.5, 0.5, f - 1.0, f + 1.0, np.zeros(2),
+                        np.arange(3, dtype=np.int64),
                         np.arange(2, dtype=np.int64), f + 1.0, f, f - 1.0, f + 1.0,
                         np.zeros(2), 1.0, False, np.zeros(2))
     forearm_angles(np.array([0.0, 0.0, 0.0, 1.0]), False, 1.0, np.eye(3), 1.0, 1e-6, 0.5, 1.5)

@@ -62,6 +62,8 @@ class MapLike(Protocol):
     @property
     def control_means_deg(self) -> FloatArray: ...  # (k,)
 
+    def output_range_deg(self) -> FloatArray: ...  # (50, 2)
+
 
 class ExpanderLike(Protocol):
     controls: tuple[str, ...]
@@ -99,6 +101,8 @@ class ServoPath:
     sag_slot: NDArray[np.int64]  # (n,)
     sag_gain: float
     sag: SagTables
+    map_low: FloatArray  # (n,) the map's output range, before sag (-inf/inf: none)
+    map_high: FloatArray  # (n,)
 
 
 class RetargetLike(Protocol):
@@ -278,7 +282,8 @@ class PosePipeline:
         curves = np.flatnonzero(np.any(full != 0.0, axis=0)).astype(np.intp)
         human = self._build_servo_path([POSE_NAMES[c] for c in curves])
         if self.sag_gain == 0.0:
-            human = ServoPath(human.a, human.b, human.sag_slot, 0.0, SagTables.empty())
+            human = ServoPath(human.a, human.b, human.sag_slot, 0.0, SagTables.empty(),
+                              human.map_low, human.map_high)
         offset = np.asarray(rt.offset_deg, dtype=np.float64)[self._robot_rows].copy()
         gain = np.ascontiguousarray(full[:, curves])
         rows, cols = np.nonzero(gain)  # row-major order
@@ -291,8 +296,9 @@ class PosePipeline:
         """Precompose the servo joints' targets as one affine map of the controls, plus the
         right forearm's sag offsets (the left forearm's are constant: no IMU there).
 
-        ``targets = controls @ A + b + gain * offsets[sag_slot]`` then one clamp to the
-        joint and servo limits. The expander clamps each curve before sag is added; this
+        ``targets = clip(controls @ A + b, map_low, map_high) + gain * offsets[sag_slot]``
+        (the map's output range, as the expander clips) then one clamp to the joint and
+        servo limits. The expander clamps each curve before sag is added; this
         path clamps once after, which differs only where a curve leaves its limits and
         sag brings it back: the end result is inside the limits either way.
         """
@@ -303,6 +309,9 @@ class PosePipeline:
         n, k = len(joints), gains.shape[1]
         a = np.zeros((k, n))
         b = np.zeros(n)
+        rng = np.asarray(m.output_range_deg(), dtype=np.float64)
+        map_low = np.full(n, -np.inf)
+        map_high = np.full(n, np.inf)
         slot = np.full(n, hand.DOFS_PER_HAND, dtype=np.int64)  # index 23 = no sag
         left_const = np.zeros(hand.DOFS_PER_HAND)
         left_rest = np.zeros(hand.DOFS_PER_HAND)
@@ -320,6 +329,7 @@ class PosePipeline:
                 if not (h == "le" and self.left_hand == "relaxed"):
                     a[:, j] = gains[src]
                     b[j] = bias[src]
+                    map_low[j], map_high[j] = rng[src]
             if h not in self.sag_index:
                 continue
             hits = np.flatnonzero(self.sag_index[h] == i)
@@ -334,7 +344,8 @@ class PosePipeline:
                     b[j] += left_rest[d]
         grid = self._grids.get("ri")
         tables = grid.kernel_tables() if grid is not None else SagTables.empty()
-        return ServoPath(np.ascontiguousarray(a), b, slot, self.sag_gain, tables)
+        return ServoPath(np.ascontiguousarray(a), b, slot, self.sag_gain, tables, map_low,
+                         map_high)
 
     # -- pieces ---------------------------------------------------------------------------
     def _add_sag(self, pose: FloatArray, h: str, inclination_deg: float,
@@ -403,6 +414,7 @@ class PosePipeline:
                 np.ascontiguousarray(controls_deg, dtype=np.float64), path.a, path.b,
                 tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
                 tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
+                path.map_low, path.map_high,
                 float(inclination_deg), float(rotation_deg), robot.human_low,
                 robot.human_high, self._human, robot.gain_start, robot.gain_curve,
                 robot.gain_value, robot.offset, self.servo_low,
@@ -414,6 +426,7 @@ class PosePipeline:
             np.ascontiguousarray(controls_deg, dtype=np.float64), path.a, path.b,
             tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
             tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
+            path.map_low, path.map_high,
             float(inclination_deg), float(rotation_deg), self.servo_low, self.servo_high,
             self.targets, float(self.slew_deg_s * max(dt_s, 0.0)), first, self._raw_targets)
         self._has_targets = True

@@ -180,3 +180,22 @@ def test_run_reads_the_users_calibrated_glove_file(tmp_path: Path,
     assert build_parts().glove_file == mine
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "elsewhere"))
     assert build_parts().glove_file == CONFIG_DIR / "glove.toml"
+
+
+def test_clamp_advice_names_the_cause_it_can_tell() -> None:
+    from handrig.app.session import clamp_advice
+    from handrig.pose.expand import TrainingRangeReport
+
+    ctrl = ("riIndexMCPy", "riPinkyMCPy")
+    inside = TrainingRangeReport(True, 100, 0, {c: 0 for c in ctrl}, 2.0)
+    outside = TrainingRangeReport(True, 100, 40, {"riIndexMCPy": 40, "riPinkyMCPy": 0}, 2.0)
+    on_curve = {"limit_clamps": 50, "clamped_joints": [{"joint": "riIndexPIPy", "clamps": 50}]}
+    on_ctrl = {"limit_clamps": 50, "clamped_joints": [{"joint": "riIndexMCPy", "clamps": 50}]}
+    assert clamp_advice({"limit_clamps": 0}, "", ctrl, outside) == "no clamps"
+    assert "recorded performance (demo.csv)" in clamp_advice(on_ctrl, "demo.csv", ctrl, inside)
+    assert "glove past its calibration (riIndexMCPy" in clamp_advice(on_ctrl, "", ctrl, inside)
+    assert "outside its training range" in clamp_advice(on_curve, "", ctrl, outside)
+    assert "glove past" not in clamp_advice(on_curve, "", ctrl, outside)
+    assert "handrig evaluate" in clamp_advice(on_curve, "", ctrl, inside)
+    text = format_summary({**_summary(), "clamp_advice": "likely: a test"})
+    assert "likely: a test" in text and "recalibrate the glove or check the map" not in text

@@ -21,8 +21,9 @@ from handrig.offline.evaluation import (
     reference_splits,
     write_error_figure,
 )
+from handrig.offline.fitting import fit_map
 from handrig.pose.expand import DEFAULT_MAP, DEFAULT_TWO_GLOVE_MAP, Expander
-from handrig.pose.maps import DEFAULT_TWO_GLOVE_CONTROLS, LinearMap, MapWarning, fit_map
+from handrig.pose.maps import DEFAULT_TWO_GLOVE_CONTROLS, LinearMap, MapWarning
 
 CTRL = ("riIndexMCPy", "riPinkyMCPy", "leIndexMCPy")
 I0, I1, I2 = (hand.curve_index(c) for c in CTRL)

@@ -13,9 +13,10 @@ from handrig.pose.sag import SagGrid
 
 
 class NumpyServoStep:
-    """:meth:`PosePipeline.servo_targets` in plain numpy: ``controls @ a + b + gain *
-    offsets[slot]`` (offsets looked up with :meth:`SagGrid.offsets`, not the kernel's
-    tables), a non-finite target holds the previous one, clamp, slew limit."""
+    """:meth:`PosePipeline.servo_targets` in plain numpy: ``clip(controls @ a + b,
+    map_low, map_high) + gain * offsets[slot]`` (offsets looked up with
+    :meth:`SagGrid.offsets`, not the kernel's tables), a non-finite target holds the
+    previous one, clamp, slew limit."""
 
     def __init__(self, path: ServoPath, sag: SagGrid | None, low: np.ndarray,
                  high: np.ndarray, slew_deg_s: float) -> None:
@@ -29,6 +30,7 @@ class NumpyServoStep:
         path = self.path
         with np.errstate(invalid="ignore"):  # inf - inf: a NaN the step must hold
             raw = controls @ path.a + path.b
+            raw = np.where(np.isfinite(raw), np.clip(raw, path.map_low, path.map_high), raw)
             if self.sag is not None:
                 offsets = np.append(self.sag.offsets(inc, rot), 0.0)  # slot 23: no sag
                 raw = raw + path.sag_gain * offsets[np.minimum(path.sag_slot, 23)]

@@ -109,7 +109,8 @@ def test_kernel_holds_the_previous_target_without_nan_leaking() -> None:
     held = kernels.robot_servo_targets(
         np.array([0.0, 4.0]), a, np.array([np.inf, 0.0]), np.zeros(2), np.zeros(2), 0.0,
         np.zeros((0, 1, 4, 1)),
-        np.zeros(2, np.int64), 0.0, 0.0, 0.0, f - 100.0, f + 100.0, human, start, curve, gain,
+        np.zeros(2, np.int64), 0.0, f - np.inf, f + np.inf, 0.0, 0.0, f - 100.0, f + 100.0,
+        human, start, curve, gain,
         np.array([0.0, 1.0, 0.0]), np.full(3, -50.0), np.full(3, 50.0), targets, 100.0,
         False, raw)
     assert held == 2  # rows 0 and 2 read the bad curve; row 1 does not
