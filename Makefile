@@ -48,15 +48,17 @@ FW_RAM_BYTES ?= 2048
 AVR_CFLAGS := -mmcu=$(FW_MCU) -DF_CPU=$(FW_F_CPU) -DARDUINO=10819 -DARDUINO_AVR_NANO \
 	-DARDUINO_ARCH_AVR -Os -g -ffunction-sections -fdata-sections \
 	-I$(ARDUINO_AVR)/cores/arduino -I$(ARDUINO_AVR)/variants/eightanaloginputs \
-	-I$(ARDUINO_AVR)/variants/standard -I$(FW_SRC)
+	-I$(ARDUINO_AVR)/variants/standard -I$(ARDUINO_AVR)/libraries/Wire/src -I$(FW_SRC)
 FW_WARN := -Wall -Wextra
 AVR_CXXFLAGS := $(AVR_CFLAGS) -std=gnu++11 -fno-exceptions -fno-threadsafe-statics -fpermissive
 FW_CORE_C := $(wildcard $(ARDUINO_AVR)/cores/arduino/*.c)
 # WString.cpp needs a newer C++ than Debian's avr-g++ 5.4 (DECIMAL_DIG); the sketch uses no String
 FW_CORE_CXX := $(filter-out %/WString.cpp,$(wildcard $(ARDUINO_AVR)/cores/arduino/*.cpp))
-FW_CORE_OBJ := $(patsubst $(ARDUINO_AVR)/cores/arduino/%,$(FW_BUILD)/core/%.o,$(FW_CORE_C) $(FW_CORE_CXX))
+FW_CORE_OBJ := $(patsubst $(ARDUINO_AVR)/cores/arduino/%,$(FW_BUILD)/core/%.o,$(FW_CORE_C) $(FW_CORE_CXX)) \
+	$(FW_BUILD)/core/Wire.cpp.o $(FW_BUILD)/core/twi.c.o
+WIRE_SRC := $(ARDUINO_AVR)/libraries/Wire/src
 FW_OBJ := $(FW_BUILD)/glove.ino.o $(FW_BUILD)/glove_core.c.o $(FW_BUILD)/board_avr.cpp.o \
-	$(FW_BUILD)/board_arduino.cpp.o
+	$(FW_BUILD)/board_arduino.cpp.o $(FW_BUILD)/board_i2c_wire.cpp.o
 FW_HEADERS := $(wildcard $(FW_SRC)/*.h)
 SIM_AVR_GLOVE := build/sim/avr_glove
 
@@ -76,6 +78,14 @@ $(FW_BUILD)/core/%.c.o: $(ARDUINO_AVR)/cores/arduino/%.c
 $(FW_BUILD)/core/%.cpp.o: $(ARDUINO_AVR)/cores/arduino/%.cpp
 	@mkdir -p $(dir $@)
 	avr-g++ $(AVR_CXXFLAGS) -c $< -o $@
+
+$(FW_BUILD)/core/Wire.cpp.o: $(WIRE_SRC)/Wire.cpp
+	@mkdir -p $(dir $@)
+	avr-g++ $(AVR_CXXFLAGS) -c $< -o $@
+
+$(FW_BUILD)/core/twi.c.o: $(WIRE_SRC)/utility/twi.c
+	@mkdir -p $(dir $@)
+	avr-gcc $(AVR_CFLAGS) -std=gnu11 -w -c $< -o $@
 
 $(FW_BUILD)/core.a: $(FW_CORE_OBJ)
 	rm -f $@ && avr-gcc-ar rcs $@ $^

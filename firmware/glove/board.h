@@ -13,7 +13,9 @@ uint8_t board_tick(uint32_t *t_us);
 /* 1 when the tick's ADC burst is complete: sums[] holds 2^GLOVE_OVERSAMPLE_LOG2
  * 10-bit samples per channel; *missed counts ticks skipped since the last burst. */
 uint8_t board_burst_done(uint16_t *sums, uint8_t *missed);
-/* I2C register access; 0 on NACK or timeout (never hangs). */
+/* I2C at 400 kHz (board_i2c_wire.cpp, every core); register access returns 0 on NACK
+ * or timeout (never hangs). */
+void board_i2c_begin(void);
 uint8_t board_i2c_write(uint8_t addr, uint8_t reg, uint8_t value);
 uint8_t board_i2c_read(uint8_t addr, uint8_t reg, uint8_t *buf, uint8_t n);
 uint8_t board_button_pressed(void);

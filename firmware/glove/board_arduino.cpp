@@ -1,12 +1,11 @@
 /* handrig glove firmware: board layer for other Arduino cores (ESP32, RP2040, ...),
- * written against the Arduino API only (analogRead, Wire, micros). Not built or run
+ * written against the Arduino API only (analogRead, micros; I2C in board_i2c_wire.cpp). Not built or run
  * in this project's CI: see firmware/README.md. The sample tick is taken from
  * micros() in loop() rather than a hardware timer, and the ADC samples are read
  * one after the other (these chips are fast enough for that at 200 Hz).
  */
 #if !(defined(__AVR_ATmega328P__) || defined(__AVR_ATmega328__) || defined(__AVR_ATmega168__))
 #include <Arduino.h>
-#include <Wire.h>
 
 #include "board.h"
 #include "glove_config.h"
@@ -20,8 +19,7 @@ void board_init(uint16_t rate_hz) {
     pinMode(GLOVE_LED_PIN, OUTPUT);
     pinMode(GLOVE_TEST_POINT_PIN, OUTPUT);
     analogReadResolution(10); /* the core scales 10-bit sums to 12 bits */
-    Wire.begin();
-    Wire.setClock(400000);
+    board_i2c_begin();
     period_us = 1000000UL / rate_hz;
     next_us = micros() + period_us;
 }
@@ -49,22 +47,6 @@ uint8_t board_burst_done(uint16_t *sums, uint8_t *skipped) {
         for (uint8_t i = 0; i < GLOVE_N_CHANNELS; i++) sums[i] += (uint16_t)analogRead(adc_pins[i]);
     *skipped = missed;
     missed = 0;
-    return 1;
-}
-
-uint8_t board_i2c_write(uint8_t addr, uint8_t reg, uint8_t value) {
-    Wire.beginTransmission(addr);
-    Wire.write(reg);
-    Wire.write(value);
-    return Wire.endTransmission() == 0;
-}
-
-uint8_t board_i2c_read(uint8_t addr, uint8_t reg, uint8_t *buf, uint8_t n) {
-    Wire.beginTransmission(addr);
-    Wire.write(reg);
-    if (Wire.endTransmission(false) != 0) return 0;
-    if (Wire.requestFrom((int)addr, (int)n) != n) return 0;
-    for (uint8_t i = 0; i < n; i++) buf[i] = (uint8_t)Wire.read();
     return 1;
 }
 

@@ -3,15 +3,14 @@
  * Timer1 in CTC mode ticks at the frame rate; its interrupt stamps the time and
  * starts a burst of ADC conversions, each one's interrupt adding to the channel's
  * sum and starting the next (round robin over the channels, so every channel's
- * samples are spread over the same 2 ms). I2C is polled with a deadline on every
- * wait, so a missing or hung IMU costs at most a few hundred microseconds.
+ * samples are spread over the same 2 ms). I2C is the Wire library
+ * (board_i2c_wire.cpp), with a timeout.
  */
 #if defined(__AVR_ATmega328P__) || defined(__AVR_ATmega328__) || defined(__AVR_ATmega168__)
 #include <Arduino.h>
 #include <avr/interrupt.h>
 #include <avr/sleep.h>
 #include <avr/wdt.h>
-#include <util/twi.h>
 
 #include "board.h"
 #include "glove_config.h"
@@ -76,13 +75,7 @@ void board_init(uint16_t rate_hz) {
      * Digital input buffers off on the analog pins A0..A3 (A6 has none). */
     DIDR0 = 0x0F;
     ADCSRA = (uint8_t)(_BV(ADEN) | _BV(ADIE) | _BV(ADPS2) | _BV(ADPS1));
-    /* I2C at 400 kHz: TWBR = (F_CPU / 400 kHz - 16) / 2, prescaler 1; internal pull-ups
-     * on as a fallback (the BNO055 breakout has its own). */
-    pinMode(SDA, INPUT_PULLUP);
-    pinMode(SCL, INPUT_PULLUP);
-    TWSR = 0;
-    TWBR = (uint8_t)((F_CPU / 400000UL - 16) / 2);
-    TWCR = _BV(TWEN);
+    board_i2c_begin();
     /* Timer1: CTC on OCR1A, prescaler 8. 200 Hz: OCR1A = 16e6 / 8 / 200 - 1 = 9999 */
     noInterrupts();
     TCCR1A = 0;
@@ -114,57 +107,6 @@ uint8_t board_burst_done(uint16_t *out, uint8_t *skipped) {
     burst_done = 0;
     interrupts();
     return 1;
-}
-
-/* ---- I2C, polled, every wait bounded (about 0.5 ms) ---- */
-static uint8_t twi_wait(void) {
-    for (uint16_t n = 0; n < 2000; n++)
-        if (TWCR & _BV(TWINT)) return 1;
-    TWCR = 0; /* hung bus: reset the TWI unit */
-    TWCR = _BV(TWEN);
-    return 0;
-}
-
-static uint8_t twi_start(uint8_t sla_rw, uint8_t want) {
-    TWCR = (uint8_t)(_BV(TWINT) | _BV(TWSTA) | _BV(TWEN));
-    if (!twi_wait()) return 0;
-    uint8_t st = TW_STATUS;
-    if (st != TW_START && st != TW_REP_START) return 0;
-    TWDR = sla_rw;
-    TWCR = (uint8_t)(_BV(TWINT) | _BV(TWEN));
-    if (!twi_wait()) return 0;
-    return TW_STATUS == want;
-}
-
-static uint8_t twi_send(uint8_t b) {
-    TWDR = b;
-    TWCR = (uint8_t)(_BV(TWINT) | _BV(TWEN));
-    return twi_wait() && TW_STATUS == TW_MT_DATA_ACK;
-}
-
-static uint8_t twi_stop(uint8_t ok) {
-    TWCR = (uint8_t)(_BV(TWINT) | _BV(TWSTO) | _BV(TWEN));
-    return ok;
-}
-
-uint8_t board_i2c_write(uint8_t addr, uint8_t reg, uint8_t value) {
-    uint8_t ok = twi_start((uint8_t)(addr << 1), TW_MT_SLA_ACK) && twi_send(reg) &&
-                 twi_send(value);
-    return twi_stop(ok);
-}
-
-uint8_t board_i2c_read(uint8_t addr, uint8_t reg, uint8_t *buf, uint8_t n) {
-    if (!(twi_start((uint8_t)(addr << 1), TW_MT_SLA_ACK) && twi_send(reg)))
-        return twi_stop(0);
-    if (!twi_start((uint8_t)((addr << 1) | 1), TW_MR_SLA_ACK)) return twi_stop(0);
-    for (uint8_t i = 0; i < n; i++) {
-        uint8_t last = i + 1 == n;
-        TWCR = (uint8_t)(_BV(TWINT) | _BV(TWEN) | (last ? 0 : _BV(TWEA)));
-        if (!twi_wait()) return twi_stop(0);
-        if (TW_STATUS != (last ? TW_MR_DATA_NACK : TW_MR_DATA_ACK)) return twi_stop(0);
-        buf[i] = TWDR;
-    }
-    return twi_stop(1);
 }
 
 uint8_t board_button_pressed(void) { return !(PIND & _BV(PD2)); }

@@ -9,6 +9,8 @@
  * sensor pinned at 0 or full scale is flagged; the watchdog restarts a hung loop;
  * the LED blinks the state (glove_core.c, gc_led_level).
  */
+#include <Wire.h> /* for the Arduino IDE to link the Wire library (board_i2c_wire.cpp) */
+
 #include "board.h"
 #include "glove_config.h"
 #include "glove_core.h"
@@ -68,9 +70,11 @@ static void imu_step(void) {
             return;
         }
         imu_fails = 0;
+        uint8_t first = imu_state != GC_IMU_RUNNING;
         imu_state = GC_IMU_RUNNING;
         quat_ok = gc_quat_from_bno055(buf, quat);
-        if ((frames % GLOVE_RATE_HZ) == 0 && board_i2c_read(GLOVE_IMU_ADDR, BNO_CALIB_STAT, buf, 1))
+        if ((first || frames % GLOVE_RATE_HZ == 0) &&
+            board_i2c_read(GLOVE_IMU_ADDR, BNO_CALIB_STAT, buf, 1))
             imu_calibrated = (buf[0] >> 6) != 0; /* system calibration 1..3 */
         return;
     }

@@ -118,7 +118,7 @@ static const row_t *row_at(double t) {
 /* ---- options and state ------------------------------------------------------------ */
 static avr_t *avr;
 static double opt_seconds = -1, opt_imu_off_at = -1, opt_noise_mv = 2.0, opt_speed = 1.0;
-static int opt_no_imu;
+static int opt_no_imu, trace_i2c;
 static int pinned[N_CH];
 static double pinned_counts[N_CH];
 static FILE *timing;
@@ -176,6 +176,12 @@ static int bno_selected, bno_index, bno_reg;
 static double bno_ndof_since = -1;
 static avr_irq_t *bno_irq;
 
+static void twi_status(struct avr_irq_t *irq, uint32_t value, void *param) {
+    (void)irq;
+    (void)param;
+    if (trace_i2c) fprintf(stderr, "i2c %.6f status %02x\n", chip_s(), value);
+}
+
 static int bno_present(void) {
     if (opt_no_imu) return 0;
     return !(opt_imu_off_at >= 0 && chip_s() >= opt_imu_off_at);
@@ -202,6 +208,8 @@ static void bno_twi(struct avr_irq_t *irq, uint32_t value, void *param) {
     (void)param;
     avr_twi_msg_irq_t v;
     v.u.v = value;
+    if (trace_i2c)
+        fprintf(stderr, "i2c %.6f msg %02x addr %02x data %02x\n", chip_s(), v.u.twi.msg, v.u.twi.addr, v.u.twi.data);
     if (v.u.twi.msg & TWI_COND_STOP) bno_selected = 0;
     if (v.u.twi.msg & TWI_COND_START) {
         bno_selected = 0;
@@ -331,6 +339,7 @@ int main(int argc, char **argv) {
     }
     if (opt_speed <= 0) die("--speed must be positive");
     read_recording(argv[2]);
+    trace_i2c = getenv("AVR_GLOVE_TRACE_I2C") != NULL;
 
     elf_firmware_t fw;
     memset(&fw, 0, sizeof fw);
@@ -360,6 +369,7 @@ int main(int argc, char **argv) {
     avr_irq_register_notify(bno_irq + TWI_IRQ_OUTPUT, bno_twi, NULL);
     avr_connect_irq(bno_irq + TWI_IRQ_INPUT, avr_io_getirq(avr, AVR_IOCTL_TWI_GETIRQ(0), TWI_IRQ_INPUT));
     avr_connect_irq(avr_io_getirq(avr, AVR_IOCTL_TWI_GETIRQ(0), TWI_IRQ_OUTPUT), bno_irq + TWI_IRQ_OUTPUT);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_TWI_GETIRQ(0), TWI_IRQ_STATUS), twi_status, NULL);
     bno[0x00] = 0xA0; /* CHIP_ID */
     bno[0x35] = 0xFF; /* CALIB_STAT: system, gyro, accel, mag all 3 */
     avr_cycle_timer_register_usec(avr, 1000, bno_fusion, NULL);
