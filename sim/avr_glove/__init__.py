@@ -113,8 +113,10 @@ class AvrGlove:
             if not path.is_file():
                 raise DataError(f"{path} not built: run `make firmware sim-avr-glove`")
         self._proc = subprocess.Popen(self.args, stdout=subprocess.PIPE, text=True)
-        assert self._proc.stdout is not None  # noqa: S101 - Popen with stdout=PIPE
-        for line in self._proc.stdout:
+        out = self._proc.stdout
+        if out is None:
+            raise DataError("the emulated chip gave no output pipe")
+        for line in out:
             self.output.append(line.rstrip("\n"))
             if line.startswith("port: "):
                 self.port = line.split(maxsplit=1)[1].strip()
