@@ -125,6 +125,11 @@ class AvrGlove:
         raise DataError("the emulated chip stopped before opening its pty:\n"
                         + "\n".join(self.output))
 
+    def pull_imu(self) -> None:
+        """The BNO055 stops answering now (its wire pulled)."""
+        if self._proc is not None and self._proc.poll() is None:
+            self._proc.send_signal(signal.SIGUSR1)
+
     def close(self, timeout_s: float = 5.0) -> dict[str, float]:
         """Stop the chip (if still running) and return its figures. Idempotent."""
         proc = self._proc

@@ -18,7 +18,8 @@
  * Options:
  *   --seconds S      stop after S s of chip time (default: run until SIGTERM/SIGINT)
  *   --no-imu         no BNO055 on the bus
- *   --imu-off-at S   the BNO055 stops answering at S s (a wire pulled)
+ *   --imu-off-at S   the BNO055 stops answering at S s (a wire pulled); SIGUSR1 pulls
+ *                    it at once
  *   --pin CH=COUNTS  hold raw channel CH at COUNTS (0..4095), e.g. a broken wire
  *   --timing FILE    per frame: tick and last-byte times on CLOCK_MONOTONIC (s)
  *   --noise MV       ADC input noise, standard deviation in mV (default 2)
@@ -123,7 +124,7 @@ static int pinned[N_CH];
 static double pinned_counts[N_CH];
 static FILE *timing;
 static int pty_master = -1;
-static volatile sig_atomic_t stop_requested;
+static volatile sig_atomic_t stop_requested, imu_pulled;
 
 static double chip_s(void) { return (double)avr->cycle / F_CPU; }
 static double mono_s(void) {
@@ -183,7 +184,7 @@ static void twi_status(struct avr_irq_t *irq, uint32_t value, void *param) {
 }
 
 static int bno_present(void) {
-    if (opt_no_imu) return 0;
+    if (opt_no_imu || imu_pulled) return 0;
     return !(opt_imu_off_at >= 0 && chip_s() >= opt_imu_off_at);
 }
 
@@ -284,8 +285,8 @@ static void uart_out(struct avr_irq_t *irq, uint32_t value, void *param) {
 }
 
 static void on_signal(int sig) {
-    (void)sig;
-    stop_requested = 1;
+    if (sig == SIGUSR1) imu_pulled = 1;
+    else stop_requested = 1;
 }
 
 static void no_sleep(avr_t *a, avr_cycle_count_t how_long) {
@@ -377,6 +378,7 @@ int main(int argc, char **argv) {
 
     signal(SIGTERM, on_signal);
     signal(SIGINT, on_signal);
+    signal(SIGUSR1, on_signal);
     signal(SIGPIPE, SIG_IGN);
     double wall0 = mono_s();
     avr_cycle_count_t next_pace = 0, pace_step = F_CPU / 10000; /* every 100 us of chip time */

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import select
+import threading
 import time
 from pathlib import Path
 
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 
 from handrig.app import ForearmAngles, build_parts
+from handrig.cli import main
 from handrig.clock import MonotonicClock
 from handrig.glove import GloveSample, SerialGlove
 from handrig.glove_calibration import GloveCalibration, load_glove_config
@@ -121,29 +123,33 @@ def test_no_imu_at_start_streams_on_with_the_configured_forearm(chip_built: None
 
 def test_imu_pulled_mid_run_the_rig_reports_it_and_keeps_going(chip_built: None):
     lines: list[str] = []
-    with AvrGlove(DEMO, imu_off_at_s=1.5) as chip:
+    with AvrGlove(DEMO) as chip:
+        def log(line: str) -> None:
+            lines.append(line)
+            if "commissioned" in line:  # the loop is about to run: pull the IMU 1 s in
+                threading.Timer(1.0, chip.pull_imu).start()
+
         result = run_live(build_parts(), LiveOptions(
-            glove=chip.port, bus="sim", duration_s=3.5, log=lines.append))
+            glove=chip.port, bus="sim", duration_s=2.5, log=log))
     s = result.summary
     assert result.error is None, result.error
     assert s["torque_off"] is True
     assert s["glove"]["crc_errors"] == 0 and s["glove"]["frames_ok"] > 400, s["glove"]
-    assert any("IMU lost" in line for line in lines), lines
+    start = next(i for i, line in enumerate(lines) if "commissioned" in line)
+    assert any("IMU lost" in line for line in lines[start:]), lines
+    assert not any("IMU lost" in line for line in lines[:start]), lines
 
 
-def test_a_sensor_pinned_at_full_scale_is_named(chip_built: None):
-    cfg_names = ["riThumbCMCx", "riThumbCMCy", "riThumbCMCz", "riIndexMCPy", "riPinkyMCPy"]
+def test_a_sensor_pinned_at_full_scale_is_named_in_the_monitor(
+        chip_built: None, capsys: pytest.CaptureFixture[str]):
     with AvrGlove(DEMO, pinned={LITTLE: 4095}) as chip:
-        glove = SerialGlove(chip.port, "frames", clock=MonotonicClock(), reader="poll",
-                            channel_names=cfg_names)
-        try:
-            samples = collect(glove, 1.2)
-            events = glove.drain_events()
-        finally:
-            glove.close()
-    assert any("sensor-pinned" in status_names(s.status) for s in samples[-50:])
-    pinned = [e for e in events if "pinned" in e]
-    assert pinned and "channel 4 (riPinkyMCPy) at full scale" in pinned[0], events
+        status = main(["glove", "monitor", "--glove", chip.port, "--once", "--seconds", "1.2"])
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "firmware flags: sensor-pinned" in out, out
+    assert "pinned: channel 4 (riPinkyMCPy) at full scale" in out, out
+    assert "glove reports a sensor pinned: channel 4 (riPinkyMCPy) at full scale" in out, out
+    assert "(IMU)" in out and "0 CRC errors" in out
 
 
 def test_the_pty_is_plain_bytes(chip_built: None):
