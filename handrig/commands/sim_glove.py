@@ -13,6 +13,10 @@ so the calibration can be rehearsed and tested without a glove:
   an empty line moves to the next pose, a pose name (``fist``) to that pose;
   ``pose NAME held`` is printed once it is there.
 
+``--imu-askew YAW,ROLL`` adds a forearm IMU fixed askew by those degrees (turned
+about the back of the forearm, then rolled about its length) and the two forearm
+poses the calibration then asks for; the calibration should find that mount.
+
 The emulated sensors read the ranges of the glove config (``--glove-config``),
 narrowed to ``--travel`` of each span, and are printed at the start: a
 calibration should find those. The first line is always ``port: /dev/pts/N``;
@@ -67,7 +71,21 @@ def register(sub: Any) -> None:
                      help="glove config whose channels are emulated (default: the one "
                           "`handrig calibrate glove` starts from)")
     cal.add_argument("--seed", type=whole_int, default=0, help="noise seed (default 0)")
+    cal.add_argument("--imu-askew", type=_yaw_roll, default=None, metavar="YAW,ROLL",
+                     help="emulate a forearm IMU mounted askew by YAW and ROLL degrees "
+                          "(frames only), e.g. 30,15")
     p.set_defaults(func=run)
+
+
+def _yaw_roll(text: str) -> tuple[float, float]:
+    try:
+        yaw, roll = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give YAW,ROLL in degrees, e.g. 30,15"
+                                         ) from None
+    if not (abs(yaw) <= 180 and abs(roll) <= 180):
+        raise argparse.ArgumentTypeError(f"{text!r}: each angle within -180..180 degrees")
+    return yaw, roll
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
         if args.file:
             raise DataError("give a recording FILE or --calibration, not both")
         return _run_calibration(args)
-    if args.cue:
-        raise DataError("--cue is for --calibration: add --calibration")
+    if args.cue or args.imu_askew:
+        raise DataError("--cue and --imu-askew are for --calibration: add --calibration")
     if not args.file:
         raise DataError("no recording: give FILE.csv, or --calibration for the scripted poses")
     return _run_file(args)
@@ -113,11 +131,16 @@ def _run_calibration(args: argparse.Namespace) -> int:
     from handrig import simulator
     from handrig.commands.calibrate_glove import DEFAULT_HOLD_S, DEFAULT_SETTLE_S, STEPS
     from handrig.glove_calibration import load_glove_config
+    from handrig.imu_mount import IMU_STEPS, askew_mount
     from handrig.paths import config_file
 
     motion = simulator.calibration_motion()
-    POSE_NAMES, ScriptedSensors = motion.POSE_NAMES, motion.ScriptedSensors
+    ScriptedSensors = motion.ScriptedSensors
     move_recording, timed_recording = motion.move_recording, motion.timed_recording
+    if args.imu_askew and args.format != "frames":
+        raise DataError("--imu-askew needs --format frames (OpenGloves lines carry no IMU)")
+    mount = askew_mount(*args.imu_askew) if args.imu_askew else None
+    POSE_NAMES = motion.pose_names(mount is not None)
 
     cfg = load_glove_config(args.glove_config or config_file("glove.toml"))
     rate = args.rate or 200.0
@@ -125,9 +148,10 @@ def _run_calibration(args: argparse.Namespace) -> int:
     n_raw = 5 if args.format == "opengloves" else 0
     sensors = ScriptedSensors.from_config(cfg, n_raw=n_raw, travel=args.travel,
                                           full_scale=full_scale)
-    texts = dict(STEPS)
+    texts = dict(STEPS + IMU_STEPS)
     pose_s = args.pose_s if args.pose_s is not None else DEFAULT_SETTLE_S + DEFAULT_HOLD_S + 2
-    common = {"transition_s": args.transition_s, "rate_hz": rate, "noise_counts": args.noise}
+    common: dict[str, Any] = {"transition_s": args.transition_s, "rate_hz": rate,
+                              "noise_counts": args.noise, "imu_mount": mount}
     if args.cue:
         first = move_recording(sensors, POSE_NAMES[0], POSE_NAMES[0], seed=args.seed, **common)
         emu = simulator.glove_emulator(first, args.format, rate_hz=rate, loop=True,
@@ -142,9 +166,12 @@ def _run_calibration(args: argparse.Namespace) -> int:
         print(f"scripted calibration as {args.format} at {rate:g} Hz, sensor noise "
               f"{args.noise:g} counts; the emulated sensors (raw counts):", flush=True)
         print("\n".join(sensors.describe()), flush=True)
+        if args.imu_askew:
+            print(f"forearm IMU mounted askew: yaw {args.imu_askew[0]:g} deg, roll "
+                  f"{args.imu_askew[1]:g} deg", flush=True)
         try:
             if args.cue:
-                _follow_cues(emu, sensors, texts, args, common)
+                _follow_cues(emu, sensors, texts, args, common, POSE_NAMES)
             else:
                 print(f"poses on a timer, {pose_s:g} s each, round and round; Ctrl-C stops",
                       flush=True)
@@ -169,25 +196,24 @@ def _announce_timed(emu: Any, names: tuple[str, ...], texts: dict[str, str],
 
 
 def _follow_cues(emu: Any, sensors: Any, texts: dict[str, str], args: argparse.Namespace,
-                 common: dict[str, float]) -> None:
+                 common: dict[str, Any], names: tuple[str, ...]) -> None:
     from handrig import simulator
 
-    motion = simulator.calibration_motion()
-    POSE_NAMES, move_recording = motion.POSE_NAMES, motion.move_recording
-    current = POSE_NAMES[0]
+    move_recording = simulator.calibration_motion().move_recording
+    current = names[0]
     print(f"pose {current} held; Enter moves to the next pose, a name "
-          f"({', '.join(POSE_NAMES)}) to that one", flush=True)
+          f"({', '.join(names)}) to that one", flush=True)
     seed = args.seed
     for line in sys.stdin:
         word = line.strip()
         if word in ("q", "quit"):
             return
         if word == "":
-            target = POSE_NAMES[(POSE_NAMES.index(current) + 1) % len(POSE_NAMES)]
-        elif word in POSE_NAMES:
+            target = names[(names.index(current) + 1) % len(names)]
+        elif word in names:
             target = word
         else:
-            print(f"not a pose: {word!r}; one of {', '.join(POSE_NAMES)}, or Enter",
+            print(f"not a pose: {word!r}; one of {', '.join(names)}, or Enter",
                   flush=True)
             continue
         seed += 1
