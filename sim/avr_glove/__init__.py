@@ -82,12 +82,14 @@ class AvrGlove:
     ``seconds``: chip time after which the harness stops by itself (None: until
     :meth:`close`). ``imu``: a BNO055 on the bus; ``imu_off_at_s``: it stops answering
     then. ``pinned``: raw channel -> counts held there (a broken wire). ``timing``: a
-    file for per-frame times. ``speed``: chip time per wall time.
+    file for per-frame times. ``speed``: chip time per wall time. ``noise_mv``: the
+    analog inputs' noise (standard deviation, mV).
     """
 
     def __init__(self, recording: str | Path, *, seconds: float | None = None, imu: bool = True,
                  imu_off_at_s: float | None = None, pinned: dict[int, int] | None = None,
-                 timing: str | Path | None = None, speed: float = 1.0) -> None:
+                 timing: str | Path | None = None, speed: float = 1.0,
+                 noise_mv: float = 2.0) -> None:
         self.args = [str(HARNESS), str(FIRMWARE_ELF), str(recording)]
         if seconds is not None:
             self.args += ["--seconds", f"{seconds:g}"]
@@ -101,7 +103,7 @@ class AvrGlove:
             self.args += ["--pin", f"{ch}={counts}"]
         if timing is not None:
             self.args += ["--timing", str(timing)]
-        self.args += ["--speed", f"{speed:g}"]
+        self.args += ["--speed", f"{speed:g}", "--noise", f"{noise_mv:g}"]
         self.port = ""
         self.figures: dict[str, float] = {}
         self.output: list[str] = []

@@ -21,7 +21,8 @@
  *   --imu-off-at S   the BNO055 stops answering at S s (a wire pulled); SIGUSR1 pulls
  *                    it at once
  *   --pin CH=COUNTS  hold raw channel CH at COUNTS (0..4095), e.g. a broken wire
- *   --timing FILE    per frame: tick and last-byte times on CLOCK_MONOTONIC (s)
+ *   --timing FILE    per frame: its number, the tick and the last byte on CLOCK_MONOTONIC
+ *                    (s), tick to last byte (us), the tick in chip time (s)
  *   --noise MV       ADC input noise, standard deviation in mV (default 2)
  *   --speed X        chip time runs X times wall time (default 1)
  */
@@ -242,7 +243,7 @@ static void bno_twi(struct avr_irq_t *irq, uint32_t value, void *param) {
 /* ---- UART to the pty, and the timing of each frame -------------------------------- */
 static avr_cycle_count_t tick_cycle, busy_cycles, counted_cycles;
 static int tick_open;
-static double tick_mono;
+static double tick_mono, tick_chip;
 static unsigned long frames_out, bytes_dropped;
 static unsigned long lat_n;
 static double lat_sum_us, lat_max_us, lat_min_us = 1e9;
@@ -261,6 +262,7 @@ static void test_point(struct avr_irq_t *irq, uint32_t value, void *param) {
     if (value && !tick_open) {
         tick_open = 1;
         tick_cycle = avr->cycle;
+        tick_chip = chip_s();
         tick_mono = mono_s();
     }
 }
@@ -281,7 +283,8 @@ static void uart_out(struct avr_irq_t *irq, uint32_t value, void *param) {
         if (us < lat_min_us) lat_min_us = us;
     }
     if (timing)
-        fprintf(timing, "%lu %.6f %.6f %.1f\n", frames_out, tick_mono, mono_s() + byte_time_us() * 1e-6, us);
+        fprintf(timing, "%lu %.7f %.7f %.1f %.7f\n", frames_out, tick_mono,
+                mono_s() + byte_time_us() * 1e-6, us, tick_chip);
 }
 
 static void on_signal(int sig) {
@@ -326,6 +329,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--timing") && val) {
             timing = fopen(argv[++i], "w");
             if (!timing) die("cannot write the --timing file");
+            setvbuf(timing, NULL, _IOLBF, 0); /* written as it happens */
         } else if (!strcmp(a, "--pin") && val) {
             int ch;
             double counts;
