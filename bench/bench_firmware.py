@@ -10,8 +10,10 @@ kinematic servos with wire timing, the glove's One Euro filter off). Prints:
   firmware's test point and its UART from outside the firmware);
 * the fraction of the chip's cycles spent awake at the frame rate (after 1 s);
 * end to end, from the ADC sample tick of the first frame that saw a step to the bus
-  emulator's receipt of the first Sync Write whose goals moved (both CLOCK_MONOTONIC;
-  the chip is paced to wall time, so its tick has a wall time);
+  emulator's receipt of the first Sync Write whose goals moved: the firmware's part
+  (tick to last bit, chip time) plus the host's part (the last byte handed to the pty
+  to the receipt, both CLOCK_MONOTONIC), so the emulator's own pacing jitter on a
+  busy machine does not count;
 * the rig's in-process latency (frame arrival to Sync Write handed to the OS).
 
 ``HANDRIG_BENCH_SECONDS`` sets the run's length (default 20 s; ``HANDRIG_BENCH_QUICK=1``:
@@ -42,8 +44,9 @@ from sim.avr_glove import AvrGlove, build, toolchain_missing
 
 
 def _pct(v: np.ndarray) -> str:
-    return (f"p50 {np.percentile(v, 50):.0f}, p99 {np.percentile(v, 99):.0f}, "
-            f"max {v.max():.0f} us ({len(v)})")
+    return (f"min {v.min():.0f}, p10 {np.percentile(v, 10):.0f}, p50 {np.percentile(v, 50):.0f}"
+            f", p90 {np.percentile(v, 90):.0f}, p99 {np.percentile(v, 99):.0f}, max {v.max():.0f}"
+            f" us ({len(v)})")
 
 
 def main() -> None:
@@ -67,7 +70,8 @@ def main() -> None:
         parts = build_parts(rig_path, _glove_file(folder))
         with (emulator(["bus", "--rig", str(rig_path), "--log", str(bus_log)],
                        "the bus emulator") as bus_port,
-              AvrGlove(rec_path, timing=timing, noise_mv=0.0) as chip):
+              AvrGlove(rec_path, timing=timing, noise_mv=0.0,
+                       whole_frames=bool(os.environ.get("HANDRIG_BENCH_WHOLE_FRAMES"))) as chip):
             result = run_live(parts, LiveOptions(glove=chip.port, bus=bus_port,
                                                  duration_s=seconds, log=lambda s: None))
         figures = chip.figures
@@ -77,11 +81,18 @@ def main() -> None:
             fields = line.split()
             if fields:
                 writes.append((float(fields[0]), tuple(int(v) for v in fields[1:])))
-    # each frame's tick (wall time) and the recorded sample its ADC burst read
+    # each frame's last byte (wall time), its tick-to-last-bit (chip time) and the
+    # recorded sample its ADC burst read
     t_rel = rec.t_s - rec.t_s[0]
-    sends = [(float(f[1]), int(np.searchsorted(t_rel, float(f[4]) % period_s, side="right") - 1))
+    sends = [(float(f[2]), int(np.searchsorted(t_rel, float(f[4]) % period_s, side="right") - 1))
              for f in frames]
-    e2e = np.array(outside_latencies(sends, values, writes)) * 1e6
+    e2e_us = []
+    for k in range(1, len(sends)):
+        if values[sends[k][1]] != values[sends[k - 1][1]]:  # this frame carries a step
+            host = outside_latencies(sends[k - 1:k + 1], values, writes)
+            if host:
+                e2e_us.append(float(frames[k][3]) + host[0] * 1e6)
+    e2e = np.array(e2e_us)
     to_wire = np.array([float(f[3]) for f in frames if float(f[4]) >= 1.0])
     s = result.summary
     lat = s["latency_us"]

@@ -9,7 +9,7 @@
 void board_i2c_begin(void) {
     Wire.begin();
     Wire.setClock(400000);
-#if defined(WIRE_HAS_TIMEOUT)
+#if defined(ARDUINO_ARCH_AVR) || defined(WIRE_HAS_TIMEOUT) /* Debian's AVR core has it */
     Wire.setWireTimeout(1000 /* us */, true /* reset the TWI unit on a timeout */);
 #endif
 }

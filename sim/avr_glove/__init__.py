@@ -83,13 +83,14 @@ class AvrGlove:
     :meth:`close`). ``imu``: a BNO055 on the bus; ``imu_off_at_s``: it stops answering
     then. ``pinned``: raw channel -> counts held there (a broken wire). ``timing``: a
     file for per-frame times. ``speed``: chip time per wall time. ``noise_mv``: the
-    analog inputs' noise (standard deviation, mV).
+    analog inputs' noise (standard deviation, mV). ``whole_frames``: the pty gets each
+    frame in one write (default: byte by byte, as the UART sends them).
     """
 
     def __init__(self, recording: str | Path, *, seconds: float | None = None, imu: bool = True,
                  imu_off_at_s: float | None = None, pinned: dict[int, int] | None = None,
                  timing: str | Path | None = None, speed: float = 1.0,
-                 noise_mv: float = 2.0) -> None:
+                 noise_mv: float = 2.0, whole_frames: bool = False) -> None:
         self.args = [str(HARNESS), str(FIRMWARE_ELF), str(recording)]
         if seconds is not None:
             self.args += ["--seconds", f"{seconds:g}"]
@@ -104,6 +105,8 @@ class AvrGlove:
         if timing is not None:
             self.args += ["--timing", str(timing)]
         self.args += ["--speed", f"{speed:g}", "--noise", f"{noise_mv:g}"]
+        if whole_frames:
+            self.args.append("--whole-frames")
         self.port = ""
         self.figures: dict[str, float] = {}
         self.output: list[str] = []

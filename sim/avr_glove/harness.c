@@ -25,6 +25,8 @@
  *                    (s), tick to last byte (us), the tick in chip time (s)
  *   --noise MV       ADC input noise, standard deviation in mV (default 2)
  *   --speed X        chip time runs X times wall time (default 1)
+ *   --whole-frames   hand the pty each frame at once when its last byte is out (default:
+ *                    each byte as the UART sends it, as a USB-serial chip may)
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -267,11 +269,29 @@ static void test_point(struct avr_irq_t *irq, uint32_t value, void *param) {
     }
 }
 
+static uint8_t out_buf[64];
+static size_t out_len;
+static int opt_whole_frames;
+
+static void pty_write(const uint8_t *p, size_t n) {
+    ssize_t w = write(pty_master, p, n);
+    if (w < 0) w = 0;
+    bytes_dropped += n - (size_t)w;
+}
+
 static void uart_out(struct avr_irq_t *irq, uint32_t value, void *param) {
     (void)irq;
     (void)param;
     uint8_t b = (uint8_t)value;
-    if (write(pty_master, &b, 1) != 1) bytes_dropped++;
+    if (!opt_whole_frames) {
+        pty_write(&b, 1);
+    } else {
+        out_buf[out_len++] = b;
+        if (b == 0 || out_len == sizeof out_buf) {
+            pty_write(out_buf, out_len);
+            out_len = 0;
+        }
+    }
     if (b != 0 || !tick_open) return;
     tick_open = 0;
     double us = (double)(avr->cycle - tick_cycle) * 1e6 / F_CPU + byte_time_us();
@@ -322,6 +342,7 @@ int main(int argc, char **argv) {
         const char *a = argv[i];
         const char *val = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--no-imu")) opt_no_imu = 1;
+        else if (!strcmp(a, "--whole-frames")) opt_whole_frames = 1;
         else if (!strcmp(a, "--seconds") && val) opt_seconds = atof(argv[++i]);
         else if (!strcmp(a, "--imu-off-at") && val) opt_imu_off_at = atof(argv[++i]);
         else if (!strcmp(a, "--noise") && val) opt_noise_mv = atof(argv[++i]);
