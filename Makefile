@@ -45,8 +45,10 @@ FW_F_CPU ?= 16000000L
 # flash left for the sketch under the 2 KB bootloader of older Nanos (Uno/Optiboot: 0.5 KB)
 FW_FLASH_BYTES ?= 30720
 FW_RAM_BYTES ?= 2048
+# e.g. make firmware FW_BUILD=build/fw500 FW_DEFS="-DGLOVE_RATE_HZ=500"
+FW_DEFS ?=
 AVR_CFLAGS := -mmcu=$(FW_MCU) -DF_CPU=$(FW_F_CPU) -DARDUINO=10819 -DARDUINO_AVR_NANO \
-	-DARDUINO_ARCH_AVR -Os -g -ffunction-sections -fdata-sections \
+	-DARDUINO_ARCH_AVR $(FW_DEFS) -Os -g -ffunction-sections -fdata-sections \
 	-I$(ARDUINO_AVR)/cores/arduino -I$(ARDUINO_AVR)/variants/eightanaloginputs \
 	-I$(ARDUINO_AVR)/variants/standard -I$(ARDUINO_AVR)/libraries/Wire/src -I$(FW_SRC)
 FW_WARN := -Wall -Wextra

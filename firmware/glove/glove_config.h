@@ -30,7 +30,9 @@
 
 /* Samples per channel per frame, as a power of two (3: 8 samples), averaged and
  * scaled to 12 bits (0..4092). */
+#ifndef GLOVE_OVERSAMPLE_LOG2
 #define GLOVE_OVERSAMPLE_LOG2 3
+#endif
 
 /* A channel reading within 8 counts of 0 or full scale for this many frames in a row
  * is flagged as pinned (0.5 s at 200 Hz). */

@@ -243,9 +243,15 @@ static void bno_twi(struct avr_irq_t *irq, uint32_t value, void *param) {
 }
 
 /* ---- UART to the pty, and the timing of each frame -------------------------------- */
-static avr_cycle_count_t tick_cycle, busy_cycles, counted_cycles;
-static int tick_open;
-static double tick_mono, tick_chip;
+static avr_cycle_count_t busy_cycles, counted_cycles;
+/* Ticks whose frame has not ended yet, oldest first: at a slow baud a frame is still on
+ * the wire when the next tick comes. */
+#define TICKS_KEPT 8
+static struct {
+    avr_cycle_count_t cycle;
+    double mono, chip;
+} ticks[TICKS_KEPT];
+static unsigned ticks_head, ticks_n;
 static unsigned long frames_out, bytes_dropped;
 static unsigned long lat_n;
 static double lat_sum_us, lat_max_us, lat_min_us = 1e9;
@@ -261,12 +267,18 @@ static double byte_time_us(void) {
 static void test_point(struct avr_irq_t *irq, uint32_t value, void *param) {
     (void)irq;
     (void)param;
-    if (value && !tick_open) {
-        tick_open = 1;
-        tick_cycle = avr->cycle;
-        tick_chip = chip_s();
-        tick_mono = mono_s();
+    static uint32_t last;
+    if (value && !last) {
+        if (ticks_n == TICKS_KEPT) { /* frames never came: forget the oldest */
+            ticks_head = (ticks_head + 1) % TICKS_KEPT;
+            ticks_n--;
+        }
+        unsigned k = (ticks_head + ticks_n++) % TICKS_KEPT;
+        ticks[k].cycle = avr->cycle;
+        ticks[k].chip = chip_s();
+        ticks[k].mono = mono_s();
     }
+    last = value;
 }
 
 static uint8_t out_buf[64];
@@ -292,8 +304,11 @@ static void uart_out(struct avr_irq_t *irq, uint32_t value, void *param) {
             out_len = 0;
         }
     }
-    if (b != 0 || !tick_open) return;
-    tick_open = 0;
+    if (b != 0 || !ticks_n) return; /* not a delimiter, or the one sent at reset */
+    avr_cycle_count_t tick_cycle = ticks[ticks_head].cycle;
+    double tick_mono = ticks[ticks_head].mono, tick_chip = ticks[ticks_head].chip;
+    ticks_head = (ticks_head + 1) % TICKS_KEPT;
+    ticks_n--;
     double us = (double)(avr->cycle - tick_cycle) * 1e6 / F_CPU + byte_time_us();
     frames_out++;
     if (chip_s() >= WARMUP_S) {
