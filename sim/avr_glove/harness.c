@@ -77,10 +77,15 @@ static void read_recording(const char *path) {
     }
     char line[1024];
     size_t cap = 0;
-    int header = 0;
+    int header = 0, has_quat = 0;
     while (fgets(line, sizeof line, f)) {
         if (line[0] == '#' || line[0] == '\n') continue;
-        if (!header) { /* t_s, 5 channels, qx qy qz qw, buttons */
+        if (!header) { /* t_s, 5 channels, [qx qy qz qw,] buttons (handrig/glove_recording.py) */
+            int commas = 0;
+            for (const char *c = line; *c; c++) commas += *c == ',';
+            has_quat = strstr(line, ",qx,qy,qz,qw,") != NULL;
+            if (commas != N_CH + 1 + (has_quat ? 4 : 0))
+                die("the recording must have t_s, five channels, optionally qx,qy,qz,qw, and buttons");
             header = 1;
             continue;
         }
@@ -94,6 +99,10 @@ static void read_recording(const char *path) {
         r->t_s = strtod(p, &end);
         for (int k = 0; k < N_CH; k++) r->raw[k] = strtod(end + 1, &end);
         for (int k = 0; k < 4; k++) {
+            if (!has_quat) {
+                r->q[k] = NAN;
+                continue;
+            }
             p = end + 1;
             r->q[k] = strtod(p, &end);
             if (end == p) r->q[k] = NAN;
@@ -441,6 +450,7 @@ int main(int argc, char **argv) {
         if (opt_seconds >= 0 && chip_s() >= opt_seconds) break;
     }
     double behind = (mono_s() - wall0) - chip_s() / opt_speed;
+    if (!lat_n) lat_min_us = 0; /* nothing measured after the warm-up */
     printf("figures: chip_s %.3f frames %lu sample_to_last_byte_us mean %.1f min %.1f max %.1f "
            "cpu_busy %.4f behind_wall_s %.3f bytes_dropped %lu state %d\n",
            chip_s(), frames_out, lat_n ? lat_sum_us / lat_n : 0.0,
