@@ -67,7 +67,7 @@ SIM_AVR_GLOVE := build/sim/avr_glove
 .PHONY: firmware firmware-deps firmware-test sim-avr-glove
 
 firmware-deps:
-	apt-get install -y --no-install-recommends $(FIRMWARE_DEBS)
+	DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $(FIRMWARE_DEBS)
 
 firmware: $(FW_BUILD)/glove.hex
 	@sh firmware/tools/size_report.sh $(FW_BUILD)/glove.elf $(FW_FLASH_BYTES) $(FW_RAM_BYTES)
