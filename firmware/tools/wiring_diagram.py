@@ -111,7 +111,7 @@ def draw() -> str:
         parts.append(_text(786, py + 4, what, 12))
     parts.append(_text(40, H - 40, "Flex sensor dividers: the resistor near the geometric mean "
                        "of the sensor's flat and bent resistance (2.2in: 25k flat, about 70k bent "
-                       "-> 47k; 4.5in: 10k/20k -> 15k).", 11))
+                       "-> 47k; other sensors: measure both).", 11))
     parts.append(_text(40, H - 22, "Hall sensor (SS49E/DRV5053 class): VCC 5V, GND, OUT to the "
                        "pin directly, no resistor; a 3x2 mm magnet on the moving segment.", 11))
     parts.append("</svg>")
