@@ -29,9 +29,15 @@
 #define GLOVE_ADC_INPUTS {0, 1, 2, 3, 6}
 
 /* Samples per channel per frame, as a power of two (3: 8 samples), averaged and
- * scaled to 12 bits (0..4092). */
+ * scaled to 12 bits (0..4092). A conversion takes 52 us, so the burst (5 channels x 8)
+ * takes 2.1 ms and must end, with the frame built, within one period: above 300 Hz
+ * the default drops to 4 samples. */
 #ifndef GLOVE_OVERSAMPLE_LOG2
+#if GLOVE_RATE_HZ > 300
+#define GLOVE_OVERSAMPLE_LOG2 2
+#else
 #define GLOVE_OVERSAMPLE_LOG2 3
+#endif
 #endif
 
 /* A channel reading within 8 counts of 0 or full scale for this many frames in a row
