@@ -1,13 +1,22 @@
 /* handrig glove firmware: the portable core (see glove_core.h). */
 #include "glove_core.h"
 
+#if defined(__AVR__)
+#include <util/crc16.h>
+#endif
+
 uint16_t gc_crc16(const uint8_t *p, size_t n) {
     /* CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection (SPEC.md section 4) */
     uint16_t crc = 0xFFFF;
     while (n--) {
+#if defined(__AVR__)
+        /* avr-libc's XMODEM step is this CRC's step (same polynomial, MSB first) */
+        crc = _crc_xmodem_update(crc, *p++);
+#else
         crc ^= (uint16_t)((uint16_t)(*p++) << 8);
         for (uint8_t b = 0; b < 8; b++)
             crc = (crc & 0x8000) ? (uint16_t)((crc << 1) ^ 0x1021) : (uint16_t)(crc << 1);
+#endif
     }
     return crc;
 }
