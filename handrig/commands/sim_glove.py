@@ -13,9 +13,10 @@ so the calibration can be rehearsed and tested without a glove:
   an empty line moves to the next pose, a pose name (``fist``) to that pose;
   ``pose NAME held`` is printed once it is there.
 
-``--imu-askew YAW,ROLL`` adds a forearm IMU fixed askew by those degrees (turned
-about the back of the forearm, then rolled about its length) and the two forearm
-poses the calibration then asks for; the calibration should find that mount.
+``--imu-askew YAW,ROLL`` emulates the forearm IMU fixed askew by those degrees
+(turned about the back of the forearm, then rolled about its length): a recording's
+orientations are turned accordingly; with ``--calibration`` the glove also performs
+the two forearm poses the calibration then asks for, which should find that mount.
 
 The emulated sensors read the ranges of the glove config (``--glove-config``),
 narrowed to ``--travel`` of each span, and are printed at the start: a
@@ -31,7 +32,7 @@ from typing import Any
 
 from handrig.commands._numbers import float_in, nonnegative_float, positive_float, whole_int
 from handrig.errors import DataError
-from handrig.glove_recording import read_glove_recording
+from handrig.glove_recording import GloveRecording, read_glove_recording
 
 
 def register(sub: Any) -> None:
@@ -72,8 +73,8 @@ def register(sub: Any) -> None:
                           "`handrig calibrate glove` starts from)")
     cal.add_argument("--seed", type=whole_int, default=0, help="noise seed (default 0)")
     cal.add_argument("--imu-askew", type=_yaw_roll, default=None, metavar="YAW,ROLL",
-                     help="emulate a forearm IMU mounted askew by YAW and ROLL degrees "
-                          "(frames only), e.g. 30,15")
+                     help="emulate the forearm IMU mounted askew by YAW and ROLL degrees "
+                          "(frames only), e.g. 30,15; also for a recording FILE")
     p.set_defaults(func=run)
 
 
@@ -95,8 +96,8 @@ def run(args: argparse.Namespace) -> int:
         if args.file:
             raise DataError("give a recording FILE or --calibration, not both")
         return _run_calibration(args)
-    if args.cue or args.imu_askew:
-        raise DataError("--cue and --imu-askew are for --calibration: add --calibration")
+    if args.cue:
+        raise DataError("--cue is for --calibration: add --calibration")
     if not args.file:
         raise DataError("no recording: give FILE.csv, or --calibration for the scripted poses")
     return _run_file(args)
@@ -106,6 +107,8 @@ def _run_file(args: argparse.Namespace) -> int:
     from handrig import simulator
 
     rec = read_glove_recording(args.file)
+    if args.imu_askew:
+        rec = _askew(rec, args)
     with simulator.glove_emulator(rec, args.format, rate_hz=args.rate, loop=args.loop,
                                   analog_max=args.analog_max) as emu:
         print(f"port: {emu.port_path}", flush=True)
@@ -120,6 +123,25 @@ def _run_file(args: argparse.Namespace) -> int:
         sent, dropped = emu.frames_sent, emu.bytes_dropped
     _say_sent(sent, dropped)
     return 0
+
+
+def _askew(rec: GloveRecording, args: argparse.Namespace) -> GloveRecording:
+    """The recording as an IMU mounted askew by ``--imu-askew`` would have sent it."""
+    import dataclasses
+
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from handrig.imu_mount import askew_mount, imu_quaternion
+
+    if args.format != "frames" or rec.quat_xyzw is None:
+        raise DataError("--imu-askew needs --format frames and a recording with an IMU "
+                        "(qx,qy,qz,qw columns)")
+    q = rec.quat_xyzw
+    ok = ~np.isnan(q).any(axis=1)
+    out = q.copy()
+    out[ok] = imu_quaternion(Rotation.from_quat(q[ok]), askew_mount(*args.imu_askew))
+    return dataclasses.replace(rec, quat_xyzw=out)
 
 
 def _say_sent(sent: int, dropped: int) -> None:
