@@ -32,3 +32,98 @@ clean:
 # Offscreen rendering (handrig demo --render) needs EGL or OSMesa; Debian packages.
 render-deps:
 	apt-get install -y --no-install-recommends libegl1 libgl1-mesa-dri libosmesa6
+
+# ---- glove firmware (firmware/glove/, firmware/README.md) --------------------------
+# Debian packages: the AVR toolchain, the Arduino AVR core, and simavr for the
+# in-the-loop tests (sim/avr_glove/). Needs root (CI runs as root).
+FIRMWARE_DEBS := gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev gcc make
+ARDUINO_AVR ?= /usr/share/arduino/hardware/arduino/avr
+FW_SRC := firmware/glove
+FW_BUILD := build/firmware
+FW_MCU ?= atmega328p
+FW_F_CPU ?= 16000000L
+# flash left for the sketch under the 2 KB bootloader of older Nanos (Uno/Optiboot: 0.5 KB)
+FW_FLASH_BYTES ?= 30720
+FW_RAM_BYTES ?= 2048
+# e.g. make firmware FW_BUILD=build/fw500 FW_DEFS="-DGLOVE_RATE_HZ=500"
+FW_DEFS ?=
+AVR_CFLAGS := -mmcu=$(FW_MCU) -DF_CPU=$(FW_F_CPU) -DARDUINO=10819 -DARDUINO_AVR_NANO \
+	-DARDUINO_ARCH_AVR $(FW_DEFS) -Os -g -ffunction-sections -fdata-sections \
+	-I$(ARDUINO_AVR)/cores/arduino -I$(ARDUINO_AVR)/variants/eightanaloginputs \
+	-I$(ARDUINO_AVR)/variants/standard -I$(ARDUINO_AVR)/libraries/Wire/src -I$(FW_SRC)
+FW_WARN := -Wall -Wextra
+AVR_CXXFLAGS := $(AVR_CFLAGS) -std=gnu++11 -fno-exceptions -fno-threadsafe-statics -fpermissive
+FW_CORE_C := $(wildcard $(ARDUINO_AVR)/cores/arduino/*.c)
+# WString.cpp needs a newer C++ than Debian's avr-g++ 5.4 (DECIMAL_DIG); the sketch uses no String
+FW_CORE_CXX := $(filter-out %/WString.cpp,$(wildcard $(ARDUINO_AVR)/cores/arduino/*.cpp))
+FW_CORE_OBJ := $(patsubst $(ARDUINO_AVR)/cores/arduino/%,$(FW_BUILD)/core/%.o,$(FW_CORE_C) $(FW_CORE_CXX)) \
+	$(FW_BUILD)/core/Wire.cpp.o $(FW_BUILD)/core/twi.c.o
+WIRE_SRC := $(ARDUINO_AVR)/libraries/Wire/src
+FW_OBJ := $(FW_BUILD)/glove.ino.o $(FW_BUILD)/glove_core.c.o $(FW_BUILD)/board_avr.cpp.o \
+	$(FW_BUILD)/board_arduino.cpp.o $(FW_BUILD)/board_i2c_wire.cpp.o
+FW_HEADERS := $(wildcard $(FW_SRC)/*.h)
+SIM_AVR_GLOVE := build/sim/avr_glove
+
+.PHONY: firmware firmware-deps firmware-test sim-avr-glove
+
+firmware-deps:
+	DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $(FIRMWARE_DEBS)
+
+firmware: $(FW_BUILD)/glove.hex
+	@sh firmware/tools/size_report.sh $(FW_BUILD)/glove.elf $(FW_FLASH_BYTES) $(FW_RAM_BYTES)
+
+$(FW_BUILD)/core/%.c.o: $(ARDUINO_AVR)/cores/arduino/%.c
+	@command -v avr-gcc >/dev/null || { echo "avr-gcc not found: run 'make firmware-deps' (as root)"; exit 1; }
+	@mkdir -p $(dir $@)
+	avr-gcc $(AVR_CFLAGS) -std=gnu11 -c $< -o $@
+
+$(FW_BUILD)/core/%.cpp.o: $(ARDUINO_AVR)/cores/arduino/%.cpp
+	@mkdir -p $(dir $@)
+	avr-g++ $(AVR_CXXFLAGS) -c $< -o $@
+
+$(FW_BUILD)/core/Wire.cpp.o: $(WIRE_SRC)/Wire.cpp
+	@mkdir -p $(dir $@)
+	avr-g++ $(AVR_CXXFLAGS) -c $< -o $@
+
+$(FW_BUILD)/core/twi.c.o: $(WIRE_SRC)/utility/twi.c
+	@mkdir -p $(dir $@)
+	avr-gcc $(AVR_CFLAGS) -std=gnu11 -w -c $< -o $@
+
+$(FW_BUILD)/core.a: $(FW_CORE_OBJ)
+	rm -f $@ && avr-gcc-ar rcs $@ $^
+
+# The Arduino IDE's build of a sketch: the .ino is C++ with Arduino.h in front.
+$(FW_BUILD)/glove.ino.cpp: $(FW_SRC)/glove.ino
+	@command -v avr-gcc >/dev/null || { echo "avr-gcc not found: run 'make firmware-deps' (as root)"; exit 1; }
+	@test -d $(ARDUINO_AVR)/cores/arduino || { echo "Arduino AVR core not found at $(ARDUINO_AVR): run 'make firmware-deps' (as root)"; exit 1; }
+	@mkdir -p $(FW_BUILD)
+	{ echo '#include <Arduino.h>'; echo '#line 1 "$<"'; cat $<; } > $@
+
+$(FW_BUILD)/glove.ino.o: $(FW_BUILD)/glove.ino.cpp $(FW_HEADERS)
+	avr-g++ $(AVR_CXXFLAGS) $(FW_WARN) -c $< -o $@
+
+$(FW_BUILD)/%.c.o: $(FW_SRC)/%.c $(FW_HEADERS)
+	@mkdir -p $(FW_BUILD)
+	avr-gcc $(AVR_CFLAGS) $(FW_WARN) -std=gnu11 -c $< -o $@
+
+$(FW_BUILD)/%.cpp.o: $(FW_SRC)/%.cpp $(FW_HEADERS)
+	@mkdir -p $(FW_BUILD)
+	avr-g++ $(AVR_CXXFLAGS) $(FW_WARN) -c $< -o $@
+
+$(FW_BUILD)/glove.elf: $(FW_OBJ) $(FW_BUILD)/core.a
+	avr-gcc -mmcu=$(FW_MCU) -Os -Wl,--gc-sections -o $@ $(FW_OBJ) $(FW_BUILD)/core.a -lm
+
+$(FW_BUILD)/glove.hex: $(FW_BUILD)/glove.elf
+	avr-objcopy -O ihex -R .eeprom $< $@
+
+# The core compiled natively, checked against SPEC.md's golden bytes (also run by pytest).
+firmware-test: $(STAMP)
+	$(BIN)/python -m pytest -q tests/firmware
+
+# The emulated chip: the firmware's ELF in simavr, ADC/I2C/UART wired to a recording.
+sim-avr-glove: $(SIM_AVR_GLOVE)
+
+$(SIM_AVR_GLOVE): sim/avr_glove/harness.c
+	@test -f /usr/include/simavr/sim_avr.h || { echo "simavr headers not found: run 'make firmware-deps' (as root)"; exit 1; }
+	@mkdir -p $(dir $@)
+	cc -O2 -Wall -Wextra -std=gnu11 -I/usr/include/simavr $< -o $@ -lsimavr -lm

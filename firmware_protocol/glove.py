@@ -33,6 +33,19 @@ Q14_ONE = 16384
 
 FLAG_IMU_VALID = 0x01
 """Flags bit 0: the quaternion fields hold a valid orientation."""
+FLAG_IMU_ABSENT = 0x02
+"""Flags bit 1: no IMU answers (none found at start, or it stopped answering)."""
+FLAG_IMU_UNCALIBRATED = 0x04
+"""Flags bit 2: the IMU answers but its fusion is not calibrated yet."""
+FLAG_SENSOR_RAIL = 0x08
+"""Flags bit 3: a raw channel is pinned at 0 or full scale (a broken wire)."""
+FLAG_WATCHDOG_RESET = 0x10
+"""Flags bit 4: the firmware was restarted by its watchdog."""
+FLAG_OVERRUN = 0x20
+"""Flags bit 5: the glove missed a sample tick since the previous frame."""
+STATUS_FLAGS = (FLAG_IMU_ABSENT | FLAG_IMU_UNCALIBRATED | FLAG_SENSOR_RAIL
+                | FLAG_WATCHDOG_RESET | FLAG_OVERRUN)
+"""The status bits of the flags byte (all but bit 0, which the quaternion implies)."""
 BUTTON_RELAX = 0x01
 """Buttons bit 0: the relax / e-stop button is pressed."""
 
@@ -89,7 +102,9 @@ class GloveFrame:
     ``channels`` are the raw uint16 sensor readings in the glove's declared order;
     ``quat_xyzw`` is the forearm IMU orientation (scalar last, rotates IMU-frame
     vectors into the ENU world frame), quantised to Q14, or ``None`` when the
-    glove flags it invalid; ``buttons`` bit 0 is relax / e-stop.
+    glove flags it invalid; ``buttons`` bit 0 is relax / e-stop. ``status``: the
+    flags byte without bit 0 (``FLAG_IMU_ABSENT`` ... ``FLAG_OVERRUN``; bits 6-7 are
+    kept as sent).
     """
 
     seq: int
@@ -97,6 +112,7 @@ class GloveFrame:
     channels: tuple[int, ...]
     quat_xyzw: tuple[float, float, float, float] | None = None
     buttons: int = 0
+    status: int = 0
 
     @property
     def relax(self) -> bool:
@@ -115,10 +131,12 @@ def pack_payload(frame: GloveFrame) -> bytes:
         raise ValueError(f"{n} channels: a frame carries at most {MAX_CHANNELS}")
     if not 0 <= frame.buttons <= 0xFF:
         raise ValueError(f"buttons {frame.buttons} do not fit one byte")
+    if not 0 <= frame.status <= 0xFF:
+        raise ValueError(f"status {frame.status} does not fit one byte")
     if frame.quat_xyzw is None:
-        flags, q = 0, (0, 0, 0, 0)
+        flags, q = frame.status & ~FLAG_IMU_VALID, (0, 0, 0, 0)
     else:
-        flags = FLAG_IMU_VALID
+        flags = (frame.status & ~FLAG_IMU_VALID) | FLAG_IMU_VALID
         qx, qy, qz, qw = frame.quat_xyzw
         q = (_q14(qx), _q14(qy), _q14(qz), _q14(qw))
     head = _HEADER.pack(
@@ -158,7 +176,7 @@ def unpack_payload(payload: bytes | bytearray | memoryview) -> GloveFrame:
         (qx / Q14_ONE, qy / Q14_ONE, qz / Q14_ONE, qw / Q14_ONE)
         if flags & FLAG_IMU_VALID else None
     )
-    return GloveFrame(seq, t_us, channels, quat, buttons)
+    return GloveFrame(seq, t_us, channels, quat, buttons, flags & ~FLAG_IMU_VALID)
 
 
 def decode_frame(encoded: bytes | bytearray | memoryview) -> GloveFrame:

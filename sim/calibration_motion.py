@@ -26,14 +26,21 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from handrig.cli.calibrate_glove import STEPS
 from handrig.devices.glove_calibration import GloveConfig
 from handrig.devices.glove_recording import GloveRecording
 from handrig.errors import DataError
+from handrig.pose.imu_mount import IMU_STEPS, imu_quaternion
 
 POSE_NAMES: tuple[str, ...] = tuple(name for name, _ in STEPS)
 """The poses in the order ``handrig calibrate glove`` asks for them."""
+IMU_POSE_NAMES: tuple[str, ...] = tuple(name for name, _ in IMU_STEPS)
+"""The two forearm poses that follow when the glove has an IMU."""
+FOREARM_ROLL_DEG: dict[str, float] = {"palm-vertical": 90.0}
+"""The forearm's roll (about its length, thumb up positive) per pose; level palm down
+(0) in every other pose."""
 
 SWAY_HZ = 0.7
 SWAY_FRACTION = 0.01
@@ -49,6 +56,8 @@ POSE_FRACTIONS: dict[str, dict[str, float]] = {
                      "ThumbIPy": 0.3, "IndexMCPy": 0.1, "MiddleMCPy": 0.15, "RingMCPy": 0.3,
                      "PinkyMCPy": 0.45, "PinkyPIPy": 0.4},
     "thumb-spread": {"ThumbCMCx": 0.1, "ThumbCMCy": -0.3, "ThumbCMCz": -0.1},
+    "forearm-level": {},
+    "palm-vertical": {},
 }
 
 
@@ -126,14 +135,16 @@ def _smoothstep(x: np.ndarray) -> np.ndarray:
 
 
 def _path(sensors: ScriptedSensors, legs: Sequence[tuple[str, str, float]], transition_s: float,
-          rate_hz: float, noise_counts: float, seed: int, t_offset_s: float = 0.0
-          ) -> GloveRecording:
+          rate_hz: float, noise_counts: float, seed: int, t_offset_s: float = 0.0,
+          imu_mount: Rotation | None = None) -> GloveRecording:
     """``legs``: (from pose, to pose, seconds); each leg moves during its first
-    ``transition_s`` and holds for the rest."""
+    ``transition_s`` and holds for the rest. With ``imu_mount`` the recording carries
+    the quaternion of an IMU mounted so (the forearm level, heading 30 deg, rolled per
+    :data:`FOREARM_ROLL_DEG`)."""
     if rate_hz <= 0 or noise_counts < 0 or transition_s < 0:
         raise DataError("rate must be positive, noise and transition zero or positive")
     rng = np.random.default_rng(seed)
-    rows, times = [], []
+    rows, times, rolls = [], [], []
     t0 = 0.0
     for start, end, seconds in legs:
         if seconds <= transition_s:
@@ -143,6 +154,8 @@ def _path(sensors: ScriptedSensors, legs: Sequence[tuple[str, str, float]], tran
         a, b = sensors.pose_raw(start), sensors.pose_raw(end)
         s = _smoothstep(t / transition_s) if transition_s > 0 else np.ones_like(t)
         rows.append(a + s[:, None] * (b - a))
+        ra, rb = FOREARM_ROLL_DEG.get(start, 0.0), FOREARM_ROLL_DEG.get(end, 0.0)
+        rolls.append(ra + s * (rb - ra))
         times.append(t0 + t)
         t0 += len(t) / rate_hz
     t_all = np.concatenate(times)
@@ -153,23 +166,36 @@ def _path(sensors: ScriptedSensors, legs: Sequence[tuple[str, str, float]], tran
     raw = np.clip(np.rint(raw), 0.0, sensors.full_scale)
     n = len(t_all)
     names = tuple(c or f"ch{k}" for k, c in enumerate(sensors.curves))
-    return GloveRecording(t_all, raw, np.zeros(n, dtype=np.int64), names, None, rate_hz,
+    quat = None
+    if imu_mount is not None:
+        forearm = Rotation.from_euler("ZX", np.column_stack(
+            [np.full(n, 30.0), np.concatenate(rolls)]), degrees=True)
+        quat = imu_quaternion(forearm, imu_mount)
+    return GloveRecording(t_all, raw, np.zeros(n, dtype=np.int64), names, quat, rate_hz,
                           {"source": "sim/calibration_motion.py"})
 
 
 def timed_recording(sensors: ScriptedSensors, *, pose_s: float, transition_s: float = 0.5,
-                    rate_hz: float = 200.0, noise_counts: float = 6.0, seed: int = 0
-                    ) -> GloveRecording:
-    """The poses in :data:`POSE_NAMES` order, ``pose_s`` each (the move into a
-    pose at its start); played in a loop, the last pose moves back to the first."""
-    legs = [(POSE_NAMES[i - 1], name, pose_s) for i, name in enumerate(POSE_NAMES)]
-    return _path(sensors, legs, transition_s, rate_hz, noise_counts, seed)
+                    rate_hz: float = 200.0, noise_counts: float = 6.0, seed: int = 0,
+                    imu_mount: Rotation | None = None) -> GloveRecording:
+    """The poses in :data:`POSE_NAMES` order (then :data:`IMU_POSE_NAMES` with an
+    ``imu_mount``), ``pose_s`` each (the move into a pose at its start); played in a
+    loop, the last pose moves back to the first."""
+    names = pose_names(imu_mount is not None)
+    legs = [(names[i - 1], name, pose_s) for i, name in enumerate(names)]
+    return _path(sensors, legs, transition_s, rate_hz, noise_counts, seed,
+                 imu_mount=imu_mount)
+
+
+def pose_names(imu: bool) -> tuple[str, ...]:
+    """The poses of a calibration, with or without the IMU's two."""
+    return POSE_NAMES + IMU_POSE_NAMES if imu else POSE_NAMES
 
 
 def move_recording(sensors: ScriptedSensors, start: str, end: str, *, transition_s: float = 0.5,
                    hold_s: float = 2.0, rate_hz: float = 200.0, noise_counts: float = 6.0,
-                   seed: int = 0) -> GloveRecording:
+                   seed: int = 0, imu_mount: Rotation | None = None) -> GloveRecording:
     """One move from pose ``start`` to ``end`` over ``transition_s``, then ``hold_s``
     in ``end`` (loop it from ``transition_s`` to hold as long as needed)."""
     return _path(sensors, [(start, end, transition_s + hold_s)], transition_s, rate_hz,
-                 noise_counts, seed)
+                 noise_counts, seed, imu_mount=imu_mount)

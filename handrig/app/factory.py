@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from firmware_protocol.glove import FLAG_IMU_ABSENT
 from handrig.app import robots as robotrig
 from handrig.clock import Clock
 from handrig.config.loading import CONFIG_DIR, load_joint_limits
@@ -91,7 +92,9 @@ class ForearmAngles:
     Uses the sample's IMU quaternion through :class:`ForearmOrientation` (mount and
     convention from glove.toml); a glove without an IMU (OpenGloves), or a sample
     whose quaternion was rejected, gets the last good orientation, or the fixed
-    ``[forearm]`` of glove.toml before any.
+    ``[forearm]`` of glove.toml before any. A frame flagged "IMU absent" (the glove's
+    IMU is gone) gets the fixed ``[forearm]``: the last good orientation may be long
+    stale.
     """
 
     def __init__(self, cfg: GloveConfig) -> None:
@@ -101,10 +104,13 @@ class ForearmAngles:
             scalar_first=imu.order == "wxyz",
             world=imu.world,
         )
-        self.last = (cfg.forearm.inclination_deg, cfg.forearm.rotation_deg)
+        self.configured = (cfg.forearm.inclination_deg, cfg.forearm.rotation_deg)
+        self.last = self.configured
         self.fixed = cfg.glove.format == "opengloves"
 
     def __call__(self, sample: GloveSample) -> tuple[float, float]:
+        if sample.quat is None and sample.status & FLAG_IMU_ABSENT:
+            self.last = self.configured
         if self.fixed or sample.quat is None:
             return self.last
         inclination, rotation, ok = self.orientation.update(sample.quat)
@@ -221,8 +227,11 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
     # handled in the cycle that reads it (no reader thread competing for the GIL).
     # a frame with fewer raw channels than the calibration reads is never settled on
     needed = max(ch.raw_index() for ch in cfg.channels) + 1
+    names = [""] * needed
+    for ch in cfg.channels:
+        names[ch.raw_index()] = names[ch.raw_index()] or ch.curve
     return SerialGlove(spec, "frames", clock=clock, baud=cfg.glove.baud, reader="poll",
-                       min_channels=needed)
+                       min_channels=needed, channel_names=names)
 
 
 def read_fields_for(rig: RigConfig) -> ReadFields:

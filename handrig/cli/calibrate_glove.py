@@ -18,6 +18,11 @@ Use the result with ``handrig run --glove-config FILE``.
 Interactive by default (Enter starts each step); ``--yes`` runs the steps on a
 timer with no input, for scripts and tests. ``handrig sim-glove --calibration``
 is an emulated glove that performs the poses, to rehearse without a glove.
+
+When the glove sends an IMU orientation (handrig frames), two more poses follow
+(forearm level palm down; palm vertical, thumb up) and the IMU's mounting on the
+forearm is measured from them and written as ``[imu] mount_xyzw``
+(:mod:`handrig.pose.imu_mount`); ``--no-imu`` skips them.
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ from handrig.devices.glove_calibration import (
     load_glove_config,
 )
 from handrig.errors import DataError, DeviceError
+from handrig.pose.imu_mount import IMU_STEPS, mount_from_poses, mount_xyzw, up_in_imu
 
 STEPS: tuple[tuple[str, str], ...] = (
     ("open", "Open hand: fingers straight and together, thumb relaxed beside the index."),
@@ -99,6 +105,8 @@ def register(sub: Any) -> None:
     p.add_argument("--settle", type=nonnegative_float, default=DEFAULT_SETTLE_S, metavar="S",
                    help=f"seconds to get into each pose before recording "
                         f"(default {DEFAULT_SETTLE_S:g})")
+    p.add_argument("--no-imu", action="store_true",
+                   help="skip the two forearm poses that measure the IMU's mounting")
     p.add_argument("--yes", action="store_true",
                    help="no questions: run the steps on the timer and write the file")
     p.set_defaults(func=run)
@@ -117,8 +125,9 @@ def _port_and_format(args: argparse.Namespace, cfg: GloveConfig) -> tuple[str, s
 
 
 def record_step(glove: GloveSource, clock: Clock, settle_s: float, hold_s: float,
-                port: str) -> np.ndarray:
-    """Raw samples (m, n_raw) received during ``hold_s`` after ``settle_s``."""
+                port: str, quats: list[np.ndarray] | None = None) -> np.ndarray:
+    """Raw samples (m, n_raw) received during ``hold_s`` after ``settle_s``; the IMU
+    quaternions of those samples that have one are appended to ``quats`` if given."""
     t_start = clock.now()
     t_rec = t_start + settle_s
     t_end = t_rec + hold_s
@@ -128,6 +137,8 @@ def record_step(glove: GloveSource, clock: Clock, settle_s: float, hold_s: float
         s = glove.latest()
         if s is not None and s.host_time_s >= t_rec:
             rows.append(s.raw.copy())
+            if quats is not None and s.quat is not None:
+                quats.append(s.quat.copy())
         if now >= t_end:
             break
         glove.check()
@@ -185,17 +196,36 @@ def run(args: argparse.Namespace) -> int:
                         analog_max=cfg.glove.analog_max, estop_letter=cfg.glove.estop_letter,
                         reconnect_s=0)
     medians: dict[str, np.ndarray] = {}
+    quats: dict[str, list[np.ndarray]] = {}
     print(f"calibrating the glove on {port} ({fmt}); {len(STEPS)} poses", flush=True)
     with glove:
-        for n, (name, text) in enumerate(STEPS, 1):
-            print(f"[{n}/{len(STEPS)}] {text}", flush=True)
+        steps = list(STEPS)
+        n = 0
+        while n < len(steps):
+            name, text = steps[n]
+            n += 1
+            print(f"[{n}/{len(steps)}] {text}", flush=True)
             if not args.yes:
                 input("      press Enter when ready, then hold still ")
             print(f"      recording {args.hold:g} s ...", flush=True)
-            rows = record_step(glove, clock, args.settle, args.hold, port)
-            medians[name] = np.median(rows, axis=0)
+            quats[name] = []
+            rows = record_step(glove, clock, args.settle, args.hold, port, quats[name])
+            if name in dict(STEPS):
+                medians[name] = np.median(rows, axis=0)
             print(f"      {len(rows)} samples", flush=True)
+            if n == len(STEPS) and not args.no_imu and any(quats.values()):
+                steps += IMU_STEPS
+                print(f"the glove sends an IMU orientation: {len(IMU_STEPS)} more poses "
+                      "measure how the IMU sits on the forearm", flush=True)
     new_cfg, report = derive(cfg, medians, full_scale)
+    if len(steps) > len(STEPS):
+        mount = mount_from_poses(*(up_in_imu(np.array(quats[name])) for name, _ in IMU_STEPS))
+        new_cfg = dataclasses.replace(
+            new_cfg, imu=dataclasses.replace(new_cfg.imu, mount_xyzw=mount_xyzw(mount)))
+        yaw, _pitch, roll = mount.inv().as_euler("ZYX", degrees=True)
+        report.append(f"  IMU mount_xyzw {list(mount_xyzw(mount))}: the IMU sits turned "
+                      f"{yaw:.1f} deg about the forearm's back and rolled {roll:.1f} deg "
+                      f"about its length ({mount.magnitude() * 180 / np.pi:.1f} deg in all)")
     print("channel curve           readings (raw counts)")
     print("\n".join(report))
     if not args.yes:

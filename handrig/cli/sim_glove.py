@@ -13,6 +13,11 @@ so the calibration can be rehearsed and tested without a glove:
   an empty line moves to the next pose, a pose name (``fist``) to that pose;
   ``pose NAME held`` is printed once it is there.
 
+``--imu-askew YAW,ROLL`` emulates the forearm IMU fixed askew by those degrees
+(turned about the back of the forearm, then rolled about its length): a recording's
+orientations are turned accordingly; with ``--calibration`` the glove also performs
+the two forearm poses the calibration then asks for, which should find that mount.
+
 The emulated sensors read the ranges of the glove config (``--glove-config``),
 narrowed to ``--travel`` of each span, and are printed at the start: a
 calibration should find those. The first line is always ``port: /dev/pts/N``;
@@ -26,7 +31,7 @@ import sys
 from typing import Any
 
 from handrig.cli._numbers import float_in, nonnegative_float, positive_float, whole_int
-from handrig.devices.glove_recording import read_glove_recording
+from handrig.devices.glove_recording import GloveRecording, read_glove_recording
 from handrig.errors import DataError
 
 
@@ -67,7 +72,21 @@ def register(sub: Any) -> None:
                      help="glove config whose channels are emulated (default: the one "
                           "`handrig calibrate glove` starts from)")
     cal.add_argument("--seed", type=whole_int, default=0, help="noise seed (default 0)")
+    cal.add_argument("--imu-askew", type=_yaw_roll, default=None, metavar="YAW,ROLL",
+                     help="emulate the forearm IMU mounted askew by YAW and ROLL degrees "
+                          "(frames only), e.g. 30,15; also for a recording FILE")
     p.set_defaults(func=run)
+
+
+def _yaw_roll(text: str) -> tuple[float, float]:
+    try:
+        yaw, roll = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give YAW,ROLL in degrees, e.g. 30,15"
+                                         ) from None
+    if not (abs(yaw) <= 180 and abs(roll) <= 180):
+        raise argparse.ArgumentTypeError(f"{text!r}: each angle within -180..180 degrees")
+    return yaw, roll
 
 
 def run(args: argparse.Namespace) -> int:
@@ -87,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
 def _run_file(args: argparse.Namespace) -> int:
     from handrig.app import simulator
     rec = read_glove_recording(args.file)
+    if args.imu_askew:
+        rec = _askew(rec, args)
     with simulator.glove_emulator(rec, args.format, rate_hz=args.rate, loop=args.loop,
                                   analog_max=args.analog_max) as emu:
         print(f"port: {emu.port_path}", flush=True)
@@ -103,6 +124,25 @@ def _run_file(args: argparse.Namespace) -> int:
     return 0
 
 
+def _askew(rec: GloveRecording, args: argparse.Namespace) -> GloveRecording:
+    """The recording as an IMU mounted askew by ``--imu-askew`` would have sent it."""
+    import dataclasses
+
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from handrig.pose.imu_mount import askew_mount, imu_quaternion
+
+    if args.format != "frames" or rec.quat_xyzw is None:
+        raise DataError("--imu-askew needs --format frames and a recording with an IMU "
+                        "(qx,qy,qz,qw columns)")
+    q = rec.quat_xyzw
+    ok = ~np.isnan(q).any(axis=1)
+    out = q.copy()
+    out[ok] = imu_quaternion(Rotation.from_quat(q[ok]), askew_mount(*args.imu_askew))
+    return dataclasses.replace(rec, quat_xyzw=out)
+
+
 def _say_sent(sent: int, dropped: int) -> None:
     print(f"sent {sent} frames" + (f", {dropped} bytes dropped (nobody reading)"
                                    if dropped else ""), flush=True)
@@ -113,10 +153,15 @@ def _run_calibration(args: argparse.Namespace) -> int:
     from handrig.cli.calibrate_glove import DEFAULT_HOLD_S, DEFAULT_SETTLE_S, STEPS
     from handrig.config.paths import config_file
     from handrig.devices.glove_calibration import load_glove_config
+    from handrig.pose.imu_mount import IMU_STEPS, askew_mount
 
     motion = simulator.calibration_motion()
-    POSE_NAMES, ScriptedSensors = motion.POSE_NAMES, motion.ScriptedSensors
+    ScriptedSensors = motion.ScriptedSensors
     move_recording, timed_recording = motion.move_recording, motion.timed_recording
+    if args.imu_askew and args.format != "frames":
+        raise DataError("--imu-askew needs --format frames (OpenGloves lines carry no IMU)")
+    mount = askew_mount(*args.imu_askew) if args.imu_askew else None
+    POSE_NAMES = motion.pose_names(mount is not None)
 
     cfg = load_glove_config(args.glove_config or config_file("glove.toml"))
     rate = args.rate or 200.0
@@ -124,9 +169,10 @@ def _run_calibration(args: argparse.Namespace) -> int:
     n_raw = 5 if args.format == "opengloves" else 0
     sensors = ScriptedSensors.from_config(cfg, n_raw=n_raw, travel=args.travel,
                                           full_scale=full_scale)
-    texts = dict(STEPS)
+    texts = dict(STEPS + IMU_STEPS)
     pose_s = args.pose_s if args.pose_s is not None else DEFAULT_SETTLE_S + DEFAULT_HOLD_S + 2
-    common = {"transition_s": args.transition_s, "rate_hz": rate, "noise_counts": args.noise}
+    common: dict[str, Any] = {"transition_s": args.transition_s, "rate_hz": rate,
+                              "noise_counts": args.noise, "imu_mount": mount}
     if args.cue:
         first = move_recording(sensors, POSE_NAMES[0], POSE_NAMES[0], seed=args.seed, **common)
         emu = simulator.glove_emulator(first, args.format, rate_hz=rate, loop=True,
@@ -141,9 +187,12 @@ def _run_calibration(args: argparse.Namespace) -> int:
         print(f"scripted calibration as {args.format} at {rate:g} Hz, sensor noise "
               f"{args.noise:g} counts; the emulated sensors (raw counts):", flush=True)
         print("\n".join(sensors.describe()), flush=True)
+        if args.imu_askew:
+            print(f"forearm IMU mounted askew: yaw {args.imu_askew[0]:g} deg, roll "
+                  f"{args.imu_askew[1]:g} deg", flush=True)
         try:
             if args.cue:
-                _follow_cues(emu, sensors, texts, args, common)
+                _follow_cues(emu, sensors, texts, args, common, POSE_NAMES)
             else:
                 print(f"poses on a timer, {pose_s:g} s each, round and round; Ctrl-C stops",
                       flush=True)
@@ -168,24 +217,23 @@ def _announce_timed(emu: Any, names: tuple[str, ...], texts: dict[str, str],
 
 
 def _follow_cues(emu: Any, sensors: Any, texts: dict[str, str], args: argparse.Namespace,
-                 common: dict[str, float]) -> None:
+                 common: dict[str, Any], names: tuple[str, ...]) -> None:
     from handrig.app import simulator
-    motion = simulator.calibration_motion()
-    POSE_NAMES, move_recording = motion.POSE_NAMES, motion.move_recording
-    current = POSE_NAMES[0]
+    move_recording = simulator.calibration_motion().move_recording
+    current = names[0]
     print(f"pose {current} held; Enter moves to the next pose, a name "
-          f"({', '.join(POSE_NAMES)}) to that one", flush=True)
+          f"({', '.join(names)}) to that one", flush=True)
     seed = args.seed
     for line in sys.stdin:
         word = line.strip()
         if word in ("q", "quit"):
             return
         if word == "":
-            target = POSE_NAMES[(POSE_NAMES.index(current) + 1) % len(POSE_NAMES)]
-        elif word in POSE_NAMES:
+            target = names[(names.index(current) + 1) % len(names)]
+        elif word in names:
             target = word
         else:
-            print(f"not a pose: {word!r}; one of {', '.join(POSE_NAMES)}, or Enter",
+            print(f"not a pose: {word!r}; one of {', '.join(names)}, or Enter",
                   flush=True)
             continue
         seed += 1

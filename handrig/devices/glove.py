@@ -41,6 +41,7 @@ import termios
 import threading
 from abc import ABC, abstractmethod
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Literal
@@ -52,6 +53,7 @@ from firmware_protocol.glove import BUTTON_RELAX, MAX_CHANNELS, FrameDecoder
 from firmware_protocol.opengloves import BUTTON_LETTERS, CHANNEL_KEYS, LineDecoder
 from handrig.clock import Clock
 from handrig.devices.glove_recording import GloveRecording
+from handrig.devices.glove_status import change_messages
 from handrig.errors import DeviceError
 
 FloatArray = NDArray[np.float64]
@@ -82,7 +84,9 @@ class GloveSample:
     received). ``sensor_time_us``: the glove's timestamp (wraps at 2**32; 0 for
     OpenGloves). ``host_time_s``: Clock time at which the read that delivered the
     frame's last byte returned (glove-to-servo latency is measured from it).
-    ``count``: 1-based running count of samples from this source.
+    ``count``: 1-based running count of samples from this source. ``status``: the
+    frame's status flags (``firmware_protocol.glove.FLAG_IMU_ABSENT`` ...; 0 for other
+    sources), in words by :mod:`handrig.devices.glove_status`.
     """
 
     raw: FloatArray
@@ -93,6 +97,7 @@ class GloveSample:
     sensor_time_us: int
     host_time_s: float
     count: int
+    status: int = 0
 
 
 @dataclass(frozen=True)
@@ -280,8 +285,12 @@ class SerialGlove(GloveSource):
         reader: Literal["thread", "poll"] = "thread",
         channels: int | None = None,
         min_channels: int = 1,
+        channel_names: Sequence[str] = (),
     ) -> None:
         super().__init__()
+        self.channel_names = tuple(channel_names)
+        """Names of the raw channels (their curves), for messages about them."""
+        self._status = 0
         if channels is not None and not 0 <= channels <= MAX_CHANNELS:
             raise DeviceError(f"glove channels {channels}: a frame carries 0..{MAX_CHANNELS}")
         if not 0 <= min_channels <= MAX_CHANNELS:
@@ -541,7 +550,7 @@ class SerialGlove(GloveSource):
             raw=np.array(fr.channels, dtype=np.float64),
             quat=None if q is None else np.array(q, dtype=np.float64),
             buttons=fr.buttons, estop=bool(fr.buttons & BUTTON_RELAX), seq=fr.seq,
-            sensor_time_us=fr.timestamp_us, host_time_s=now, count=count,
+            sensor_time_us=fr.timestamp_us, host_time_s=now, count=count, status=fr.status,
         )
 
     def _line_sample(self, line: Any, now: float, count: int) -> GloveSample:
@@ -581,6 +590,10 @@ class SerialGlove(GloveSource):
             self._count += 1
             self._arrived(self._frame_sample(fr, now, self._count))
             self._last_good_s = now
+            if fr.status != self._status:  # the glove's health changed: say so once
+                self._events.extend(change_messages(self._status, fr.status, fr.channels,
+                                                    self.channel_names))
+                self._status = fr.status
 
     def _feed_lines(self, data: bytes, now: float) -> None:
         for line in self._lines.feed(data):
