@@ -15,18 +15,18 @@ import pytest
 from rich.console import Console
 
 from handrig.app.factory import build_parts
+from handrig.app.keys import KeyReader
 from handrig.app.panel import (
     BusHealth,
     GloveLink,
-    KeyReader,
     LivePanel,
     Outputs,
     PanelSnapshot,
-    RigSnapshot,
     ServoLine,
     plain_line,
     render,
 )
+from handrig.app.rig_snapshot import RigSnapshot
 from handrig.clock import FakeClock
 from handrig.config.rig import load_rig_config
 from handrig.devices.glove import GloveSample, GloveSource, GloveStats
