@@ -103,9 +103,6 @@ class SerialGlove(GloveSource):
         self._estop_bit = 1 << BUTTON_LETTERS.index(estop_letter)
         self._frames = FrameDecoder()
         self._lines = LineDecoder(analog_max)
-        self._scratch_frames = FrameDecoder()  # for rehearse(): never touches live state
-        self._scratch_lines = LineDecoder(analog_max)
-        self._last_chunk = b""
         self._serial: Any = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -197,23 +194,10 @@ class SerialGlove(GloveSource):
         thread and :meth:`latest` with ``reader="poll"`` call this; tests may too)."""
         with self._lock:
             self._bytes += len(data)
-            self._last_chunk = data
             if self.fmt == "frames":
                 self._feed_frames(data, now)
             else:
                 self._feed_lines(data, now)
-
-    def rehearse(self) -> None:
-        chunk = self._last_chunk
-        if not chunk:
-            return
-        now = self.clock.now()
-        if self.fmt == "frames":
-            for fr in self._scratch_frames.feed(chunk):
-                self._frame_sample(fr, now, 0)
-        else:
-            for line in self._scratch_lines.feed(chunk):
-                self._line_sample(line, now, 0)
 
     def _poll(self) -> None:
         ser = self._serial

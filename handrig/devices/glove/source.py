@@ -133,13 +133,6 @@ class GloveSource(ABC):
         self._taken = s.count
         return s
 
-    def rehearse(self) -> None:  # noqa: B027 - optional hook
-        """Run the decode path once on scratch state, with no effect on the source.
-
-        The loop calls it shortly before each deadline so the code that turns the
-        next frame into a sample is warm in the CPU's caches when the frame is read.
-        """
-
     def peek(self) -> GloveSample | None:
         """The newest sample so far (new or not), without marking it taken."""
         return self._newest
