@@ -36,6 +36,7 @@ Safety (what a puppeteer relies on during a show):
 from __future__ import annotations
 
 import gc
+import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any, Literal
@@ -54,6 +55,7 @@ from handrig.loop.ports import (
 )
 from handrig.loop.profile import StageProfile
 from handrig.loop.stats import RunStats
+from handrig.loop.telemetry import SnapshotBuilder, Telemetry
 from handrig.loop.trigger import FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pose.pipeline import PosePipeline
 
@@ -130,6 +132,11 @@ class Rig:
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
+        self.telemetry = Telemetry()
+        """The newest :class:`~handrig.loop.telemetry.LoopSnapshot`, for any thread."""
+        self._snapshot = SnapshotBuilder(
+            glove, bus, pipeline, self.machine, self.stats, lambda: self.started_at,
+            self._view, lambda: self.cycle.outputs)
         self.stage_profile = StageProfile(clock) if profile else None
         if self.stage_profile is not None:
             self.stage_profile.wrap(self.cycle)
@@ -178,6 +185,12 @@ class Rig:
         turns torque off at once. Safe from another thread or a signal handler."""
         self.machine.request_estop(reason)
 
+    def _view(self) -> tuple[Any, ...]:
+        c = self.cycle
+        sample = c.sample
+        return (c.controls, None if sample is None else sample.raw, c.angles, c.last_pose,
+                c.sent, c.last_state, math.nan if sample is None else sample.host_time_s)
+
     # -- the loop ------------------------------------------------------------------------------
     def _event(self, text: str) -> None:
         self.stats.events.append(text)
@@ -224,6 +237,7 @@ class Rig:
                 if last_start is not None:
                     stats.period.add(tick.now_s - last_start)
                 last_start = tick.now_s
+                self.telemetry.offer(tick.now_s, self._snapshot)
                 if over:
                     machine.stop_reason = machine.stop_reason or "stop requested"
                     break
@@ -238,6 +252,8 @@ class Rig:
             stats.cpu_s = time.thread_time() - cpu0
             stats.ceiling_waits = int(getattr(self.trigger, "ceiling_waits", 0))
             self._pipeline_figures()
+            self._snapshot.finished = True
+            self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats
 
     def _pipeline_figures(self) -> None:

@@ -130,6 +130,10 @@ class SerialGlove(GloveSource):
                 "(pass the right port with --glove PORT; on Linux add your user to 'dialout')"
             ) from None
 
+    @property
+    def name(self) -> str:
+        return self.port
+
     def start(self) -> None:
         if self._thread is not None or self._serial is not None:
             return

@@ -119,6 +119,11 @@ class GloveSource(ABC):
         self._failure: DeviceError | None = None
         self._events: deque[str] = deque(maxlen=MAX_EVENTS)
 
+    @property
+    def name(self) -> str:
+        """Where the samples come from, for a person (a port path, "replay")."""
+        return type(self).__name__
+
     def start(self) -> None:  # noqa: B027 - optional hook
         """Begin reading (open the port, start the thread). Idempotent."""
 

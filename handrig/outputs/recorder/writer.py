@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig.errors import DataError
+from handrig.outputs.base import Output, OutputStatus
 from handrig.outputs.recorder.bvh_take import BvhTake
 from handrig.outputs.recorder.csv_take import CsvTake
 from handrig.outputs.recorder.formats import (
@@ -26,7 +27,7 @@ from handrig.outputs.recorder.formats import (
 _IOV_MAX = 1024 if sys.platform.startswith("linux") else 16  # buffers per writev (Linux; POSIX)
 
 
-class Recorder:
+class Recorder(Output):
     """Stream frames to a CSV or BVH file while the show runs.
 
     ``add`` (or calling the recorder, the rig's output hook) turns the frame into one
@@ -133,10 +134,21 @@ class Recorder:
         with self._lock:
             self._pending.append(head)
 
-    def __call__(self, t_s: float, pose54_deg: NDArray[np.float64]) -> None:
-        """The rig's output hook: ``pose54_deg`` = 50 curves then the 4 wrist DOFs
+    def __call__(self, t_s: float, pose_deg: NDArray[np.float64]) -> None:
+        """The rig's output hook: ``pose_deg`` = 50 curves then the 4 wrist DOFs
         (:data:`handrig.hand.ALL_JOINT_NAMES` order)."""
-        self.add(t_s, pose54_deg[:50], pose54_deg[50:54])
+        self.add(t_s, pose_deg[:50], pose_deg[50:54])
+
+    def status(self) -> OutputStatus:
+        error = "" if self.error is None else str(self.error)
+        stopped = ("closed" if self._closed else "") or (
+            "write error: the take stops here" if error else "")
+        return OutputStatus(
+            kind="recorder", name=self.fmt, path=str(self.path),
+            frames_written=self.frames_written, bytes_written=self.bytes_written,
+            frames_dropped=self.frames_dropped, errors=int(self.error is not None),
+            last_error=error, stopped_reason=stopped,
+            duration_s=self.frames_written / self.rate_hz)
 
     def _writer(self) -> None:
         while True:
