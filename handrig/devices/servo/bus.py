@@ -42,10 +42,20 @@ class ServoState:
     """(n,) bool: the servos this read asked for (a read of one part of the servos,
     ``read_state(part=...)``); the others keep their last reading, ``age_s`` says how
     old, and are not stale for it. None: every servo was asked."""
+    sent: bool = True
+    """Whether the read went on the wire. False: the bus declined it (its request and
+    replies could not both be on the wire by the deadline, or the caller came after
+    the deadline); every servo is then stale with its last reading."""
 
     @property
     def all_fresh(self) -> bool:
         return not bool(self.stale.any())
+
+    @property
+    def answered(self) -> np.ndarray:
+        """(n,) bool: the servos that gave a valid reading in this read."""
+        fresh = ~np.asarray(self.stale, dtype=bool)
+        return fresh if self.asked is None else fresh & self.asked
 
 
 @dataclass
@@ -136,19 +146,20 @@ class FaultPolicy:
 
 
 class ServoBus(ABC):
-    """A bus of position servos, one per joint, in rig order.
+    """A bus of position servos, one per joint, in rig order: everything the loop uses.
 
-    The realtime loop calls ``write_goals_deg`` every cycle and ``read_state``
-    every few; torque is on only inside ``with bus.torque():``.
+    The realtime loop calls ``write_goals_deg`` every cycle and ``read_state`` every
+    few; torque is on only inside ``with bus.torque():``. The abstract methods are
+    what every bus must do; the rest are hooks with defaults that a bus fills in when
+    it can say more (its wire timing, housekeeping reads between state reads, events
+    for the log). The loop decides what to do about silent servos
+    (:mod:`handrig.loop.silence`) from what :meth:`read_state` reports.
     """
 
     port: str = ""
     """Where the bus is (a serial path), for a person."""
-
-    @property
-    def ids(self) -> tuple[int, ...]:
-        """Each servo's bus id, in rig order (default: 1..n)."""
-        return tuple(range(1, self.n_servos + 1))
+    baud: int = 0
+    """The wire's baud rate (0: not a serial wire; the loop then assumes no wire time)."""
 
     @property
     @abstractmethod
@@ -174,11 +185,58 @@ class ServoBus(ABC):
 
     @abstractmethod
     def write_goals_deg(self, goals_deg: np.ndarray) -> int:
-        """Send one goal per servo (degrees, rig order); return how many were clamped."""
+        """Send one goal per servo (degrees, rig order); return how many were clamped
+        into the servos' limits (a bus never sends a goal outside them)."""
 
     @abstractmethod
-    def read_state(self, deadline_s: float | None = None) -> ServoState:
-        """Read present state; servos without a valid reply are marked stale."""
+    def read_state(self, deadline_s: float | None = None,
+                   part: tuple[int, int] | None = None) -> ServoState:
+        """Read present state by ``deadline_s`` (clock time; None: the bus's own
+        budget). ``part=(i, m)``: ask only the servos at rig indices ``i, i + m, ...``
+        (``ServoState.asked``). Servos without a valid reply are marked stale with
+        their age; a read the bus declined says so (``ServoState.sent``)."""
+
+    # -- hooks: what a bus may say beyond the contract (defaults: nothing to say) ----------
+    @property
+    def ids(self) -> tuple[int, ...]:
+        """Each servo's bus id, in rig order (default: 1..n)."""
+        return tuple(range(1, self.n_servos + 1))
+
+    @property
+    def last_goals_deg(self) -> np.ndarray:
+        """The goals last sent, after clamping (NaN before the first write or if the bus
+        does not know): where the loop starts from."""
+        return np.full(self.n_servos, np.nan)
+
+    @property
+    def last_write_s(self) -> float:
+        """When the last write was handed to the OS, clock time (NaN: unknown); where the
+        loop's latency figure ends (default: when the loop's write call returned)."""
+        return float("nan")
+
+    def read_wire_s(self, n: int) -> float:
+        """Wire time of a present-state read of ``n`` servos, request and replies
+        (0: no wire to wait for)."""
+        return 0.0
+
+    def quiet_wait_s(self) -> float:
+        """How long a read asked now would wait, beyond the wire, for the line to go
+        quiet (after a failed reply); the loop counts it when fitting reads into gaps."""
+        return 0.0
+
+    def housekeeping(self, deadline_s: float) -> bool:
+        """Between state reads, where the wire has room by ``deadline_s``: the bus's own
+        upkeep (watchdogs, temperatures). True if it ran (default: nothing to do)."""
+        return False
+
+    def drain_events(self) -> list[str]:
+        """What the bus did since the last call, one line each for the run's log."""
+        return []
+
+    @property
+    def relax_reason(self) -> str | None:
+        """Why the puppet should be relaxed while servos are silent, else None."""
+        return None
 
     @property
     def n_servos(self) -> int:

@@ -125,7 +125,9 @@ class Readings:
 
     def unread(self, now: float) -> ServoState:
         """The state of a read that was not sent: every servo stale, its last reading."""
-        return self.snapshot(now, np.ones(self.n, bool), np.zeros(self.n, np.uint8))
+        state = self.snapshot(now, np.ones(self.n, bool), np.zeros(self.n, np.uint8))
+        state.sent = False
+        return state
 
     def prepare_whole(self) -> tuple[np.ndarray, np.ndarray]:
         """Allocate the state a whole read returns (arrays and counters as they will be

@@ -222,7 +222,7 @@ def test_rig_snapshot_reads_a_running_rig() -> None:
     bus = WarmBus(tuple(parts.pipeline.servo_joints), clock)
     rig = Rig(SteadyGlove(clock), bus, parts.pipeline, clock, controls_from_raw=parts.controls,
               orientation=parts.orientation, rate_hz=200.0, read_every=4,
-              glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None)
+              glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None, loop_mode="fixed")
     snapshot = RigSnapshot(rig, glove_source="/dev/ttyACM0", temperature_limit_c={1: 45.0},
                            keys=True)
     rig.run(frames=100)

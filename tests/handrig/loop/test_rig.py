@@ -103,6 +103,8 @@ def parts_factory():
 
 
 def make_rig(parts, glove, bus, clock, **kw):
+    kw.setdefault("loop_mode", "fixed")  # the tests here set the glove-triggered mode
+    kw.setdefault("catch_up", False)  # and catching up where they mean it
     return Rig(glove, bus, parts.pipeline, clock, controls_from_raw=parts.controls,
                orientation=parts.orientation, rate_hz=200.0, read_every=4,
                glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None, **kw)
@@ -327,7 +329,8 @@ def test_the_live_control_path_sees_one_sample_per_glove_frame(parts_factory):
     glove = ScriptedGlove(clock, lambda t: MID)
     bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = Rig(glove, bus, parts.pipeline, clock, controls_from_raw=controls,
-              orientation=parts.orientation, rate_hz=200.0, log=lambda s: None)
+              orientation=parts.orientation, rate_hz=200.0, log=lambda s: None,
+              loop_mode="fixed")
     stats = rig.run(frames=50)
     assert len(seen) == stats.glove_samples
 
@@ -742,7 +745,10 @@ def test_a_read_the_bus_found_no_room_for_stays_due_and_is_not_counted(parts_fac
                 self.asked.append(deadline_s - self.clock.now())
                 if deadline_s - self.clock.now() < 0.0075:
                     self._stats.skipped_reads += 1
-                    return super().read_state(deadline_s)
+                    state = super().read_state(deadline_s)
+                    state.sent = False  # declined: the loop learns it from the result
+                    state.stale[:] = True
+                    return state
             return super().read_state(deadline_s)
 
     bus = CrampedBus(tuple(s.joint for s in parts.rig_config.servos), clock)
