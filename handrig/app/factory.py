@@ -292,7 +292,7 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
         # that polls holds back the kernel worker delivering the reply (and the glove's
         # bytes) whenever that worker is queued on the loop's CPU.
         bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=read_fields_for(rig_cfg),
-                           spin_s=0.0)
+                           spin_s=0.0, emulated=proc is not None)
         stack.callback(bus.close)
         yield OpenedBus(bus, port, proc)
 
