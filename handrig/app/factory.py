@@ -500,6 +500,8 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
         "reads": s.reads,
         "stale_reads": s.stale_reads,
         "relax_events": s.relax_events,
+        "silence": {"silences": s.servo_silences, "held": s.servos_held,
+                    "recoveries": s.servo_recoveries},
         "resumes": s.resumes,
         "estop": s.estop,
         "stop_reason": s.stop_reason,

@@ -94,7 +94,7 @@ class FaultHandler:
     def hardware_error(self, index: int, bits: int) -> None:
         """Servo ``index`` reports Hardware Error Status ``bits``: per policy, reboot or stop."""
         r = self.roster
-        self.readings.hw_err[index] = bits
+        self.readings.note_hardware_error(index, bits)
         self.stats.hardware_errors[index] += 1
         what = (f"{r.describe(index)} hardware error 0x{bits:02x}: "
                 f"{describe_hardware_error(bits)} {r.where()}")
@@ -215,6 +215,10 @@ class FaultHandler:
         self.arm_watchdog()
 
     # ------------------------------------------------------------------ stale runs
+    def read_sent(self) -> None:
+        """A read went on the wire: the run of reads that did not fit is over."""
+        self.skip_run = 0
+
     def read_skipped(self, wire_s: float, allowed_s: float) -> None:
         """A read was not sent: the wire could not carry it by its deadline. When the
         caller came after the deadline (the host was late) it is counted in

@@ -57,8 +57,8 @@ class StateReader:
         self._parts: dict[tuple[int, int], np.ndarray] = {}
         n = readings.n
         baud = link.budget.baud
-        # a temperature Fast Sync Read: request 14 + N bytes, reply 8 + 5N
-        self._temperature_wire_s = wire_time_s(22 + 6 * n, baud) + 0.0005
+        # a temperature Fast Sync Read (1 byte per servo)
+        self._temperature_wire_s = wire_time_s(read_bytes(n, 1, True), baud) + 0.0005
         # how long housekeeping has taken here (its replies come no sooner than the wire
         # allows, and later from a slow adapter or a busy emulator): it runs only where
         # that much room is left, unless it has been due for HOUSEKEEPING_FORCE_S
@@ -104,7 +104,7 @@ class StateReader:
         elif start + self.read_wire_s(k) > deadline_s:
             self.faults.read_skipped(self.read_wire_s(k), deadline_s - now)
             return self.readings.unread(now)
-        self.faults.skip_run = 0
+        self.faults.read_sent()
         self.stats.reads += 1
         self.readings.start_read()
         self.last_whole = False
