@@ -139,7 +139,7 @@ def child(variant: str, hz: float, baud: int, seconds: float) -> None:
             text = rig_path.read_text(encoding="utf-8")
             rig_path.write_text(text.replace("spin_us = 500.0", "spin_us = 0.0", 1),
                                 encoding="utf-8")
-        b._rig_file = lambda *args, **kwargs: rig_path  # type: ignore[assignment]
+        b._rig_file = lambda *args, **kwargs: rig_path
         r = b.run_step_case(b.Case("glove", hz, baud), seconds, folder)
         tag = f"glove_{hz:g}_{baud}"
         logged = [line.split() for line in
