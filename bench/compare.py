@@ -12,10 +12,12 @@ each side before the rounds and drops that output (the base worktree starts with
 numba cache, so its first run compiles).
 
 It prints each bench's output once, every number as ``base / new`` (each the median
-over the rounds; one value where both sides gave the same in every round). A line
-whose words differ between the two sides (a bench that changed what it prints) is
-printed twice, marked ``base:`` and ``new:``. The machine is shared and noisy: read
-the pairs, not the digits.
+over the rounds, or with ``--each`` every round's; one value where both sides gave
+the same in every round). A line whose words differ between the two sides (a bench
+that changed what it prints) is printed twice, marked ``base:`` and ``new:`` (the
+spaces padding a table's columns do not count). The machine is shared and noisy:
+read the pairs, not the digits, and run an A/A comparison (``--base HEAD`` on a
+clean tree) to see the noise.
 """
 
 from __future__ import annotations
@@ -40,19 +42,29 @@ def skeleton(line: str) -> tuple[str, list[str]]:
     return NUMBER.sub("\0", line), NUMBER.findall(line)
 
 
-def _fmt(values: Sequence[str]) -> str:
-    """The median of one number's values over the rounds, printed as the bench did."""
+def _words(line: str) -> str:
+    """What two lines must share to be merged: the words, whatever the numbers and
+    the spaces padding a table's columns."""
+    return " ".join(skeleton(line)[0].split())
+
+
+def _fmt(values: Sequence[str], each: bool = False) -> str:
+    """The median of one number's values over the rounds, printed as the bench did
+    (``each``: every round's value, comma separated)."""
     if len(set(values)) == 1:
         return values[0]
+    if each:
+        return ", ".join(values)
     decimals = max((len(v.split(".")[1]) if "." in v and "e" not in v.lower() else 0)
                    for v in values)
     m = statistics.median(float(v) for v in values)
     return f"{m:.{decimals}f}"
 
 
-def merge(base: list[str], new: list[str]) -> list[str]:
+def merge(base: list[str], new: list[str], each: bool = False) -> list[str]:
     """One bench's output, ``base`` and ``new`` each a list of rounds' outputs (text):
-    line by line, numbers as ``base / new`` where the lines' words agree."""
+    line by line, numbers as ``base / new`` where the lines' words agree (laid out as
+    the first round of the base printed it)."""
     b_lines = [out.splitlines() for out in base]
     n_lines = [out.splitlines() for out in new]
     length = max(len(x) for x in b_lines + n_lines)
@@ -60,12 +72,12 @@ def merge(base: list[str], new: list[str]) -> list[str]:
     for i in range(length):
         b_row = [lines[i] for lines in b_lines if i < len(lines)]
         n_row = [lines[i] for lines in n_lines if i < len(lines)]
-        shapes = {skeleton(x)[0] for x in b_row + n_row}
+        shapes = {_words(x) for x in b_row + n_row}
         counts = {len(skeleton(x)[1]) for x in b_row + n_row}
         if len(shapes) != 1 or len(counts) != 1 or not b_row or not n_row:
             merged += [f"base: {x}" for x in b_row[:1]] + [f"new:  {x}" for x in n_row[:1]]
             continue
-        shape = shapes.pop()
+        shape = skeleton(b_row[0])[0]
         b_nums = [skeleton(x)[1] for x in b_row]
         n_nums = [skeleton(x)[1] for x in n_row]
         parts = []
@@ -73,7 +85,7 @@ def merge(base: list[str], new: list[str]) -> list[str]:
             old = [nums[k] for nums in b_nums]
             now = [nums[k] for nums in n_nums]
             parts.append(_fmt(old) if set(old) == set(now) and len(set(old)) == 1
-                         else f"{_fmt(old)} / {_fmt(now)}")
+                         else f"{_fmt(old, each)} / {_fmt(now, each)}")
         pieces = shape.split("\0")
         merged.append("".join(p + (parts[j] if j < len(parts) else "")
                               for j, p in enumerate(pieces)))
@@ -114,6 +126,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument("--rounds", type=int, default=2, help="runs of each side (default 2)")
     p.add_argument("--seconds", type=float, default=None,
                    help="HANDRIG_BENCH_SECONDS for the benches that read it")
+    p.add_argument("--each", action="store_true",
+                   help="every round's value instead of the median")
     p.add_argument("--warm-up", action="store_true",
                    help="run each bench once on each side first, output dropped")
     return p.parse_args(argv)
@@ -155,7 +169,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     for side in order:
                         outs[side].append(run_bench(sides[side], name, args.seconds))
                 print(f"== {name} ==")
-                print("\n".join(merge(outs["base"], outs["new"])), flush=True)
+                print("\n".join(merge(outs["base"], outs["new"], args.each)), flush=True)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(base_root)],
                            cwd=HERE, capture_output=True)

@@ -45,3 +45,13 @@ def test_a_base_that_is_not_a_commit_is_refused() -> None:
                           "--benches", "expand"], cwd=ROOT, capture_output=True, text=True)
     assert out.returncode != 0
     assert "is not a commit here" in out.stderr
+
+
+def test_a_table_row_whose_column_padding_differs_is_still_merged() -> None:
+    assert merge(["handrig cycle    618     0.49       9"],
+                 ["handrig cycle    451     0.36      54"]) == [
+        "handrig cycle    618 / 451     0.49 / 0.36       9 / 54"]
+
+
+def test_each_rounds_values_on_request() -> None:
+    assert merge(["t 1.0", "t 3.0"], ["t 2.0", "t 2.0"], each=True) == ["t 1.0, 3.0 / 2.0"]
