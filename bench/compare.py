@@ -157,7 +157,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 check_imports(root)
             print(f"base {sha[:9]} (a worktree in {base_root}) against new: this tree "
                   f"({head}{', with uncommitted changes' if dirty else ''}); {args.rounds} "
-                  f"rounds, alternating; numbers are base / new, medians over the rounds",
+                  f"rounds, alternating; numbers are base / new, "
+                  f"{'every round' if args.each else 'medians over the rounds'}",
                   flush=True)
             for name in benches:
                 outs: dict[str, list[str]] = {"base": [], "new": []}
