@@ -11,11 +11,11 @@ settings pass through from the environment. ``--warm-up`` runs each bench once o
 each side before the rounds and drops that output (the base worktree starts with no
 numba cache, so its first run compiles).
 
-It prints each bench's output once, every number as ``base / new`` (each the median
-over the rounds, or with ``--each`` every round's; one value where both sides gave
-the same in every round). A line whose words differ between the two sides (a bench
-that changed what it prints) is printed twice, marked ``base:`` and ``new:`` (the
-spaces padding a table's columns do not count). The machine is shared and noisy:
+It prints each bench's output once, every number as ``base->new`` (each the median
+over the rounds, or with ``--each`` every round's, comma separated; one value where
+both sides gave the same in every round). A line whose words differ between the two
+sides (a bench that changed what it prints) is printed twice, marked ``base:`` and
+``new:`` (the spaces padding a table's columns do not count). The machine is shared and noisy:
 read the pairs, not the digits, and run an A/A comparison (``--base HEAD`` on a
 clean tree) to see the noise.
 """
@@ -54,7 +54,7 @@ def _fmt(values: Sequence[str], each: bool = False) -> str:
     if len(set(values)) == 1:
         return values[0]
     if each:
-        return ", ".join(values)
+        return ",".join(values)
     decimals = max((len(v.split(".")[1]) if "." in v and "e" not in v.lower() else 0)
                    for v in values)
     m = statistics.median(float(v) for v in values)
@@ -63,7 +63,7 @@ def _fmt(values: Sequence[str], each: bool = False) -> str:
 
 def merge(base: list[str], new: list[str], each: bool = False) -> list[str]:
     """One bench's output, ``base`` and ``new`` each a list of rounds' outputs (text):
-    line by line, numbers as ``base / new`` where the lines' words agree (laid out as
+    line by line, numbers as ``base->new`` where the lines' words agree (laid out as
     the first round of the base printed it)."""
     b_lines = [out.splitlines() for out in base]
     n_lines = [out.splitlines() for out in new]
@@ -85,7 +85,7 @@ def merge(base: list[str], new: list[str], each: bool = False) -> list[str]:
             old = [nums[k] for nums in b_nums]
             now = [nums[k] for nums in n_nums]
             parts.append(_fmt(old) if set(old) == set(now) and len(set(old)) == 1
-                         else f"{_fmt(old, each)} / {_fmt(now, each)}")
+                         else f"{_fmt(old, each)}->{_fmt(now, each)}")
         pieces = shape.split("\0")
         merged.append("".join(p + (parts[j] if j < len(parts) else "")
                               for j, p in enumerate(pieces)))
@@ -157,7 +157,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 check_imports(root)
             print(f"base {sha[:9]} (a worktree in {base_root}) against new: this tree "
                   f"({head}{', with uncommitted changes' if dirty else ''}); {args.rounds} "
-                  f"rounds, alternating; numbers are base / new, "
+                  f"rounds, alternating; numbers are base->new, "
                   f"{'every round' if args.each else 'medians over the rounds'}",
                   flush=True)
             for name in benches:

@@ -17,16 +17,16 @@ def test_numbers_are_cut_out_of_a_line_as_printed() -> None:
     assert shape == "expand one frame, \0 controls: median \0 us, p\0 \0"
 
 
-def test_numbers_that_differ_become_base_slash_new_medians() -> None:
+def test_numbers_that_differ_become_base_to_new_medians() -> None:
     base = ["median 3.00 us (20 servos)\n", "median 5.00 us (20 servos)\n",
             "median 4.00 us (20 servos)\n"]
     new = ["median 1.20 us (20 servos)\n", "median 1.40 us (20 servos)\n",
            "median 1.30 us (20 servos)\n"]
-    assert merge(base, new) == ["median 4.00 / 1.30 us (20 servos)"]
+    assert merge(base, new) == ["median 4.00->1.30 us (20 servos)"]
 
 
 def test_a_number_that_agrees_everywhere_is_printed_once() -> None:
-    assert merge(["a 1 b 2.5"], ["a 1 b 2.7"]) == ["a 1 b 2.5 / 2.7"]
+    assert merge(["a 1 b 2.5"], ["a 1 b 2.7"]) == ["a 1 b 2.5->2.7"]
 
 
 def test_lines_whose_words_differ_are_printed_for_each_side() -> None:
@@ -50,8 +50,8 @@ def test_a_base_that_is_not_a_commit_is_refused() -> None:
 def test_a_table_row_whose_column_padding_differs_is_still_merged() -> None:
     assert merge(["handrig cycle    618     0.49       9"],
                  ["handrig cycle    451     0.36      54"]) == [
-        "handrig cycle    618 / 451     0.49 / 0.36       9 / 54"]
+        "handrig cycle    618->451     0.49->0.36       9->54"]
 
 
 def test_each_rounds_values_on_request() -> None:
-    assert merge(["t 1.0", "t 3.0"], ["t 2.0", "t 2.0"], each=True) == ["t 1.0, 3.0 / 2.0"]
+    assert merge(["t 1.0", "t 3.0"], ["t 2.0", "t 2.0"], each=True) == ["t 1.0,3.0->2.0"]
