@@ -290,6 +290,7 @@ class Rig:
             watch = self.cycle.silence
             stats.servo_silences, stats.servos_held = watch.silences, watch.held
             stats.servo_recoveries = watch.recoveries
+            stats.servo_recovery_reads_max = watch.recovery_reads_max
             self._snapshot.finished = True
             self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats
