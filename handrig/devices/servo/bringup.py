@@ -148,7 +148,7 @@ class ServoPort:
         size = reg.size
         reader = {1: self.packet.read1ByteTxRx, 2: self.packet.read2ByteTxRx,
                   4: self.packet.read4ByteTxRx}[size]
-        value, result, error = reader(self.handler, servo_id, reg.address)
+        value, result, _error = reader(self.handler, servo_id, reg.address)
         if result != COMM_SUCCESS:
             raise DeviceError(f"servo {servo_id} on {self.port} at {self.baud} bps: reading "
                               f"{reg.name} failed ({self.packet.getTxRxResult(result)})")
