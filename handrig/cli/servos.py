@@ -25,12 +25,11 @@ from handrig.app.factory import port_process
 from handrig.app.robots import load_rig
 from handrig.app.sources import format_sources, rig_file
 from handrig.cli._numbers import whole_int
+from handrig.cli._ports import by_id_for
 from handrig.cli._rig import add_rig_argument
 from handrig.config.rig import BAUD_RATES, RigConfig
 from handrig.devices.servo import bringup
 from handrig.errors import ConfigError
-
-BY_ID = Path("/dev/serial/by-id")
 
 
 def _baud(text: str) -> int:
@@ -117,20 +116,6 @@ def register(sub: Any) -> None:
 def _usage(parser: argparse.ArgumentParser) -> int:
     parser.print_help()
     return 2
-
-
-def by_id_for(port: str, folder: Path = BY_ID) -> Path | None:
-    """The stable ``/dev/serial/by-id/...`` name of ``port``, if there is one."""
-    if not folder.is_dir() or port.startswith(str(folder)):
-        return None
-    try:
-        target = os.path.realpath(port)
-        for link in sorted(folder.iterdir()):
-            if os.path.realpath(link) == target:
-                return link
-    except OSError:
-        return None
-    return None
 
 
 @contextlib.contextmanager
