@@ -42,3 +42,22 @@ def check_gl_backend(what: str = "the simulated puppet") -> None:
             file="environment", key="MUJOCO_GL", value=backend,
             allowed="install it (`make render-deps`: libegl1, libgl1-mesa-dri, libosmesa6), "
             "or set MUJOCO_GL to a backend that is installed (egl), or unset it")
+
+
+def check_renderer(flag: str) -> None:
+    """ConfigError naming ``flag`` when offscreen rendering cannot work: the backend
+    (``MUJOCO_GL``, egl when unset) has no library installed."""
+    backend = os.environ.get("MUJOCO_GL", "").lower() or "egl"
+    lib = LIBRARIES.get(backend)
+    if lib is None:
+        if not has_display():
+            raise ConfigError(
+                f"MUJOCO_GL={backend} renders through a window and there is no display",
+                key=flag, allowed="set MUJOCO_GL=egl (or osmesa) to render offscreen")
+        return
+    if ctypes.util.find_library(lib) is None:
+        raise ConfigError(
+            f"offscreen rendering with MUJOCO_GL={backend} needs the {lib} library, which is "
+            "not installed", key=flag,
+            allowed="install it (`make render-deps`: libegl1, libgl1-mesa-dri, libosmesa6), "
+            "or leave out the flag")
