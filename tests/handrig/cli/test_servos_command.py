@@ -108,3 +108,19 @@ def test_reboot_clears_a_hardware_error_whose_cause_is_gone(
         assert main(["servos", "reboot", "--port", bus.port_path, "--baud", "1000000",
                      "5"]) == 0
         assert "hardware errors now: none" in capsys.readouterr().out
+
+
+def test_scan_and_set_through_sim_bus_servo_baud(capsys: pytest.CaptureFixture[str]) -> None:
+    """The same steps against ``handrig sim-bus --servo-baud`` in a process of its own."""
+    from handrig.app.factory import port_process
+
+    with port_process(["sim-bus", "--ids", "1,2,3", "--no-puppet", "--no-realtime",
+                       "--servo-baud", "1:57600,2:115200,3:1000000"],
+                      "the simulated servo bus") as (_, port):
+        assert scan(port, capsys) == [(1, 57600), (2, 115200), (3, 1_000_000)]
+        assert main(["servos", "set-id", "--port", port, "--baud", "115200", "2", "5"]) == 0
+        assert main(["servos", "set-baud", "--port", port, "--baud", "115200", "5",
+                     "1000000"]) == 0
+        capsys.readouterr()
+        assert scan(port, capsys, 57600, 115200, 1_000_000) == [
+            (1, 57600), (3, 1_000_000), (5, 1_000_000)]
