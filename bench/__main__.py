@@ -12,6 +12,7 @@ described there) without running it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import pkgutil
 import sys
@@ -59,10 +60,8 @@ def module_help(module: ModuleType, name: str) -> None:
     """``--help`` for one bench: its own parser's, else its docstring."""
     parse = getattr(module, "parse_args", None)
     if callable(parse):
-        try:
+        with contextlib.suppress(SystemExit):  # argparse exits after printing the help
             parse(["--help"])
-        except SystemExit:
-            pass
         return
     print(f"usage: python -m bench {name.removeprefix('bench_')}\n")
     print((module.__doc__ or "").strip())

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TextIO
 
 from handrig.app.sources import RIGS_DIR, Source, format_sources, rig_file
 from handrig.config.paths import CONFIG_HOME_HELP
@@ -39,7 +40,6 @@ def rig_path(rig: str | Path | None) -> Path:
     return rig_file(rig).path
 
 
-def print_sources(sources: list[Source], *, stream: object = None) -> None:
+def print_sources(sources: list[Source], *, stream: TextIO | None = None) -> None:
     """Print the files in use (to stdout unless ``stream``) and flush."""
-    out = stream if stream is not None else sys.stdout
-    print(format_sources(sources), file=out, flush=True)  # type: ignore[call-overload]
+    print(format_sources(sources), file=stream or sys.stdout, flush=True)

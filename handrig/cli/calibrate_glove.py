@@ -286,7 +286,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_values(doc: TOMLDocument, cfg: GloveConfig, port: str | None, fmt: str) -> None:
     """Set the measured values (and the port, if any) in the glove file's document."""
-    for table, ch in zip(doc["channels"], cfg.channels, strict=True):  # type: ignore[arg-type]
+    for table, ch in zip(doc["channels"], cfg.channels, strict=True):
         table["raw_open"] = ch.raw_open
         table["raw_closed"] = ch.raw_closed
     imu = doc.setdefault("imu", {})

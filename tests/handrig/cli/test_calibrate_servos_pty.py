@@ -35,7 +35,8 @@ def my_rig(home: Path) -> Path:
     """A rig.toml of the user's own, with a comment and spacing of their own."""
     path = home / "config" / "handrig" / "rig.toml"
     path.parent.mkdir(parents=True)
-    path.write_bytes(b"# my puppet, tuned by hand  \r\n" + installed_config("rig.toml").read_bytes())
+    shipped = installed_config("rig.toml").read_bytes()
+    path.write_bytes(b"# my puppet, tuned by hand  \r\n" + shipped)
     return path
 
 
