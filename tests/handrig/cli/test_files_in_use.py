@@ -72,6 +72,7 @@ def test_config_show_gives_each_value_its_source(tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     rig = tmp_path / "rig.toml"
     text = installed_config("rig.toml").read_text().replace("watchdog_ms = 100", "")
+    text = text.replace("[calibration]\nmax_zero_shift_deg = 20.0", "")
     rig.write_text(text.replace("[bus]\n", "[bus]\n# mine\n"))
     assert main(["config", "show", "--rig", str(rig)]) == 0
     out = capsys.readouterr().out
