@@ -55,7 +55,7 @@ from handrig.cli._rig import add_rig_argument
 from handrig.cli.calibrate_glove import calibrate_subparsers
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.loading import build
-from handrig.config.paths import is_installed, output_for, user_config
+from handrig.config.paths import is_installed, output_for, user_config, user_config_dir
 from handrig.config.rig import (
     POSITION_TICKS_MAX,
     POSITION_TICKS_MIN,
@@ -63,7 +63,14 @@ from handrig.config.rig import (
     RigConfig,
     ServoCalibration,
 )
-from handrig.config.toml_edit import backups_of, undo, update_servos, write_with_backup
+from handrig.config.toml_edit import (
+    BACKUP_DIR,
+    backups_of,
+    edit,
+    undo,
+    update_servos,
+    write_with_backup,
+)
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
 from handrig.errors import ConfigError, HandrigError
@@ -94,10 +101,10 @@ def register(sub: Any) -> None:
         "undo", help="put back the file as it was before the last calibration wrote it",
         description="Restore the newest backup (byte for byte) of a file a calibration "
         "wrote, and delete that backup: a second undo goes one write further back. "
-        "Default: whichever of your rig.toml and glove.toml was written last.")
+        "Default: whichever of your files in the user config directory a calibration "
+        "wrote last.")
     u.add_argument("--file", default=None, metavar="FILE",
-                   help="the calibrated file (default: your rig.toml or glove.toml, the one "
-                   "written last)")
+                   help="the calibrated file (default: the one of yours written last)")
     u.set_defaults(func=run_undo)
 
 
@@ -434,6 +441,11 @@ def run(args: argparse.Namespace) -> int:
         print("nothing to write: no servo's zero was accepted")
         return 0
     text = update_servos(rig_path.read_text(encoding="utf-8"), changes, file=str(rig_path))
+    moved = out.resolve().parent != rig_path.resolve().parent
+    robot = getattr(rig, "robot", None)
+    if moved and robot is not None:  # a preset's copy: its model and table stay where they are
+        text = edit(text, lambda doc: doc["robot"].update(
+            model=str(robot.model), retarget=str(robot.retarget)), file=str(rig_path))
     try:
         build(type(rig), tomllib.loads(text))
     except ConfigError as exc:
@@ -443,7 +455,6 @@ def run(args: argparse.Namespace) -> int:
     backup = write_with_backup(out, text)
     print(f"wrote {len(changes)} servo calibration(s) to {out}")
     print(f"  backup of what was there: {backup} (`handrig calibrate undo` puts it back)")
-    moved = out.resolve().parent != rig_path.resolve().parent
     relative = [f"{k} = {v!r}" for k in ("map", "sag_grid", "glove")
                 if (v := getattr(rig.loop, k)) and not Path(v).is_absolute()]
     if moved and relative:
@@ -460,13 +471,14 @@ def run_undo(args: argparse.Namespace) -> int:
     if args.file:
         target = Path(args.file)
     else:
-        candidates = [user_config(n) for n in ("rig.toml", "glove.toml")]
-        dated = [(backups_of(p)[-1].name.split(".", 2)[-1], p) for p in candidates
-                 if backups_of(p)]
+        folder = user_config_dir()
+        names = {p.name.split(".20", 1)[0] for p in (folder / BACKUP_DIR).glob("*.toml.*")}
+        dated = [(backups_of(folder / n)[-1].name[len(n) + 1:], folder / n) for n in names
+                 if backups_of(folder / n)]
         if not dated:
-            raise ConfigError("no calibration to undo: no backups of your rig.toml or "
-                              "glove.toml", file=str(candidates[0].parent),
+            raise ConfigError("no calibration to undo: no backups of your files",
+                              file=str(folder / BACKUP_DIR),
                               allowed="--file FILE for a file written with --out")
-        target = max(dated)[1]
+        target = max(dated)[1]  # the one written last
     print(undo(target))
     return 0
