@@ -87,6 +87,8 @@ def write_with_backup(path: Path, text: str) -> Path:
     folder = path.parent / BACKUP_DIR
     folder.mkdir(parents=True, exist_ok=True)
     stamp = _stamp()
+    while any(p.name.startswith(f"{path.name}.{stamp}") for p in backups_of(path)):
+        stamp = _stamp()  # two writes within one microsecond: the next one is later
     if path.exists():
         backup = folder / f"{path.name}.{stamp}"
         shutil.copyfile(path, backup)
