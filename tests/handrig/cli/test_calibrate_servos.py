@@ -217,3 +217,42 @@ def test_cli_writes_a_checked_copy_of_the_rig_file(tmp_path: Path):
         capture_output=True, text=True, timeout=90,
     )
     assert bad.returncode == 2 and "--ids" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_direction_check_jogging_asks_whether_the_joint_flexed_and_flips_on_no() -> None:
+    rig = load_rig_config()
+    prompts: list[str] = []
+    answers = iter(["", "", "n"])
+    with SimBus.from_rig(rig, ids=[7, 8]) as sim:
+        bus = two_servo_bus(rig, sim)
+        seen: list[int] = []
+
+        def ask(prompt: str) -> str:
+            prompts.append(prompt)
+            seen.append(sim.servo(7).goal)
+            return next(answers)
+
+        try:
+            with bus.torque(handle_signals=False):
+                changes = calibrate(bus, rig, [7], jog=True, yes=False, ask=ask,
+                                    say=lambda _s: None)
+            back = sim.servo(7).goal
+        finally:
+            bus.close()
+    assert "Did the joint flex" in prompts[2]
+    assert seen[2] == round(2048 + 10 * 4096 / 360)  # +10 deg, inside [-20, 90]
+    assert back == 2048  # returned to the zero after the question
+    assert changes == {7: {"zero_ticks": 2048, "direction": -1}}
+
+
+def test_no_clamps_means_no_clamp_advice_in_the_summary() -> None:
+    from handrig.app.factory import summary_dict
+    from handrig.app.session import format_summary
+    from handrig.devices.servo.bus import BusStats
+    from handrig.loop.stats import RunStats
+
+    summary = summary_dict(RunStats(frames=100, duration_s=1.0), BusStats(20), None, True)
+    summary["clamp_advice"] = "no clamps"
+    text = format_summary(summary)
+    assert "limit clamps      0 servo targets" in text
+    assert "high all the time" not in text and "recalibrate the glove" not in text
