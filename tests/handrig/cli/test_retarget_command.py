@@ -32,7 +32,7 @@ def test_prints_the_table_the_ranges_and_a_summary(capsys: pytest.CaptureFixture
     assert lines[0].startswith("retarget table: 16 robot joints")
     table = {ln.split()[0]: ln for ln in lines[2:18]}
     assert list(table) == LEAP_JOINTS
-    assert "+1.83 riPinkyMCPy" in table["rf_mcp"] and "little finger" in table["rf_mcp"]
+    assert "+1.62 riPinkyMCPy" in table["rf_mcp"] and "little finger" in table["rf_mcp"]
     assert "-1 riIndexMCPx" in table["if_rot"]
     assert "+1.2 riThumbCMCz +1.2 riThumbMCPz" in table["th_mcp"]
     assert "at low" in out and "at high" in out and "covers" in out
@@ -59,7 +59,7 @@ def test_json_counts_how_often_the_demo_hits_each_limit(leap_json: dict) -> None
         assert ("demo" in j["flags"]) == (d_lo < low or d_hi > high)
         assert j["capture_deg"] is not None
     assert joints["if_mcp"]["demo_cover_frac"] >= 0.6
-    assert joints["rf_mcp"]["sources"] == {"riPinkyMCPy": 1.83}
+    assert joints["rf_mcp"]["sources"] == {"riPinkyMCPy": 1.62}
 
 
 def test_a_table_file_and_a_human_rig(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
