@@ -255,6 +255,11 @@ class SimBus(Dispatcher):
         """How many times a client opened the port since :meth:`start`."""
         return self.line.sessions
 
+    @property
+    def client_closes(self) -> int:
+        """How many times a client let the port go since :meth:`start`."""
+        return self.line.closes
+
     # ------------------------------------------------------------- serving
 
     def _serve(self) -> None:
@@ -274,7 +279,6 @@ class SimBus(Dispatcher):
                     self.stats.noise_bytes += len(buf)
                     buf.clear()
                     self._partial_since = None
-                    self.stats.client_closes += 1
                 if not chunk:
                     self._housekeeping(now)
                     if buf and now - last_rx > STALE_PARTIAL_S:

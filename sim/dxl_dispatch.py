@@ -56,7 +56,6 @@ class BusStats:
     by_instruction: Counter[int] = field(default_factory=Counter)
     goals_decoded: int = 0  # Goal Position values received
     goals_outside: int = 0  # of those, outside the servo's goal_limits
-    client_closes: int = 0  # times the client let the port go
 
     @property
     def overhead_mean_s(self) -> float:

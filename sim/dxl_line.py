@@ -72,6 +72,8 @@ class PtyLine:
         self.client_open = False
         self.sessions = 0
         """How many times a client opened the port (noticed at its first poll)."""
+        self.closes = 0
+        """How many times a client that held the port let it go."""
         self._poll = select.poll()
 
     def open(self) -> str:
@@ -126,6 +128,8 @@ class PtyLine:
             return data, False
         if revents & select.POLLHUP:
             was_open = self.client_open
+            if was_open:
+                self.closes += 1
             self.client_open = False
             time.sleep(NO_CLIENT_POLL_S)  # poll reports HUP at once while no client holds it
             return None, was_open

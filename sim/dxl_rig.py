@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from typing import Literal, cast
+from typing import cast
 
 from firmware_protocol.dynamixel import MODELS
-from handrig.config.rig import RigConfig
+from handrig.config.rig import RigConfig, ServoModel
 from handrig.errors import ConfigError
 from sim.dxl_servo import EmulatedServo
 
@@ -21,7 +21,7 @@ def with_model(config: RigConfig, model: str) -> RigConfig:
     if model not in MODELS:
         raise ConfigError("unknown servo model", key="model", value=model,
                           allowed=", ".join(MODELS))
-    name = cast(Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288"], model)
+    name = cast(ServoModel, model)
     return dataclasses.replace(config, servos=tuple(
         dataclasses.replace(s, model=name) for s in config.servos))
 

@@ -76,6 +76,7 @@ CURRENT_MODE = 0
 CURRENT_BASED_POSITION_MODE = 5
 # Present Current (126, int16), Present Velocity (128, int32), Present Position (132, int32).
 _PRESENT = struct.Struct("<hii")
+_I16, _U16, _I32, _U32 = (struct.Struct(f) for f in ("<h", "<H", "<i", "<I"))
 # Thermal model, first order: dT/dt = (T_ambient + R_th x P - T) / tau, with P the
 # winding's I^2 R (R = V_nominal / I_stall, both from the datasheet) plus the
 # electronics' standby draw at the supply voltage. The standby current, R_th and tau
@@ -280,9 +281,9 @@ class EmulatedServo:
         current = round(d * self.motor_current_ma / self.info.current_unit_ma)
         current = max(-32768, min(32767, current))
         _PRESENT.pack_into(mem, 126, current, velocity, position)
-        threshold = int.from_bytes(mem[24:28], "little")
+        threshold = _U32.unpack_from(mem, 24)[0]
         mem[122] = 1 if abs(velocity) > threshold else 0
-        mem[124:126] = self._present_pwm().to_bytes(2, "little", signed=True)
+        _I16.pack_into(mem, 124, self._present_pwm())
         self._publish_moving_status(position, threshold)
 
     def _present_pwm(self) -> int:
@@ -294,8 +295,8 @@ class EmulatedServo:
         info = self.info
         duty = (self.motor_velocity_rpm / info.no_load_speed_rpm
                 + self.motor_current_ma / (info.stall_current_a * 1000.0))
-        limit = int.from_bytes(self.mem[36:38], "little")
-        pwm = round(self.direction * duty * PWM_FULL)
+        limit = _U16.unpack_from(self.mem, 36)[0]
+        pwm = round((-duty if self.mem[10] & 1 else duty) * PWM_FULL)
         return max(-limit, min(limit, pwm))
 
     def _publish_moving_status(self, position: int, threshold: int) -> None:
@@ -304,7 +305,7 @@ class EmulatedServo:
         within Moving Threshold of Goal Position (this emulator reads the threshold in
         pulses for it: the e-manual names no other window)."""
         mem = self.mem
-        goal = int.from_bytes(mem[116:120], "little", signed=True)
+        goal = _I32.unpack_from(mem, 116)[0]
         status = self._profile_type
         ongoing = mem[112:116] != b"\0\0\0\0" and self.trajectory_ticks != goal
         if ongoing and mem[64]:
@@ -376,12 +377,22 @@ class EmulatedServo:
 
     def tick(self, dt_s: float) -> None:
         """The servo's own clock: Realtime Tick, the profile generator, Moving Status."""
+        mem = self.mem
         self.tick_ms = (self.tick_ms + dt_s * 1000.0) % 32768.0
-        self.mem[120:122] = int(self.tick_ms).to_bytes(2, "little")
-        if dt_s > 0:
-            self.step_profile(dt_s)
-            self._publish_moving_status(self.present,
-                                        int.from_bytes(self.mem[24:28], "little"))
+        _U16.pack_into(mem, 120, int(self.tick_ms))
+        if dt_s <= 0:
+            return
+        if mem[112:116] == b"\0\0\0\0" and self._profile_type == PROFILE_NONE \
+                and (mem[64] or self._profile_goal is None):
+            # no profile: the trajectory is the goal (cheap: the puppet ticks every push)
+            if mem[140:144] != mem[116:120] or mem[136:140] != b"\0\0\0\0":
+                mem[140:144] = mem[116:120]
+                mem[136:140] = b"\0\0\0\0"
+                self.trajectory_ticks = float(_I32.unpack_from(mem, 116)[0])
+                self.trajectory_velocity = 0.0
+            return
+        self.step_profile(dt_s)
+        self._publish_moving_status(self.present, _U32.unpack_from(mem, 24)[0])
 
     def advance(self, dt_s: float) -> None:
         """Kinematic motion without physics: :meth:`tick`, then toward the goal (or the
@@ -508,9 +519,10 @@ class EmulatedServo:
             mem = self.mem
             low = int.from_bytes(mem[52:56], "little", signed=True)
             if low <= value <= int.from_bytes(mem[48:52], "little", signed=True):
-                self.mem[116:120] = data
-                self._publish_moving_status(self.present, int.from_bytes(mem[24:28], "little"))
-                return self.error_byte()
+                mem[116:120] = data
+                self._publish_moving_status(_I32.unpack_from(mem, 132)[0],
+                                            _U32.unpack_from(mem, 24)[0])
+                return ERROR_ALERT if mem[70] else 0
             self.counters["errors"] += 1
             return self.error_byte(ErrorCode.DATA_LIMIT)
         code = self.check_write(address, data)

@@ -31,6 +31,10 @@ POSITION_TICKS_MAX = 4095
 # Model numbers of the X-series servos we know (REFERENCE.md section 2).
 MODEL_NUMBERS: dict[str, int] = {"XL330-M288": 1200, "XC330-T288": 1220, "XM430-W350": 1020}
 MODEL_NUMBERS["XC330-M288"] = 1240  # the LEAP hand's servo
+MODEL_NUMBERS["XL330-M077"] = 1190
+MODEL_NUMBERS["XC430-W150"] = 1070  # no current sensing (e-manual): no current limit
+ServoModel = Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288", "XL330-M077",
+                     "XC430-W150"]
 # Baud rates the X series and dynamixel-sdk both accept.
 BAUD_RATES: tuple[int, ...] = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000)
 
@@ -41,7 +45,7 @@ class ServoCalibration:
 
     id: int
     joint: str
-    model: Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288"] = "XL330-M288"
+    model: ServoModel = "XL330-M288"
     zero_ticks: int = 2048
     direction: Literal[1, -1] = 1
     gear_ratio: float = 1.0
@@ -230,11 +234,14 @@ OPERATING_MODES: dict[str, int] = {
 }
 # Current Limit (38) maximum per model, mA: XL330-M288 1750 x 1 mA, XC330-T288 910 x 1 mA,
 # XC330-M288 2352 x 1 mA, XM430-W350 1193 x 2.69 mA (ROBOTIS e-manual control tables).
+# XL330-M077 1750 x 1 mA. Models absent here (XC430-W150) have no Current Limit.
 CURRENT_LIMIT_MAX_MA: dict[str, float] = {
     "XL330-M288": 1750.0, "XC330-T288": 910.0, "XC330-M288": 2352.0, "XM430-W350": 1193 * 2.69,
+    "XL330-M077": 1750.0,
 }
 CURRENT_UNIT_MA: dict[str, float] = {
     "XL330-M288": 1.0, "XC330-T288": 1.0, "XC330-M288": 1.0, "XM430-W350": 2.69,
+    "XL330-M077": 1.0,
 }
 GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
 RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
@@ -262,8 +269,13 @@ class ServoSettingsGroup:
     current_limit_ma: int | None = None
     position_p_gain: int | None = None
     position_d_gain: int | None = None
+    operating_mode: Literal["position", "extended_position", "current_based_position"] | None \
+        = None
 
     def check(self) -> None:
+        if self.operating_mode is not None and self.operating_mode not in OPERATING_MODES:
+            raise ConfigError("unknown operating mode", key="operating_mode",
+                              value=self.operating_mode, allowed=", ".join(OPERATING_MODES))
         if not self.ids:
             raise ConfigError("a group needs at least one servo ID", key="ids")
         _check_current(self.current_limit_ma, "current_limit_ma")
@@ -327,8 +339,9 @@ class ResolvedServoSettings:
     return_delay_us: int
 
     def current_limit_units(self, model: str) -> int | None:
-        """Current Limit / Goal Current in the register's units for servo ``model``."""
-        if self.current_limit_ma is None:
+        """Current Limit / Goal Current in the register's units for servo ``model``
+        (None: none set, or a model without current sensing)."""
+        if self.current_limit_ma is None or model not in CURRENT_UNIT_MA:
             return None
         return round(self.current_limit_ma / CURRENT_UNIT_MA[model])
 
@@ -337,13 +350,16 @@ def resolve_servo_settings(settings: ServoSettings, servo_id: int) -> ResolvedSe
     """``[servo_settings]`` for one servo, with its group's values where it has one."""
     current, p_gain, d_gain = (settings.current_limit_ma, settings.position_p_gain,
                                settings.position_d_gain)
+    mode = settings.operating_mode_value
     for group in settings.groups:
         if servo_id in group.ids:
+            if group.operating_mode is not None:
+                mode = OPERATING_MODES[group.operating_mode]
             current = group.current_limit_ma if group.current_limit_ma is not None else current
             p_gain = group.position_p_gain if group.position_p_gain is not None else p_gain
             d_gain = group.position_d_gain if group.position_d_gain is not None else d_gain
-    return ResolvedServoSettings(servo_id, settings.operating_mode_value, current, p_gain,
-                                 d_gain, settings.return_delay_us)
+    return ResolvedServoSettings(servo_id, mode, current, p_gain, d_gain,
+                                 settings.return_delay_us)
 
 
 def check_servo_settings(rig: RigConfig) -> None:
@@ -357,6 +373,13 @@ def check_servo_settings(rig: RigConfig) -> None:
                                   allowed=", ".join(str(i) for i in sorted(ids)))
     for s in rig.servos:
         resolved = resolve_servo_settings(rig.servo_settings, s.id)
+        if s.model not in CURRENT_LIMIT_MAX_MA:  # no current sensing: nothing to check
+            if resolved.operating_mode == OPERATING_MODES["current_based_position"]:
+                raise ConfigError(f"servo {s.id} ({s.model}) has no current-based position "
+                                  "mode", key="servo_settings.operating_mode",
+                                  allowed="a group with operating_mode = \"position\" or "
+                                  "\"extended_position\" for it")
+            continue
         top = CURRENT_LIMIT_MAX_MA[s.model]
         if resolved.current_limit_ma is not None and resolved.current_limit_ma > top:
             raise ConfigError(f"current limit above the {s.model}'s maximum for servo {s.id}",

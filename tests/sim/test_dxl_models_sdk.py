@@ -70,8 +70,11 @@ def test_defaults_after_a_reboot_follow_the_model(
             # Goal Current starts at Current Limit, also after a reboot
             assert ph.write2ByteTxRx(port, i, Reg.GOAL_CURRENT, 5) == (COMM_SUCCESS, 0)
             assert ph.reboot(port, i)[0] == COMM_SUCCESS
-            time.sleep(0.15)
-            assert ph.read2ByteTxRx(port, i, Reg.GOAL_CURRENT)[0] == m.current_limit
+            deadline = time.monotonic() + 2.0  # silent while it reboots (0.1 s)
+            while ph.ping(port, i)[1] != COMM_SUCCESS and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert ph.read2ByteTxRx(port, i, Reg.GOAL_CURRENT) == (m.current_limit,
+                                                                   COMM_SUCCESS, 0)
 
 
 def test_moving_status_in_position_and_present_pwm(

@@ -85,6 +85,8 @@ def test_sim_bus_servo_baud_flag(
     sim_bus_at_three_bauds: tuple[subprocess.Popen[str], str],
 ) -> None:
     proc, path = sim_bus_at_three_bauds
+    assert proc.stdout is not None
+    assert "baud 57600, 115200, 1000000" in proc.stdout.readline()  # the "servos:" line
     assert _ping_all(path, 57_600) == [1, 40]
     assert _ping_all(path, 115_200) == [2]
     assert _ping_all(path, 1_000_000) == [3]
@@ -92,7 +94,7 @@ def test_sim_bus_servo_baud_flag(
     proc.send_signal(signal.SIGINT)
     out, _ = proc.communicate(timeout=10)
     assert proc.returncode == 0
-    assert "baud 57600, 115200, 1000000" in out
+    assert "sim-bus: " in out and "0 bad CRC" in out
 
 
 @pytest.mark.parametrize("spec, message", [
@@ -160,6 +162,7 @@ def test_a_client_that_probes_closes_and_reopens_is_served() -> None:
                 time.sleep(0.005)
             assert not bus.client_open
         assert bus.running and bus.error is None
+        time.sleep(0.05)  # the bus thread counts the last half packet as noise
         assert sessions == sorted(set(sessions)) and len(sessions) == 3  # each noticed
-        assert bus.stats.client_closes >= 3
+        assert bus.client_closes == 3
         assert bus.stats.noise_bytes >= 3 * 6
