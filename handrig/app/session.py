@@ -233,7 +233,8 @@ class _Session:
             for line in header:
                 log(line)
         outputs = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
-                              record=opts.record, log=log)
+                              record=opts.record, log=log,
+                              glove_rate_hz=parts.glove_config.glove.rate_hz)
         rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=self._rig_log,
                             profile=opts.profile)
         self.outputs = list(outputs)
@@ -340,6 +341,8 @@ def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
         duration = f"{rec['duration_s']:.1f} s" if rec.get("duration_s") is not None else "-"
         dropped = (f", {rec['frames_dropped']} frames dropped (disk too slow)"
                    if rec.get("frames_dropped") else "")
+        if rec.get("stopped_reason"):
+            dropped = f", {rec['frames_dropped']} frames not recorded: {rec['stopped_reason']}"
         rec_text = (f"recording {rec['path']}: {rec['frames']} frames, {duration}, "
                     f"{rec['bytes']} bytes{dropped}")
     else:

@@ -18,6 +18,7 @@ that read.
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
 import select
@@ -126,8 +127,14 @@ class SerialGlove(GloveSource):
         import serial  # adapter module: the only place the glove side touches pyserial
 
         try:
-            return serial.Serial(self.port, self.baud, timeout=0, exclusive=False)
+            # exclusive: a second reader of the same glove would take half its frames
+            return serial.Serial(self.port, self.baud, timeout=0, exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
+            if isinstance(exc, OSError) and exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
+                raise DeviceError(
+                    f"glove port {self.port} is busy: another program (a second handrig"
+                    " run, a glove monitor, a serial terminal) has it open; close that one"
+                    " first") from None
             raise DeviceError(
                 f"cannot open glove port {self.port}: {exc}; is the glove plugged in? "
                 "(pass the right port with --glove PORT; on Linux add your user to 'dialout')"

@@ -89,6 +89,7 @@ def test_outputs_are_listed() -> None:
         fmt = "bvh"
         frames_written = 2200
         rate_hz = 200.0
+        duration_s = 11.0
         bytes_written = 123_456
         frames_dropped = 0
 

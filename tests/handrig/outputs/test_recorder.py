@@ -371,7 +371,7 @@ def test_bvh_fingers_curl_toward_the_palm_on_both_hands(tmp_path: Path) -> None:
             fist[c.index] = 60.0
     wrist = np.array([[0.0, 0, 0, 0], [0.0, 0, 0, 0], [40.0, 0, 40.0, 0], [0.0, 15, 0.0, 15]])
     path = tmp_path / "fist.bvh"
-    with Recorder(path, rate_hz=30.0) as rec:
+    with Recorder(path, rate_hz=10.0) as rec:  # a frame every 0.1 s: one BVH frame each
         rec.add(0.0, rest, wrist[0])
         rec.add(0.1, fist, wrist[1])
         rec.add(0.2, rest, wrist[2])

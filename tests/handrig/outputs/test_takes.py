@@ -1,0 +1,203 @@
+"""Takes are never replaced, keep time (CSV as recorded, BVH resampled), and survive a
+full disk: the recorder stops at once, says why, and what it wrote stays readable."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import bvh as outside_bvh  # an outside BVH reader, to check ours against
+import numpy as np
+import pytest
+
+from handrig.errors import DataError
+from handrig.offline.bvh import read_bvh
+from handrig.outputs.recorder import Recorder, free_path, load_performance, repair
+
+
+def _poses(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return rng.uniform(-20, 60, (n, 50)), rng.uniform(-30, 30, (n, 4))
+
+
+# -- a take is never replaced -------------------------------------------------------
+
+
+def test_an_existing_take_is_refused_naming_it_and_the_next_free_name(tmp_path: Path) -> None:
+    take = tmp_path / "take.csv"
+    take.write_text("the first take\n")
+    (tmp_path / "take-2.csv").write_text("the second take\n")
+    with pytest.raises(DataError) as err:
+        Recorder(take)
+    text = str(err.value)
+    assert text.startswith(f"{take}: a take is already there, and a take is never replaced")
+    assert str(tmp_path / "take-3.csv") in text and "(the next free name)" in text
+    assert take.read_text() == "the first take\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take-2.csv", "take.csv"]
+    assert free_path(tmp_path / "new.bvh") == tmp_path / "new.bvh"
+
+
+def test_a_file_that_appears_during_the_run_is_kept_and_the_take_gets_the_next_name(
+        tmp_path: Path) -> None:
+    take = tmp_path / "take.bvh"
+    logged: list[str] = []
+    poses, wrist = _poses(10)
+    rec = Recorder(take, rate_hz=100.0, log=logged.append)
+    for i in range(10):
+        rec.add(i / 100.0, poses[i], wrist[i])
+    take.write_text("someone else's file\n")  # e.g. a second run started at the same time
+    final = rec.close()
+    assert final == tmp_path / "take-2.bvh" == rec.path
+    assert take.read_text() == "someone else's file\n"
+    assert read_bvh(final).n_frames == 10 and not (tmp_path / "take.bvh.partial").exists()
+    assert logged == [f"{take} appeared during the run and is kept: the take is {final}"]
+
+
+# -- takes keep time ----------------------------------------------------------------
+
+
+def _glove_times(rate_hz: float, seconds: float, silence: tuple[float, float] | None,
+                 seed: int = 1) -> np.ndarray:
+    """Frame times of a glove at ``rate_hz`` with USB jitter (up to a third of a period),
+    silent over ``silence`` = (start, end) s if given."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1.0 / rate_hz)
+    t = t + rng.uniform(0.0, 1.0 / (3 * rate_hz), t.shape)
+    t[0] = 0.0
+    if silence is not None:
+        t = t[(t < silence[0]) | (t >= silence[1])]
+    return np.sort(t) + 0.25  # the first frame comes a little after the run starts
+
+
+@pytest.mark.parametrize("glove_hz", [100.0, 200.0, 500.0])
+def test_bvh_is_resampled_from_the_frames_times_and_keeps_a_silence(
+        tmp_path: Path, glove_hz: float) -> None:
+    t = _glove_times(glove_hz, 4.0, silence=(1.5, 2.5))
+    poses, wrist = _poses(len(t))
+    bvh_rate = 120.0  # another rate than the glove's: the user's choice
+    with Recorder(tmp_path / "t.bvh", rate_hz=bvh_rate) as b, \
+            Recorder(tmp_path / "t.csv", rate_hz=glove_hz) as c:
+        for i in range(len(t)):
+            b.add(t[i], poses[i], wrist[i])
+            c.add(t[i], poses[i], wrist[i])
+    span = t[-1] - t[0]
+    # CSV: every frame with its own time, the silence a 1 s gap between two rows
+    tc, pc, wc = load_performance(tmp_path / "t.csv")
+    np.testing.assert_allclose(tc, t, atol=1e-6)
+    np.testing.assert_allclose(pc, poses, atol=1e-6)
+    assert wc is not None
+    np.testing.assert_allclose(wc, wrist, atol=1e-6)
+    assert np.max(np.diff(tc)) == pytest.approx(1.0, abs=2.0 / glove_hz)
+    # BVH: one frame per 1/120 s from the first frame to the last, each the newest frame
+    # at or before its time (what the servos held then)
+    tb, pb, wb = load_performance(tmp_path / "t.bvh")
+    assert len(tb) == int(np.floor(span * bvh_rate + 1e-6)) + 1
+    assert abs(len(tb) / bvh_rate - (span + 1.0 / bvh_rate)) <= 1.0 / bvh_rate
+    src = np.searchsorted(t, t[0] + tb + 1e-7, side="right") - 1
+    np.testing.assert_allclose(pb, poses[src], atol=1e-4)
+    assert wb is not None
+    np.testing.assert_allclose(wb, wrist[src], atol=1e-4)
+    in_silence = (t[0] + tb > 1.5 + 0.25 + 0.01) & (t[0] + tb < 2.5 + 0.25 - 0.01)
+    assert in_silence.sum() >= np.floor(0.98 * bvh_rate)  # 0.98 s of frames...
+    assert len(set(src[in_silence])) == 1  # ...all holding the last pose before it
+    # an outside reader agrees on the frame count and the frame time
+    with open(tmp_path / "t.bvh") as f:
+        mocap = outside_bvh.Bvh(f.read())
+    assert mocap.nframes == len(tb) and mocap.frame_time == pytest.approx(1.0 / bvh_rate)
+
+
+def test_a_frame_on_the_grid_is_written_at_once_and_the_rest_at_close(tmp_path: Path) -> None:
+    poses, wrist = _poses(3)
+    rec = Recorder(tmp_path / "g.bvh", rate_hz=100.0)
+    rec.add(0.0, poses[0], wrist[0])
+    rec.add(0.025, poses[1], wrist[1])  # grid times 0.01, 0.02 hold frame 0
+    rec.flush()
+    assert rec.frames_written == 3
+    rec.add(0.04, poses[2], wrist[2])  # 0.03 holds frame 1, 0.04 is frame 2's own
+    rec.close()
+    _, p, _ = load_performance(tmp_path / "g.bvh")
+    np.testing.assert_allclose(p, poses[[0, 0, 0, 1, 2]], atol=1e-4)
+
+
+@pytest.mark.parametrize("fmt", ["csv", "bvh"])
+def test_repair_and_the_readers_handle_an_uneven_take_cut_short(tmp_path: Path,
+                                                                 fmt: str) -> None:
+    t = _glove_times(200.0, 2.0, silence=(0.8, 1.3))
+    poses, wrist = _poses(len(t))
+    path = tmp_path / f"cut.{fmt}"
+    rec = Recorder(path, rate_hz=200.0)
+    for i in range(len(t)):
+        rec.add(t[i], poses[i], wrist[i])
+    rec.flush()
+    written = rec.frames_written
+    os.close(rec._fd)  # the run dies here: the take stays a .partial
+    part = tmp_path / f"cut.{fmt}.partial"
+    with open(part, "ab") as f:
+        f.write(b"12.5,3" if fmt == "csv" else b"0.000000 1.2")  # a frame cut in half
+    done = repair(part)
+    assert done.path == path and done.frames == written and done.bytes_dropped > 0
+    t2, p2, _ = load_performance(path)
+    assert len(t2) == written
+    if fmt == "csv":
+        np.testing.assert_allclose(t2, t[:written], atol=1e-6)
+    else:
+        src = np.searchsorted(t, t[0] + t2 + 1e-7, side="right") - 1
+        np.testing.assert_allclose(p2, poses[src], atol=1e-4)
+
+
+# -- a full disk ----------------------------------------------------------------------
+
+_CHILD = textwrap.dedent("""
+    import json, resource, signal, sys, time
+    import numpy as np
+    from handrig.outputs.recorder import Recorder
+
+    path, limit = sys.argv[1], int(sys.argv[2])
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails: EFBIG
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    rec = Recorder(path, rate_hz=200.0, flush_s=0.05,
+                   log=lambda m: print("LOG", json.dumps(m), flush=True))
+    pose, wrist = np.linspace(-10, 50, 50), np.zeros(4)
+    for i in range(600):  # 3 s at 200 Hz: the show goes on
+        rec.add(i / 200.0, pose + i * 1e-3, wrist)
+        if i % 50 == 0:
+            print("FRAME", i, flush=True)
+        time.sleep(0.005)
+    final = rec.close()
+    print("DONE", json.dumps({"path": str(final), "written": rec.frames_written,
+                              "dropped": rec.frames_dropped, "added": rec.n_frames,
+                              "reason": rec.stopped_reason}), flush=True)
+""")
+
+
+@pytest.mark.parametrize("fmt", ["csv", "bvh"])
+def test_a_full_disk_stops_the_recording_at_once_and_the_take_stays_readable(
+        tmp_path: Path, fmt: str) -> None:
+    """A real process with a file size limit (RLIMIT_FSIZE: no root, no loop device): its
+    writes past the limit fail as on a full disk."""
+    path = tmp_path / f"take.{fmt}"
+    limit = 60_000  # bytes: about 150 (CSV) or 240 (BVH) frames of the 600
+    out = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(limit)],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    logs = [i for i, ln in enumerate(lines) if ln.startswith("LOG ")]
+    assert len(logs) == 1
+    message = json.loads(lines[logs[0]][4:])
+    assert message.startswith(f"recording {path} stopped: the file size limit was reached")
+    assert "the show goes on" in message
+    # said during the run, not at its end: frames were still being added after it
+    assert any(ln.startswith("FRAME ") for ln in lines[logs[0]:])
+    done = json.loads(next(ln for ln in lines if ln.startswith("DONE "))[5:])
+    assert done["path"] == str(path) and done["reason"] == message
+    assert 0 < done["written"] < 600 and done["dropped"] > 0
+    assert done["added"] == 600
+    assert path.stat().st_size <= limit
+    t, poses, _ = load_performance(path)  # readable as it is, no repair needed
+    assert len(t) == done["written"]
+    np.testing.assert_allclose(poses[-1], np.linspace(-10, 50, 50) + (len(t) - 1) * 1e-3,
+                               atol=1e-4)
