@@ -20,11 +20,15 @@ sign +1 on the right and -1 on the left (the skeleton mirrors across X).
 as ``t_s = i * frame_time``; a recording without wrists has zero wrist channels.
 
 BVH needs a fixed frame time while the loop's frames come when the glove's do (and at
-the floor rate when it is silent), so :class:`BvhTake` resamples: frame ``k`` of the
-file holds the pose of the newest frame added at or before ``t_first + k / rate_hz``
-(a zero-order hold, which is what the servos did: each goal stays until the next).
-The file therefore lasts as long as the performance, within one frame, whatever the
-glove's rate, its jitter, catch-up cycles or a silence.
+the floor rate when it is silent), so :class:`BvhTake` resamples. Frame ``k`` of the
+file stands for time ``t_first + k / rate_hz`` and holds the newest frame added at or
+before half a frame after that time: a frame within half a frame of it (so a glove at
+the file's rate maps one to one, whatever its jitter, instead of a late frame being
+doubled and the next dropped), else the frame before it, held, as the servos held
+each goal until the next (so a glove silence stays a silence of the same length). The
+file covers the frames from the first to the last: it lasts as long as the
+performance, within one frame, whatever the glove's rate, catch-up cycles or a
+silence.
 
 The header's frame count is a fixed-width field (:data:`FRAMES_WIDTH`), rewritten
 after each batch the writer puts in the file.
@@ -113,16 +117,16 @@ class BvhTake(TakeFormat):
         if t0 is None:
             self._t0 = t0 = self._t_last = t_s
         rate, k = self.rate_hz, self._k
-        # grid times t0 + k / rate before this frame hold the frame before it
-        before = math.ceil((t_s - GRID_TOLERANCE_S - t0) * rate)
+        # frame k holds the newest frame at or before t0 + (k + 1/2) / rate: those up
+        # to this frame's time hold the frame before it, one just at it holds this one
+        before = math.ceil((t_s - GRID_TOLERANCE_S - t0) * rate - 0.5)
         if before > k:
             emit(self._line(), before - k)
             k = before
         np.copyto(self._held, values)
         self._held_line = b""
         self._t_last = max(self._t_last, t_s)
-        # a grid time at this frame's own time (within the tolerance) is this frame's
-        upto = math.floor((t_s + GRID_TOLERANCE_S - t0) * rate) + 1
+        upto = math.floor((t_s + GRID_TOLERANCE_S - t0) * rate - 0.5) + 1
         if upto > k:
             emit(self._line(), upto - k)
             k = upto
@@ -131,6 +135,7 @@ class BvhTake(TakeFormat):
     def finish(self, emit: Emit) -> None:
         if self._t0 is None:
             return
+        # the frames up to the last frame's own time
         total = math.floor((self._t_last + GRID_TOLERANCE_S - self._t0) * self.rate_hz) + 1
         if total > self._k:
             emit(self._line(), total - self._k)

@@ -93,11 +93,11 @@ def test_bvh_is_resampled_from_the_frames_times_and_keeps_a_silence(
     np.testing.assert_allclose(wc, wrist, atol=1e-6)
     assert np.max(np.diff(tc)) == pytest.approx(1.0, abs=2.0 / glove_hz)
     # BVH: one frame per 1/120 s from the first frame to the last, each the newest frame
-    # at or before its time (what the servos held then)
+    # at or before half a frame after its time (what the servos held then)
     tb, pb, wb = load_performance(tmp_path / "t.bvh")
     assert len(tb) == int(np.floor(span * bvh_rate + 1e-6)) + 1
     assert abs(len(tb) / bvh_rate - (span + 1.0 / bvh_rate)) <= 1.0 / bvh_rate
-    src = np.searchsorted(t, t[0] + tb + 1e-7, side="right") - 1
+    src = np.searchsorted(t, t[0] + tb + 0.5 / bvh_rate + 1e-7, side="right") - 1
     np.testing.assert_allclose(pb, poses[src], atol=1e-4)
     assert wb is not None
     np.testing.assert_allclose(wb, wrist[src], atol=1e-4)
@@ -110,17 +110,34 @@ def test_bvh_is_resampled_from_the_frames_times_and_keeps_a_silence(
     assert mocap.nframes == len(tb) and mocap.frame_time == pytest.approx(1.0 / bvh_rate)
 
 
-def test_a_frame_on_the_grid_is_written_at_once_and_the_rest_at_close(tmp_path: Path) -> None:
+def test_bvh_frames_hold_the_frame_up_to_half_a_frame_after_their_time(tmp_path: Path) -> None:
+    """Frame k (time k / rate) holds the newest frame at or before (k + 1/2) / rate, and
+    is written as soon as a frame shows that none nearer comes."""
     poses, wrist = _poses(3)
     rec = Recorder(tmp_path / "g.bvh", rate_hz=100.0)
     rec.add(0.0, poses[0], wrist[0])
-    rec.add(0.025, poses[1], wrist[1])  # grid times 0.01, 0.02 hold frame 0
+    rec.add(0.025, poses[1], wrist[1])  # 0.00, 0.01 hold frame 0; 0.02 takes it (tie)
     rec.flush()
     assert rec.frames_written == 3
-    rec.add(0.04, poses[2], wrist[2])  # 0.03 holds frame 1, 0.04 is frame 2's own
-    rec.close()
+    rec.add(0.04, poses[2], wrist[2])  # 0.03 holds frame 1; 0.04 waits for what follows
+    rec.flush()
+    assert rec.frames_written == 4
+    rec.close()  # nothing follows: 0.04 is frame 2's, the last time a frame came
     _, p, _ = load_performance(tmp_path / "g.bvh")
-    np.testing.assert_allclose(p, poses[[0, 0, 0, 1, 2]], atol=1e-4)
+    np.testing.assert_allclose(p, poses[[0, 0, 1, 1, 2]], atol=1e-4)
+
+
+def test_a_jittery_glove_at_the_bvh_rate_maps_one_to_one(tmp_path: Path) -> None:
+    rng = np.random.default_rng(3)
+    t = np.arange(400) / 200.0 + rng.uniform(-0.4, 0.4, 400) / 200.0  # +-0.4 frame
+    t[0] = 0.0
+    poses, wrist = _poses(len(t))
+    with Recorder(tmp_path / "j.bvh", rate_hz=200.0) as rec:
+        for i in range(len(t)):
+            rec.add(t[i], poses[i], wrist[i])
+    _, p, _ = load_performance(tmp_path / "j.bvh")
+    n = int(np.floor(t[-1] * 200.0 + 1e-9)) + 1
+    np.testing.assert_allclose(p, poses[:n], atol=1e-4)  # none doubled, none dropped
 
 
 @pytest.mark.parametrize("fmt", ["csv", "bvh"])
@@ -145,7 +162,7 @@ def test_repair_and_the_readers_handle_an_uneven_take_cut_short(tmp_path: Path,
     if fmt == "csv":
         np.testing.assert_allclose(t2, t[:written], atol=1e-6)
     else:
-        src = np.searchsorted(t, t[0] + t2 + 1e-7, side="right") - 1
+        src = np.searchsorted(t, t[0] + t2 + 0.5 / 200.0 + 1e-7, side="right") - 1
         np.testing.assert_allclose(p2, poses[src], atol=1e-4)
 
 
