@@ -218,3 +218,68 @@ def test_a_full_disk_stops_the_recording_at_once_and_the_take_stays_readable(
     assert len(t) == done["written"]
     np.testing.assert_allclose(poses[-1], np.linspace(-10, 50, 50) + (len(t) - 1) * 1e-3,
                                atol=1e-4)
+
+
+# -- the same, through a real `handrig run` -------------------------------------------
+
+CLI = [sys.executable, "-m", "handrig.cli"]
+
+
+def test_handrig_run_refuses_an_existing_take_before_the_servos(tmp_path: Path) -> None:
+    from sim.demo_recording import DEMO_RECORDING
+
+    take = tmp_path / "take.bvh"
+    take.write_text("yesterday's take\n")
+    out = subprocess.run([*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim",
+                          "--seconds", "1", "--record", str(take), "--json"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2, out.stderr
+    assert (f"handrig: error: {take}: a take is already there, and a take is never"
+            f" replaced; record to {tmp_path / 'take-2.bvh'}") in out.stderr
+    summary = json.loads(out.stdout)
+    assert summary["torque_off"] is None and summary["frames"] == 0
+    assert "simulated servo bus" not in out.stderr  # refused before the bus was opened
+    assert take.read_text() == "yesterday's take\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take.bvh"]
+
+
+def _file_size_limit(limit: int) -> None:
+    import resource
+    import signal
+
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # kept across exec: writes fail, EFBIG
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+
+def test_handrig_run_goes_on_when_the_disk_fills_and_says_so_at_once(tmp_path: Path) -> None:
+    from sim.demo_recording import DEMO_RECORDING
+
+    take = tmp_path / "take.csv"
+    limit = 150_000  # bytes: about 1.2 s of the 200 Hz take (the run is 4 s and the ease)
+    proc = subprocess.Popen(
+        [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--seconds", "4",
+         "--record", str(take), "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: _file_size_limit(limit))
+    try:
+        out, err = proc.communicate(timeout=180)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    lines = err.splitlines()
+    stopped = [i for i, ln in enumerate(lines) if ln.startswith(f"recording {take} stopped")]
+    assert len(stopped) == 1, err
+    assert "the file size limit was reached" in lines[stopped[0]]
+    assert "the show goes on" in lines[stopped[0]]
+    done = next(i for i, ln in enumerate(lines) if "4 s done" in ln)
+    assert stopped[0] < done  # said while the show ran, not after it
+    summary = json.loads(out)
+    assert summary["torque_off"] is True and "error" not in summary
+    assert summary["stop_reason"] == "4 s done" and summary["frames"] > 500
+    rec = summary["outputs"]["recording"]
+    assert rec["stopped_reason"] == lines[stopped[0]]
+    assert rec["frames"] > 0 and rec["frames_dropped"] > 0
+    t, poses, _ = load_performance(take)  # readable as it is
+    assert len(t) == rec["frames"] and take.stat().st_size <= limit
+    assert np.all(np.diff(t) >= 0) and np.isfinite(poses).all()
