@@ -283,3 +283,40 @@ def test_handrig_run_goes_on_when_the_disk_fills_and_says_so_at_once(tmp_path: P
     t, poses, _ = load_performance(take)  # readable as it is
     assert len(t) == rec["frames"] and take.stat().st_size <= limit
     assert np.all(np.diff(t) >= 0) and np.isfinite(poses).all()
+
+
+def test_record_convert_writes_a_bvh_at_the_rate_the_user_chooses(tmp_path: Path) -> None:
+    t = _glove_times(100.0, 3.0, silence=(1.0, 2.0))
+    poses, wrist = _poses(len(t))
+    take = tmp_path / "take.csv"
+    with Recorder(take, rate_hz=100.0) as rec:
+        for i in range(len(t)):
+            rec.add(t[i], poses[i], wrist[i])
+    bvh_path = tmp_path / "take60.bvh"
+    out = subprocess.run([*CLI, "record", "convert", str(take), str(bvh_path), "--rate", "60",
+                          "--json"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    done = json.loads(out.stdout)
+    span = t[-1] - t[0]
+    n = int(np.floor(span * 60.0 + 1e-6)) + 1
+    assert done["frames_in"] == len(t) and done["frames_out"] == n
+    with open(bvh_path) as f:
+        outside = outside_bvh.Bvh(f.read())
+    assert outside.nframes == n and outside.frame_time == pytest.approx(1 / 60)
+    tb, pb, _ = load_performance(bvh_path)
+    src = np.searchsorted(t, t[0] + tb + 0.5 / 60 + 1e-7, side="right") - 1
+    np.testing.assert_allclose(pb, poses[src], atol=1e-4)
+    # and back to a CSV: the BVH's frame times, its poses
+    back = tmp_path / "back.csv"
+    out = subprocess.run([*CLI, "record", "convert", str(bvh_path), str(back)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith(f"{back}: {n} frames from {n}")
+    tc, pc, _ = load_performance(back)
+    np.testing.assert_allclose(tc, np.arange(n) / 60.0, atol=1e-6)
+    np.testing.assert_allclose(pc, pb, atol=1e-4)
+    # a take is never replaced, by convert either
+    out = subprocess.run([*CLI, "record", "convert", str(bvh_path), str(back)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and f"{back}: a take is already there" in out.stderr
+    assert "Traceback" not in out.stderr
