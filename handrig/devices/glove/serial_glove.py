@@ -170,7 +170,11 @@ class SerialGlove(GloveSource):
     def take(self) -> GloveSample | None:
         """:meth:`latest` without reading the port first: for a loop whose trigger has
         just pumped it (a cycle started by a frame, or after waiting on the port until a
-        deadline with nothing arriving), which saves a system call on the frame's path."""
+        deadline with nothing arriving), which saves a system call on the frame's path.
+        While the port is gone (no descriptor to wait on, so nothing pumps it) it tries
+        to reopen it, every ``reconnect_s``, as :meth:`latest` does."""
+        if self._serial is None and self.reader == "poll":
+            self._poll()
         return super().latest()
 
     def fileno(self) -> int | None:
