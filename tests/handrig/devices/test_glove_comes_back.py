@@ -1,6 +1,7 @@
 """A glove that vanishes and comes back on the same path is reopened and the puppet
-resumes, in every loop mode: the glove on a pty behind a symlink (as udev points
-/dev/ttyACM0 at a replugged glove), the loop and the emulated bus."""
+resumes, in every loop mode: the glove on a pty behind a symlink that goes away with
+it and comes back pointing at a new pty (as udev removes /dev/ttyACM0 on unplug and
+makes it again for the replugged glove), the loop and the emulated bus."""
 
 from __future__ import annotations
 
@@ -51,7 +52,8 @@ def test_a_glove_unplugged_and_plugged_back_is_reopened_and_the_puppet_resumes(
             def unplug_and_replug() -> None:
                 nonlocal second
                 time.sleep(1.5)
-                first.hang_up()  # the glove is gone
+                first.hang_up()  # the glove is gone, and so is its device node
+                link.unlink()
                 time.sleep(1.0)
                 second = GloveEmulator(rec, "frames", rate_hz=200.0, loop=True).start()
                 _point(link, second.port_path)  # back, on another pty behind the same name
@@ -97,6 +99,7 @@ def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Pat
                 break
         time.sleep(1.5)
         first.hang_up()
+        link.unlink()
         time.sleep(1.0)
         second = GloveEmulator(rec, "frames", rate_hz=200.0, loop=True).start()
         _point(link, second.port_path)
