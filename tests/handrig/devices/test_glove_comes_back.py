@@ -69,12 +69,13 @@ def test_a_glove_unplugged_and_plugged_back_is_reopened_and_the_puppet_resumes(
         first.close()
         if second is not None:
             second.close()
-    assert glove_stats.disconnects == 1, events
-    assert glove_stats.reconnects == 1, events
-    assert 0.9 <= glove_stats.last_outage_s <= 2.0
-    assert stats.relax_events == 1 and stats.resumes == 1, events
-    assert any("is back after" in e for e in events), events
-    assert stats.frames > 0 and glove_stats.frames_ok > 400  # before and after the outage
+    said = f"{glove_stats}\n{stats}\n" + "\n".join(events)
+    assert glove_stats.disconnects == 1, said
+    assert glove_stats.reconnects == 1, said
+    assert 0.5 <= glove_stats.last_outage_s <= 2.0, said  # the node was gone for 1 s
+    assert stats.relax_events == 1 and stats.resumes == 1, said
+    assert any("is back after" in e for e in events), said
+    assert stats.frames > 0 and glove_stats.frames_ok > 400, said  # before and after
 
 
 def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Path) -> None:
