@@ -2,8 +2,8 @@
 
 Header row ``t_s,<50 curve names>[,<4 wrist names>]``, one row per frame, values
 with 6 decimals (round trip within 5e-7). Each row keeps its frame's real time (the
-loop's clock, seconds since the run started): frames need not be evenly spaced, and a
-glove silence is the gap between two rows.
+loop's clock, seconds since the run started): rows are as far apart as the frames
+were, evenly or not, and a stretch with no frames is a gap between two rows.
 """
 
 from __future__ import annotations
