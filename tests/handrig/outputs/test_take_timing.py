@@ -82,7 +82,9 @@ def test_takes_last_as_long_as_the_run_at_any_glove_rate(tmp_path: Path,
     # the run as the outputs lived it: from the first frame they were handed to the last
     # (the clock read in the output call, not the time the rig passed along), a frame each
     run_from_first_s = handed[-1] - handed[0] + frame_s
-    assert abs(run_from_first_s - (RUN_S + 1.0 - t[0])) <= 0.05
+    # 10 s and the 1 s ease from the first frame on (later on a loaded machine: a host
+    # stall near the end lengthens the run, and the take with it)
+    assert -0.05 <= run_from_first_s - (RUN_S + 1.0 - t[0]) <= 0.5
     csv_s = t[-1] - t[0] + frame_s
     bvh_s = len(tb) * frame_s
     print(f"{glove_hz:g} Hz glove: run {run_from_first_s:.4f} s from its first frame,"
