@@ -301,12 +301,14 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
 
 def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
             vmc: str | None = None, record: str | None = None,
-            log: Callable[[str], None] = print, glove_rate_hz: float | None = None
+            log: Callable[[str], None] = print, glove_rate_hz: float | None = None,
+            record_rate_hz: float | None = None
             ) -> list[Callable[[float, FloatArray], None]]:
     """The outputs a run feeds the full pose to: a VMC sender (``HOST:PORT``), a
     recorder (``.csv`` or ``.bvh``). Each is closed when ``stack`` unwinds. A BVH take
-    is written at the glove's nominal rate (``glove_rate_hz``, ``[glove] rate_hz``) when
-    the loop follows the glove, at ``[loop] rate_hz`` in mode "fixed"."""
+    is written at ``record_rate_hz`` if given (``--record-rate``), else at the glove's
+    nominal rate (``glove_rate_hz``, ``[glove] rate_hz``) when the loop follows the
+    glove, at ``[loop] rate_hz`` in mode "fixed"."""
     out: list[Callable[[float, FloatArray], None]] = []
     if vmc:
         from handrig.outputs.vmc import VmcSender, parse_host_port
@@ -321,6 +323,8 @@ def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
         rate_hz = rig_cfg.loop.rate_hz
         if rig_cfg.loop.mode == "glove" and glove_rate_hz:
             rate_hz = glove_rate_hz
+        if record_rate_hz:
+            rate_hz = record_rate_hz
         recorder = Recorder(record, rate_hz=rate_hz, log=log)
         stack.callback(lambda: log(f"recorded performance: {recorder.close()}"))
         out.append(recorder)

@@ -56,6 +56,7 @@ class LiveOptions:
     viewer: bool = False
     vmc: str | None = None
     record: str | None = None
+    record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
     panel: bool = False  # the live panel (plain lines when stdout is no terminal)
     keys: bool = True  # with the panel: read the show keys when stdin is a terminal
     sim_faults: str = ""
@@ -234,7 +235,8 @@ class _Session:
                 log(line)
         outputs = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
                               record=opts.record, log=log,
-                              glove_rate_hz=parts.glove_config.glove.rate_hz)
+                              glove_rate_hz=parts.glove_config.glove.rate_hz,
+                              record_rate_hz=opts.record_rate_hz)
         rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=self._rig_log,
                             profile=opts.profile)
         self.outputs = list(outputs)

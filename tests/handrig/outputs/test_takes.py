@@ -320,3 +320,43 @@ def test_record_convert_writes_a_bvh_at_the_rate_the_user_chooses(tmp_path: Path
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and f"{back}: a take is already there" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def test_a_run_records_bvh_at_the_glove_rate_or_the_rate_asked_for(tmp_path: Path) -> None:
+    import contextlib
+    import dataclasses
+
+    from handrig.app import factory as app
+    from handrig.clock import MonotonicClock
+
+    rig_cfg = app.build_parts().rig_config
+    fixed = dataclasses.replace(rig_cfg, loop=dataclasses.replace(rig_cfg.loop, mode="fixed"))
+    cases = [(rig_cfg, None, 100.0), (rig_cfg, 60.0, 60.0), (fixed, None, rig_cfg.loop.rate_hz)]
+    for i, (cfg, asked, expected) in enumerate(cases):
+        with contextlib.ExitStack() as stack:
+            outs = app.outputs(stack, cfg, MonotonicClock(), record=str(tmp_path / f"{i}.bvh"),
+                               log=lambda _: None, glove_rate_hz=100.0, record_rate_hz=asked)
+            (rec,) = outs
+            assert isinstance(rec, Recorder) and rec.rate_hz == expected
+
+
+def test_handrig_run_record_rate_sets_the_bvh_frame_time(tmp_path: Path) -> None:
+    from sim.demo_recording import DEMO_RECORDING
+
+    take = tmp_path / "take.bvh"
+    out = subprocess.run([*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim",
+                          "--seconds", "2", "--record", str(take), "--record-rate", "60",
+                          "--json"], capture_output=True, text=True, timeout=180)
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout)
+    with open(take) as f:
+        outside = outside_bvh.Bvh(f.read())
+    assert outside.frame_time == pytest.approx(1 / 60)
+    rec = summary["outputs"]["recording"]
+    assert rec["frames"] == outside.nframes
+    # 2 s and the 1 s ease, from the first frame: within a frame of the run
+    assert abs(outside.nframes / 60 - rec["duration_s"]) <= 1 / 60 + 0.01
+    assert abs(rec["duration_s"] - summary["duration_s"]) <= 0.1
+    out = subprocess.run([*CLI, "run", "--record", str(tmp_path / "x.bvh"), "--record-rate",
+                          "0", "--bus", "sim"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "--record-rate: must be in 1..2000, got '0'" in out.stderr
