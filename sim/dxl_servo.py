@@ -38,6 +38,7 @@ import math
 import struct
 
 from firmware_protocol.dynamixel import (
+    BAUD_BY_INDEX,
     BUS_WATCHDOG_UNIT_S,
     CONTROL_TABLE_BYTES,
     ERROR_ALERT,
@@ -138,6 +139,9 @@ class EmulatedServo:
             raise ValueError(f"unknown servo model {model!r}; known: {', '.join(MODELS)}")
         if not 0 <= servo_id <= 252:
             raise ValueError(f"servo ID {servo_id} out of range 0..252")
+        if baud not in INDEX_BY_BAUD:
+            raise ValueError(f"servo {servo_id}: {baud} baud is not an X-series rate; "
+                             f"known: {', '.join(str(b) for b in INDEX_BY_BAUD)}")
         self.info = MODELS[model]
         self.mem = bytearray(READABLE_BYTES)
         self.motor_ticks = float(start_ticks)
@@ -185,6 +189,11 @@ class EmulatedServo:
     @property
     def id(self) -> int:
         return self.mem[7]
+
+    @property
+    def baud(self) -> int:
+        """The rate the servo listens and answers at (its Baud Rate item), bits/s."""
+        return BAUD_BY_INDEX[self.mem[8]]
 
     @property
     def torque_enabled(self) -> bool:

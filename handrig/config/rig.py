@@ -123,6 +123,16 @@ class BusConfig:
             )
 
 
+LOOP_RANGES: tuple[tuple[str, float, float, str], ...] = (
+    ("glove_timeout_s", 0.01, 10.0, "s"),
+    ("relax_time_s", 0.01, 10.0, "s"),
+    ("resume_frames", 1, 1000, "frames"),
+    ("resume_time_s", 0.01, 10.0, "s"),
+    ("slew_deg_s", 1.0, 10000.0, "deg/s"),
+)
+"""[loop] keys checked against a sane range: (key, lowest, highest, unit)."""
+
+
 @dataclass(frozen=True)
 class LoopConfig:
     """The realtime loop: rate, safety timings, slew limit, sag and the files it uses.
@@ -136,10 +146,11 @@ class LoopConfig:
     mode: Literal["glove", "fixed"] = "glove"  # a cycle per glove frame, or at rate_hz
     floor_hz: float = 100.0  # mode "glove": a write at least this often, frame or not
     ceiling_hz: float = 1000.0  # mode "glove": at most this many writes per second
-    spin_us: float = 500.0  # mode "glove": poll the port this long either side of a frame
     catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
+    resume_frames: int = 3  # good glove frames in a row after a loss before following again
+    resume_time_s: float = 0.3  # how long easing back to the glove's pose takes
     slew_deg_s: float = 720.0  # max joint speed commanded in normal running
     sag_gain: float = 1.0  # 0 = no passive sag, 1 = the full baked sag
     left_hand: Literal["mirror", "map", "relaxed"] = "map"
@@ -164,13 +175,11 @@ class LoopConfig:
             raise ConfigError("ceiling rate out of range", key="ceiling_hz",
                               value=self.ceiling_hz,
                               allowed=f"floor_hz ({self.floor_hz:g})..5000 Hz")
-        if not 0.0 <= self.spin_us <= 5000.0:
-            raise ConfigError("spin window out of range", key="spin_us", value=self.spin_us,
-                              allowed="0 (off: sleep until the frame) ..5000 us")
-        for name in ("glove_timeout_s", "relax_time_s", "slew_deg_s"):
+        for name, low, high, unit in LOOP_RANGES:
             value = getattr(self, name)
-            if value <= 0:
-                raise ConfigError("must be positive", key=name, value=value)
+            if not low <= value <= high:
+                raise ConfigError("out of range", key=name, value=value,
+                                  allowed=f"{low:g}..{high:g} {unit}")
         if not 0 <= self.realtime_priority <= 99:
             raise ConfigError("out of range", key="realtime_priority",
                               value=self.realtime_priority, allowed="0 (off) or 1..99")

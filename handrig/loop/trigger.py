@@ -12,16 +12,15 @@ frame superseded before its cycle began (a loop held up two periods or more, by 
 slow read or the host, or frames the glove sent together) still gets its cycle: the
 tick asks for the oldest frame the glove keeps behind the newest (up to
 ``handrig.devices.glove.BEHIND_KEPT``), and the ticks for the rest and the newest follow at
-once, all within the ceiling's burst. A trigger may run a rehearsal shortly before a
-tick (see :mod:`handrig.loop.rehearsal`).
+once, all within the ceiling's burst.
 
 Both triggers stamp frame arrivals when the glove offers a file descriptor
-(``fileno()``) and a non-blocking ``pump()`` (read what is there, stamp it
-with the clock): while they wait they block on the descriptor and pump as soon
-as bytes arrive, so a sample's ``host_time_s`` is the time its last byte became
-readable, not the time a cycle got round to it. A glove without a descriptor
-that says when its next sample is due (``next_due_s()``, a replay) is waited
-for by sleeping until then.
+(:meth:`~handrig.devices.glove.source.GloveSource.fileno`; ``pump()`` reads what
+is there and stamps it with the clock): while they wait they block on the
+descriptor and pump as soon as bytes arrive, so a sample's ``host_time_s`` is the
+time its last byte became readable, not the time a cycle got round to it. A glove
+without a descriptor that says when its next sample is due (``next_due_s()``, a
+replay) is waited for by sleeping until then.
 
 The trigger also says whether a present-state read fits the time left before
 the next tick (:meth:`Trigger.read_deadline`) and whether a read delayed a
@@ -33,17 +32,15 @@ from __future__ import annotations
 import math
 import select
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
-from handrig.clock import Clock
+from handrig.clock import Clock, MonotonicClock
+from handrig.devices.glove.source import GloveSource
 
 READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the next tick
 PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's period estimate
 GAP_FACTOR = 4.0  # an interval this many times the estimate is a pause, not a period
 FORCED_READ_FACTOR = 4  # no gap fits for this many times read_every ticks: read anyway
-REHEARSE_EVERY_S = 0.00015  # in a spin window: a rehearsal, then polls only for this long
 ANCHOR_FOLLOW = 1.0 / 16.0  # how fast the glove's grid follows arrivals later than it
 JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 FORCED_READ_SHARE = 0.5  # a forced read ends this share of a period after the next frame
@@ -80,12 +77,9 @@ class Tick:
     behind_s: float = 0.0
 
 
-def _fd_of(glove: Any) -> int | None:
-    """The glove's descriptor when it offers one and a pump to read it, else None."""
-    fileno = getattr(glove, "fileno", None)
-    if fileno is None or getattr(glove, "pump", None) is None:
-        return None
-    fd = fileno()
+def _fd_of(glove: GloveSource) -> int | None:
+    """The glove's descriptor when it offers one (to wait on, then pump), else None."""
+    fd = glove.fileno()
     return fd if isinstance(fd, int) and fd >= 0 else None
 
 
@@ -102,19 +96,24 @@ class Trigger(ABC):
 
     period_s: float
     """The longest time between cycles (the fixed period, or the floor rate's)."""
+    ceiling_waits: int = 0
+    """Ticks held back to keep to a ceiling rate."""
+
+    def take_bursts(self) -> int:
+        """Glove frames superseded on arrival, sent back to back, since the last call."""
+        return 0
 
     @abstractmethod
     def start(self, t0_s: float) -> None:
         """The first tick is due at ``t0_s``."""
 
     @abstractmethod
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
-             settle: bool = True) -> Tick:
-        """Block until the next cycle is due and fill ``tick`` in (returned). ``warm(now)``,
-        if given, may be called once shortly before that. ``settle=False``: return as
-        soon as the cycle may start and leave what only the read schedule needs
-        (``tick.next_s``, the glove's period estimate) to :meth:`settle`, which the
-        read schedule calls once the cycle's write is out (or the next wait does)."""
+    def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
+        """Block until the next cycle is due and fill ``tick`` in (returned).
+        ``settle=False``: return as soon as the cycle may start and leave what only the
+        read schedule needs (``tick.next_s``, the glove's period estimate) to
+        :meth:`settle`, which the read schedule calls once the cycle's write is out (or
+        the next wait does)."""
 
     def settle(self, tick: Tick) -> None:  # noqa: B027 - a hook most triggers need not fill
         """Finish the bookkeeping a ``wait(settle=False)`` left (nothing to do here)."""
@@ -145,18 +144,16 @@ class Trigger(ABC):
 class FixedRateTrigger(Trigger):
     """A tick every ``1 / rate_hz`` seconds from the start, on ``clock``.
 
-    ``warm_s`` before each deadline the trigger wakes and calls ``warm``, then sleeps
-    out the rest; 0 skips that step. ``glove``: stamp its frames as they arrive while
+    ``glove``: stamp its frames as they arrive while
     waiting (see the module docstring); the cycle still runs on the fixed tick.
     """
 
-    def __init__(self, clock: Clock, rate_hz: float, *, warm_s: float = 0.0,
-                 glove: Any = None) -> None:
+    def __init__(self, clock: Clock, rate_hz: float, *,
+                 glove: GloveSource | None = None) -> None:
         if not rate_hz > 0.0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         self.clock = clock
         self.period_s = 1.0 / rate_hz
-        self.warm_s = max(0.0, float(warm_s))
         self.glove = glove
         self._t0 = 0.0
         self._k = 0
@@ -171,7 +168,7 @@ class FixedRateTrigger(Trigger):
         """Sleep until ``t``, pumping the glove's arrivals meanwhile."""
         clock, glove = self.clock, self.glove
         if glove is not None:
-            spin = float(getattr(clock, "spin_s", 0.0))
+            spin = clock.spin_s if isinstance(clock, MonotonicClock) else 0.0
             while True:
                 fd = _fd_of(glove)
                 left = t - clock.now() - spin
@@ -181,13 +178,9 @@ class FixedRateTrigger(Trigger):
                     glove.pump()
         clock.sleep_until(t)
 
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
-             settle: bool = True) -> Tick:
+    def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
         clock, period = self.clock, self.period_s
         deadline = self._t0 + self._k * period
-        if warm is not None and self.warm_s > 0 and clock.now() < deadline - self.warm_s:
-            self._sleep_until(deadline - self.warm_s)
-            warm(clock.now())
         self._sleep_until(deadline)
         now = clock.now()
         late = now - deadline
@@ -215,7 +208,7 @@ class GloveTrigger(Trigger):
 
     ``glove``: a source with ``fileno()`` and ``pump()`` (a serial glove read by the
     loop), or with ``next_due_s()`` (a replay); a glove with neither gets the floor
-    rate only. ``warm_s`` before the predicted next frame the trigger calls ``warm``.
+    rate only.
 
     The glove's period is estimated from the arrivals (:attr:`frame_period_s`, with
     their mean deviation :attr:`frame_jitter_s`); a present-state read is taken only
@@ -231,26 +224,20 @@ class GloveTrigger(Trigger):
     :attr:`catch_ups`.
     """
 
-    def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
-                 warm_s: float = 0.0, spin_s: float = 0.0, catch_up: bool = False) -> None:
+    def __init__(self, clock: Clock, glove: GloveSource, *, floor_hz: float, ceiling_hz: float,
+                 catch_up: bool = False) -> None:
         if not 0.0 < floor_hz <= ceiling_hz:
             raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
         self.clock = clock
         self.glove = glove
         self.period_s = 1.0 / floor_hz
         self.min_gap_s = 1.0 / ceiling_hz
-        self.warm_s = max(0.0, float(warm_s))
-        self.spin_s = max(0.0, float(spin_s))
-        self.spin_time_s = 0.0  # time spent polling and rehearsing in the spin windows
-        self.spin_frames = 0  # frames that arrived inside a spin window
         self.burst_frames = 0  # frames superseded on arrival by a newer one in the same read
-        self.rehearse_every_s = REHEARSE_EVERY_S
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0  # mean deviation of the arrivals from the period
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
         self.catch_up = bool(catch_up)
         self.catch_ups = 0  # ticks that took the frame behind the newest
-        self._has_behind = getattr(glove, "has_behind", None)
         self._credit = 1.0  # ticks the ceiling lets through now (a token bucket)
         self._credit_at = 0.0
         self._k = 0
@@ -259,10 +246,6 @@ class GloveTrigger(Trigger):
         self._anchor = math.nan  # the glove's time grid: an arrival on its early edge
         self._unsettled: Tick | None = None  # a tick whose bookkeeping waits for settle()
         self._unsettled_arrival: float | None = None
-        self._has_new = getattr(glove, "has_new", None)
-        self._peek = getattr(glove, "peek", None)
-        self._due_of = getattr(glove, "next_due_s", None)
-        self._pump_counts = bool(getattr(glove, "pump_counts", False))
         self._drained_s = math.nan  # when a pump last emptied the port
 
     def start(self, t0_s: float) -> None:
@@ -303,8 +286,7 @@ class GloveTrigger(Trigger):
         return self._anchor + self.frame_period_s
 
     def _new_frame(self) -> bool:
-        has_new = self._has_new
-        return bool(has_new()) if has_new is not None else False
+        return self.glove.has_new()
 
     def _wait_frame(self, until_s: float) -> float | None:
         """Wait for a new frame until ``until_s``; its arrival time, or None if none came."""
@@ -327,12 +309,10 @@ class GloveTrigger(Trigger):
                 if fd is None:
                     break
             return self._arrival(clock.now()) if self._new_frame() else None
-        due_of = getattr(glove, "next_due_s", None)
-        if due_of is not None:
-            due = float(due_of())
-            if due <= until_s:
-                clock.sleep_until(due)
-                return due
+        due = glove.next_due_s()
+        if due is not None and due <= until_s:
+            clock.sleep_until(due)
+            return due
         clock.sleep_until(until_s)
         return None
 
@@ -351,8 +331,8 @@ class GloveTrigger(Trigger):
         return predicted + math.ceil((now - predicted) / period) * period
 
     def _count(self) -> int:
-        peek = self._peek
-        return int(getattr(peek() if peek is not None else None, "count", 0) or 0)
+        newest = self.glove.peek()
+        return 0 if newest is None else newest.count
 
     def _pump(self, idle: bool) -> None:
         """Read the port (the glove stamps what it decodes now). ``idle``: the port was
@@ -362,7 +342,7 @@ class GloveTrigger(Trigger):
         the glove's period fits into the time since the port was last emptied can have
         come one by one; any more came in a burst."""
         glove = self.glove
-        if self._pump_counts:  # the glove says how many frames a pump gave
+        if glove.pump_counts:  # the glove says how many frames a pump gave
             drained = self._drained_s
             got = glove.pump()
             now = self.clock.now()
@@ -387,96 +367,14 @@ class GloveTrigger(Trigger):
         n, self.burst_frames = self.burst_frames, 0
         return n
 
-    def _spin_frame(self, until_s: float, warm: Callable[[float], None]) -> float | None:
-        """Poll for a new frame until ``until_s``, rehearsing between polls (the spin
-        window: the critical path stays warm in the caches until the frame is there); its
-        arrival, or None if none came. Bytes a poll finds are read at once and stamped at
-        that read, as a reader blocking on the port would stamp them (the previous poll,
-        which found none, is at most one rehearsal stage earlier)."""
-        clock, glove = self.clock, self.glove
-        fd = _fd_of(glove)
-        begin = clock.now()
-        try:
-            if fd is None:
-                due_of = getattr(glove, "next_due_s", None)
-                if due_of is None:
-                    return None
-                due = float(due_of())
-                if due > until_s:
-                    return None
-                took = 0.0  # a rehearsal ends before the frame is due
-                t = begin
-                while t + took < due:
-                    warm(t)
-                    now = clock.now()
-                    if now <= t:
-                        break  # a clock that does not move on its own (a FakeClock)
-                    took, t = now - t, now
-                clock.sleep_until(due)
-                self.spin_frames += 1
-                return due
-            steps = getattr(warm, "steps", None)
-            empty = [begin]  # when a poll last found the port empty
-            seen_empty = [False]
-            port = fd
-
-            def arrived() -> bool:
-                t = clock.now()
-                if _readable(port, 0.0):
-                    return True
-                empty[0] = t
-                seen_empty[0] = True
-                return False
-
-            next_warm = previous = begin
-            polls = 0
-            while True:
-                polls += 1
-                t = clock.now()
-                if arrived():  # read at once, stamped at the read (as a blocking reader)
-                    self._pump(seen_empty[0])
-                    if self._new_frame():
-                        self.spin_frames += 1
-                        return self._arrival(clock.now())
-                    fd = _fd_of(glove)
-                    if fd is None:
-                        return None
-                    port = fd
-                    continue
-                if t >= until_s or (polls > 1 and t <= previous):
-                    return None  # the window is over (or the clock does not move on its own)
-                previous = t
-                if t >= next_warm:
-                    if steps is None:
-                        warm(t)
-                    else:  # a stage at a time, looking at the port in between
-                        for _ in steps(t):
-                            if arrived():
-                                break
-                    next_warm = clock.now() + self.rehearse_every_s
-        finally:
-            self.spin_time_s += clock.now() - begin
-
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
-             settle: bool = True) -> Tick:
+    def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
         if self._unsettled is not None:
             self.settle(self._unsettled)
         clock = self.clock
         floor_at = self._last_start + self.period_s
         arrival: float | None = None
-        predicted = self.predicted_frame_s
         if self._new_frame():  # read already (the newest, after a catch-up): no waiting
             arrival = self._arrival(clock.now())
-        elif warm is not None and predicted == predicted and self.spin_s > 0:
-            if clock.now() < predicted - self.spin_s < floor_at:
-                arrival = self._wait_frame(predicted - self.spin_s)
-            if arrival is None and clock.now() < floor_at:
-                arrival = self._spin_frame(min(predicted + self.spin_s, floor_at), warm)
-        elif (warm is not None and self.warm_s > 0 and predicted == predicted
-                and clock.now() < predicted - self.warm_s < floor_at):
-            arrival = self._wait_frame(predicted - self.warm_s)
-            if arrival is None:
-                warm(clock.now())
         if arrival is None:
             arrival = self._wait_frame(floor_at)
         now = clock.now()
@@ -489,7 +387,7 @@ class GloveTrigger(Trigger):
             # lets this tick and the newest's through back to back
             # (not the first tick: the backlog read at the start is history, its newest wins)
             catch_up = (self.catch_up and credit >= CATCH_UP_CREDIT and self._k > 0
-                        and self._has_behind is not None and bool(self._has_behind()))
+                        and self.glove.has_behind())
             if catch_up:
                 self.catch_ups += 1
             if credit < 1.0:  # the ceiling: the cycle then takes the newest frame
@@ -535,12 +433,11 @@ class GloveTrigger(Trigger):
 
     def _arrival(self, now: float) -> float:
         """The newest pumped sample's stamp (a replay: its due time), at most ``now``."""
-        t: Any
-        if self._due_of is not None and _fd_of(self.glove) is None:
-            t = getattr(self.glove, "newest_due_s", lambda: now)()
-        else:
-            peek = self._peek
-            t = getattr(peek() if peek is not None else None, "host_time_s", None)
+        glove = self.glove
+        t = glove.newest_due_s() if _fd_of(glove) is None else None
+        if t is None:
+            newest = glove.peek()
+            t = None if newest is None else newest.host_time_s
         return float(t) if t is not None and t <= now else now
 
     def _period_from(self, arrival: float) -> None:
@@ -602,5 +499,5 @@ class GloveTrigger(Trigger):
         fd = _fd_of(glove)
         if fd is not None:
             return _readable(fd, 0.0)
-        due_of = getattr(glove, "next_due_s", None)
-        return due_of is not None and float(due_of()) <= self.clock.now()
+        due = glove.next_due_s()
+        return due is not None and due <= self.clock.now()

@@ -44,6 +44,10 @@ class ReplayGlove(GloveSource):
         self._served = 0
         self._skipped = 0
 
+    @property
+    def name(self) -> str:
+        return "replay"
+
     def start(self) -> None:
         if self._t0 is None:
             self._t0 = self.clock.now()

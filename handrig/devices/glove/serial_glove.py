@@ -104,9 +104,6 @@ class SerialGlove(GloveSource):
         self._estop_bit = 1 << BUTTON_LETTERS.index(estop_letter)
         self._frames = FrameDecoder()
         self._lines = LineDecoder(analog_max)
-        self._scratch_frames = FrameDecoder()  # for rehearse(): never touches live state
-        self._scratch_lines = LineDecoder(analog_max)
-        self._last_chunk = b""
         self._serial: Any = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -139,6 +136,10 @@ class SerialGlove(GloveSource):
                 f"cannot open glove port {self.port}: {exc}; is the glove plugged in? "
                 "(pass the right port with --glove PORT; on Linux add your user to 'dialout')"
             ) from None
+
+    @property
+    def name(self) -> str:
+        return self.port
 
     def start(self) -> None:
         if self._thread is not None or self._serial is not None:
@@ -208,23 +209,10 @@ class SerialGlove(GloveSource):
         thread and :meth:`latest` with ``reader="poll"`` call this; tests may too)."""
         with self._lock:
             self._bytes += len(data)
-            self._last_chunk = data
             if self.fmt == "frames":
                 self._feed_frames(data, now)
             else:
                 self._feed_lines(data, now)
-
-    def rehearse(self) -> None:
-        chunk = self._last_chunk
-        if not chunk:
-            return
-        now = self.clock.now()
-        if self.fmt == "frames":
-            for fr in self._scratch_frames.feed(chunk):
-                self._frame_sample(fr, now, 0)
-        else:
-            for line in self._scratch_lines.feed(chunk):
-                self._line_sample(line, now, 0)
 
     def _poll(self) -> None:
         ser = self._serial

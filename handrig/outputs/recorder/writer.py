@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig.errors import DataError
+from handrig.outputs.base import Output, OutputStatus
 from handrig.outputs.recorder.bvh_take import BvhTake
 from handrig.outputs.recorder.csv_take import CsvTake
 from handrig.outputs.recorder.formats import (
@@ -36,7 +37,7 @@ _WHY = {
 }
 
 
-class Recorder:
+class Recorder(Output):
     """Stream frames to a CSV or BVH file while the show runs.
 
     ``add`` (or calling the recorder, the rig's output hook) turns the frame into text at
@@ -174,10 +175,22 @@ class Recorder:
         with self._lock:
             self._pending.append(head)
 
-    def __call__(self, t_s: float, pose54_deg: NDArray[np.float64]) -> None:
-        """The rig's output hook: ``pose54_deg`` = 50 curves then the 4 wrist DOFs
+    def __call__(self, t_s: float, pose_deg: NDArray[np.float64]) -> None:
+        """The rig's output hook: ``pose_deg`` = 50 curves then the 4 wrist DOFs
         (:data:`handrig.hand.ALL_JOINT_NAMES` order)."""
-        self.add(t_s, pose54_deg[:50], pose54_deg[50:54])
+        self.add(t_s, pose_deg[:50], pose_deg[50:54])
+
+    def status(self) -> OutputStatus:
+        """``stopped_reason``: why the recording stopped before the run's end (a full
+        disk ...), "" while it records and after an orderly close; ``duration_s``: the
+        performance time added (:attr:`duration_s`)."""
+        error = "" if self.error is None else str(self.error)
+        return OutputStatus(
+            kind="recorder", name=self.fmt, path=str(self.path),
+            frames_written=self.frames_written, bytes_written=self.bytes_written,
+            frames_dropped=self.frames_dropped, errors=int(self.error is not None),
+            last_error=error, stopped_reason=self.stopped_reason,
+            duration_s=self.duration_s)
 
     def _writer(self) -> None:
         while True:
