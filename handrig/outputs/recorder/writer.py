@@ -251,7 +251,7 @@ class Recorder(Output):
             self._cut_clean = False
         kept = self.frames_written / self.rate_hz if self.fmt == "bvh" else None
         self.stopped_reason = (
-            f"recording {self.path} stopped: {why} ({exc.strerror}); it keeps its first"
+            f"recording stopped: {why} ({exc.strerror}); {self.path} keeps its first"
             f" {self.frames_written} frames" + (f" ({kept:.1f} s)" if kept is not None else "")
             + "; the show goes on")
         if self.log is not None:

@@ -205,7 +205,8 @@ def test_a_full_disk_stops_the_recording_at_once_and_the_take_stays_readable(
     logs = [i for i, ln in enumerate(lines) if ln.startswith("LOG ")]
     assert len(logs) == 1
     message = json.loads(lines[logs[0]][4:])
-    assert message.startswith(f"recording {path} stopped: the file size limit was reached")
+    assert message.startswith("recording stopped: the file size limit was reached")
+    assert f"{path} keeps its first" in message
     assert "the show goes on" in message
     # said during the run, not at its end: frames were still being added after it
     assert any(ln.startswith("FRAME ") for ln in lines[logs[0]:])
@@ -268,9 +269,10 @@ def test_handrig_run_goes_on_when_the_disk_fills_and_says_so_at_once(tmp_path: P
             proc.kill()
     assert proc.returncode == 0, err
     lines = err.splitlines()
-    stopped = [i for i, ln in enumerate(lines) if ln.startswith(f"recording {take} stopped")]
+    stopped = [i for i, ln in enumerate(lines) if ln.startswith("recording stopped: ")]
     assert len(stopped) == 1, err
     assert "the file size limit was reached" in lines[stopped[0]]
+    assert f"{take} keeps its first" in lines[stopped[0]]
     assert "the show goes on" in lines[stopped[0]]
     done = next(i for i, ln in enumerate(lines) if "4 s done" in ln)
     assert stopped[0] < done  # said while the show ran, not after it
