@@ -211,6 +211,9 @@ def check_outputs(vmc: str | None, record: str | None) -> None:
         if suffix not in (".csv", ".bvh"):
             raise ConfigError(f"unknown recording suffix {suffix or '(none)'!r}", key="--record",
                               value=record, allowed="a file name ending in .csv or .bvh")
+        from handrig.outputs.recorder import check_new_take
+
+        check_new_take(record)  # a take is never replaced: refused before the bus opens
 
 
 def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
@@ -299,9 +302,14 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
 
 def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
             vmc: str | None = None, record: str | None = None,
-            log: Callable[[str], None] = print) -> list[Callable[[float, FloatArray], None]]:
+            log: Callable[[str], None] = print, glove_rate_hz: float | None = None,
+            record_rate_hz: float | None = None
+            ) -> list[Callable[[float, FloatArray], None]]:
     """The outputs a run feeds the full pose to: a VMC sender (``HOST:PORT``), a
-    recorder (``.csv`` or ``.bvh``). Each is closed when ``stack`` unwinds."""
+    recorder (``.csv`` or ``.bvh``). Each is closed when ``stack`` unwinds. A BVH take
+    is written at ``record_rate_hz`` if given (``--record-rate``), else at the glove's
+    nominal rate (``glove_rate_hz``, ``[glove] rate_hz``) when the loop follows the
+    glove, at ``[loop] rate_hz`` in mode "fixed"."""
     out: list[Callable[[float, FloatArray], None]] = []
     if vmc:
         from handrig.outputs.vmc import VmcSender, parse_host_port
@@ -313,7 +321,12 @@ def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
     if record:
         from handrig.outputs.recorder import Recorder
 
-        recorder = Recorder(record, rate_hz=rig_cfg.loop.rate_hz)
+        rate_hz = rig_cfg.loop.rate_hz
+        if rig_cfg.loop.mode == "glove" and glove_rate_hz:
+            rate_hz = glove_rate_hz
+        if record_rate_hz:
+            rate_hz = record_rate_hz
+        recorder = Recorder(record, rate_hz=rate_hz, log=log)
         stack.callback(lambda: log(f"recorded performance: {recorder.close()}"))
         out.append(recorder)
     return out
@@ -450,7 +463,7 @@ def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, A
             out["recording"] = {
                 "path": st.path, "format": st.name, "frames": st.frames_written,
                 "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-                "frames_dropped": st.frames_dropped}
+                "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
     return out
 
 

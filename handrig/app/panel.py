@@ -103,6 +103,7 @@ class Outputs:
     record_path: str = ""
     record_bytes: int = 0  # on disk so far
     record_duration_s: float = 0.0  # of performance recorded
+    record_stopped: str = ""  # why the recording stopped during the run ("" = recording)
 
 
 @dataclass(frozen=True)
@@ -240,6 +241,9 @@ def outputs_line(o: Outputs) -> Text:
     if o.record_path:
         name = _fit_left(o.record_path, 20)
         text.append(f"rec {name} {_size(o.record_bytes)} {_clock(o.record_duration_s)}")
+        if o.record_stopped:
+            text.append(f" {_fit(o.record_stopped.removeprefix('recording '), 34)}",
+                        "bold red")
     else:
         text.append("rec off", "dim")
     return text
@@ -320,7 +324,8 @@ def plain_line(s: PanelSnapshot) -> str:
         f"servos max {_num(hot)} C, {faults} with errors",
         f"vmc {o.vmc_target} {_num(o.vmc_rate_hz)} Hz" if o.vmc_target else "vmc off",
         (f"rec {o.record_path} {_size(o.record_bytes)} {_clock(o.record_duration_s)}"
-         if o.record_path else "rec off"),
+         + (f" {o.record_stopped}" if o.record_stopped else "") if o.record_path
+         else "rec off"),
     ]
     return " | ".join(parts)
 

@@ -116,7 +116,7 @@ class RigSnapshot:
 
     def _outputs(self, s: LoopSnapshot) -> Outputs:
         vmc_target, vmc_rate, vmc_err = "", NAN, 0
-        rec_path, rec_bytes, rec_s = "", 0, 0.0
+        rec_path, rec_bytes, rec_s, rec_stopped = "", 0, 0.0, ""
         for out in s.outputs:
             if out.kind == "vmc":
                 vmc_target = out.address
@@ -124,4 +124,5 @@ class RigSnapshot:
                 vmc_err = out.errors
             elif out.kind == "recorder":
                 rec_path, rec_bytes, rec_s = out.path, out.bytes_written, out.duration_s
-        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s)
+                rec_stopped = out.stopped_reason
+        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped)

@@ -56,6 +56,7 @@ class LiveOptions:
     viewer: bool = False
     vmc: str | None = None
     record: str | None = None
+    record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
     panel: bool = False  # the live panel (plain lines when stdout is no terminal)
     keys: bool = True  # with the panel: read the show keys when stdin is a terminal
     sim_faults: str = ""
@@ -233,7 +234,9 @@ class _Session:
             for line in header:
                 log(line)
         outputs = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
-                              record=opts.record, log=log)
+                              record=opts.record, log=log,
+                              glove_rate_hz=parts.glove_config.glove.rate_hz,
+                              record_rate_hz=opts.record_rate_hz)
         rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=self._rig_log,
                             profile=opts.profile)
         self.outputs = list(outputs)
@@ -342,6 +345,8 @@ def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
         duration = f"{rec['duration_s']:.1f} s" if rec.get("duration_s") is not None else "-"
         dropped = (f", {rec['frames_dropped']} frames dropped (disk too slow)"
                    if rec.get("frames_dropped") else "")
+        if rec.get("stopped_reason"):
+            dropped = f", {rec['frames_dropped']} frames not recorded: {rec['stopped_reason']}"
         rec_text = (f"recording {rec['path']}: {rec['frames']} frames, {duration}, "
                     f"{rec['bytes']} bytes{dropped}")
     else:

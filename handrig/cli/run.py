@@ -9,7 +9,7 @@ from handrig.app.factory import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import run_sources
 from handrig.cli._display import check_display, check_gl_backend
-from handrig.cli._numbers import positive_float, positive_int
+from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.errors import HandrigError
 
@@ -38,7 +38,10 @@ def register(sub: Any) -> None:
     p.add_argument("--vmc", default=None, metavar="HOST:PORT",
                    help="also send the hands to a VMC receiver (VSeeFace, Unity, Blender)")
     p.add_argument("--record", default=None, metavar="FILE",
-                   help="record the performance (.csv or .bvh)")
+                   help="record the performance (.csv or .bvh; never replaces a file)")
+    p.add_argument("--record-rate", type=float_in(1.0, 2000.0), default=None, metavar="HZ",
+                   help="a .bvh take's frames per second (default: the glove's [glove]"
+                   " rate_hz; a CSV keeps each frame's own time)")
     p.add_argument("--frames", type=positive_int, default=None, metavar="N",
                    help="stop after N cycles")
     p.add_argument("--seconds", type=positive_float, default=None, metavar="S",
@@ -65,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
     opts = LiveOptions(
         glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
         wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
-        record=args.record, panel=not args.json, verbose=not args.json,
+        record=args.record, record_rate_hz=args.record_rate, panel=not args.json,
+        verbose=not args.json,
     )
     result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

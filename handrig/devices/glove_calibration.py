@@ -8,6 +8,7 @@
     baud = 115200
     analog_max = 4095          # OpenGloves value range: 1023 (AVR) or 4095 (ESP32)
     estop_letter = "N"         # OpenGloves button letter that acts as relax / e-stop
+    rate_hz = 200.0            # the glove's nominal frame rate (a BVH take's frame rate)
 
     [filter]                   # One Euro filter on the calibrated degrees
     min_cutoff_hz = 1.5
@@ -137,6 +138,7 @@ class GlovePort:
     baud: int = 115200
     analog_max: int = 4095
     estop_letter: str = "N"
+    rate_hz: float = 200.0  # the glove's nominal frame rate: a BVH take's frame rate
 
     def check(self) -> None:
         if self.analog_max not in (1023, 4095):
@@ -147,6 +149,9 @@ class GlovePort:
                               value=self.estop_letter, allowed=", ".join(BUTTON_LETTERS))
         if self.baud <= 0:
             raise ConfigError("must be positive", key="baud", value=self.baud)
+        if not 10.0 <= self.rate_hz <= 2000.0:
+            raise ConfigError("glove rate out of range", key="rate_hz", value=self.rate_hz,
+                              allowed="10..2000 Hz, the rate the glove sends frames at")
 
 
 @dataclass(frozen=True)
@@ -260,7 +265,8 @@ def glove_config_to_toml(cfg: GloveConfig) -> dict[str, Any]:
     g, f, m, a = cfg.glove, cfg.filter, cfg.imu, cfg.forearm
     return {
         "glove": {"format": g.format, "port": g.port, "baud": g.baud,
-                  "analog_max": g.analog_max, "estop_letter": g.estop_letter},
+                  "analog_max": g.analog_max, "estop_letter": g.estop_letter,
+                  "rate_hz": g.rate_hz},
         "filter": {"enabled": f.enabled, "min_cutoff_hz": f.min_cutoff_hz, "beta": f.beta,
                    "d_cutoff_hz": f.d_cutoff_hz},
         "imu": {"order": m.order, "world": m.world, "mount_xyzw": list(m.mount_xyzw)},

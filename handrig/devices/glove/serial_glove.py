@@ -18,6 +18,7 @@ that read.
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
 import select
@@ -123,8 +124,14 @@ class SerialGlove(GloveSource):
         import serial  # adapter module: the only place the glove side touches pyserial
 
         try:
-            return serial.Serial(self.port, self.baud, timeout=0, exclusive=False)
+            # exclusive: a second reader of the same glove would take half its frames
+            return serial.Serial(self.port, self.baud, timeout=0, exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
+            if isinstance(exc, OSError) and exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
+                raise DeviceError(
+                    f"glove port {self.port} is busy: another program (a second handrig"
+                    " run, a glove monitor, a serial terminal) has it open; close that one"
+                    " first") from None
             raise DeviceError(
                 f"cannot open glove port {self.port}: {exc}; is the glove plugged in? "
                 "(pass the right port with --glove PORT; on Linux add your user to 'dialout')"
@@ -164,7 +171,11 @@ class SerialGlove(GloveSource):
     def take(self) -> GloveSample | None:
         """:meth:`latest` without reading the port first: for a loop whose trigger has
         just pumped it (a cycle started by a frame, or after waiting on the port until a
-        deadline with nothing arriving), which saves a system call on the frame's path."""
+        deadline with nothing arriving), which saves a system call on the frame's path.
+        While the port is gone (no descriptor to wait on, so nothing pumps it) it tries
+        to reopen it, every ``reconnect_s``, as :meth:`latest` does."""
+        if self._serial is None and self.reader == "poll":
+            self._poll()
         return super().latest()
 
     def fileno(self) -> int | None:

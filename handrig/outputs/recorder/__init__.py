@@ -26,8 +26,10 @@ from handrig.outputs.recorder.formats import (
     Format,
     Performance,
     TakeFormat,
+    check_new_take,
     csv_header,
     format_of,
+    free_path,
     partial_path,
 )
 from handrig.outputs.recorder.loading import FORMAT_CLASSES, load_performance
@@ -38,6 +40,6 @@ from handrig.outputs.recorder.writer import Recorder
 __all__ = [
     "BVH_CHANNELS", "BVH_PROFILE", "FORMATS", "FORMAT_CLASSES", "FRAMES_FIELD", "FRAMES_WIDTH",
     "PARTIAL_SUFFIX", "BvhTake", "CsvTake", "Format", "Performance", "Playback", "Recorder",
-    "Repaired", "TakeFormat", "csv_header", "format_of", "load_performance", "partial_path",
-    "repair",
+    "Repaired", "TakeFormat", "check_new_take", "csv_header", "format_of", "free_path",
+    "load_performance", "partial_path", "repair",
 ]

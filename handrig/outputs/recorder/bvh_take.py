@@ -19,12 +19,24 @@ sign +1 on the right and -1 on the left (the skeleton mirrors across X).
 ``Frame Time`` is ``1 / rate_hz``: frames are evenly spaced and read back
 as ``t_s = i * frame_time``; a recording without wrists has zero wrist channels.
 
+BVH needs a fixed frame time while the loop's frames come when the glove's do (and at
+the floor rate when it is silent), so :class:`BvhTake` resamples. Frame ``k`` of the
+file stands for time ``t_first + k / rate_hz`` and holds the newest frame added at or
+before half a frame after that time: a frame within half a frame of it (so a glove at
+the file's rate maps one to one, whatever its jitter, instead of a late frame being
+doubled and the next dropped), else the frame before it, held, as the servos held
+each goal until the next (so a glove silence stays a silence of the same length). The
+file covers the frames from the first to the last: it lasts as long as the
+performance, within one frame, whatever the glove's rate, catch-up cycles or a
+silence.
+
 The header's frame count is a fixed-width field (:data:`FRAMES_WIDTH`), rewritten
 after each batch the writer puts in the file.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import ClassVar
@@ -38,6 +50,7 @@ from handrig.offline.bvh import BvhJoint, format_hierarchy, parse_hierarchy, rea
 from handrig.offline.mocap import Profile, load_profile
 from handrig.outputs import skeleton
 from handrig.outputs.recorder.formats import (
+    Emit,
     Format,
     FrameLayout,
     Performance,
@@ -53,6 +66,8 @@ FRAMES_FIELD = "Frames: "
 """What precedes the frame count in a BVH header."""
 FRAMES_WIDTH = 12
 """Characters of the frame count field a recording reserves (left-aligned, space-padded)."""
+GRID_TOLERANCE_S = 1e-7
+"""A frame this close to a grid time counts as on it (float rounding of the times)."""
 _ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", *BVH_CHANNELS)
 _SIDE = {"ri": "Right", "le": "Left"}
 _HAND_SPACING_CM = 20.0  # each wrist this far from the root, along the arm (arbitrary)
@@ -83,6 +98,11 @@ class BvhTake(TakeFormat):
         self._tmp = np.zeros(len(table))
         self._line_fmt = b" ".join([b"%.6f"] * n_channels) + b"\n"
         self._frames_at = -1  # byte offset of the 'Frames:' value
+        self._held = np.zeros(len(table))  # the newest frame added: what the grid holds
+        self._held_line = b""  # its line, once encoded
+        self._t0: float | None = None  # the first frame's time: grid time 0
+        self._t_last = 0.0
+        self._k = 0  # grid frames owed so far
 
     def header(self, with_wrist: bool) -> bytes:
         head = (format_hierarchy(_bvh_skeleton())
@@ -91,13 +111,45 @@ class BvhTake(TakeFormat):
         self._frames_at = head.index(FRAMES_FIELD) + len(FRAMES_FIELD)
         return head.encode("ascii")
 
-    def encode(self, t_s: float, values: NDArray[np.float64], with_wrist: bool) -> bytes:
-        tmp = self._tmp
-        np.subtract(values, self._offset, out=tmp)
-        tmp *= self._sign
-        m = self._motion
-        m[self._cols] = tmp
-        return self._line_fmt % tuple(m.tolist())
+    def add(self, t_s: float, values: NDArray[np.float64], with_wrist: bool,
+            emit: Emit) -> None:
+        t0 = self._t0
+        if t0 is None:
+            self._t0 = t0 = self._t_last = t_s
+        rate, k = self.rate_hz, self._k
+        # frame k holds the newest frame at or before t0 + (k + 1/2) / rate: those up
+        # to this frame's time hold the frame before it, one just at it holds this one
+        before = math.ceil((t_s - GRID_TOLERANCE_S - t0) * rate - 0.5)
+        if before > k:
+            emit(self._line(), before - k)
+            k = before
+        np.copyto(self._held, values)
+        self._held_line = b""
+        self._t_last = max(self._t_last, t_s)
+        upto = math.floor((t_s + GRID_TOLERANCE_S - t0) * rate - 0.5) + 1
+        if upto > k:
+            emit(self._line(), upto - k)
+            k = upto
+        self._k = k
+
+    def finish(self, emit: Emit) -> None:
+        if self._t0 is None:
+            return
+        # the frames up to the last frame's own time
+        total = math.floor((self._t_last + GRID_TOLERANCE_S - self._t0) * self.rate_hz) + 1
+        if total > self._k:
+            emit(self._line(), total - self._k)
+            self._k = total
+
+    def _line(self) -> bytes:
+        if not self._held_line:
+            tmp = self._tmp
+            np.subtract(self._held, self._offset, out=tmp)
+            tmp *= self._sign
+            m = self._motion
+            m[self._cols] = tmp
+            self._held_line = self._line_fmt % tuple(m.tolist())
+        return self._held_line
 
     def frames_written(self, fd: int, frames: int) -> None:
         # the header precedes the data, so a killed run's take usually reads as it is

@@ -1,7 +1,9 @@
 """Performance CSV: :class:`CsvTake`.
 
 Header row ``t_s,<50 curve names>[,<4 wrist names>]``, one row per frame, values
-with 6 decimals (round trip within 5e-7). Times are the loop's, as recorded.
+with 6 decimals (round trip within 5e-7). Each row keeps its frame's real time (the
+loop's clock, seconds since the run started): rows are as far apart as the frames
+were, evenly or not, and a stretch with no frames is a gap between two rows.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from handrig import hand
 from handrig.errors import DataError
 from handrig.offline.bvh import UNFINISHED_HINT
 from handrig.outputs.recorder.formats import (
+    Emit,
     Format,
     FrameLayout,
     Performance,
@@ -45,9 +48,10 @@ class CsvTake(TakeFormat):
         self._with_wrist = with_wrist
         return (",".join(names) + "\n").encode("ascii")
 
-    def encode(self, t_s: float, values: NDArray[np.float64], with_wrist: bool) -> bytes:
+    def add(self, t_s: float, values: NDArray[np.float64], with_wrist: bool,
+            emit: Emit) -> None:
         used = values if with_wrist else values[:_CURVES]
-        return self._line_fmt % (t_s, *used.tolist())
+        emit(self._line_fmt % (t_s, *used.tolist()), 1)
 
     @classmethod
     def load(cls, p: Path) -> Performance:

@@ -30,6 +30,9 @@ PARTIAL_SUFFIX = ".partial"
 N_VALUES = len(hand.CURVE_NAMES) + len(WRIST_NAMES)
 """Values in a frame: the 50 curves then the 4 wrist DOFs."""
 
+Emit = Callable[[bytes, int], None]
+"""Where a format puts its lines: ``emit(line, times)``."""
+
 Performance = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]
 """(t_s (n,), poses (n, 50), wrist (n, 4) or None)."""
 
@@ -86,9 +89,16 @@ class TakeFormat(ABC):
         """The bytes before the first frame."""
 
     @abstractmethod
-    def encode(self, t_s: float, values: NDArray[np.float64], with_wrist: bool) -> bytes:
-        """One frame's line: ``values`` (54,) = 50 curves then 4 wrist DOFs (zeros when
-        the take has none), degrees."""
+    def add(self, t_s: float, values: NDArray[np.float64], with_wrist: bool,
+            emit: Emit) -> None:
+        """A frame at time ``t_s`` (s, never earlier than the one before): ``values`` (54,)
+        = 50 curves then 4 wrist DOFs (zeros when the take has none), degrees. Calls
+        ``emit(line, times)`` for what is to be written now (a format at a fixed frame
+        time writes the frames whose time has come, which may be none or several)."""
+
+    def finish(self, emit: Emit) -> None:  # noqa: B027 - optional hook
+        """The end of the take: ``emit`` what is still owed (a format at a fixed frame
+        time: the last frame, up to its time)."""
 
     def frames_written(self, fd: int, frames: int) -> None:  # noqa: B027 - optional hook
         """The writer has put ``frames`` frames in the file ``fd`` (a header that counts
@@ -104,6 +114,34 @@ class TakeFormat(ABC):
     def layout(cls, head: bytes, p: Path) -> FrameLayout:
         """Where the frames of a file starting with ``head`` are (DataError if the header
         is damaged: nothing to keep)."""
+
+
+def free_path(path: str | Path) -> Path:
+    """``path`` if neither it nor its ``.partial`` exists, else the first free
+    ``<stem>-2<suffix>``, ``<stem>-3<suffix>`` ... (a take is never replaced)."""
+    p = Path(path)
+    k = 1
+    candidate = p
+    while candidate.exists() or partial_path(candidate).exists():
+        k += 1
+        candidate = p.with_name(f"{p.stem}-{k}{p.suffix}")
+    return candidate
+
+
+def check_new_take(path: str | Path) -> None:
+    """DataError, naming the file and the next free name, if ``path`` holds a take already
+    (it would be replaced) or its ``.partial`` is there (an unfinished take)."""
+    p = Path(path)
+    if p.exists():
+        raise DataError(
+            f"{p}: a take is already there, and a take is never replaced; record to"
+            f" {free_path(p)} (the next free name) or move the old take away")
+    tmp = partial_path(p)
+    if tmp.exists():
+        raise DataError(
+            f"{tmp}: an unfinished take from a run that did not close it is in"
+            f" the way; recover it with `handrig record repair {tmp}` (or move it)"
+            " and start again")
 
 
 def all_numbers(tokens: list[bytes], n: int) -> bool:
