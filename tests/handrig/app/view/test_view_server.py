@@ -149,7 +149,8 @@ def test_scene_from_the_rigs_model(rig: str | None) -> None:
     assert len(geometry["geoms"]) >= 10
     joint = cfg.servos[1].joint
     rest, bent = scene.pose({}), scene.pose({joint: 40.0})
-    assert len(rest["pos"]) == 3 * models["ri"].nbody and len(rest["quat"]) == 4 * models["ri"].nbody
+    nbody = models["ri"].nbody
+    assert len(rest["pos"]) == 3 * nbody and len(rest["quat"]) == 4 * nbody
     moved = np.abs(np.subtract(rest["pos"], bent["pos"])) > 1e-4
     assert moved.any() and not moved.all()  # the bodies below that joint, not the root
 
