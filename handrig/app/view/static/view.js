@@ -38,13 +38,15 @@ function makeView(el) {
   return view;
 }
 
-function fit(view, object) {
-  const box = new THREE.Box3().setFromObject(object);
+// Aim the camera at the objects (the hand, not the forearm), seen from above and in front.
+function fit(view, objects, from) {
+  const box = new THREE.Box3();
+  for (const o of objects) if (o.visible) box.expandByObject(o);
   if (box.isEmpty()) return;
   const centre = box.getCenter(new THREE.Vector3());
   const size = box.getSize(new THREE.Vector3()).length();
   view.controls.target.copy(centre);
-  view.camera.position.copy(centre).add(new THREE.Vector3(0.1, -0.5, 0.7).multiplyScalar(size));
+  view.camera.position.copy(centre).add(from.clone().multiplyScalar(size));
   view.controls.update();
   view.fitted = true;
 }
@@ -78,7 +80,7 @@ function buildModel(model, ghost) {
   for (const g of model.geoms) {
     const geo = geometryOf(g, model.meshes);
     if (!geo) continue;
-    const colour = new THREE.Color(g.rgba[0], g.rgba[1], g.rgba[2]);
+    const colour = new THREE.Color().setRGB(g.rgba[0], g.rgba[1], g.rgba[2], THREE.SRGBColorSpace);
     const material = ghost
       ? new THREE.MeshBasicMaterial({ color: 0x9fd0ff, transparent: true, opacity: 0.18, depthWrite: false })
       : new THREE.MeshLambertMaterial({ color: colour, transparent: g.rgba[3] < 1, opacity: g.rgba[3] });
@@ -202,9 +204,13 @@ function drawFrame(f) {
     attr.needsUpdate = true;
     b.geo.setDrawRange(0, segs.length / 3);
     b.geo.computeBoundingSphere();
+    b.geo.computeBoundingBox();
   }
-  if (!puppet.fitted) fit(puppet, puppet.scene);
-  if (!skeleton.fitted) fit(skeleton, skeleton.scene);
+  if (!puppet.fitted) {
+    const hands = Object.values(models).flatMap((m) => (m.bodies.length > 2 ? m.bodies.slice(2) : m.bodies));
+    fit(puppet, hands, new THREE.Vector3(0.15, -0.75, 0.85));
+  }
+  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.35, 1.0));
   puppet.dirty = skeleton.dirty = true;
   drawTables(f);
 }
