@@ -117,6 +117,11 @@ class ViewServer:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}/" + (f"?token={self.token}" if self.token else "")
 
+    @property
+    def native_thread_id(self) -> int | None:
+        """The server thread's OS id while it runs (its CPU time is in /proc)."""
+        return self._thread.native_id if self._thread is not None else None
+
     def attach(self, source: Callable[[], LoopSnapshot | None],
                controls: RigControls | None = None) -> None:
         """Show what ``source`` returns (``rig.telemetry.latest``); the buttons call

@@ -113,6 +113,15 @@ def pixels(png: bytes) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
 
 
+def save_small(png: bytes, path: str, width: int = 900) -> None:
+    """The page's picture for the docs: ``width`` pixels wide, 128 colours."""
+    from PIL import Image
+
+    image = Image.open(io.BytesIO(png)).convert("RGB")
+    image = image.resize((width, round(image.height * width / image.width)), Image.LANCZOS)
+    image.quantize(128).save(path, optimize=True)
+
+
 def skin(rgb: np.ndarray) -> np.ndarray:
     """The puppet's skin colour (rgba 0.85 0.68 0.58, lit): warm, red over green over blue."""
     r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
@@ -144,7 +153,7 @@ def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: DemoRun, tmp_pat
         second = pixels(puppet.screenshot_as_png)
         bones = pixels(skeleton_view.screenshot_as_png)
         if os.environ.get("HANDRIG_VIEW_SCREENSHOT"):
-            browser.save_screenshot(os.environ["HANDRIG_VIEW_SCREENSHOT"])
+            save_small(browser.get_screenshot_as_png(), os.environ["HANDRIG_VIEW_SCREENSHOT"])
 
         # the hand is drawn in the model's view, in its colour, away from the edges
         h, w = first.shape[:2]

@@ -1,0 +1,217 @@
+"""What the live view costs the loop: the rig at 200 Hz / 1 Mbps with and without
+``--view`` and two headless chromium pages connected, side by side in one run.
+
+The case is :mod:`bench.bench_rig`'s (the real rig between the glove and bus
+emulators in processes of their own, 20 servos with wire timing, fixed-rate at
+200 Hz); the rounds alternate without/with the view so drift on the shared
+machine falls on both. Reported per round and pooled: end-to-end latency in the
+process (frame arrival to Sync Write handed to the OS) and from outside (glove
+emulator send to the bus emulator's receipt), p50/p99; the rig process's CPU; the
+view thread's CPU, frames encoded and sent, frames slow pages skipped.
+
+Browsers: Debian's chromium through chromium-driver (``make browser-deps``); where
+they are missing, two WebSocket clients stand in and the table says so.
+``HANDRIG_BENCH_SECONDS`` sets each round's length (default 20 s; QUICK: 8 s),
+``HANDRIG_BENCH_ROUNDS`` the rounds of each (default 2).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import resource
+import shutil
+import tempfile
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench.bench_rig import (
+    INDEX_CHANNEL,
+    _glove_file,
+    _rig_file,
+    emulator,
+    outside_latencies,
+    step_recording,
+)
+from handrig.app.factory import build_parts
+from handrig.app.session import LiveOptions, run_live
+from handrig.app.view import ViewServer, build_server
+from handrig.devices.glove_recording import write_glove_recording
+
+RATE_HZ = 200.0
+BAUD = 1_000_000
+CLK_TCK = os.sysconf("SC_CLK_TCK")
+
+
+def thread_cpu_s(tid: int | None) -> float:
+    """CPU seconds (user + system) of one thread of this process so far."""
+    if tid is None:
+        return 0.0
+    try:
+        fields = Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+
+def process_cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+@contextlib.contextmanager
+def browsers(url: str, n: int, folder: Path) -> Iterator[str]:
+    """``n`` pages on ``url``: headless chromium when installed, else WebSocket clients
+    that read every frame; yields what they are."""
+    chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
+    if chromium and driver:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.service import Service
+
+        pages = []
+        try:
+            for i in range(n):
+                opts = webdriver.ChromeOptions()
+                opts.binary_location = chromium
+                for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                            "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+                            "--window-size=1200,900", f"--user-data-dir={folder / f'p{i}'}"):
+                    opts.add_argument(arg)
+                page = webdriver.Chrome(options=opts, service=Service(executable_path=driver))
+                pages.append(page)
+                page.get(url)
+            yield f"{n} headless chromium pages"
+        finally:
+            for page in pages:
+                page.quit()
+        return
+    from websockets.sync.client import connect
+
+    stop = threading.Event()
+
+    def read() -> None:
+        with connect(url.replace("http://", "ws://").split("?")[0].rstrip("/") + "/ws") as ws:
+            while not stop.is_set():
+                with contextlib.suppress(TimeoutError):
+                    ws.recv(timeout=0.5)
+
+    threads = [threading.Thread(target=read, daemon=True) for _ in range(n)]
+    for t in threads:
+        t.start()
+    try:
+        yield f"{n} WebSocket clients (chromium not installed: make browser-deps)"
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(timeout=2)
+
+
+def run_round(with_view: bool, seconds: float, folder: Path, rec_path: Path,
+              values: np.ndarray) -> dict[str, Any]:
+    rig_path = _rig_file(folder, "fixed", RATE_HZ, BAUD)
+    tag = f"{'view' if with_view else 'plain'}_{time.monotonic_ns()}"
+    glove_log, bus_log = folder / f"glove_{tag}.log", folder / f"bus_{tag}.log"
+    parts = build_parts(rig_path, _glove_file(folder))
+    server: ViewServer | None = None
+    out: dict[str, Any] = {"view": with_view}
+    with contextlib.ExitStack() as stack:
+        bus_port = stack.enter_context(emulator(
+            ["bus", "--rig", str(rig_path), "--log", str(bus_log)], "the bus emulator"))
+        glove_port = stack.enter_context(emulator(
+            ["glove", str(rec_path), "--rate", f"{RATE_HZ:g}", "--log", str(glove_log)],
+            "the glove emulator"))
+        on_rig = None
+        if with_view:
+            server = stack.enter_context(build_server("127.0.0.1:0", parts.rig_config))
+            out["browsers"] = stack.enter_context(browsers(server.url, 2, folder))
+            view = server
+
+            def on_rig(rig: Any) -> None:
+                view.attach(rig.telemetry.latest, rig)
+        cpu0 = process_cpu_s()
+        view0 = thread_cpu_s(server.native_thread_id) if server else 0.0
+        t0 = time.monotonic()
+        result = run_live(parts, LiveOptions(glove=glove_port, bus=bus_port, duration_s=seconds,
+                                             log=lambda s: None, on_rig=on_rig))
+        wall = time.monotonic() - t0
+        out["cpu_pct"] = 100.0 * (process_cpu_s() - cpu0) / wall
+        if server is not None:
+            out["view_cpu_pct"] = 100.0 * (thread_cpu_s(server.native_thread_id) - view0) / wall
+            out["stats"] = server.stats
+    sends = [(float(a), int(c)) for a, _, c in
+             (line.split() for line in glove_log.read_text().splitlines() if line)]
+    writes = [(float(f[0]), tuple(int(v) for v in f[1:]))
+              for f in (line.split() for line in bus_log.read_text().splitlines()) if f]
+    out["outside_us"] = np.array(outside_latencies(sends, values, writes)) * 1e6
+    out["summary"] = result.summary
+    return out
+
+
+def _pct(xs: np.ndarray, q: float) -> float:
+    return float(np.percentile(xs, q)) if len(xs) else float("nan")
+
+
+def main() -> None:
+    quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
+    seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 8.0 if quick else 20.0))
+    rounds = int(os.environ.get("HANDRIG_BENCH_ROUNDS", 2))
+    results: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="bench_view_") as tmp:
+        folder = Path(tmp)
+        rec = step_recording()
+        rec_path = folder / "steps.csv"
+        write_glove_recording(rec_path, rec)
+        values = rec.raw[:, INDEX_CHANNEL].copy()
+        print(f"rig at {RATE_HZ:g} Hz fixed-rate, {BAUD / 1e6:g} Mbps, 20 emulated servos with "
+              f"wire timing; {rounds} rounds of {seconds:g} s without / with --view and two "
+              "pages", flush=True)
+        print("| round | view | in-process p50 / p99 us | outside p50 / p99 us | rate Hz "
+              "| overruns | process CPU % | view thread CPU % | frames encoded / sent / "
+              "skipped |", flush=True)
+        print("|---|---|---|---|---|---|---|---|---|", flush=True)
+        for i in range(rounds):
+            for with_view in (False, True):
+                r = run_round(with_view, seconds, folder, rec_path, values)
+                results.append(r)
+                s, lat = r["summary"], r["outside_us"]
+                st = r.get("stats")
+                frames = (f"{st.frames_encoded} / {st.frames_sent} / {st.frames_skipped}"
+                          if st else "-")
+                print(f"| {i + 1} | {'yes' if with_view else 'no'} "
+                      f"| {s['latency_us']['p50']} / {s['latency_us']['p99']} "
+                      f"| {_pct(lat, 50):.0f} / {_pct(lat, 99):.0f} | {s['rate_hz']} "
+                      f"| {s['overruns']} | {r['cpu_pct']:.1f} "
+                      f"| {r.get('view_cpu_pct', 0.0):.1f} | {frames} |", flush=True)
+    browsers_used = next((r["browsers"] for r in results if "browsers" in r), "")
+    print(f"pages: {browsers_used}")
+    for label, key in (("in-process", "in"), ("outside", "out")):
+        pooled = {}
+        for with_view in (False, True):
+            rs = [r for r in results if r["view"] == with_view]
+            if key == "out":
+                lat = np.concatenate([r["outside_us"] for r in rs])
+                pooled[with_view] = (_pct(lat, 50), _pct(lat, 99))
+            else:
+                pooled[with_view] = (float(np.median([r["summary"]["latency_us"]["p50"]
+                                                      for r in rs])),
+                                     float(np.median([r["summary"]["latency_us"]["p99"]
+                                                      for r in rs])))
+        (a50, a99), (b50, b99) = pooled[False], pooled[True]
+        print(f"{label} end-to-end, without -> with the view: p50 {a50:.0f} -> {b50:.0f} us "
+              f"({100 * (b50 - a50) / a50:+.1f} %), p99 {a99:.0f} -> {b99:.0f} us "
+              f"({100 * (b99 - a99) / a99:+.1f} %)")
+    view_cpu = [r["view_cpu_pct"] for r in results if r["view"]]
+    plain = np.mean([r["cpu_pct"] for r in results if not r["view"]])
+    viewed = np.mean([r["cpu_pct"] for r in results if r["view"]])
+    print(f"view thread CPU: {np.mean(view_cpu):.1f} % of a core; rig process CPU "
+          f"{plain:.1f} % without, {viewed:.1f} % with the view "
+          "(the pages' own chromium processes are not counted)")
+
+
+if __name__ == "__main__":
+    main()
