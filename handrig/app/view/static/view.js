@@ -210,7 +210,7 @@ function drawFrame(f) {
     const hands = Object.values(models).flatMap((m) => (m.bodies.length > 2 ? m.bodies.slice(2) : m.bodies));
     fit(puppet, hands, new THREE.Vector3(0.15, -0.75, 0.85));
   }
-  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.35, 1.0));
+  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.45, 1.45));
   puppet.dirty = skeleton.dirty = true;
   drawTables(f);
 }
