@@ -354,7 +354,7 @@ def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
         resume_frames=resume.frames, resume_time_s=resume.time_s,
         outputs=outputs, log=log, profile=profile,
         loop_mode=loop.mode, floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz,
-        spin_s=loop.spin_us * 1e-6, catch_up=loop.catch_up, read_parts=rig_cfg.bus.read_parts,
+        catch_up=loop.catch_up, read_parts=rig_cfg.bus.read_parts,
     )
 
 

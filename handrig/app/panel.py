@@ -10,45 +10,30 @@ is tested without a rig and fed by whatever runs the loop:
   its own thread (the realtime loop never waits for the terminal): on a
   terminal below the lines printed before it (commissioning, once), else as a
   plain line every few seconds;
-* :class:`RigSnapshot` takes the snapshot of a running :class:`~handrig.loop.rig.Rig`;
-* :class:`KeyReader` reads keys from a terminal without blocking and calls
-  their callbacks: space relaxes or resumes, ``q`` stops (ease, then torque
-  off), ``e`` is the e-stop (torque off at once) (:data:`SHOW_KEYS`).
+* :class:`~handrig.app.rig_snapshot.RigSnapshot` takes the snapshot of a running
+  :class:`~handrig.loop.rig.Rig`;
+* :class:`~handrig.app.keys.KeyReader` reads keys from a terminal without blocking
+  and calls their callbacks (:data:`~handrig.app.keys.SHOW_KEYS`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import select
-import termios
 import threading
-import tty
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from types import TracebackType
-from typing import Any
 
-import numpy as np
 from rich.console import Console, Group
 from rich.live import Live
 from rich.text import Text
 
 from firmware_protocol.dynamixel import HardwareError
+from handrig.app.keys import SHOW_KEYS
 
 WIDTH = 80
 HEIGHT = 24
 SERVO_COLUMNS = 2
 NAN = math.nan
-
-SHOW_KEYS: dict[str, str] = {
-    " ": "relax/resume",
-    "q": "stop (ease, torque off)",
-    "e": "e-stop (torque off now)",
-}
-"""The show's keys and what each does (the callbacks are the loop's)."""
 
 HARDWARE_ERROR_LETTERS: tuple[tuple[int, str], ...] = (
     (HardwareError.INPUT_VOLTAGE, "V"),
@@ -355,7 +340,7 @@ class LivePanel:
     """Redraws a :class:`PanelSnapshot` from ``source`` while the show runs.
 
     ``source``: a callable returning the current snapshot (called from the
-    panel's thread), or a :class:`~handrig.loop.rig.Rig` (wrapped in :class:`RigSnapshot`).
+    panel's thread), e.g. a :class:`~handrig.app.rig_snapshot.RigSnapshot`.
     ``header``: lines printed once, above the panel (the commissioning report).
     On a terminal the panel redraws at ``refresh_hz`` below what was printed
     before it; :meth:`log` prints above it. Without a terminal it prints
@@ -364,15 +349,13 @@ class LivePanel:
 
     def __init__(
         self,
-        source: Callable[[], PanelSnapshot] | Any,
+        source: Callable[[], PanelSnapshot],
         refresh_hz: float = 4.0,
         console: Console | None = None,
         *,
         header: Sequence[str] = (),
         plain_every_s: float = 5.0,
     ) -> None:
-        if not callable(source):
-            source = RigSnapshot(source)
         self.source: Callable[[], PanelSnapshot] = source
         self.refresh_s = 1.0 / refresh_hz
         self.plain_every_s = plain_every_s
@@ -438,278 +421,3 @@ class LivePanel:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
-
-
-# -- a rig's snapshot -------------------------------------------------------------------
-
-
-class _Rate:
-    """Events per second of a growing counter, over the last ``window_s`` or more."""
-
-    def __init__(self, window_s: float = 1.0) -> None:
-        self.window_s = window_s
-        self._marks: list[tuple[float, int]] = []
-        self.value = NAN
-
-    def update(self, now: float, count: int) -> float:
-        self._marks.append((now, count))
-        while len(self._marks) > 2 and now - self._marks[1][0] >= self.window_s:
-            self._marks.pop(0)
-        t0, c0 = self._marks[0]
-        if now - t0 > 0:
-            self.value = (count - c0) / (now - t0)
-        return self.value
-
-
-class RigSnapshot:
-    """``RigSnapshot(rig)()``: the :class:`PanelSnapshot` of a running rig.
-
-    Reads the rig's counters, its glove's and bus's statistics, its newest
-    servo state, and the VMC sender and recorder among its outputs. Rates are
-    taken over the last second between calls. ``glove_source`` and
-    ``temperature_limit_c`` (servo id -> limit) are shown when given; ``keys``:
-    whether a :class:`KeyReader` is listening (the panel says so either way).
-    """
-
-    def __init__(self, rig: Any, *, glove_source: str = "",
-                 temperature_limit_c: Mapping[int, float] | None = None,
-                 keys: bool = False) -> None:
-        self.rig = rig
-        self.glove_source = glove_source
-        self.keys = keys
-        self.temperature_limit_c = dict(temperature_limit_c or {})
-        self._rates = {k: _Rate() for k in ("loop", "glove", "reads", "writes", "vmc")}
-
-    def __call__(self) -> PanelSnapshot:
-        rig = self.rig
-        now = rig.clock.now()
-        stats = rig.stats
-        elapsed = now - rig.started_at if stats.frames else 0.0  # started_at is set by then
-        lat = np.asarray(stats.latencies_s[-2000:], dtype=np.float64)
-        p50, p99 = (np.percentile(lat, [50, 99]) * 1e6) if lat.size else (NAN, NAN)
-        mode = getattr(rig.mode, "value", str(rig.mode))
-        if stats.estop:
-            mode = "e-stop"
-        reason = ""
-        if mode in ("stopping", "e-stop"):
-            reason = stats.stop_reason or (stats.events[-1] if stats.events else "")
-        elif mode in ("relaxing", "resuming") and stats.events:
-            reason = stats.events[-1]
-        elif mode == "waiting":
-            reason = "no glove frame yet: holding where the servos are"
-        return PanelSnapshot(
-            mode=mode, reason=reason, elapsed_s=elapsed,
-            loop_rate_hz=self._rates["loop"].update(now, stats.frames),
-            overruns=stats.overruns, latency_p50_us=float(p50), latency_p99_us=float(p99),
-            glove=self._glove(now), bus=self._bus(now), servos=self._servos(now),
-            outputs=self._outputs(now), events=tuple(stats.events[-3:]), keys=self.keys,
-        )
-
-    def _glove(self, now: float) -> GloveLink:
-        stats_fn = getattr(self.rig.glove, "stats", None)
-        if stats_fn is None:
-            return GloveLink(self.glove_source)
-        g = stats_fn()
-        return GloveLink(
-            source=self.glove_source or str(getattr(self.rig.glove, "port", "")),
-            rate_hz=self._rates["glove"].update(now, g.frames_ok), frames_ok=g.frames_ok,
-            errors=g.errors, last_frame_age_s=g.time_since_last_good_s,
-            reconnects=g.reconnects, failure=g.failure)
-
-    def _bus(self, now: float) -> BusHealth:
-        bus = self.rig.bus
-        b = getattr(bus, "stats", None)
-        state = self.rig.last_state
-        stale_n, worst = 0, 0.0
-        if state is not None:
-            stale = np.asarray(state.stale, dtype=bool)
-            stale_n = int(stale.sum())
-            if stale_n:
-                since = max(0.0, now - float(state.timestamp_s))
-                worst = float(np.max(np.asarray(state.age_s)[stale])) + since
-        if b is None:
-            return BusHealth(stale_servos=stale_n, stale_worst_age_s=worst)
-        return BusHealth(
-            port=str(getattr(bus, "port", "")),
-            read_rate_hz=self._rates["reads"].update(now, b.reads),
-            write_rate_hz=self._rates["writes"].update(now, b.writes),
-            timeouts=b.timeouts, errors=b.crc_errors + b.malformed + b.status_errors,
-            stale_servos=stale_n, stale_worst_age_s=worst)
-
-    def _servos(self, now: float) -> tuple[ServoLine, ...]:
-        rig = self.rig
-        joints = tuple(rig.pipeline.servo_joints)
-        ids = list(getattr(rig.bus, "ids", None) or range(1, len(joints) + 1))
-        goals = np.asarray(rig.pipeline.targets, dtype=np.float64)
-        state = rig.last_state
-
-        def column(name: str, default: float = NAN) -> np.ndarray:
-            arr = getattr(state, name, None)
-            return (np.full(len(joints), default) if arr is None
-                    else np.asarray(arr, dtype=np.float64))
-
-        pos, temp, cur = (column("positions_deg"), column("temperatures_c"),
-                          column("currents_ma"))
-        hw = column("hardware_errors", 0.0)
-        stale = column("stale", 0.0)
-        return tuple(
-            ServoLine(int(ids[i]), joint, float(goals[i]), float(pos[i]), bool(stale[i]),
-                      float(temp[i]), self.temperature_limit_c.get(int(ids[i]), NAN),
-                      float(cur[i]), int(hw[i]))
-            for i, joint in enumerate(joints))
-
-    def _outputs(self, now: float) -> Outputs:
-        vmc_target, vmc_rate, vmc_err = "", NAN, 0
-        rec_path, rec_bytes, rec_s = "", 0, 0.0
-        for out in self.rig.outputs:
-            address = getattr(out, "address", None)
-            if address is not None and hasattr(out, "bundles_sent"):
-                vmc_target = f"{address[0]}:{address[1]}"
-                vmc_rate = self._rates["vmc"].update(now, out.bundles_sent)
-                vmc_err = int(getattr(out, "errors", 0))
-            elif hasattr(out, "n_frames") and hasattr(out, "path"):
-                rec_path = str(out.path)
-                rec_s = out.n_frames / float(getattr(out, "rate_hz", 0.0) or 1.0)
-                rec_bytes = _bytes_on_disk(Path(out.path))
-        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s)
-
-
-def _bytes_on_disk(path: Path) -> int:
-    """Size of a recording being written (its ``.partial`` file until it is closed)."""
-    total = 0
-    for p in (path, path.with_name(path.name + ".partial")):
-        with contextlib.suppress(OSError):
-            total = max(total, p.stat().st_size)
-    return total
-
-
-# -- keys -------------------------------------------------------------------------------
-
-
-class KeyReader:
-    """Single keys from a terminal, read without blocking, each calling its callback.
-
-    ``bindings``: key -> callable (e.g. ``{" ": toggle_relax, "q": stop, "e":
-    estop}``, see :meth:`for_show`); letters match either case. Within ``with``
-    (or between :meth:`open` and :meth:`close`) the terminal on ``fd`` is in
-    cbreak mode: keys arrive one at a time and are not echoed, Ctrl-C still
-    interrupts; the previous settings are restored on close, also after an
-    error. :meth:`poll` handles what has arrived and never waits; :meth:`start`
-    polls from a thread. Escape sequences (arrow keys) are ignored. A callback
-    that raises is reported to ``on_error``; without one it is re-raised from
-    :meth:`poll`, and the thread keeps it in :attr:`error` and stops reading.
-    """
-
-    def __init__(self, fd: int, bindings: Mapping[str, Callable[[], None]], *,
-                 poll_s: float = 0.05,
-                 on_error: Callable[[BaseException], None] | None = None) -> None:
-        self.fd = fd
-        self.bindings = {(k if len(k) == 1 and not k.isalpha() else k.lower()): v
-                         for k, v in bindings.items()}
-        self.poll_s = poll_s
-        self.on_error = on_error
-        self.pressed: list[str] = []  # every bound key handled, in order
-        self.eof = False  # the terminal went away
-        self.error: BaseException | None = None  # what stopped the thread
-        self._saved: list[Any] | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    @classmethod
-    def for_show(cls, fd: int, *, toggle_relax: Callable[[], None], stop: Callable[[], None],
-                 estop: Callable[[], None], **kwargs: Any) -> KeyReader:
-        """The show's keys (:data:`SHOW_KEYS`): space, ``q`` and ``e``."""
-        return cls(fd, {" ": toggle_relax, "q": stop, "e": estop}, **kwargs)
-
-    def open(self) -> KeyReader:
-        """Put the terminal in cbreak mode (nothing happens if ``fd`` is no terminal)."""
-        if self._saved is None and os.isatty(self.fd):
-            self._saved = termios.tcgetattr(self.fd)
-            tty.setcbreak(self.fd, termios.TCSANOW)
-        return self
-
-    def close(self) -> None:
-        """Stop the thread and restore the terminal. Idempotent."""
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
-        self._thread = None
-        if self._saved is not None:
-            with contextlib.suppress(termios.error, OSError):
-                termios.tcsetattr(self.fd, termios.TCSADRAIN, self._saved)
-            self._saved = None
-
-    def __enter__(self) -> KeyReader:
-        return self.open()
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
-
-    def poll(self, timeout_s: float = 0.0) -> int:
-        """Handle the keys that arrived (waiting at most ``timeout_s`` for the first);
-        returns how many bound keys were handled."""
-        handled = 0
-        wait = timeout_s
-        while not self.eof:
-            try:
-                ready, _, _ = select.select([self.fd], [], [], wait)
-            except (OSError, ValueError):
-                self.eof = True
-                break
-            if not ready:
-                break
-            wait = 0.0
-            try:
-                data = os.read(self.fd, 64)
-            except BlockingIOError:
-                break
-            except OSError:
-                data = b""
-            if not data:
-                self.eof = True
-                break
-            handled += self._dispatch(data.decode("utf-8", errors="ignore"))
-        return handled
-
-    def _dispatch(self, text: str) -> int:
-        handled = 0
-        i = 0
-        while i < len(text):
-            ch = text[i]
-            i += 1
-            if ch == "\x1b":  # an escape sequence: skip to its final byte
-                while i < len(text) and not (text[i].isalpha() or text[i] == "~"):
-                    i += 1
-                i += 1
-                continue
-            fn = self.bindings.get(ch.lower() if ch.isalpha() else ch)
-            if fn is None:
-                continue
-            self.pressed.append(ch)
-            handled += 1
-            try:
-                fn()
-            except Exception as exc:
-                if self.on_error is None:
-                    raise
-                self.on_error(exc)
-        return handled
-
-    def start(self) -> KeyReader:
-        """Poll from a background thread until :meth:`close` (opens the terminal first)."""
-        self.open()
-        if self._thread is None:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name="handrig-keys",
-                                            daemon=True)
-            self._thread.start()
-        return self
-
-    def _run(self) -> None:
-        while not self._stop.is_set() and not self.eof:
-            try:
-                self.poll(self.poll_s)
-            except Exception as exc:  # a callback failed and there is no on_error
-                self.error = exc
-                return

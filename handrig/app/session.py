@@ -281,7 +281,9 @@ class _Session:
     def _console(self, rig: Any, header: list[str]) -> Iterator[None]:
         """The show console: the panel (on a terminal, else plain lines) and, when stdin
         is a terminal, the show keys."""
-        from handrig.app.panel import KeyReader, LivePanel, RigSnapshot, show_console
+        from handrig.app.keys import KeyReader
+        from handrig.app.panel import LivePanel, show_console
+        from handrig.app.rig_snapshot import RigSnapshot
 
         keys: KeyReader | None = None
         if self.opts.keys and _is_terminal(sys.stdin):

@@ -136,7 +136,6 @@ class LoopConfig:
     mode: Literal["glove", "fixed"] = "glove"  # a cycle per glove frame, or at rate_hz
     floor_hz: float = 100.0  # mode "glove": a write at least this often, frame or not
     ceiling_hz: float = 1000.0  # mode "glove": at most this many writes per second
-    spin_us: float = 500.0  # mode "glove": poll the port this long either side of a frame
     catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
@@ -164,9 +163,6 @@ class LoopConfig:
             raise ConfigError("ceiling rate out of range", key="ceiling_hz",
                               value=self.ceiling_hz,
                               allowed=f"floor_hz ({self.floor_hz:g})..5000 Hz")
-        if not 0.0 <= self.spin_us <= 5000.0:
-            raise ConfigError("spin window out of range", key="spin_us", value=self.spin_us,
-                              allowed="0 (off: sleep until the frame) ..5000 us")
         for name in ("glove_timeout_s", "relax_time_s", "slew_deg_s"):
             value = getattr(self, name)
             if value <= 0:

@@ -3,7 +3,7 @@
 ``trigger`` (when a cycle runs), ``modes`` (what the puppet does: waiting, running,
 relaxing, resuming, stopping), ``cycle`` (one glove sample to one Sync Write and
 what follows it), ``easing`` (to the relaxed pose and back to the glove),
-``rehearsal`` (the critical path kept warm), ``stats`` (fixed-size figures),
+``stats`` (fixed-size figures),
 ``profile`` (per-stage timing, for the benchmark), ``ports`` (what the loop needs
 from the glove, the bus and the control path).
 """

@@ -123,6 +123,11 @@ class Cycle:
         self._deferred_controls = np.zeros_like(self.controls)
         self._deferred: tuple[float, tuple[float, float]] | None = None  # (t_s, angles)
 
+    @property
+    def last_pose(self) -> FloatArray | None:
+        """The full pose last output (None before the first)."""
+        return self._pose
+
     def seed(self) -> None:
         """Start from where the servos are: the goals the bus holds them at, else a read.
         DeviceError when neither is known (the loop must not start blind)."""

@@ -12,8 +12,7 @@ The loop is made of parts (:mod:`handrig.loop`): a trigger says when a cycle run
 (:class:`~handrig.loop.trigger.FixedRateTrigger`,
 :class:`~handrig.loop.trigger.GloveTrigger`), the mode machine what the
 puppet does (:mod:`handrig.loop.modes`), the cycle does one cycle's work
-(:mod:`handrig.loop.cycle`) with two easings (:mod:`handrig.loop.easing`), a
-rehearsal keeps the critical path warm (:mod:`handrig.loop.rehearsal`), and the
+(:mod:`handrig.loop.cycle`) with two easings (:mod:`handrig.loop.easing`), and the
 statistics are fixed-size (:mod:`handrig.loop.stats`). :class:`Rig` puts them
 together.
 
@@ -37,6 +36,7 @@ Safety (what a puppeteer relies on during a show):
 from __future__ import annotations
 
 import gc
+import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any, Literal
@@ -54,15 +54,13 @@ from handrig.loop.ports import (
     SampleLike,
 )
 from handrig.loop.profile import StageProfile
-from handrig.loop.rehearsal import Rehearsal
 from handrig.loop.stats import RunStats
+from handrig.loop.telemetry import SnapshotBuilder, Telemetry
 from handrig.loop.trigger import FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pose.pipeline import PosePipeline
 
 __all__ = ["BusLike", "ControlsFromRaw", "GloveLike", "Mode", "OrientationLike", "Rig",
            "RunStats", "SampleLike"]
-
-WARM_S = 0.00035  # how long before a deadline the rehearsal runs
 
 
 class Rig:
@@ -70,8 +68,7 @@ class Rig:
 
     ``trigger``: what starts each cycle (default: by ``loop_mode``, a
     :class:`FixedRateTrigger` at ``rate_hz`` or a :class:`GloveTrigger` between
-    ``floor_hz`` and ``ceiling_hz``; either rehearses ``warm_s`` before the next
-    tick, 0 turns the rehearsal off, and stamps the glove's frames as they arrive).
+    ``floor_hz`` and ``ceiling_hz``; either stamps the glove's frames as they arrive).
     ``profile``: time the critical path's stages (:attr:`stage_profile`).
     """
 
@@ -92,13 +89,11 @@ class Rig:
         resume_time_s: float = 0.3,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         log: Callable[[str], None] = print,
-        warm_s: float = WARM_S,
         profile: bool = False,
         trigger: Trigger | None = None,
         loop_mode: Literal["fixed", "glove"] = "fixed",
         floor_hz: float = 100.0,
         ceiling_hz: float = 1000.0,
-        spin_s: float = 0.0,
         catch_up: bool = False,
         read_parts: int = 1,
     ) -> None:
@@ -106,15 +101,12 @@ class Rig:
         self.bus = bus
         self.pipeline = pipeline
         self.clock = clock
-        self.warm_s = max(0.0, float(warm_s))
         if trigger is None:
             if loop_mode == "glove":
                 trigger = GloveTrigger(clock, glove, floor_hz=floor_hz, ceiling_hz=ceiling_hz,
-                                       warm_s=self.warm_s,
-                                       spin_s=spin_s if self.warm_s > 0 else 0.0,
                                        catch_up=catch_up)
             elif loop_mode == "fixed":
-                trigger = FixedRateTrigger(clock, rate_hz, warm_s=self.warm_s, glove=glove)
+                trigger = FixedRateTrigger(clock, rate_hz, glove=glove)
             else:
                 raise ValueError(f"loop_mode {loop_mode!r} unknown: use 'fixed' or 'glove'")
         self.trigger = trigger
@@ -140,8 +132,11 @@ class Rig:
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
-        self.rehearsal = (Rehearsal(glove, bus, pipeline, controls_from_raw, orientation,
-                                    self.period_s) if self.warm_s > 0 else None)
+        self.telemetry = Telemetry()
+        """The newest :class:`~handrig.loop.telemetry.LoopSnapshot`, for any thread."""
+        self._snapshot = SnapshotBuilder(
+            glove, bus, pipeline, self.machine, self.stats, lambda: self.started_at,
+            self._view, lambda: self.cycle.outputs)
         self.stage_profile = StageProfile(clock) if profile else None
         if self.stage_profile is not None:
             self.stage_profile.wrap(self.cycle)
@@ -190,6 +185,12 @@ class Rig:
         turns torque off at once. Safe from another thread or a signal handler."""
         self.machine.request_estop(reason)
 
+    def _view(self) -> tuple[Any, ...]:
+        c = self.cycle
+        sample = c.sample
+        return (c.controls, None if sample is None else sample.raw, c.angles, c.last_pose,
+                c.sent, c.last_state, math.nan if sample is None else sample.host_time_s)
+
     # -- the loop ------------------------------------------------------------------------------
     def _event(self, text: str) -> None:
         self.stats.events.append(text)
@@ -218,7 +219,6 @@ class Rig:
         machine.start(t0)
         cycle.t0_s = t0
         tick = Tick()
-        rehearsal = self.rehearsal
         cpu0 = time.thread_time()
         last_start: float | None = None
         try:
@@ -230,17 +230,14 @@ class Rig:
                     machine.finish(f"{frames} frames done")
                 elif duration_s is not None and clock.now() - t0 >= duration_s:
                     machine.finish(f"{duration_s:g} s done")
-                if rehearsal is not None:
-                    rehearsal.sample = cycle.sample
-                    rehearsal.angles = cycle.angles
-                warm = rehearsal if rehearsal is not None and cycle.sample is not None else None
-                self.trigger.wait(tick, warm, settle=False)  # settled by the read schedule
+                self.trigger.wait(tick, settle=False)  # settled by the read schedule
                 over = cycle.run(tick)  # at once: the bookkeeping below is off the frame's path
                 if tick.skipped:
                     stats.add_overrun(tick.late_s, tick.skipped)
                 if last_start is not None:
                     stats.period.add(tick.now_s - last_start)
                 last_start = tick.now_s
+                self.telemetry.offer(tick.now_s, self._snapshot)
                 if over:
                     machine.stop_reason = machine.stop_reason or "stop requested"
                     break
@@ -255,6 +252,8 @@ class Rig:
             stats.cpu_s = time.thread_time() - cpu0
             stats.ceiling_waits = int(getattr(self.trigger, "ceiling_waits", 0))
             self._pipeline_figures()
+            self._snapshot.finished = True
+            self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats
 
     def _pipeline_figures(self) -> None:

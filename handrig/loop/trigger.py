@@ -12,8 +12,7 @@ frame superseded before its cycle began (a loop held up two periods or more, by 
 slow read or the host, or frames the glove sent together) still gets its cycle: the
 tick asks for the oldest frame the glove keeps behind the newest (up to
 ``handrig.devices.glove.BEHIND_KEPT``), and the ticks for the rest and the newest follow at
-once, all within the ceiling's burst. A trigger may run a rehearsal shortly before a
-tick (see :mod:`handrig.loop.rehearsal`).
+once, all within the ceiling's burst.
 
 Both triggers stamp frame arrivals when the glove offers a file descriptor
 (``fileno()``) and a non-blocking ``pump()`` (read what is there, stamp it
@@ -33,7 +32,6 @@ from __future__ import annotations
 import math
 import select
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,7 +41,6 @@ READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the nex
 PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's period estimate
 GAP_FACTOR = 4.0  # an interval this many times the estimate is a pause, not a period
 FORCED_READ_FACTOR = 4  # no gap fits for this many times read_every ticks: read anyway
-REHEARSE_EVERY_S = 0.00015  # in a spin window: a rehearsal, then polls only for this long
 ANCHOR_FOLLOW = 1.0 / 16.0  # how fast the glove's grid follows arrivals later than it
 JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations before the frame
 FORCED_READ_SHARE = 0.5  # a forced read ends this share of a period after the next frame
@@ -108,13 +105,12 @@ class Trigger(ABC):
         """The first tick is due at ``t0_s``."""
 
     @abstractmethod
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
-             settle: bool = True) -> Tick:
-        """Block until the next cycle is due and fill ``tick`` in (returned). ``warm(now)``,
-        if given, may be called once shortly before that. ``settle=False``: return as
-        soon as the cycle may start and leave what only the read schedule needs
-        (``tick.next_s``, the glove's period estimate) to :meth:`settle`, which the
-        read schedule calls once the cycle's write is out (or the next wait does)."""
+    def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
+        """Block until the next cycle is due and fill ``tick`` in (returned).
+        ``settle=False``: return as soon as the cycle may start and leave what only the
+        read schedule needs (``tick.next_s``, the glove's period estimate) to
+        :meth:`settle`, which the read schedule calls once the cycle's write is out (or
+        the next wait does)."""
 
     def settle(self, tick: Tick) -> None:  # noqa: B027 - a hook most triggers need not fill
         """Finish the bookkeeping a ``wait(settle=False)`` left (nothing to do here)."""
@@ -145,18 +141,15 @@ class Trigger(ABC):
 class FixedRateTrigger(Trigger):
     """A tick every ``1 / rate_hz`` seconds from the start, on ``clock``.
 
-    ``warm_s`` before each deadline the trigger wakes and calls ``warm``, then sleeps
-    out the rest; 0 skips that step. ``glove``: stamp its frames as they arrive while
+    ``glove``: stamp its frames as they arrive while
     waiting (see the module docstring); the cycle still runs on the fixed tick.
     """
 
-    def __init__(self, clock: Clock, rate_hz: float, *, warm_s: float = 0.0,
-                 glove: Any = None) -> None:
+    def __init__(self, clock: Clock, rate_hz: float, *, glove: Any = None) -> None:
         if not rate_hz > 0.0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         self.clock = clock
         self.period_s = 1.0 / rate_hz
-        self.warm_s = max(0.0, float(warm_s))
         self.glove = glove
         self._t0 = 0.0
         self._k = 0
@@ -181,13 +174,9 @@ class FixedRateTrigger(Trigger):
                     glove.pump()
         clock.sleep_until(t)
 
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
-             settle: bool = True) -> Tick:
+    def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
         clock, period = self.clock, self.period_s
         deadline = self._t0 + self._k * period
-        if warm is not None and self.warm_s > 0 and clock.now() < deadline - self.warm_s:
-            self._sleep_until(deadline - self.warm_s)
-            warm(clock.now())
         self._sleep_until(deadline)
         now = clock.now()
         late = now - deadline
@@ -215,7 +204,7 @@ class GloveTrigger(Trigger):
 
     ``glove``: a source with ``fileno()`` and ``pump()`` (a serial glove read by the
     loop), or with ``next_due_s()`` (a replay); a glove with neither gets the floor
-    rate only. ``warm_s`` before the predicted next frame the trigger calls ``warm``.
+    rate only.
 
     The glove's period is estimated from the arrivals (:attr:`frame_period_s`, with
     their mean deviation :attr:`frame_jitter_s`); a present-state read is taken only
@@ -232,19 +221,14 @@ class GloveTrigger(Trigger):
     """
 
     def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
-                 warm_s: float = 0.0, spin_s: float = 0.0, catch_up: bool = False) -> None:
+                 catch_up: bool = False) -> None:
         if not 0.0 < floor_hz <= ceiling_hz:
             raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
         self.clock = clock
         self.glove = glove
         self.period_s = 1.0 / floor_hz
         self.min_gap_s = 1.0 / ceiling_hz
-        self.warm_s = max(0.0, float(warm_s))
-        self.spin_s = max(0.0, float(spin_s))
-        self.spin_time_s = 0.0  # time spent polling and rehearsing in the spin windows
-        self.spin_frames = 0  # frames that arrived inside a spin window
         self.burst_frames = 0  # frames superseded on arrival by a newer one in the same read
-        self.rehearse_every_s = REHEARSE_EVERY_S
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0  # mean deviation of the arrivals from the period
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
@@ -387,96 +371,14 @@ class GloveTrigger(Trigger):
         n, self.burst_frames = self.burst_frames, 0
         return n
 
-    def _spin_frame(self, until_s: float, warm: Callable[[float], None]) -> float | None:
-        """Poll for a new frame until ``until_s``, rehearsing between polls (the spin
-        window: the critical path stays warm in the caches until the frame is there); its
-        arrival, or None if none came. Bytes a poll finds are read at once and stamped at
-        that read, as a reader blocking on the port would stamp them (the previous poll,
-        which found none, is at most one rehearsal stage earlier)."""
-        clock, glove = self.clock, self.glove
-        fd = _fd_of(glove)
-        begin = clock.now()
-        try:
-            if fd is None:
-                due_of = getattr(glove, "next_due_s", None)
-                if due_of is None:
-                    return None
-                due = float(due_of())
-                if due > until_s:
-                    return None
-                took = 0.0  # a rehearsal ends before the frame is due
-                t = begin
-                while t + took < due:
-                    warm(t)
-                    now = clock.now()
-                    if now <= t:
-                        break  # a clock that does not move on its own (a FakeClock)
-                    took, t = now - t, now
-                clock.sleep_until(due)
-                self.spin_frames += 1
-                return due
-            steps = getattr(warm, "steps", None)
-            empty = [begin]  # when a poll last found the port empty
-            seen_empty = [False]
-            port = fd
-
-            def arrived() -> bool:
-                t = clock.now()
-                if _readable(port, 0.0):
-                    return True
-                empty[0] = t
-                seen_empty[0] = True
-                return False
-
-            next_warm = previous = begin
-            polls = 0
-            while True:
-                polls += 1
-                t = clock.now()
-                if arrived():  # read at once, stamped at the read (as a blocking reader)
-                    self._pump(seen_empty[0])
-                    if self._new_frame():
-                        self.spin_frames += 1
-                        return self._arrival(clock.now())
-                    fd = _fd_of(glove)
-                    if fd is None:
-                        return None
-                    port = fd
-                    continue
-                if t >= until_s or (polls > 1 and t <= previous):
-                    return None  # the window is over (or the clock does not move on its own)
-                previous = t
-                if t >= next_warm:
-                    if steps is None:
-                        warm(t)
-                    else:  # a stage at a time, looking at the port in between
-                        for _ in steps(t):
-                            if arrived():
-                                break
-                    next_warm = clock.now() + self.rehearse_every_s
-        finally:
-            self.spin_time_s += clock.now() - begin
-
-    def wait(self, tick: Tick, warm: Callable[[float], None] | None = None, *,
-             settle: bool = True) -> Tick:
+    def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
         if self._unsettled is not None:
             self.settle(self._unsettled)
         clock = self.clock
         floor_at = self._last_start + self.period_s
         arrival: float | None = None
-        predicted = self.predicted_frame_s
         if self._new_frame():  # read already (the newest, after a catch-up): no waiting
             arrival = self._arrival(clock.now())
-        elif warm is not None and predicted == predicted and self.spin_s > 0:
-            if clock.now() < predicted - self.spin_s < floor_at:
-                arrival = self._wait_frame(predicted - self.spin_s)
-            if arrival is None and clock.now() < floor_at:
-                arrival = self._spin_frame(min(predicted + self.spin_s, floor_at), warm)
-        elif (warm is not None and self.warm_s > 0 and predicted == predicted
-                and clock.now() < predicted - self.warm_s < floor_at):
-            arrival = self._wait_frame(predicted - self.warm_s)
-            if arrival is None:
-                warm(clock.now())
         if arrival is None:
             arrival = self._wait_frame(floor_at)
         now = clock.now()

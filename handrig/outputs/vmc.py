@@ -61,6 +61,7 @@ from handrig import hand
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import ConfigError
 from handrig.outputs import skeleton
+from handrig.outputs.base import Output, OutputStatus
 from handrig.outputs.skeleton import Anat
 
 DEFAULT_PORT = 39539
@@ -269,7 +270,7 @@ def parse_host_port(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, i
     return host, port
 
 
-class VmcSender:
+class VmcSender(Output):
     """Send the two hands to a VMC receiver at most ``rate_hz`` times a second.
 
     ``send`` is meant to be called every loop tick; it returns at once, without
@@ -310,6 +311,7 @@ class VmcSender:
         self.skipped = 0
         self.errors = 0
         self.last_error = ""
+        self.bytes_sent = 0
 
     def encode(self, pose50_deg: NDArray[np.float64], wrist_deg: NDArray[np.float64] | None,
                t_s: float) -> bytearray:
@@ -345,6 +347,7 @@ class VmcSender:
             self.last_error = f"VMC send to {self.address[0]}:{self.address[1]} failed: {exc}"
             return False
         self.bundles_sent += 1
+        self.bytes_sent += len(data)
         return True
 
     def stats(self) -> dict[str, object]:
@@ -353,10 +356,16 @@ class VmcSender:
                 "bundles_sent": self.bundles_sent, "skipped": self.skipped,
                 "errors": self.errors, "last_error": self.last_error}
 
-    def __call__(self, t_s: float, pose54_deg: NDArray[np.float64]) -> None:
-        """The rig's output hook: ``pose54_deg`` = 50 curves then the 4 wrist DOFs
+    def __call__(self, t_s: float, pose_deg: NDArray[np.float64]) -> None:
+        """The rig's output hook: ``pose_deg`` = 50 curves then the 4 wrist DOFs
         (:data:`handrig.hand.ALL_JOINT_NAMES` order, which :data:`WRIST_NAMES` follows)."""
-        self.send(pose54_deg[:50], pose54_deg[50:54], t_s)
+        self.send(pose_deg[:50], pose_deg[50:54], t_s)
+
+    def status(self) -> OutputStatus:
+        return OutputStatus(
+            kind="vmc", name="VMC", address=f"{self.address[0]}:{self.address[1]}",
+            frames_written=self.bundles_sent, bytes_written=self.bytes_sent,
+            errors=self.errors, last_error=self.last_error)
 
     def close(self) -> None:
         """Close the socket; further sends count as errors."""

@@ -142,6 +142,14 @@ class ServoBus(ABC):
     every few; torque is on only inside ``with bus.torque():``.
     """
 
+    port: str = ""
+    """Where the bus is (a serial path), for a person."""
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        """Each servo's bus id, in rig order (default: 1..n)."""
+        return tuple(range(1, self.n_servos + 1))
+
     @property
     @abstractmethod
     def joint_names(self) -> tuple[str, ...]:

@@ -319,13 +319,6 @@ class DynamixelBus(ServoBus):
                 self.writer.send_held()  # not sent by the read: send it on its own
         return clamped, state
 
-    def rehearse_write(self, goals_deg: np.ndarray) -> None:
-        """Build the goal Sync Write for ``goals_deg`` without sending it, counting or
-        remembering anything: the loop calls it shortly before a deadline so the write
-        path is warm in the CPU's caches when the real goals come (see handrig.loop.rig)."""
-        with self._lock:
-            self.writer.rehearse(goals_deg)
-
     # ------------------------------------------------------------------ present state
     def read_state(self, deadline_s: float | None = None,
                    part: tuple[int, int] | None = None) -> ServoState:
@@ -387,7 +380,7 @@ class DynamixelBus(ServoBus):
     # ------------------------------------------------------------------ torque
     def torque(
         self, *, handle_signals: bool = True, on_signal: Callable[[str], None] | None = None
-    ) -> TorqueContext:
+    ) -> TorqueContext[DynamixelBus]:
         """Context manager: torque on inside, off on every way out.
 
         On entry every servo gets its present position (clamped) as goal, then
@@ -399,7 +392,9 @@ class DynamixelBus(ServoBus):
         (SIGINT) / SafetyStop (the others); a second signal raises at once;
         signals during the torque-off are ignored until it is done.
         """
-        return TorqueContext(self, handle_signals, on_signal)
+        return TorqueContext(
+            self, is_on=lambda: self.torque_enabled, enable=self.enable_torque,
+            disable=self.disable_torque, handle_signals=handle_signals, on_signal=on_signal)
 
     def enable_torque(self) -> None:
         """Torque on (what entering :meth:`torque` does); DeviceError if not connected."""

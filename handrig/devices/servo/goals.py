@@ -30,9 +30,7 @@ class GoalWriter:
         self.packet[: len(prefix)] = np.frombuffer(prefix, np.uint8)
         self.packet[codec.SYNC_WRITE_BODY :: 5][:n] = roster.ids
         self._view = self.packet.data  # a memoryview: what is written to the port
-        self._rehearsal_packet = self.packet.copy()
         self._goal_deg = np.zeros(n, np.float64)
-        self._rehearsal_goal = np.zeros(n, np.float64)
         self.last_goal_deg = np.full(n, np.nan)
         """The goals last sent, after clamping (NaN before the first write)."""
 
@@ -65,11 +63,6 @@ class GoalWriter:
         as a clamp (keeps the Bus Watchdogs fed while a servo restarts)."""
         self._clamp_into(goal_deg, self._goal_deg, self.packet)
         self.send_built()
-
-    def rehearse(self, goals_deg: np.ndarray) -> None:
-        """Build a Sync Write for ``goals_deg`` into a scratch packet: nothing is sent,
-        counted or remembered (the write path gets warm in the CPU's caches)."""
-        self._clamp_into(goals_deg, self._rehearsal_goal, self._rehearsal_packet)
 
     def _clamp_into(self, goals_deg: np.ndarray, goal: np.ndarray, packet: np.ndarray) -> int:
         r = self.roster

@@ -14,7 +14,7 @@ import signal
 import threading
 from collections.abc import Callable
 from types import FrameType, TracebackType
-from typing import TYPE_CHECKING
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -27,9 +27,6 @@ from handrig.devices.servo.link import Link
 from handrig.devices.servo.registers import VELOCITY_DPS_PER_UNIT, Reg
 from handrig.devices.servo.roster import Roster
 from handrig.errors import DeviceError, SafetyStop
-
-if TYPE_CHECKING:
-    from handrig.devices.servo.dynamixel import DynamixelBus
 
 log = logging.getLogger("handrig.devices.servo")
 
@@ -162,13 +159,26 @@ class TorqueControl:
         return failed
 
 
-class TorqueContext:
-    """What :meth:`DynamixelBus.torque` returns (see there)."""
+T = TypeVar("T")
+
+
+class TorqueContext(Generic[T]):
+    """Torque on inside, off on every way out (what a bus's ``torque()`` returns).
+
+    ``is_on``, ``enable`` and ``disable`` are the bus's torque state and switches
+    (``disable`` returns the servos it failed to switch off); entering returns
+    ``device``. Signals are handled as :meth:`DynamixelBus.torque` describes.
+    """
 
     def __init__(
-        self, bus: DynamixelBus, handle_signals: bool, on_signal: Callable[[str], None] | None
+        self, device: T, *, is_on: Callable[[], bool], enable: Callable[[], None],
+        disable: Callable[[], list[str]], handle_signals: bool,
+        on_signal: Callable[[str], None] | None,
     ) -> None:
-        self.bus = bus
+        self.device = device
+        self._is_on = is_on
+        self._enable = enable
+        self._disable = disable
         self.handle_signals = handle_signals
         self.on_signal = on_signal
         self.signals_seen = 0
@@ -200,21 +210,21 @@ class TorqueContext:
             signal.signal(sig, old)  # type: ignore[arg-type]
         self._saved.clear()
 
-    def __enter__(self) -> DynamixelBus:
-        if self.bus.torque_enabled:
+    def __enter__(self) -> T:
+        if self._is_on():
             raise DeviceError("torque is already on: torque() contexts do not nest")
         self._install()
         try:
-            self.bus.enable_torque()
+            self._enable()
         except BaseException:
             self._off()
             raise
-        return self.bus
+        return self.device
 
     def _off(self) -> None:
         self._cleaning = True
         try:
-            self.failed = self.bus.disable_torque()
+            self.failed = self._disable()
         finally:
             self._restore()
             self._cleaning = False

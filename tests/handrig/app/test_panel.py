@@ -15,18 +15,18 @@ import pytest
 from rich.console import Console
 
 from handrig.app.factory import build_parts
+from handrig.app.keys import KeyReader
 from handrig.app.panel import (
     BusHealth,
     GloveLink,
-    KeyReader,
     LivePanel,
     Outputs,
     PanelSnapshot,
-    RigSnapshot,
     ServoLine,
     plain_line,
     render,
 )
+from handrig.app.rig_snapshot import RigSnapshot
 from handrig.clock import FakeClock
 from handrig.config.rig import load_rig_config
 from handrig.devices.glove import GloveSample, GloveSource, GloveStats
@@ -174,13 +174,16 @@ class WarmBus(ServoBus):
         self._names = names
         self.clock = clock
         self._stats = BusStats(len(names), writes=0, timeouts=4)
-        self.ids = list(range(1, len(names) + 1))
         self.port = "/dev/ttyUSB9"
         self.last_goals_deg = np.zeros(len(names))  # where torque-on holds the servos
 
     @property
     def joint_names(self) -> tuple[str, ...]:
         return self._names
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        return tuple(range(1, len(self._names) + 1))
 
     @property
     def stats(self) -> BusStats:

@@ -314,14 +314,13 @@ def test_servo_fast_path_equals_the_full_pipeline(parts_factory):
     assert compared >= 50
 
 
-def test_rehearsal_never_feeds_live_state(parts_factory):
-    """The rehearsal runs on copies: a plain-function control path is not rehearsed,
-    and the live filter sees exactly one sample per glove frame."""
+def test_the_live_control_path_sees_one_sample_per_glove_frame(parts_factory):
+    """The live filter sees exactly one sample per glove frame."""
     parts = parts_factory()
     clock = FakeClock()
     seen: list[float] = []
 
-    def controls(raw, t_s, out):  # a plain function: deepcopy returns it unchanged
+    def controls(raw, t_s, out):
         seen.append(t_s)
         return parts.controls(raw, t_s, out)
 
@@ -329,7 +328,6 @@ def test_rehearsal_never_feeds_live_state(parts_factory):
     bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = Rig(glove, bus, parts.pipeline, clock, controls_from_raw=controls,
               orientation=parts.orientation, rate_hz=200.0, log=lambda s: None)
-    assert rig.rehearsal is not None and not rig.rehearsal.rehearses_controls
     stats = rig.run(frames=50)
     assert len(seen) == stats.glove_samples
 
@@ -471,7 +469,7 @@ def test_the_trigger_is_a_part_that_can_be_swapped(parts_factory):
         def start(self, t0_s: float) -> None:
             self.t0 = t0_s
 
-        def wait(self, tick: Tick, warm=None, *, settle: bool = True) -> Tick:
+        def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
             self.waits += 1
             deadline = self.t0 + self.k * self.period_s
             self.clock.sleep_until(deadline)

@@ -269,98 +269,6 @@ def test_the_fixed_trigger_reads_every_read_every_slots_as_before() -> None:
     assert due == [True, False, False, False, True, False, False, False]
 
 
-class CountingWarm:
-    """A rehearsal that counts its calls and stages (the spin window's ``warm``)."""
-
-    def __init__(self) -> None:
-        self.calls = 0
-        self.stages = 0
-
-    def __call__(self, now_s: float) -> None:
-        for _ in self.steps(now_s):
-            pass
-
-    def steps(self, now_s: float):
-        self.calls += 1
-        for _ in range(3):
-            time.sleep(20e-6)
-            self.stages += 1
-            yield
-
-
-def _settle_period(glove: PipeGlove, trig: GloveTrigger, tick: Tick, period_s: float,
-                   frames: int = 6) -> None:
-    """Frames every ``period_s`` until the trigger knows the period."""
-    for _ in range(frames):
-        time.sleep(period_s)
-        glove.send()
-        trig.wait(tick)
-        glove.latest()
-    assert trig.frame_period_s == pytest.approx(period_s, rel=0.5)
-
-
-def test_the_spin_window_rehearses_until_the_frame_and_stamps_it_at_the_read(
-        pipe_glove) -> None:
-    clock = pipe_glove.clock
-    trig = GloveTrigger(clock, pipe_glove, floor_hz=20.0, ceiling_hz=5000.0,
-                        spin_s=0.004)
-    warm = CountingWarm()
-    trig.start(clock.now())
-    tick = Tick()
-    trig.wait(tick, warm)
-    _settle_period(pipe_glove, trig, tick, 0.01)
-    spun = trig.spin_frames
-    # the next frame is due 10 ms after the last: send it 9 ms later, inside the window
-    time.sleep(0.009 - (clock.now() - tick.now_s))
-    before = warm.calls
-    import threading
-    sent = []
-    timer = threading.Timer(0.0005, lambda: sent.append(pipe_glove.send()))
-    timer.start()
-    trig.wait(tick, warm)
-    timer.join()
-    assert tick.frame and trig.spin_frames == spun + 1
-    assert warm.calls > before  # rehearsed while waiting for it
-    sample = pipe_glove.latest()
-    assert sample is not None
-    # read as soon as a poll found the bytes and stamped at that read, as a reader
-    # blocking on the port would: after the write, before the cycle starts
-    assert sent and sent[0] <= sample.host_time_s <= tick.now_s
-    assert sample.host_time_s - sent[0] < 0.002
-    assert tick.now_s - sent[0] < 0.003  # found within the window, not at the floor
-    assert trig.spin_time_s > 0
-
-
-def test_no_spin_window_before_the_period_is_known_or_without_a_rehearsal(pipe_glove) -> None:
-    clock = pipe_glove.clock
-    trig = GloveTrigger(clock, pipe_glove, floor_hz=20.0, ceiling_hz=5000.0, spin_s=0.004)
-    trig.start(clock.now())
-    tick = Tick()
-    trig.wait(tick)
-    for _ in range(4):
-        time.sleep(0.01)
-        pipe_glove.send()
-        trig.wait(tick)  # no warm: the loop has no sample to rehearse yet
-        pipe_glove.latest()
-    assert trig.spin_frames == 0 and trig.spin_time_s == 0.0
-
-
-def test_a_spin_window_with_a_fake_clock_ends_instead_of_spinning_forever() -> None:
-    clock = FakeClock(0.0)
-    glove = ReplayGlove(recording(200.0, 50), clock)
-    trig = GloveTrigger(clock, glove, floor_hz=100.0, ceiling_hz=1000.0, spin_s=0.0005)
-    warm = CountingWarm()
-    glove.start()
-    trig.start(0.0)
-    tick = Tick()
-    starts = []
-    for _ in range(10):
-        trig.wait(tick, warm)
-        glove.latest()
-        starts.append(tick.now_s)
-    np.testing.assert_allclose(starts, np.arange(10) / 200.0, atol=1e-9)
-
-
 def test_frames_sent_back_to_back_count_as_a_burst_not_as_frames_the_loop_skipped(
         pipe_glove) -> None:
     clock = pipe_glove.clock
@@ -604,30 +512,29 @@ def test_a_replay_sample_the_loop_was_late_for_gets_its_cycle_before_the_newest(
     assert glove.latest().count == last + 6 and glove.stats().frames_lost == 1
 
 
-def test_after_a_catch_up_the_newest_is_not_held_in_a_spin_window() -> None:
+def test_after_a_catch_up_the_newest_is_not_held_back() -> None:
     """The newest frame is read already when its tick is asked for: it goes at once, not
-    when the spin window around the next predicted frame is over."""
+    at the next predicted frame or the floor."""
     master, glove, send = _pty_frames_glove()
     try:
         clock = glove.clock
-        trig = GloveTrigger(clock, glove, floor_hz=5.0, ceiling_hz=1000.0, catch_up=True,
-                            spin_s=0.019)  # nearly the whole 20 ms period is spin window
+        trig = GloveTrigger(clock, glove, floor_hz=5.0, ceiling_hz=1000.0, catch_up=True)
         trig.start(clock.now())
         tick = Tick()
         trig.wait(tick)
         for _ in range(8):
             time.sleep(0.02)
             send()
-            trig.wait(tick, lambda now: None)
+            trig.wait(tick)
             glove.take()
         send()
         time.sleep(0.02)
         send()
         time.sleep(0.003)
-        trig.wait(tick, lambda now: None)
+        trig.wait(tick)
         assert tick.catch_up and glove.take_behind() is not None
         begun = clock.now()
-        trig.wait(tick, lambda now: None)
+        trig.wait(tick)
         assert tick.frame and clock.now() - begun < 0.005
         assert glove.take() is not None
     finally:

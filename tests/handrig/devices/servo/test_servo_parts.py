@@ -89,14 +89,6 @@ def test_goal_write_is_one_port_write_of_the_golden_sync_write() -> None:
     np.testing.assert_array_equal(bus.last_goals_deg, goals)
 
 
-def test_rehearsal_sends_and_counts_nothing() -> None:
-    bus, transport, _ = make_bus()
-    before, stats = len(transport.writes), bus.stats.summary()
-    bus.rehearse_write(np.full(6, 500.0))
-    assert len(transport.writes) == before and bus.stats.summary() == stats
-    assert np.isnan(bus.last_goals_deg).all()
-
-
 def test_write_and_read_is_one_port_write_then_the_short_way() -> None:
     rig = small_rig()
     bus, transport, peer = make_bus(rig, temperature_every=0)

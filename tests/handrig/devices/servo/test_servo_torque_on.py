@@ -1,10 +1,9 @@
-"""Torque-on never moves a servo that sits outside its limits; rehearsal sends nothing."""
+"""Torque-on never moves a servo that sits outside its limits."""
 
 from __future__ import annotations
 
 import time
 
-import numpy as np
 import pytest
 
 from firmware_protocol.dynamixel import Reg
@@ -72,23 +71,6 @@ def test_calibration_holds_an_outside_servo_where_it_is():
                 assert sim.servo(8).torque_enabled
                 assert abs(sim.servo(8).goal - below) <= 1
                 assert abs(sim.servo(8).present - below) < 2
-        finally:
-            bus.close()
-
-
-def test_rehearse_write_sends_and_counts_nothing():
-    with SimBus(_servos(2048.0)) as sim:
-        bus = DynamixelBus(sim.port_path, _rig())
-        bus.connect()
-        try:
-            packets = sim.stats.packets
-            writes, clamps = bus.stats.writes, bus.stats.clamps
-            last = bus.last_goals_deg
-            bus.rehearse_write(np.array([500.0, -500.0]))
-            time.sleep(0.05)
-            assert sim.stats.packets == packets
-            assert (bus.stats.writes, bus.stats.clamps) == (writes, clamps)
-            np.testing.assert_array_equal(bus.last_goals_deg, last)
         finally:
             bus.close()
 

@@ -1,23 +1,7 @@
-"""Glove sources: where the realtime loop gets raw glove samples.
+"""A glove on a serial port: :class:`SerialGlove`.
 
-:class:`GloveSource` is the abstract device. The loop calls :meth:`~GloveSource.latest`
-once per cycle: it returns the newest sample not handed out before, or ``None``
-when nothing new has arrived, and never blocks. Concrete sources:
-
-* :class:`SerialGlove`: a serial port (or pty) read by a background thread, in
-  the handrig frame format (``firmware_protocol/SPEC.md``) or the OpenGloves
-  alpha line format;
-* :class:`ReplayGlove`: a :class:`~handrig.devices.glove_recording.GloveRecording`
-  played against the injected clock (no thread, deterministic with a FakeClock).
-
-Each source keeps :class:`GloveStats` (good frames, CRC and other errors,
-frames dropped for an unexpected channel count, resyncs, garbage bytes, sequence
-gaps, disconnects and reconnects, time since the last good frame). A port that
-goes away sets :attr:`GloveSource.failure` to a :class:`DeviceError` with a
-clear message; ``latest()`` then simply returns ``None`` (the loop's glove
-timeout eases the puppet to the relaxed pose) and :meth:`GloveSource.check`
-raises it for callers that prefer to stop. What happened to the port (gone,
-back after how long) is also queued as text for :meth:`GloveSource.drain_events`.
+Reads the handrig frame format (``firmware_protocol/SPEC.md``) or the OpenGloves
+alpha line format, on a background thread or (``reader="poll"``) inside the loop.
 
 A frame's channel count is checked before it becomes a sample: ``channels`` if
 given, else the count the glove settles on (:data:`LOCK_FRAMES` good frames in a
@@ -39,221 +23,22 @@ import os
 import select
 import termios
 import threading
-from abc import ABC, abstractmethod
-from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
-from types import TracebackType
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
 from firmware_protocol.glove import BUTTON_RELAX, MAX_CHANNELS, FrameDecoder
 from firmware_protocol.opengloves import BUTTON_LETTERS, CHANNEL_KEYS, LineDecoder
 from handrig.clock import Clock
-from handrig.devices.glove_recording import GloveRecording
+from handrig.devices.glove.source import GloveSample, GloveSource, GloveStats
 from handrig.devices.glove_status import change_messages
 from handrig.errors import DeviceError
 
-FloatArray = NDArray[np.float64]
 GloveFormat = Literal["frames", "opengloves"]
 
 LOCK_FRAMES = 3
 """Good frames in a row with one channel count that fix the count a glove sends."""
-BEHIND_KEPT = 2
-"""Samples kept behind the newest while never handed out (:meth:`GloveSource.take_behind`:
-a loop held up catches up on them); older ones are superseded for good."""
-MAX_EVENTS = 64
-"""Port events kept for :meth:`GloveSource.drain_events` (the oldest go first)."""
-DUE_TOLERANCE_S = 1e-9
-""":meth:`ReplayGlove.next_due_s` is this much after the due time, so that the clock
-time it gives, less the start, does not round to just before the sample."""
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class GloveSample:
-    """One glove sample as the loop sees it.
-
-    ``raw`` (k,) float64: raw channel counts in the glove's channel order (for
-    OpenGloves the 13 channels of ``firmware_protocol.opengloves.CHANNEL_KEYS``).
-    ``quat`` (4,) float64: forearm IMU orientation x, y, z, w (scalar last, ENU
-    world frame, IMU body to world), or ``None`` when the glove has no valid IMU
-    reading. ``buttons``: bitfield, bit 0 = relax / e-stop (``estop``).
-    ``seq``: the glove's sequence number (wraps at 65536; for OpenGloves, lines
-    received). ``sensor_time_us``: the glove's timestamp (wraps at 2**32; 0 for
-    OpenGloves). ``host_time_s``: Clock time at which the read that delivered the
-    frame's last byte returned (glove-to-servo latency is measured from it).
-    ``count``: 1-based running count of samples from this source. ``status``: the
-    frame's status flags (``firmware_protocol.glove.FLAG_IMU_ABSENT`` ...; 0 for other
-    sources), in words by :mod:`handrig.devices.glove_status`.
-    """
-
-    raw: FloatArray
-    quat: FloatArray | None
-    buttons: int
-    estop: bool
-    seq: int
-    sensor_time_us: int
-    host_time_s: float
-    count: int
-    status: int = 0
-
-
-@dataclass(frozen=True)
-class GloveStats:
-    """A snapshot of a source's counters (monotonic since it was opened).
-
-    For :class:`ReplayGlove`, ``frames_lost`` counts recorded samples that came
-    due but were superseded before the loop asked (the loop ran slower than the
-    recording).
-    """
-
-    frames_ok: int = 0
-    crc_errors: int = 0
-    decode_errors: int = 0
-    """Rejected frames other than CRC mismatches (bad stuffing, length, version,
-    malformed or cut OpenGloves lines, overlong runs)."""
-    resyncs: int = 0
-    garbage_bytes: int = 0
-    seq_gaps: int = 0
-    frames_lost: int = 0
-    bytes_read: int = 0
-    reconnects: int = 0
-    """Times the port came back after it went away."""
-    time_since_last_good_s: float = math.inf
-    failure: str = ""
-    channel_errors: int = 0
-    """Frames dropped for a channel count other than :attr:`expected_channels`
-    (also counted in ``decode_errors``)."""
-    expected_channels: int = 0
-    """The channel count frames must have; 0 until the glove has settled on one."""
-    disconnects: int = 0
-    """Times the port went away (unplugged, hung up, unreadable)."""
-    last_outage_s: float = 0.0
-    """How long the port was gone the last time it came back, seconds."""
-
-    @property
-    def errors(self) -> int:
-        """Rejected frames of every kind."""
-        return self.crc_errors + self.decode_errors
-
-
-class GloveSource(ABC):
-    """A glove: raw samples in, without ever blocking the loop.
-
-    Use as a context manager (``with SerialGlove(...) as glove:``), which calls
-    :meth:`start` and :meth:`close`.
-    """
-
-    def __init__(self) -> None:
-        self._newest: GloveSample | None = None
-        self._behind: deque[GloveSample] = deque(maxlen=BEHIND_KEPT)  # never taken
-        self._taken = 0
-        self._failure: DeviceError | None = None
-        self._events: deque[str] = deque(maxlen=MAX_EVENTS)
-
-    def start(self) -> None:  # noqa: B027 - optional hook
-        """Begin reading (open the port, start the thread). Idempotent."""
-
-    def close(self) -> None:  # noqa: B027 - optional hook
-        """Stop reading and release the device. Idempotent."""
-
-    def latest(self) -> GloveSample | None:
-        """The newest sample not returned before, or ``None`` if nothing new. Never blocks."""
-        s = self._newest
-        if s is None or s.count == self._taken:
-            return None
-        self._taken = s.count
-        return s
-
-    def rehearse(self) -> None:  # noqa: B027 - optional hook
-        """Run the decode path once on scratch state, with no effect on the source.
-
-        The loop calls it shortly before each deadline so the code that turns the
-        next frame into a sample is warm in the CPU's caches when the frame is read.
-        """
-
-    def peek(self) -> GloveSample | None:
-        """The newest sample so far (new or not), without marking it taken."""
-        return self._newest
-
-    def _arrived(self, sample: GloveSample) -> None:
-        """``sample`` is the newest now; the one it replaces is kept behind it while it
-        has not been taken (:data:`BEHIND_KEPT` of them: a loop that fell further behind
-        skips the older ones)."""
-        old, behind = self._newest, self._behind
-        if old is None or old.count == self._taken:
-            behind.clear()
-        else:
-            behind.append(old)
-        self._newest = sample
-
-    def has_behind(self) -> bool:
-        """Whether a sample before the newest came and was never taken (it was superseded
-        before the loop asked), while the newest is new too."""
-        behind = self._behind
-        if not behind:  # the usual case: the loop took the one before the newest
-            return False
-        s, taken = self._newest, self._taken
-        if s is None or s.count == taken:
-            return False
-        return any(b.count > taken for b in behind)
-
-    def take_behind(self) -> GloveSample | None:
-        """The oldest sample kept behind the newest that was never taken
-        (:meth:`has_behind`), marked taken so that the ones after it and the newest stay
-        new; else ``None``."""
-        if not self.has_behind():
-            return None
-        behind = self._behind
-        while behind[0].count <= self._taken:
-            behind.popleft()
-        b = behind.popleft()
-        self._taken = b.count
-        return b
-
-    def has_new(self) -> bool:
-        """Whether :meth:`latest` has a sample not returned before (without taking it)."""
-        s = self._newest
-        return s is not None and s.count != self._taken
-
-    @abstractmethod
-    def stats(self) -> GloveStats:
-        """A snapshot of the counters."""
-
-    @property
-    def failure(self) -> DeviceError | None:
-        """Why the device stopped delivering (port gone, unreadable), or ``None``."""
-        return self._failure
-
-    def check(self) -> None:
-        """Raise :attr:`failure` if the device has failed."""
-        if self._failure is not None:
-            raise self._failure
-
-    def drain_events(self) -> list[str]:
-        """What happened to the device since the last call (port gone, port back), oldest
-        first; at most :data:`MAX_EVENTS` are kept. Safe to call from any thread."""
-        out = []
-        while self._events:
-            try:
-                out.append(self._events.popleft())
-            except IndexError:
-                break
-        return out
-
-    def __enter__(self) -> GloveSource:
-        self.start()
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 class SerialGlove(GloveSource):
@@ -318,9 +103,6 @@ class SerialGlove(GloveSource):
         self._estop_bit = 1 << BUTTON_LETTERS.index(estop_letter)
         self._frames = FrameDecoder()
         self._lines = LineDecoder(analog_max)
-        self._scratch_frames = FrameDecoder()  # for rehearse(): never touches live state
-        self._scratch_lines = LineDecoder(analog_max)
-        self._last_chunk = b""
         self._serial: Any = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -347,6 +129,10 @@ class SerialGlove(GloveSource):
                 f"cannot open glove port {self.port}: {exc}; is the glove plugged in? "
                 "(pass the right port with --glove PORT; on Linux add your user to 'dialout')"
             ) from None
+
+    @property
+    def name(self) -> str:
+        return self.port
 
     def start(self) -> None:
         if self._thread is not None or self._serial is not None:
@@ -412,23 +198,10 @@ class SerialGlove(GloveSource):
         thread and :meth:`latest` with ``reader="poll"`` call this; tests may too)."""
         with self._lock:
             self._bytes += len(data)
-            self._last_chunk = data
             if self.fmt == "frames":
                 self._feed_frames(data, now)
             else:
                 self._feed_lines(data, now)
-
-    def rehearse(self) -> None:
-        chunk = self._last_chunk
-        if not chunk:
-            return
-        now = self.clock.now()
-        if self.fmt == "frames":
-            for fr in self._scratch_frames.feed(chunk):
-                self._frame_sample(fr, now, 0)
-        else:
-            for line in self._scratch_lines.feed(chunk):
-                self._line_sample(line, now, 0)
 
     def _poll(self) -> None:
         ser = self._serial
@@ -613,140 +386,3 @@ def _nonblocking(fd: int) -> None:
         termios.tcsetattr(fd, termios.TCSANOW, attrs)
     except termios.error:
         pass  # not a terminal (a pipe or socket): O_NONBLOCK alone does it
-
-
-class ReplayGlove(GloveSource):
-    """A recording played against the injected clock.
-
-    :meth:`start` (or the first :meth:`latest`) pins recording time ``t_s[0]`` to
-    ``clock.now()``; from then ``latest()`` returns the newest recorded sample at or
-    before the current time, once. Its ``host_time_s`` is the clock time at which
-    that sample was due, so latency measured from it includes how late the loop
-    picked it up. With ``loop=True`` the recording repeats (one median sample
-    period between the last and the first sample); otherwise :attr:`finished`
-    turns true after the last sample and ``latest()`` returns ``None``.
-    """
-
-    def __init__(self, recording: GloveRecording, clock: Clock, *, loop: bool = False) -> None:
-        super().__init__()
-        if len(recording) == 0:
-            raise DeviceError("glove recording is empty: nothing to replay")
-        self.recording = recording
-        self.clock = clock
-        self.loop = loop
-        t = recording.t_s
-        gap = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
-        self._period_s = float(t[-1] - t[0]) + gap
-        self._t_rel = t - t[0]
-        self._t0: float | None = None
-        self._served = 0
-        self._skipped = 0
-
-    def start(self) -> None:
-        if self._t0 is None:
-            self._t0 = self.clock.now()
-
-    @property
-    def finished(self) -> bool:
-        """Not looping and the last sample has been due."""
-        if self.loop or self._t0 is None:
-            return False
-        return self.clock.now() - self._t0 >= self._t_rel[-1]
-
-    def latest(self) -> GloveSample | None:
-        if self._t0 is None:
-            self._t0 = self.clock.now()
-        lap, i = self._due_index(self.clock.now() - self._t0)
-        if i < 0:
-            return None
-        count = lap * len(self._t_rel) + i + 1
-        if count <= self._taken:
-            return None
-        return self._serve(lap, i, count)
-
-    def _serve(self, lap: int, i: int, count: int) -> GloveSample:
-        """Recorded sample ``i`` of lap ``lap`` (the ``count``-th), marked taken."""
-        rec = self.recording
-        q = None if rec.quat_xyzw is None else rec.quat_xyzw[i]
-        if q is not None and np.isnan(q).any():
-            q = None
-        b = int(rec.buttons[i])
-        sample = GloveSample(
-            raw=rec.raw[i], quat=q, buttons=b, estop=bool(b & BUTTON_RELAX),
-            seq=(count - 1) & 0xFFFF, sensor_time_us=int(self._t_rel[i] * 1e6) & 0xFFFFFFFF,
-            host_time_s=self._due_at(lap, i), count=count,
-        )
-        self._skipped += count - self._taken - 1
-        self._newest = sample
-        self._taken = count
-        self._served += 1
-        return sample
-
-    def _behind_index(self) -> tuple[int, int, int] | None:
-        """(lap, index, count) of the oldest of the :data:`BEHIND_KEPT` samples due before
-        the newest that was not taken, when it came due strictly before the newest (a
-        recorded duplicate of the newest's time is not caught up)."""
-        if self._t0 is None:
-            return None
-        n = len(self._t_rel)
-        lap, i = self._due_index(self.clock.now() - self._t0)
-        count = lap * n + i + 1
-        first = max(self._taken + 1, count - BEHIND_KEPT)
-        if i < 0 or first >= count:
-            return None
-        b_lap, b_i = divmod(first - 1, n)
-        if self._due_at(b_lap, b_i) >= self._due_at(lap, i):
-            return None
-        return b_lap, b_i, first
-
-    def has_behind(self) -> bool:
-        return self._behind_index() is not None
-
-    def take_behind(self) -> GloveSample | None:
-        behind = self._behind_index()
-        return None if behind is None else self._serve(*behind)
-
-    def _due_index(self, elapsed: float) -> tuple[int, int]:
-        """(lap, index) of the newest recorded sample due ``elapsed`` s after the start."""
-        lap = 0
-        if self.loop:
-            lap = int(elapsed // self._period_s)
-            elapsed -= lap * self._period_s
-        return lap, int(np.searchsorted(self._t_rel, elapsed, side="right")) - 1
-
-    def _due_at(self, lap: int, i: int) -> float:
-        t0 = self._t0 if self._t0 is not None else self.clock.now()
-        return t0 + lap * self._period_s + float(self._t_rel[i])
-
-    def has_new(self) -> bool:
-        if self._t0 is None:
-            return False
-        lap, i = self._due_index(self.clock.now() - self._t0)
-        return i >= 0 and lap * len(self._t_rel) + i + 1 > self._taken
-
-    def newest_due_s(self) -> float:
-        """When the newest sample due by now came due (the clock now before any)."""
-        now = self.clock.now()
-        if self._t0 is None:
-            return now
-        lap, i = self._due_index(now - self._t0)
-        return self._due_at(lap, i) if i >= 0 else now
-
-    def next_due_s(self) -> float:
-        """When the next sample not yet returned comes due (inf after the last one)."""
-        if self._t0 is None:
-            self._t0 = self.clock.now()
-        n = len(self._t_rel)
-        lap, i = divmod(self._taken, n)  # the sample after the last one returned
-        if not self.loop and lap > 0:
-            return math.inf
-        due = self._due_at(lap, i) + DUE_TOLERANCE_S
-        now = self.clock.now()
-        return due if due > now else now
-
-    def stats(self) -> GloveStats:
-        since = math.inf
-        if self._newest is not None:
-            since = self.clock.now() - self._newest.host_time_s
-        return GloveStats(frames_ok=self._served, time_since_last_good_s=since,
-                          frames_lost=self._skipped)

@@ -1,0 +1,127 @@
+"""The panel's snapshot of a running rig (:class:`RigSnapshot`), from its telemetry.
+
+Reads only ``rig.telemetry.latest()`` (a frozen
+:class:`~handrig.loop.telemetry.LoopSnapshot` the loop publishes) and the rig's
+clock, never the loop's live arrays: the panel's thread and the loop's share
+nothing that changes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Protocol
+
+from handrig.app.panel import NAN, BusHealth, GloveLink, Outputs, PanelSnapshot, ServoLine
+from handrig.clock import Clock
+from handrig.loop.telemetry import LoopSnapshot, Telemetry
+
+
+class Watched(Protocol):
+    """What the panel needs of a rig: its clock and its telemetry."""
+
+    clock: Clock
+    telemetry: Telemetry
+
+
+class _Rate:
+    """Events per second of a growing counter, over the last ``window_s`` or more."""
+
+    def __init__(self, window_s: float = 1.0) -> None:
+        self.window_s = window_s
+        self._marks: list[tuple[float, int]] = []
+        self.value = NAN
+
+    def update(self, now: float, count: int) -> float:
+        if self._marks and now <= self._marks[-1][0]:
+            return self.value  # the same snapshot again
+        self._marks.append((now, count))
+        while len(self._marks) > 2 and now - self._marks[1][0] >= self.window_s:
+            self._marks.pop(0)
+        t0, c0 = self._marks[0]
+        if now - t0 > 0:
+            self.value = (count - c0) / (now - t0)
+        return self.value
+
+
+def _nan(value: float | None) -> float:
+    return NAN if value is None else float(value)
+
+
+class RigSnapshot:
+    """``RigSnapshot(rig)()``: the :class:`PanelSnapshot` of a running rig.
+
+    Built from the newest telemetry snapshot; ages and the elapsed time are carried
+    forward to the clock's now. Rates are taken over the last second between
+    snapshots. ``glove_source`` and ``temperature_limit_c`` (servo id -> limit) are
+    shown when given; ``keys``: whether a :class:`~handrig.app.keys.KeyReader` is
+    listening (the panel says so either way).
+    """
+
+    def __init__(self, rig: Watched, *, glove_source: str = "",
+                 temperature_limit_c: Mapping[int, float] | None = None,
+                 keys: bool = False) -> None:
+        self.rig = rig
+        self.glove_source = glove_source
+        self.keys = keys
+        self.temperature_limit_c = dict(temperature_limit_c or {})
+        self._rates = {k: _Rate() for k in ("glove", "reads", "writes", "vmc")}
+
+    def __call__(self) -> PanelSnapshot:
+        snap = self.rig.telemetry.latest()
+        if snap is None:
+            return PanelSnapshot(reason="starting", keys=self.keys,
+                                 glove=GloveLink(self.glove_source))
+        since = max(0.0, self.rig.clock.now() - snap.t_s)
+        return PanelSnapshot(
+            mode=snap.mode, reason=snap.mode_reason,
+            elapsed_s=snap.elapsed_s + since if snap.cycles else 0.0,
+            loop_rate_hz=snap.rate_hz, overruns=snap.overruns,
+            latency_p50_us=_nan(snap.latency_p50_us), latency_p99_us=_nan(snap.latency_p99_us),
+            glove=self._glove(snap, since), bus=self._bus(snap, since),
+            servos=self._servos(snap), outputs=self._outputs(snap), events=snap.events,
+            keys=self.keys)
+
+    def _glove(self, s: LoopSnapshot, since: float) -> GloveLink:
+        return GloveLink(
+            source=self.glove_source or s.glove_source,
+            rate_hz=self._rates["glove"].update(s.t_s, s.glove_frames_ok),
+            frames_ok=s.glove_frames_ok, errors=s.glove_errors,
+            last_frame_age_s=s.glove_last_frame_age_s, reconnects=s.glove_reconnects,
+            failure=s.glove_failure)
+
+    def _bus(self, s: LoopSnapshot, since: float) -> BusHealth:
+        ages = [a for a, stale in zip(s.reading_ages_s, s.stale, strict=False) if stale]
+        worst = max(ages) + since if ages else 0.0
+        return BusHealth(
+            port=s.bus_port, read_rate_hz=self._rates["reads"].update(s.t_s, s.bus_reads),
+            write_rate_hz=self._rates["writes"].update(s.t_s, s.bus_writes),
+            timeouts=s.bus_timeouts, errors=s.bus_errors, stale_servos=len(ages),
+            stale_worst_age_s=worst if math.isfinite(worst) else 0.0)
+
+    def _servos(self, s: LoopSnapshot) -> tuple[ServoLine, ...]:
+        n = len(s.servo_joints)
+
+        def at(values: tuple[float | None, ...], i: int) -> float:
+            return _nan(values[i]) if i < len(values) else NAN
+
+        return tuple(
+            ServoLine(s.servo_ids[i], joint, at(s.goals_deg, i), at(s.positions_deg, i),
+                      bool(s.stale[i]) if i < len(s.stale) else False,
+                      at(s.temperatures_c, i),
+                      self.temperature_limit_c.get(s.servo_ids[i], NAN),
+                      at(s.currents_ma, i),
+                      s.hardware_errors[i] if i < len(s.hardware_errors) else 0)
+            for i, joint in enumerate(s.servo_joints[:n]))
+
+    def _outputs(self, s: LoopSnapshot) -> Outputs:
+        vmc_target, vmc_rate, vmc_err = "", NAN, 0
+        rec_path, rec_bytes, rec_s = "", 0, 0.0
+        for out in s.outputs:
+            if out.kind == "vmc":
+                vmc_target = out.address
+                vmc_rate = self._rates["vmc"].update(s.t_s, out.frames_written)
+                vmc_err = out.errors
+            elif out.kind == "recorder":
+                rec_path, rec_bytes, rec_s = out.path, out.bytes_written, out.duration_s
+        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s)

@@ -1,0 +1,245 @@
+"""What the loop publishes for anyone watching: an immutable :class:`LoopSnapshot`.
+
+The loop thread calls :meth:`Telemetry.publish` after each cycle's work; at most
+every ``every_s`` (50 ms) it builds a snapshot of plain tuples from the loop's
+state and swaps it in with one reference assignment. Readers on any thread call
+:meth:`Telemetry.latest` and get the newest snapshot whole (never a half-written
+one), without a lock and without touching the loop's live arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from handrig.devices.glove.source import GloveSource
+from handrig.devices.servo.bus import ServoBus, ServoState
+from handrig.loop.modes import Mode, ModeMachine
+from handrig.loop.stats import RunStats
+from handrig.outputs.base import Output, OutputStatus
+from handrig.pose.pipeline import POSE_NAMES, PosePipeline
+
+PUBLISH_EVERY_S = 0.05  # a snapshot at most this often (20 a second)
+RATE_WINDOW_S = 1.0  # the loop rate is taken over about this long
+RECENT_LATENCIES = 1000  # the latency percentiles are of the newest this many frames
+
+
+@dataclass(frozen=True)
+class LoopSnapshot:
+    """The loop at one moment. Times in seconds on the loop's clock, angles in degrees.
+
+    Per-servo tuples are in rig order (``servo_ids``, ``servo_joints``); a missing
+    reading is None. ``pose_deg`` is the full pose last output (``curve_names``
+    order: both hands' curves, then the wrists), NaN before the first.
+    """
+
+    t_s: float
+    seq: int
+    mode: str
+    mode_reason: str
+    rate_hz: float
+    latency_p50_us: float | None
+    latency_p99_us: float | None
+    frames_lost: int
+    cycles: int
+    overruns: int
+    elapsed_s: float = 0.0
+    events: tuple[str, ...] = ()
+    # the glove
+    controls: tuple[float, ...] = ()
+    raw: tuple[float, ...] = ()
+    control_names: tuple[str, ...] = ()
+    inclination_deg: float = 0.0
+    rotation_deg: float = 0.0
+    glove_connected: bool = False
+    glove_source: str = ""
+    glove_frames_ok: int = 0
+    glove_errors: int = 0
+    glove_reconnects: int = 0
+    glove_last_frame_age_s: float = math.inf
+    glove_failure: str = ""
+    # the pose
+    pose_deg: tuple[float, ...] = ()
+    curve_names: tuple[str, ...] = ()
+    # the servos
+    servo_ids: tuple[int, ...] = ()
+    servo_joints: tuple[str, ...] = ()
+    goals_deg: tuple[float, ...] = ()
+    positions_deg: tuple[float | None, ...] = ()
+    temperatures_c: tuple[float | None, ...] = ()
+    currents_ma: tuple[float | None, ...] = ()
+    hardware_errors: tuple[int, ...] = ()
+    stale: tuple[bool, ...] = ()
+    reading_ages_s: tuple[float, ...] = ()
+    bus_port: str = ""
+    bus_reads: int = 0
+    bus_writes: int = 0
+    bus_timeouts: int = 0
+    bus_errors: int = 0
+    # the outputs
+    outputs: tuple[OutputStatus, ...] = ()
+
+
+def _opt(values: np.ndarray | None, n: int) -> tuple[float | None, ...]:
+    if values is None:
+        return (None,) * n
+    return tuple(float(v) if v == v else None for v in values.tolist())
+
+
+class Telemetry:
+    """The newest :class:`LoopSnapshot` (None before the first publication).
+
+    ``publish(snapshot)`` swaps a built snapshot in; :meth:`offer` is what the loop
+    calls each cycle: it builds one with ``build(t_s, seq)`` only when ``every_s``
+    has passed since the last (or when ``force``).
+    """
+
+    def __init__(self, every_s: float = PUBLISH_EVERY_S) -> None:
+        self.every_s = float(every_s)
+        self._latest: LoopSnapshot | None = None
+        self._seq = 0
+        self._last_s = -math.inf
+
+    def publish(self, snapshot: LoopSnapshot) -> None:
+        """Make ``snapshot`` the newest (one reference assignment: never blocks)."""
+        self._latest = snapshot
+        self._last_s = snapshot.t_s
+
+    def offer(self, now_s: float, build: Callable[[float, int], LoopSnapshot],
+              force: bool = False) -> bool:
+        """Build and publish a snapshot if one is due; True if it was."""
+        if not force and now_s - self._last_s < self.every_s:
+            return False
+        self._seq += 1
+        self.publish(build(now_s, self._seq))
+        return True
+
+    def latest(self) -> LoopSnapshot | None:
+        """The newest snapshot (any thread)."""
+        return self._latest
+
+
+class SnapshotBuilder:
+    """Builds :class:`LoopSnapshot` from the loop's parts (on the loop's thread).
+
+    ``view`` gives what the cycle holds: ``(controls, raw, angles, pose, goals,
+    state, frame_s)`` (the newest arrays, copied into tuples here; ``frame_s`` the
+    newest glove frame's arrival, NaN before one). The glove counts as connected
+    while its newest frame is at most the glove timeout old and it reports no failure.
+    """
+
+    def __init__(self, glove: object, bus: object, pipeline: PosePipeline,
+                 machine: ModeMachine, stats: RunStats, started_s: Callable[[], float],
+                 view: Callable[[], tuple[Any, ...]],
+                 outputs: Callable[[], tuple[object, ...]]) -> None:
+        self.glove = glove if isinstance(glove, GloveSource) else None
+        self.bus = bus if isinstance(bus, ServoBus) else None
+        self.pipeline = pipeline
+        self.machine = machine
+        self.stats = stats
+        self.started_s = started_s
+        self.view = view
+        self.outputs = outputs
+        self.control_names = tuple(pipeline.expander.controls)
+        self.servo_joints = tuple(pipeline.servo_joints)
+        n = len(self.servo_joints)
+        self.servo_ids = (tuple(self.bus.ids) if self.bus is not None
+                          else tuple(range(1, n + 1)))
+        self._marks: list[tuple[float, int]] = []
+        self.finished = False  # the run is over: the mode reads "stopped"
+
+    def _rate(self, now: float, count: int) -> float:
+        marks = self._marks
+        marks.append((now, count))
+        while len(marks) > 2 and now - marks[1][0] >= RATE_WINDOW_S:
+            marks.pop(0)
+        t0, c0 = marks[0]
+        return (count - c0) / (now - t0) if now > t0 else math.nan
+
+    def _mode(self) -> tuple[str, str]:
+        stats, mode = self.stats, self.machine.mode
+        name = "e-stop" if stats.estop else "stopped" if self.finished else mode.value
+        events = stats.events
+        reason = ""
+        if name in ("stopping", "e-stop", "stopped"):
+            reason = stats.stop_reason or (events[-1] if len(events) else "")
+        elif mode in (Mode.RELAXING, Mode.RESUMING) and len(events):
+            reason = events[-1]
+        elif mode is Mode.WAITING:
+            reason = "no glove frame yet: holding where the servos are"
+        return name, reason
+
+    def __call__(self, now: float, seq: int) -> LoopSnapshot:
+        stats = self.stats
+        recent = stats.latencies_s[-RECENT_LATENCIES:]
+        p50 = p99 = None
+        if recent:
+            q = np.percentile(np.asarray(recent, dtype=np.float64), [50, 99]) * 1e6
+            p50, p99 = float(q[0]), float(q[1])
+        mode, reason = self._mode()
+        controls, raw, angles, pose, goals, state, frame_s = self.view()
+        n = len(self.servo_joints)
+        glove_fields = self._glove()
+        fresh = now - float(frame_s) <= self.machine.glove_timeout_s  # False for NaN
+        glove_fields["glove_connected"] = fresh and not glove_fields.get("glove_failure")
+        bus_fields = self._bus(state, now, n)
+        pose_t = (tuple(np.asarray(pose, dtype=np.float64).tolist()) if pose is not None
+                  else (math.nan,) * len(POSE_NAMES))
+        inc, rot = angles if isinstance(angles, tuple) else (0.0, 0.0)
+        started = self.started_s()
+        return LoopSnapshot(
+            t_s=now, seq=seq, mode=mode, mode_reason=reason,
+            rate_hz=self._rate(now, stats.frames), latency_p50_us=p50, latency_p99_us=p99,
+            frames_lost=stats.frames_skipped + int(glove_fields.pop("frames_lost")),
+            cycles=stats.frames, overruns=stats.overruns,
+            elapsed_s=now - started if stats.frames else 0.0,
+            events=tuple(stats.events[-3:]),
+            controls=tuple(np.asarray(controls, dtype=np.float64).tolist()),
+            raw=tuple(np.asarray(raw, dtype=np.float64).tolist()) if raw is not None else (),
+            control_names=self.control_names,
+            inclination_deg=float(inc), rotation_deg=float(rot),
+            pose_deg=pose_t, curve_names=POSE_NAMES,
+            servo_ids=self.servo_ids, servo_joints=self.servo_joints,
+            goals_deg=tuple(np.asarray(goals, dtype=np.float64).tolist()),
+            outputs=tuple(o.status() for o in self.outputs() if isinstance(o, Output)),
+            **glove_fields, **bus_fields,
+        )
+
+    def _glove(self) -> dict[str, Any]:
+        glove = self.glove
+        if glove is None:
+            return {"frames_lost": 0}
+        g = glove.stats()
+        return {
+            "frames_lost": g.frames_lost, "glove_source": glove.name,
+            "glove_frames_ok": g.frames_ok,
+            "glove_errors": g.errors, "glove_reconnects": g.reconnects,
+            "glove_last_frame_age_s": g.time_since_last_good_s, "glove_failure": g.failure,
+        }
+
+    def _bus(self, state: object, now: float, n: int) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        bus = self.bus
+        if bus is not None:
+            b = bus.stats
+            out.update(bus_port=bus.port, bus_reads=b.reads, bus_writes=b.writes,
+                       bus_timeouts=b.timeouts,
+                       bus_errors=b.crc_errors + b.malformed + b.status_errors)
+        if not isinstance(state, ServoState):
+            out.update(positions_deg=(None,) * n, temperatures_c=(None,) * n,
+                       currents_ma=(None,) * n, hardware_errors=(0,) * n,
+                       stale=(False,) * n, reading_ages_s=(math.inf,) * n)
+            return out
+        since = max(0.0, now - float(state.timestamp_s))
+        out.update(
+            positions_deg=_opt(state.positions_deg, n),
+            temperatures_c=_opt(state.temperatures_c, n),
+            currents_ma=_opt(state.currents_ma, n),
+            hardware_errors=tuple(int(v) for v in state.hardware_errors.tolist()),
+            stale=tuple(bool(v) for v in state.stale.tolist()),
+            reading_ages_s=tuple(float(a) + since for a in state.age_s.tolist()))
+        return out

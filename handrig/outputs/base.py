@@ -1,0 +1,56 @@
+"""The output contract: :class:`Output`, what the loop hands each full pose to, and its
+:class:`OutputStatus`.
+
+The loop calls an output once per written pose, ``output(t_s, pose_deg)``: ``t_s``
+seconds since the run started, ``pose_deg`` the full pose
+(:data:`handrig.pose.pipeline.POSE_NAMES` order, degrees). The call runs on the
+loop's thread and must not block (a recorder queues the frame, a network sender
+drops it). ``status()`` may be called from any thread and returns a frozen record;
+the panel and the telemetry read only that.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class OutputStatus:
+    """What an output has done so far. ``kind``: ``"recorder"``, ``"vmc"`` ...;
+    ``name``: a short label; ``path`` (a file) or ``address`` (``host:port``), the other
+    empty; ``duration_s``: seconds of motion written (0 where that means nothing);
+    ``stopped_reason``: why the output stopped taking frames ("" while it takes them)."""
+
+    kind: str
+    name: str
+    path: str = ""
+    address: str = ""
+    frames_written: int = 0
+    bytes_written: int = 0
+    frames_dropped: int = 0
+    errors: int = 0
+    last_error: str = ""
+    stopped_reason: str = ""
+    duration_s: float = 0.0
+
+
+class Output(ABC):
+    """Something that takes the loop's full poses (a recorder, a network sender)."""
+
+    @abstractmethod
+    def __call__(self, t_s: float, pose_deg: FloatArray) -> None:
+        """Take one pose (on the loop's thread: never blocks)."""
+
+    @abstractmethod
+    def status(self) -> OutputStatus:
+        """The counters and state, as a frozen record (any thread)."""
+
+    def close(self) -> object:
+        """Finish (flush, close the file or socket). Idempotent."""
+        return None

@@ -1,0 +1,102 @@
+"""The loop's telemetry: frozen snapshots of plain tuples, published at most every 50 ms,
+read from another thread while the loop runs."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from handrig.clock import FakeClock
+from handrig.loop.telemetry import LoopSnapshot, Telemetry
+from handrig.outputs.base import Output, OutputStatus
+from handrig.outputs.recorder import Recorder
+from handrig.pose.pipeline import POSE_NAMES
+from tests.handrig.loop.test_rig import MID, RecordingBus, ScriptedGlove, make_rig
+
+
+class CountingOutput(Output):
+    def __init__(self) -> None:
+        self.frames = 0
+
+    def __call__(self, t_s: float, pose_deg: np.ndarray) -> None:
+        self.frames += 1
+
+    def status(self) -> OutputStatus:
+        return OutputStatus(kind="test", name="counter", frames_written=self.frames)
+
+
+def test_publication_is_rate_limited_and_numbered() -> None:
+    tel = Telemetry(every_s=0.05)
+    built: list[int] = []
+    times: list[float] = []
+
+    def build(t: float, seq: int) -> LoopSnapshot:
+        built.append(seq)
+        times.append(t)
+        return LoopSnapshot(t, seq, "running", "", 200.0, None, None, 0, seq, 0)
+
+    assert tel.latest() is None
+    published = [tel.offer(k * 0.005, build) for k in range(100)]  # 0.5 s at 200 Hz
+    assert sum(published) == 10 and built == list(range(1, 11))
+    snap = tel.latest()
+    assert snap is not None and snap.seq == 10 and snap.t_s == times[-1]
+    assert min(np.diff(times)) >= 0.05 - 1e-9 and max(np.diff(times)) <= 0.055 + 1e-9
+    assert tel.offer(0.451, build, force=True) and tel.latest().seq == 11  # type: ignore[union-attr]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        snap.mode = "stopped"  # type: ignore[misc]
+
+
+def test_a_run_publishes_what_the_loop_did(tmp_path: Path) -> None:
+    from handrig.app.factory import build_parts
+
+    parts = build_parts()
+    clock = FakeClock(10.0)
+    glove = ScriptedGlove(clock, lambda t: MID)
+    joints = tuple(s.joint for s in parts.rig_config.servos)
+    bus = RecordingBus(joints, clock, write_cost_s=50e-6)
+    counter = CountingOutput()
+    rec = Recorder(tmp_path / "take.csv", rate_hz=200.0, sync=False)
+    rig = make_rig(parts, glove, bus, clock, outputs=[counter, rec])
+    seen: list[LoopSnapshot] = []
+    done = threading.Event()
+
+    def watch() -> None:  # another thread reads while the loop runs
+        while not done.is_set():
+            s = rig.telemetry.latest()
+            if s is not None and (not seen or s.seq != seen[-1].seq):
+                seen.append(s)
+
+    t = threading.Thread(target=watch)
+    t.start()
+    try:
+        rig.run(frames=200)
+    finally:
+        done.set()
+        t.join()
+    rec.close()
+    last = rig.telemetry.latest()
+    assert last is not None and last.mode == "stopped"
+    # 200 frames + 0.5 s of easing at 200 Hz = 1.5 s: a snapshot every 50 ms or so
+    assert 25 <= last.seq <= 32
+    assert all(b.seq > a.seq and b.t_s >= a.t_s for a, b in itertools.pairwise(seen))
+    assert last.cycles == rig.stats.frames and last.frames_lost == 0
+    assert last.latency_p50_us == pytest.approx(50.0, abs=1.0)
+    assert last.rate_hz == pytest.approx(200.0, rel=0.05)
+    assert last.servo_joints == joints and len(last.servo_ids) == len(joints)
+    np.testing.assert_allclose(last.goals_deg, bus.goals[-1])
+    assert last.positions_deg and all(p is not None for p in last.positions_deg)
+    assert last.curve_names == POSE_NAMES and len(last.pose_deg) == len(POSE_NAMES)
+    assert all(math.isfinite(v) for v in last.pose_deg)
+    assert len(last.controls) == len(last.control_names) == len(parts.pipeline.expander.controls)
+    np.testing.assert_allclose(last.raw, MID)
+    assert last.glove_connected and last.glove_frames_ok == glove.n
+    kinds = {o.kind: o for o in last.outputs}
+    assert kinds["test"].frames_written == counter.frames > 0
+    assert kinds["recorder"].path == str(tmp_path / "take.csv")
+    assert isinstance(last.controls, tuple) and isinstance(last.goals_deg, tuple)
