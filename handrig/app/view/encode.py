@@ -65,6 +65,7 @@ class FrameEncoder:
         return json.dumps({
             "type": "scene", "title": self.title, "actions": list(self.actions),
             "models": {h: s.geometry() for h, s in self.models.items()},
+            "rest": {h: s.pose({}) for h, s in self.models.items()},
             "skeleton_hands": list(self.skeletons),
         }, separators=(",", ":"))
 
@@ -106,6 +107,7 @@ class FrameEncoder:
             "bodies": {h: s.pose(angles) for h, s in self.models.items()},
             "ghost": ({h: s.pose(ghost) for h, s in self.models.items()}
                       if reported and goals else None),
-            "skeleton": {h: s.skeleton(pose) for h, s in self.skeletons.items()},
+            "skeleton": {h: s.skeleton(pose) for h, s in self.skeletons.items()
+                         if any(n.startswith(h) for n in snap.curve_names)},
         }
         return json.dumps(msg, separators=(",", ":"))

@@ -38,15 +38,21 @@ function makeView(el) {
   return view;
 }
 
-// Aim the camera at the objects (the hand, not the forearm), seen from above and in front.
-function fit(view, objects, from) {
+// Aim the camera at the objects (the hand, not the forearm): all of them in view,
+// seen from the direction ``from`` (above and in front).
+function fit(view, objects, from, margin) {
   const box = new THREE.Box3();
-  for (const o of objects) if (o.visible) box.expandByObject(o);
+  for (const o of objects) {
+    if (!o.visible) continue;
+    o.updateMatrixWorld(true);
+    box.expandByObject(o);
+  }
   if (box.isEmpty()) return;
-  const centre = box.getCenter(new THREE.Vector3());
-  const size = box.getSize(new THREE.Vector3()).length();
-  view.controls.target.copy(centre);
-  view.camera.position.copy(centre).add(from.clone().multiplyScalar(size));
+  const sphere = box.getBoundingSphere(new THREE.Sphere());
+  const halfFov = THREE.MathUtils.degToRad(view.camera.fov / 2) * Math.min(1, view.camera.aspect);
+  const distance = margin * sphere.radius / Math.sin(halfFov);
+  view.controls.target.copy(sphere.center);
+  view.camera.position.copy(sphere.center).add(from.clone().normalize().multiplyScalar(distance));
   view.controls.update();
   view.fitted = true;
 }
@@ -136,6 +142,10 @@ function onScene(msg) {
     skeleton.scene.add(group);
     bones[hand] = { group, geo };
   }
+  // the camera is aimed at the hand at rest (not the forearm), with room for it to move
+  for (const [hand, posed] of Object.entries(msg.rest)) place(models[hand], posed);
+  const handBodies = Object.values(models).flatMap((m) => (m.bodies.length > 2 ? m.bodies.slice(2) : m.bodies));
+  fit(puppet, handBodies, new THREE.Vector3(0.15, -0.75, 0.85), 1.6);
   $('title').textContent = msg.title;
   actions.clear();
   for (const a of msg.actions) actions.add(a);
@@ -206,11 +216,7 @@ function drawFrame(f) {
     b.geo.computeBoundingSphere();
     b.geo.computeBoundingBox();
   }
-  if (!puppet.fitted) {
-    const hands = Object.values(models).flatMap((m) => (m.bodies.length > 2 ? m.bodies.slice(2) : m.bodies));
-    fit(puppet, hands, new THREE.Vector3(0.15, -0.75, 0.85));
-  }
-  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.45, 1.45));
+  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
   puppet.dirty = skeleton.dirty = true;
   drawTables(f);
 }
