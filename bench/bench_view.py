@@ -64,12 +64,33 @@ def process_cpu_s() -> float:
     return r.ru_utime + r.ru_stime
 
 
+def chromium_cpu_s(marker: str) -> float:
+    """CPU seconds so far of the processes whose command line holds ``marker`` (the
+    pages' own profile folder: their browser, renderer and GPU processes)."""
+    total = 0.0
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            if marker.encode() not in (proc / "cmdline").read_bytes():
+                continue
+            fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / CLK_TCK
+    return total
+
+
+def chromium_available() -> bool:
+    return bool(shutil.which("chromium") and shutil.which("chromedriver"))
+
+
 @contextlib.contextmanager
-def browsers(url: str, n: int, folder: Path) -> Iterator[str]:
-    """``n`` pages on ``url``: headless chromium when installed, else WebSocket clients
+def browsers(url: str, n: int, folder: Path, real: bool) -> Iterator[str]:
+    """``n`` pages on ``url``: headless chromium (``real``), else WebSocket clients
     that read every frame; yields what they are."""
     chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
-    if chromium and driver:
+    if real and chromium and driver:
         from selenium import webdriver
         from selenium.webdriver.chrome.service import Service
 
@@ -80,7 +101,8 @@ def browsers(url: str, n: int, folder: Path) -> Iterator[str]:
                 opts.binary_location = chromium
                 for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
                             "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
-                            "--window-size=1200,900", f"--user-data-dir={folder / f'p{i}'}"):
+                            "--window-size=1200,900",
+                            f"--user-data-dir={folder / f'pages{i}'}"):
                     opts.add_argument(arg)
                 page = webdriver.Chrome(options=opts, service=Service(executable_path=driver))
                 pages.append(page)
@@ -104,21 +126,24 @@ def browsers(url: str, n: int, folder: Path) -> Iterator[str]:
     for t in threads:
         t.start()
     try:
-        yield f"{n} WebSocket clients (chromium not installed: make browser-deps)"
+        yield f"{n} WebSocket clients"
     finally:
         stop.set()
         for t in threads:
             t.join(timeout=2)
 
 
-def run_round(with_view: bool, seconds: float, folder: Path, rec_path: Path,
+def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
               values: np.ndarray) -> dict[str, Any]:
-    rig_path = _rig_file(folder, "fixed", RATE_HZ, BAUD)
-    tag = f"{'view' if with_view else 'plain'}_{time.monotonic_ns()}"
+    """One round of ``case``: "none" (no view), "sockets" (the view, two WebSocket
+    clients) or "chromium" (the view, two headless chromium pages)."""
+    with_view = case != "none"
+    rig_path = _rig_file(folder, "glove", RATE_HZ, BAUD)
+    tag = f"{case}_{time.monotonic_ns()}"
     glove_log, bus_log = folder / f"glove_{tag}.log", folder / f"bus_{tag}.log"
     parts = build_parts(rig_path, _glove_file(folder))
     server: ViewServer | None = None
-    out: dict[str, Any] = {"view": with_view}
+    out: dict[str, Any] = {"case": case}
     with contextlib.ExitStack() as stack:
         bus_port = stack.enter_context(emulator(
             ["bus", "--rig", str(rig_path), "--log", str(bus_log)], "the bus emulator"))
@@ -128,18 +153,20 @@ def run_round(with_view: bool, seconds: float, folder: Path, rec_path: Path,
         on_rig = None
         if with_view:
             server = stack.enter_context(build_server("127.0.0.1:0", parts.rig_config))
-            out["browsers"] = stack.enter_context(browsers(server.url, 2, folder))
+            out["browsers"] = stack.enter_context(
+                browsers(server.url, 2, folder, real=case == "chromium"))
             view = server
 
             def on_rig(rig: Any) -> None:
                 view.attach(rig.telemetry.latest, rig)
-        cpu0 = process_cpu_s()
+        cpu0, pages0 = process_cpu_s(), chromium_cpu_s(str(folder / "pages"))
         view0 = thread_cpu_s(server.native_thread_id) if server else 0.0
         t0 = time.monotonic()
         result = run_live(parts, LiveOptions(glove=glove_port, bus=bus_port, duration_s=seconds,
                                              log=lambda s: None, on_rig=on_rig))
         wall = time.monotonic() - t0
         out["cpu_pct"] = 100.0 * (process_cpu_s() - cpu0) / wall
+        out["pages_cpu_pct"] = 100.0 * (chromium_cpu_s(str(folder / "pages")) - pages0) / wall
         if server is not None:
             out["view_cpu_pct"] = 100.0 * (thread_cpu_s(server.native_thread_id) - view0) / wall
             out["stats"] = server.stats
@@ -156,10 +183,24 @@ def _pct(xs: np.ndarray, q: float) -> float:
     return float(np.percentile(xs, q)) if len(xs) else float("nan")
 
 
+CASES = {"none": "no view", "sockets": "view + 2 WebSocket clients",
+         "chromium": "view + 2 chromium pages"}
+
+
+def _row(i: int, r: dict[str, Any]) -> str:
+    s, lat, st = r["summary"], r["outside_us"], r.get("stats")
+    frames = f"{st.frames_encoded} / {st.frames_sent} / {st.frames_skipped}" if st else "-"
+    return (f"| {i} | {CASES[r['case']]} | {s['latency_us']['p50']} / {s['latency_us']['p99']} "
+            f"| {_pct(lat, 50):.0f} / {_pct(lat, 99):.0f} | {s['rate_hz']} | {s['overruns']} "
+            f"| {r['cpu_pct']:.1f} | {r.get('view_cpu_pct', 0.0):.1f} "
+            f"| {r['pages_cpu_pct']:.1f} | {frames} |")
+
+
 def main() -> None:
     quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 8.0 if quick else 20.0))
     rounds = int(os.environ.get("HANDRIG_BENCH_ROUNDS", 2))
+    cases = ["none", "sockets"] + (["chromium"] if chromium_available() else [])
     results: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="bench_view_") as tmp:
         folder = Path(tmp)
@@ -167,50 +208,40 @@ def main() -> None:
         rec_path = folder / "steps.csv"
         write_glove_recording(rec_path, rec)
         values = rec.raw[:, INDEX_CHANNEL].copy()
-        print(f"rig at {RATE_HZ:g} Hz fixed-rate, {BAUD / 1e6:g} Mbps, 20 emulated servos with "
-              f"wire timing; {rounds} rounds of {seconds:g} s without / with --view and two "
-              "pages", flush=True)
-        print("| round | view | in-process p50 / p99 us | outside p50 / p99 us | rate Hz "
-              "| overruns | process CPU % | view thread CPU % | frames encoded / sent / "
-              "skipped |", flush=True)
-        print("|---|---|---|---|---|---|---|---|---|", flush=True)
+        print(f"rig at {RATE_HZ:g} Hz glove-triggered, {BAUD / 1e6:g} Mbps, 20 emulated servos with "
+              f"wire timing; {rounds} rounds of {seconds:g} s of each case, in turn", flush=True)
+        if "chromium" not in cases:
+            print("chromium or chromium-driver is not installed (make browser-deps): the "
+                  "case with two chromium pages is left out", flush=True)
+        print("| round | case | in-process p50 / p99 us | outside p50 / p99 us | rate Hz "
+              "| overruns | rig process CPU % | view thread CPU % | pages' CPU % "
+              "| frames encoded / sent / skipped |", flush=True)
+        print("|---|---|---|---|---|---|---|---|---|---|", flush=True)
         for i in range(rounds):
-            for with_view in (False, True):
-                r = run_round(with_view, seconds, folder, rec_path, values)
+            for case in cases:
+                r = run_round(case, seconds, folder, rec_path, values)
                 results.append(r)
-                s, lat = r["summary"], r["outside_us"]
-                st = r.get("stats")
-                frames = (f"{st.frames_encoded} / {st.frames_sent} / {st.frames_skipped}"
-                          if st else "-")
-                print(f"| {i + 1} | {'yes' if with_view else 'no'} "
-                      f"| {s['latency_us']['p50']} / {s['latency_us']['p99']} "
-                      f"| {_pct(lat, 50):.0f} / {_pct(lat, 99):.0f} | {s['rate_hz']} "
-                      f"| {s['overruns']} | {r['cpu_pct']:.1f} "
-                      f"| {r.get('view_cpu_pct', 0.0):.1f} | {frames} |", flush=True)
-    browsers_used = next((r["browsers"] for r in results if "browsers" in r), "")
-    print(f"pages: {browsers_used}")
-    for label, key in (("in-process", "in"), ("outside", "out")):
-        pooled = {}
-        for with_view in (False, True):
-            rs = [r for r in results if r["view"] == with_view]
-            if key == "out":
-                lat = np.concatenate([r["outside_us"] for r in rs])
-                pooled[with_view] = (_pct(lat, 50), _pct(lat, 99))
-            else:
-                pooled[with_view] = (float(np.median([r["summary"]["latency_us"]["p50"]
-                                                      for r in rs])),
-                                     float(np.median([r["summary"]["latency_us"]["p99"]
-                                                      for r in rs])))
-        (a50, a99), (b50, b99) = pooled[False], pooled[True]
-        print(f"{label} end-to-end, without -> with the view: p50 {a50:.0f} -> {b50:.0f} us "
-              f"({100 * (b50 - a50) / a50:+.1f} %), p99 {a99:.0f} -> {b99:.0f} us "
-              f"({100 * (b99 - a99) / a99:+.1f} %)")
-    view_cpu = [r["view_cpu_pct"] for r in results if r["view"]]
-    plain = np.mean([r["cpu_pct"] for r in results if not r["view"]])
-    viewed = np.mean([r["cpu_pct"] for r in results if r["view"]])
-    print(f"view thread CPU: {np.mean(view_cpu):.1f} % of a core; rig process CPU "
-          f"{plain:.1f} % without, {viewed:.1f} % with the view "
-          "(the pages' own chromium processes are not counted)")
+                print(_row(i + 1, r), flush=True)
+    pooled: dict[str, tuple[float, float, float, float]] = {}
+    for case in cases:
+        rs = [r for r in results if r["case"] == case]
+        lat = np.concatenate([r["outside_us"] for r in rs])
+        pooled[case] = (float(np.median([r["summary"]["latency_us"]["p50"] for r in rs])),
+                        float(np.median([r["summary"]["latency_us"]["p99"] for r in rs])),
+                        _pct(lat, 50), _pct(lat, 99))
+    base = pooled["none"]
+    for case in cases[1:]:
+        p = pooled[case]
+        rel = [100.0 * (b - a) / a for a, b in zip(base, p, strict=True)]
+        print(f"{CASES[case]} vs no view: in-process p50 {base[0]:.0f} -> {p[0]:.0f} us "
+              f"({rel[0]:+.1f} %), p99 {base[1]:.0f} -> {p[1]:.0f} us ({rel[1]:+.1f} %); "
+              f"outside p50 {base[2]:.0f} -> {p[2]:.0f} us ({rel[2]:+.1f} %), "
+              f"p99 {base[3]:.0f} -> {p[3]:.0f} us ({rel[3]:+.1f} %)")
+    for case in cases[1:]:
+        rs = [r for r in results if r["case"] == case]
+        print(f"{CASES[case]}: view thread {np.mean([r['view_cpu_pct'] for r in rs]):.1f} % "
+              f"of a core; the pages' own processes "
+              f"{np.mean([r['pages_cpu_pct'] for r in rs]):.1f} %")
 
 
 if __name__ == "__main__":

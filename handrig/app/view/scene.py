@@ -21,7 +21,8 @@ VISIBLE_GROUPS = (0, 1, 2)  # the groups MuJoCo's own viewer shows by default
 
 
 def _round(values: Any, nd: int = 5) -> list[float]:
-    return [round(float(v), nd) for v in np.asarray(values, dtype=np.float64).ravel()]
+    out: list[float] = np.round(np.asarray(values, dtype=np.float64).ravel(), nd).tolist()
+    return out
 
 
 class ModelScene:
