@@ -11,26 +11,28 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ipaddress
-import secrets
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
+from handrig.app.view.address import (
+    DEFAULT_HOST,
+    DEFAULT_PORT,
+    is_loopback,
+    parse_view_address,
+    secrets_token,
+)
 from handrig.app.view.encode import FrameEncoder
+from handrig.app.view.playback import view_playback
 from handrig.app.view.scene import ModelScene
 from handrig.app.view.server import RigControls, ViewServer, ViewStats
-from handrig.errors import ConfigError
 
 if TYPE_CHECKING:
     from handrig.config.rig import RigConfig
     from handrig.loop.rig import Rig
 
 __all__ = ["FrameEncoder", "ModelScene", "RigControls", "ViewServer", "ViewStats",
-           "add_view_flag", "build_server", "parse_view_address", "view_session"]
-
-DEFAULT_HOST = "127.0.0.1"
-DEFAULT_PORT = 8765
-
+           "add_view_flag", "build_server", "is_loopback", "parse_view_address", "view_playback",
+           "view_session"]
 
 def add_view_flag(parser: argparse.ArgumentParser) -> None:
     """``--view [HOST:]PORT``: serve the live view (127.0.0.1 unless a host is given)."""
@@ -39,33 +41,6 @@ def add_view_flag(parser: argparse.ArgumentParser) -> None:
         help=f"serve a live view of the rig in the browser, e.g. --view {DEFAULT_PORT} "
         f"(on {DEFAULT_HOST} only; with a HOST such as 0.0.0.0 other machines may open "
         "it, with the token in the URL printed at the start; PORT 0: any free port)")
-
-
-def parse_view_address(text: str) -> tuple[str, int]:
-    """``"PORT"``, ``"HOST:PORT"`` or ``"[IPv6]:PORT"`` -> (host, port); ConfigError
-    otherwise."""
-    host, sep, port_text = text.rpartition(":")
-    if not sep:
-        host, port_text = DEFAULT_HOST, text
-    host = host.strip("[]") or DEFAULT_HOST
-    try:
-        port = int(port_text)
-    except ValueError:
-        port = -1
-    if not 0 <= port < 65536:
-        raise ConfigError("not a view address", key="--view", value=text,
-                          allowed=f"[HOST:]PORT with PORT 0..65535, e.g. {DEFAULT_PORT} or "
-                          f"0.0.0.0:{DEFAULT_PORT}")
-    return host, port
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def build_server(address: str, rig_config: RigConfig, *, rate_hz: float = 30.0,
@@ -79,7 +54,7 @@ def build_server(address: str, rig_config: RigConfig, *, rate_hz: float = 30.0,
     models = {h: ModelScene(m) for h, m in simulator.view_models(rig_config).items()}
     skeletons = {h: ModelScene(m) for h, m in simulator.human_hand_models().items()}
     encoder = FrameEncoder(models, skeletons, title=title, actions=actions)
-    token = None if is_loopback(host) else secrets.token_urlsafe(16)
+    token = None if is_loopback(host) else secrets_token()
     return ViewServer(host, port, encoder, token=token, rate_hz=rate_hz)
 
 

@@ -15,6 +15,7 @@ import os
 import queue
 import re
 import shutil
+import socket
 import subprocess
 import sys
 import threading
@@ -52,15 +53,17 @@ def chromium(tmp: Path) -> Any:
     return webdriver.Chrome(options=opts, service=Service(executable_path=str(DRIVER)))
 
 
-class DemoRun:
-    """``handrig demo --view 127.0.0.1:0 --json`` in a subprocess; its view URL from
-    the line it prints at the start."""
+ROOT = Path(__file__).resolve().parents[4]
 
-    def __init__(self, *extra: str) -> None:
+
+class ViewRun:
+    """``handrig COMMAND ... --view 127.0.0.1:0 --json`` in a subprocess; its view URL
+    from the line it prints at the start."""
+
+    def __init__(self, *argv: str) -> None:
         env = {**os.environ, "MUJOCO_GL": "egl"}
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "handrig.cli", "demo", "--view", "127.0.0.1:0",
-             "--frames", str(FRAMES), "--json", *extra],
+            [sys.executable, "-m", "handrig.cli", *argv, "--view", "127.0.0.1:0", "--json"],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         self.lines: queue.Queue[str] = queue.Queue()
         self.stderr: list[str] = []
@@ -129,15 +132,15 @@ def skin(rgb: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture
-def demo() -> Iterator[DemoRun]:
-    run = DemoRun()
+def demo() -> Iterator[ViewRun]:
+    run = ViewRun("demo", "--frames", str(FRAMES))
     try:
         yield run
     finally:
         run.kill()
 
 
-def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: DemoRun, tmp_path: Path
+def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: ViewRun, tmp_path: Path
                                                           ) -> None:
     from selenium.webdriver.common.by import By
 
@@ -189,7 +192,7 @@ def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: DemoRun, tmp_pat
     assert summary["frames"] < FRAMES
 
 
-def test_two_browsers_and_one_that_leaves(demo: DemoRun, tmp_path: Path) -> None:
+def test_two_browsers_and_one_that_leaves(demo: ViewRun, tmp_path: Path) -> None:
     browsers = [chromium(tmp_path / f"profile{i}") for i in range(2)]
     try:
         for b in browsers:
@@ -211,3 +214,27 @@ def test_two_browsers_and_one_that_leaves(demo: DemoRun, tmp_path: Path) -> None
             b.quit()
     assert summary["estop"] is False and summary["torque_off"] is True
     assert summary["frames"] < FRAMES
+
+
+def test_play_shows_the_recording_and_its_stop_button_ends_it(tmp_path: Path) -> None:
+    from selenium.webdriver.common.by import By
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:  # the VMC receiver
+        sink.bind(("127.0.0.1", 0))
+        run = ViewRun("play", str(ROOT / "data" / "mocap" / "pn_gestures_reference.bvh"),
+                      "--loop", "--vmc", f"127.0.0.1:{sink.getsockname()[1]}")
+        browser = chromium(tmp_path / "profile")
+        try:
+            browser.get(run.url)
+            wait_for(lambda: browser.execute_script("return window.handrigView.framesDrawn()")
+                     > 5, 90, "the page to draw frames")
+            assert "playing" in browser.find_element(By.ID, "mode").text
+            assert not browser.find_element(By.ID, "estop").is_enabled()  # no rig, no e-stop
+            shot = pixels(browser.find_element(By.ID, "puppet").screenshot_as_png)
+            assert skin(shot).mean() > 0.01  # both hands of the human-hand model
+            browser.find_element(By.ID, "stop").click()
+            summary = run.summary(timeout_s=30)
+        finally:
+            browser.quit()
+            run.kill()
+    assert summary["bundles_sent"] > 0 and summary["interrupted"] is False
