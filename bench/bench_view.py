@@ -1,18 +1,23 @@
-"""What the live view costs the loop: the rig at 200 Hz / 1 Mbps with and without
-``--view`` and two headless chromium pages connected, side by side in one run.
+"""What the live view costs the loop: the rig at 200 Hz / 1 Mbps without ``--view``
+and with it and two pages connected, side by side in one run.
 
-The case is :mod:`bench.bench_rig`'s (the real rig between the glove and bus
-emulators in processes of their own, 20 servos with wire timing, fixed-rate at
-200 Hz); the rounds alternate without/with the view so drift on the shared
-machine falls on both. Reported per round and pooled: end-to-end latency in the
-process (frame arrival to Sync Write handed to the OS) and from outside (glove
-emulator send to the bus emulator's receipt), p50/p99; the rig process's CPU; the
-view thread's CPU, frames encoded and sent, frames slow pages skipped.
+The rig is :mod:`bench.bench_rig`'s (the real rig between the glove and bus
+emulators in processes of their own, 20 servos with wire timing) in the default
+rig's glove-triggered mode with a 200 Hz glove. The cases, in turn, each round:
+no view; the view with two WebSocket clients reading every frame (the view's own
+cost); the view with two headless chromium pages (which draw in software, with
+SwiftShader, on the same two cores as the rig and its emulated servos); and the same
+pages under the idle scheduling class (``chrt --idle 0``: they get only the CPU
+the rig and the emulators leave). Reported per round and pooled over rounds:
+end-to-end latency in the process (frame arrival to Sync Write handed to the OS)
+and from outside (glove emulator send to the bus emulator's receipt), p50/p99;
+the rig process's CPU; the view thread's CPU; the pages' own CPU; frames encoded,
+sent and skipped by slow pages.
 
 Browsers: Debian's chromium through chromium-driver (``make browser-deps``); where
-they are missing, two WebSocket clients stand in and the table says so.
+they are missing the chromium cases are left out and the output says so.
 ``HANDRIG_BENCH_SECONDS`` sets each round's length (default 20 s; QUICK: 8 s),
-``HANDRIG_BENCH_ROUNDS`` the rounds of each (default 2).
+``HANDRIG_BENCH_ROUNDS`` the rounds (default 2).
 """
 
 from __future__ import annotations
@@ -86,11 +91,18 @@ def chromium_available() -> bool:
 
 
 @contextlib.contextmanager
-def browsers(url: str, n: int, folder: Path, real: bool) -> Iterator[str]:
-    """``n`` pages on ``url``: headless chromium (``real``), else WebSocket clients
-    that read every frame; yields what they are."""
+def browsers(url: str, n: int, folder: Path, real: bool, idle: bool = False
+             ) -> Iterator[str]:
+    """``n`` pages on ``url``: headless chromium (``real``; ``idle``: under the idle
+    scheduling class, ``chrt --idle 0``), else WebSocket clients that read every
+    frame; yields what they are."""
     chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
     if real and chromium and driver:
+        if idle:
+            wrapper = folder / "chromium-idle"
+            wrapper.write_text(f'#!/bin/sh\nexec chrt --idle 0 {chromium} "$@"\n')
+            wrapper.chmod(0o755)
+            chromium = str(wrapper)
         from selenium import webdriver
         from selenium.webdriver.chrome.service import Service
 
@@ -154,7 +166,8 @@ def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
         if with_view:
             server = stack.enter_context(build_server("127.0.0.1:0", parts.rig_config))
             out["browsers"] = stack.enter_context(
-                browsers(server.url, 2, folder, real=case == "chromium"))
+                browsers(server.url, 2, folder, real=case.startswith("chromium"),
+                         idle=case == "chromium-idle"))
             view = server
 
             def on_rig(rig: Any) -> None:
@@ -184,7 +197,8 @@ def _pct(xs: np.ndarray, q: float) -> float:
 
 
 CASES = {"none": "no view", "sockets": "view + 2 WebSocket clients",
-         "chromium": "view + 2 chromium pages"}
+         "chromium": "view + 2 chromium pages",
+         "chromium-idle": "view + 2 chromium pages at idle priority"}
 
 
 def _row(i: int, r: dict[str, Any]) -> str:
@@ -200,7 +214,9 @@ def main() -> None:
     quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 8.0 if quick else 20.0))
     rounds = int(os.environ.get("HANDRIG_BENCH_ROUNDS", 2))
-    cases = ["none", "sockets"] + (["chromium"] if chromium_available() else [])
+    cases = ["none", "sockets"] + (["chromium", "chromium-idle"] if chromium_available()
+                                   and shutil.which("chrt") else
+                                   ["chromium"] if chromium_available() else [])
     results: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="bench_view_") as tmp:
         folder = Path(tmp)
@@ -208,8 +224,9 @@ def main() -> None:
         rec_path = folder / "steps.csv"
         write_glove_recording(rec_path, rec)
         values = rec.raw[:, INDEX_CHANNEL].copy()
-        print(f"rig at {RATE_HZ:g} Hz glove-triggered, {BAUD / 1e6:g} Mbps, 20 emulated servos with "
-              f"wire timing; {rounds} rounds of {seconds:g} s of each case, in turn", flush=True)
+        print(f"rig at {RATE_HZ:g} Hz glove-triggered, {BAUD / 1e6:g} Mbps, 20 emulated servos "
+              f"with wire timing; {rounds} rounds of {seconds:g} s of each case, in turn",
+              flush=True)
         if "chromium" not in cases:
             print("chromium or chromium-driver is not installed (make browser-deps): the "
                   "case with two chromium pages is left out", flush=True)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import socket
+import subprocess
+import sys
 import time
 import urllib.error
 import urllib.request
@@ -162,3 +164,16 @@ def test_skeleton_bends_with_the_pose() -> None:
     bent = np.reshape(hand.skeleton({"leIndexPIPy": 80.0, "leIndexDIPy": 60.0}), (-1, 2, 3))
     assert straight.shape == bent.shape and straight.shape[0] >= 19  # every bone and tip
     assert 0 < np.count_nonzero(np.abs(straight - bent).max(axis=(1, 2)) > 1e-4) <= 3
+
+
+def test_demo_on_a_port_in_use_says_which_and_starts_nothing() -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = subprocess.run(
+            [sys.executable, "-m", "handrig.cli", "demo", "--frames", "10", "--view",
+             str(port)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert f"--view '127.0.0.1:{port}': port {port} on 127.0.0.1 is in use" in done.stderr
+    assert "glove emulator streaming" not in done.stdout  # nothing started
