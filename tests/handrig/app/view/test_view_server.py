@@ -177,3 +177,40 @@ def test_demo_on_a_port_in_use_says_which_and_starts_nothing() -> None:
     assert done.returncode == 2
     assert f"--view '127.0.0.1:{port}': port {port} on 127.0.0.1 is in use" in done.stderr
     assert "glove emulator streaming" not in done.stdout  # nothing started
+
+
+def _snapshot(cfg, *, positions: bool, nan_pose: bool = False):  # type: ignore[no-untyped-def]
+    from handrig.loop.telemetry import LoopSnapshot
+    from handrig.outputs.base import OutputStatus
+    from handrig.pose.pipeline import POSE_NAMES
+
+    n = len(cfg.servos)
+    goals = tuple(30.0 if "PIP" in s.joint else 0.0 for s in cfg.servos)
+    return LoopSnapshot(
+        t_s=1.0, seq=3, mode="running", mode_reason="following the glove", rate_hz=200.0,
+        latency_p50_us=150.0, latency_p99_us=float("nan"), frames_lost=2, cycles=400,
+        overruns=1, controls=(0.5,), raw=(2000.0,), control_names=("riIndexMCPy",),
+        inclination_deg=-20.0, rotation_deg=5.0, glove_connected=True,
+        pose_deg=tuple(float("nan") if nan_pose else 10.0 for _ in POSE_NAMES),
+        curve_names=POSE_NAMES, servo_ids=tuple(s.id for s in cfg.servos),
+        servo_joints=tuple(s.joint for s in cfg.servos), goals_deg=goals,
+        positions_deg=tuple(g - 5.0 for g in goals) if positions else (None,) * n,
+        temperatures_c=(31.0,) * n, hardware_errors=(0,) * (n - 1) + (0x20,),
+        stale=(False,) * n, outputs=(OutputStatus(kind="vmc", name="VMC",
+                                                   address="127.0.0.1:39539"),))
+
+
+def test_frame_from_a_snapshot(human_rig) -> None:  # type: ignore[no-untyped-def]
+    encoder = build_server("127.0.0.1:0", human_rig).encoder
+    read = json.loads(encoder.frame(_snapshot(human_rig, positions=True)))
+    assert read["source"] == "positions" and read["ghost"] is not None
+    assert read["latency_p99_us"] is None  # NaN is not JSON: sent as null
+    assert read["servos"]["errors"][-1] == 0x20 and read["servos"]["position_deg"][0] == -5.0
+    assert read["outputs"][0]["kind"] == "vmc" and read["outputs"][0]["address"]
+    assert set(read["skeleton"]) == {"ri", "le"}  # the pose holds both hands
+    assert read["bodies"]["ri"]["pos"] != read["ghost"]["ri"]["pos"]  # 5 degrees apart
+    unread = json.loads(encoder.frame(_snapshot(human_rig, positions=False, nan_pose=True)))
+    assert unread["source"] == "goals" and unread["ghost"] is None
+    assert all(len(s) > 0 for s in unread["skeleton"].values())  # at rest, not NaN
+    scene = json.loads(encoder.scene())
+    assert scene["type"] == "scene" and set(scene["rest"]) == set(scene["models"]) == {"ri"}
