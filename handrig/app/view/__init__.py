@@ -61,20 +61,19 @@ def build_server(address: str, rig_config: RigConfig, *, rate_hz: float = 30.0,
 @contextlib.contextmanager
 def view_session(address: str | None, rig_config: RigConfig, log: Callable[[str], None]
                  ) -> Iterator[Callable[[Rig], None] | None]:
-    """Serve the view for the block when ``address`` is given, and yield the function
-    that attaches the rig (its telemetry and its key actions); yields None without
+    """Serve the view for the block when ``address`` is given, in a process of its own
+    (:class:`handrig.app.view.process.ViewProcess`), and yield the function that
+    attaches the rig (its telemetry and its key actions); yields None without
     ``--view``. The server closes when the block ends, however it ends."""
     if address is None:
         yield None
         return
-    server = build_server(address, rig_config).start()
+    from handrig.app.view.process import ViewProcess
+
+    view = ViewProcess(address, rig_config).start()
     try:
-        log(f"view: {server.url}")
-
-        def attach(rig: Rig) -> None:
-            server.attach(rig.telemetry.latest, rig)
-
-        yield attach
+        log(f"view: {view.url}")
+        yield view.attach_rig
     finally:
-        server.close()
+        view.close()
 

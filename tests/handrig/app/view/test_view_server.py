@@ -175,7 +175,7 @@ def test_demo_on_a_port_in_use_says_which_and_starts_nothing() -> None:
             [sys.executable, "-m", "handrig.cli", "demo", "--frames", "10", "--view",
              str(port)], capture_output=True, text=True, timeout=120)
     assert done.returncode == 2
-    assert f"--view '127.0.0.1:{port}': port {port} on 127.0.0.1 is in use" in done.stderr
+    assert f"--view '{port}': port {port} on 127.0.0.1 is in use" in done.stderr
     assert "glove emulator streaming" not in done.stdout  # nothing started
 
 
