@@ -11,7 +11,8 @@ pages under the idle scheduling class (``chrt --idle 0``: they get only the CPU
 the rig and the emulators leave). Reported per round and pooled over rounds:
 end-to-end latency in the process (frame arrival to Sync Write handed to the OS)
 and from outside (glove emulator send to the bus emulator's receipt), p50/p99;
-the rig process's CPU; the view thread's CPU; the pages' own CPU; frames encoded,
+the rig process's CPU; the view's CPU (its feeder thread in the rig's process,
+its own process); the pages' own CPU; frames encoded,
 sent and skipped by slow pages.
 
 Browsers: Debian's chromium through chromium-driver (``make browser-deps``); where
@@ -45,7 +46,7 @@ from bench.bench_rig import (
 )
 from handrig.app.factory import build_parts
 from handrig.app.session import LiveOptions, run_live
-from handrig.app.view import ViewServer, build_server
+from handrig.app.view.process import ViewProcess
 from handrig.devices.glove_recording import write_glove_recording
 
 RATE_HZ = 200.0
@@ -59,6 +60,17 @@ def thread_cpu_s(tid: int | None) -> float:
         return 0.0
     try:
         fields = Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+
+def pid_cpu_s(pid: int | None) -> float:
+    """CPU seconds (user + system) of process ``pid`` so far."""
+    if pid is None:
+        return 0.0
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     except OSError:
         return 0.0
     return (int(fields[11]) + int(fields[12])) / CLK_TCK
@@ -154,7 +166,7 @@ def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
     tag = f"{case}_{time.monotonic_ns()}"
     glove_log, bus_log = folder / f"glove_{tag}.log", folder / f"bus_{tag}.log"
     parts = build_parts(rig_path, _glove_file(folder))
-    server: ViewServer | None = None
+    server: ViewProcess | None = None
     out: dict[str, Any] = {"case": case}
     with contextlib.ExitStack() as stack:
         bus_port = stack.enter_context(emulator(
@@ -164,16 +176,13 @@ def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
             "the glove emulator"))
         on_rig = None
         if with_view:
-            server = stack.enter_context(build_server("127.0.0.1:0", parts.rig_config))
+            server = stack.enter_context(ViewProcess("127.0.0.1:0", parts.rig_config))
             out["browsers"] = stack.enter_context(
                 browsers(server.url, 2, folder, real=case.startswith("chromium"),
                          idle=case == "chromium-idle"))
-            view = server
-
-            def on_rig(rig: Any) -> None:
-                view.attach(rig.telemetry.latest, rig)
+            on_rig = server.attach_rig
         cpu0, pages0 = process_cpu_s(), chromium_cpu_s(str(folder / "pages"))
-        view0 = thread_cpu_s(server.native_thread_id) if server else 0.0
+        child0 = pid_cpu_s(server.pid) if server else 0.0
         t0 = time.monotonic()
         result = run_live(parts, LiveOptions(glove=glove_port, bus=bus_port, duration_s=seconds,
                                              log=lambda s: None, on_rig=on_rig))
@@ -181,8 +190,10 @@ def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
         out["cpu_pct"] = 100.0 * (process_cpu_s() - cpu0) / wall
         out["pages_cpu_pct"] = 100.0 * (chromium_cpu_s(str(folder / "pages")) - pages0) / wall
         if server is not None:
-            out["view_cpu_pct"] = 100.0 * (thread_cpu_s(server.native_thread_id) - view0) / wall
-            out["stats"] = server.stats
+            out["feeder_cpu_pct"] = 100.0 * thread_cpu_s(server.feeder_thread_id) / wall
+            out["view_cpu_pct"] = 100.0 * (pid_cpu_s(server.pid) - child0) / wall
+    if server is not None:
+        out["stats"] = server.stats  # the child's counters, sent as it ends
     sends = [(float(a), int(c)) for a, _, c in
              (line.split() for line in glove_log.read_text().splitlines() if line)]
     writes = [(float(f[0]), tuple(int(v) for v in f[1:]))
@@ -203,10 +214,12 @@ CASES = {"none": "no view", "sockets": "view + 2 WebSocket clients",
 
 def _row(i: int, r: dict[str, Any]) -> str:
     s, lat, st = r["summary"], r["outside_us"], r.get("stats")
-    frames = f"{st.frames_encoded} / {st.frames_sent} / {st.frames_skipped}" if st else "-"
+    frames = (f"{st.get('frames_encoded')} / {st.get('frames_sent')} / "
+              f"{st.get('frames_skipped')}" if st is not None else "-")
     return (f"| {i} | {CASES[r['case']]} | {s['latency_us']['p50']} / {s['latency_us']['p99']} "
             f"| {_pct(lat, 50):.0f} / {_pct(lat, 99):.0f} | {s['rate_hz']} | {s['overruns']} "
-            f"| {r['cpu_pct']:.1f} | {r.get('view_cpu_pct', 0.0):.1f} "
+            f"| {r['cpu_pct']:.1f} | {r.get('feeder_cpu_pct', 0.0):.2f} "
+            f"| {r.get('view_cpu_pct', 0.0):.1f} "
             f"| {r['pages_cpu_pct']:.1f} | {frames} |")
 
 
@@ -231,9 +244,9 @@ def main() -> None:
             print("chromium or chromium-driver is not installed (make browser-deps): the "
                   "case with two chromium pages is left out", flush=True)
         print("| round | case | in-process p50 / p99 us | outside p50 / p99 us | rate Hz "
-              "| overruns | rig process CPU % | view thread CPU % | pages' CPU % "
-              "| frames encoded / sent / skipped |", flush=True)
-        print("|---|---|---|---|---|---|---|---|---|---|", flush=True)
+              "| overruns | rig process CPU % | its feeder thread CPU % | view process CPU % "
+              "| pages' CPU % | frames encoded / sent / skipped |", flush=True)
+        print("|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
         for i in range(rounds):
             for case in cases:
                 r = run_round(case, seconds, folder, rec_path, values)
@@ -256,8 +269,9 @@ def main() -> None:
               f"p99 {base[3]:.0f} -> {p[3]:.0f} us ({rel[3]:+.1f} %)")
     for case in cases[1:]:
         rs = [r for r in results if r["case"] == case]
-        print(f"{CASES[case]}: view thread {np.mean([r['view_cpu_pct'] for r in rs]):.1f} % "
-              f"of a core; the pages' own processes "
+        print(f"{CASES[case]}: in the rig's process the feeder thread "
+              f"{np.mean([r['feeder_cpu_pct'] for r in rs]):.2f} % of a core; the view's "
+              f"process {np.mean([r['view_cpu_pct'] for r in rs]):.1f} %; the pages' own processes "
               f"{np.mean([r['pages_cpu_pct'] for r in rs]):.1f} %")
 
 
