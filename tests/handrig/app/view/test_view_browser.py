@@ -178,7 +178,7 @@ def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: ViewRun, tmp_pat
         mode = browser.find_element(By.ID, "mode")
         before = mode.text
         browser.find_element(By.ID, "relax").click()
-        wait_for(lambda: mode.text != before, 10, f"the mode to change from {before!r}")
+        wait_for(lambda: mode.text == "relaxing", 10, f"the mode to change from {before!r}")
         time.sleep(0.5)
         browser.find_element(By.ID, "estop").click()  # acts on pointerdown
         summary = demo.summary(timeout_s=60)

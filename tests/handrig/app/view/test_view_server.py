@@ -214,3 +214,42 @@ def test_frame_from_a_snapshot(human_rig) -> None:  # type: ignore[no-untyped-de
     assert all(len(s) > 0 for s in unread["skeleton"].values())  # at rest, not NaN
     scene = json.loads(encoder.scene())
     assert scene["type"] == "scene" and set(scene["rest"]) == set(scene["models"]) == {"ri"}
+
+
+def test_run_view_streams_real_telemetry_and_its_estop_ends_the_run() -> None:
+    """Without a browser: ``handrig run --view`` on the simulated rig; a WebSocket
+    client gets the scene and frames of the real loop, and its e-stop ends the run."""
+    recording = simulator.demo_recording()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handrig.cli", "run", "--bus", "sim", "--glove",
+         f"replay:{recording}", "--frames", "20000", "--json", "--view", "127.0.0.1:0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        url = ""
+        deadline = time.monotonic() + 120
+        while not url and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            if line.startswith("view: "):
+                url = line.split()[1]
+        assert url.startswith("http://127.0.0.1:")
+        port = int(url.rsplit(":", 1)[1].strip("/"))
+        with connect(f"ws://127.0.0.1:{port}/ws") as ws:
+            assert json.loads(ws.recv(timeout=30))["type"] == "scene"
+            frames = [json.loads(ws.recv(timeout=30)) for _ in range(5)]
+            assert [f["type"] for f in frames] == ["frame"] * 5
+            assert frames[-1]["seq"] > frames[0]["seq"]
+            assert frames[-1]["mode"] in ("running", "waiting", "resuming")
+            assert len(frames[-1]["servos"]["ids"]) == 20
+            ws.send("garbage")
+            ws.send(json.dumps({"action": "estop"}))
+            out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["estop"] is True and summary["torque_off"] is True
+    assert summary["stop_reason"] == "e-stop button (view)"
