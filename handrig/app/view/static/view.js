@@ -10,7 +10,7 @@ const HAND_OFFSET_M = { ri: -0.11, le: 0.11 };  // two hands side by side
 const SKELETON_COLOUR = 0x3cc8ff;
 
 function makeView(el) {
-  const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+  const renderer = new THREE.WebGLRenderer({ antialias: true });
   renderer.setPixelRatio(window.devicePixelRatio);
   el.appendChild(renderer.domElement);
   const scene = new THREE.Scene();
@@ -165,9 +165,18 @@ function cells(row, values) {
   values.forEach((v, i) => { if (row.cells[i].textContent !== v) row.cells[i].textContent = v; });
 }
 
+function drawMode(f) {
+  if ($('mode').textContent !== f.mode) $('mode').textContent = f.mode;
+  const reason = f.mode_reason ? `(${f.mode_reason})` : '';
+  if ($('reason').textContent !== reason) $('reason').textContent = reason;
+}
+
+// The figures change every frame but nobody reads them 20 times a second; redrawing
+// the tables (layout and paint) costs the browser more than the 3D view.
+const TABLES_EVERY_MS = 250;
+let tablesAt = 0;
+
 function drawTables(f) {
-  $('mode').textContent = f.mode;
-  $('reason').textContent = f.mode_reason ? `(${f.mode_reason})` : '';
   $('source').textContent = { positions: 'the servos\' present positions', goals: 'the goals (no readings)', pose: 'the pipeline\'s pose (no readings)' }[f.source];
   $('rate').textContent = fmt(f.rate_hz, ' Hz');
   $('latency').textContent = `${fmt(f.latency_p50_us, ' µs', 0)} / ${fmt(f.latency_p99_us, ' µs', 0)}`;
@@ -218,7 +227,9 @@ function drawFrame(f) {
   }
   if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
   puppet.dirty = skeleton.dirty = true;
-  drawTables(f);
+  drawMode(f);
+  const now = performance.now();
+  if (now - tablesAt >= TABLES_EVERY_MS) { tablesAt = now; drawTables(f); }
 }
 
 function animate() {
