@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from handrig.loop.telemetry import LoopSnapshot
 
 FEED_HZ = 30.0
+CHILD_NICE = 10  # the view yields the CPU to the run, its emulators and everything else
 START_TIMEOUT_S = 120.0
 
 
@@ -84,9 +85,11 @@ class ViewProcess:
 
     def start(self) -> ViewProcess:
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        # a session of its own: a Ctrl-C at the terminal goes to the run, which eases the
+        # puppet down and then closes the view (the child ends when its stdin closes)
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "handrig.app.view.process"], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, env=env)
+            stdout=subprocess.PIPE, env=env, start_new_session=True)
         assert self._proc.stdin is not None  # for mypy: PIPE was asked for
         _write(self._proc.stdin, {"address": self.address, "rig_config": self.rig_config,
                                   "title": self.title})
@@ -220,6 +223,7 @@ def child_main() -> int:
 
     stdin, out = sys.stdin.buffer, sys.stdout
     sys.stdout = sys.stderr  # nothing else may write on the protocol's stream
+    os.nice(CHILD_NICE)
     setup = _read(stdin)
     try:
         server = build_server(setup["address"], setup["rig_config"], title=setup["title"])

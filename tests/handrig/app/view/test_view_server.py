@@ -4,6 +4,8 @@ input on the socket, closing; the scene export from the real MuJoCo models."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 import socket
 import subprocess
 import sys
@@ -216,14 +218,17 @@ def test_frame_from_a_snapshot(human_rig) -> None:  # type: ignore[no-untyped-de
     assert scene["type"] == "scene" and set(scene["rest"]) == set(scene["models"]) == {"ri"}
 
 
-def test_run_view_streams_real_telemetry_and_its_estop_ends_the_run() -> None:
+@pytest.mark.parametrize("end", ["estop", "ctrl-c"])
+def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None:
     """Without a browser: ``handrig run --view`` on the simulated rig; a WebSocket
-    client gets the scene and frames of the real loop, and its e-stop ends the run."""
+    client gets the scene and frames of the real loop; its e-stop ends the run, or a
+    Ctrl-C at the terminal (to the run's process group) eases it down; either way the
+    view's server is closed when the run has ended."""
     recording = simulator.demo_recording()
     proc = subprocess.Popen(
         [sys.executable, "-m", "handrig.cli", "run", "--bus", "sim", "--glove",
          f"replay:{recording}", "--frames", "20000", "--json", "--view", "127.0.0.1:0"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         assert proc.stderr is not None
         url = ""
@@ -244,12 +249,20 @@ def test_run_view_streams_real_telemetry_and_its_estop_ends_the_run() -> None:
             assert frames[-1]["mode"] in ("running", "waiting", "resuming")
             assert len(frames[-1]["servos"]["ids"]) == 20
             ws.send("garbage")
-            ws.send(json.dumps({"action": "estop"}))
+            if end == "estop":
+                ws.send(json.dumps({"action": "estop"}))
+            else:
+                os.killpg(proc.pid, signal.SIGINT)
             out, _ = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
     summary = json.loads(out.strip().splitlines()[-1])
-    assert summary["estop"] is True and summary["torque_off"] is True
-    assert summary["stop_reason"] == "e-stop button (view)"
+    assert summary["torque_off"] is True
+    if end == "estop":
+        assert summary["estop"] is True and summary["stop_reason"] == "e-stop button (view)"
+    else:
+        assert summary["estop"] is False and summary["signals"]
+    with pytest.raises(OSError):  # the run's exit closed the view's server
+        socket.create_connection(("127.0.0.1", port), timeout=2).close()
