@@ -93,7 +93,9 @@ def wire_timed_cycles(seconds: float = 1.5) -> None:
     n = len(rig.servos)
     print(f"wire timing on, plain SDK Sync Write + Fast Sync Read, {n} servos, puppet on:")
     for baud in (1_000_000, 4_000_000):
-        with SimBus.from_rig(rig, puppet=True, wire_timing=True) as bus:
+        # the servos at the client's rate: a servo answers only at its own Baud Rate
+        with SimBus.from_rig(rig, puppet=True, wire_timing=True,
+                             bauds={s.id: baud for s in rig.servos}) as bus:
             port = PortHandler(bus.port_path)
             port.openPort()
             port.setBaudRate(baud)

@@ -103,7 +103,7 @@ def render_strip(
         xml = hand_model_xml("ri")
     else:
         try:
-            xml = Path(model).read_text()
+            xml = _with_absolute_meshdir(Path(model))
         except OSError as exc:
             raise RenderUnavailable(f"cannot read the robot model {model}: {exc}") from None
     xml = xml.replace("<worldbody>", f"<asset>{BACKGROUND}</asset><worldbody>", 1)
@@ -171,6 +171,20 @@ def _draw(model: object, data: object, mujoco: object, frames_deg: Sequence[np.n
     finally:
         renderer.close()
     return _save(images, labels, out)
+
+
+def _with_absolute_meshdir(path: Path) -> str:
+    """The model's XML with its ``<compiler meshdir>`` made absolute: loaded from a
+    string, MuJoCo would look for the meshes relative to the working directory."""
+    import xml.etree.ElementTree as ET
+
+    text = path.read_text()
+    root = ET.fromstring(text)
+    compiler = root.find("compiler")
+    if compiler is None or compiler.get("meshdir") is None:
+        return text
+    compiler.set("meshdir", str((path.parent / compiler.get("meshdir", "")).resolve()))
+    return ET.tostring(root, encoding="unicode")
 
 
 def _colour_robot(model: object, mujoco: object) -> None:

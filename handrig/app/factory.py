@@ -32,7 +32,7 @@ from handrig.clock import Clock
 from handrig.config.loading import CONFIG_DIR, load_joint_limits
 from handrig.config.paths import config_file
 from handrig.config.rig import RigConfig
-from handrig.devices.glove import GloveSample, GloveSource, ReplayGlove, SerialGlove
+from handrig.devices.glove import GloveSample, GloveSource, GloveStats, ReplayGlove, SerialGlove
 from handrig.devices.glove_calibration import (
     GloveConfig,
     GloveControls,
@@ -45,6 +45,7 @@ from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 from handrig.errors import ConfigError, DeviceError
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
+from handrig.outputs.base import Output
 from handrig.pose.expand import Expander
 from handrig.pose.orientation import ForearmOrientation
 from handrig.pose.pipeline import PosePipeline
@@ -291,7 +292,7 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
         # that polls holds back the kernel worker delivering the reply (and the glove's
         # bytes) whenever that worker is queued on the loop's CPU.
         bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=read_fields_for(rig_cfg),
-                           spin_s=0.0)
+                           spin_s=0.0, emulated=proc is not None)
         stack.callback(bus.close)
         yield OpenedBus(bus, port, proc)
 
@@ -318,44 +319,14 @@ def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
     return out
 
 
-@dataclass(frozen=True)
-class ResumeSettings:
-    """How the loop comes back after a glove loss: ``frames`` good frames in a row, then
-    easing to the glove's pose over ``time_s``. Read from ``[loop] resume_frames`` and
-    ``resume_time_s`` when the rig file has them."""
-
-    frames: int = 3
-    time_s: float = 0.3
-
-
-def resume_settings(rig_cfg: RigConfig) -> ResumeSettings:
-    loop = rig_cfg.loop
-    default = ResumeSettings()
-    return ResumeSettings(int(getattr(loop, "resume_frames", default.frames)),
-                          float(getattr(loop, "resume_time_s", default.time_s)))
-
-
 def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
               outputs: Sequence[Callable[[float, FloatArray], None]] = (),
               log: Callable[[str], None] = print, profile: bool = False) -> Rig:
-    """The loop on these devices, with the rig file's rates and safety timings. In loop
-    mode "glove" the ceiling is also held below the rate at which Sync Writes of Goal
-    Position fill the wire (``0.9 / wire time``), so writes never queue on the bus."""
-    loop = parts.rig_config.loop
-    resume = resume_settings(parts.rig_config)
-    rig_cfg = parts.rig_config
-    write_s = wire_time_s(14 + 5 * len(rig_cfg.servos), rig_cfg.bus.baud)  # 14 + 5N bytes
-    ceiling_hz = max(loop.floor_hz, min(loop.ceiling_hz, 0.9 / write_s))
-    return Rig(
-        glove, bus, parts.pipeline, clock,
-        controls_from_raw=parts.controls, orientation=parts.orientation,
-        rate_hz=loop.rate_hz, read_every=parts.rig_config.bus.read_every,
-        glove_timeout_s=loop.glove_timeout_s, relax_time_s=loop.relax_time_s,
-        resume_frames=resume.frames, resume_time_s=resume.time_s,
-        outputs=outputs, log=log, profile=profile,
-        loop_mode=loop.mode, floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz,
-        catch_up=loop.catch_up, read_parts=rig_cfg.bus.read_parts,
-    )
+    """The loop on these devices, with the rig file's rates and safety timings
+    (:meth:`Rig.from_config`)."""
+    return Rig.from_config(parts.rig_config, glove, bus, parts.pipeline, clock,
+                           controls_from_raw=parts.controls, orientation=parts.orientation,
+                           outputs=outputs, log=log, profile=profile)
 
 
 def _die_with_parent() -> Callable[[], None] | None:
@@ -454,10 +425,10 @@ def bus_faults(bus: dict[str, Any]) -> dict[str, int]:
     return {FAULT_WORDS[k]: int(bus[k]) for k in FAULT_WORDS if bus.get(k)}
 
 
-def clamped_joints(pipeline: Any, top: int = TOP_CLAMPED) -> list[dict[str, Any]]:
+def clamped_joints(pipeline: PosePipeline, top: int = TOP_CLAMPED) -> list[dict[str, Any]]:
     """The servo joints whose targets were clamped most often (most first, none at 0)."""
-    counts = np.asarray(getattr(pipeline, "servo_clamps_by_servo", ()), dtype=np.int64)
-    joints = tuple(getattr(pipeline, "servo_joints", ()))
+    counts = np.asarray(pipeline.servo_clamps_by_servo, dtype=np.int64)
+    joints = tuple(pipeline.servo_joints)
     order: list[int] = np.argsort(-counts, kind="stable")[:top].tolist() if counts.size else []
     return [{"joint": joints[i], "clamps": int(counts[i])} for i in order if counts[i] > 0]
 
@@ -467,24 +438,24 @@ def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, A
     ``recording`` (path, format, frames, duration, bytes), None when off."""
     out: dict[str, Any] = {"vmc": None, "recording": None}
     for o in outs:
-        if hasattr(o, "bundles_sent") and hasattr(o, "address"):
-            sent = int(o.bundles_sent)
-            out["vmc"] = {"target": f"{o.address[0]}:{o.address[1]}", "bundles_sent": sent,
+        if not isinstance(o, Output):
+            continue
+        st = o.status()
+        if st.kind == "vmc":
+            sent = st.frames_written
+            out["vmc"] = {"target": st.address, "bundles_sent": sent,
                           "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
-                          "errors": int(getattr(o, "errors", 0)),
-                          "last_error": str(getattr(o, "last_error", ""))}
-        elif hasattr(o, "frames_written") and hasattr(o, "path"):
-            frames = int(o.frames_written)
-            rate = float(getattr(o, "rate_hz", 0.0) or 0.0)
+                          "errors": st.errors, "last_error": st.last_error}
+        elif st.kind == "recorder":
             out["recording"] = {
-                "path": str(o.path), "format": str(getattr(o, "fmt", "")), "frames": frames,
-                "duration_s": round(frames / rate, 3) if rate > 0 else None,
-                "bytes": int(getattr(o, "bytes_written", 0)),
-                "frames_dropped": int(getattr(o, "frames_dropped", 0))}
+                "path": st.path, "format": st.name, "frames": st.frames_written,
+                "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
+                "frames_dropped": st.frames_dropped}
     return out
 
 
-def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: bool | None,
+def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None,
+                 torque_off: bool | None,
                  *, outputs: dict[str, Any] | None = None,
                  clamped: list[dict[str, Any]] | None = None, ease_s: float = 0.0
                  ) -> dict[str, Any]:
@@ -529,6 +500,8 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: 
         "reads": s.reads,
         "stale_reads": s.stale_reads,
         "relax_events": s.relax_events,
+        "silence": {"silences": s.servo_silences, "held": s.servos_held,
+                    "recoveries": s.servo_recoveries},
         "resumes": s.resumes,
         "estop": s.estop,
         "stop_reason": s.stop_reason,
@@ -545,10 +518,10 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: Any, torque_off: 
             "frames_ok": glove_stats.frames_ok, "crc_errors": glove_stats.crc_errors,
             "decode_errors": glove_stats.decode_errors, "resyncs": glove_stats.resyncs,
             "seq_gaps": glove_stats.seq_gaps, "frames_used": s.glove_samples,
-            "channel_errors": getattr(glove_stats, "channel_errors", 0),
-            "disconnects": getattr(glove_stats, "disconnects", 0),
-            "reconnects": getattr(glove_stats, "reconnects", 0),
-            "last_outage_s": num(getattr(glove_stats, "last_outage_s", 0.0)),
+            "channel_errors": glove_stats.channel_errors,
+            "disconnects": glove_stats.disconnects,
+            "reconnects": glove_stats.reconnects,
+            "last_outage_s": num(glove_stats.last_outage_s),
         }
     if bus_stats is not None:
         bus: dict[str, Any] = {}

@@ -130,16 +130,21 @@ def _print_checks(checks: list[JointCheck], frames: int, with_capture: bool) -> 
     print(f"what the sources reach (unclipped), and demo frames clipped at each limit "
           f"({frames} frames)")
     print(f"{'robot joint':<12} {'range':>16} {'anatomy':>16} {'capture':>16} {'demo':>16}"
-          f" {'at low':>7} {'at high':>7}  flags")
+          f" {'at low':>7} {'at high':>7} {'covers':>7}  flags")
     for c in checks:
         flags = ", ".join(f"{f} exceeds range" for f in c.flags) or "ok"
         print(f"{c.joint:<12} {_fmt(c.range_deg):>16} {_fmt(c.anatomical_deg):>16} "
               f"{_fmt(c.capture_deg):>16} {_fmt(c.demo_deg):>16} "
-              f"{100 * c.demo_low_frac:>6.1f}% {100 * c.demo_high_frac:>6.1f}%  {flags}")
+              f"{100 * c.demo_low_frac:>6.1f}% {100 * c.demo_high_frac:>6.1f}% "
+              f"{_pct(c.demo_cover_frac):>7}  {flags}")
     flagged = [c.joint for c in checks if set(c.flags) & {"capture", "demo"}]
     print(f"{len(flagged)} of {len(checks)} robot joints get inputs past their range from "
           f"the {'capture or ' if with_capture else ''}demo"
           + (f": {', '.join(flagged)}" if flagged else ""))
+
+
+def _pct(frac: float | None) -> str:
+    return "-" if frac is None else f"{100 * frac:.0f}%"
 
 
 def _as_json(rt: Retarget, checks: list[JointCheck], frames: int) -> dict[str, Any]:
@@ -154,6 +159,7 @@ def _as_json(rt: Retarget, checks: list[JointCheck], frames: int) -> dict[str, A
              "capture_deg": None if c.capture_deg is None else list(c.capture_deg),
              "demo_deg": None if c.demo_deg is None else list(c.demo_deg),
              "demo_low_frac": c.demo_low_frac, "demo_high_frac": c.demo_high_frac,
+             "demo_cover_frac": c.demo_cover_frac,
              "flags": list(c.flags)}
             for k, c in enumerate(checks)
         ],

@@ -31,6 +31,10 @@ POSITION_TICKS_MAX = 4095
 # Model numbers of the X-series servos we know (REFERENCE.md section 2).
 MODEL_NUMBERS: dict[str, int] = {"XL330-M288": 1200, "XC330-T288": 1220, "XM430-W350": 1020}
 MODEL_NUMBERS["XC330-M288"] = 1240  # the LEAP hand's servo
+MODEL_NUMBERS["XL330-M077"] = 1190
+MODEL_NUMBERS["XC430-W150"] = 1070  # no current sensing (e-manual): no current limit
+ServoModel = Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288", "XL330-M077",
+                     "XC430-W150"]
 # Baud rates the X series and dynamixel-sdk both accept.
 BAUD_RATES: tuple[int, ...] = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000)
 
@@ -41,7 +45,7 @@ class ServoCalibration:
 
     id: int
     joint: str
-    model: Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288"] = "XL330-M288"
+    model: ServoModel = "XL330-M288"
     zero_ticks: int = 2048
     direction: Literal[1, -1] = 1
     gear_ratio: float = 1.0
@@ -123,6 +127,16 @@ class BusConfig:
             )
 
 
+LOOP_RANGES: tuple[tuple[str, float, float, str], ...] = (
+    ("glove_timeout_s", 0.01, 10.0, "s"),
+    ("relax_time_s", 0.01, 10.0, "s"),
+    ("resume_frames", 1, 1000, "frames"),
+    ("resume_time_s", 0.01, 10.0, "s"),
+    ("slew_deg_s", 1.0, 10000.0, "deg/s"),
+)
+"""[loop] keys checked against a sane range: (key, lowest, highest, unit)."""
+
+
 @dataclass(frozen=True)
 class LoopConfig:
     """The realtime loop: rate, safety timings, slew limit, sag and the files it uses.
@@ -139,6 +153,8 @@ class LoopConfig:
     catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
+    resume_frames: int = 3  # good glove frames in a row after a loss before following again
+    resume_time_s: float = 0.3  # how long easing back to the glove's pose takes
     slew_deg_s: float = 720.0  # max joint speed commanded in normal running
     sag_gain: float = 1.0  # 0 = no passive sag, 1 = the full baked sag
     left_hand: Literal["mirror", "map", "relaxed"] = "map"
@@ -163,10 +179,11 @@ class LoopConfig:
             raise ConfigError("ceiling rate out of range", key="ceiling_hz",
                               value=self.ceiling_hz,
                               allowed=f"floor_hz ({self.floor_hz:g})..5000 Hz")
-        for name in ("glove_timeout_s", "relax_time_s", "slew_deg_s"):
+        for name, low, high, unit in LOOP_RANGES:
             value = getattr(self, name)
-            if value <= 0:
-                raise ConfigError("must be positive", key=name, value=value)
+            if not low <= value <= high:
+                raise ConfigError("out of range", key=name, value=value,
+                                  allowed=f"{low:g}..{high:g} {unit}")
         if not 0 <= self.realtime_priority <= 99:
             raise ConfigError("out of range", key="realtime_priority",
                               value=self.realtime_priority, allowed="0 (off) or 1..99")
@@ -217,11 +234,14 @@ OPERATING_MODES: dict[str, int] = {
 }
 # Current Limit (38) maximum per model, mA: XL330-M288 1750 x 1 mA, XC330-T288 910 x 1 mA,
 # XC330-M288 2352 x 1 mA, XM430-W350 1193 x 2.69 mA (ROBOTIS e-manual control tables).
+# XL330-M077 1750 x 1 mA. Models absent here (XC430-W150) have no Current Limit.
 CURRENT_LIMIT_MAX_MA: dict[str, float] = {
     "XL330-M288": 1750.0, "XC330-T288": 910.0, "XC330-M288": 2352.0, "XM430-W350": 1193 * 2.69,
+    "XL330-M077": 1750.0,
 }
 CURRENT_UNIT_MA: dict[str, float] = {
     "XL330-M288": 1.0, "XC330-T288": 1.0, "XC330-M288": 1.0, "XM430-W350": 2.69,
+    "XL330-M077": 1.0,
 }
 GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
 RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
@@ -249,8 +269,13 @@ class ServoSettingsGroup:
     current_limit_ma: int | None = None
     position_p_gain: int | None = None
     position_d_gain: int | None = None
+    operating_mode: Literal["position", "extended_position", "current_based_position"] | None \
+        = None
 
     def check(self) -> None:
+        if self.operating_mode is not None and self.operating_mode not in OPERATING_MODES:
+            raise ConfigError("unknown operating mode", key="operating_mode",
+                              value=self.operating_mode, allowed=", ".join(OPERATING_MODES))
         if not self.ids:
             raise ConfigError("a group needs at least one servo ID", key="ids")
         _check_current(self.current_limit_ma, "current_limit_ma")
@@ -314,8 +339,9 @@ class ResolvedServoSettings:
     return_delay_us: int
 
     def current_limit_units(self, model: str) -> int | None:
-        """Current Limit / Goal Current in the register's units for servo ``model``."""
-        if self.current_limit_ma is None:
+        """Current Limit / Goal Current in the register's units for servo ``model``
+        (None: none set, or a model without current sensing)."""
+        if self.current_limit_ma is None or model not in CURRENT_UNIT_MA:
             return None
         return round(self.current_limit_ma / CURRENT_UNIT_MA[model])
 
@@ -324,13 +350,16 @@ def resolve_servo_settings(settings: ServoSettings, servo_id: int) -> ResolvedSe
     """``[servo_settings]`` for one servo, with its group's values where it has one."""
     current, p_gain, d_gain = (settings.current_limit_ma, settings.position_p_gain,
                                settings.position_d_gain)
+    mode = settings.operating_mode_value
     for group in settings.groups:
         if servo_id in group.ids:
+            if group.operating_mode is not None:
+                mode = OPERATING_MODES[group.operating_mode]
             current = group.current_limit_ma if group.current_limit_ma is not None else current
             p_gain = group.position_p_gain if group.position_p_gain is not None else p_gain
             d_gain = group.position_d_gain if group.position_d_gain is not None else d_gain
-    return ResolvedServoSettings(servo_id, settings.operating_mode_value, current, p_gain,
-                                 d_gain, settings.return_delay_us)
+    return ResolvedServoSettings(servo_id, mode, current, p_gain, d_gain,
+                                 settings.return_delay_us)
 
 
 def check_servo_settings(rig: RigConfig) -> None:
@@ -344,6 +373,13 @@ def check_servo_settings(rig: RigConfig) -> None:
                                   allowed=", ".join(str(i) for i in sorted(ids)))
     for s in rig.servos:
         resolved = resolve_servo_settings(rig.servo_settings, s.id)
+        if s.model not in CURRENT_LIMIT_MAX_MA:  # no current sensing: nothing to check
+            if resolved.operating_mode == OPERATING_MODES["current_based_position"]:
+                raise ConfigError(f"servo {s.id} ({s.model}) has no current-based position "
+                                  "mode", key="servo_settings.operating_mode",
+                                  allowed="a group with operating_mode = \"position\" or "
+                                  "\"extended_position\" for it")
+            continue
         top = CURRENT_LIMIT_MAX_MA[s.model]
         if resolved.current_limit_ma is not None and resolved.current_limit_ma > top:
             raise ConfigError(f"current limit above the {s.model}'s maximum for servo {s.id}",
@@ -352,14 +388,32 @@ def check_servo_settings(rig: RigConfig) -> None:
 
 
 @dataclass(frozen=True)
+class CalibrationConfig:
+    """``[calibration]``: when ``handrig calibrate servos`` asks for a typed confirmation.
+
+    ``max_zero_shift_deg``: a new zero further than this from the current one (joint
+    degrees) is written only after the user types ``yes``.
+    """
+
+    max_zero_shift_deg: float = 20.0
+
+    def check(self) -> None:
+        if not 0.0 < self.max_zero_shift_deg <= 360.0:
+            raise ConfigError("out of range", key="max_zero_shift_deg",
+                              value=self.max_zero_shift_deg, allowed="0 < degrees <= 360")
+
+
+@dataclass(frozen=True)
 class RigConfig:
-    """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]`` and ``[[servos]]``."""
+    """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]``, ``[calibration]`` and
+    ``[[servos]]``."""
 
     bus: BusConfig = BusConfig()
     loop: LoopConfig = LoopConfig()
     servos: tuple[ServoCalibration, ...] = ()
     servo_settings: ServoSettings = ServoSettings()
     silence: SilenceConfig = SilenceConfig()
+    calibration: CalibrationConfig = CalibrationConfig()
 
     def check(self) -> None:
         if not self.servos:

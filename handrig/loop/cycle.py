@@ -27,10 +27,21 @@ from typing import Any
 import numpy as np
 
 from handrig.clock import Clock
+from handrig.config.rig import SilenceConfig
+from handrig.devices.servo.wire import goal_write_bytes, wire_time_s
 from handrig.errors import DeviceError
 from handrig.loop.easing import Easing
 from handrig.loop.modes import Mode, ModeMachine
-from handrig.loop.ports import BusLike, ControlsFromRaw, FloatArray, GloveLike, OrientationLike
+from handrig.loop.ports import (
+    ControlsFromRaw,
+    FloatArray,
+    GloveSample,
+    GloveSource,
+    OrientationLike,
+    ServoBus,
+    ServoState,
+)
+from handrig.loop.silence import SilenceWatch
 from handrig.loop.stats import RunStats
 from handrig.loop.trigger import READ_MARGIN_S, FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pose.pipeline import POSE_SIZE, PosePipeline
@@ -38,7 +49,6 @@ from handrig.pose.pipeline import POSE_SIZE, PosePipeline
 __all__ = ["READ_MARGIN_S", "Cycle"]
 READ_SMOOTHING = 0.2  # weight of the newest read's duration in the expected read time
 SKIP_GROWTH = 1.25  # a read the bus skipped: the next one needs this much more room
-BITS_PER_BYTE = 10  # start bit, 8 data bits, stop bit (REFERENCE.md section 3)
 
 
 class Cycle:
@@ -51,8 +61,8 @@ class Cycle:
 
     def __init__(
         self,
-        glove: GloveLike,
-        bus: BusLike,
+        glove: GloveSource,
+        bus: ServoBus,
         pipeline: PosePipeline,
         clock: Clock,
         machine: ModeMachine,
@@ -67,19 +77,17 @@ class Cycle:
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         trigger: Trigger | None = None,
         read_parts: int = 1,
+        silence: SilenceConfig | None = None,
     ) -> None:
         self.bus = bus
         # each read asks one part of the servos in turn (1: every servo at once)
         self.read_parts = max(1, min(int(read_parts), len(pipeline.servo_joints)))
         self._part = 0
         self.trigger: Trigger = trigger or FixedRateTrigger(clock, 1.0 / period_s)
-        # frames the glove sent back to back, superseded on arrival (not by a busy loop)
-        self._take_bursts: Callable[[], int] | None = getattr(self.trigger, "take_bursts", None)
         self.read_s = 0.0  # expected duration of a present-state read (moving average)
         self._reads_due = 0  # cycles since the last read
         self.read_wire_s = self._wire_floor(
             bus, -(-len(pipeline.servo_joints) // self.read_parts))
-        self._quiet_wait_s: Callable[[], float] | None = getattr(bus, "quiet_wait_s", None)
         self.pipeline = pipeline
         self.clock = clock
         self.machine = machine
@@ -89,23 +97,18 @@ class Cycle:
         self.outputs = tuple(outputs)
         # a glove trigger pumps the port itself: the cycle then takes the newest sample
         # without reading the port again
-        take = getattr(glove, "take", None)
-        self.latest: Callable[[], Any] = (
-            take if isinstance(self.trigger, GloveTrigger) and take is not None
-            else glove.latest)
-        # a tick that catches up takes the frame behind the newest (see Tick.catch_up)
-        self._take_behind: Callable[[], Any] | None = getattr(glove, "take_behind", None)
-        self._peek: Callable[[], Any] | None = getattr(glove, "peek", None)
+        self.glove = glove
+        self.latest: Callable[[], GloveSample | None] = (
+            glove.take if isinstance(self.trigger, GloveTrigger) else glove.latest)
         self.controls_from_raw: Callable[..., Any] = controls_from_raw
-        self.orientation: Callable[[Any], tuple[float, float]] = orientation
+        self.orientation: Callable[[GloveSample], tuple[float, float]] = orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
         # port events of the glove, silence events of the bus: into the run's events
-        self._drains: tuple[Callable[[], list[str]], ...] = tuple(
-            d for d in (getattr(glove, "drain_events", None), getattr(bus, "drain_events", None))
-            if callable(d))
-        # watchdogs and temperatures, read midway between state reads (a bus may not have it)
-        self.housekeeping: Callable[[float], bool] | None = getattr(bus, "housekeeping", None)
+        self._drains: tuple[Callable[[], list[str]], ...] = (
+            glove.drain_events, bus.drain_events, lambda: self.silence.drain_events())
+        # the bus's upkeep (watchdogs, temperatures), midway between state reads
+        self.housekeeping: Callable[[float], bool] = bus.housekeeping
         self._housekeeping_slot = self.read_every // 2 if self.read_every > 1 else -1
         n = len(pipeline.servo_joints)
         self.relax = Easing(n, POSE_SIZE, relax_time_s)
@@ -115,8 +118,10 @@ class Cycle:
         self.sent = np.zeros(n)  # the goals last written
         self._step = np.zeros(n)
         self._slew_deg_s = pipeline.slew_deg_s
-        self.sample: Any = None  # the newest glove sample
-        self.last_state: Any = None  # the newest ServoState read back
+        # the [silence] tiers for servos that stop answering: decided here, from the reads
+        self.silence = SilenceWatch(bus, silence or SilenceConfig(), pipeline.slew_deg_s)
+        self.sample: GloveSample | None = None  # the newest glove sample
+        self.last_state: ServoState | None = None  # the newest ServoState read back
         self.t0_s = 0.0
         self._pose: FloatArray | None = None  # the full pose last output
         # a caught-up frame's full pose waits until the newest frame's write is out
@@ -131,14 +136,14 @@ class Cycle:
     def seed(self) -> None:
         """Start from where the servos are: the goals the bus holds them at, else a read.
         DeviceError when neither is known (the loop must not start blind)."""
-        held = getattr(self.bus, "last_goals_deg", None)
+        held = np.asarray(self.bus.last_goals_deg, dtype=np.float64)
         pipeline = self.pipeline
-        if held is not None and np.all(np.isfinite(held)):
-            pipeline.seed(np.asarray(held, dtype=np.float64))
+        if held.shape == (len(self.sent),) and np.all(np.isfinite(held)):
+            pipeline.seed(held)
         elif not pipeline.has_targets:
             state = self.bus.read_state()
-            positions = np.asarray(getattr(state, "positions_deg", []), dtype=np.float64)
-            stale = np.asarray(getattr(state, "stale", []), dtype=bool)
+            positions = np.asarray(state.positions_deg, dtype=np.float64)
+            stale = np.asarray(state.stale, dtype=bool)
             if positions.shape == (len(self.sent),) and not stale.any() and np.all(
                     np.isfinite(positions)):
                 pipeline.seed(positions)
@@ -153,11 +158,11 @@ class Cycle:
         now = tick.now_s
         machine = self.machine
         sample, t_sample = None, now
-        if tick.catch_up and self._take_behind is not None:
-            sample = self._take_behind()
+        if tick.catch_up:  # the frame behind the newest (see Tick.catch_up)
+            sample = self.glove.take_behind()
             if sample is not None:  # its filter time: a period per frame before the newest
-                newest = self._peek() if self._peek is not None else None
-                behind = max(1, getattr(newest, "count", 0) - sample.count)
+                newest = self.glove.peek()
+                behind = max(1, (0 if newest is None else newest.count) - sample.count)
                 t_sample = now - behind * tick.behind_s
                 self.stats.frames_caught_up += 1
         if sample is None:
@@ -178,6 +183,8 @@ class Cycle:
         else:
             relaxed = self.pipeline.relaxed_targets(*self.angles)
             goals, done = self.relax.goals(now, self.sent, self._pose, relaxed)
+        if self.silence.steering:  # servos held for silence, or coming back from it
+            goals = self.silence.steer(goals, self.sent, tick.dt_s)
         bus_clamps = self.write(goals)
         self._after_write(tick, sample, mode, goals, bus_clamps)
         if done:
@@ -202,12 +209,12 @@ class Cycle:
         np.add(sent, step, out=goals)
         return goals, done
 
-    def _after_write(self, tick: Tick, sample: Any, mode: Mode, goals: FloatArray,
-                     bus_clamps: int) -> None:
+    def _after_write(self, tick: Tick, sample: GloveSample | None, mode: Mode,
+                     goals: FloatArray, bus_clamps: int) -> None:
         stats = self.stats
         written = self.clock.now()
-        handed = getattr(self.bus, "last_write_s", None)  # the Sync Write's os.write returned
-        if handed is not None and handed == handed and tick.now_s <= handed <= written:
+        handed = self.bus.last_write_s  # the Sync Write's os.write returned (NaN: unknown)
+        if tick.now_s <= handed <= written:
             written = handed
         stats.bus_clamps += int(bus_clamps)
         if sample is not None:
@@ -216,8 +223,9 @@ class Cycle:
             stats.compute.add(written - tick.now_s)
             stats.latencies_s.append(latency)
             stats.glove_samples += 1
-            count, before = getattr(sample, "count", 0), getattr(self.sample, "count", 0)
-            bursts = self._take_bursts() if self._take_bursts is not None else 0
+            count, before = sample.count, 0 if self.sample is None else self.sample.count
+            # frames the glove sent back to back, superseded on arrival (not by a busy loop)
+            bursts = self.trigger.take_bursts()
             if before and count > before + 1:
                 superseded = count - before - 1
                 bursts = min(superseded, bursts)
@@ -263,28 +271,21 @@ class Cycle:
         for out in self.outputs:
             out(t_s, pose)
 
-    def _skipped_reads(self) -> int:
-        stats = getattr(self.bus, "stats", None)
-        return int(getattr(stats, "skipped_reads", 0))
-
     def _take_events(self) -> None:
         machine = self.machine
         for drain in self._drains:
             for text in drain():
                 machine.event(text)
-        if hasattr(self.bus, "relax_reason"):
-            machine.servos_silent(self.bus.relax_reason)
+        machine.servos_silent(self.silence.relax_reason)
 
     @staticmethod
-    def _wire_floor(bus: Any, n: int) -> float:
-        """The least a read right after a write can take: the write's Sync Write of Goal
-        Position (14 + 5N bytes) still on the wire, then the read's request and replies
-        (0 for a bus that does not say its baud rate and read wire time)."""
-        read_wire = getattr(bus, "read_wire_s", None)
-        baud = getattr(bus, "baud", None)
-        if read_wire is None or not isinstance(baud, int) or baud <= 0:
+    def _wire_floor(bus: ServoBus, n: int) -> float:
+        """The least a read right after a write can take: the write's goal Sync Write
+        still on the wire, then the read's request and replies (0 for a bus that has no
+        serial wire)."""
+        if bus.baud <= 0:
             return 0.0
-        return float(read_wire(n)) + (14 + 5 * n) * BITS_PER_BYTE / baud
+        return bus.read_wire_s(n) + wire_time_s(goal_write_bytes(bus.n_servos), bus.baud)
 
     def _read(self, tick: Tick) -> None:
         """The present-state read, if the trigger finds room for one in this cycle."""
@@ -292,20 +293,22 @@ class Cycle:
         trigger, clock = self.trigger, self.clock
         start = clock.now()
         read_s = max(self.read_s, self.read_wire_s)
-        if self._quiet_wait_s is not None:
-            read_s += self._quiet_wait_s()  # a failed reply's quiet line, before the request
+        read_s += self.bus.quiet_wait_s()  # a failed reply's quiet line, before the request
         deadline = trigger.read_deadline(tick, start, self._reads_due, self.read_every, read_s)
         if deadline is None:
-            if (self._reads_due == self._housekeeping_slot and self.housekeeping is not None):
+            if self._reads_due == self._housekeeping_slot:
                 self.housekeeping(tick.next_s - READ_MARGIN_S)
             return
         due, self._reads_due = self._reads_due, 0
-        skipped_before = self._skipped_reads()
         parts = self.read_parts
+        silence = self.silence
+        silence.note_read(start, late=deadline <= start)
         state = (self.bus.read_state(deadline, (self._part, parts)) if parts > 1
                  else self.bus.read_state(deadline))
         end = clock.now()
-        if self._skipped_reads() > skipped_before:
+        if silence.active or not state.all_fresh:
+            silence.update(state, end)  # DeviceTimeoutError when the action is "stop"
+        if not state.sent:
             # the bus found no room for it after all (a line to let go quiet, replies
             # slower than the wire): still due, so a forced read comes in time, and the
             # next one is asked only with more room than this one had
@@ -323,15 +326,12 @@ class Cycle:
         self._track(state, self.sent)
         self._take_events()
 
-    def _track(self, state: Any, goals: FloatArray) -> None:
+    def _track(self, state: ServoState, goals: FloatArray) -> None:
         stats = self.stats
         stats.reads += 1
-        positions = getattr(state, "positions_deg", None)
-        stale = getattr(state, "stale", None)
-        if positions is None:
-            return
-        fresh = ~np.asarray(stale, dtype=bool) if stale is not None else np.ones(len(goals), bool)
-        asked = getattr(state, "asked", None)
+        positions = state.positions_deg
+        fresh = ~np.asarray(state.stale, dtype=bool)
+        asked = state.asked
         if asked is not None:  # a read of a part: the others' readings are older
             asked = np.asarray(asked, dtype=bool)
             fresh &= asked

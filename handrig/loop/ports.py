@@ -1,24 +1,28 @@
-"""What the loop needs from its dependencies (structural types: any object that fits)."""
+"""What the loop needs from its dependencies.
+
+The devices are the abstract classes that list everything the loop uses:
+:class:`~handrig.devices.glove.source.GloveSource`,
+:class:`~handrig.devices.servo.bus.ServoBus` and
+:class:`~handrig.outputs.base.Output` (a plain callable ``(t_s, pose)`` is an output
+too). The control path and the forearm orientation are callables.
+"""
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from handrig.devices.glove.source import GloveSample, GloveSource
+from handrig.devices.servo.bus import ServoBus, ServoState
+
 FloatArray = NDArray[np.float64]
+OutputLike = Callable[[float, FloatArray], None]
 
-
-class SampleLike(Protocol):
-    raw: FloatArray
-    quat: FloatArray | None
-    estop: bool
-    host_time_s: float
-
-
-class GloveLike(Protocol):
-    def latest(self) -> Any: ...
+__all__ = ["ControlsFromRaw", "FloatArray", "GloveSample", "GloveSource", "OrientationLike",
+           "OutputLike", "ServoBus", "ServoState"]
 
 
 class ControlsFromRaw(Protocol):
@@ -26,12 +30,4 @@ class ControlsFromRaw(Protocol):
 
 
 class OrientationLike(Protocol):
-    def __call__(self, sample: Any) -> tuple[float, float]: ...
-
-
-class BusLike(Protocol):
-    def write_goals_deg(self, goals_deg: FloatArray) -> int: ...
-
-    def read_state(self, deadline_s: float | None = None,
-                   part: tuple[int, int] | None = None) -> Any: ...
-
+    def __call__(self, sample: GloveSample) -> tuple[float, float]: ...

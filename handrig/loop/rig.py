@@ -42,16 +42,17 @@ from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 from handrig.clock import Clock
+from handrig.config.rig import BusConfig, LoopConfig, RigConfig, SilenceConfig
+from handrig.devices.servo.wire import goal_write_bytes, wire_time_s
 from handrig.errors import DeviceError
 from handrig.loop.cycle import Cycle
 from handrig.loop.modes import Mode, ModeMachine
 from handrig.loop.ports import (
-    BusLike,
     ControlsFromRaw,
     FloatArray,
-    GloveLike,
+    GloveSource,
     OrientationLike,
-    SampleLike,
+    ServoBus,
 )
 from handrig.loop.profile import StageProfile
 from handrig.loop.stats import RunStats
@@ -59,8 +60,13 @@ from handrig.loop.telemetry import SnapshotBuilder, Telemetry
 from handrig.loop.trigger import FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pose.pipeline import PosePipeline
 
-__all__ = ["BusLike", "ControlsFromRaw", "GloveLike", "Mode", "OrientationLike", "Rig",
-           "RunStats", "SampleLike"]
+__all__ = ["ControlsFromRaw", "GloveSource", "Mode", "OrientationLike", "Rig", "RunStats",
+           "ServoBus"]
+
+_LOOP = LoopConfig()  # the defaults live in the config dataclasses
+_BUS = BusConfig()
+WIRE_SHARE = 0.9  # goal writes may fill at most this share of the wire
+PUBLISH_ROOM_S = 0.001  # a telemetry snapshot (~0.2 ms) is built only with this much room
 
 
 class Rig:
@@ -70,32 +76,58 @@ class Rig:
     :class:`FixedRateTrigger` at ``rate_hz`` or a :class:`GloveTrigger` between
     ``floor_hz`` and ``ceiling_hz``; either stamps the glove's frames as they arrive).
     ``profile``: time the critical path's stages (:attr:`stage_profile`).
+    The defaults are the config's (:class:`~handrig.config.rig.LoopConfig`,
+    :class:`~handrig.config.rig.BusConfig`); :meth:`from_config` builds a rig from a
+    rig file's settings.
     """
+
+    @classmethod
+    def from_config(
+        cls, config: RigConfig, glove: GloveSource, bus: ServoBus, pipeline: PosePipeline,
+        clock: Clock, *, controls_from_raw: ControlsFromRaw, orientation: OrientationLike,
+        outputs: Sequence[Callable[[float, FloatArray], None]] = (),
+        log: Callable[[str], None] = print, profile: bool = False,
+    ) -> Rig:
+        """The loop with the rig file's rates and safety timings (``[loop]``, ``[bus]``).
+        In loop mode "glove" the ceiling is also held below the rate at which goal Sync
+        Writes fill the wire (``0.9 / wire time``), so writes never queue on the bus."""
+        loop = config.loop
+        write_s = wire_time_s(goal_write_bytes(len(config.servos)), config.bus.baud)
+        ceiling_hz = max(loop.floor_hz, min(loop.ceiling_hz, WIRE_SHARE / write_s))
+        return cls(
+            glove, bus, pipeline, clock, controls_from_raw=controls_from_raw,
+            orientation=orientation, rate_hz=loop.rate_hz, read_every=config.bus.read_every,
+            glove_timeout_s=loop.glove_timeout_s, relax_time_s=loop.relax_time_s,
+            resume_frames=loop.resume_frames, resume_time_s=loop.resume_time_s,
+            outputs=outputs, log=log, profile=profile, loop_mode=loop.mode,
+            floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz, catch_up=loop.catch_up,
+            read_parts=config.bus.read_parts, silence=config.silence)
 
     def __init__(
         self,
-        glove: GloveLike,
-        bus: BusLike,
+        glove: GloveSource,
+        bus: ServoBus,
         pipeline: PosePipeline,
         clock: Clock,
         *,
         controls_from_raw: ControlsFromRaw,
         orientation: OrientationLike,
-        rate_hz: float = 200.0,
-        read_every: int = 4,
-        glove_timeout_s: float = 0.25,
-        relax_time_s: float = 1.0,
-        resume_frames: int = 3,
-        resume_time_s: float = 0.3,
+        rate_hz: float = _LOOP.rate_hz,
+        read_every: int = _BUS.read_every,
+        glove_timeout_s: float = _LOOP.glove_timeout_s,
+        relax_time_s: float = _LOOP.relax_time_s,
+        resume_frames: int = _LOOP.resume_frames,
+        resume_time_s: float = _LOOP.resume_time_s,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         log: Callable[[str], None] = print,
         profile: bool = False,
         trigger: Trigger | None = None,
-        loop_mode: Literal["fixed", "glove"] = "fixed",
-        floor_hz: float = 100.0,
-        ceiling_hz: float = 1000.0,
-        catch_up: bool = False,
-        read_parts: int = 1,
+        loop_mode: Literal["fixed", "glove"] = _LOOP.mode,
+        floor_hz: float = _LOOP.floor_hz,
+        ceiling_hz: float = _LOOP.ceiling_hz,
+        catch_up: bool = _LOOP.catch_up,
+        read_parts: int = _BUS.read_parts,
+        silence: SilenceConfig | None = None,
     ) -> None:
         self.glove = glove
         self.bus = bus
@@ -128,7 +160,7 @@ class Rig:
             controls_from_raw=controls_from_raw, orientation=orientation,
             period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
             resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
-            read_parts=read_parts,
+            read_parts=read_parts, silence=silence,
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
@@ -237,7 +269,10 @@ class Rig:
                 if last_start is not None:
                     stats.period.add(tick.now_s - last_start)
                 last_start = tick.now_s
-                self.telemetry.offer(tick.now_s, self._snapshot)
+                # a snapshot only where it delays no frame: not while the newest frame
+                # waits (a catch-up tick), and with room before the next one is expected
+                if not tick.catch_up and clock.now() + PUBLISH_ROOM_S < tick.next_s:
+                    self.telemetry.offer(tick.now_s, self._snapshot)
                 if over:
                     machine.stop_reason = machine.stop_reason or "stop requested"
                     break
@@ -250,8 +285,12 @@ class Rig:
             self._prepared = False
             stats.duration_s = clock.now() - t0
             stats.cpu_s = time.thread_time() - cpu0
-            stats.ceiling_waits = int(getattr(self.trigger, "ceiling_waits", 0))
+            stats.ceiling_waits = self.trigger.ceiling_waits
             self._pipeline_figures()
+            watch = self.cycle.silence
+            stats.servo_silences, stats.servos_held = watch.silences, watch.held
+            stats.servo_recoveries = watch.recoveries
+            stats.servo_recovery_reads_max = watch.recovery_reads_max
             self._snapshot.finished = True
             self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats

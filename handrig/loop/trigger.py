@@ -15,12 +15,12 @@ tick asks for the oldest frame the glove keeps behind the newest (up to
 once, all within the ceiling's burst.
 
 Both triggers stamp frame arrivals when the glove offers a file descriptor
-(``fileno()``) and a non-blocking ``pump()`` (read what is there, stamp it
-with the clock): while they wait they block on the descriptor and pump as soon
-as bytes arrive, so a sample's ``host_time_s`` is the time its last byte became
-readable, not the time a cycle got round to it. A glove without a descriptor
-that says when its next sample is due (``next_due_s()``, a replay) is waited
-for by sleeping until then.
+(:meth:`~handrig.devices.glove.source.GloveSource.fileno`; ``pump()`` reads what
+is there and stamps it with the clock): while they wait they block on the
+descriptor and pump as soon as bytes arrive, so a sample's ``host_time_s`` is the
+time its last byte became readable, not the time a cycle got round to it. A glove
+without a descriptor that says when its next sample is due (``next_due_s()``, a
+replay) is waited for by sleeping until then.
 
 The trigger also says whether a present-state read fits the time left before
 the next tick (:meth:`Trigger.read_deadline`) and whether a read delayed a
@@ -33,9 +33,9 @@ import math
 import select
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any
 
-from handrig.clock import Clock
+from handrig.clock import Clock, MonotonicClock
+from handrig.devices.glove.source import GloveSource
 
 READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the next tick
 PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's period estimate
@@ -77,12 +77,9 @@ class Tick:
     behind_s: float = 0.0
 
 
-def _fd_of(glove: Any) -> int | None:
-    """The glove's descriptor when it offers one and a pump to read it, else None."""
-    fileno = getattr(glove, "fileno", None)
-    if fileno is None or getattr(glove, "pump", None) is None:
-        return None
-    fd = fileno()
+def _fd_of(glove: GloveSource) -> int | None:
+    """The glove's descriptor when it offers one (to wait on, then pump), else None."""
+    fd = glove.fileno()
     return fd if isinstance(fd, int) and fd >= 0 else None
 
 
@@ -99,6 +96,12 @@ class Trigger(ABC):
 
     period_s: float
     """The longest time between cycles (the fixed period, or the floor rate's)."""
+    ceiling_waits: int = 0
+    """Ticks held back to keep to a ceiling rate."""
+
+    def take_bursts(self) -> int:
+        """Glove frames superseded on arrival, sent back to back, since the last call."""
+        return 0
 
     @abstractmethod
     def start(self, t0_s: float) -> None:
@@ -145,7 +148,8 @@ class FixedRateTrigger(Trigger):
     waiting (see the module docstring); the cycle still runs on the fixed tick.
     """
 
-    def __init__(self, clock: Clock, rate_hz: float, *, glove: Any = None) -> None:
+    def __init__(self, clock: Clock, rate_hz: float, *,
+                 glove: GloveSource | None = None) -> None:
         if not rate_hz > 0.0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         self.clock = clock
@@ -164,7 +168,7 @@ class FixedRateTrigger(Trigger):
         """Sleep until ``t``, pumping the glove's arrivals meanwhile."""
         clock, glove = self.clock, self.glove
         if glove is not None:
-            spin = float(getattr(clock, "spin_s", 0.0))
+            spin = clock.spin_s if isinstance(clock, MonotonicClock) else 0.0
             while True:
                 fd = _fd_of(glove)
                 left = t - clock.now() - spin
@@ -220,7 +224,7 @@ class GloveTrigger(Trigger):
     :attr:`catch_ups`.
     """
 
-    def __init__(self, clock: Clock, glove: Any, *, floor_hz: float, ceiling_hz: float,
+    def __init__(self, clock: Clock, glove: GloveSource, *, floor_hz: float, ceiling_hz: float,
                  catch_up: bool = False) -> None:
         if not 0.0 < floor_hz <= ceiling_hz:
             raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
@@ -234,7 +238,6 @@ class GloveTrigger(Trigger):
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
         self.catch_up = bool(catch_up)
         self.catch_ups = 0  # ticks that took the frame behind the newest
-        self._has_behind = getattr(glove, "has_behind", None)
         self._credit = 1.0  # ticks the ceiling lets through now (a token bucket)
         self._credit_at = 0.0
         self._k = 0
@@ -243,10 +246,6 @@ class GloveTrigger(Trigger):
         self._anchor = math.nan  # the glove's time grid: an arrival on its early edge
         self._unsettled: Tick | None = None  # a tick whose bookkeeping waits for settle()
         self._unsettled_arrival: float | None = None
-        self._has_new = getattr(glove, "has_new", None)
-        self._peek = getattr(glove, "peek", None)
-        self._due_of = getattr(glove, "next_due_s", None)
-        self._pump_counts = bool(getattr(glove, "pump_counts", False))
         self._drained_s = math.nan  # when a pump last emptied the port
 
     def start(self, t0_s: float) -> None:
@@ -287,8 +286,7 @@ class GloveTrigger(Trigger):
         return self._anchor + self.frame_period_s
 
     def _new_frame(self) -> bool:
-        has_new = self._has_new
-        return bool(has_new()) if has_new is not None else False
+        return self.glove.has_new()
 
     def _wait_frame(self, until_s: float) -> float | None:
         """Wait for a new frame until ``until_s``; its arrival time, or None if none came."""
@@ -311,12 +309,10 @@ class GloveTrigger(Trigger):
                 if fd is None:
                     break
             return self._arrival(clock.now()) if self._new_frame() else None
-        due_of = getattr(glove, "next_due_s", None)
-        if due_of is not None:
-            due = float(due_of())
-            if due <= until_s:
-                clock.sleep_until(due)
-                return due
+        due = glove.next_due_s()
+        if due is not None and due <= until_s:
+            clock.sleep_until(due)
+            return due
         clock.sleep_until(until_s)
         return None
 
@@ -335,8 +331,8 @@ class GloveTrigger(Trigger):
         return predicted + math.ceil((now - predicted) / period) * period
 
     def _count(self) -> int:
-        peek = self._peek
-        return int(getattr(peek() if peek is not None else None, "count", 0) or 0)
+        newest = self.glove.peek()
+        return 0 if newest is None else newest.count
 
     def _pump(self, idle: bool) -> None:
         """Read the port (the glove stamps what it decodes now). ``idle``: the port was
@@ -346,7 +342,7 @@ class GloveTrigger(Trigger):
         the glove's period fits into the time since the port was last emptied can have
         come one by one; any more came in a burst."""
         glove = self.glove
-        if self._pump_counts:  # the glove says how many frames a pump gave
+        if glove.pump_counts:  # the glove says how many frames a pump gave
             drained = self._drained_s
             got = glove.pump()
             now = self.clock.now()
@@ -391,7 +387,7 @@ class GloveTrigger(Trigger):
             # lets this tick and the newest's through back to back
             # (not the first tick: the backlog read at the start is history, its newest wins)
             catch_up = (self.catch_up and credit >= CATCH_UP_CREDIT and self._k > 0
-                        and self._has_behind is not None and bool(self._has_behind()))
+                        and self.glove.has_behind())
             if catch_up:
                 self.catch_ups += 1
             if credit < 1.0:  # the ceiling: the cycle then takes the newest frame
@@ -437,12 +433,11 @@ class GloveTrigger(Trigger):
 
     def _arrival(self, now: float) -> float:
         """The newest pumped sample's stamp (a replay: its due time), at most ``now``."""
-        t: Any
-        if self._due_of is not None and _fd_of(self.glove) is None:
-            t = getattr(self.glove, "newest_due_s", lambda: now)()
-        else:
-            peek = self._peek
-            t = getattr(peek() if peek is not None else None, "host_time_s", None)
+        glove = self.glove
+        t = glove.newest_due_s() if _fd_of(glove) is None else None
+        if t is None:
+            newest = glove.peek()
+            t = None if newest is None else newest.host_time_s
         return float(t) if t is not None and t <= now else now
 
     def _period_from(self, arrival: float) -> None:
@@ -504,5 +499,5 @@ class GloveTrigger(Trigger):
         fd = _fd_of(glove)
         if fd is not None:
             return _readable(fd, 0.0)
-        due_of = getattr(glove, "next_due_s", None)
-        return due_of is not None and float(due_of()) <= self.clock.now()
+        due = glove.next_due_s()
+        return due is not None and due <= self.clock.now()

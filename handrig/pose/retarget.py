@@ -202,7 +202,8 @@ class JointCheck:
 
     Ranges are of the unclipped retarget output, degrees; ``None`` when that data was
     not given. ``demo_low_frac`` / ``demo_high_frac``: share of demo frames whose
-    output is clipped at the robot's low / high limit.
+    output is clipped at the robot's low / high limit; :attr:`demo_cover_frac`: share
+    of the robot's range the demo moves the joint through.
     """
 
     joint: str
@@ -212,6 +213,16 @@ class JointCheck:
     demo_deg: tuple[float, float] | None
     demo_low_frac: float
     demo_high_frac: float
+
+    @property
+    def demo_cover_frac(self) -> float | None:
+        """Share of the robot's range the demo's output covers (clipped to the range);
+        ``None`` without demo data."""
+        if self.demo_deg is None:
+            return None
+        low, high = self.range_deg
+        covered = min(high, self.demo_deg[1]) - max(low, self.demo_deg[0])
+        return max(0.0, covered) / (high - low) if high > low else 0.0
 
     @property
     def flags(self) -> tuple[str, ...]:

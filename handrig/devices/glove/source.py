@@ -106,11 +106,18 @@ class GloveStats:
 
 
 class GloveSource(ABC):
-    """A glove: raw samples in, without ever blocking the loop.
+    """A glove: raw samples in, without ever blocking the loop; everything the loop uses.
 
     Use as a context manager (``with SerialGlove(...) as glove:``), which calls
-    :meth:`start` and :meth:`close`.
+    :meth:`start` and :meth:`close`. Subclasses call :meth:`_arrived` with each new
+    sample and implement :meth:`stats`; the hooks (:meth:`fileno` and :meth:`pump`
+    for a port the loop waits on, :meth:`next_due_s` and :meth:`newest_due_s` for a
+    source that knows when its samples come) have defaults that say "nothing to
+    wait on": the loop then runs at its floor rate and takes what :meth:`latest` has.
     """
+
+    pump_counts: bool = False
+    """Whether :meth:`pump` returns how many good frames it decoded (else 0 always)."""
 
     def __init__(self) -> None:
         self._newest: GloveSample | None = None
@@ -152,6 +159,31 @@ class GloveSource(ABC):
         else:
             behind.append(old)
         self._newest = sample
+
+    def take(self) -> GloveSample | None:
+        """:meth:`latest` without reading the device first (a loop that has just pumped
+        it); by default the same as :meth:`latest`."""
+        return self.latest()
+
+    def fileno(self) -> int | None:
+        """A descriptor that turns readable when bytes arrive, for a loop that blocks on
+        it and then calls :meth:`pump`; None (the default): nothing to wait on."""
+        return None
+
+    def pump(self) -> int:
+        """Read and decode what has arrived, stamped with the clock now; never blocks.
+        Returns how many good frames that gave (see :attr:`pump_counts`)."""
+        return 0
+
+    def next_due_s(self) -> float | None:
+        """When the next sample not yet returned comes due, clock time (a replay);
+        None (the default): the source does not know."""
+        return None
+
+    def newest_due_s(self) -> float | None:
+        """When the newest sample due by now came due (a replay: its arrival time);
+        None (the default): use the sample's ``host_time_s``."""
+        return None
 
     def has_behind(self) -> bool:
         """Whether a sample before the newest came and was never taken (it was superseded

@@ -15,8 +15,6 @@ from typing import Literal
 
 import numpy as np
 
-from handrig.config.rig import SilenceConfig
-
 
 @dataclass
 class ServoState:
@@ -42,10 +40,20 @@ class ServoState:
     """(n,) bool: the servos this read asked for (a read of one part of the servos,
     ``read_state(part=...)``); the others keep their last reading, ``age_s`` says how
     old, and are not stale for it. None: every servo was asked."""
+    sent: bool = True
+    """Whether the read went on the wire. False: the bus declined it (its request and
+    replies could not both be on the wire by the deadline, or the caller came after
+    the deadline); every servo is then stale with its last reading."""
 
     @property
     def all_fresh(self) -> bool:
         return not bool(self.stale.any())
+
+    @property
+    def answered(self) -> np.ndarray:
+        """(n,) bool: the servos that gave a valid reading in this read."""
+        fresh = ~np.asarray(self.stale, dtype=bool)
+        return fresh if self.asked is None else fresh & self.asked
 
 
 @dataclass
@@ -67,10 +75,6 @@ class BusStats:
     watchdog_gaps: int = 0  # goal writes after a silence near the Bus Watchdog (re-armed)
     skipped_reads: int = 0  # reads not sent: the wire could not carry them by their deadline
     late_reads: int = 0  # reads not sent: the caller came after the read's deadline
-    silences: int = 0  # servos past the silence warning (rig.toml [silence] warn_s)
-    held: int = 0  # servos whose goal was held for silence
-    recoveries: int = 0  # silent servos that answered again
-    recovery_reads_max: int = 0  # the longest silence that ended, in reads
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -96,8 +100,7 @@ class BusStats:
             f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
             f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
             f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, skipped reads "
-            f"{self.skipped_reads}, late reads {self.late_reads}, silences {self.silences}, "
-            f"recoveries {self.recoveries}, stale readings "
+            f"{self.skipped_reads}, late reads {self.late_reads}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )
@@ -111,8 +114,6 @@ class FaultPolicy:
       deadline (``read_budget_s`` after the call, or the caller's) allows.
     - ``max_stale_reads``: this many reads in a row that the wire could not carry
       by their deadline (a configuration that does not fit) raise DeviceTimeoutError.
-    - ``silence``: the tiers for a servo with no valid reply (warn, hold, then the
-      action); None: the rig file's ``[silence]``.
     - ``on_hardware_error``: ``"reboot"`` the servo (at most ``max_reboots`` times
       per servo, then stop) or ``"stop"`` at once (ServoFault naming servo and bit).
     - ``fast_failures_before_fallback``: whole Fast Sync Reads failing in a row
@@ -126,7 +127,6 @@ class FaultPolicy:
     max_reboots: int = 3
     reboot_wait_s: float = 1.0
     fast_failures_before_fallback: int = 10
-    silence: SilenceConfig | None = None
 
     def __post_init__(self) -> None:
         if self.read_retries < 0 or self.max_stale_reads < 1 or self.max_reboots < 0:
@@ -136,19 +136,23 @@ class FaultPolicy:
 
 
 class ServoBus(ABC):
-    """A bus of position servos, one per joint, in rig order.
+    """A bus of position servos, one per joint, in rig order: everything the loop uses.
 
-    The realtime loop calls ``write_goals_deg`` every cycle and ``read_state``
-    every few; torque is on only inside ``with bus.torque():``.
+    The realtime loop calls ``write_goals_deg`` every cycle and ``read_state`` every
+    few; torque is on only inside ``with bus.torque():``. The abstract methods are
+    what every bus must do; the rest are hooks with defaults that a bus fills in when
+    it can say more (its wire timing, housekeeping reads between state reads, events
+    for the log). The loop decides what to do about silent servos
+    (:mod:`handrig.loop.silence`) from what :meth:`read_state` reports.
     """
 
     port: str = ""
     """Where the bus is (a serial path), for a person."""
-
-    @property
-    def ids(self) -> tuple[int, ...]:
-        """Each servo's bus id, in rig order (default: 1..n)."""
-        return tuple(range(1, self.n_servos + 1))
+    baud: int = 0
+    """The wire's baud rate (0: not a serial wire; the loop then assumes no wire time)."""
+    emulated: bool = False
+    """The servos are an emulator's (the factory knows: it started it); what the loop
+    says about servos that all go quiet at once then points at the emulator."""
 
     @property
     @abstractmethod
@@ -174,11 +178,61 @@ class ServoBus(ABC):
 
     @abstractmethod
     def write_goals_deg(self, goals_deg: np.ndarray) -> int:
-        """Send one goal per servo (degrees, rig order); return how many were clamped."""
+        """Send one goal per servo (degrees, rig order); return how many were clamped
+        into the servos' limits (a bus never sends a goal outside them)."""
 
     @abstractmethod
-    def read_state(self, deadline_s: float | None = None) -> ServoState:
-        """Read present state; servos without a valid reply are marked stale."""
+    def read_state(self, deadline_s: float | None = None,
+                   part: tuple[int, int] | None = None) -> ServoState:
+        """Read present state by ``deadline_s`` (clock time; None: the bus's own
+        budget). ``part=(i, m)``: ask only the servos at rig indices ``i, i + m, ...``
+        (``ServoState.asked``). Servos without a valid reply are marked stale with
+        their age; a read the bus declined says so (``ServoState.sent``)."""
+
+    # -- hooks: what a bus may say beyond the contract (defaults: nothing to say) ----------
+    @property
+    def ids(self) -> tuple[int, ...]:
+        """Each servo's bus id, in rig order (default: 1..n)."""
+        return tuple(range(1, self.n_servos + 1))
+
+    @property
+    def last_goals_deg(self) -> np.ndarray:
+        """The goals last sent, after clamping (NaN before the first write or if the bus
+        does not know): where the loop starts from."""
+        return np.full(self.n_servos, np.nan)
+
+    @property
+    def last_write_s(self) -> float:
+        """When the last write was handed to the OS, clock time (NaN: unknown); where the
+        loop's latency figure ends (default: when the loop's write call returned)."""
+        return float("nan")
+
+    def read_wire_s(self, n: int) -> float:
+        """Wire time of a present-state read of ``n`` servos, request and replies
+        (0: no wire to wait for)."""
+        return 0.0
+
+    def quiet_wait_s(self) -> float:
+        """How long a read asked now would wait, beyond the wire, for the line to go
+        quiet (after a failed reply); the loop counts it when fitting reads into gaps."""
+        return 0.0
+
+    def housekeeping(self, deadline_s: float) -> bool:
+        """Between state reads, where the wire has room by ``deadline_s``: the bus's own
+        upkeep (watchdogs, temperatures). True if it ran (default: nothing to do)."""
+        return False
+
+    def drain_events(self) -> list[str]:
+        """What the bus did since the last call, one line each for the run's log."""
+        return []
+
+    def describe(self, index: int) -> str:
+        """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""
+        return f"servo {self.ids[index]} ({self.joint_names[index]})"
+
+    def where(self) -> str:
+        """Where the bus is, for a message (``"on /dev/ttyUSB0"``)."""
+        return f"on {self.port}" if self.port else ""
 
     @property
     def n_servos(self) -> int:

@@ -75,6 +75,10 @@ class Readings:
         self.status_err[:] = 0
         self.hw_err[:] = 0
 
+    def note_hardware_error(self, index: int, bits: int) -> None:
+        """Servo ``index`` reported Hardware Error Status ``bits`` in this read."""
+        self.hw_err[index] = bits
+
     def mark(self, now: float, asked: np.ndarray | None = None) -> np.ndarray:
         """The read is over at ``now``: stale runs and times updated; returns ``stale``.
         ``asked``: the indices a read of a part asked for (the others are left as they
@@ -125,7 +129,9 @@ class Readings:
 
     def unread(self, now: float) -> ServoState:
         """The state of a read that was not sent: every servo stale, its last reading."""
-        return self.snapshot(now, np.ones(self.n, bool), np.zeros(self.n, np.uint8))
+        state = self.snapshot(now, np.ones(self.n, bool), np.zeros(self.n, np.uint8))
+        state.sent = False
+        return state
 
     def prepare_whole(self) -> tuple[np.ndarray, np.ndarray]:
         """Allocate the state a whole read returns (arrays and counters as they will be

@@ -20,13 +20,20 @@ def wire_time_s(n_bytes: int, baud: int) -> float:
     return n_bytes * BITS_PER_BYTE / baud
 
 
+def goal_write_bytes(n_servos: int) -> int:
+    """Bytes of a Sync Write of Goal Position to ``n_servos``: 14 + 5N (REFERENCE.md
+    section 3: header, id, length, instruction, address, data length, CRC; per servo
+    its id and 4 data bytes)."""
+    return 14 + 5 * n_servos
+
+
 def cycle_bytes(n_servos: int, data_len: int = 4) -> int:
     """Bytes per write + Fast Sync Read cycle (REFERENCE.md section 3).
 
     Sync Write of Goal Position 14 + 5N, Fast Sync Read instruction 14 + N, its
     reply 8 + (data_len + 4) N (8 + 8N for the 4-byte position).
     """
-    return (14 + 5 * n_servos) + (14 + n_servos) + fast_reply_len(data_len, n_servos)
+    return goal_write_bytes(n_servos) + read_bytes(n_servos, data_len, True)
 
 
 def read_bytes(n_servos: int, data_len: int, fast: bool) -> int:

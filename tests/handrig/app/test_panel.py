@@ -175,7 +175,6 @@ class WarmBus(ServoBus):
         self.clock = clock
         self._stats = BusStats(len(names), writes=0, timeouts=4)
         self.port = "/dev/ttyUSB9"
-        self.last_goals_deg = np.zeros(len(names))  # where torque-on holds the servos
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -184,6 +183,10 @@ class WarmBus(ServoBus):
     @property
     def ids(self) -> tuple[int, ...]:
         return tuple(range(1, len(self._names) + 1))
+
+    @property
+    def last_goals_deg(self) -> np.ndarray:
+        return np.zeros(len(self._names))  # where torque-on holds the servos
 
     @property
     def stats(self) -> BusStats:
@@ -222,7 +225,7 @@ def test_rig_snapshot_reads_a_running_rig() -> None:
     bus = WarmBus(tuple(parts.pipeline.servo_joints), clock)
     rig = Rig(SteadyGlove(clock), bus, parts.pipeline, clock, controls_from_raw=parts.controls,
               orientation=parts.orientation, rate_hz=200.0, read_every=4,
-              glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None)
+              glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None, loop_mode="fixed")
     snapshot = RigSnapshot(rig, glove_source="/dev/ttyACM0", temperature_limit_c={1: 45.0},
                            keys=True)
     rig.run(frames=100)

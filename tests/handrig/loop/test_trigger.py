@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from handrig.clock import FakeClock, MonotonicClock
-from handrig.devices.glove import GloveSample, ReplayGlove
+from handrig.devices.glove import GloveSample, GloveSource, GloveStats, ReplayGlove
 from handrig.devices.glove_recording import GloveRecording
 from handrig.loop.trigger import (
     FORCED_READ_FACTOR,
@@ -30,10 +30,18 @@ def recording(rate_hz: float, n: int) -> GloveRecording:
                           channel_names=tuple(f"c{k}" for k in range(5)), rate_hz=rate_hz)
 
 
-class PipeGlove:
+class QuietGlove(GloveSource):
+    """A glove that never sends (nothing to wait on)."""
+
+    def stats(self) -> GloveStats:
+        return GloveStats()
+
+
+class PipeGlove(GloveSource):
     """A glove on a pipe: ``pump()`` decodes each byte as one frame stamped now."""
 
     def __init__(self, clock: MonotonicClock) -> None:
+        super().__init__()
         self.clock = clock
         self.r, self.w = os.pipe()
         os.set_blocking(self.r, False)
@@ -45,17 +53,21 @@ class PipeGlove:
     def fileno(self) -> int:
         return self.r
 
-    def pump(self) -> None:
+    def pump(self) -> int:
         self.pumps += 1
         try:
             data = os.read(self.r, 4096)
         except BlockingIOError:
-            return
+            return 0
         now = self.clock.now()
         for _ in data:
             self.count += 1
             self.newest = GloveSample(np.zeros(5), None, 0, False, self.count, 0, now,
                                       self.count)
+        return 0
+
+    def stats(self) -> GloveStats:
+        return GloveStats(frames_ok=self.count)
 
     def has_new(self) -> bool:
         return self.newest is not None and self.count != self.taken
@@ -348,7 +360,7 @@ def test_the_fixed_trigger_reads_in_a_later_slot_or_forced_over_two_when_one_is_
 
 def test_the_prediction_keeps_to_the_gloves_grid_when_frames_come_late() -> None:
     clock = FakeClock(0.0)
-    trig = GloveTrigger(clock, object(), floor_hz=50.0, ceiling_hz=1000.0)
+    trig = GloveTrigger(clock, QuietGlove(), floor_hz=50.0, ceiling_hz=1000.0)
     trig.start(0.0)
     late = {3: 0.0012, 4: 0.0008, 7: 0.0015}  # frames delayed on the way, never early
     for k in range(10):
@@ -363,7 +375,7 @@ def test_the_prediction_keeps_to_the_gloves_grid_when_frames_come_late() -> None
 
 def test_an_overdue_frame_leaves_no_gap_to_read_in_and_a_lost_one_the_next_slot() -> None:
     clock = FakeClock(0.0)
-    trig = GloveTrigger(clock, object(), floor_hz=50.0, ceiling_hz=1000.0)
+    trig = GloveTrigger(clock, QuietGlove(), floor_hz=50.0, ceiling_hz=1000.0)
     trig.start(0.0)
     assert trig._next_frame_after(0.0) == math.inf  # no period yet
     for k in range(6):

@@ -1,0 +1,88 @@
+"""The library API: a robot-hand preset driven from Python with human curves, against
+the emulated bus (``port="sim"``: handrig sim-bus, the real driver, the MuJoCo robot)."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from handrig import hand
+from handrig.app.robot_api import RobotHand
+from handrig.config.loading import CONFIG_DIR
+from handrig.errors import ConfigError, HandrigError
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def test_the_example_in_the_readme_runs_against_the_simulated_bus() -> None:
+    env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    out = subprocess.run([sys.executable, str(ROOT / "examples" / "robot_hand.py"),
+                          "--seconds", "1.0"], capture_output=True, text=True, timeout=300,
+                         env=env, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert lines[0] == "leap: 16 joints, torque on: True"
+    goal, present = (float(x) for x in
+                     lines[1].split(" deg, present ")[0].split()[-1:]
+                     + lines[1].split(" deg, present ")[1].split()[:1])
+    # the hand closed toward the last goal (at LEAP's index MCP limit the fingertip
+    # meets the palm in the model's collision boxes, so it stops short of it)
+    assert goal > 90.0 and present > 0.7 * goal
+    assert lines[-1] == "torque off after the block (read back from the servos): True"
+    readme = (ROOT / "README.md").read_text()
+    assert "examples/robot_hand.py" in readme and "RobotHand(" in readme
+
+
+def test_goals_follow_the_curves_within_limits_and_slew() -> None:
+    with RobotHand("orca", port="sim") as robot:
+        assert robot.torque_on
+        names = robot.joint_names
+        i = names.index("right_i-mcp")
+        start = robot.command({})  # the flat hand
+        want = robot.targets_deg({"riIndexMCPy": 30.0})
+        assert want[i] > start[i] + 40.0  # the table's gain: the robot moves more
+        first = robot.command({"riIndexMCPy": 30.0})
+        step = robot.rig.loop.slew_deg_s * 0.5  # generous: one call's time
+        assert abs(first[i] - start[i]) <= step
+        for _ in range(300):  # the slew limit lets the goals reach it within a second
+            goals = robot.command({"riIndexMCPy": 30.0})
+            if np.allclose(goals, want):
+                break
+            time.sleep(0.005)
+        np.testing.assert_allclose(goals, want)
+        # past every limit: clipped to the table's range and the servo's limits
+        wild = robot.targets_deg({name: 500.0 for name in hand.CURVE_NAMES})
+        lows = np.array([s.min_deg for s in robot.rig.servos])
+        highs = np.array([s.max_deg for s in robot.rig.servos])
+        assert np.all(wild <= highs + 1e-9) and np.all(wild >= lows - 1e-9)
+        sent_before = goals.copy()
+        with pytest.raises(ConfigError, match="not a finite number: nothing was sent"):
+            robot.command({"riIndexMCPy": math.nan})
+        with pytest.raises(ConfigError, match="expected 50 human curves"):
+            robot.command([1.0, 2.0])
+        with pytest.raises(ConfigError, match="not a human curve"):
+            robot.command({"indexMCP": 10.0})
+        np.testing.assert_allclose(robot.command({"riIndexMCPy": 30.0}), sent_before)
+        robot.command(np.zeros(len(hand.CURVE_NAMES)))  # all 50, in CURVE_NAMES order
+        deadline = 200
+        while abs(robot.present_deg()["right_i-mcp"] - want[i]) > 3.0 and deadline:
+            robot.command({"riIndexMCPy": 30.0})
+            time.sleep(0.01)
+            deadline -= 1
+        assert deadline, "the index MCP never reached its goal"
+    assert robot.torque_off_confirmed is True
+    assert not robot.torque_on
+    with pytest.raises(HandrigError, match="not open"):
+        robot.command({})
+
+
+def test_a_human_rig_is_not_a_robot_hand() -> None:
+    with pytest.raises(ConfigError, match="not a robot rig"):
+        RobotHand(CONFIG_DIR / "rig.toml")
