@@ -143,7 +143,7 @@ def test_close_frees_the_port(human_rig) -> None:  # type: ignore[no-untyped-def
     build_server(f"127.0.0.1:{port}", human_rig).start().close()  # the port is free again
 
 
-@pytest.mark.parametrize("rig", [None, "leap"])
+@pytest.mark.parametrize("rig", [None, "leap", "orca"])
 def test_scene_from_the_rigs_model(rig: str | None) -> None:
     cfg = build_parts(rig).rig_config
     models = simulator.view_models(cfg)
@@ -151,6 +151,11 @@ def test_scene_from_the_rigs_model(rig: str | None) -> None:
     geometry = scene.geometry()
     assert len(geometry["bodies"]) == models["ri"].nbody
     assert len(geometry["geoms"]) >= 10
+    if models["ri"].nmesh:  # the ORCA hand is drawn from its meshes
+        assert geometry["meshes"] and all(
+            len(m["vertices"]) % 3 == 0 and len(m["faces"]) % 3 == 0
+            and max(m["faces"]) < len(m["vertices"]) // 3
+            for m in geometry["meshes"].values())
     joint = cfg.servos[1].joint
     rest, bent = scene.pose({}), scene.pose({joint: 40.0})
     nbody = models["ri"].nbody
