@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean render-deps
+.PHONY: demo test lint bench clean render-deps browser-deps
 
 # Re-install only when pyproject.toml is newer than the last install.
 $(STAMP): pyproject.toml
@@ -32,6 +32,11 @@ clean:
 # Offscreen rendering (handrig demo --render) needs EGL or OSMesa; Debian packages.
 render-deps:
 	apt-get install -y --no-install-recommends libegl1 libgl1-mesa-dri libosmesa6
+
+# The live view's browser tests (tests/handrig/app/view) and `python -m bench view` drive
+# Debian's headless chromium through chromium-driver. Needs root (CI runs as root).
+browser-deps:
+	DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends chromium chromium-driver
 
 # ---- glove firmware (firmware/glove/, firmware/README.md) --------------------------
 # Debian packages: the AVR toolchain, the Arduino AVR core, and simavr for the

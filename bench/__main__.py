@@ -22,7 +22,8 @@ from types import ModuleType
 
 import bench
 
-LONG = frozenset({"bench_soak", "bench_arrival", "bench_skips"})
+# only when named: long, or (bench_view) driving headless chromium pages
+LONG = frozenset({"bench_soak", "bench_arrival", "bench_skips", "bench_view"})
 HELP = ("-h", "--help")
 
 

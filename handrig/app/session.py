@@ -64,6 +64,7 @@ class LiveOptions:
     verbose: bool = False  # log every commissioning step
     profile: bool = False  # time the critical path's stages (bench_rig)
     log: Callable[[str], None] = field(default=lambda text: print(text, file=sys.stderr))
+    on_rig: Callable[[Any], None] | None = None  # given the rig once built (the --view)
 
 
 @dataclass
@@ -241,6 +242,8 @@ class _Session:
                             profile=opts.profile)
         self.outputs = list(outputs)
         self.stats = rig.stats
+        if opts.on_rig is not None:
+            opts.on_rig(rig)
         if opts.snapshot_every > 0:
             rig.outputs = (*rig.outputs, self._snapshots(rig, opts.snapshot_every))
         rig.prepare()  # the garbage collected before torque (and its watchdog) goes on

@@ -129,3 +129,20 @@ def calibration_motion() -> ModuleType:
     import sim.calibration_motion
 
     return sim.calibration_motion
+
+
+def view_models(rig: RigConfig) -> dict[str, Any]:
+    """The rig's MuJoCo models as the puppet builds them, by hand (``"ri"``, ``"le"``;
+    a robot rig: its MJCF model as ``"ri"``), for drawing (``handrig.app.view``)."""
+    from sim.puppet import Puppet
+
+    return {hand: sim.model for hand, sim in Puppet(rig).hands.items()}
+
+
+def human_hand_models() -> dict[str, Any]:
+    """Both hands of the 23-DOF human-hand model (``sim.hand_model``), by hand."""
+    import mujoco
+
+    from sim.hand_model import hand_model_xml
+
+    return {h: mujoco.MjModel.from_xml_string(hand_model_xml(h)) for h in ("ri", "le")}

@@ -25,6 +25,7 @@ from handrig.app import simulator
 from handrig.app.factory import build_parts, port_process, robot_model
 from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
 from handrig.app.sources import Source, format_sources, run_sources
+from handrig.app.view import add_view_flag, view_session
 from handrig.cli._display import check_gl_backend, check_renderer
 from handrig.cli._numbers import positive_float, positive_int
 from handrig.cli._rig import add_rig_argument
@@ -50,6 +51,7 @@ def register(sub: Any) -> None:
                    help="rate the emulated glove sends at (default 200)")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="switch on emulated bus faults (see handrig sim-bus --help)")
+    add_view_flag(p)
     p.set_defaults(func=run)
 
 
@@ -68,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
         "recording", Path(recording), "--recording" if args.recording else
         "shipped demo: raw glove counts, calibrated with the glove file above")]))
     log(f"demo: {recording} -> glove emulator -> pipeline -> Dynamixel driver -> MuJoCo puppet")
-    with ExitSignals() as signals:  # a Ctrl-C while the glove emulator starts unwinds
+    with (ExitSignals() as signals,  # a Ctrl-C while the glove emulator starts unwinds
+          view_session(args.view, parts.rig_config,
+                       lambda text: print(text, file=sys.stderr, flush=True)) as on_rig):
         try:
             with port_process(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
                               "the glove emulator (handrig sim-glove)") as (_, glove_port):
@@ -76,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
                 opts = LiveOptions(glove=glove_port, recorded=recording, bus="sim",
                                    frames=args.frames,
                                    sim_faults=args.faults, log=log, panel=not args.json,
+                                   on_rig=on_rig,
                                    snapshot_every=max(1, args.frames // 6) if args.render else 0)
                 signals.disarm()  # the session handles its own; after it: shut down, print
                 result = run_live(parts, opts)

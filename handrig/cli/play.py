@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from typing import Any
 
+from handrig.app.view import add_view_flag, view_playback
 from handrig.cli._numbers import positive_float
 from handrig.clock import MonotonicClock
 from handrig.errors import ConfigError
@@ -30,6 +32,7 @@ def register(sub: Any) -> None:
                    help="time scale, 2 = twice as fast")
     p.add_argument("--loop", action="store_true", help="start over at the end (until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    add_view_flag(p)
     p.set_defaults(func=run)
 
 
@@ -45,13 +48,16 @@ def run(args: argparse.Namespace) -> int:
               "no rig, glove, map or sag grid is read)", flush=True)
     period_s = 1.0 / args.rate
     interrupted = False
-    with VmcSender(host, port, rate_hz=args.rate, clock=clock) as sender:
+    with (VmcSender(host, port, rate_hz=args.rate, clock=clock) as sender,
+          view_playback(args.view, str(args.file),
+                        lambda text: print(text, file=sys.stderr, flush=True)) as view):
         playback.start()
         next_s = clock.now()
         try:
-            while (frame := playback.sample()) is not None:
+            while (frame := playback.sample()) is not None and not view.stop_requested:
                 pose, wrist = frame
                 sender.send(pose, wrist, playback.elapsed_s())
+                view.show(pose, wrist, playback.elapsed_s())
                 next_s += period_s
                 clock.sleep_until(next_s)
         except KeyboardInterrupt:  # the way to stop --loop; still print what was sent

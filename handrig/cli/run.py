@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from handrig.app.factory import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import run_sources
+from handrig.app.view import add_view_flag, view_session
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._rig import add_rig_argument, print_sources
@@ -49,6 +51,7 @@ def register(sub: Any) -> None:
     p.add_argument("--no-wire-timing", action="store_true",
                    help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    add_view_flag(p)
     p.set_defaults(func=run)
 
 
@@ -65,13 +68,18 @@ def run(args: argparse.Namespace) -> int:
         return print_result(failed(exc), as_json=True)
     if not args.json:
         print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
-    opts = LiveOptions(
-        glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
-        wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
-        record=args.record, record_rate_hz=args.record_rate, panel=not args.json,
-        verbose=not args.json,
-    )
-    result = run_live(parts, opts)
+    with view_session(args.view, parts.rig_config, _stderr) as on_rig:
+        opts = LiveOptions(
+            glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
+            wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
+            record=args.record, record_rate_hz=args.record_rate, panel=not args.json,
+            verbose=not args.json, on_rig=on_rig,
+        )
+        result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
         raise result.error
     return print_result(result, as_json=args.json)
+
+
+def _stderr(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)

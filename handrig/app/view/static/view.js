@@ -1,0 +1,273 @@
+// The handrig live view: draws the rig's MuJoCo model and a human-hand skeleton from
+// the frames the server sends (bodies already posed by MuJoCo in Python), and sends
+// the buttons' actions back. Only the newest frame is drawn.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+
+const token = new URLSearchParams(location.search).get('token');
+const $ = (id) => document.getElementById(id);
+const HAND_OFFSET_M = { ri: -0.11, le: 0.11 };  // two hands side by side
+const SKELETON_COLOUR = 0x3cc8ff;
+
+function makeView(el) {
+  const renderer = new THREE.WebGLRenderer({ antialias: true });
+  renderer.setPixelRatio(window.devicePixelRatio);
+  el.appendChild(renderer.domElement);
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0x0f1115);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x303040, 1.6));
+  const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+  sun.position.set(0.3, -0.4, 1.0);
+  scene.add(sun);
+  const camera = new THREE.PerspectiveCamera(40, 1, 0.005, 20);
+  camera.up.set(0, 0, 1);
+  camera.position.set(0.05, -0.45, 0.35);
+  const controls = new OrbitControls(camera, renderer.domElement);
+  controls.target.set(0.05, 0, 0);
+  const view = { el, renderer, scene, camera, controls, dirty: true, fitted: false };
+  controls.addEventListener('change', () => { view.dirty = true; });
+  const resize = () => {
+    const w = el.clientWidth, h = el.clientHeight;
+    renderer.setSize(w, h);
+    camera.aspect = w / h;
+    camera.updateProjectionMatrix();
+    view.dirty = true;
+  };
+  new ResizeObserver(resize).observe(el);
+  resize();
+  return view;
+}
+
+// Aim the camera at the objects (the hand, not the forearm): all of them in view,
+// seen from the direction ``from`` (above and in front).
+function fit(view, objects, from, margin) {
+  const box = new THREE.Box3();
+  for (const o of objects) {
+    if (!o.visible) continue;
+    o.updateMatrixWorld(true);
+    box.expandByObject(o);
+  }
+  if (box.isEmpty()) return;
+  const sphere = box.getBoundingSphere(new THREE.Sphere());
+  const halfFov = THREE.MathUtils.degToRad(view.camera.fov / 2) * Math.min(1, view.camera.aspect);
+  const distance = margin * sphere.radius / Math.sin(halfFov);
+  view.controls.target.copy(sphere.center);
+  view.camera.position.copy(sphere.center).add(from.clone().normalize().multiplyScalar(distance));
+  view.controls.update();
+  view.fitted = true;
+}
+
+function geometryOf(g, meshes) {
+  const s = g.size;
+  let geo;
+  switch (g.kind) {
+    case 'sphere': geo = new THREE.SphereGeometry(s[0], 20, 14); break;
+    case 'ellipsoid': geo = new THREE.SphereGeometry(1, 20, 14); geo.scale(s[0], s[1], s[2]); break;
+    case 'capsule': geo = new THREE.CapsuleGeometry(s[0], 2 * s[1], 6, 16); geo.rotateX(Math.PI / 2); break;
+    case 'cylinder': geo = new THREE.CylinderGeometry(s[0], s[0], 2 * s[1], 20); geo.rotateX(Math.PI / 2); break;
+    case 'box': geo = new THREE.BoxGeometry(2 * s[0], 2 * s[1], 2 * s[2]); break;
+    case 'mesh': {
+      const m = meshes[g.mesh];
+      geo = new THREE.BufferGeometry();
+      geo.setAttribute('position', new THREE.Float32BufferAttribute(m.vertices, 3));
+      geo.setIndex(m.faces);
+      geo.computeVertexNormals();
+      break;
+    }
+    default: return null;
+  }
+  return geo;
+}
+
+// One MuJoCo model: a group per body, its geoms inside at their place in the body.
+function buildModel(model, ghost) {
+  const root = new THREE.Group();
+  const bodies = model.bodies.map(() => { const b = new THREE.Group(); root.add(b); return b; });
+  for (const g of model.geoms) {
+    const geo = geometryOf(g, model.meshes);
+    if (!geo) continue;
+    const colour = new THREE.Color().setRGB(g.rgba[0], g.rgba[1], g.rgba[2], THREE.SRGBColorSpace);
+    const material = ghost
+      ? new THREE.MeshBasicMaterial({ color: 0x9fd0ff, transparent: true, opacity: 0.18, depthWrite: false })
+      : new THREE.MeshLambertMaterial({ color: colour, transparent: g.rgba[3] < 1, opacity: g.rgba[3] });
+    const mesh = new THREE.Mesh(geo, material);
+    mesh.position.set(g.pos[0], g.pos[1], g.pos[2]);
+    mesh.quaternion.set(g.quat[1], g.quat[2], g.quat[3], g.quat[0]);
+    bodies[g.body].add(mesh);
+  }
+  return { root, bodies };
+}
+
+function place(built, posed) {
+  const p = posed.pos, q = posed.quat;
+  built.bodies.forEach((b, i) => {
+    b.position.set(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+    b.quaternion.set(q[4 * i + 1], q[4 * i + 2], q[4 * i + 3], q[4 * i]);
+  });
+}
+
+const puppet = makeView($('puppet'));
+const skeleton = makeView($('skeleton'));
+let models = {}, ghosts = {}, bones = {};
+let latest = null, socket = null, received = 0, drawn = 0, drawnTotal = 0;
+const actions = new Set();
+
+function onScene(msg) {
+  for (const view of [puppet, skeleton]) {
+    for (const child of [...view.scene.children]) if (child.userData.model) view.scene.remove(child);
+    view.fitted = false;
+  }
+  models = {}; ghosts = {}; bones = {};
+  const hands = Object.keys(msg.models);
+  for (const hand of hands) {
+    const shift = hands.length > 1 ? HAND_OFFSET_M[hand] || 0 : 0;
+    for (const [store, ghost] of [[models, false], [ghosts, true]]) {
+      const built = buildModel(msg.models[hand], ghost);
+      built.root.position.y = shift;
+      built.root.userData.model = true;
+      built.root.visible = !ghost;
+      puppet.scene.add(built.root);
+      store[hand] = built;
+    }
+  }
+  for (const hand of msg.skeleton_hands) {
+    const geo = new THREE.BufferGeometry();
+    geo.setAttribute('position', new THREE.Float32BufferAttribute(new Float32Array(6 * 64), 3));
+    const group = new THREE.Group();
+    group.add(new THREE.LineSegments(geo, new THREE.LineBasicMaterial({ color: SKELETON_COLOUR })));
+    group.add(new THREE.Points(geo, new THREE.PointsMaterial({ color: 0xffffff, size: 5, sizeAttenuation: false })));
+    group.position.y = HAND_OFFSET_M[hand] || 0;
+    group.userData.model = true;
+    group.visible = false;
+    skeleton.scene.add(group);
+    bones[hand] = { group, geo };
+  }
+  // the camera is aimed at the hand at rest (not the forearm), with room for it to move
+  for (const [hand, posed] of Object.entries(msg.rest)) place(models[hand], posed);
+  const handBodies = Object.values(models).flatMap((m) => (m.bodies.length > 2 ? m.bodies.slice(2) : m.bodies));
+  fit(puppet, handBodies, new THREE.Vector3(0.15, -0.75, 0.85), 1.6);
+  $('title').textContent = msg.title;
+  actions.clear();
+  for (const a of msg.actions) actions.add(a);
+  for (const id of ['relax', 'stop', 'estop']) $(id).disabled = !actions.has(id);
+}
+
+function fmt(x, unit = '', nd = 1) { return x === null || x === undefined ? '–' : `${x.toFixed(nd)}${unit}`; }
+
+function rows(tbody, n) {
+  while (tbody.rows.length > n) tbody.deleteRow(-1);
+  while (tbody.rows.length < n) tbody.insertRow();
+  return tbody.rows;
+}
+
+function cells(row, values) {
+  while (row.cells.length < values.length) row.insertCell();
+  values.forEach((v, i) => { if (row.cells[i].textContent !== v) row.cells[i].textContent = v; });
+}
+
+function drawMode(f) {
+  if ($('mode').textContent !== f.mode) $('mode').textContent = f.mode;
+  const reason = f.mode_reason ? `(${f.mode_reason})` : '';
+  if ($('reason').textContent !== reason) $('reason').textContent = reason;
+}
+
+// The figures change every frame but nobody reads them 20 times a second; redrawing
+// the tables (layout and paint) costs the browser more than the 3D view.
+const TABLES_EVERY_MS = 250;
+let tablesAt = 0;
+
+function drawTables(f) {
+  $('source').textContent = { positions: 'the servos\' present positions', goals: 'the goals (no readings)', pose: 'the pipeline\'s pose (no readings)' }[f.source];
+  $('rate').textContent = fmt(f.rate_hz, ' Hz');
+  $('latency').textContent = `${fmt(f.latency_p50_us, ' µs', 0)} / ${fmt(f.latency_p99_us, ' µs', 0)}`;
+  $('lost').textContent = String(f.frames_lost);
+  $('cycles').textContent = `${f.cycles} / ${f.overruns}`;
+  const g = f.glove;
+  $('glovelink').textContent = g.connected ? '' : '(not connected)';
+  $('glovelink').className = g.connected ? '' : 'bad';
+  $('incl').textContent = fmt(g.inclination_deg, '°');
+  $('rot').textContent = fmt(g.rotation_deg, '°');
+  const grows = rows($('glove').tBodies[0], g.names.length);
+  g.names.forEach((n, i) => cells(grows[i], [n, fmt(g.controls[i], '', 3), fmt(g.raw[i], '', 0)]));
+  const s = f.servos;
+  const srows = rows($('servos').tBodies[0], s.ids.length);
+  s.ids.forEach((id, i) => {
+    const err = s.errors[i];
+    cells(srows[i], [String(id), s.joints[i], fmt(s.goal_deg[i]), fmt(s.position_deg[i]),
+      fmt(s.temperature_c[i], '', 0), err ? `0x${err.toString(16).padStart(2, '0')}` : '–']);
+    srows[i].className = s.stale[i] ? 'stale' : '';
+    srows[i].cells[5].className = err ? 'err' : '';
+  });
+  const outs = $('outputs');
+  const text = f.outputs.map((o) => (typeof o === 'object' && o !== null
+    ? Object.entries(o).map(([k, v]) => `${k}: ${JSON.stringify(v)}`).join(', ') : String(o)));
+  if (outs.dataset.text !== JSON.stringify(text)) {
+    outs.dataset.text = JSON.stringify(text);
+    outs.replaceChildren(...(text.length ? text : ['none']).map((t) => { const li = document.createElement('li'); li.textContent = t; return li; }));
+  }
+}
+
+function drawFrame(f) {
+  for (const [hand, posed] of Object.entries(f.bodies)) if (models[hand]) place(models[hand], posed);
+  for (const [hand, built] of Object.entries(ghosts)) {
+    built.root.visible = Boolean(f.ghost && f.ghost[hand]);
+    if (built.root.visible) place(built, f.ghost[hand]);
+  }
+  for (const [hand, b] of Object.entries(bones)) {
+    const segs = f.skeleton[hand];
+    b.group.visible = Boolean(segs && segs.length);
+    if (!b.group.visible) continue;
+    const attr = b.geo.getAttribute('position');
+    attr.array.fill(0);
+    attr.array.set(segs.slice(0, attr.array.length));
+    attr.needsUpdate = true;
+    b.geo.setDrawRange(0, segs.length / 3);
+    b.geo.computeBoundingSphere();
+    b.geo.computeBoundingBox();
+  }
+  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
+  puppet.dirty = skeleton.dirty = true;
+  drawMode(f);
+  const now = performance.now();
+  if (now - tablesAt >= TABLES_EVERY_MS) { tablesAt = now; drawTables(f); }
+}
+
+function animate() {
+  if (latest) { drawFrame(latest); latest = null; drawn += 1; drawnTotal += 1; }
+  for (const view of [puppet, skeleton]) {
+    if (view.dirty) { view.renderer.render(view.scene, view.camera); view.dirty = false; }
+  }
+  requestAnimationFrame(animate);
+}
+
+function connect() {
+  const scheme = location.protocol === 'https:' ? 'wss' : 'ws';
+  socket = new WebSocket(`${scheme}://${location.host}/ws${token ? `?token=${encodeURIComponent(token)}` : ''}`);
+  socket.onopen = () => { $('link').textContent = 'live'; $('link').className = 'ok'; };
+  socket.onmessage = (ev) => {
+    const msg = JSON.parse(ev.data);
+    if (msg.type === 'scene') onScene(msg);
+    else if (msg.type === 'frame') { latest = msg; received += 1; }
+  };
+  socket.onclose = () => {
+    $('link').textContent = 'not connected (the run may have ended)';
+    $('link').className = 'bad';
+    setTimeout(connect, 1000);
+  };
+}
+
+function send(action) {
+  if (socket && socket.readyState === WebSocket.OPEN && actions.has(action)) {
+    socket.send(JSON.stringify({ action }));
+  }
+}
+
+// the e-stop acts when the button goes down, not when it is released
+$('estop').addEventListener('pointerdown', () => send('estop'));
+$('estop').addEventListener('keydown', (ev) => { if (ev.key === 'Enter' || ev.key === ' ') send('estop'); });
+$('relax').addEventListener('click', () => send('relax'));
+$('stop').addEventListener('click', () => send('stop'));
+setInterval(() => { $('viewfps').textContent = `${received} frames/s received, ${drawn} drawn`; received = 0; drawn = 0; }, 1000);
+window.handrigView = { framesDrawn: () => drawnTotal };
+connect();
+requestAnimationFrame(animate);

@@ -1,0 +1,240 @@
+"""The live view in a real headless browser (Debian's chromium through chromium-driver,
+driven by selenium): a ``handrig demo --view`` run's page draws the hand and moves it,
+its relax button relaxes the rig, its e-stop button ends the run with torque off.
+
+Skips only when chromium or its driver is not installed (``make browser-deps``; CI
+installs them). ``HANDRIG_VIEW_SCREENSHOT=FILE.png`` also writes the page's picture
+for the docs (docs/view.png is made this way).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import queue
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+CHROMIUM = shutil.which("chromium")
+DRIVER = shutil.which("chromedriver")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
+                       reason="Debian's chromium and chromium-driver are not installed: "
+                       "run `make browser-deps` as root (CI does)"),
+]
+FRAMES = 20000  # 100 s at 200 Hz: the test ends the run itself
+SKELETON_RGB = (60, 200, 255)
+
+
+def chromium(tmp: Path) -> Any:
+    """Headless Debian chromium with WebGL on SwiftShader (no GPU, no display)."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = str(CHROMIUM)
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+                "--window-size=1200,900", f"--user-data-dir={tmp}"):
+        opts.add_argument(arg)
+    return webdriver.Chrome(options=opts, service=Service(executable_path=str(DRIVER)))
+
+
+ROOT = Path(__file__).resolve().parents[4]
+
+
+class ViewRun:
+    """``handrig COMMAND ... --view 127.0.0.1:0 --json`` in a subprocess; its view URL
+    from the line it prints at the start."""
+
+    def __init__(self, *argv: str) -> None:
+        env = {**os.environ, "MUJOCO_GL": "egl"}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "handrig.cli", *argv, "--view", "127.0.0.1:0", "--json"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.stderr: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+        self.url = self._wait_url()
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.stderr.append(line)
+            self.lines.put(line)
+
+    def _wait_url(self) -> str:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            try:
+                line = self.lines.get(timeout=1)
+            except queue.Empty:
+                if self.proc.poll() is not None:
+                    break
+                continue
+            found = re.search(r"view: (http://\S+)", line)
+            if found:
+                return found.group(1)
+        raise AssertionError("no view URL printed:\n" + "".join(self.stderr))
+
+    def summary(self, timeout_s: float = 60) -> dict[str, Any]:
+        out, _ = self.proc.communicate(timeout=timeout_s)
+        return json.loads(out.strip().splitlines()[-1])
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def wait_for(check: Any, timeout_s: float, what: str) -> Any:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = check()
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def pixels(png: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
+
+
+def save_small(png: bytes, path: str, width: int = 900) -> None:
+    """The page's picture for the docs: ``width`` pixels wide, 128 colours."""
+    from PIL import Image
+
+    image = Image.open(io.BytesIO(png)).convert("RGB")
+    image = image.resize((width, round(image.height * width / image.width)), Image.LANCZOS)
+    image.quantize(128).save(path, optimize=True)
+
+
+def skin(rgb: np.ndarray) -> np.ndarray:
+    """The puppet's skin colour (rgba 0.85 0.68 0.58, lit): warm, red over green over blue."""
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (r > 110) & (r > g + 12) & (g > b + 4) & (r - b > 30)
+
+
+@pytest.fixture
+def demo() -> Iterator[ViewRun]:
+    run = ViewRun("demo", "--frames", str(FRAMES))
+    try:
+        yield run
+    finally:
+        run.kill()
+
+
+def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: ViewRun, tmp_path: Path
+                                                          ) -> None:
+    from selenium.webdriver.common.by import By
+
+    browser = chromium(tmp_path / "profile")
+    try:
+        browser.get(demo.url)
+        wait_for(lambda: browser.execute_script("return window.handrigView.framesDrawn()") > 5,
+                 90, "the page to draw frames")
+        puppet = browser.find_element(By.ID, "puppet")
+        skeleton_view = browser.find_element(By.ID, "skeleton")
+        first = pixels(puppet.screenshot_as_png)
+        time.sleep(1.5)
+        second = pixels(puppet.screenshot_as_png)
+        bones = pixels(skeleton_view.screenshot_as_png)
+        if os.environ.get("HANDRIG_VIEW_SCREENSHOT"):
+            save_small(browser.get_screenshot_as_png(), os.environ["HANDRIG_VIEW_SCREENSHOT"])
+
+        # the hand is drawn in the model's view, in its colour, away from the edges
+        h, w = first.shape[:2]
+        for shot in (first, second):
+            mask = skin(shot)
+            assert mask.mean() > 0.01, f"only {mask.mean():.2%} of the view is the hand's colour"
+            ys, xs = np.nonzero(mask)
+            assert 0.1 * w < xs.mean() < 0.9 * w and 0.1 * h < ys.mean() < 0.9 * h
+        # ... and it moved between the two moments
+        changed = skin(first) != skin(second)
+        assert changed.mean() > 0.002, f"the hand moved over only {changed.mean():.3%}"
+        # the skeleton's view draws bones in their colour, not the puppet's skin
+        near = np.abs(bones - np.array(SKELETON_RGB)).max(axis=-1) < 60
+        assert near.sum() > 50 and skin(bones).mean() < 0.001
+        # the tables are filled from the telemetry
+        assert browser.find_element(By.ID, "servos").find_elements(By.CSS_SELECTOR, "tbody tr")
+        assert browser.find_element(By.ID, "glove").find_elements(By.CSS_SELECTOR, "tbody tr")
+
+        mode = browser.find_element(By.ID, "mode")
+        before = mode.text
+        browser.find_element(By.ID, "relax").click()
+        wait_for(lambda: mode.text == "relaxing", 10, f"the mode to change from {before!r}")
+        time.sleep(0.5)
+        browser.find_element(By.ID, "estop").click()  # acts on pointerdown
+        summary = demo.summary(timeout_s=60)
+    finally:
+        browser.quit()
+    events = "\n".join(summary["events"])
+    assert "relaxed until it is pressed again" in events  # the relax button's mode change
+    assert summary["estop"] is True and summary["torque_off"] is True
+    assert summary["stop_reason"] == "e-stop button (view)"
+    assert "e-stop button (view): torque off now" in events
+    assert summary["frames"] < FRAMES
+
+
+def test_two_browsers_and_one_that_leaves(demo: ViewRun, tmp_path: Path) -> None:
+    browsers = [chromium(tmp_path / f"profile{i}") for i in range(2)]
+    try:
+        for b in browsers:
+            b.get(demo.url)
+        for b in browsers:
+            wait_for(lambda b=b: b.execute_script("return window.handrigView.framesDrawn()") > 3,
+                     90, "both pages to draw")
+        browsers.pop().quit()  # one leaves without a word
+        stay = browsers[0]
+        drawn = stay.execute_script("return window.handrigView.framesDrawn()")
+        wait_for(lambda: stay.execute_script("return window.handrigView.framesDrawn()")
+                 > drawn + 10, 30, "the other page to go on")
+        from selenium.webdriver.common.by import By
+
+        stay.find_element(By.ID, "stop").click()
+        summary = demo.summary(timeout_s=60)
+    finally:
+        for b in browsers:
+            b.quit()
+    assert summary["estop"] is False and summary["torque_off"] is True
+    assert summary["frames"] < FRAMES
+
+
+def test_play_shows_the_recording_and_its_stop_button_ends_it(tmp_path: Path) -> None:
+    from selenium.webdriver.common.by import By
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:  # the VMC receiver
+        sink.bind(("127.0.0.1", 0))
+        run = ViewRun("play", str(ROOT / "data" / "mocap" / "pn_gestures_reference.bvh"),
+                      "--loop", "--vmc", f"127.0.0.1:{sink.getsockname()[1]}")
+        browser = chromium(tmp_path / "profile")
+        try:
+            browser.get(run.url)
+            wait_for(lambda: browser.execute_script("return window.handrigView.framesDrawn()")
+                     > 5, 90, "the page to draw frames")
+            assert "playing" in browser.find_element(By.ID, "mode").text
+            assert not browser.find_element(By.ID, "estop").is_enabled()  # no rig, no e-stop
+            shot = pixels(browser.find_element(By.ID, "puppet").screenshot_as_png)
+            assert skin(shot).mean() > 0.01  # both hands of the human-hand model
+            browser.find_element(By.ID, "stop").click()
+            summary = run.summary(timeout_s=30)
+        finally:
+            browser.quit()
+            run.kill()
+    assert summary["bundles_sent"] > 0 and summary["interrupted"] is False

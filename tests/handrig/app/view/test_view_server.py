@@ -1,0 +1,273 @@
+"""The view's server without a browser: addresses, the token, a port in use, bad
+input on the socket, closing; the scene export from the real MuJoCo models."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pytest
+from websockets.sync.client import connect
+
+from handrig.app import simulator
+from handrig.app.factory import build_parts
+from handrig.app.view import ModelScene, build_server, is_loopback, parse_view_address
+from handrig.errors import ConfigError
+
+
+class Controls:
+    """Records what the buttons asked for (the rig's three key actions)."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+
+    def toggle_relax(self) -> None:
+        self.calls.append("relax")
+
+    def request_stop(self, reason: str = "") -> None:
+        self.calls.append("stop")
+
+    def estop(self, reason: str = "") -> None:
+        self.calls.append("estop")
+
+
+@pytest.fixture(scope="module")
+def human_rig():  # type: ignore[no-untyped-def]
+    return build_parts(None).rig_config
+
+
+def test_address_parsing() -> None:
+    assert parse_view_address("8765") == ("127.0.0.1", 8765)
+    assert parse_view_address("0.0.0.0:9000") == ("0.0.0.0", 9000)
+    assert parse_view_address("[::1]:9000") == ("::1", 9000)
+    assert parse_view_address(":0") == ("127.0.0.1", 0)
+    for bad in ("x", "1:2:x", "70000", "-1"):
+        with pytest.raises(ConfigError, match="--view"):
+            parse_view_address(bad)
+    assert is_loopback("127.0.0.1") and is_loopback("localhost") and is_loopback("::1")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.0.2.1")
+
+
+def test_loopback_has_no_token_other_hosts_do(human_rig) -> None:  # type: ignore[no-untyped-def]
+    assert build_server("127.0.0.1:0", human_rig).token is None
+    server = build_server("0.0.0.0:0", human_rig)
+    assert server.token and len(server.token) >= 16
+    assert f"?token={server.token}" in server.url
+
+
+def test_token_guards_page_and_socket(human_rig) -> None:  # type: ignore[no-untyped-def]
+    with build_server("0.0.0.0:0", human_rig) as server:
+        base = f"http://127.0.0.1:{server.port}/"
+        with pytest.raises(urllib.error.HTTPError) as denied:
+            urllib.request.urlopen(base, timeout=5)
+        assert denied.value.code == 403
+        with pytest.raises(Exception, match="403"):
+            connect(f"ws://127.0.0.1:{server.port}/ws?token=wrong", open_timeout=5)
+        page = urllib.request.urlopen(f"{base}?token={server.token}", timeout=5).read()
+        assert b"handrig view" in page
+        with connect(f"ws://127.0.0.1:{server.port}/ws?token={server.token}") as ws:
+            assert json.loads(ws.recv(timeout=5))["type"] == "scene"
+
+
+def test_page_and_vendored_files_served(human_rig) -> None:  # type: ignore[no-untyped-def]
+    with build_server("127.0.0.1:0", human_rig) as server:
+        base = f"http://127.0.0.1:{server.port}"
+        page = urllib.request.urlopen(base + "/", timeout=5).read().decode()
+        for path in ("/static/view.js", "/static/vendor/three/three.module.js",
+                     "/static/vendor/three/OrbitControls.js"):
+            assert path in page
+            with urllib.request.urlopen(base + path, timeout=5) as reply:
+                assert reply.headers["Content-Type"] == "text/javascript"
+                assert len(reply.read()) > 1000
+        assert "http://" not in page and "https://" not in page  # nothing from the internet
+        with pytest.raises(urllib.error.HTTPError) as missing:
+            urllib.request.urlopen(base + "/static/../server.py", timeout=5)
+        assert missing.value.code == 404
+
+
+def test_port_in_use_names_the_port(human_rig) -> None:  # type: ignore[no-untyped-def]
+    with build_server("127.0.0.1:0", human_rig) as first:
+        second = build_server(f"127.0.0.1:{first.port}", human_rig)
+        with pytest.raises(ConfigError, match=f"port {first.port} on 127.0.0.1 is in use"):
+            second.start()
+
+
+def test_garbage_and_disconnects_cost_nothing(human_rig) -> None:  # type: ignore[no-untyped-def]
+    controls = Controls()
+    with build_server("127.0.0.1:0", human_rig) as server:
+        server.attach(lambda: None, controls)
+        url = f"ws://127.0.0.1:{server.port}/ws"
+        with connect(url) as ws:
+            ws.recv(timeout=5)
+            for junk in ("not json", "[1, 2]", '{"action": "selfdestruct"}', b"\x00\xff" * 8,
+                         '{"action": 5}'):
+                ws.send(junk)
+        with connect(url) as ws:  # a message over the limit closes only that socket
+            ws.recv(timeout=5)
+            ws.send("x" * 5000)
+            with pytest.raises(Exception):  # noqa: B017  closed by the server (1009)
+                ws.recv(timeout=5)
+        for _ in range(5):  # browsers that vanish mid-handshake or without a close
+            raw = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+            raw.sendall(b"GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\n")
+            raw.close()
+        with connect(url) as ws:
+            assert json.loads(ws.recv(timeout=5))["type"] == "scene"
+            ws.send(json.dumps({"action": "relax"}))
+            ws.send(json.dumps({"action": "estop"}))
+            deadline = time.monotonic() + 5
+            while len(controls.calls) < 2 and time.monotonic() < deadline:
+                time.sleep(0.01)
+        assert controls.calls == ["relax", "estop"]
+        assert server.stats.bad_messages == 5
+
+
+def test_close_frees_the_port(human_rig) -> None:  # type: ignore[no-untyped-def]
+    server = build_server("127.0.0.1:0", human_rig).start()
+    port = server.port
+    with connect(f"ws://127.0.0.1:{port}/ws") as ws:
+        ws.recv(timeout=5)
+        server.close()
+        with pytest.raises(Exception):  # noqa: B017  the server closed the socket
+            ws.recv(timeout=5)
+    with pytest.raises(OSError):
+        socket.create_connection(("127.0.0.1", port), timeout=2).close()
+    build_server(f"127.0.0.1:{port}", human_rig).start().close()  # the port is free again
+
+
+@pytest.mark.parametrize("rig", [None, "leap", "orca"])
+def test_scene_from_the_rigs_model(rig: str | None) -> None:
+    cfg = build_parts(rig).rig_config
+    models = simulator.view_models(cfg)
+    scene = ModelScene(models["ri"])
+    geometry = scene.geometry()
+    assert len(geometry["bodies"]) == models["ri"].nbody
+    assert len(geometry["geoms"]) >= 10
+    if models["ri"].nmesh:  # the ORCA hand is drawn from its meshes
+        assert geometry["meshes"] and all(
+            len(m["vertices"]) % 3 == 0 and len(m["faces"]) % 3 == 0
+            and max(m["faces"]) < len(m["vertices"]) // 3
+            for m in geometry["meshes"].values())
+    joint = cfg.servos[1].joint
+    rest, bent = scene.pose({}), scene.pose({joint: 40.0})
+    nbody = models["ri"].nbody
+    assert len(rest["pos"]) == 3 * nbody and len(rest["quat"]) == 4 * nbody
+    moved = (np.abs(np.subtract(rest["quat"], bent["quat"])).reshape(nbody, 4) > 1e-3).any(1)
+    assert moved.any() and not moved.all()  # the bodies below that joint, not the root
+
+
+def test_skeleton_bends_with_the_pose() -> None:
+    models = simulator.human_hand_models()
+    hand = ModelScene(models["le"])
+    straight = np.reshape(hand.skeleton({}), (-1, 2, 3))
+    bent = np.reshape(hand.skeleton({"leIndexPIPy": 80.0, "leIndexDIPy": 60.0}), (-1, 2, 3))
+    assert straight.shape == bent.shape and straight.shape[0] >= 19  # every bone and tip
+    assert 0 < np.count_nonzero(np.abs(straight - bent).max(axis=(1, 2)) > 1e-4) <= 3
+
+
+def test_demo_on_a_port_in_use_says_which_and_starts_nothing() -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = subprocess.run(
+            [sys.executable, "-m", "handrig.cli", "demo", "--frames", "10", "--view",
+             str(port)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert f"--view '{port}': port {port} on 127.0.0.1 is in use" in done.stderr
+    assert "glove emulator streaming" not in done.stdout  # nothing started
+
+
+def _snapshot(cfg, *, positions: bool, nan_pose: bool = False):  # type: ignore[no-untyped-def]
+    from handrig.loop.telemetry import LoopSnapshot
+    from handrig.outputs.base import OutputStatus
+    from handrig.pose.pipeline import POSE_NAMES
+
+    n = len(cfg.servos)
+    goals = tuple(30.0 if "PIP" in s.joint else 0.0 for s in cfg.servos)
+    return LoopSnapshot(
+        t_s=1.0, seq=3, mode="running", mode_reason="following the glove", rate_hz=200.0,
+        latency_p50_us=150.0, latency_p99_us=float("nan"), frames_lost=2, cycles=400,
+        overruns=1, controls=(0.5,), raw=(2000.0,), control_names=("riIndexMCPy",),
+        inclination_deg=-20.0, rotation_deg=5.0, glove_connected=True,
+        pose_deg=tuple(float("nan") if nan_pose else 10.0 for _ in POSE_NAMES),
+        curve_names=POSE_NAMES, servo_ids=tuple(s.id for s in cfg.servos),
+        servo_joints=tuple(s.joint for s in cfg.servos), goals_deg=goals,
+        positions_deg=tuple(g - 5.0 for g in goals) if positions else (None,) * n,
+        temperatures_c=(31.0,) * n, hardware_errors=(0,) * (n - 1) + (0x20,),
+        stale=(False,) * n, outputs=(OutputStatus(kind="vmc", name="VMC",
+                                                   address="127.0.0.1:39539"),))
+
+
+def test_frame_from_a_snapshot(human_rig) -> None:  # type: ignore[no-untyped-def]
+    encoder = build_server("127.0.0.1:0", human_rig).encoder
+    read = json.loads(encoder.frame(_snapshot(human_rig, positions=True)))
+    assert read["source"] == "positions" and read["ghost"] is not None
+    assert read["latency_p99_us"] is None  # NaN is not JSON: sent as null
+    assert read["servos"]["errors"][-1] == 0x20 and read["servos"]["position_deg"][0] == -5.0
+    assert read["outputs"][0]["kind"] == "vmc" and read["outputs"][0]["address"]
+    assert set(read["skeleton"]) == {"ri", "le"}  # the pose holds both hands
+    assert read["bodies"]["ri"]["pos"] != read["ghost"]["ri"]["pos"]  # 5 degrees apart
+    unread = json.loads(encoder.frame(_snapshot(human_rig, positions=False, nan_pose=True)))
+    assert unread["source"] == "goals" and unread["ghost"] is None
+    assert all(len(s) > 0 for s in unread["skeleton"].values())  # at rest, not NaN
+    scene = json.loads(encoder.scene())
+    assert scene["type"] == "scene" and set(scene["rest"]) == set(scene["models"]) == {"ri"}
+
+
+@pytest.mark.parametrize("end", ["estop", "ctrl-c"])
+def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None:
+    """Without a browser: ``handrig run --view`` on the simulated rig; a WebSocket
+    client gets the scene and frames of the real loop; its e-stop ends the run, or a
+    Ctrl-C at the terminal (to the run's process group) eases it down; either way the
+    view's server is closed when the run has ended."""
+    recording = simulator.demo_recording()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handrig.cli", "run", "--bus", "sim", "--glove",
+         f"replay:{recording}", "--frames", "20000", "--json", "--view", "127.0.0.1:0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        assert proc.stderr is not None
+        url = ""
+        deadline = time.monotonic() + 120
+        while not url and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            if line.startswith("view: "):
+                url = line.split()[1]
+        assert url.startswith("http://127.0.0.1:")
+        port = int(url.rsplit(":", 1)[1].strip("/"))
+        with connect(f"ws://127.0.0.1:{port}/ws") as ws:
+            assert json.loads(ws.recv(timeout=30))["type"] == "scene"
+            frames = [json.loads(ws.recv(timeout=30)) for _ in range(5)]
+            assert [f["type"] for f in frames] == ["frame"] * 5
+            assert frames[-1]["seq"] > frames[0]["seq"]
+            assert frames[-1]["mode"] in ("running", "waiting", "resuming")
+            assert len(frames[-1]["servos"]["ids"]) == 20
+            ws.send("garbage")
+            if end == "estop":
+                ws.send(json.dumps({"action": "estop"}))
+            else:
+                os.killpg(proc.pid, signal.SIGINT)
+            out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["torque_off"] is True
+    if end == "estop":
+        assert summary["estop"] is True and summary["stop_reason"] == "e-stop button (view)"
+    else:
+        assert summary["estop"] is False and summary["signals"]
+    with pytest.raises(OSError):  # the run's exit closed the view's server
+        socket.create_connection(("127.0.0.1", port), timeout=2).close()
