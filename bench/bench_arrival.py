@@ -1,8 +1,8 @@
-"""Where a glove frame's time goes before its cycle starts: spin window off and on.
+"""Where a glove frame's time goes before its cycle starts.
 
 Runs the glove-triggered rig of :mod:`bench.bench_rig` (200 Hz glove, 1 Mbps bus,
-both emulators in processes of their own) with ``[loop] spin_us = 0`` (the loop
-sleeps on the port until bytes arrive) and with the shipped 500 us, alternating,
+both emulators in processes of their own; the loop sleeps on the port until bytes
+arrive: the spin window that polled it went in issue 23, see docs/measurements.md),
 and for every frame the rig decoded joins three times on CLOCK_MONOTONIC:
 
 * the glove emulator's send time (from its log, by sequence number);
@@ -16,13 +16,12 @@ end-to-end figures. The decode time is taken by wrapping
 ``SerialGlove._frame_sample`` in this process: nothing in the product changes.
 
 ``HANDRIG_BENCH_SECONDS`` sets each run's length (default 10 s);
-``HANDRIG_BENCH_ROUNDS`` the number of alternations (default 2).
+``HANDRIG_BENCH_ROUNDS`` the number of runs (default 2).
 """
 
 from __future__ import annotations
 
 import os
-import re
 import tempfile
 import time
 from pathlib import Path
@@ -33,29 +32,16 @@ import numpy as np
 from bench import bench_rig
 from handrig.devices import glove as glove_module
 
-SPINS_US = (0.0, 500.0)
 
-
-def _run(spin_us: float, seconds: float) -> dict[str, Any]:
+def _run(seconds: float) -> dict[str, Any]:
     decoded: list[tuple[int, float, float]] = []
     original = glove_module.SerialGlove._frame_sample
 
     def frame_sample(fr: Any, now: float, count: int) -> Any:
-        if count:  # 0: the rehearsal's scratch decode
-            decoded.append((int(fr.seq), now, time.perf_counter()))
+        decoded.append((int(fr.seq), now, time.perf_counter()))
         return original(fr, now, count)
 
-    rig_file = bench_rig._rig_file
-
-    def spun_rig_file(folder: Path, mode: str, rate_hz: float, baud: int) -> Path:
-        path = rig_file(folder, mode, rate_hz, baud)
-        text = re.sub(r"(?m)^spin_us = [\d.]+", f"spin_us = {spin_us:g}",
-                      path.read_text(encoding="utf-8"), count=1)
-        path.write_text(text, encoding="utf-8")
-        return path
-
     glove_module.SerialGlove._frame_sample = staticmethod(frame_sample)  # type: ignore[method-assign]
-    bench_rig._rig_file = spun_rig_file
     try:
         with tempfile.TemporaryDirectory(prefix="bench_arrival_") as tmp:
             folder = Path(tmp)
@@ -68,7 +54,6 @@ def _run(spin_us: float, seconds: float) -> dict[str, Any]:
                 sends[int(seq)] = float(t_s)  # no wrap in a run this short
     finally:
         glove_module.SerialGlove._frame_sample = staticmethod(original)  # type: ignore[method-assign]
-        bench_rig._rig_file = rig_file
     rows = np.array([(sends[seq], stamp, done) for seq, stamp, done in decoded
                      if seq in sends and sends[seq] <= done])
     return {"summary": result["summary"], "outside": result["outside_us"],
@@ -85,17 +70,16 @@ def main() -> None:
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 10.0))
     rounds = int(os.environ.get("HANDRIG_BENCH_ROUNDS", 2))
     print(f"glove-triggered rig, 200 Hz glove, 1 Mbps, 20 emulated servos, {seconds:g} s "
-          f"per run, spin window off and on alternating, {rounds} rounds", flush=True)
-    print("| spin_us | send -> stamp p10 / p50 / p90 (us) | send -> decoded p10 / p50 / p90 "
+          f"per run, {rounds} runs", flush=True)
+    print("| run | send -> stamp p10 / p50 / p90 (us) | send -> decoded p10 / p50 / p90 "
           "(us) | in-process end to end p50 / p99 (us) | outside p50 / p99 (us) | "
           "CPU/cycle (us) |\n|---|---|---|---|---|---|", flush=True)
-    for _ in range(rounds):
-        for spin in SPINS_US:
-            r = _run(spin, seconds)
-            s, o = r["summary"], r["outside"]
-            print(f"| {spin:g} | {_pct(r['stamp_us'])} | {_pct(r['decoded_us'])} | "
-                  f"{s['latency_us']['p50']} / {s['latency_us']['p99']} | "
-                  f"{o['p50']} / {o['p99']} | {s['cpu_per_cycle_us']} |", flush=True)
+    for k in range(rounds):
+        r = _run(seconds)
+        s, o = r["summary"], r["outside"]
+        print(f"| {k + 1} | {_pct(r['stamp_us'])} | {_pct(r['decoded_us'])} | "
+              f"{s['latency_us']['p50']} / {s['latency_us']['p99']} | "
+              f"{o['p50']} / {o['p99']} | {s['cpu_per_cycle_us']} |", flush=True)
 
 
 if __name__ == "__main__":

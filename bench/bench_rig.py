@@ -22,7 +22,7 @@ gloves, it reports:
 ``HANDRIG_BENCH_QUICK=1``: 10 s); ``HANDRIG_BENCH_CASES`` picks cases, as
 ``MODE/GLOVE_HZ/MBPS`` separated by commas (``glove/500/4,glove/200/4``; default all
 eight); ``HANDRIG_BENCH_APPEND=1`` also appends the table as a dated section to
-``docs/measurements.md``.
+``docs/measurements-history.md`` (docs/measurements.md keeps the current figures).
 """
 
 from __future__ import annotations
@@ -250,7 +250,7 @@ def main() -> None:
                 "Write handed to the OS; outside: glove emulator send time to the bus "
                 "emulator's receipt of the first Sync Write that moved, CLOCK_MONOTONIC.\n\n"
                 + HEADER + "\n" + "\n".join(_row(r) for r in rows) + "\n")
-        with (ROOT / "docs" / "measurements.md").open("a", encoding="utf-8") as f:
+        with (ROOT / "docs" / "measurements-history.md").open("a", encoding="utf-8") as f:
             f.write(text)
 
 

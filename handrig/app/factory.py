@@ -238,11 +238,20 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
                        min_channels=needed, channel_names=names)
 
 
-def read_fields_for(rig: RigConfig) -> ReadFields:
+def cycle_rate_hz(rig: RigConfig, glove_rate_hz: float) -> float:
+    """Cycles a second the loop runs at: the glove's nominal frame rate in mode "glove"
+    (held to the ceiling), ``[loop] rate_hz`` in mode "fixed"."""
+    if rig.loop.mode == "fixed":
+        return rig.loop.rate_hz
+    return min(glove_rate_hz, rig.loop.ceiling_hz)
+
+
+def read_fields_for(rig: RigConfig, glove_rate_hz: float) -> ReadFields:
     """What the loop reads back: position, velocity and current when a goal write plus that
     read fit in 70 % of a cycle on the wire, else position only (e.g. 20 servos at 1 Mbps
-    and 200 Hz: 4.4 ms of wire for the full read, 3.2 ms for positions, in a 5 ms cycle)."""
-    n, period = len(rig.servos), 1.0 / rig.loop.rate_hz
+    and 200 Hz: 4.4 ms of wire for the full read, 3.2 ms for positions, in a 5 ms cycle).
+    The cycle is the loop's (:func:`cycle_rate_hz`), not ``[loop] rate_hz`` in mode glove."""
+    n, period = len(rig.servos), 1.0 / cycle_rate_hz(rig, glove_rate_hz)
     full = wire_time_s(cycle_bytes(n, data_len=10), rig.bus.baud)
     return "motion" if full <= 0.7 * period else "position"
 
@@ -294,7 +303,8 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
         # the tens of microseconds a poll saves do not matter, and a SCHED_FIFO thread
         # that polls holds back the kernel worker delivering the reply (and the glove's
         # bytes) whenever that worker is queued on the loop's CPU.
-        bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=read_fields_for(rig_cfg),
+        fields = read_fields_for(rig_cfg, parts.glove_config.glove.rate_hz)
+        bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=fields,
                            spin_s=0.0, emulated=proc is not None)
         stack.callback(bus.close)
         yield OpenedBus(bus, port, proc)

@@ -74,3 +74,22 @@ def test_the_summary_carries_the_glove_port_counters() -> None:
     glove = summary_dict(RunStats(), None, stats, True)["glove"]
     assert (glove["channel_errors"], glove["disconnects"], glove["reconnects"],
             glove["last_outage_s"]) == (2, 1, 1, 1.25)
+
+
+def test_what_the_bus_reads_back_follows_the_loops_cycle_not_the_fixed_rate() -> None:
+    """In mode "glove" a cycle comes per glove frame: the full read (position, velocity,
+    current) must fit the glove's period, whatever ``[loop] rate_hz`` (the fixed mode's
+    rate) says; in mode "fixed" it is that rate."""
+    from handrig.app.factory import cycle_rate_hz, read_fields_for
+    from handrig.config.paths import CONFIG_DIR
+    from handrig.config.rig import load_rig_config
+
+    rig = load_rig_config(CONFIG_DIR / "rig.toml")  # 20 servos at 1 Mbps, mode "glove"
+    assert rig.loop.mode == "glove"
+    slow = dataclasses.replace(rig, loop=dataclasses.replace(rig.loop, rate_hz=50.0))
+    # 4.4 ms of wire for the full read: it fits a 100 Hz glove's 10 ms, not a 200 Hz one's 5 ms
+    assert read_fields_for(slow, 100.0) == "motion"
+    assert read_fields_for(slow, 200.0) == "position"
+    assert cycle_rate_hz(slow, 5000.0) == rig.loop.ceiling_hz
+    fixed = dataclasses.replace(slow, loop=dataclasses.replace(slow.loop, mode="fixed"))
+    assert cycle_rate_hz(fixed, 200.0) == 50.0 and read_fields_for(fixed, 200.0) == "motion"
