@@ -9,6 +9,7 @@ Arrays are in rig order (``RigConfig.servos``), one entry per servo.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Literal
@@ -56,6 +57,9 @@ class ServoState:
         return fresh if self.asked is None else fresh & self.asked
 
 
+_ARRAY_COUNTERS = frozenset({"stale_readings", "hardware_errors", "reboots"})
+
+
 @dataclass
 class BusStats:
     """Counters of a bus since it was connected (``per-servo`` arrays in rig order)."""
@@ -83,6 +87,23 @@ class BusStats:
         for name in ("stale_readings", "hardware_errors", "reboots"):
             if len(getattr(self, name)) != self.n_servos:
                 setattr(self, name, np.zeros(self.n_servos, np.int64))
+
+    @classmethod
+    def total(cls, ledgers: Sequence[BusStats]) -> BusStats:
+        """The bus's counters: the sum of its parts' own ledgers (each part counts what it
+        did in a ledger of its own; nobody writes another's)."""
+        first, rest = ledgers[0], ledgers[1:]
+        new = first.copy()
+        d = new.__dict__
+        for other in rest:
+            for name, value in other.__dict__.items():
+                if name == "n_servos":
+                    continue
+                if name in _ARRAY_COUNTERS:
+                    d[name] = d[name] + value
+                elif value:
+                    d[name] += value
+        return new
 
     def copy(self) -> BusStats:
         new = object.__new__(BusStats)  # every read takes one: no __init__ round trip

@@ -56,6 +56,11 @@ log = logging.getLogger("handrig.devices.servo")
 REPLY_POLL_LEAD_S = 50e-6  # default spin_s
 
 
+# the parts that count what they do, each in a ledger of its own
+_PARTS_COUNTING = ("plan", "readings", "link", "writer", "sweep", "faults", "fast", "sync",
+                   "reader")
+
+
 class DynamixelBus(ServoBus):
     """The servos of ``rig`` on the serial port ``port`` (a path such as ``/dev/ttyUSB0``).
 
@@ -103,9 +108,11 @@ class DynamixelBus(ServoBus):
         self.clock = clock or MonotonicClock()
         self.policy = fault_policy or FaultPolicy()
         self.roster = Roster(rig, port, self.baud)
-        self._stats = BusStats(self.roster.n)
+        # each part counts what it did in a ledger of its own; ``stats`` sums them
+        self._ledgers = {name: BusStats(self.roster.n) for name in _PARTS_COUNTING}
         self.commissioning: list[str] = []  # what connect() found and did, one line each
-        self.plan = ReadPlan(read_fields, self._stats, self.roster.where(), self.commissioning)
+        self.plan = ReadPlan(read_fields, self._ledgers["plan"], self.roster.where(),
+                             self.commissioning)
         codec.warm_up()
         self._lock = threading.RLock()
         self._connected = False
@@ -115,7 +122,7 @@ class DynamixelBus(ServoBus):
         self, transport: Transport | None, reply_timeout_s: float | None,
         reply_gap_s: float | None, spin_s: float, temperature_every: int,
     ) -> None:
-        roster, stats, clock, plan = self.roster, self._stats, self.clock, self.plan
+        roster, own, clock, plan = self.roster, self._ledgers, self.clock, self.plan
         if reply_timeout_s is None:
             wire = wire_time_s(read_bytes(roster.n, plan.data_len, True), self.baud)
             reply_timeout_s = 2.0 * wire + 0.002
@@ -123,18 +130,19 @@ class DynamixelBus(ServoBus):
             reply_gap_s = 0.0015 + wire_time_s(32, self.baud)
         self.budget = WireBudget(self.baud, float(reply_gap_s), float(reply_timeout_s))
         self.transport = transport or SerialTransport(self.port, self.baud, clock)
-        self.readings = Readings(roster.n, stats)
-        self.link = Link(self.transport, self.budget, roster, clock, stats,
+        self.readings = Readings(roster.n, own["readings"], self._total_stats)
+        self.link = Link(self.transport, self.budget, roster, clock, own["link"],
                          self.readings.status_err)
-        self.writer = GoalWriter(roster, self.link, stats)
-        self.sweep = RegisterSweep(roster, self.link, plan, stats)
+        self.writer = GoalWriter(roster, self.link, own["writer"])
+        self.sweep = RegisterSweep(roster, self.link, plan, own["sweep"])
         self.faults = FaultHandler(roster, self.link, self.writer, self.sweep, self.readings,
-                                   self.policy, stats, clock)
-        self.fast = FastSyncRead(roster, self.link, self.readings, plan, stats, float(spin_s))
+                                   self.policy, own["faults"], clock)
+        self.fast = FastSyncRead(roster, self.link, self.readings, plan, own["fast"],
+                                 float(spin_s))
         self.reader = StateReader(
             self.link, self.readings, plan, self.fast, SyncRead(roster, self.link, self.readings,
-                                                                plan, stats),
-            self.sweep, self.faults, self.policy, stats, clock, temperature_every)
+                                                                plan, own["sync"]),
+            self.sweep, self.faults, self.policy, own["reader"], clock, temperature_every)
         self.commissioner = Commissioner(roster, self.link, plan, self.fast, self.faults, clock,
                                          self.commissioning, self._read_every_servo)
         self.torque_control = TorqueControl(
@@ -152,7 +160,11 @@ class DynamixelBus(ServoBus):
 
     @property
     def stats(self) -> BusStats:
-        return self._stats
+        """The bus's counters since it was connected: the parts' ledgers summed (a copy)."""
+        return self._total_stats()
+
+    def _total_stats(self) -> BusStats:
+        return BusStats.total(tuple(self._ledgers.values()))
 
     @property
     def torque_enabled(self) -> bool:

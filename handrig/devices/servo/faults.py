@@ -44,8 +44,8 @@ WATCHDOG_GAP_FRACTION = 0.8
 class FaultHandler:
     """What the bus does about hardware errors, watchdogs and servos that stay stale.
 
-    ``torque_on``: set by the torque control; a reboot then gives the servo its
-    last goal and torque back, and the watchdogs are kept armed.
+    ``torque_on``: told by the torque control (:meth:`note_torque`); a reboot then gives
+    the servo its last goal and torque back, and the watchdogs are kept armed.
     """
 
     def __init__(
@@ -70,8 +70,9 @@ class FaultHandler:
     def torque_on(self) -> bool:
         return self._torque_on
 
-    @torque_on.setter
-    def torque_on(self, on: bool) -> None:
+    def note_torque(self, on: bool) -> None:
+        """The torque control switched torque (a reboot then restores it; the watchdog
+        is re-armed only while it is on)."""
         self._torque_on = bool(on)
 
     # ------------------------------------------------------------------ hardware errors

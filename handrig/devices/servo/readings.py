@@ -8,6 +8,7 @@ A state handed to a caller holds copies: scribbling on it changes nothing here.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
@@ -56,9 +57,12 @@ class Readings:
     """The latest reading of each of ``n`` servos, what the current read got, and the
     states made from them."""
 
-    def __init__(self, n: int, stats: BusStats) -> None:
+    def __init__(self, n: int, stats: BusStats,
+                 totals: Callable[[], BusStats] | None = None) -> None:
         self.n = n
-        self.stats = stats
+        self.stats = stats  # this part's own counters (stale readings)
+        # the bus's counters, summed over its parts, that each state carries
+        self._totals: Callable[[], BusStats] = totals or stats.copy
         self.latest = np.full((5, n), np.nan)
         self.positions_deg, self.velocities_dps, self.currents_ma = self.latest[:3]
         self.temperatures_c, self.read_time = self.latest[3], self.latest[4]
@@ -123,7 +127,7 @@ class Readings:
             stale=stale,
             age_s=now - self.read_time,
             timestamp_s=now,
-            stats=self.stats.copy(),
+            stats=self._totals(),
             asked=mask,
         )
 
@@ -144,7 +148,7 @@ class Readings:
             positions_deg=out[0], velocities_dps=out[1], currents_ma=out[2],
             temperatures_c=out[3], status_errors=out_u8[0], hardware_errors=out_u8[1],
             stale=out_u8[2].view(np.bool_), age_s=out[4], timestamp_s=np.nan,
-            stats=self.stats.copy(),
+            stats=self._totals(),
         )
         self._next = (state, out, out_u8)
         return out, out_u8
@@ -152,7 +156,7 @@ class Readings:
     def recount_whole(self) -> None:
         """Counters changed after :meth:`prepare_whole` (a late reply was dropped)."""
         if self._next is not None:
-            self._next[0].stats = self.stats.copy()
+            self._next[0].stats = self._totals()
 
     def take_whole(self, timestamp_s: float) -> ServoState:
         """The state :meth:`prepare_whole` allocated, now filled by the kernel."""

@@ -89,7 +89,7 @@ class TorqueControl:
                     slow.append(j)
                     self.link.write_register(j, Reg.PROFILE_VELOCITY, self._approach_units[j])
                 self.write_goals(pos)  # hold where they are, clamped into the limits
-            self.faults.torque_on = True
+            self.faults.note_torque(True)
             for i in range(r.n):
                 self.link.write_register(i, Reg.TORQUE_ENABLE, 1)
             self.faults.arm_watchdog()
@@ -143,7 +143,8 @@ class TorqueControl:
         r = self.roster
         failed: list[str] = []
         if not self.link.transport.is_open:
-            was_on, self.faults.torque_on = self.faults.torque_on, False
+            was_on = self.faults.torque_on
+            self.faults.note_torque(False)
             return [f"all servos: port {r.port} is closed"] if was_on else []
         try:
             self.link.sync_write(Reg.TORQUE_ENABLE, [0] * r.n)
@@ -155,7 +156,7 @@ class TorqueControl:
                 self.link.write_register(i, Reg.BUS_WATCHDOG, 0)
             except DeviceError as exc:
                 failed.append(f"{r.describe(i)}: {exc}")
-        self.faults.torque_on = False
+        self.faults.note_torque(False)
         return failed
 
 
