@@ -927,3 +927,41 @@ def test_reads_and_writes_compile_nothing_after_the_warm_up() -> None:
                          text=True, timeout=120, cwd=Path(__file__).resolve().parents[4])
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "{}"
+
+
+def test_a_write_the_port_never_drains_ends_at_its_deadline_naming_the_port() -> None:
+    master, slave = os.openpty()  # nobody reads the master: a wedged adapter
+    path = os.ttyname(slave)
+    clock = FakeClock(0.0)
+    t = SerialTransport(path, 1_000_000, clock)
+    t.open()
+    try:
+        with pytest.raises(DeviceTimeoutError, match=f"{path} took no bytes.*stopped draining"):
+            for _ in range(10_000):
+                t.write(bytes(114))  # a goal Sync Write to 20 servos
+        assert t.wedged
+        assert clock.now() >= 0.2  # waited its deadline, no longer than a few polls more
+        assert clock.now() < 0.3
+    finally:
+        started = time.monotonic()
+        t.close()  # the bytes still queued are dropped: closing does not wait on them
+        assert time.monotonic() - started < 1.0
+        os.close(slave)
+        os.close(master)
+
+
+def test_torque_off_on_a_bus_that_stopped_answering_is_bounded_and_names_the_servos(
+        sim: SimBus, bus: DynamixelBus) -> None:
+    started = math.nan
+    with (pytest.raises(DeviceError, match="torque off failed") as info,
+          bus.torque(handle_signals=False)):
+        sim.faults = FaultSpec(drop=1.0)
+        started = time.monotonic()
+    took = time.monotonic() - started
+    sim.faults = FaultSpec()
+    assert took < 1.5, f"torque off took {took:.2f} s"
+    text = str(info.value)
+    for s in small_rig().servos:
+        assert f"servo {s.id} ({s.joint})" in text
+    # the broadcast reached them all the same
+    assert not any(sim.servo(s.id).torque_enabled for s in small_rig().servos)
