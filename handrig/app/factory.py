@@ -292,7 +292,7 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
         # that polls holds back the kernel worker delivering the reply (and the glove's
         # bytes) whenever that worker is queued on the loop's CPU.
         bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=read_fields_for(rig_cfg),
-                           spin_s=0.0)
+                           spin_s=0.0, emulated=proc is not None)
         stack.callback(bus.close)
         yield OpenedBus(bus, port, proc)
 
@@ -500,6 +500,8 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
         "reads": s.reads,
         "stale_reads": s.stale_reads,
         "relax_events": s.relax_events,
+        "silence": {"silences": s.servo_silences, "held": s.servos_held,
+                    "recoveries": s.servo_recoveries},
         "resumes": s.resumes,
         "estop": s.estop,
         "stop_reason": s.stop_reason,

@@ -316,6 +316,18 @@ class GloveCalibration:
                                             self._lo, self._hi, self._last_good, out)
         return out
 
+    def kernel_state(self) -> tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray,
+                                    FloatArray, FloatArray]:
+        """The arrays a compiled step that fuses this calibration reads (and, for the last
+        good values, updates in place): (raw_index, gain, offset, lo, hi, last_good)."""
+        return (self.raw_index, self._gain, self._offset, self._lo, self._hi,
+                self._last_good)
+
+    def checked_raw(self, raw: FloatArray) -> FloatArray:
+        """``raw`` as contiguous float64, long enough for every calibrated channel
+        (DataError naming the fix otherwise)."""
+        return self._checked_raw(raw)
+
     def _checked_raw(self, raw: FloatArray) -> FloatArray:
         """``raw`` as contiguous float64, long enough for every calibrated channel."""
         r = np.ascontiguousarray(raw, dtype=np.float64)
@@ -364,6 +376,11 @@ class GloveControls:
             OneEuroFilter(len(calibration), fs.min_cutoff_hz, fs.beta, fs.d_cutoff_hz)
             if fs.enabled else None
         )
+        # the arrays the fused kernel works on, through the parts' public accessors
+        self._cal_state = calibration.kernel_state()
+        d = self._deg  # no filter: placeholders the kernel does not read
+        self._filter_state = (self.filter.kernel_state() if self.filter is not None
+                              else (d, d, d, d, d))
 
     @classmethod
     def from_config(cls, cfg: GloveConfig, control_names: Sequence[str]) -> GloveControls:
@@ -372,19 +389,17 @@ class GloveControls:
 
     def __call__(self, raw: FloatArray, t_s: float, out: FloatArray) -> FloatArray:
         cal = self.calibration
-        r = cal._checked_raw(raw)
+        r = cal.checked_raw(raw)
         f = self.filter
         if f is None:
             cal.nonfinite += kernels.glove_controls(
-                r, cal.raw_index, cal._gain, cal._offset, cal._lo, cal._hi, cal._last_good,
-                self._deg, False, False, 0.0, self._deg, self._deg, self._deg, self._deg,
-                self._deg, self._perm, out)
+                r, *self._cal_state, self._deg, False, False, 0.0, *self._filter_state,
+                self._perm, out)
             return out
         prime, te = f.advance(t_s)
         cal.nonfinite += kernels.glove_controls(
-            r, cal.raw_index, cal._gain, cal._offset, cal._lo, cal._hi, cal._last_good,
-            self._deg, True, prime, te, f._x_hat, f._dx_hat, f.min_cutoff_hz, f.beta,
-            f._two_pi_d, self._perm, out)
+            r, *self._cal_state, self._deg, True, prime, te, *self._filter_state,
+            self._perm, out)
         return out
 
     def reset(self) -> None:

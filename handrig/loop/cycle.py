@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from handrig.clock import Clock
+from handrig.config.rig import SilenceConfig
 from handrig.devices.servo.wire import goal_write_bytes, wire_time_s
 from handrig.errors import DeviceError
 from handrig.loop.easing import Easing
@@ -40,6 +41,7 @@ from handrig.loop.ports import (
     ServoBus,
     ServoState,
 )
+from handrig.loop.silence import SilenceWatch
 from handrig.loop.stats import RunStats
 from handrig.loop.trigger import READ_MARGIN_S, FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pose.pipeline import POSE_SIZE, PosePipeline
@@ -75,6 +77,7 @@ class Cycle:
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         trigger: Trigger | None = None,
         read_parts: int = 1,
+        silence: SilenceConfig | None = None,
     ) -> None:
         self.bus = bus
         # each read asks one part of the servos in turn (1: every servo at once)
@@ -102,8 +105,8 @@ class Cycle:
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
         # port events of the glove, silence events of the bus: into the run's events
-        self._drains: tuple[Callable[[], list[str]], ...] = (glove.drain_events,
-                                                             bus.drain_events)
+        self._drains: tuple[Callable[[], list[str]], ...] = (
+            glove.drain_events, bus.drain_events, lambda: self.silence.drain_events())
         # the bus's upkeep (watchdogs, temperatures), midway between state reads
         self.housekeeping: Callable[[float], bool] = bus.housekeeping
         self._housekeeping_slot = self.read_every // 2 if self.read_every > 1 else -1
@@ -115,6 +118,8 @@ class Cycle:
         self.sent = np.zeros(n)  # the goals last written
         self._step = np.zeros(n)
         self._slew_deg_s = pipeline.slew_deg_s
+        # the [silence] tiers for servos that stop answering: decided here, from the reads
+        self.silence = SilenceWatch(bus, silence or SilenceConfig(), pipeline.slew_deg_s)
         self.sample: GloveSample | None = None  # the newest glove sample
         self.last_state: ServoState | None = None  # the newest ServoState read back
         self.t0_s = 0.0
@@ -178,6 +183,8 @@ class Cycle:
         else:
             relaxed = self.pipeline.relaxed_targets(*self.angles)
             goals, done = self.relax.goals(now, self.sent, self._pose, relaxed)
+        if self.silence.steering:  # servos held for silence, or coming back from it
+            goals = self.silence.steer(goals, self.sent, tick.dt_s)
         bus_clamps = self.write(goals)
         self._after_write(tick, sample, mode, goals, bus_clamps)
         if done:
@@ -269,7 +276,7 @@ class Cycle:
         for drain in self._drains:
             for text in drain():
                 machine.event(text)
-        machine.servos_silent(self.bus.relax_reason)
+        machine.servos_silent(self.silence.relax_reason)
 
     @staticmethod
     def _wire_floor(bus: ServoBus, n: int) -> float:
@@ -294,9 +301,13 @@ class Cycle:
             return
         due, self._reads_due = self._reads_due, 0
         parts = self.read_parts
+        silence = self.silence
+        silence.note_read(start, late=deadline <= start)
         state = (self.bus.read_state(deadline, (self._part, parts)) if parts > 1
                  else self.bus.read_state(deadline))
         end = clock.now()
+        if silence.active or not state.all_fresh:
+            silence.update(state, end)  # DeviceTimeoutError when the action is "stop"
         if not state.sent:
             # the bus found no room for it after all (a line to let go quiet, replies
             # slower than the wire): still due, so a forced read comes in time, and the

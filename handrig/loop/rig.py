@@ -42,7 +42,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 from handrig.clock import Clock
-from handrig.config.rig import BusConfig, LoopConfig, RigConfig
+from handrig.config.rig import BusConfig, LoopConfig, RigConfig, SilenceConfig
 from handrig.devices.servo.wire import goal_write_bytes, wire_time_s
 from handrig.errors import DeviceError
 from handrig.loop.cycle import Cycle
@@ -100,7 +100,7 @@ class Rig:
             resume_frames=loop.resume_frames, resume_time_s=loop.resume_time_s,
             outputs=outputs, log=log, profile=profile, loop_mode=loop.mode,
             floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz, catch_up=loop.catch_up,
-            read_parts=config.bus.read_parts)
+            read_parts=config.bus.read_parts, silence=config.silence)
 
     def __init__(
         self,
@@ -126,6 +126,7 @@ class Rig:
         ceiling_hz: float = _LOOP.ceiling_hz,
         catch_up: bool = _LOOP.catch_up,
         read_parts: int = _BUS.read_parts,
+        silence: SilenceConfig | None = None,
     ) -> None:
         self.glove = glove
         self.bus = bus
@@ -158,7 +159,7 @@ class Rig:
             controls_from_raw=controls_from_raw, orientation=orientation,
             period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
             resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
-            read_parts=read_parts,
+            read_parts=read_parts, silence=silence,
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
@@ -282,6 +283,9 @@ class Rig:
             stats.cpu_s = time.thread_time() - cpu0
             stats.ceiling_waits = self.trigger.ceiling_waits
             self._pipeline_figures()
+            watch = self.cycle.silence
+            stats.servo_silences, stats.servos_held = watch.silences, watch.held
+            stats.servo_recoveries = watch.recoveries
             self._snapshot.finished = True
             self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats

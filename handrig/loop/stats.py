@@ -189,6 +189,9 @@ class RunStats:
     tracking_max_deg: float = 0.0
     relax_events: int = 0  # times the glove was lost and the puppet eased to relaxed
     resumes: int = 0  # times the glove came back and the puppet eased back to it
+    servo_silences: int = 0  # servos past the [silence] warning
+    servos_held: int = 0  # servos whose goal was held for silence
+    servo_recoveries: int = 0  # silent servos that answered again
     estop: bool = False
     stop_reason: str = ""
     events: Ring[str] = field(default_factory=lambda: Ring(KEPT_EVENTS))

@@ -67,6 +67,12 @@ class OneEuroFilter:
             raise ValueError(f"{name} must be finite and {rule}, got {value!r}")
         return arr
 
+    def kernel_state(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The arrays a compiled step that fuses this filter reads and updates in place:
+        (x_hat, dx_hat, min_cutoff_hz, beta, 2 pi d_cutoff_hz), each (n,). They stay the
+        same objects for the filter's life; call :meth:`advance` for each sample."""
+        return self._x_hat, self._dx_hat, self.min_cutoff_hz, self.beta, self._two_pi_d
+
     def reset(self) -> None:
         """Forget the history: the next call passes its input through."""
         self._primed = False

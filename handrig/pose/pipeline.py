@@ -10,8 +10,7 @@ Per loop cycle, :meth:`PosePipeline.servo_targets` (before the Sync Write) and
 The full pose is a 54-vector laid out as :data:`handrig.hand.ALL_JOINT_NAMES`
 (the 50 curves, then ``riWristFlexion, riWristDeviation, leWristFlexion,
 leWristDeviation``), degrees in the vocabulary convention. Every array is
-preallocated; :meth:`PosePipeline.servo_targets` allocates nothing. The loop
-rehearses the step on :meth:`PosePipeline.rehearsal_copy`.
+preallocated; :meth:`PosePipeline.servo_targets` allocates nothing.
 
 A robot hand (``retarget`` given) drives the robot's joints instead: the servo
 step computes the human curves the retarget table reads, clamps them to their joint
@@ -23,7 +22,6 @@ This module imports no device code (no serial, dynamixel_sdk or mujoco).
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol
@@ -247,7 +245,7 @@ class PosePipeline:
         kernels.warm_up()
 
     def _allocate_work(self) -> None:
-        """The arrays a step writes (all of them: :meth:`rehearsal_copy` makes new ones)."""
+        """The arrays a step writes (all of them)."""
         n = len(self.servo_joints)
         self.curves = np.zeros(hand.CURVES_PER_HAND * 2)
         self.pose = np.zeros(POSE_SIZE)
@@ -259,18 +257,6 @@ class PosePipeline:
         self._clamped_pose = np.zeros(POSE_SIZE)
         self._raw_targets = np.zeros(n)
         self._step = np.zeros(n)
-
-    def rehearsal_copy(self) -> PosePipeline:
-        """A pipeline to rehearse the servo step on (the loop runs it just before a
-        deadline, to have the code warm): it shares this one's map, sag grid, limits and
-        servo path, which no step writes, and has its own work arrays, targets and
-        counters, so nothing it does shows here."""
-        other = copy.copy(self)
-        other._allocate_work()
-        if self.robot_path is not None:
-            other._human = np.zeros(len(self.robot_path.curves))
-        other.targets[:] = self.targets
-        return other
 
     def _build_robot_path(self, rt: RetargetLike) -> RobotPath:
         """The retarget rows in servo order over the curves they read (a curve is read

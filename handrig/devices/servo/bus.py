@@ -15,8 +15,6 @@ from typing import Literal
 
 import numpy as np
 
-from handrig.config.rig import SilenceConfig
-
 
 @dataclass
 class ServoState:
@@ -77,10 +75,6 @@ class BusStats:
     watchdog_gaps: int = 0  # goal writes after a silence near the Bus Watchdog (re-armed)
     skipped_reads: int = 0  # reads not sent: the wire could not carry them by their deadline
     late_reads: int = 0  # reads not sent: the caller came after the read's deadline
-    silences: int = 0  # servos past the silence warning (rig.toml [silence] warn_s)
-    held: int = 0  # servos whose goal was held for silence
-    recoveries: int = 0  # silent servos that answered again
-    recovery_reads_max: int = 0  # the longest silence that ended, in reads
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -106,8 +100,7 @@ class BusStats:
             f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
             f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
             f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, skipped reads "
-            f"{self.skipped_reads}, late reads {self.late_reads}, silences {self.silences}, "
-            f"recoveries {self.recoveries}, stale readings "
+            f"{self.skipped_reads}, late reads {self.late_reads}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )
@@ -121,8 +114,6 @@ class FaultPolicy:
       deadline (``read_budget_s`` after the call, or the caller's) allows.
     - ``max_stale_reads``: this many reads in a row that the wire could not carry
       by their deadline (a configuration that does not fit) raise DeviceTimeoutError.
-    - ``silence``: the tiers for a servo with no valid reply (warn, hold, then the
-      action); None: the rig file's ``[silence]``.
     - ``on_hardware_error``: ``"reboot"`` the servo (at most ``max_reboots`` times
       per servo, then stop) or ``"stop"`` at once (ServoFault naming servo and bit).
     - ``fast_failures_before_fallback``: whole Fast Sync Reads failing in a row
@@ -136,7 +127,6 @@ class FaultPolicy:
     max_reboots: int = 3
     reboot_wait_s: float = 1.0
     fast_failures_before_fallback: int = 10
-    silence: SilenceConfig | None = None
 
     def __post_init__(self) -> None:
         if self.read_retries < 0 or self.max_stale_reads < 1 or self.max_reboots < 0:
@@ -160,6 +150,9 @@ class ServoBus(ABC):
     """Where the bus is (a serial path), for a person."""
     baud: int = 0
     """The wire's baud rate (0: not a serial wire; the loop then assumes no wire time)."""
+    emulated: bool = False
+    """The servos are an emulator's (the factory knows: it started it); what the loop
+    says about servos that all go quiet at once then points at the emulator."""
 
     @property
     @abstractmethod
@@ -233,10 +226,13 @@ class ServoBus(ABC):
         """What the bus did since the last call, one line each for the run's log."""
         return []
 
-    @property
-    def relax_reason(self) -> str | None:
-        """Why the puppet should be relaxed while servos are silent, else None."""
-        return None
+    def describe(self, index: int) -> str:
+        """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""
+        return f"servo {self.ids[index]} ({self.joint_names[index]})"
+
+    def where(self) -> str:
+        """Where the bus is, for a message (``"on /dev/ttyUSB0"``)."""
+        return f"on {self.port}" if self.port else ""
 
     @property
     def n_servos(self) -> int:

@@ -68,6 +68,7 @@ class DynamixelBus(ServoBus):
     Read fetches the temperatures and, with torque on, another checks the Bus
     Watchdogs and re-arms any that tripped (0: never). ``reply_timeout_s`` bounds
     the wait for one reply (default: twice its wire time plus 2 ms);
+    ``emulated``: the servos are an emulator's (whoever opened the port knows).
     ``reply_gap_s`` ends a reply that stops flowing (default 1.5 ms, a USB
     adapter's latency-timer period with margin, plus 32 byte times). ``spin_s``:
     poll for a Fast Sync Read reply, instead of sleeping, from ``spin_s`` before
@@ -93,8 +94,10 @@ class DynamixelBus(ServoBus):
         spin_s: float = REPLY_POLL_LEAD_S,
         reply_gap_s: float | None = None,
         transport: Transport | None = None,
+        emulated: bool = False,
     ) -> None:
         self.port = port
+        self.emulated = bool(emulated)
         self.rig = rig
         self.baud = int(baud if baud is not None else rig.bus.baud)
         self.clock = clock or MonotonicClock()
@@ -287,14 +290,10 @@ class DynamixelBus(ServoBus):
         Each goal is clamped to the servo's ``[min_deg, max_deg]``; a non-finite
         goal is replaced by the last goal sent (or the servo's zero clamped into its
         limits). Returns how many goals were changed that way (also counted in
-        ``stats.clamps``). No reply is expected. A servo held for silence (rig.toml
-        ``[silence]``) keeps its last goal instead, and one that answers again is
-        moved back to its goals at the slew limit.
+        ``stats.clamps``). No reply is expected.
         """
         with self._lock:
             self.faults.rearm_after_silence()
-            if self.faults.silence.steering and self.faults.torque_on:
-                goals_deg = self.faults.silence.steer(goals_deg, self.writer.last_goal_deg)
             clamped = self.writer.build(goals_deg)
             self.writer.send_built()
         return clamped
@@ -309,8 +308,6 @@ class DynamixelBus(ServoBus):
         """
         with self._lock:
             self.faults.rearm_after_silence()
-            if self.faults.silence.steering and self.faults.torque_on:
-                goals_deg = self.faults.silence.steer(goals_deg, self.writer.last_goal_deg)
             clamped = self.writer.build(goals_deg)
             self.writer.hold_built()
             try:
@@ -334,27 +331,18 @@ class DynamixelBus(ServoBus):
         failed servos are retried up to ``fault_policy.read_retries`` times while
         time remains. Servos without a valid reply are marked stale, never passed
         off as fresh. A read (or retry) whose request and reply could not both be
-        on the wire before the deadline is not sent: its servos are marked stale
-        (``stats.skipped_reads``; ``stats.late_reads`` when the call came after the
-        deadline); ``max_stale_reads`` skipped reads in a row that were not late
-        raise DeviceTimeoutError. A servo raising its Alert bit is handled per
-        policy (reboot or ServoFault). A servo without a valid reading goes through
-        the ``[silence]`` tiers (warning, goal held, then the action; "stop" raises
-        DeviceTimeoutError naming it and what was seen); see :attr:`relax_reason`
-        and :meth:`drain_events`.
+        on the wire before the deadline is not sent (``ServoState.sent`` False): its
+        servos are marked stale (``stats.skipped_reads``; ``stats.late_reads`` when
+        the call came after the deadline); ``max_stale_reads`` skipped reads in a
+        row that were not late raise DeviceTimeoutError. A servo raising its Alert
+        bit is handled per policy (reboot or ServoFault). What to do about a servo
+        that stays silent is the loop's decision (:mod:`handrig.loop.silence`).
         """
         with self._lock:
             return self.reader.read(deadline_s, part)
 
-    @property
-    def relax_reason(self) -> str | None:
-        """Why the puppet should be relaxed while servos are silent (the ``[silence]``
-        action ``"relax"`` in force), else None."""
-        return self.faults.silence.relax_reason
-
-    def drain_events(self) -> list[str]:
-        """What the bus did about silent servos since the last call, one line each."""
-        return self.faults.silence.drain_events()
+    def where(self) -> str:
+        return self.roster.where()
 
     def housekeeping(self, deadline_s: float) -> bool:
         """Between state reads: the Bus Watchdogs, then the temperatures, when

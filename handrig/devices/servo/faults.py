@@ -6,23 +6,17 @@ A servo raising its Alert bit has its Hardware Error Status read; the
 20 ms units) stops a servo whose host goes silent; a tripped watchdog (-1) makes
 the servo refuse goals until it is cleared with 0 and armed again.
 
-A servo without a valid reading goes through the tiers of the rig file's
-``[silence]`` (:class:`SilenceWatch`): a warning, then its goal held, then the
-configured action (continue with the others, relax, or stop). What is said names
-what was seen: which servos, for how long, whether the host itself was late and
-whether every servo went quiet at once; hardware advice is given only when the
-host kept time and the other servos answer.
+What to do about a servo that stops answering is the loop's decision
+(:mod:`handrig.loop.silence`): the bus marks its readings stale, with their age.
 """
 
 from __future__ import annotations
 
 import logging
-from collections import deque
 
 import numpy as np
 
 from handrig.clock import Clock
-from handrig.config.rig import SilenceConfig
 from handrig.devices.servo.bus import BusStats, FaultPolicy
 from handrig.devices.servo.codec import INST_PING, INST_REBOOT, build_instruction
 from handrig.devices.servo.goals import GoalWriter
@@ -45,226 +39,6 @@ log = logging.getLogger("handrig.devices.servo")
 # A goal write after a silence this fraction of the Bus Watchdog time re-arms it first
 # (the servo's clock and ours differ).
 WATCHDOG_GAP_FRACTION = 0.8
-# A read that comes this much later than the usual gap between reads counts as the
-# host being late (a loop period is a few milliseconds; a starved host loses tens).
-HOST_LATE_S = 0.02
-GAP_WARM_UP = 16  # gaps between reads learnt before any is judged late
-EVENTS_KEPT = 64
-# Tiers of a silent servo.
-ANSWERING, WARNED, HELD, ACTED = 0, 1, 2, 3
-
-
-class SilenceWatch:
-    """Tiered responses to servos without a valid reading (``config``: ``[silence]``).
-
-    :meth:`note_read` is told when each read starts (the gaps between reads say
-    whether the host was late); :meth:`update` after each read looks at how long
-    each servo has gone without a valid reading. ``holding``: servos whose goal is
-    held at the last one sent; ``releasing``: servos that answer again, moved back
-    to their goals at ``release_step_deg`` per write. ``relax_reason``: set while
-    the action ``"relax"`` is in force. ``events``: what happened, one line each,
-    taken by :meth:`drain_events`.
-    """
-
-    def __init__(self, roster: Roster, readings: Readings, stats: BusStats,
-                 config: SilenceConfig, release_step_deg: float) -> None:
-        self.roster = roster
-        self.readings = readings
-        self.stats = stats
-        self.config = config
-        n = roster.n
-        self.tier = np.zeros(n, np.int8)
-        self.holding = np.zeros(n, bool)
-        self.releasing = np.zeros(n, bool)
-        self.steering = False  # holding or releasing any servo
-        self.active = False  # any servo past warn_s
-        self.relax_reason: str | None = None
-        self.events: deque[str] = deque(maxlen=EVENTS_KEPT)
-        self.release_step_deg = float(release_step_deg)
-        self.emulated = "/pts/" in roster.port or roster.port.startswith("/dev/pty")
-        self._reads = np.zeros(n, np.int64)  # reads while silent
-        self._goals = np.zeros(n, np.float64)
-        self._step = np.zeros(n, np.float64)
-        self._t_ref = np.nan  # the first read: nobody is silent since before it
-        self._last_read_s = np.nan
-        self._usual_gap_s = np.nan
-        self._gaps_seen = 0
-        self.late_s = 0.0  # the host's worst lateness within the last action_s
-        self._late_at = -np.inf
-        self._late_reads = 0  # reads that came after their deadline, same window
-
-    # ------------------------------------------------------------------ host timing
-    def note_read(self, now: float, late: bool = False) -> None:
-        """A read starts at ``now`` (``late``: the caller came after its deadline)."""
-        if not np.isfinite(self._t_ref):
-            self._t_ref = now
-        gap = now - self._last_read_s
-        self._last_read_s = now
-        usual = self._usual_gap_s
-        if not np.isfinite(gap):
-            return
-        if gap > self.config.action_s:
-            # nobody was reading (not a loop): silence counts from this read on
-            self._t_ref = now
-            self._gaps_seen = 0
-            return
-        self._gaps_seen += 1
-        if self._gaps_seen <= GAP_WARM_UP or not np.isfinite(usual):
-            # the cadence is learnt first (commissioning reads back to back, then the loop)
-            self._usual_gap_s = gap if not np.isfinite(usual) else usual + 0.25 * (gap - usual)
-            return
-        lateness = gap - usual
-        window_s = self.config.action_s
-        if now - self._late_at > window_s:
-            self.late_s, self._late_reads = 0.0, 0
-        if late:
-            self._late_reads += 1
-            self._late_at = now
-        if lateness >= HOST_LATE_S and lateness >= self.late_s:
-            self.late_s, self._late_at = lateness, now
-        self._usual_gap_s = usual + 0.02 * (min(gap, 2.0 * usual) - usual)
-
-    # ------------------------------------------------------------------ tiers
-    def update(self, now: float) -> None:
-        """After a read at ``now``: raise tiers, act on them, release servos that answer.
-        DeviceTimeoutError when the action is ``"stop"``."""
-        cfg = self.config
-        last = np.maximum(self.readings.read_time, self._t_ref)
-        silent_s = now - last
-        silent = silent_s > cfg.warn_s
-        self._reads[silent] += 1
-        back = np.flatnonzero((self.tier > ANSWERING) & ~silent)
-        if back.size:
-            self._recover(back, silent_s)
-        if not silent.any():
-            self.active = False
-            return
-        self.active = True
-        new = np.where(silent_s > cfg.action_s, ACTED,
-                       np.where(silent_s > cfg.hold_s, HELD, WARNED)).astype(np.int8)
-        new[~silent] = ANSWERING
-        rising = np.flatnonzero(new > self.tier)
-        if not rising.size:
-            return
-        old = self.tier[rising].copy()
-        self.tier[rising] = new[rising]
-        warned = rising[old < WARNED]
-        if warned.size:
-            what, why = self.describe(warned, float(silent_s[warned].max()))
-            self.stats.silences += int(warned.size)
-            self._say(f"{what}; {why}")
-        newly_held = rising[(old < HELD) & (new[rising] >= HELD)]
-        if newly_held.size:
-            self.holding[newly_held] = True
-            self.releasing[newly_held] = False
-            self.steering = True
-            self.stats.held += int(newly_held.size)
-            self._say(f"holding {self._names(newly_held)} at the last goal sent "
-                      "(goals still go out; no reply is needed for them)")
-        acting = rising[(old < ACTED) & (new[rising] >= ACTED)]
-        if acting.size:
-            self._act(acting, float(silent_s[acting].max()))
-
-    def _act(self, indices: np.ndarray, seconds: float) -> None:
-        what, why = self.describe(indices, seconds)
-        action = self.config.action
-        if action == "stop":
-            raise DeviceTimeoutError(
-                f"{what} {self.roster.where()} ({self.stats.summary()}); {why}; "
-                "[silence] action is stop")
-        if action == "relax":
-            self.relax_reason = f"{what}; {why}"
-            self._say(f"{what}: relaxing every servo until it answers ([silence] action)")
-        else:
-            rest = ("stays held, the others continue" if len(indices) < self.roster.n
-                    else "stay held")
-            self._say(f"{what}: {self._names(indices)} {rest} ([silence] action)")
-
-    def _recover(self, back: np.ndarray, silent_s: np.ndarray) -> None:
-        reads = self._reads[back]
-        self.stats.recoveries += int(back.size)
-        self.stats.recovery_reads_max = max(self.stats.recovery_reads_max, int(reads.max()))
-        held = bool(self.holding[back].any())
-        who = f"{self._names(back)} answer{'s' if back.size in (1, self.roster.n) else ''}"
-        self._say(f"{who} again after {int(reads.max())} silent reads"
-                  + (": releasing to the goals at the slew limit" if held else ""))
-        self.releasing[back] |= self.holding[back]
-        self.holding[back] = False
-        self.tier[back] = ANSWERING
-        self._reads[back] = 0
-        if not (self.tier >= ACTED).any():
-            self.relax_reason = None
-
-    def describe(self, indices: np.ndarray, seconds: float) -> tuple[str, str]:
-        """(what was seen, what it points to) for silent servos ``indices``."""
-        r = self.roster
-        everyone = len(indices) == r.n or bool((self.tier > ANSWERING).all())
-        who = "any servo" if everyone else self._names(indices)
-        what = f"no valid reply from {who} for {seconds:.2f} s"
-        late = self.late_s >= HOST_LATE_S or self._late_reads > 0
-        late = late and self._last_read_s - self._late_at <= self.config.action_s
-        late_text = (f"the host was late by {self.late_s * 1e3:.0f} ms"
-                     + (f" ({self._late_reads} reads came after their deadline)"
-                        if self._late_reads else ""))
-        if everyone and late:
-            why = (f"{late_text} and every servo went quiet at once: the host "
-                   + ("and the emulator are" if self.emulated else "is")
-                   + " not keeping up, not a hardware fault (give the loop a CPU of its "
-                   "own, see [loop] realtime_priority and pin_cpu, or lower rate_hz)")
-        elif everyone and self.emulated:
-            why = ("every servo went quiet at once on an emulated bus while the host kept "
-                   "time: the emulator is not keeping up (a loaded machine), not a "
-                   "hardware fault")
-        elif everyone:
-            why = ("every servo went quiet at once: check the bus's power supply, the USB "
-                   "adapter and the baud rate")
-        elif late:
-            why = f"{late_text}; the other servos answer: check its cable, power and ID"
-        else:
-            why = "the other servos answer: check its cable, power and ID"
-        return what, why
-
-    def _names(self, indices: np.ndarray) -> str:
-        if len(indices) == self.roster.n:
-            return "every servo"
-        return ", ".join(self.roster.describe(int(i)) for i in indices)
-
-    def _say(self, text: str) -> None:
-        log.warning("%s", text)
-        self.events.append(text)
-
-    def drain_events(self) -> list[str]:
-        """What happened since the last call, oldest first."""
-        out = list(self.events)
-        self.events.clear()
-        return out
-
-    # ------------------------------------------------------------------ goals
-    def release_all(self) -> None:
-        """Nothing held or being released (torque went on or off)."""
-        self.holding[:] = False
-        self.releasing[:] = False
-        self.steering = False
-
-    def steer(self, goals_deg: np.ndarray, last_goal_deg: np.ndarray) -> np.ndarray:
-        """``goals_deg`` with held servos at ``last_goal_deg`` and released ones moving
-        back at ``release_step_deg`` per write (a new array; the caller's is untouched)."""
-        out = self._goals
-        np.copyto(out, goals_deg)
-        known = np.isfinite(last_goal_deg)
-        hold = self.holding & known
-        out[hold] = last_goal_deg[hold]
-        rel = self.releasing & known & np.isfinite(out)
-        if rel.any():
-            step = self._step
-            np.subtract(out, last_goal_deg, out=step)
-            done = rel & (np.abs(step) <= self.release_step_deg)
-            np.clip(step, -self.release_step_deg, self.release_step_deg, out=step)
-            out[rel] = last_goal_deg[rel] + step[rel]
-            self.releasing[done] = False
-        self.releasing &= known
-        self.steering = bool(self.holding.any() or self.releasing.any())
-        return out
 
 
 class FaultHandler:
@@ -290,10 +64,6 @@ class FaultHandler:
         self._watchdog_gap_s = (
             WATCHDOG_GAP_FRACTION * self.watchdog_ms / 1000.0 if self.watchdog_ms else np.inf)
         self.skip_run = 0  # reads in a row not sent for lack of wire time
-        rig = roster.rig
-        self.silence = SilenceWatch(
-            roster, readings, stats, policy.silence or rig.silence,
-            rig.loop.slew_deg_s / rig.loop.rate_hz)
         self._torque_on = False
 
     @property
@@ -302,8 +72,6 @@ class FaultHandler:
 
     @torque_on.setter
     def torque_on(self, on: bool) -> None:
-        # torque on or off: goals start from present positions, nothing held over
-        self.silence.release_all()
         self._torque_on = bool(on)
 
     # ------------------------------------------------------------------ hardware errors
@@ -326,7 +94,7 @@ class FaultHandler:
     def hardware_error(self, index: int, bits: int) -> None:
         """Servo ``index`` reports Hardware Error Status ``bits``: per policy, reboot or stop."""
         r = self.roster
-        self.readings.hw_err[index] = bits
+        self.readings.note_hardware_error(index, bits)
         self.stats.hardware_errors[index] += 1
         what = (f"{r.describe(index)} hardware error 0x{bits:02x}: "
                 f"{describe_hardware_error(bits)} {r.where()}")
@@ -447,10 +215,14 @@ class FaultHandler:
         self.arm_watchdog()
 
     # ------------------------------------------------------------------ stale runs
+    def read_sent(self) -> None:
+        """A read went on the wire: the run of reads that did not fit is over."""
+        self.skip_run = 0
+
     def read_skipped(self, wire_s: float, allowed_s: float) -> None:
         """A read was not sent: the wire could not carry it by its deadline. When the
         caller came after the deadline (the host was late) it is counted in
-        ``late_reads`` and left to the silence tiers; otherwise too many in a row raise
+        ``late_reads`` and left to the loop's silence tiers; otherwise too many in a row raise
         (a read that never fits is a configuration to change)."""
         self.stats.skipped_reads += 1
         if allowed_s <= wire_s and allowed_s <= 0.0:

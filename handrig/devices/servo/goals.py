@@ -49,14 +49,19 @@ class GoalWriter:
 
     def hold_built(self) -> None:
         """Hand the built Sync Write to the link, to go out with the next request."""
-        self.link.held = self.packet.tobytes()
+        self.link.hold(self.packet.tobytes())
         self.last_goal_deg[:] = self._goal_deg
         self.stats.writes += 1
 
     def send_held(self) -> None:
         """Send a held Sync Write that no request took along."""
-        if self.link.held:
+        if self.link.holding:
             self.link.send(b"")
+
+    def remember(self, goal_deg: np.ndarray) -> None:
+        """Take ``goal_deg`` as the goals last sent (a torque-on that wrote them servo by
+        servo): a reboot then re-sends them."""
+        self.last_goal_deg[:] = goal_deg
 
     def resend(self, goal_deg: np.ndarray) -> None:
         """Send ``goal_deg`` (already within limits) as the goal Sync Write, uncounted

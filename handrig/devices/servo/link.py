@@ -56,6 +56,15 @@ class Link:
         self.sent_s = float("nan")  # when the last write was handed to the OS
 
     # ------------------------------------------------------------------ sending
+    def hold(self, packet: bytes) -> None:
+        """Keep ``packet`` (a goal Sync Write) to go out with the next request."""
+        self.held = packet
+
+    @property
+    def holding(self) -> bool:
+        """Whether a held packet is waiting for a request to take it along."""
+        return bool(self.held)
+
     def send(self, packet: bytes | memoryview) -> None:
         """Write ``packet`` after any held goal Sync Write, in one port write."""
         data = self.held + bytes(packet) if self.held else packet

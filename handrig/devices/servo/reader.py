@@ -57,8 +57,8 @@ class StateReader:
         self._parts: dict[tuple[int, int], np.ndarray] = {}
         n = readings.n
         baud = link.budget.baud
-        # a temperature Fast Sync Read: request 14 + N bytes, reply 8 + 5N
-        self._temperature_wire_s = wire_time_s(22 + 6 * n, baud) + 0.0005
+        # a temperature Fast Sync Read (1 byte per servo)
+        self._temperature_wire_s = wire_time_s(read_bytes(n, 1, True), baud) + 0.0005
         # how long housekeeping has taken here (its replies come no sooner than the wire
         # allows, and later from a slow adapter or a busy emulator): it runs only where
         # that much room is left, unless it has been due for HOUSEKEEPING_FORCE_S
@@ -83,15 +83,12 @@ class StateReader:
         """One present-state read (see :meth:`handrig.devices.servo.DynamixelBus.read_state`)."""
         if part is not None and part[1] > 1:
             return self._read_part(part, deadline_s)
-        silence = self.faults.silence
         begun = self._begin(self.readings.n, deadline_s)
         if isinstance(begun, ServoState):
             return begun
         deadline_s = begun
         if self._attempts(deadline_s) and not (
                 self.temperature_every and self.stats.reads >= self._next_temperature_read):
-            if silence.active:
-                silence.update(self.fast.whole_at)
             return self.readings.take_whole(self.fast.whole_at)
         return self._finish(deadline_s)
 
@@ -101,17 +98,13 @@ class StateReader:
         request and replies cannot be on the wire by then, the state of a read not sent
         (counted as skipped)."""
         now = self.clock.now()
-        silence = self.faults.silence
         start = self.link.request_start(now)
         if deadline_s is None:
             deadline_s = start + max(self.policy.read_budget_s, self._min_budget_s)
         elif start + self.read_wire_s(k) > deadline_s:
-            silence.note_read(now, late=deadline_s <= now)
             self.faults.read_skipped(self.read_wire_s(k), deadline_s - now)
-            silence.update(now)
             return self.readings.unread(now)
-        silence.note_read(now)
-        self.faults.skip_run = 0
+        self.faults.read_sent()
         self.stats.reads += 1
         self.readings.start_read()
         self.last_whole = False
@@ -241,8 +234,6 @@ class StateReader:
         if self._housekeeping_due() and self._housekeeping_fits(deadline_s):
             self._next_temperature_read = self.stats.reads + self.temperature_every
             self._housekeeping(deadline_s)
-        if stale.any() or self.faults.silence.active:
-            self.faults.silence.update(now)
         return r.snapshot(now, stale, r.hw_err.copy(), asked)
 
     def housekeeping(self, deadline_s: float) -> bool:

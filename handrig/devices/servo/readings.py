@@ -75,6 +75,10 @@ class Readings:
         self.status_err[:] = 0
         self.hw_err[:] = 0
 
+    def note_hardware_error(self, index: int, bits: int) -> None:
+        """Servo ``index`` reported Hardware Error Status ``bits`` in this read."""
+        self.hw_err[index] = bits
+
     def mark(self, now: float, asked: np.ndarray | None = None) -> np.ndarray:
         """The read is over at ``now``: stale runs and times updated; returns ``stale``.
         ``asked``: the indices a read of a part asked for (the others are left as they

@@ -83,7 +83,7 @@ class TorqueControl:
             if outside.any() and self.hold_outside_limits:  # calibration: hold them
                 for i in range(r.n):
                     self.link.write_register(i, Reg.GOAL_POSITION, r.ticks(i, float(pos[i])))
-                self.writer.last_goal_deg[:] = pos  # a reboot re-sends where they were held
+                self.writer.remember(pos)  # a reboot re-sends where they were held
             else:
                 self._refuse_far(pos, excess)
                 # a joint slightly out (a limp puppet on its stop) is brought in slowly

@@ -175,7 +175,6 @@ class WarmBus(ServoBus):
         self.clock = clock
         self._stats = BusStats(len(names), writes=0, timeouts=4)
         self.port = "/dev/ttyUSB9"
-        self.last_goals_deg = np.zeros(len(names))  # where torque-on holds the servos
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -184,6 +183,10 @@ class WarmBus(ServoBus):
     @property
     def ids(self) -> tuple[int, ...]:
         return tuple(range(1, len(self._names) + 1))
+
+    @property
+    def last_goals_deg(self) -> np.ndarray:
+        return np.zeros(len(self._names))  # where torque-on holds the servos
 
     @property
     def stats(self) -> BusStats:

@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from handrig.app import factory as app
@@ -19,6 +20,7 @@ from handrig.config.loading import CONFIG_DIR
 from handrig.devices.servo.bus import BusStats
 from handrig.errors import ConfigError
 from handrig.loop.stats import RunStats
+from handrig.outputs.base import Output, OutputStatus
 
 CLI = [sys.executable, "-m", "handrig.cli"]
 CHECKOUT = Path(__file__).resolve().parents[3]
@@ -78,19 +80,22 @@ def test_clamps_say_what_they_mean_and_which_joints(parts: app.RigParts) -> None
 
 
 def test_outputs_are_listed() -> None:
-    class Sender:
-        address = ("127.0.0.1", 39539)
-        bundles_sent = 600
-        errors = 0
-        last_error = ""
+    class Sender(Output):  # the fakes subclass the Output ABC: only status() is read
+        def __call__(self, t_s: float, pose_deg: np.ndarray) -> None:
+            pass
 
-    class Rec:
-        path = Path("take.bvh")
-        fmt = "bvh"
-        frames_written = 2200
-        rate_hz = 200.0
-        bytes_written = 123_456
-        frames_dropped = 0
+        def status(self) -> OutputStatus:
+            return OutputStatus(kind="vmc", name="VMC", address="127.0.0.1:39539",
+                                frames_written=600)
+
+    class Rec(Output):
+        def __call__(self, t_s: float, pose_deg: np.ndarray) -> None:
+            pass
+
+        def status(self) -> OutputStatus:
+            return OutputStatus(kind="recorder", name="bvh", path="take.bvh",
+                                frames_written=2200, bytes_written=123_456,
+                                duration_s=2200 / 200.0)
 
     outputs = app.outputs_summary([Sender(), Rec()], duration_s=10.0)
     assert outputs["vmc"]["target"] == "127.0.0.1:39539" and outputs["vmc"]["rate_hz"] == 60.0

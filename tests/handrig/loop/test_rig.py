@@ -15,6 +15,7 @@ import pytest
 
 from handrig.app.factory import build_parts
 from handrig.clock import FakeClock
+from handrig.config.rig import SilenceConfig
 from handrig.devices.glove import GloveSample, GloveSource, GloveStats
 from handrig.devices.servo.bus import BusStats, ServoBus, ServoState
 from handrig.errors import DeviceError
@@ -540,25 +541,24 @@ class EventfulGlove(ScriptedGlove):
 
 
 class SilentServosBus(RecordingBus):
-    """Asks for the relaxed pose (the [silence] action "relax") between two times."""
+    """Servo 7 gives no valid reading between two times (the bus reports it stale, with
+    the age of its last reading); the loop's [silence] tiers decide what that means."""
 
     def __init__(self, names: tuple[str, ...], clock: FakeClock, silent: tuple[float, float]
                  ) -> None:
         super().__init__(names, clock)
         self.silent = silent
-        self.said = False
+        self.last_heard = 0.0
 
-    @property
-    def relax_reason(self) -> str | None:
+    def read_state(self, deadline_s: float | None = None) -> ServoState:
+        state = super().read_state(deadline_s)
         t = self.clock.now()
-        return ("no valid reply from servo 7 for 1.00 s"
-                if self.silent[0] <= t < self.silent[1] else None)
-
-    def drain_events(self) -> list[str]:
-        if self.clock.now() >= self.silent[0] and not self.said:
-            self.said = True
-            return ["holding servo 7 (riRingPIPy) at the last goal sent"]
-        return []
+        if self.silent[0] <= t < self.silent[1]:
+            state.stale[6] = True
+            state.age_s[6] = t - self.last_heard
+        else:
+            self.last_heard = t
+        return state
 
 
 def test_bus_and_glove_events_reach_the_run_and_a_relax_request_relaxes(parts_factory):
@@ -566,8 +566,9 @@ def test_bus_and_glove_events_reach_the_run_and_a_relax_request_relaxes(parts_fa
     clock = FakeClock()
     glove = EventfulGlove(clock, lambda t: MID)
     names = tuple(s.joint for s in parts.rig_config.servos)
-    bus = SilentServosBus(names, clock, (0.5, 1.5))
-    rig = make_rig(parts, glove, bus, clock)
+    bus = SilentServosBus(names, clock, (0.45, 1.5))
+    rig = make_rig(parts, glove, bus, clock, silence=SilenceConfig(
+        warn_s=0.01, hold_s=0.02, action_s=0.05, action="relax"))
     rig.run(frames=500)
     events = list(rig.stats.events)
     assert events[:2] == ["glove port /dev/ttyACM0 went away", "glove port /dev/ttyACM0 is back"]
@@ -577,7 +578,10 @@ def test_bus_and_glove_events_reach_the_run_and_a_relax_request_relaxes(parts_fa
     assert any("servos answer again" in e for e in events)
     assert rig.stats.relax_events == 1 and rig.stats.resumes == 1
     relaxed = relaxed_targets(parts)
-    np.testing.assert_allclose(bus.goals[int(1.45 * 200)], relaxed, atol=1e-6)
+    # every other servo relaxed; the silent one held at its last goal all along
+    at = bus.goals[int(1.45 * 200)]
+    np.testing.assert_allclose(np.delete(at, 6), np.delete(relaxed, 6), atol=1e-6)
+    assert at[6] == bus.goals[int(0.6 * 200)][6] == bus.goals[int(1.0 * 200)][6]
     assert np.abs(bus.goals[480] - relaxed).max() > 1.0
 
 

@@ -1,5 +1,5 @@
 """The pose pipeline's servo step (the compiled kernel) against a numpy reference written
-from its definition, and the rehearsal copy it offers the loop."""
+from its definition."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from handrig.app.factory import build_parts
-from handrig.pose.pipeline import PosePipeline, ServoPath
+from handrig.pose.pipeline import ServoPath
 from handrig.pose.sag import SagGrid
 
 
@@ -69,29 +69,6 @@ def test_servo_targets_kernel_matches_the_numpy_reference() -> None:
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
         np.testing.assert_allclose(pipeline.raw_targets, reference.raw, atol=1e-9)
     assert pipeline.rejected == reference.rejected > 0
-
-
-def test_a_rehearsal_copy_shares_the_tables_and_changes_nothing_here() -> None:
-    pipeline = build_parts().pipeline
-    means = pipeline.control_means_deg
-    pipeline.servo_targets(means, 0.0, 0.0, 0.005)
-    before = pipeline.targets.copy()
-    counters = (pipeline.rejected, pipeline.clamps, pipeline.servo_clamps, pipeline.slewed)
-    copy = pipeline.rehearsal_copy()
-    assert isinstance(copy, PosePipeline)
-    assert copy.servo_path is pipeline.servo_path and copy.expander is pipeline.expander
-    np.testing.assert_array_equal(copy.targets, before)
-    for _ in range(20):
-        wild = means + 40.0
-        wild[0] = np.nan
-        copy.servo_targets(wild, 60.0, 170.0, 0.005)
-        copy.account(wild, 60.0, 170.0)
-        copy.relaxed_targets(60.0, 170.0)
-    assert copy.targets is not pipeline.targets
-    np.testing.assert_array_equal(pipeline.targets, before)
-    assert (pipeline.rejected, pipeline.clamps, pipeline.servo_clamps,
-            pipeline.slewed) == counters
-    assert copy.rejected > pipeline.rejected
 
 
 def test_relaxed_targets_are_the_clamped_relaxed_pose() -> None:

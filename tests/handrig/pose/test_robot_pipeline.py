@@ -135,17 +135,6 @@ def test_relaxed_targets_and_account_use_the_retarget(leap: app.RigParts) -> Non
     assert pl.servo_clamps == int(np.count_nonzero(outside)) > 0
 
 
-def test_rehearsal_copy_has_its_own_work_arrays(leap: app.RigParts) -> None:
-    pl = _fresh(leap)
-    c = leap.expander.control_means_deg.copy()
-    pl.servo_targets(c, -90.0, 0.0, 0.005)
-    before = pl.targets.copy()
-    other = pl.rehearsal_copy()
-    other.servo_targets(c + 30.0, -90.0, 0.0, 0.005)
-    np.testing.assert_array_equal(pl.targets, before)
-    assert other._human is not pl._human
-
-
 def test_a_servo_joint_without_a_table_row_is_refused(leap: app.RigParts) -> None:
     rig = leap.rig_config
     assert isinstance(rig, RobotRigConfig)

@@ -28,6 +28,7 @@ from handrig.config.rig import RigConfig, SilenceConfig, load_rig_config
 from handrig.devices.servo import DynamixelBus, FaultPolicy, ServoBus
 from handrig.devices.servo.transport import SerialTransport
 from handrig.errors import DeviceError, DeviceTimeoutError, SafetyStop, ServoFault
+from handrig.loop.silence import SilenceWatch
 from sim.dxl_bus import FaultSpec, SimBus
 
 REPO = Path(__file__).resolve().parents[4]
@@ -252,10 +253,12 @@ def test_reply_faults_counted_marked_stale_never_out_of_limits(
 
 def test_servo_gone_at_runtime_is_stale_then_a_fault(sim: SimBus) -> None:
     rig = small_rig()
-    policy = FaultPolicy(read_budget_s=0.05, silence=SilenceConfig(
-        warn_s=0.05, hold_s=0.1, action_s=0.2, action="stop"))
+    policy = FaultPolicy(read_budget_s=0.05)
     b = DynamixelBus(sim.port_path, rig, baud=1_000_000, fault_policy=policy)
     b.connect()
+    # the loop's [silence] tiers decide what a silent servo means (handrig.loop.silence)
+    watch = SilenceWatch(b, SilenceConfig(warn_s=0.05, hold_s=0.1, action_s=0.2,
+                                          action="stop"), rig.loop.slew_deg_s)
     try:
         first = b.read_state()
         assert first.all_fresh
@@ -269,7 +272,8 @@ def test_servo_gone_at_runtime_is_stale_then_a_fault(sim: SimBus) -> None:
         with pytest.raises(DeviceTimeoutError, match=r"no valid reply from servo 3 "
                            r"\(riThumbCMCz\) for .* check its cable, power and ID"):
             for _ in range(100):
-                b.read_state()
+                watch.note_read(b.clock.now())
+                watch.update(b.read_state(), b.clock.now())
                 time.sleep(0.01)
     finally:
         b.close()

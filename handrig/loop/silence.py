@@ -1,0 +1,241 @@
+"""What the loop does about servos that stop answering: the ``[silence]`` tiers.
+
+The bus reports facts: each read says which servos gave a valid reading and how
+old each servo's last one is (:class:`~handrig.devices.servo.bus.ServoState`),
+and whether the read was sent at all. The decisions are made here, the same for
+every bus built to :class:`~handrig.devices.servo.bus.ServoBus`: after ``warn_s``
+without a valid reading a servo is named in a warning; after ``hold_s`` its goal
+is held where it was (goals still go out, so the Bus Watchdogs stay fed); after
+``action_s`` comes the action: ``"continue"`` (the others keep following),
+``"relax"`` (:attr:`SilenceWatch.relax_reason` asks the mode machine to ease to
+the relaxed pose until it answers) or ``"stop"`` (DeviceTimeoutError: the run
+ends, torque off). A servo that answers again is brought back to its goals at
+the slew limit.
+
+What is said names what was seen: which servos, for how long, whether the host
+itself was late (the gaps between reads) and whether every servo went quiet at
+once; hardware advice is given only when the host kept time and the others answer.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from handrig.config.rig import SilenceConfig
+from handrig.devices.servo.bus import ServoBus, ServoState
+from handrig.errors import DeviceTimeoutError
+
+HOST_LATE_S = 0.02  # a read this much later than the usual gap: the host was late
+GAP_WARM_UP = 16  # gaps between reads learnt before any is judged late
+EVENTS_KEPT = 64
+ANSWERING, WARNED, HELD, ACTED = 0, 1, 2, 3  # tiers of a silent servo
+
+
+class SilenceWatch:
+    """The ``[silence]`` tiers for the servos of ``bus`` (see the module docstring).
+
+    :meth:`note_read` is told when each read starts (``late``: after its deadline);
+    :meth:`update` gets each read's state; :meth:`steer` turns the goals the loop
+    wants into the goals to send (held servos stay, released ones come back at
+    ``slew_deg_s``). Counters: ``silences`` (servos warned about), ``held``,
+    ``recoveries``, ``recovery_reads_max``; :meth:`drain_events` takes what was said.
+    """
+
+    def __init__(self, bus: ServoBus, config: SilenceConfig, slew_deg_s: float) -> None:
+        self.bus = bus
+        self.config = config
+        self.slew_deg_s = float(slew_deg_s)
+        n = bus.n_servos
+        self.n = n
+        self.tier = np.zeros(n, np.int8)
+        self.holding = np.zeros(n, bool)
+        self.releasing = np.zeros(n, bool)
+        self.steering = False  # holding or releasing any servo
+        self.active = False  # any servo past warn_s
+        self.relax_reason: str | None = None
+        self.events: deque[str] = deque(maxlen=EVENTS_KEPT)
+        self.silences = 0
+        self.held = 0
+        self.recoveries = 0
+        self.recovery_reads_max = 0
+        self._reads = np.zeros(n, np.int64)  # reads while silent
+        self._goals = np.zeros(n, np.float64)
+        self._step = np.zeros(n, np.float64)
+        self._t_ref = np.nan  # the first read: nobody is silent since before it
+        self._last_read_s = np.nan
+        self._usual_gap_s = np.nan
+        self._gaps_seen = 0
+        self.late_s = 0.0  # the host's worst lateness within the last action_s
+        self._late_at = -np.inf
+        self._late_reads = 0  # reads that came after their deadline, same window
+
+    # ------------------------------------------------------------------ host timing
+    def note_read(self, now: float, late: bool = False) -> None:
+        """A read starts at ``now`` (``late``: the caller came after its deadline)."""
+        if not np.isfinite(self._t_ref):
+            self._t_ref = now
+        gap = now - self._last_read_s
+        self._last_read_s = now
+        usual = self._usual_gap_s
+        if not np.isfinite(gap):
+            return
+        if gap > self.config.action_s:
+            # nobody was reading: silence counts from this read on
+            self._t_ref = now
+            self._gaps_seen = 0
+            return
+        self._gaps_seen += 1
+        if self._gaps_seen <= GAP_WARM_UP or not np.isfinite(usual):
+            self._usual_gap_s = gap if not np.isfinite(usual) else usual + 0.25 * (gap - usual)
+            return
+        lateness = gap - usual
+        if now - self._late_at > self.config.action_s:
+            self.late_s, self._late_reads = 0.0, 0
+        if late:
+            self._late_reads += 1
+            self._late_at = now
+        if lateness >= HOST_LATE_S and lateness >= self.late_s:
+            self.late_s, self._late_at = lateness, now
+        self._usual_gap_s = usual + 0.02 * (min(gap, 2.0 * usual) - usual)
+
+    # ------------------------------------------------------------------ tiers
+    def update(self, state: ServoState, now: float) -> None:
+        """After a read: raise tiers, act on them, release servos that answer.
+        DeviceTimeoutError when the action is ``"stop"``."""
+        cfg = self.config
+        since_ref = now - self._t_ref if np.isfinite(self._t_ref) else 0.0
+        silent_s = np.minimum(np.asarray(state.age_s, dtype=np.float64)
+                              + (now - state.timestamp_s), since_ref)
+        silent = silent_s > cfg.warn_s
+        self._reads[silent] += 1
+        back = np.flatnonzero((self.tier > ANSWERING) & ~silent)
+        if back.size:
+            self._recover(back)
+        if not silent.any():
+            self.active = False
+            return
+        self.active = True
+        new = np.where(silent_s > cfg.action_s, ACTED,
+                       np.where(silent_s > cfg.hold_s, HELD, WARNED)).astype(np.int8)
+        new[~silent] = ANSWERING
+        rising = np.flatnonzero(new > self.tier)
+        if not rising.size:
+            return
+        old = self.tier[rising].copy()
+        self.tier[rising] = new[rising]
+        warned = rising[old < WARNED]
+        if warned.size:
+            what, why = self.describe(warned, float(silent_s[warned].max()))
+            self.silences += int(warned.size)
+            self._say(f"{what}; {why}")
+        newly_held = rising[(old < HELD) & (new[rising] >= HELD)]
+        if newly_held.size:
+            self.holding[newly_held] = True
+            self.releasing[newly_held] = False
+            self.steering = True
+            self.held += int(newly_held.size)
+            self._say(f"holding {self._names(newly_held)} at the last goal sent "
+                      "(goals still go out; no reply is needed for them)")
+        acting = rising[(old < ACTED) & (new[rising] >= ACTED)]
+        if acting.size:
+            self._act(acting, float(silent_s[acting].max()))
+
+    def _act(self, indices: np.ndarray, seconds: float) -> None:
+        what, why = self.describe(indices, seconds)
+        action = self.config.action
+        if action == "stop":
+            raise DeviceTimeoutError(
+                f"{what} {self.bus.where()} ({self.bus.stats.summary()}); {why}; "
+                "[silence] action is stop")
+        if action == "relax":
+            self.relax_reason = f"{what}; {why}"
+            self._say(f"{what}: relaxing every servo until it answers ([silence] action)")
+        else:
+            rest = ("stays held, the others continue" if len(indices) < self.n
+                    else "stay held")
+            self._say(f"{what}: {self._names(indices)} {rest} ([silence] action)")
+
+    def _recover(self, back: np.ndarray) -> None:
+        reads = self._reads[back]
+        self.recoveries += int(back.size)
+        self.recovery_reads_max = max(self.recovery_reads_max, int(reads.max()))
+        held = bool(self.holding[back].any())
+        who = f"{self._names(back)} answer{'s' if back.size in (1, self.n) else ''}"
+        self._say(f"{who} again after {int(reads.max())} silent reads"
+                  + (": releasing to the goals at the slew limit" if held else ""))
+        self.releasing[back] |= self.holding[back]
+        self.holding[back] = False
+        self.tier[back] = ANSWERING
+        self._reads[back] = 0
+        if not (self.tier >= ACTED).any():
+            self.relax_reason = None
+
+    def describe(self, indices: np.ndarray, seconds: float) -> tuple[str, str]:
+        """(what was seen, what it points to) for silent servos ``indices``."""
+        everyone = len(indices) == self.n or bool((self.tier > ANSWERING).all())
+        who = "any servo" if everyone else self._names(indices)
+        what = f"no valid reply from {who} for {seconds:.2f} s"
+        late = self.late_s >= HOST_LATE_S or self._late_reads > 0
+        late = late and self._last_read_s - self._late_at <= self.config.action_s
+        late_text = (f"the host was late by {self.late_s * 1e3:.0f} ms"
+                     + (f" ({self._late_reads} reads came after their deadline)"
+                        if self._late_reads else ""))
+        emulated = self.bus.emulated
+        if everyone and late:
+            why = (f"{late_text} and every servo went quiet at once: the host "
+                   + ("and the emulator are" if emulated else "is")
+                   + " not keeping up, not a hardware fault (give the loop a CPU of its "
+                   "own, see [loop] realtime_priority and pin_cpu, or lower rate_hz)")
+        elif everyone and emulated:
+            why = ("every servo went quiet at once on an emulated bus while the host kept "
+                   "time: the emulator is not keeping up (a loaded machine), not a "
+                   "hardware fault")
+        elif everyone:
+            why = ("every servo went quiet at once: check the bus's power supply, the USB "
+                   "adapter and the baud rate")
+        elif late:
+            why = f"{late_text}; the other servos answer: check its cable, power and ID"
+        else:
+            why = "the other servos answer: check its cable, power and ID"
+        return what, why
+
+    def _names(self, indices: np.ndarray) -> str:
+        if len(indices) == self.n:
+            return "every servo"
+        return ", ".join(self.bus.describe(int(i)) for i in indices)
+
+    def _say(self, text: str) -> None:
+        self.events.append(text)
+
+    def drain_events(self) -> list[str]:
+        """What happened since the last call, oldest first."""
+        out = list(self.events)
+        self.events.clear()
+        return out
+
+    # ------------------------------------------------------------------ goals
+    def steer(self, goals_deg: np.ndarray, last_goal_deg: np.ndarray,
+              dt_s: float) -> np.ndarray:
+        """``goals_deg`` with held servos at ``last_goal_deg`` and released ones moving
+        back at the slew limit over ``dt_s`` (a new array; the caller's is untouched)."""
+        out = self._goals
+        np.copyto(out, goals_deg)
+        if not self.steering:
+            return out
+        known = np.isfinite(last_goal_deg)
+        hold = self.holding & known
+        out[hold] = last_goal_deg[hold]
+        rel = self.releasing & known & np.isfinite(out)
+        if rel.any():
+            limit = self.slew_deg_s * dt_s
+            step = self._step
+            np.subtract(out, last_goal_deg, out=step)
+            done = rel & (np.abs(step) <= limit)
+            np.clip(step, -limit, limit, out=step)
+            out[rel] = last_goal_deg[rel] + step[rel]
+            self.releasing[done] = False
+        self.releasing &= known
+        self.steering = bool(self.holding.any() or self.releasing.any())
+        return out
