@@ -12,6 +12,7 @@ What to do about a servo that stops answering is the loop's decision
 
 from __future__ import annotations
 
+import contextlib
 import logging
 
 import numpy as np
@@ -38,6 +39,7 @@ log = logging.getLogger("handrig.devices.servo")
 
 # A goal write after a silence this fraction of the Bus Watchdog time re-arms it first
 # (the servo's clock and ours differ).
+REARM_ATTEMPTS = 2  # re-arming a watchdog mid-run: a servo that does not answer is silent
 WATCHDOG_GAP_FRACTION = 0.8
 
 
@@ -159,19 +161,22 @@ class FaultHandler:
                 )
 
     # ------------------------------------------------------------------ watchdog
-    def arm_watchdog(self) -> None:
+    def arm_watchdog(self, *, strict: bool = True) -> None:
         """Bus Watchdog to ``rig.bus.watchdog_ms`` on every servo at once, then checked.
 
         Broadcast Sync Writes reach every servo in one packet (servo by servo, the
         first ones armed could trip while a lossy bus delays the last); 0 first
-        clears a tripped watchdog (-1). Servos not confirmed get checked writes.
+        clears a tripped watchdog (-1). Servos not confirmed get checked writes;
+        not ``strict`` (re-arming mid-run), one that does not answer them is left
+        to the loop's silence tiers instead of ending the run (the broadcast
+        reached it if it hears the bus).
         """
         n = self.roster.n
         units = self.watchdog_ms // BUS_WATCHDOG_UNIT_MS
         self.link.sync_write(Reg.BUS_WATCHDOG, [0] * n)
         if units:
             self.link.sync_write(Reg.BUS_WATCHDOG, [units] * n)
-        for _ in range(COMMAND_ATTEMPTS):
+        for _ in range(COMMAND_ATTEMPTS if strict else 1):
             values = self.sweep.read(Reg.BUS_WATCHDOG, self.clock.now() + COMMAND_TIMEOUT_S)
             if all(v is not None for v in values):
                 break
@@ -182,8 +187,12 @@ class FaultHandler:
                 self.link.write_register(i, Reg.BUS_WATCHDOG, 0)
                 if units:
                     self.link.write_register(i, Reg.BUS_WATCHDOG, units)
-            else:
+            elif strict:
                 self.link.write_register(i, Reg.BUS_WATCHDOG, units)
+            else:
+                with contextlib.suppress(DeviceTimeoutError):
+                    self.link.write_register(i, Reg.BUS_WATCHDOG, units,
+                                             attempts=REARM_ATTEMPTS)
 
     def rearm_after_silence(self) -> None:
         """Before goals: if the host was silent near the Bus Watchdog time, the servos'
@@ -212,7 +221,7 @@ class FaultHandler:
         log.warning("Bus Watchdog tripped on %s (the bus was quiet for more than %d ms): "
                     "re-arming", ", ".join(self.roster.describe(i) for i in tripped),
                     self.watchdog_ms)
-        self.arm_watchdog()
+        self.arm_watchdog(strict=False)
 
     # ------------------------------------------------------------------ stale runs
     def read_sent(self) -> None:

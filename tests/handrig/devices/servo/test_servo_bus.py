@@ -21,11 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from firmware_protocol import dynamixel as dx
 from firmware_protocol.dynamixel import HardwareError
 from firmware_protocol.dynamixel import Reg as SimReg
 from handrig.clock import FakeClock
 from handrig.config.rig import RigConfig, SilenceConfig, load_rig_config
 from handrig.devices.servo import DynamixelBus, FaultPolicy, ServoBus
+from handrig.devices.servo.bus import ServoState
 from handrig.devices.servo.transport import SerialTransport
 from handrig.errors import DeviceError, DeviceTimeoutError, SafetyStop, ServoFault
 from handrig.loop.silence import SilenceWatch
@@ -969,3 +971,87 @@ def test_torque_off_on_a_bus_that_stopped_answering_is_bounded_and_names_the_ser
         assert f"servo {s.id} ({s.joint})" in text
     # the broadcast reached them all the same
     assert not any(sim.servo(s.id).torque_enabled for s in small_rig().servos)
+
+
+def _silence_by_sync_write(port: str, servo_id: int) -> None:
+    """Status Return Level 0 on one servo, by a Sync Write from another opener of the
+    port (how the issue silenced a servo mid-run): it still obeys, never replies."""
+    fd = os.open(port, os.O_RDWR | os.O_NOCTTY)
+    try:
+        os.write(fd, dx.build_instruction(
+            dx.BROADCAST_ID, dx.Instruction.SYNC_WRITE,
+            dx.sync_write_params(dx.Reg.STATUS_RETURN_LEVEL, 1, [(servo_id, bytes([0]))])))
+    finally:
+        os.close(fd)
+
+
+@pytest.mark.parametrize("parts", [1, 2], ids=["whole", "parts"])
+def test_one_silent_servo_mid_chain_costs_that_servo_only(parts: int) -> None:
+    rig = load_rig_config()  # 20 servos; servo 7 sits mid-chain
+    silent = [s.id for s in rig.servos].index(7)
+    with SimBus.from_rig(rig) as sim:
+        bus = DynamixelBus(sim.port_path, rig, baud=rig.bus.baud, temperature_every=0)
+        bus.connect()
+        try:
+            def read(k: int) -> ServoState:
+                # a deadline with room for one read of the servos asked and no retry,
+                # as the loop fits its reads between glove frames
+                n = len(bus.reader.part_indices((k % parts, parts)))
+                now = bus.clock.now()
+                start = max(now, bus.link.request_start(now))
+                return bus.read_state(start + bus.read_wire_s(n) + 0.002,
+                                      part=(k % parts, parts) if parts > 1 else None)
+
+            for k in range(10):
+                assert not read(k).stale.any()
+            sim_servo = sim.servo(7)
+            _silence_by_sync_write(sim.port_path, 7)
+            deadline = time.monotonic() + 5
+            while sim_servo.status_return_level != 0:
+                assert time.monotonic() < deadline
+                time.sleep(0.001)
+            stale = np.zeros(len(rig.servos), np.int64)
+            its_reads = 0
+            for k in range(10, 10 + 40 * parts):
+                state = read(k)
+                # a read the host was too late to send (a loaded machine) asks nobody
+                asked = state.stale if state.asked is None else state.stale[state.asked]
+                # a read whose reply came after its deadline (a loaded machine) got
+                # nobody: the host's lateness, not the silent servo's
+                if k >= 10 + 4 * parts and state.sent and not asked.all():
+                    stale += state.stale
+                    its_reads += bool(state.asked is None or state.asked[silent])
+            others = np.delete(stale, silent)
+            assert its_reads >= 25 and stale[silent] == its_reads
+            assert not others.any(), f"servos after it starved: {others.tolist()}"
+            assert bus.stats.partial_replies > 0  # its cut replies were seen for what they are
+            assert bus.stats.chain_ends > 0
+            assert bus.stats.fallbacks == 0
+            # it answers again: asked at the end of the chain, it is read at once
+            sim_servo.mem[dx.Reg.STATUS_RETURN_LEVEL] = 2
+            state = read(silent % parts)
+            for _ in range(5):  # a read the host was too late to send asks nobody
+                if state.sent:
+                    break
+                state = read(silent % parts)
+            assert not state.stale.any()
+        finally:
+            bus.close()
+
+
+def test_a_silent_servo_does_not_end_the_run_when_tripped_watchdogs_are_rearmed(
+        sim: SimBus) -> None:
+    rig = small_rig()
+    b = DynamixelBus(sim.port_path, rig, baud=1_000_000, temperature_every=1)
+    b.connect()
+    try:
+        with b.torque():
+            sim.servo(3).mem[dx.Reg.STATUS_RETURN_LEVEL] = 0  # hears, obeys, never answers
+            time.sleep(0.3)  # the host "hangs": every servo's watchdog (100 ms) trips
+            # the re-arm's checked writes get no answer from servo 3: left to the loop's
+            # silence tiers, not a DeviceTimeoutError ending the run
+            b.read_state(b.clock.now() + 0.2)
+            assert b.stats.watchdog_trips >= 1 and b.torque_enabled
+            sim.servo(3).mem[dx.Reg.STATUS_RETURN_LEVEL] = 2  # its torque-off confirmed
+    finally:
+        b.close()
