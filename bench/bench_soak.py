@@ -305,8 +305,9 @@ def report(r: dict[str, Any]) -> None:
               f"stale reads {s.stale_reads}/{s.reads}")
     else:
         print(f"  recoveries      none (stale reads {s.stale_reads}/{s.reads})")
-    print(f"  silences        {b.silences} servos past the [silence] warning, {b.held} held, "
-          f"{b.recoveries} answered again (longest {b.recovery_reads_max} reads)")
+    print(f"  silences        {s.servo_silences} servos past the [silence] warning, "
+          f"{s.servos_held} held, {s.servo_recoveries} answered again (longest "
+          f"{s.servo_recovery_reads_max} reads)")
     m = re.search(r"goals: (\d+) decoded, (\d+) outside", r["emulator"])
     goals = f"{m.group(2)} of {m.group(1)} decoded" if m else "(no count from the emulator)"
     print(f"  goals outside   {goals} on the bus side outside the rig's limits "

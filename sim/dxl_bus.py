@@ -1,10 +1,11 @@
 """An emulated Dynamixel Protocol 2.0 bus on a pseudo-terminal.
 
 A client (``dynamixel-sdk``, or handrig's driver on top of it) opens
-``bus.port_path`` as if it were a USB adapter. A thread reads the master side,
+``bus.port_path`` as if it were a USB adapter. A thread reads the emulator's end
+of the pty (:class:`sim.dxl_line.PtyLine`: it holds no end a client opens),
 frames instruction packets by LEN (the SDK sends them unstuffed), checks the
-CRC, dispatches to :class:`~sim.dxl_servo.EmulatedServo` objects and writes the
-status packets back.
+CRC, dispatches to :class:`~sim.dxl_servo.EmulatedServo` objects
+(:class:`sim.dxl_dispatch.Dispatcher`) and writes the status packets back.
 
 Wire time (``wire_timing=True``): a pty delivers bytes at once whatever the
 baud rate, so the bus models the wire itself. It reads the baud the client set
@@ -13,57 +14,40 @@ earlier than the time the last byte would have arrived on a real half-duplex
 bus: instruction on the wire, then the servo's Return Delay Time, then the reply.
 Replies are held until that instant (sleep, then a short spin), never earlier.
 
-Faults (:class:`FaultSpec`): dropped, CRC-corrupted, wrong-ID, truncated and
-delayed replies with given probabilities (explicit seed), missing servos, and
-an overload hardware error on chosen servos; every fault is counted in
-:attr:`SimBus.fault_counts`.
-
-Goal audit: every Goal Position the bus decodes (Sync Write or Write) is
-counted in ``stats.goals_decoded``; with ``goal_limits`` (from the rig: each
-calibrated servo's ``[min_deg, max_deg]`` in ticks) one outside them is counted
-in ``stats.goals_outside``, the driver-side promise checked from the servo side.
+Faults: :class:`sim.dxl_faults.FaultSpec`. Servos for a rig: :mod:`sim.dxl_rig`.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import os
 import random
-import select
-import termios
 import threading
-import tty
 from collections import Counter
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Literal, NamedTuple, Protocol, cast
+from typing import Protocol
 
 from firmware_protocol.dynamixel import (
-    BAUD_BY_INDEX,
-    BROADCAST_ID,
-    MAX_PACKET_LEN,
-    MODELS,
     ErrorCode,
     HardwareError,
-    Instruction,
     PacketError,
-    build_fast_read_reply,
-    build_status,
     find_frame,
     parse_instruction,
-    split_bulk_read,
-    split_bulk_write,
-    split_sync_read,
-    split_sync_write,
 )
 from handrig.app.robots import load_rig
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import RigConfig
 from handrig.errors import ConfigError
-from handrig.realtime import LOOP_TIMER_SLACK_NS, timer_slack_ns
-from sim.dxl_servo import READABLE_BYTES, EmulatedServo
+from sim.dxl_dispatch import BusStats, Dispatcher, _Reply
+from sim.dxl_faults import FaultSpec
+from sim.dxl_line import BITS_PER_BYTE, SPIN_S, PtyLine, tighten_timer_slack, try_realtime
+from sim.dxl_rig import GOAL_POSITION_ADDRESS, goal_limits, servos_from_rig, with_model
+from sim.dxl_servo import EmulatedServo
+
+__all__ = [
+    "BITS_PER_BYTE", "GOAL_POSITION_ADDRESS", "BusStats", "FaultSpec", "MotionModel", "SimBus",
+    "_Reply", "goal_limits", "servos_from_rig", "with_model",
+]
 
 
 class MotionModel(Protocol):
@@ -79,7 +63,7 @@ class MotionModel(Protocol):
 
     def stop(self) -> None: ...
 
-BITS_PER_BYTE = 10  # start + 8 data + stop
+
 # A partial frame older than this is dropped as line noise.
 STALE_PARTIAL_S = 0.1
 # Servos without physics move kinematically; their state is advanced at most this often.
@@ -93,158 +77,9 @@ KINEMATIC_STEP_S = 0.002
 # it back (docs/measurements.md has the hand-over times measured both ways).
 HOUSEKEEPING_SLOT_S = 0.0003
 HOUSEKEEPING_OVERDUE_S = 0.01
-# Replies are timed by sleeping, then spinning for the last SPIN_S (with the thread's
-# timer slack cut to 1 us, Linux sleeps overshoot by tens of microseconds).
-SPIN_S = 60e-6
 
 
-# SCHED_FIFO priority of the bus thread when ``realtime`` (low: above normal tasks only).
-REALTIME_PRIORITY = 10
-
-
-def _tighten_timer_slack() -> None:
-    """Timer slack of 1 us for the calling thread (Linux; no-op elsewhere)."""
-    timer_slack_ns(LOOP_TIMER_SLACK_NS)
-
-
-def _try_realtime() -> bool:
-    """SCHED_FIFO for the calling thread where allowed; False when refused or unsupported.
-
-    On a loaded machine a normal thread wakes late from its sleeps, and its replies
-    leave late (docs/measurements.md)."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
-    except (OSError, AttributeError):
-        return False
-    return True
-
-
-def _baud_table() -> dict[int, int]:
-    out: dict[int, int] = {}
-    for name in dir(termios):
-        if name.startswith("B") and name[1:].isdigit():
-            out[getattr(termios, name)] = int(name[1:])
-    return out
-
-
-_BAUD_OF_SPEED = _baud_table()
-
-
-@dataclass(frozen=True)
-class FaultSpec:
-    """Switchable faults. Probabilities are per reply; ``seed`` makes them repeatable.
-
-    ``missing``: servo IDs that never answer (as if unplugged). ``overload``: servo
-    IDs that report an overload hardware error ``overload_after_s`` after the bus
-    starts (torque off, Alert bit set, only a reboot clears it). ``delay_s`` is the
-    extra latency of a delayed reply.
-    """
-
-    drop: float = 0.0
-    corrupt: float = 0.0
-    wrong_id: float = 0.0
-    truncate: float = 0.0
-    delay: float = 0.0
-    delay_s: float = 0.005
-    missing: frozenset[int] = field(default_factory=frozenset)
-    overload: frozenset[int] = field(default_factory=frozenset)
-    overload_after_s: float = 0.0
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        for name in ("drop", "corrupt", "wrong_id", "truncate", "delay"):
-            p = getattr(self, name)
-            if not 0.0 <= p <= 1.0:
-                raise ConfigError("fault probability out of range", key=name, value=p,
-                                  allowed="0..1")
-        if self.delay_s < 0 or self.overload_after_s < 0:
-            raise ConfigError("times must be >= 0", key="delay_s/overload_after_s",
-                              value=(self.delay_s, self.overload_after_s))
-
-    @property
-    def any_reply_fault(self) -> bool:
-        return any((self.drop, self.corrupt, self.wrong_id, self.truncate, self.delay))
-
-    @classmethod
-    def parse(cls, spec: str) -> FaultSpec:
-        """Parse ``"drop=0.02,corrupt=0.01,wrong_id=0.01,truncate=0.01,delay=0.01:0.005,
-        missing=7+9,overload=3@1.5,seed=42"`` (any subset, comma separated).
-
-        ``delay=P[:SECONDS]``; ``missing`` and ``overload`` take IDs joined by ``+``;
-        ``overload=IDS[@SECONDS]``.
-        """
-        allowed = "drop, corrupt, wrong_id, truncate, delay=P[:S], missing=ID+ID, " \
-                  "overload=ID+ID[@S], seed=N"
-        kw: dict[str, object] = {}
-        for part in filter(None, (p.strip() for p in spec.split(","))):
-            key, eq, value = part.partition("=")
-            key = key.strip().replace("-", "_")
-            if not eq:
-                raise ConfigError("expected key=value", file="--faults", key=part, allowed=allowed)
-            try:
-                if key in ("drop", "corrupt", "wrong_id", "truncate"):
-                    kw[key] = float(value)
-                elif key == "delay":
-                    p, _, s = value.partition(":")
-                    kw["delay"] = float(p)
-                    if s:
-                        kw["delay_s"] = float(s.removesuffix("s"))
-                elif key == "missing":
-                    kw["missing"] = frozenset(int(v) for v in value.split("+") if v)
-                elif key == "overload":
-                    ids, _, after = value.partition("@")
-                    kw["overload"] = frozenset(int(v) for v in ids.split("+") if v)
-                    if after:
-                        kw["overload_after_s"] = float(after.removesuffix("s"))
-                elif key == "seed":
-                    kw["seed"] = int(value)
-                else:
-                    raise ConfigError("unknown fault", file="--faults", key=key, allowed=allowed)
-            except ValueError as exc:
-                raise ConfigError(f"bad number ({exc})", file="--faults", key=key, value=value,
-                                  allowed=allowed) from None
-        try:
-            return cls(**kw)  # type: ignore[arg-type]
-        except ConfigError as exc:
-            raise exc.located("--faults") from None
-
-
-@dataclass
-class BusStats:
-    """Counters and host-overhead figures of the emulated bus."""
-
-    packets: int = 0
-    replies: int = 0
-    bad_crc: int = 0
-    noise_bytes: int = 0
-    overhead_total_s: float = 0.0
-    overhead_max_s: float = 0.0
-    late_total_s: float = 0.0
-    late_max_s: float = 0.0
-    by_instruction: Counter[int] = field(default_factory=Counter)
-    goals_decoded: int = 0  # Goal Position values received
-    goals_outside: int = 0  # of those, outside the servo's goal_limits
-
-    @property
-    def overhead_mean_s(self) -> float:
-        """Mean host time from a packet's last byte read to its reply ready to send."""
-        return self.overhead_total_s / self.packets if self.packets else 0.0
-
-    @property
-    def late_mean_s(self) -> float:
-        """Mean time a reply left after its wire-time instant (wire timing on)."""
-        return self.late_total_s / self.replies if self.replies else 0.0
-
-
-class _Reply(NamedTuple):
-    """Bytes a servo sends, after its Return Delay Time (and a fault's extra delay)."""
-
-    data: bytes
-    return_delay_s: float
-    fault_delay_s: float = 0.0
-
-
-class SimBus:
+class SimBus(Dispatcher):
     """Emulated servos behind a pty. Use as a context manager::
 
         with SimBus.from_rig(load_rig_config(), puppet=True, wire_timing=True) as bus:
@@ -256,8 +91,9 @@ class SimBus:
     ``faults``: fault switches (:class:`FaultSpec`). ``puppet``: what moves the motors
     (:class:`sim.puppet.Puppet`); without one servos move kinematically.
     ``clock``: times replies (default: :class:`MonotonicClock` with a 60 us spin).
-    ``check_baud``: a servo hears only packets sent at its Baud Rate item (off by
-    default: servos follow whatever baud the client sets). ``realtime``: ask for
+    ``check_baud``: a servo hears only packets sent at its Baud Rate item, as a real
+    one does (on by default; off, servos follow whatever baud the client sets).
+    ``realtime``: ask for
     SCHED_FIFO priority for the bus thread (best effort; ``realtime_granted`` says
     whether the OS agreed) so replies leave on time on a busy machine.
 
@@ -275,7 +111,7 @@ class SimBus:
         faults: FaultSpec | None = None,
         puppet: MotionModel | None = None,
         clock: Clock | None = None,
-        check_baud: bool = False,
+        check_baud: bool = True,
         realtime: bool = True,
     ) -> None:
         limits = goal_limits(servos) if isinstance(servos, RigConfig) else {}
@@ -302,8 +138,7 @@ class SimBus:
         self._rng = random.Random(self._faults.seed)
         self._by_id: dict[int, EmulatedServo] = {}
         self._rebuild_ids()
-        self._master = -1
-        self._slave = -1
+        self.line = PtyLine()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._started_at = 0.0
@@ -332,17 +167,19 @@ class SimBus:
         faults: FaultSpec | None = None,
         clock: Clock | None = None,
         realtime: bool = True,
+        bauds: Mapping[int, int] | None = None,
     ) -> SimBus:
         """Servos for the rig's IDs (or ``ids``), each starting at its joint's zero.
 
         ``puppet=True`` attaches a MuJoCo hand (:class:`sim.puppet.Puppet`) whose joints
         the calibrated servos drive; IDs without a calibration move kinematically.
+        ``bauds``: servo ID -> baud (bits per second) for servos not at the rig's baud.
         """
         # a path or preset name; a robot rig ("leap") brings its own MJCF model
         config = rig if isinstance(rig, RigConfig) else load_rig(rig)
         if model is not None:
             config = with_model(config, model)
-        servos = servos_from_rig(config, ids=ids, model=model)
+        servos = servos_from_rig(config, ids=ids, model=model, bauds=bauds)
         the_puppet: MotionModel | None
         if puppet is True:
             from sim.puppet import Puppet
@@ -357,40 +194,13 @@ class SimBus:
         bus.goal_limits = goal_limits(config)
         return bus
 
-    @property
-    def faults(self) -> FaultSpec:
-        """The fault switches; assigning new ones (at any time) reseeds their random
-        source and applies ``missing`` at once (``overload`` only counts from start)."""
-        return self._faults
-
-    @faults.setter
-    def faults(self, spec: FaultSpec) -> None:
-        with self.lock:
-            self._faults = spec
-            self._rng = random.Random(spec.seed)
-            self._overload_done = False
-            self._rebuild_ids()
-
-    def servo(self, servo_id: int) -> EmulatedServo:
-        """The emulated servo with this ID (missing ones included)."""
-        for s in self.servos:
-            if s.id == servo_id:
-                return s
-        raise KeyError(f"no emulated servo with ID {servo_id}")
-
-    def _rebuild_ids(self) -> None:
-        self._by_id = {s.id: s for s in self.servos if s.id not in self.faults.missing}
-
     # ------------------------------------------------------------ lifecycle
 
     def start(self) -> SimBus:
         """Open the pty and start serving; ``port_path`` is then valid."""
         if self._thread is not None:
             return self
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._master)
-        tty.setraw(self._slave)
-        self.port_path = os.ttyname(self._slave)
+        self.port_path = self.line.open()
         self._started_at = self.clock.now()
         self._last_advance = self._started_at
         for s in self.servos:
@@ -414,10 +224,7 @@ class SimBus:
             self._thread = None
         if self.puppet is not None:
             self.puppet.stop()
-        for fd in (self._master, self._slave):
-            if fd >= 0:
-                os.close(fd)
-        self._master = self._slave = -1
+        self.line.close()
 
     def __enter__(self) -> SimBus:
         return self.start()
@@ -436,41 +243,48 @@ class SimBus:
 
     def baud(self) -> int:
         """The baud rate the client set on the port (termios), 1 Mbps if unknown."""
-        try:
-            speed = termios.tcgetattr(self._master)[5]
-        except (termios.error, OSError):
-            return 1_000_000
-        return _BAUD_OF_SPEED.get(speed, 1_000_000) or 1_000_000
+        return self.line.baud()
+
+    @property
+    def client_open(self) -> bool:
+        """Whether a client holds the port now."""
+        return self.line.client_open
+
+    @property
+    def client_sessions(self) -> int:
+        """How many times a client opened the port since :meth:`start`."""
+        return self.line.sessions
 
     # ------------------------------------------------------------- serving
 
     def _serve(self) -> None:
-        _tighten_timer_slack()
+        tighten_timer_slack()
         if self.realtime:
-            self.realtime_granted = _try_realtime()
+            self.realtime_granted = try_realtime()
         buf = bytearray()
         last_rx = 0.0
-        fd = self._master
+        line = self.line
         clock = self.clock
         try:
             while not self._stop.is_set():
+                chunk, closed = line.wait(0.01)
                 # Arrivals are time-stamped before anything else.
-                ready, _, _ = select.select([fd], [], [], 0.01)
                 now = clock.now()
-                if not ready:
+                if closed:  # the client let the port go: what it left half-sent is noise
+                    self.stats.noise_bytes += len(buf)
+                    buf.clear()
+                    self._partial_since = None
+                    self.stats.client_closes += 1
+                if not chunk:
                     self._housekeeping(now)
                     if buf and now - last_rx > STALE_PARTIAL_S:
                         self.stats.noise_bytes += len(buf)
                         buf.clear()
                         self._partial_since = None
                     continue
-                try:
-                    chunk = os.read(fd, 65536)
-                except OSError:
-                    continue
                 last_rx = now
                 buf += chunk
-                self._drain(buf, now)  # then straight back to select: see HOUSEKEEPING_SLOT_S
+                self._drain(buf, now)  # then straight back to the line: see HOUSEKEEPING_SLOT_S
         except BaseException as exc:  # reported through .error; the thread must not vanish
             self.error = exc
             raise
@@ -529,7 +343,8 @@ class SimBus:
     def _handle_frame(self, frame: bytes, t_rx: float) -> None:
         self.stats.packets += 1
         if self.check_baud:
-            self._packet_baud = self.baud()
+            # bytes fed without a line (:meth:`feed`) reach every servo
+            self._packet_baud = self.line.baud() if self.line.fd >= 0 else 0
         with self.lock:
             if not self.wire_timing or t_rx - self._last_advance >= HOUSEKEEPING_OVERDUE_S:
                 self._housekeeping(t_rx)
@@ -583,286 +398,10 @@ class SimBus:
 
     def _emit(self, data: bytes) -> None:
         """Put bytes on the line (the pty master)."""
-        os.write(self._master, data)
+        self.line.write(data)
 
     def feed(self, data: bytes, now: float | None = None) -> None:
         """Handle bytes as if they had arrived on the line (no pty, no thread needed);
         replies go through :meth:`_emit`."""
         self._feed_buf += data
         self._drain(self._feed_buf, self.clock.now() if now is None else now)
-
-    # ------------------------------------------------------------ dispatch
-
-    def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"") -> _Reply:
-        """One status packet, with faults applied."""
-        packet = build_status(servo.id, error, data)
-        extra = 0.0
-        if self.faults.any_reply_fault:
-            packet, extra = self._apply_faults(
-                packet, servo.id, lambda other: build_status(other, error, data))
-        return _Reply(packet, servo.return_delay_s, extra)
-
-    def _apply_faults(
-        self, packet: bytes, servo_id: int, rebuild: Callable[[int], bytes]
-    ) -> tuple[bytes, float]:
-        """Drop, misaddress (``rebuild(other_id)``), corrupt, truncate or delay a reply."""
-        f = self.faults
-        rng = self._rng
-        if f.drop and rng.random() < f.drop:
-            self.fault_counts["dropped"] += 1
-            return b"", 0.0
-        if f.wrong_id and rng.random() < f.wrong_id:
-            self.fault_counts["wrong_id"] += 1
-            other = rng.choice([i for i in range(253) if i != servo_id])
-            packet = rebuild(other)
-        if f.corrupt and rng.random() < f.corrupt:
-            self.fault_counts["corrupted"] += 1
-            packet = packet[:-1] + bytes((packet[-1] ^ 0x5A,))
-        if f.truncate and rng.random() < f.truncate:
-            self.fault_counts["truncated"] += 1
-            packet = packet[: rng.randrange(1, len(packet))]
-        extra = 0.0
-        if f.delay and rng.random() < f.delay:
-            self.fault_counts["delayed"] += 1
-            extra = f.delay_s
-        return packet, extra
-
-    def _servo_for(self, servo_id: int, now: float) -> EmulatedServo | None:
-        servo = self._by_id.get(servo_id)
-        if servo is None:
-            if servo_id in self.faults.missing:
-                self.fault_counts["missing"] += 1
-            return None
-        if not servo.available(now) or not self._hears(servo):
-            return None
-        servo.last_heard = now
-        return servo
-
-    def _hears(self, servo: EmulatedServo) -> bool:
-        """With ``check_baud``, a servo hears only packets at its Baud Rate item."""
-        return not self.check_baud or BAUD_BY_INDEX.get(servo.mem[8]) == self._packet_baud
-
-    def _listening(self, now: float) -> list[EmulatedServo]:
-        """Servos that hear a broadcast now, in ID order."""
-        return sorted((s for s in self._by_id.values() if s.available(now) and self._hears(s)),
-                      key=lambda s: s.id)
-
-    def _dispatch(
-        self, target: int, inst: int, params: bytes, now: float
-    ) -> list[_Reply]:
-        if target == BROADCAST_ID:
-            for s in self._by_id.values():
-                if self._hears(s):
-                    s.last_heard = now
-            return self._broadcast(inst, params, now)
-        servo = self._servo_for(target, now)
-        if servo is None:
-            return []
-        level = servo.status_return_level
-        try:
-            if inst == Instruction.PING:
-                return [self._reply(servo, *servo.ping())]
-            if inst == Instruction.READ:
-                if len(params) != 4:
-                    return self._error(servo, ErrorCode.DATA_LENGTH, level >= 1)
-                address = params[0] | params[1] << 8
-                length = params[2] | params[3] << 8
-                err, data = servo.read(address, length)
-                return [self._reply(servo, err, data)] if level >= 1 else []
-            if inst in (Instruction.WRITE, Instruction.REG_WRITE):
-                if len(params) < 3:
-                    return self._error(servo, ErrorCode.DATA_LENGTH, level >= 2)
-                address = params[0] | params[1] << 8
-                if address == GOAL_POSITION_ADDRESS and len(params) == 6:
-                    self._audit_goal(servo.id, params[2:])
-                if inst == Instruction.WRITE:
-                    err = servo.write(address, params[2:])
-                else:
-                    err = servo.reg_write(address, params[2:])
-                if address <= 7 < address + len(params) - 2:
-                    self._rebuild_ids()
-                return [self._reply(servo, err)] if level >= 2 else []
-            if inst == Instruction.ACTION:
-                err = servo.action()
-                self._rebuild_ids()
-                return [self._reply(servo, err)] if level >= 2 else []
-            if inst == Instruction.REBOOT:
-                err = servo.reboot(now)
-                return [self._reply(servo, err)] if level >= 2 else []
-            if inst == Instruction.FACTORY_RESET:
-                option = params[0] if len(params) == 1 else 0
-                reply = [self._reply(servo, servo.factory_reset(option, now))] if level >= 2 else []
-                self._rebuild_ids()
-                return reply
-            if inst == Instruction.CLEAR:
-                return [self._reply(servo, servo.error_byte())] if level >= 2 else []
-            # Sync/bulk instructions are broadcast only; anything else is unknown.
-            return self._error(servo, ErrorCode.INSTRUCTION, True)
-        except PacketError:
-            return self._error(servo, ErrorCode.DATA_LENGTH, True)
-
-    def _audit_goal(self, servo_id: int, data: bytes) -> None:
-        self.stats.goals_decoded += 1
-        limits = self.goal_limits.get(servo_id)
-        if limits is not None:
-            goal = int.from_bytes(data, "little", signed=True)
-            if not limits[0] <= goal <= limits[1]:
-                self.stats.goals_outside += 1
-
-    def _error(self, servo: EmulatedServo, code: int, reply: bool) -> list[_Reply]:
-        return [self._reply(servo, servo.error_byte(code))] if reply else []
-
-    def _broadcast(self, inst: int, params: bytes, now: float) -> list[_Reply]:
-        try:
-            if inst == Instruction.SYNC_WRITE:
-                address, length, items = split_sync_write(params)
-                if address == GOAL_POSITION_ADDRESS and length == 4:
-                    for servo_id, data in items:
-                        self._audit_goal(servo_id, data)
-                if self.on_sync_write is not None:
-                    self.on_sync_write(now, address, list(items))
-                for servo_id, data in items:
-                    servo = self._servo_for(servo_id, now)
-                    if servo is not None:
-                        servo.write(address, data)
-                if address <= 7 < address + length:
-                    self._rebuild_ids()
-                return []
-            if inst == Instruction.FAST_SYNC_READ:
-                address, length, ids = split_sync_read(params)
-                return self._fast_read([(i, address, length) for i in ids], now)
-            if inst == Instruction.SYNC_READ:
-                address, length, ids = split_sync_read(params)
-                out: list[_Reply] = []
-                for servo_id in ids:
-                    servo = self._servo_for(servo_id, now)
-                    if servo is not None and servo.status_return_level >= 1:
-                        out.append(self._reply(servo, *servo.read(address, length)))
-                return out
-            if inst == Instruction.BULK_READ:
-                out = []
-                for servo_id, address, length in split_bulk_read(params):
-                    servo = self._servo_for(servo_id, now)
-                    if servo is not None and servo.status_return_level >= 1:
-                        out.append(self._reply(servo, *servo.read(address, length)))
-                return out
-            if inst == Instruction.FAST_BULK_READ:
-                return self._fast_read(split_bulk_read(params), now)
-            if inst == Instruction.BULK_WRITE:
-                for servo_id, address, data in split_bulk_write(params):
-                    servo = self._servo_for(servo_id, now)
-                    if servo is not None:
-                        servo.write(address, data)
-                self._rebuild_ids()
-                return []
-            if inst == Instruction.PING:
-                out = []
-                for servo in self._listening(now):
-                    out.append(self._reply(servo, *servo.ping()))
-                for servo_id in sorted(self.faults.missing):
-                    self.fault_counts["missing"] += 1
-                    _ = servo_id
-                return out
-            if inst == Instruction.ACTION:
-                for servo in self._listening(now):
-                    servo.action()
-                self._rebuild_ids()
-                return []
-            if inst == Instruction.REBOOT:
-                for servo in self._listening(now):
-                    servo.reboot(now)
-                return []
-            if inst in (Instruction.WRITE, Instruction.REG_WRITE) and len(params) >= 3:
-                address = params[0] | params[1] << 8
-                for servo in self._listening(now):
-                    if inst == Instruction.WRITE:
-                        servo.write(address, params[2:])
-                    else:
-                        servo.reg_write(address, params[2:])
-                self._rebuild_ids()
-                return []
-        except PacketError:
-            return []
-        return []  # broadcast instructions get no status, even when wrong
-
-    def _fast_read(
-        self, requests: Sequence[tuple[int, int, int]], now: float
-    ) -> list[_Reply]:
-        """One combined reply; it stops short at the first servo that does not answer.
-
-        A request the reply cannot carry (a range beyond the control table, a reply
-        longer than a packet) gets no reply at all."""
-        total = 8 + sum(n + 4 for _, _, n in requests)
-        if total > MAX_PACKET_LEN or any(n == 0 or a + n > READABLE_BYTES
-                                         for _, a, n in requests):
-            return []
-        chunks: list[tuple[int, int, bytes]] = []
-        complete = True
-        first_delay = 0.0
-        for servo_id, address, length in requests:
-            servo = self._servo_for(servo_id, now)
-            if servo is None or servo.status_return_level < 1:
-                complete = False
-                break
-            if not chunks:
-                first_delay = servo.return_delay_s
-            err, data = servo.read(address, length)
-            if not data:  # an error reply carries no data; keep the frame's shape
-                data = bytes(length)
-            chunks.append((servo_id, err, data))
-        if not chunks:
-            return []
-        missing = [(i, 0, bytes(n)) for i, _, n in requests[len(chunks):]]
-        sent = 8 + sum(len(d) + 4 for _, _, d in chunks)
-
-        def build(first_id: int) -> bytes:
-            first = (first_id, chunks[0][1], chunks[0][2])
-            packet = build_fast_read_reply([first, *chunks[1:], *missing])
-            return packet if complete else packet[:sent]
-
-        packet = build(chunks[0][0])
-        extra = 0.0
-        if self.faults.any_reply_fault:
-            packet, extra = self._apply_faults(packet, chunks[0][0], build)
-        return [_Reply(packet, first_delay, extra)]
-
-
-def with_model(config: RigConfig, model: str) -> RigConfig:
-    """The rig with every servo of model ``model`` (servos and puppet must agree)."""
-    if model not in MODELS:
-        raise ConfigError("unknown servo model", key="model", value=model,
-                          allowed=", ".join(MODELS))
-    name = cast(Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288"], model)
-    return dataclasses.replace(config, servos=tuple(
-        dataclasses.replace(s, model=name) for s in config.servos))
-
-
-GOAL_POSITION_ADDRESS = 116  # Goal Position (REFERENCE.md section 2)
-
-
-def goal_limits(config: RigConfig) -> dict[int, tuple[int, int]]:
-    """Each calibrated servo's ``[min_deg, max_deg]`` as (lowest, highest) goal ticks."""
-    out = {}
-    for s in config.servos:
-        a, b = s.deg_to_ticks(s.min_deg), s.deg_to_ticks(s.max_deg)
-        out[s.id] = (min(a, b), max(a, b))
-    return out
-
-
-def servos_from_rig(
-    config: RigConfig, *, ids: Sequence[int] | None = None, model: str | None = None
-) -> list[EmulatedServo]:
-    """Emulated servos for a rig: its IDs (or ``ids``), its models (or ``model``),
-    each starting at its calibrated zero (joint at 0 deg)."""
-    calibrated = {s.id: s for s in config.servos}
-    wanted = list(ids) if ids is not None else list(calibrated)
-    out = []
-    for servo_id in wanted:
-        cal = calibrated.get(servo_id)
-        out.append(EmulatedServo(
-            servo_id,
-            model or (cal.model if cal else "XL330-M288"),
-            baud=config.bus.baud,
-            start_ticks=float(cal.zero_ticks) if cal else 2048.0,
-        ))
-    return out

@@ -38,11 +38,11 @@ import math
 import struct
 
 from firmware_protocol.dynamixel import (
+    BAUD_BY_INDEX,
     BUS_WATCHDOG_UNIT_S,
     CONTROL_TABLE_BYTES,
     ERROR_ALERT,
     INDEX_BY_BAUD,
-    ITEM_AT,
     MODELS,
     RETURN_DELAY_UNIT_S,
     TICKS_PER_TURN,
@@ -56,6 +56,15 @@ from firmware_protocol.dynamixel import (
     ModelInfo,
     Reg,
 )
+from sim.dxl_profile import (
+    IN_POSITION,
+    PROFILE_NONE,
+    PROFILE_ONGOING,
+    VELOCITY_UNIT_TICKS_S,
+    profile_limits,
+    profile_step,
+    profile_type,
+)
 
 # Addresses above the modelled table up to the end of the XL330 table (661) read as 0.
 READABLE_BYTES = 662
@@ -63,7 +72,6 @@ READABLE_BYTES = 662
 # emulator, not a datasheet figure.
 REBOOT_S = 0.1
 POSITION_MODES = (3, 4, 5)
-OPERATING_MODES = (0, 1, 3, 4, 5, 16)
 CURRENT_MODE = 0
 CURRENT_BASED_POSITION_MODE = 5
 # Present Current (126, int16), Present Velocity (128, int32), Present Position (132, int32).
@@ -85,37 +93,19 @@ def idle_temperature_c(volts: float) -> float:
 
 
 def _defaults(info: ModelInfo, servo_id: int, baud: int) -> dict[Reg, int]:
+    """Initial values: the model's e-manual table, this servo's ID and baud, and the
+    supply at the model's recommended voltage."""
     return {
-        Reg.MODEL_NUMBER: info.model_number,
-        Reg.MODEL_INFORMATION: 0,
+        **info.defaults,
         Reg.FIRMWARE_VERSION: info.firmware_version,
         Reg.ID: servo_id,
-        Reg.BAUD_RATE: INDEX_BY_BAUD.get(baud, 1),
-        Reg.RETURN_DELAY_TIME: 250,
-        Reg.DRIVE_MODE: 0,
-        Reg.OPERATING_MODE: 3,
-        Reg.SECONDARY_ID: 255,
-        Reg.PROTOCOL_TYPE: 2,
-        Reg.HOMING_OFFSET: 0,
-        Reg.MOVING_THRESHOLD: 10,
-        Reg.TEMPERATURE_LIMIT: 70,
-        Reg.MAX_VOLTAGE_LIMIT: 70,
-        Reg.MIN_VOLTAGE_LIMIT: 35,
-        Reg.PWM_LIMIT: 885,
-        Reg.CURRENT_LIMIT: info.current_limit,
-        Reg.VELOCITY_LIMIT: round(info.no_load_speed_rpm / VELOCITY_UNIT_RPM),
-        Reg.MAX_POSITION_LIMIT: 4095,
-        Reg.MIN_POSITION_LIMIT: 0,
-        Reg.STARTUP_CONFIGURATION: 0,
-        Reg.SHUTDOWN: 53,  # overload, electrical shock, overheating, input voltage
-        Reg.STATUS_RETURN_LEVEL: 2,
-        Reg.POSITION_P_GAIN: info.position_p_gain,
-        Reg.POSITION_D_GAIN: info.position_d_gain,
-        Reg.VELOCITY_P_GAIN: 180,
-        Reg.VELOCITY_I_GAIN: 1600,
+        Reg.BAUD_RATE: INDEX_BY_BAUD[baud],
         Reg.PRESENT_INPUT_VOLTAGE: info.nominal_voltage_dv,
         Reg.PRESENT_TEMPERATURE: AMBIENT_TEMPERATURE_C,
     }
+
+
+PWM_FULL = 885  # Goal/Present PWM at 100 % (0.113 % per unit)
 
 
 class EmulatedServo:
@@ -138,8 +128,17 @@ class EmulatedServo:
             raise ValueError(f"unknown servo model {model!r}; known: {', '.join(MODELS)}")
         if not 0 <= servo_id <= 252:
             raise ValueError(f"servo ID {servo_id} out of range 0..252")
+        if baud not in INDEX_BY_BAUD:
+            raise ValueError(f"servo {servo_id}: {baud} baud is not an X-series rate; "
+                             f"known: {', '.join(str(b) for b in INDEX_BY_BAUD)}")
         self.info = MODELS[model]
+        self._item_at = self.info.item_at()
         self.mem = bytearray(READABLE_BYTES)
+        # the profile generator's output, in Present Position units and units/s
+        self.trajectory_ticks = float(start_ticks)
+        self.trajectory_velocity = 0.0
+        self._profile_goal: int | None = None
+        self._profile_type = PROFILE_NONE
         self.motor_ticks = float(start_ticks)
         self.motor_velocity_rpm = 0.0
         self.motor_current_ma = 0.0
@@ -180,11 +179,22 @@ class EmulatedServo:
         self._registered = None
         self._publish_present()
         self.set(Reg.GOAL_POSITION, self.get(Reg.PRESENT_POSITION))
-        self.set(Reg.GOAL_CURRENT, self.get(Reg.CURRENT_LIMIT))
+        self.trajectory_ticks = float(self.present)
+        self.trajectory_velocity = 0.0
+        self._profile_goal = None
+        self._profile_type = PROFILE_NONE
+        self._publish_trajectory()
+        if self.info.has_current:
+            self.set(Reg.GOAL_CURRENT, self.get(Reg.CURRENT_LIMIT))
 
     @property
     def id(self) -> int:
         return self.mem[7]
+
+    @property
+    def baud(self) -> int:
+        """The rate the servo listens and answers at (its Baud Rate item), bits/s."""
+        return BAUD_BY_INDEX[self.mem[8]]
 
     @property
     def torque_enabled(self) -> bool:
@@ -226,7 +236,8 @@ class EmulatedServo:
         """The motor current the controller may use, mA: in current-based position
         (and current) mode min(|Goal Current|, Current Limit); ``None`` in the other
         modes, where only the motor's stall current bounds it."""
-        if self.mem[11] not in (CURRENT_MODE, CURRENT_BASED_POSITION_MODE):
+        if self.mem[11] not in (CURRENT_MODE, CURRENT_BASED_POSITION_MODE) \
+                or not self.info.has_current:
             return None
         units = min(abs(self.get(Reg.GOAL_CURRENT)), self.get(Reg.CURRENT_LIMIT))
         return units * self.info.current_unit_ma
@@ -244,6 +255,16 @@ class EmulatedServo:
         homing = int.from_bytes(mem[20:24], "little", signed=True)
         return (homing - goal) if mem[10] & 1 else (goal - homing)
 
+    def trajectory_motor_ticks(self) -> float:
+        """The profile generator's position (Position Trajectory) as a motor position:
+        the goal itself while Profile Velocity is 0."""
+        mem = self.mem
+        if mem[112:116] == b"\0\0\0\0":
+            return self.goal_motor_ticks()
+        homing = int.from_bytes(mem[20:24], "little", signed=True)
+        t = self.trajectory_ticks
+        return (homing - t) if mem[10] & 1 else (t - homing)
+
     def set_motion(self, motor_ticks: float, velocity_rpm: float, current_ma: float) -> None:
         """Physics writes the motor's state; Present Position/Velocity/Current follow."""
         self.motor_ticks = motor_ticks
@@ -259,7 +280,75 @@ class EmulatedServo:
         current = round(d * self.motor_current_ma / self.info.current_unit_ma)
         current = max(-32768, min(32767, current))
         _PRESENT.pack_into(mem, 126, current, velocity, position)
-        mem[122] = 1 if abs(velocity) > int.from_bytes(mem[24:28], "little") else 0
+        threshold = int.from_bytes(mem[24:28], "little")
+        mem[122] = 1 if abs(velocity) > threshold else 0
+        mem[124:126] = self._present_pwm().to_bytes(2, "little", signed=True)
+        self._publish_moving_status(position, threshold)
+
+    def _present_pwm(self) -> int:
+        """Present PWM (124): the share of the supply the motor needs for its speed
+        (back EMF) and current (winding), each against the datasheet's no-load speed
+        and stall current, capped by PWM Limit; 0 with torque off."""
+        if not self.mem[64]:
+            return 0
+        info = self.info
+        duty = (self.motor_velocity_rpm / info.no_load_speed_rpm
+                + self.motor_current_ma / (info.stall_current_a * 1000.0))
+        limit = int.from_bytes(self.mem[36:38], "little")
+        pwm = round(self.direction * duty * PWM_FULL)
+        return max(-limit, min(limit, pwm))
+
+    def _publish_moving_status(self, position: int, threshold: int) -> None:
+        """Moving Status (123): profile type and Profile Ongoing while the profile runs;
+        In-Position in a position mode once the profile is done and Present Position is
+        within Moving Threshold of Goal Position (this emulator reads the threshold in
+        pulses for it: the e-manual names no other window)."""
+        mem = self.mem
+        goal = int.from_bytes(mem[116:120], "little", signed=True)
+        status = self._profile_type
+        ongoing = mem[112:116] != b"\0\0\0\0" and self.trajectory_ticks != goal
+        if ongoing and mem[64]:
+            status |= PROFILE_ONGOING
+        elif mem[64] and mem[11] in POSITION_MODES and abs(goal - position) <= threshold:
+            status |= IN_POSITION
+        mem[123] = status
+
+    def _publish_trajectory(self) -> None:
+        mem = self.mem
+        mem[136:140] = round(self.trajectory_velocity / VELOCITY_UNIT_TICKS_S).to_bytes(
+            4, "little", signed=True)
+        mem[140:144] = round(self.trajectory_ticks).to_bytes(4, "little", signed=True)
+
+    def step_profile(self, dt_s: float) -> None:
+        """Advance the profile generator by ``dt_s`` (e-manual, Profile Velocity(112) and
+        Profile Acceleration(108), velocity-based): no profile while Profile Velocity is
+        0 (the trajectory is the goal); a rectangular one at Profile Velocity when
+        Profile Acceleration is 0; else trapezoidal, or triangular when the move is too
+        short to reach Profile Velocity. Velocity Limit caps Profile Velocity."""
+        mem = self.mem
+        goal = int.from_bytes(mem[116:120], "little", signed=True)
+        profile = int.from_bytes(mem[112:116], "little")
+        if not mem[64] or mem[11] not in POSITION_MODES:
+            self.trajectory_ticks = float(self.present if not mem[64] else goal)
+            self.trajectory_velocity = 0.0
+            self._profile_goal = goal
+            self._profile_type = PROFILE_NONE
+        elif not profile:
+            self.trajectory_ticks, self.trajectory_velocity = float(goal), 0.0
+            self._profile_goal, self._profile_type = goal, PROFILE_NONE
+        else:
+            self._profile_toward(goal, profile, dt_s)
+        self._publish_trajectory()
+
+    def _profile_toward(self, goal: int, profile: int, dt_s: float) -> None:
+        mem = self.mem
+        v_max, accel = profile_limits(profile, int.from_bytes(mem[44:48], "little"),
+                                      int.from_bytes(mem[108:112], "little"))
+        if goal != self._profile_goal:
+            self._profile_goal = goal
+            self._profile_type = profile_type(goal - self.trajectory_ticks, v_max, accel)
+        self.trajectory_ticks, self.trajectory_velocity = profile_step(
+            self.trajectory_ticks, self.trajectory_velocity, goal, v_max, accel, dt_s)
 
     def heat(self, dt_s: float) -> None:
         """Warm the servo by I^2 R at the present current plus its standby draw, and cool
@@ -285,10 +374,19 @@ class EmulatedServo:
         units = min(profile, limit) if profile else limit
         return units * VELOCITY_UNIT_RPM * TICKS_PER_TURN / 60.0
 
-    def advance(self, dt_s: float) -> None:
-        """Kinematic motion without physics: toward the goal at the speed limit."""
+    def tick(self, dt_s: float) -> None:
+        """The servo's own clock: Realtime Tick, the profile generator, Moving Status."""
         self.tick_ms = (self.tick_ms + dt_s * 1000.0) % 32768.0
         self.mem[120:122] = int(self.tick_ms).to_bytes(2, "little")
+        if dt_s > 0:
+            self.step_profile(dt_s)
+            self._publish_moving_status(self.present,
+                                        int.from_bytes(self.mem[24:28], "little"))
+
+    def advance(self, dt_s: float) -> None:
+        """Kinematic motion without physics: :meth:`tick`, then toward the goal (or the
+        profile's trajectory) at the speed limit."""
+        self.tick(dt_s)
         if dt_s <= 0:
             return
         self.heat(dt_s)
@@ -296,7 +394,7 @@ class EmulatedServo:
             if self.motor_velocity_rpm or self.motor_current_ma:
                 self.set_motion(self.motor_ticks, 0.0, 0.0)
             return
-        error = self.goal_motor_ticks() - self.motor_ticks
+        error = self.trajectory_motor_ticks() - self.motor_ticks
         step = self.speed_limit_ticks_per_s() * dt_s
         moved = math.copysign(min(abs(error), step), error)
         rpm = moved / dt_s * 60.0 / TICKS_PER_TURN
@@ -304,16 +402,27 @@ class EmulatedServo:
 
     # ------------------------------------------------------------------ faults
 
+    def set_supply_voltage(self, volts: float) -> None:
+        """The supply the servo sees: Present Input Voltage (144) follows it; outside
+        Min/Max Voltage Limit (34, 32) the servo reports an input voltage error
+        (Hardware Error Status bit 0; torque off if Shutdown (63) has bit 0)."""
+        dv = max(0, min(65535, round(volts * 10)))
+        self.set(Reg.PRESENT_INPUT_VOLTAGE, dv)
+        if not self.get(Reg.MIN_VOLTAGE_LIMIT) <= dv <= self.get(Reg.MAX_VOLTAGE_LIMIT):
+            self.inject_hardware_error(HardwareError.INPUT_VOLTAGE)
+
     def inject_hardware_error(
         self, bits: int = HardwareError.OVERLOAD, *, persistent: bool = False
     ) -> None:
-        """A hardware error (overload by default): torque off, Alert bit set, until a
-        reboot clears it. ``persistent``: the cause stays, so it comes back after every
-        reboot until :meth:`clear_injected_fault`."""
+        """A hardware error (overload by default): Hardware Error Status bit and the
+        Alert bit set, torque off when Shutdown (63) has the bit, until a reboot clears
+        it. ``persistent``: the cause stays, so it comes back after every reboot until
+        :meth:`clear_injected_fault`."""
         if persistent:
             self.injected_hardware_error |= int(bits)
         self.mem[70] |= int(bits)
-        self.mem[64] = 0
+        if self.mem[63] & int(bits):  # Shutdown (63) picks the errors that stop the motor
+            self.mem[64] = 0
 
     def clear_injected_fault(self) -> None:
         """Remove the cause of a persistent injected fault (the status stays until a reboot)."""
@@ -353,9 +462,10 @@ class EmulatedServo:
         pos = address
         torque = self.torque_enabled
         while pos < end:
-            item = ITEM_AT.get(pos)
+            item = self._item_at.get(pos)
             if item is None:
-                inside = any(i.address < pos < i.address + i.size for i in ITEM_AT.values())
+                inside = any(i.address < pos < i.address + i.size
+                             for i in self._item_at.values())
                 return ErrorCode.DATA_LENGTH if inside else ErrorCode.ACCESS
             if pos + item.size > end:
                 return ErrorCode.DATA_LENGTH
@@ -373,7 +483,7 @@ class EmulatedServo:
         low, high = item.min_value, item.max_value
         if low is not None and high is not None and not low <= value <= high:
             return ErrorCode.DATA_RANGE
-        if pos == Reg.OPERATING_MODE and value not in OPERATING_MODES:
+        if pos == Reg.OPERATING_MODE and value not in self.info.operating_modes:
             return ErrorCode.DATA_RANGE
         goals = (Reg.GOAL_POSITION, Reg.GOAL_VELOCITY, Reg.GOAL_CURRENT, Reg.GOAL_PWM)
         if pos in goals and self.mem[98] == 0xFF:  # Bus Watchdog error stands
@@ -399,6 +509,7 @@ class EmulatedServo:
             low = int.from_bytes(mem[52:56], "little", signed=True)
             if low <= value <= int.from_bytes(mem[48:52], "little", signed=True):
                 self.mem[116:120] = data
+                self._publish_moving_status(self.present, int.from_bytes(mem[24:28], "little"))
                 return self.error_byte()
             self.counters["errors"] += 1
             return self.error_byte(ErrorCode.DATA_LIMIT)
@@ -411,7 +522,8 @@ class EmulatedServo:
         if address <= Reg.TORQUE_ENABLE < end and self.mem[64] and self.mem[70]:
             # A standing hardware error keeps torque off until a reboot.
             self.mem[64] = 0
-        if address <= Reg.HOMING_OFFSET < end or address <= Reg.DRIVE_MODE < end:
+        if address <= Reg.HOMING_OFFSET < end or address <= Reg.DRIVE_MODE < end \
+                or address <= Reg.GOAL_POSITION < end or address <= Reg.TORQUE_ENABLE < end:
             self._publish_present()
         return self.error_byte()
 

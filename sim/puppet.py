@@ -276,6 +276,7 @@ class _HandSim:
             if s is None:
                 continue
             s.set_motion(float(ticks[k]), float(rpm[k]), float(current_ma[k]))
+            s.tick(dt_s)  # the servo's clock, profile generator and Moving Status
             if heat_dt_s:
                 s.heat(heat_dt_s)
             if overload_s is not None and ch.powered:

@@ -1,14 +1,50 @@
-"""Shared fixtures."""
+"""Shared fixtures, and the test session's own home.
+
+The user's home is never read: before any test module is imported or any fixture
+of any scope runs, ``pytest_configure`` points ``HOME`` and the XDG directories at
+a temporary folder for the whole session (so a module- or session-scoped fixture
+that loads a default file gets the installed one, not a calibrated glove.toml or a
+baked grid of the developer's); every test then gets empty ones of its own.
+"""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+
+SESSION_HOME_VARS = ("HOME", "XDG_CONFIG_HOME", "XDG_DATA_HOME", "XDG_CACHE_HOME",
+                     "XDG_STATE_HOME")
+_saved_env: dict[str, str | None] = {}
+_session_home: list[str] = []
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    home = tempfile.mkdtemp(prefix="handrig-test-home-")
+    _session_home.append(home)
+    for var in SESSION_HOME_VARS:
+        _saved_env[var] = os.environ.get(var)
+    os.environ["HOME"] = home
+    os.environ["XDG_CONFIG_HOME"] = os.path.join(home, ".config")
+    os.environ["XDG_DATA_HOME"] = os.path.join(home, ".local", "share")
+    os.environ["XDG_CACHE_HOME"] = os.path.join(home, ".cache")
+    os.environ["XDG_STATE_HOME"] = os.path.join(home, ".local", "state")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    for var, value in _saved_env.items():
+        if value is None:
+            os.environ.pop(var, None)
+        else:
+            os.environ[var] = value
+    for home in _session_home:
+        shutil.rmtree(home, ignore_errors=True)
 
 SPEC = Path(__file__).resolve().parents[1] / "firmware_protocol" / "SPEC.md"
 

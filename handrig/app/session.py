@@ -405,9 +405,11 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['missed_cycles']} cycles missed)",
         f"limit clamps      {summary['limit_clamps']} servo targets held at a joint or servo "
         f"limit{most}",
-        "                  (the pose asked past the limit: normal at a full fist or spread; "
-        "high all the time: " + summary.get("clamp_advice", "recalibrate the glove or check the"
-                                            " map") + ")",
+        *([] if not (summary["limit_clamps"] or summary.get("clamped_joints")
+                     or summary.get("clamp_advice", "no clamps") != "no clamps") else [
+            "                  (the pose asked past the limit: normal at a full fist or spread"
+            + (f"; high all the time: {summary['clamp_advice']})" if "clamp_advice" in summary
+               else ")")]),
         f"                  {summary['pose_clamps']} values of the full two-hand pose clamped, "
         f"{summary['bus_clamps']} goals clamped by the driver, {summary['slew_limited']} "
         f"slew-limited, {summary['nonfinite_targets']} non-finite targets held",

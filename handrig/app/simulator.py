@@ -9,7 +9,7 @@ simulated rig). Everything else reaches the emulators as subprocesses
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -84,11 +84,13 @@ def servo_bus(
     wire_timing: bool = False,
     faults: str = "",
     realtime: bool = True,
+    bauds: Mapping[int, int] | None = None,
 ) -> tuple[SimBus, Puppet | None]:
     """Emulated Dynamixel servos on a pty (not started), and the MuJoCo puppet they
     drive (None with ``puppet=False``: the servos move kinematically). ``model``:
     every servo of that model (the rig's servos too: :func:`with_model`); ``faults``:
-    a fault spec as ``handrig sim-bus --faults`` takes it."""
+    a fault spec as ``handrig sim-bus --faults`` takes it; ``bauds``: servo ID -> baud
+    for servos not at the rig's (a servo answers only at its own)."""
     from sim.dxl_bus import FaultSpec, SimBus
 
     spec = FaultSpec.parse(faults) if faults else None
@@ -99,7 +101,8 @@ def servo_bus(
         kwargs: dict[str, Any] = {} if on_behind is None else {"on_behind": on_behind}
         hand = Puppet(rig, **kwargs)
     bus = SimBus.from_rig(rig, ids=ids, model=model, puppet=hand or False,
-                          wire_timing=wire_timing, faults=spec, realtime=realtime)
+                          wire_timing=wire_timing, faults=spec, realtime=realtime,
+                          bauds=bauds)
     return bus, hand
 
 

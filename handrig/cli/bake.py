@@ -97,7 +97,11 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         print(f"plot: {bake.plot(grid, path.with_suffix('.png'))}")
     if not args.out:
-        print(f"  to use it: sag_grid = \"{path}\" in the [loop] table of rig.toml")
+        print("  `handrig run` and `handrig demo` read it from now on (your baked grid) unless "
+              "the rig file's [loop] sag_grid names another; delete it to go back to the "
+              "shipped config/sag_grid.npz")
+    else:
+        print(f"  to use it: sag_grid = \"{path}\" in the [loop] table of the rig file")
     if args.report:
         rdir = Path(args.report)
         rdir.mkdir(parents=True, exist_ok=True)

@@ -8,12 +8,19 @@ from it in the channel's closing direction (the direction of the current
 ``raw_open -> raw_closed``, so reversed sensors stay reversed). The curves and
 their open/closed angles are kept from the current config.
 
-Where it reads and writes: it starts from ``--config``, by default your own
-glove.toml ($XDG_CONFIG_HOME/handrig/glove.toml, ~/.config/handrig when unset)
-if there is one, else the installed config/glove.toml. It writes ``--out``; by
-default back to ``--config`` when that is your own file, and to your own
-glove.toml when it started from the installed one, which is never rewritten.
-Use the result with ``handrig run --glove-config FILE``.
+Where it reads and writes: it starts from ``--glove-config``, else the glove file
+a run with ``--rig`` uses (the rig file's ``[loop] glove``, else your own
+glove.toml in $XDG_CONFIG_HOME/handrig, ~/.config/handrig when unset, else the
+installed config/glove.toml); the files are printed first. It writes ``--out``;
+by default back to the file it started from when that is your own, and to your
+own glove.toml when it started from the installed one, which is never rewritten;
+``handrig run`` reads your glove.toml without being told. Only the measured
+values change: the shipped comments and layout stay. Every write first keeps a
+dated copy in ``backups/`` beside the file; ``handrig calibrate undo`` puts it back.
+
+The port given with ``--glove`` is saved in the file, except a pseudo-terminal
+(``/dev/pts/N``, an emulator's, gone when it exits); when the adapter also has a
+name under ``/dev/serial/by-id/`` (which survives replugging) that name is saved.
 
 Interactive by default (Enter starts each step); ``--yes`` runs the steps on a
 timer with no input, for scripts and tests. ``handrig sim-glove --calibration``
@@ -34,18 +41,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomli_w
+from tomlkit.toml_document import TOMLDocument
 
+from handrig.app.robots import load_rig
+from handrig.app.sources import Source, format_sources, glove_file, rig_file
 from handrig.cli._numbers import nonnegative_float, positive_float
+from handrig.cli._ports import by_id_for, is_transient
+from handrig.cli._rig import add_rig_argument
 from handrig.clock import Clock, MonotonicClock
-from handrig.config.paths import CONFIG_HOME_HELP, config_file, output_for
+from handrig.config.paths import CONFIG_HOME_HELP, output_for, user_config
+from handrig.config.toml_edit import edit, undo, write_with_backup
 from handrig.devices.glove import GloveSource, SerialGlove
-from handrig.devices.glove_calibration import (
-    GloveConfig,
-    glove_config_to_toml,
-    load_glove_config,
-)
-from handrig.errors import DataError, DeviceError
+from handrig.devices.glove_calibration import GloveConfig, load_glove_config
+from handrig.errors import DataError, DeviceError, HandrigError
 from handrig.pose.imu_mount import IMU_STEPS, mount_from_poses, mount_xyzw, up_in_imu
 
 STEPS: tuple[tuple[str, str], ...] = (
@@ -91,12 +99,14 @@ def register(sub: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--config", default=None, metavar="FILE",
-                   help=f"glove config to start from (default: glove.toml in {CONFIG_HOME_HELP}"
-                        ", else the installed config/glove.toml)")
+    p.add_argument("--glove-config", default=None, metavar="FILE",
+                   help="glove file to start from (default: the rig file's [loop] glove, else "
+                        f"glove.toml in {CONFIG_HOME_HELP}, else the installed config/glove.toml)")
+    p.add_argument("--config", dest="glove_config", default=None, help=argparse.SUPPRESS)
+    add_rig_argument(p, old_name=False)
     p.add_argument("--out", default=None, metavar="FILE",
-                   help="where to write (default: the --config file if it is yours, else "
-                        "glove.toml in the user config directory; the installed file is "
+                   help="where to write (default: the file it starts from if it is yours, "
+                        "else glove.toml in the user config directory; the installed file is "
                         "never rewritten)")
     p.add_argument("--glove", default=None, metavar="PORT",
                    help="glove port, or opengloves:PORT (default: [glove] port of the config)")
@@ -184,9 +194,15 @@ def derive(cfg: GloveConfig, medians: dict[str, np.ndarray],
 
 
 def run(args: argparse.Namespace) -> int:
-    src = Path(args.config) if args.config else config_file("glove.toml")
+    rig_source = rig_file(args.rig)
+    rig_cfg = load_rig(rig_source.path)
+    source = glove_file(rig_source.path, rig_cfg, args.glove_config)
+    src = source.path
     cfg = load_glove_config(src)
     out_path = Path(args.out) if args.out else output_for(src, "glove.toml")
+    print(format_sources([rig_source, source, Source(
+        "writes to", out_path, "--out" if args.out else
+        "default: your own copy, with a dated backup")]), flush=True)
     port, fmt = _port_and_format(args, cfg)
     if args.hold <= 0 or args.settle < 0:
         raise DataError("--hold must be positive and --settle zero or positive")
@@ -233,14 +249,50 @@ def run(args: argparse.Namespace) -> int:
         if answer not in ("", "y", "yes"):
             print("not written", file=sys.stderr)
             return 1
+    port_note = ""
+    saved_port: str | None = None
     if args.glove:
-        new_cfg = dataclasses.replace(
-            new_cfg, glove=dataclasses.replace(new_cfg.glove, port=port, format=fmt))  # type: ignore[arg-type]
-    header = ("# handrig glove: written by `handrig calibrate glove`.\n"
-              "# Format: handrig/glove_calibration.py.\n")
+        if is_transient(port):
+            port_note = (f"port {port} not saved: a pseudo-terminal (an emulator's) is gone "
+                         "when its program exits; the file keeps "
+                         f"port = {cfg.glove.port!r}")
+        else:
+            stable = by_id_for(port)
+            saved_port = str(stable) if stable is not None else port
+            if stable is not None:
+                port_note = (f"port saved as {stable}: the same adapter as {port}, under a "
+                             "name that stays when it is plugged in again")
+    text = edit(src.read_text(encoding="utf-8"),
+                lambda doc: _write_values(doc, new_cfg, saved_port, fmt), file=str(src))
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text(header + tomli_w.dumps(glove_config_to_toml(new_cfg)), encoding="utf-8")
-    load_glove_config(out_path)  # what was written must load
+    backup = write_with_backup(out_path, text)
+    try:
+        load_glove_config(out_path)  # what was written must load
+    except HandrigError:
+        undo(out_path)  # put back what was there: a file that does not load helps nobody
+        raise
     print(f"wrote {out_path}")
-    print(f"  use it with: handrig run --glove-config {out_path}")
+    print(f"  backup of what was there: {backup} (`handrig calibrate undo` puts it back)")
+    if port_note:
+        print(f"  {port_note}")
+    if glove_file(rig_source.path, rig_cfg).path.resolve() == out_path.resolve():
+        print("  `handrig run` reads it from now on"
+              + ("" if out_path.resolve() == user_config("glove.toml").resolve()
+                 else f" (the glove file of {rig_source.path.name})"))
+    else:
+        print(f"  use it with: handrig run --glove-config {out_path}")
     return 0
+
+
+def _write_values(doc: TOMLDocument, cfg: GloveConfig, port: str | None, fmt: str) -> None:
+    """Set the measured values (and the port, if any) in the glove file's document."""
+    for table, ch in zip(doc["channels"], cfg.channels, strict=True):
+        table["raw_open"] = ch.raw_open
+        table["raw_closed"] = ch.raw_closed
+    imu = doc.setdefault("imu", {})
+    if list(imu.get("mount_xyzw", [0.0, 0.0, 0.0, 1.0])) != list(cfg.imu.mount_xyzw):
+        imu["mount_xyzw"] = list(cfg.imu.mount_xyzw)
+    if port is not None:
+        glove = doc.setdefault("glove", {})
+        glove["port"] = port
+        glove["format"] = fmt

@@ -2,23 +2,37 @@
 
 For every servo in the rig, the joint is brought to its zero pose (finger
 straight, wrist neutral: 0 deg in the vocabulary convention) and the servo's
-present position becomes ``zero_ticks``:
+present position becomes ``zero_ticks``. Two steps per servo, read then accept:
 
-* by hand (default): torque stays off; move the joint, press Enter to read
-  where it is now, Enter again to accept that reading;
-* ``--jog``: torque on; type ``+2`` / ``-0.5`` (joint degrees) to jog the
-  servo; the prompt then shows the position it settled at, and Enter accepts
-  exactly that; ``s`` skips a servo, ``q`` stops (nothing is written);
-* ``--yes``: accept every servo's present position without asking (scripts, tests).
+* by hand (default): torque stays off; move the joint, press Enter to read where
+  it is; the new zero and its shift from the current one are shown; Enter again
+  accepts exactly that reading (r reads again);
+* ``--jog``: torque on; type ``+2`` / ``-30`` (joint degrees, up to the joint's
+  range) to jog the servo, Enter to read where it settled, Enter again to accept;
+* ``s`` skips a servo; ``q`` leaves: nothing is written, exit status 0;
+* ``--yes``: read and accept every servo's present position without asking
+  (scripts, tests), except the ones that need a confirmation, which are skipped.
 
-Where it reads and writes: the rig file is ``--config``, by default your own
+A confirmation (typing ``yes``) is needed, and the reason shown, when the new zero
+is further than ``[calibration] max_zero_shift_deg`` (default 20) from the current
+one (a joint hanging under gravity with torque off, or a horn a spline off, reads
+like that), or when it puts part of ``[min_deg, max_deg]`` outside the servo's
+0..4095 ticks (the limits are then narrowed to what the servo can reach).
+
+After a zero is accepted the direction is checked: with ``--jog`` the servo moves
+the joint a few degrees towards flexion and asks whether it flexed; by hand you
+flex it and the reading's sign is checked. A wrong direction flips ``direction``
+(after you agree). ``--no-direction-check`` leaves it out.
+
+Where it reads and writes: the rig file is ``--rig``, by default your own
 rig.toml ($XDG_CONFIG_HOME/handrig/rig.toml, ~/.config/handrig when unset) if
 there is one, else the installed config/rig.toml. The result goes to ``--out``;
-by default back to ``--config`` when that is your own file, and to your own
-rig.toml when it started from the installed one, which is never rewritten. Use
-it with ``handrig run --config FILE``. Comments and layout are kept; only the
-``zero_ticks`` lines change, and the new file is checked before it is written
-(a zero whose limits fall outside the servo's range is refused with the reason).
+by default back to the rig file when it is your own, and to your own rig.toml
+when it started from the installed one, which is never rewritten (``handrig run``
+then reads it without being told). Comments and layout are kept; only the
+changed values are rewritten, and the new file is checked before it is written.
+Every write first keeps a dated copy of the file in ``backups/`` beside it;
+``handrig calibrate undo`` puts the last one back, byte for byte.
 """
 
 from __future__ import annotations
@@ -27,7 +41,6 @@ import argparse
 import contextlib
 import dataclasses
 import math
-import re
 import sys
 import tomllib
 from collections.abc import Callable
@@ -35,86 +48,70 @@ from pathlib import Path
 from typing import Any
 
 from handrig.app.factory import port_process
+from handrig.app.robots import load_rig
+from handrig.app.sources import Source, format_sources, rig_file
+from handrig.cli._display import check_gl_backend
+from handrig.cli._rig import add_rig_argument
 from handrig.cli.calibrate_glove import calibrate_subparsers
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.loading import build
-from handrig.config.paths import CONFIG_HOME_HELP, config_file, output_for
-from handrig.config.rig import RigConfig, load_rig_config
+from handrig.config.paths import is_installed, output_for, user_config, user_config_dir
+from handrig.config.rig import (
+    POSITION_TICKS_MAX,
+    POSITION_TICKS_MIN,
+    TICKS_PER_DEG,
+    RigConfig,
+    ServoCalibration,
+)
+from handrig.config.toml_edit import (
+    BACKUP_DIR,
+    backups_of,
+    edit,
+    undo,
+    update_servos,
+    write_with_backup,
+)
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
 from handrig.errors import ConfigError, HandrigError
 
 
 def register(sub: Any) -> None:
-    p: argparse.ArgumentParser = calibrate_subparsers(sub).add_parser(
+    calibrate = calibrate_subparsers(sub)
+    p: argparse.ArgumentParser = calibrate.add_parser(
         "servos", help="set each servo's zero (by hand, or jogging) and save it to rig.toml",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--config", default=None, metavar="FILE",
-                   help=f"rig file to start from (default: rig.toml in {CONFIG_HOME_HELP}, "
-                        "else the installed config/rig.toml)")
+    add_rig_argument(p)
     p.add_argument("--bus", default=None, metavar="PORT",
                    help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
     p.add_argument("--ids", default=None, metavar="LIST", help="only these servo IDs, e.g. 1,2,7")
     p.add_argument("--jog", action="store_true", help="torque on and jog each servo to zero")
     p.add_argument("--yes", action="store_true",
-                   help="accept every present position without asking")
+                   help="accept every present position without asking (a zero that needs a "
+                   "confirmation is skipped)")
+    p.add_argument("--no-direction-check", action="store_true",
+                   help="do not check each servo's direction after its zero")
     p.add_argument("--out", default=None, metavar="FILE",
-                   help="where to write (default: the --config file if it is yours, else "
+                   help="where to write (default: the rig file if it is yours, else "
                         "rig.toml in the user config directory; the installed file is never "
                         "rewritten)")
     p.set_defaults(func=run)
+    u: argparse.ArgumentParser = calibrate.add_parser(
+        "undo", help="put back the file as it was before the last calibration wrote it",
+        description="Restore the newest backup (byte for byte) of a file a calibration "
+        "wrote, and delete that backup: a second undo goes one write further back. "
+        "Default: whichever of your files in the user config directory a calibration "
+        "wrote last.")
+    u.add_argument("--file", default=None, metavar="FILE",
+                   help="the calibrated file (default: the one of yours written last)")
+    u.set_defaults(func=run_undo)
 
 
 def update_zero_ticks(text: str, zeros: dict[int, int]) -> str:
-    """``text`` of a rig file with ``zero_ticks`` of the given servo IDs replaced.
-
-    Works on the ``[[servos]]`` blocks line by line, so comments and layout stay; a
-    block without a ``zero_ticks`` line gets one after its ``id`` line.
-    """
-    lines = text.splitlines(keepends=True)
-    # (first line, end line) of every [[servos]] block
-    blocks: list[tuple[int, int]] = []
-    begin: int | None = None
-    for i, line in enumerate(lines):
-        header = line.split("#", 1)[0].strip()
-        if re.fullmatch(r"\[\[?\s*[A-Za-z_][\w.\- ]*\]\]?", header):  # a table header
-            if begin is not None:
-                blocks.append((begin, i))
-                begin = None
-            if re.fullmatch(r"\[\[\s*servos\s*\]\]", header):
-                begin = i
-    if begin is not None:
-        blocks.append((begin, len(lines)))
-    by_id: dict[int, tuple[int | None, int]] = {}  # id -> (zero line, id line)
-    for first, last in blocks:
-        id_line = zero_at = None
-        servo_id = None
-        for i in range(first + 1, last):
-            stripped = lines[i].strip()
-            m = re.match(r"id\s*=\s*(\d+)", stripped)
-            if m:
-                servo_id, id_line = int(m.group(1)), i
-            elif re.match(r"zero_ticks\s*=", stripped):
-                zero_at = i
-        if servo_id is not None and id_line is not None:
-            by_id[servo_id] = (zero_at, id_line)
-    for servo_id in zeros:
-        if servo_id not in by_id:
-            raise ConfigError("no [[servos]] block with this id", key="servos.id", value=servo_id)
-    inserts: list[tuple[int, str]] = []
-    for servo_id, ticks in zeros.items():
-        zero_at, id_line = by_id[servo_id]
-        if zero_at is not None:
-            old = lines[zero_at]
-            indent = old[: len(old) - len(old.lstrip())]
-            comment = "  " + old[old.index("#"):].rstrip("\n") if "#" in old else ""
-            lines[zero_at] = f"{indent}zero_ticks = {ticks}{comment}\n"
-        else:
-            inserts.append((id_line + 1, f"zero_ticks = {ticks}\n"))
-    for at, line in sorted(inserts, reverse=True):
-        lines.insert(at, line)
-    return "".join(lines)
+    """``text`` of a rig file with ``zero_ticks`` of the given servo IDs replaced
+    (comments and layout kept)."""
+    return update_servos(text, {i: {"zero_ticks": t} for i, t in zeros.items()})
 
 
 def calibration_rig(rig: RigConfig) -> RigConfig:
@@ -123,12 +120,17 @@ def calibration_rig(rig: RigConfig) -> RigConfig:
     return dataclasses.replace(rig, bus=dataclasses.replace(rig.bus, watchdog_ms=0))
 
 
-MAX_JOG_STEP_DEG = 10.0  # one jog command moves the joint at most this far
 ACCEPT_TOLERANCE_TICKS = 2  # Enter accepts the shown reading if the servo is still within this
 POLL_S = 0.02  # present position is read this often while waiting for the servo to settle
 STILL_S = 0.15  # ... and counts as settled after this long within STILL_TICKS
 STILL_TICKS = 1
 SETTLE_TIMEOUT_S = 3.0
+DIRECTION_STEP_DEG = 10.0  # the direction check moves the joint this far (within its limits)
+DIRECTION_MIN_DEG = 3.0  # by hand: a flex must read at least this far from zero
+
+
+class Quit(Exception):
+    """The user typed q: leave, nothing written."""
 
 
 def _ask(prompt: str) -> str:
@@ -161,77 +163,241 @@ def settled_position(bus: DynamixelBus, index: int, clock: Clock,
             anchor, since = ticks, clock.now()
 
 
+@dataclasses.dataclass(frozen=True)
+class Proposal:
+    """A reading as a new zero: its shift, what needs a confirmation, the new limits."""
+
+    zero_ticks: int
+    shift_deg: float
+    reasons: tuple[str, ...]  # why a typed confirmation is needed (empty: none)
+    limits_deg: tuple[float, float] | None  # narrowed limits, None when they fit
+    impossible: str = ""  # why this zero cannot be used at all
+
+
+def propose(cal: ServoCalibration, ticks: int, max_shift_deg: float) -> Proposal:
+    """What writing ``ticks`` as ``cal``'s zero would mean."""
+    shift = cal.ticks_to_deg(ticks)  # joint degrees from the current zero
+    reasons = []
+    if abs(shift) > max_shift_deg:
+        reasons.append(
+            f"the zero moves {shift:+.1f} deg, more than [calibration] max_zero_shift_deg = "
+            f"{max_shift_deg:g}: a joint hanging under gravity with torque off, or a horn "
+            "mounted a spline off, reads like this")
+    new = dataclasses.replace(cal, zero_ticks=ticks)
+    ends = sorted((new.ticks_to_deg(POSITION_TICKS_MIN), new.ticks_to_deg(POSITION_TICKS_MAX)))
+    low, high = max(cal.min_deg, ends[0]), min(cal.max_deg, ends[1])
+    limits: tuple[float, float] | None = None
+    if low > cal.min_deg or high < cal.max_deg:
+        low, high = math.ceil(low * 10) / 10, math.floor(high * 10) / 10
+        if low >= high:
+            return Proposal(ticks, shift, tuple(reasons), None, impossible=(
+                f"with zero_ticks {ticks} no part of [{cal.min_deg:g}, {cal.max_deg:g}] deg "
+                "lies within the servo's 0..4095 ticks"))
+        a, b = sorted((new.deg_to_ticks_exact(cal.min_deg), new.deg_to_ticks_exact(cal.max_deg)))
+        reasons.append(
+            f"with zero_ticks {ticks} the joint's range [{cal.min_deg:g}, {cal.max_deg:g}] deg "
+            f"needs ticks {a:.0f}..{b:.0f}, outside the servo's travel 0..4095: accepting "
+            f"narrows the limits to [{low:g}, {high:g}] deg")
+        limits = (low, high)
+    return Proposal(ticks, shift, tuple(reasons), limits)
+
+
+def _jog(bus: DynamixelBus, index: int, cal: ServoCalibration, start: int,
+         answer: str, say: Callable[[str], None]) -> bool:
+    """Jog by ``answer`` joint degrees, at most the joint's range; False if not a jog."""
+    span_deg = cal.max_deg - cal.min_deg
+    try:
+        step_deg = float(answer)
+    except ValueError:
+        step_deg = math.nan
+    if not math.isfinite(step_deg) or abs(step_deg) > span_deg:
+        say(f"not a jog: {answer!r}; type degrees between -{span_deg:g} and +{span_deg:g} "
+            "(the joint's range), e.g. +2 or -30")
+        return False
+    ticks_per_deg = cal.direction * cal.gear_ratio * TICKS_PER_DEG
+    base = bus.read_register(index, Reg.GOAL_POSITION)  # jogs add up
+    goal = round(base + ticks_per_deg * step_deg)
+    # never further from where it started than the joint's configured span
+    span = abs(ticks_per_deg) * span_deg
+    low, high = max(POSITION_TICKS_MIN, start - span), min(POSITION_TICKS_MAX, start + span)
+    bus.write_register(index, Reg.GOAL_POSITION, int(min(max(goal, low), high)))
+    return True
+
+
+def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog: bool,
+                    ask: Callable[[str], str], say: Callable[[str], None],
+                    clock: Clock) -> int | None:
+    """Check ``cal.direction`` (``cal`` has the new zero); the direction to write if it
+    must flip, else None. Jogging: the servo flexes the joint and the user says whether
+    it flexed. By hand: the user flexes it and the reading's sign tells."""
+    name = bus.describe(index)
+    step = min(DIRECTION_STEP_DEG, cal.max_deg) if cal.max_deg > 0 else 0.0
+    flip = -cal.direction
+    if jog:
+        if step <= 0:
+            say(f"{name}: its range [{cal.min_deg:g}, {cal.max_deg:g}] allows no flexion: "
+                "direction not checked")
+            return None
+        bus.write_register(index, Reg.GOAL_POSITION, cal.deg_to_ticks(step))
+        settled_position(bus, index, clock)
+        try:
+            while True:
+                answer = ask(f"{name}: moved to {step:+g} deg. Did the joint flex (bend the way "
+                             "it closes)? [y/n, q quits]: ").lower()
+                if answer in ("y", "yes"):
+                    return None
+                if answer in ("n", "no"):
+                    say(f"{name}: direction flips to {flip} (it moved the other way)")
+                    return flip
+                if answer == "q":
+                    raise Quit
+        finally:
+            bus.write_register(index, Reg.GOAL_POSITION, cal.deg_to_ticks(0.0))
+            settled_position(bus, index, clock)
+    while True:
+        answer = ask(f"{name}: direction check: flex the joint by hand (bend it the way it "
+                     "closes, 10 deg or more), hold it, press Enter [s skips the check, q "
+                     "quits]: ").lower()
+        if answer == "s":
+            say(f"{name}: direction not checked")
+            return None
+        if answer == "q":
+            raise Quit
+        ticks, _ = settled_position(bus, index, clock)
+        deg = cal.ticks_to_deg(ticks)
+        if abs(deg) < DIRECTION_MIN_DEG:
+            say(f"{name}: it reads {deg:+.1f} deg: flex it further")
+            continue
+        if deg > 0:
+            say(f"{name}: reads {deg:+.1f} deg where you flexed it: direction {cal.direction} "
+                "is right")
+            return None
+        answer = ask(f"{name}: reads {deg:+.1f} deg where you flexed it: the direction looks "
+                     f"reversed. Write direction = {flip}? [y/n]: ").lower()
+        if answer in ("y", "yes"):
+            return flip
+        say(f"{name}: direction stays {cal.direction}")
+        return None
+
+
 def calibrate(
     bus: DynamixelBus, rig: RigConfig, ids: list[int], *, jog: bool, yes: bool,
     ask: Callable[[str], str] = _ask, say: Callable[[str], None] = print,
-    clock: Clock | None = None,
-) -> dict[int, int]:
-    """Walk through the servos and return {id: new zero_ticks}.
+    clock: Clock | None = None, direction_check: bool = True,
+) -> dict[int, dict[str, Any]]:
+    """Walk through the servos; return {id: {key: new value}} (``zero_ticks``, and
+    ``direction``, ``min_deg``/``max_deg`` where they change). Raises :class:`Quit`.
 
-    The prompt shows the servo's position read after it settled (after a jog,
-    or after the joint was moved by hand); Enter accepts exactly that reading,
-    once a fresh read confirms the servo is still there (else the new reading
-    is shown and Enter is asked for again).
+    Step one shows the servo's settled position; Enter reads it. Step two shows the
+    reading as a new zero, with its shift; Enter accepts exactly that reading once a
+    fresh read confirms the servo is still there (else the new reading is shown).
+    A zero that needs a confirmation (see :func:`propose`) is accepted only by
+    typing ``yes``; ``yes=True`` skips those servos.
     """
     clock = clock or MonotonicClock()
-    zeros: dict[int, int] = {}
+    bound = rig.calibration.max_zero_shift_deg
+    changes: dict[int, dict[str, Any]] = {}
     for servo_id in ids:
         index = bus.ids.index(servo_id)
         cal = rig.servo(servo_id)
         name = bus.describe(index)
         start = bus.read_register(index, Reg.PRESENT_POSITION)
         shown, settled = settled_position(bus, index, clock)
-        while True:
-            if yes:
-                zeros[servo_id] = shown
-                say(f"{name}: zero_ticks {cal.zero_ticks} -> {shown}")
-                break
-            hint = ("+N/-N jog degrees, " if jog else "move the joint by hand, ") + \
-                "Enter accepts the position shown, s skips, q quits"
-            moving = "" if settled else ", still moving"
-            answer = ask(f"{name}: at {shown} ticks ({cal.ticks_to_deg(shown):+.1f} deg from "
-                         f"the current zero {cal.zero_ticks}{moving}); bring it to 0 deg "
-                         f"[{hint}]: ")
-            if answer == "":
-                now_ticks, settled = settled_position(bus, index, clock)
-                if settled and abs(now_ticks - shown) <= ACCEPT_TOLERANCE_TICKS:
-                    zeros[servo_id] = shown
-                    say(f"{name}: zero_ticks {cal.zero_ticks} -> {shown}")
-                    break
-                say(f"{name}: it moved ({shown} -> {now_ticks} ticks); Enter accepts the new "
-                    "position if it stays")
-                shown = now_ticks
-                continue
-            if answer.lower() == "s":
+        reading: int | None = shown if yes else None
+        hint = "+N/-N jog degrees, " if jog else "move the joint by hand, "
+        accepted: Proposal | None = None
+        while accepted is None:
+            if reading is None:
+                moving = "" if settled else ", still moving"
+                answer = ask(f"{name}: at {shown} ticks ({cal.ticks_to_deg(shown):+.1f} deg "
+                             f"from the current zero {cal.zero_ticks}{moving}); bring it to "
+                             f"0 deg [{hint}Enter reads it, s skips, q quits]: ")
+            else:
+                prop = propose(cal, reading, bound)
+                say(f"{name}: reads {reading} ticks: zero_ticks {cal.zero_ticks} -> {reading} "
+                    f"({prop.shift_deg:+.1f} deg)")
+                if prop.impossible:
+                    say(f"{name}: cannot be the zero: {prop.impossible}")
+                    if yes:
+                        break
+                    reading = None
+                    continue
+                else:
+                    for reason in prop.reasons:
+                        say(f"{name}: needs a confirmation: {reason}")
+                    if yes:
+                        if prop.reasons:
+                            say(f"{name}: not written (--yes does not confirm); run without "
+                                "--yes to confirm it")
+                            break
+                        accepted = prop
+                        continue
+                    answer = ask(f"{name}: type yes to accept this zero anyway, Enter reads "
+                                 "again, s skips, q quits: " if prop.reasons else
+                                 f"{name}: Enter accepts this zero, r reads again, s skips, "
+                                 "q quits: ")
+                    confirm = answer.lower() == "yes" if prop.reasons else answer == ""
+                    if confirm:
+                        now_ticks, settled = settled_position(bus, index, clock)
+                        if settled and abs(now_ticks - reading) <= ACCEPT_TOLERANCE_TICKS:
+                            accepted = prop
+                            continue
+                        say(f"{name}: it moved ({reading} -> {now_ticks} ticks); read again")
+                        shown, reading = now_ticks, None
+                        continue
+                    if answer in ("", "r"):
+                        reading = None
+                        shown, settled = settled_position(bus, index, clock)
+                        continue
+            low = answer.lower()
+            if low == "q":
+                raise Quit
+            if low == "s":
                 say(f"{name}: skipped (zero_ticks stays {cal.zero_ticks})")
                 break
-            if answer.lower() == "q":
-                raise HandrigError("calibration stopped: nothing was written")
+            if answer in ("", "r"):
+                shown, settled = settled_position(bus, index, clock)
+                reading = shown
+                continue
             if jog:
-                try:
-                    step_deg = float(answer)
-                except ValueError:
-                    step_deg = math.nan
-                if not math.isfinite(step_deg) or abs(step_deg) > MAX_JOG_STEP_DEG:
-                    say(f"not a jog: {answer!r}; type degrees between -{MAX_JOG_STEP_DEG:g} "
-                        f"and +{MAX_JOG_STEP_DEG:g}, e.g. +2 or -0.5")
-                    continue
-                ticks_per_deg = cal.direction * cal.gear_ratio * 4096 / 360
-                base = bus.read_register(index, Reg.GOAL_POSITION)  # jogs add up
-                goal = round(base + ticks_per_deg * step_deg)
-                # never further from where it started than the joint's configured span
-                span = abs(ticks_per_deg) * (cal.max_deg - cal.min_deg)
-                low, high = max(0, start - span), min(4095, start + span)
-                bus.write_register(index, Reg.GOAL_POSITION, int(min(max(goal, low), high)))
-            else:
-                say("torque is off: move the joint by hand, then press Enter")
+                reading = None
+                if _jog(bus, index, cal, start, answer, say):
+                    shown, settled = settled_position(bus, index, clock)
+                continue
+            say("torque is off: move the joint by hand, then press Enter")
             shown, settled = settled_position(bus, index, clock)
-    return zeros
+        if accepted is None:
+            continue
+        change: dict[str, Any] = {"zero_ticks": accepted.zero_ticks}
+        new_cal = dataclasses.replace(cal, zero_ticks=accepted.zero_ticks)
+        if accepted.limits_deg is not None:
+            change["min_deg"], change["max_deg"] = accepted.limits_deg
+            new_cal = dataclasses.replace(new_cal, min_deg=accepted.limits_deg[0],
+                                          max_deg=accepted.limits_deg[1])
+        say(f"{name}: zero_ticks {cal.zero_ticks} -> {accepted.zero_ticks} accepted"
+            + (f", limits [{new_cal.min_deg:g}, {new_cal.max_deg:g}] deg"
+               if accepted.limits_deg else ""))
+        if direction_check and not yes:
+            flipped = check_direction(bus, index, new_cal, jog=jog, ask=ask, say=say,
+                                      clock=clock)
+            if flipped is not None:
+                change["direction"] = flipped
+        changes[servo_id] = change
+    return changes
+
+
+def default_out(rig_path: Path) -> Path:
+    """Where a calibration of ``rig_path`` goes by default: the file itself when it is
+    yours; your rig.toml for the installed default; your copy of a preset by its name."""
+    if is_installed(rig_path) and rig_path.name != "rig.toml":
+        return user_config(rig_path.name)
+    return output_for(rig_path, "rig.toml")
 
 
 def run(args: argparse.Namespace) -> int:
-    rig_path = Path(args.config) if args.config else config_file("rig.toml")
-    rig = load_rig_config(rig_path)
+    source = rig_file(args.rig)
+    rig_path = source.path
+    rig = load_rig(rig_path)
     ids = [s.id for s in rig.servos]
     if args.ids:
         try:
@@ -243,36 +409,76 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("servo IDs not in the rig file", key="--ids", value=unknown,
                               allowed=", ".join(map(str, ids)))
         ids = wanted
+    out = Path(args.out) if args.out else default_out(rig_path)
     bus_spec = args.bus or rig.bus.port
-    with contextlib.ExitStack() as stack:
-        if bus_spec == "sim":
-            _, bus_spec = stack.enter_context(
-                port_process(["sim-bus", "--rig", str(rig_path)], "the simulated servo bus"))
-        bus = DynamixelBus(bus_spec, calibration_rig(rig))
-        bus.hold_outside_limits = True  # the zero is what is being found
-        stack.callback(bus.close)
-        bus.connect()
-        if args.jog:
-            with bus.torque():
-                zeros = calibrate(bus, rig, ids, jog=True, yes=args.yes)
-        else:
-            bus.disable_torque()
-            zeros = calibrate(bus, rig, ids, jog=False, yes=args.yes)
-    text = update_zero_ticks(rig_path.read_text(), zeros)
+    print(format_sources([source, Source("writes to", out, "--out" if args.out else
+                                         "default: your own copy, with a dated backup")]),
+          flush=True)
+    if bus_spec == "sim":
+        check_gl_backend("--bus sim")
     try:
-        build(RigConfig, tomllib.loads(text))
+        with contextlib.ExitStack() as stack:
+            if bus_spec == "sim":
+                _, bus_spec = stack.enter_context(
+                    port_process(["sim-bus", "--rig", str(rig_path)], "the simulated servo bus"))
+            bus = DynamixelBus(bus_spec, calibration_rig(rig))
+            bus.hold_outside_limits = True  # the zero is what is being found
+            stack.callback(bus.close)
+            bus.connect()
+            check = not args.no_direction_check
+            if args.jog:
+                with bus.torque():
+                    changes = calibrate(bus, rig, ids, jog=True, yes=args.yes,
+                                        direction_check=check)
+            else:
+                bus.disable_torque()
+                changes = calibrate(bus, rig, ids, jog=False, yes=args.yes,
+                                    direction_check=check)
+    except Quit:
+        print("calibration stopped: nothing was written")
+        return 0
+    if not changes:
+        print("nothing to write: no servo's zero was accepted")
+        return 0
+    text = update_servos(rig_path.read_text(encoding="utf-8"), changes, file=str(rig_path))
+    moved = out.resolve().parent != rig_path.resolve().parent
+    robot = getattr(rig, "robot", None)
+    if moved and robot is not None:  # a preset's copy: its model and table stay where they are
+        text = edit(text, lambda doc: doc["robot"].update(
+            model=str(robot.model), retarget=str(robot.retarget)), file=str(rig_path))
+    try:
+        build(type(rig), tomllib.loads(text))
     except ConfigError as exc:
         raise ConfigError(f"the new zeros do not fit: {exc.detail}", key=exc.key,
                           value=exc.value, allowed=exc.allowed) from None
-    out = Path(args.out) if args.out else output_for(rig_path, "rig.toml")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
-    print(f"wrote {len(zeros)} zero(s) to {out}")
-    moved = out.resolve().parent != rig_path.resolve().parent
+    backup = write_with_backup(out, text)
+    print(f"wrote {len(changes)} servo calibration(s) to {out}")
+    print(f"  backup of what was there: {backup} (`handrig calibrate undo` puts it back)")
     relative = [f"{k} = {v!r}" for k in ("map", "sag_grid", "glove")
                 if (v := getattr(rig.loop, k)) and not Path(v).is_absolute()]
     if moved and relative:
         print(f"  note: {', '.join(relative)} in [loop] are relative to the rig file's "
               f"folder, now {out.parent}")
-    print(f"  use it with: handrig run --config {out}")
+    if out.resolve() == user_config("rig.toml").resolve():
+        print("  `handrig run` and `handrig demo` read it from now on (your rig.toml)")
+    else:
+        print(f"  use it with: handrig run --rig {out}")
+    return 0
+
+
+def run_undo(args: argparse.Namespace) -> int:
+    if args.file:
+        target = Path(args.file)
+    else:
+        folder = user_config_dir()
+        names = {p.name.split(".20", 1)[0] for p in (folder / BACKUP_DIR).glob("*.toml.*")}
+        dated = [(backups_of(folder / n)[-1].name[len(n) + 1:], folder / n) for n in names
+                 if backups_of(folder / n)]
+        if not dated:
+            raise ConfigError("no calibration to undo: no backups of your files",
+                              file=str(folder / BACKUP_DIR),
+                              allowed="--file FILE for a file written with --out")
+        target = max(dated)[1]  # the one written last
+    print(undo(target))
     return 0

@@ -18,12 +18,16 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
+from pathlib import Path
 from typing import Any
 
 from handrig.app import simulator
 from handrig.app.factory import build_parts, port_process, robot_model
 from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
+from handrig.app.sources import Source, format_sources, run_sources
+from handrig.cli._display import check_gl_backend, check_renderer
 from handrig.cli._numbers import positive_float, positive_int
+from handrig.cli._rig import add_rig_argument
 from handrig.errors import HandrigError
 
 DEFAULT_FRAMES = 3000  # 15 s at 200 Hz
@@ -34,9 +38,7 @@ def register(sub: Any) -> None:
         "demo", help="the embedded demo: a recorded glove drives the simulated puppet",
         description=__doc__,
     )
-    p.add_argument("--rig", default=None, metavar="NAME|FILE",
-                   help="rig preset (e.g. 'leap': the LEAP robot hand) or rig file "
-                   "(default config/rig.toml, the human puppet)")
+    add_rig_argument(p)
     p.add_argument("--frames", type=positive_int, default=DEFAULT_FRAMES, metavar="N",
                    help=f"loop cycles to run (default {DEFAULT_FRAMES}, 15 s at 200 Hz)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
@@ -58,7 +60,13 @@ def run(args: argparse.Namespace) -> int:
                 print(text, flush=True)
 
     recording = args.recording or str(simulator.demo_recording())
+    check_gl_backend("the demo's simulated puppet")
+    if args.render:
+        check_renderer("--render")
     parts = build_parts(args.rig)
+    log(format_sources([*run_sources(args.rig, rig_cfg=parts.rig_config), Source(
+        "recording", Path(recording), "--recording" if args.recording else
+        "shipped demo: raw glove counts, calibrated with the glove file above")]))
     log(f"demo: {recording} -> glove emulator -> pipeline -> Dynamixel driver -> MuJoCo puppet")
     with ExitSignals() as signals:  # a Ctrl-C while the glove emulator starts unwinds
         try:

@@ -40,6 +40,9 @@ def run(args: argparse.Namespace) -> int:
                           allowed="0 < HZ <= 1000, e.g. 60")
     clock = MonotonicClock()
     playback = Playback(args.file, clock, speed=args.speed, loop=args.loop)
+    if not args.json:  # the files in use, as run and demo print them
+        print(f"files in use:\n  recording  {args.file}  (argument; it holds the joint angles: "
+              "no rig, glove, map or sag grid is read)", flush=True)
     period_s = 1.0 / args.rate
     interrupted = False
     with VmcSender(host, port, rate_hz=args.rate, clock=clock) as sender:

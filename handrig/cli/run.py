@@ -7,7 +7,10 @@ from typing import Any
 
 from handrig.app.factory import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
+from handrig.app.sources import run_sources
+from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import positive_float, positive_int
+from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.errors import HandrigError
 
 
@@ -22,10 +25,10 @@ def register(sub: Any) -> None:
         "relaxed pose, then disables torque; a second one stops at once. --seconds and "
         "--frames count the run before the ease to relaxed, which the summary includes.",
     )
-    p.add_argument("--config", default=None, metavar="FILE",
-                   help="rig file (default config/rig.toml)")
+    add_rig_argument(p)
     p.add_argument("--glove-config", default=None, metavar="FILE",
-                   help="glove file (default: the rig file's [loop] glove, else config/glove.toml)")
+                   help="glove file (default: the rig file's [loop] glove, else your calibrated "
+                   "glove.toml, else config/glove.toml)")
     p.add_argument("--glove", default=None, metavar="SPEC",
                    help="PORT (handrig frames), opengloves:PORT, or replay:FILE.csv")
     p.add_argument("--bus", default=None, metavar="PORT",
@@ -48,11 +51,17 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        parts = build_parts(args.config, args.glove_config)
+        if args.viewer:
+            check_display("--viewer")
+        parts = build_parts(args.rig, args.glove_config)
+        if (args.bus or parts.rig_config.bus.port) == "sim":
+            check_gl_backend("--bus sim")
     except HandrigError as exc:
         if not args.json:
             raise
         return print_result(failed(exc), as_json=True)
+    if not args.json:
+        print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
     opts = LiveOptions(
         glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
         wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,

@@ -7,12 +7,17 @@ import json
 from typing import Any
 
 from handrig.cli._numbers import finite_float
+from handrig.cli._rig import add_rig_argument
 
 
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "sag", help="look up the passive-sag pose at a forearm orientation")
-    p.add_argument("--grid", default=None, help="baked grid .npz (default config/sag_grid.npz)")
+    p.add_argument("--grid", default=None, metavar="FILE.npz",
+                   help="baked grid (default: the rig's grid as a run chooses it: the rig "
+                   "file's [loop] sag_grid, else your baked grid in $XDG_DATA_HOME/handrig "
+                   "(from `handrig bake`), else the shipped config/sag_grid.npz)")
+    add_rig_argument(p, old_name=False)
     p.add_argument("--inclination", type=finite_float, required=True, metavar="DEG",
                    help="forearm above horizontal: -90 hanging down .. 90 pointing up")
     p.add_argument("--rotation", type=finite_float, required=True, metavar="DEG",
@@ -28,7 +33,14 @@ def run(args: argparse.Namespace) -> int:
 
     if not -90.0 <= args.inclination <= 90.0:
         raise DataError(f"--inclination {args.inclination}: must be within -90..90 degrees")
-    grid = SagGrid.load(args.grid, hand=args.hand)
+    from handrig.app.robots import load_rig
+    from handrig.app.sources import grid_file, rig_file
+
+    path = args.grid
+    if path is None:
+        rig = rig_file(args.rig).path
+        path = grid_file(rig, load_rig(rig)).path
+    grid = SagGrid.load(path, hand=args.hand)
     values = grid.lookup(args.inclination, args.rotation)
     offsets = values - grid.rest_deg
     if args.json:

@@ -40,6 +40,9 @@ def register(sub: Any) -> None:
     p.add_argument("--model", default=None, metavar="NAME",
                    help="servo model for every servo (XL330-M288, XC330-T288, XM430-W350; "
                    "default: the rig's)")
+    p.add_argument("--servo-baud", default="", metavar="ID:BAUD,...",
+                   help="servos at a baud other than the rig's, e.g. '1:57600,2:115200,"
+                   "3:1000000'; a servo answers only at its own Baud Rate")
     p.add_argument("--wire-timing", action="store_true",
                    help="delay replies by their wire time at the baud the client set, "
                    "plus Return Delay Time")
@@ -76,6 +79,37 @@ def parse_ids(text: str) -> list[int]:
     return out
 
 
+def parse_servo_bauds(text: str, ids: list[int]) -> dict[int, int]:
+    """'1:57600,2:115200' -> {1: 57600, 2: 115200}; ConfigError on anything else
+    (an ID not on the bus, a baud no X-series servo has)."""
+    from firmware_protocol.dynamixel import INDEX_BY_BAUD
+
+    allowed = "ID:BAUD pairs, e.g. '1:57600,2:1000000'; bauds " + ", ".join(
+        str(b) for b in INDEX_BY_BAUD)
+    out: dict[int, int] = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        sid, colon, baud = part.partition(":")
+        try:
+            servo_id, rate = int(sid), int(baud)
+        except ValueError:
+            raise ConfigError("not ID:BAUD", file="--servo-baud", key=part,
+                              allowed=allowed) from None
+        if not colon:
+            raise ConfigError("not ID:BAUD", file="--servo-baud", key=part, allowed=allowed)
+        if servo_id not in ids:
+            raise ConfigError("no servo with this ID on the bus", file="--servo-baud",
+                              key=part, value=servo_id,
+                              allowed=",".join(str(i) for i in ids))
+        if rate not in INDEX_BY_BAUD:
+            raise ConfigError("not a Dynamixel X baud rate", file="--servo-baud", key=part,
+                              value=rate, allowed=allowed)
+        if servo_id in out:
+            raise ConfigError("servo ID given twice", file="--servo-baud", key=part,
+                              value=servo_id)
+        out[servo_id] = rate
+    return out
+
+
 def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
@@ -97,11 +131,14 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("unknown servo model", file="--model", value=args.model,
                               allowed=", ".join(MODELS))
         rig = simulator.with_model(rig, args.model)
+    bauds = parse_servo_bauds(args.servo_baud, ids if ids is not None
+                              else [s.id for s in rig.servos])
 
     behind: list[float] = []
     bus, puppet = simulator.servo_bus(
         rig, ids=ids, model=args.model, puppet=not args.no_puppet, on_behind=behind.append,
-        wire_timing=args.wire_timing, faults=args.faults, realtime=not args.no_realtime)
+        wire_timing=args.wire_timing, faults=args.faults, realtime=not args.no_realtime,
+        bauds=bauds)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -113,8 +150,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"port: {bus.port_path}", flush=True)
         driven = set(puppet.driven_ids) if puppet is not None else set()
         models = sorted({s.info.name for s in bus.servos})
+        rates = sorted({s.baud for s in bus.servos})
         _say(f"servos: {len(bus.servos)} ({', '.join(models)}), IDs "
-             f"{','.join(str(s.id) for s in bus.servos)}; puppet drives {len(driven)}; "
+             f"{','.join(str(s.id) for s in bus.servos)}; baud "
+             f"{', '.join(str(r) for r in rates)}; puppet drives {len(driven)}; "
              f"wire timing {'on' if args.wire_timing else 'off'}; "
              f"faults {args.faults or 'none'}")
         viewer = _open_viewer(puppet) if args.viewer else None

@@ -365,14 +365,32 @@ def check_servo_settings(rig: RigConfig) -> None:
 
 
 @dataclass(frozen=True)
+class CalibrationConfig:
+    """``[calibration]``: when ``handrig calibrate servos`` asks for a typed confirmation.
+
+    ``max_zero_shift_deg``: a new zero further than this from the current one (joint
+    degrees) is written only after the user types ``yes``.
+    """
+
+    max_zero_shift_deg: float = 20.0
+
+    def check(self) -> None:
+        if not 0.0 < self.max_zero_shift_deg <= 360.0:
+            raise ConfigError("out of range", key="max_zero_shift_deg",
+                              value=self.max_zero_shift_deg, allowed="0 < degrees <= 360")
+
+
+@dataclass(frozen=True)
 class RigConfig:
-    """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]`` and ``[[servos]]``."""
+    """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]``, ``[calibration]`` and
+    ``[[servos]]``."""
 
     bus: BusConfig = BusConfig()
     loop: LoopConfig = LoopConfig()
     servos: tuple[ServoCalibration, ...] = ()
     servo_settings: ServoSettings = ServoSettings()
     silence: SilenceConfig = SilenceConfig()
+    calibration: CalibrationConfig = CalibrationConfig()
 
     def check(self) -> None:
         if not self.servos:

@@ -66,6 +66,7 @@ __all__ = ["ControlsFromRaw", "GloveSource", "Mode", "OrientationLike", "Rig", "
 _LOOP = LoopConfig()  # the defaults live in the config dataclasses
 _BUS = BusConfig()
 WIRE_SHARE = 0.9  # goal writes may fill at most this share of the wire
+PUBLISH_ROOM_S = 0.001  # a telemetry snapshot (~0.2 ms) is built only with this much room
 
 
 class Rig:
@@ -268,7 +269,10 @@ class Rig:
                 if last_start is not None:
                     stats.period.add(tick.now_s - last_start)
                 last_start = tick.now_s
-                self.telemetry.offer(tick.now_s, self._snapshot)
+                # a snapshot only where it delays no frame: not while the newest frame
+                # waits (a catch-up tick), and with room before the next one is expected
+                if not tick.catch_up and clock.now() + PUBLISH_ROOM_S < tick.next_s:
+                    self.telemetry.offer(tick.now_s, self._snapshot)
                 if over:
                     machine.stop_reason = machine.stop_reason or "stop requested"
                     break
@@ -286,6 +290,7 @@ class Rig:
             watch = self.cycle.silence
             stats.servo_silences, stats.servos_held = watch.silences, watch.held
             stats.servo_recoveries = watch.recoveries
+            stats.servo_recovery_reads_max = watch.recovery_reads_max
             self._snapshot.finished = True
             self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats

@@ -192,6 +192,7 @@ class RunStats:
     servo_silences: int = 0  # servos past the [silence] warning
     servos_held: int = 0  # servos whose goal was held for silence
     servo_recoveries: int = 0  # silent servos that answered again
+    servo_recovery_reads_max: int = 0  # the longest silence that ended, in reads
     estop: bool = False
     stop_reason: str = ""
     events: Ring[str] = field(default_factory=lambda: Ring(KEPT_EVENTS))

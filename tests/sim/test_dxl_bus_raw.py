@@ -179,6 +179,7 @@ def test_faults_repeat_with_the_same_seed(servos: list[EmulatedServo]) -> None:
 def test_wire_timing_reply_never_early(servos: list[EmulatedServo]) -> None:
     for s in servos:
         s.mem[9] = 0  # Return Delay Time 0
+        s.mem[8] = 1  # Baud Rate 57600: a servo hears only its own rate
     servos[1].mem[9] = 100  # 200 us on servo 2
     for bus, c in _bus(servos, wire_timing=True):
         c.ser.baudrate = 57600  # 10 bits per byte: 174 us per byte

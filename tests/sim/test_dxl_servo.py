@@ -65,7 +65,7 @@ def test_kinematic_motion_at_speed_limit_and_only_with_torque() -> None:
     assert s.present == 2048  # torque off: no motion
     assert _w(s, Reg.TORQUE_ENABLE, 1, 1) == 0
     s.advance(0.05)
-    speed = round(103.0 / 0.229) * 0.229 * 4096 / 60  # Velocity Limit default, ticks/s
+    speed = 445 * 0.229 * 4096 / 60  # XL330-M288 Velocity Limit default, ticks/s
     assert 2048 + 0.05 * speed - 2 <= s.present <= 2048 + 0.05 * speed + 2
     assert s.get(Reg.PRESENT_VELOCITY) > 0 and s.get(Reg.MOVING) == 1
     s.advance(1.0)

@@ -73,8 +73,47 @@ def test_guided_calibration_writes_the_measured_ranges(tmp_path: Path, capsys) -
     }
     default = load_glove_config()
     assert [c.open_deg for c in cfg.channels] == [c.open_deg for c in default.channels]
-    assert cfg.glove.port.startswith("/dev/pts/")  # --glove is remembered for `handrig run`
+    assert cfg.glove.port == default.glove.port  # a pty (/dev/pts/N) is never saved
+    assert "not saved: a pseudo-terminal" in text
     assert cfg.filter == default.filter
+
+
+def test_a_calibrated_glove_file_keeps_the_shipped_comments_and_layout(
+        tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from handrig.config.paths import installed_config
+
+    status, out = run_calibration(tmp_path, POSES)
+    assert status == 0, capsys.readouterr().err
+    shipped = installed_config("glove.toml").read_text().splitlines()
+    written = out.read_text().splitlines()
+    assert len(written) == len(shipped)
+    changed = [(a, b) for a, b in zip(shipped, written, strict=True) if a != b]
+    # only raw_open / raw_closed lines differ; every comment line and layout line stays
+    assert changed and all(b.split("=")[0].strip() in ("raw_open", "raw_closed")
+                           for _, b in changed), changed
+    for a, b in changed:
+        if "#" in a:
+            assert a[a.index("#"):] == b[b.index("#"):]
+
+
+def test_calibration_writes_keep_a_backup_and_undo_restores_the_last(
+        tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "glove.toml"
+    out.write_text("# mine\n" + load_text())
+    before = out.read_bytes()
+    status, _ = run_calibration(tmp_path, POSES)
+    assert status == 0 and out.read_bytes() != before
+    assert (tmp_path / "backups").is_dir()
+    from handrig.config.toml_edit import undo
+
+    assert "restored" in undo(out)
+    assert out.read_bytes() == before
+
+
+def load_text() -> str:
+    from handrig.config.paths import installed_config
+
+    return installed_config("glove.toml").read_text()
 
 
 def test_a_sensor_that_does_not_move_is_refused(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]

@@ -697,7 +697,9 @@ def test_servos_move_while_the_bus_is_busy_with_wire_timing(read: bool) -> None:
     wire time, or once overdue when no reply leaves such time (goal writes only)."""
     rig = RIG  # 20 servos: at 4 Mbps a Fast Sync Read reply takes 420 us of wire
     goals = np.array([0.5 * s.max_deg for s in rig.servos])
-    with SimBus.from_rig(rig, wire_timing=True) as sim:
+    # the servos at 4 Mbps too: a servo answers only at its own Baud Rate
+    with SimBus.from_rig(rig, wire_timing=True,
+                         bauds={s.id: 4_000_000 for s in rig.servos}) as sim:
         advances: list[float] = []  # when the emulated servos' motion was advanced
         housekeeping = sim._housekeeping
 
@@ -743,6 +745,8 @@ def test_a_read_the_wire_cannot_carry_by_its_deadline_is_not_sent(sim: SimBus) -
     with them: a read that cannot fit before its deadline is skipped, its servos stale;
     reads that never fit stop the bus with the reason."""
     rig = small_rig()
+    for servo in sim.servos:  # a servo answers only at its own Baud Rate
+        servo.set(SimReg.BAUD_RATE, 1)  # 57600
     b = DynamixelBus(sim.port_path, rig, baud=57_600,
                      fault_policy=FaultPolicy(max_stale_reads=3))
     b.connect()

@@ -1,0 +1,336 @@
+"""Instruction semantics of the emulated bus: which servo hears a packet, what it answers.
+
+:class:`Dispatcher` is mixed into :class:`sim.dxl_bus.SimBus`, which owns the line
+and the timing; this part turns one parsed instruction into the status packets
+the servos send (unicast, broadcast, sync/bulk and fast reads), with faults applied.
+
+Baud: a servo hears only packets sent at its own Baud Rate item (a real servo at
+another rate decodes noise and stays silent), unless ``check_baud`` is off.
+
+Goal audit: every Goal Position the bus decodes (Sync Write or Write) is
+counted in ``stats.goals_decoded``; with ``goal_limits`` (from the rig: each
+calibrated servo's ``[min_deg, max_deg]`` in ticks) one outside them is counted
+in ``stats.goals_outside``, the driver-side promise checked from the servo side.
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+from firmware_protocol.dynamixel import (
+    BAUD_BY_INDEX,
+    BROADCAST_ID,
+    MAX_PACKET_LEN,
+    ErrorCode,
+    Instruction,
+    PacketError,
+    build_fast_read_reply,
+    build_status,
+    split_bulk_read,
+    split_bulk_write,
+    split_sync_read,
+    split_sync_write,
+)
+from sim.dxl_faults import FaultSpec, apply_faults
+from sim.dxl_rig import GOAL_POSITION_ADDRESS
+from sim.dxl_servo import READABLE_BYTES, EmulatedServo
+
+
+@dataclass
+class BusStats:
+    """Counters and host-overhead figures of the emulated bus."""
+
+    packets: int = 0
+    replies: int = 0
+    bad_crc: int = 0
+    noise_bytes: int = 0
+    overhead_total_s: float = 0.0
+    overhead_max_s: float = 0.0
+    late_total_s: float = 0.0
+    late_max_s: float = 0.0
+    by_instruction: Counter[int] = field(default_factory=Counter)
+    goals_decoded: int = 0  # Goal Position values received
+    goals_outside: int = 0  # of those, outside the servo's goal_limits
+    client_closes: int = 0  # times the client let the port go
+
+    @property
+    def overhead_mean_s(self) -> float:
+        """Mean host time from a packet's last byte read to its reply ready to send."""
+        return self.overhead_total_s / self.packets if self.packets else 0.0
+
+    @property
+    def late_mean_s(self) -> float:
+        """Mean time a reply left after its wire-time instant (wire timing on)."""
+        return self.late_total_s / self.replies if self.replies else 0.0
+
+
+class _Reply(NamedTuple):
+    """Bytes a servo sends, after its Return Delay Time (and a fault's extra delay)."""
+
+    data: bytes
+    return_delay_s: float
+    fault_delay_s: float = 0.0
+
+
+class Dispatcher:
+    """The servos behind the line and what they answer (state owned by the bus)."""
+
+    servos: list[EmulatedServo]
+    stats: BusStats
+    fault_counts: Counter[str]
+    goal_limits: dict[int, tuple[int, int]]
+    on_sync_write: Callable[[float, int, list[tuple[int, bytes]]], None] | None
+    check_baud: bool
+    lock: threading.RLock
+    _faults: FaultSpec
+    _rng: random.Random
+    _by_id: dict[int, EmulatedServo]
+    _packet_baud: int
+    _overload_done: bool
+
+    @property
+    def faults(self) -> FaultSpec:
+        """The fault switches; assigning new ones (at any time) reseeds their random
+        source and applies ``missing`` at once (``overload`` only counts from start)."""
+        return self._faults
+
+    @faults.setter
+    def faults(self, spec: FaultSpec) -> None:
+        with self.lock:
+            self._faults = spec
+            self._rng = random.Random(spec.seed)
+            self._overload_done = False
+            self._rebuild_ids()
+
+    def servo(self, servo_id: int) -> EmulatedServo:
+        """The emulated servo with this ID (missing ones included)."""
+        for s in self.servos:
+            if s.id == servo_id:
+                return s
+        raise KeyError(f"no emulated servo with ID {servo_id}")
+
+    def _rebuild_ids(self) -> None:
+        self._by_id = {s.id: s for s in self.servos if s.id not in self.faults.missing}
+
+    # ------------------------------------------------------------ dispatch
+
+    def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"") -> _Reply:
+        """One status packet, with faults applied."""
+        packet = build_status(servo.id, error, data)
+        extra = 0.0
+        if self.faults.any_reply_fault:
+            packet, extra = self._apply_faults(
+                packet, servo.id, lambda other: build_status(other, error, data))
+        return _Reply(packet, servo.return_delay_s, extra)
+
+    def _apply_faults(
+        self, packet: bytes, servo_id: int, rebuild: Callable[[int], bytes]
+    ) -> tuple[bytes, float]:
+        """Drop, misaddress (``rebuild(other_id)``), corrupt, truncate or delay a reply."""
+        return apply_faults(self.faults, self._rng, self.fault_counts, packet, servo_id, rebuild)
+
+    def _servo_for(self, servo_id: int, now: float) -> EmulatedServo | None:
+        servo = self._by_id.get(servo_id)
+        if servo is None:
+            if servo_id in self.faults.missing:
+                self.fault_counts["missing"] += 1
+            return None
+        if not servo.available(now) or not self._hears(servo):
+            return None
+        servo.last_heard = now
+        return servo
+
+    def _hears(self, servo: EmulatedServo) -> bool:
+        """With ``check_baud``, a servo hears only packets at its Baud Rate item
+        (``_packet_baud`` 0: bytes fed without a line, heard by all)."""
+        return (not self.check_baud or not self._packet_baud
+                or BAUD_BY_INDEX.get(servo.mem[8]) == self._packet_baud)
+
+    def _listening(self, now: float) -> list[EmulatedServo]:
+        """Servos that hear a broadcast now, in ID order."""
+        return sorted((s for s in self._by_id.values() if s.available(now) and self._hears(s)),
+                      key=lambda s: s.id)
+
+    def _dispatch(
+        self, target: int, inst: int, params: bytes, now: float
+    ) -> list[_Reply]:
+        if target == BROADCAST_ID:
+            for s in self._by_id.values():
+                if self._hears(s):
+                    s.last_heard = now
+            return self._broadcast(inst, params, now)
+        servo = self._servo_for(target, now)
+        if servo is None:
+            return []
+        level = servo.status_return_level
+        try:
+            if inst == Instruction.PING:
+                return [self._reply(servo, *servo.ping())]
+            if inst == Instruction.READ:
+                if len(params) != 4:
+                    return self._error(servo, ErrorCode.DATA_LENGTH, level >= 1)
+                address = params[0] | params[1] << 8
+                length = params[2] | params[3] << 8
+                err, data = servo.read(address, length)
+                return [self._reply(servo, err, data)] if level >= 1 else []
+            if inst in (Instruction.WRITE, Instruction.REG_WRITE):
+                if len(params) < 3:
+                    return self._error(servo, ErrorCode.DATA_LENGTH, level >= 2)
+                address = params[0] | params[1] << 8
+                if address == GOAL_POSITION_ADDRESS and len(params) == 6:
+                    self._audit_goal(servo.id, params[2:])
+                if inst == Instruction.WRITE:
+                    err = servo.write(address, params[2:])
+                else:
+                    err = servo.reg_write(address, params[2:])
+                if address <= 7 < address + len(params) - 2:
+                    self._rebuild_ids()
+                return [self._reply(servo, err)] if level >= 2 else []
+            if inst == Instruction.ACTION:
+                err = servo.action()
+                self._rebuild_ids()
+                return [self._reply(servo, err)] if level >= 2 else []
+            if inst == Instruction.REBOOT:
+                err = servo.reboot(now)
+                return [self._reply(servo, err)] if level >= 2 else []
+            if inst == Instruction.FACTORY_RESET:
+                option = params[0] if len(params) == 1 else 0
+                reply = [self._reply(servo, servo.factory_reset(option, now))] if level >= 2 else []
+                self._rebuild_ids()
+                return reply
+            if inst == Instruction.CLEAR:
+                return [self._reply(servo, servo.error_byte())] if level >= 2 else []
+            # Sync/bulk instructions are broadcast only; anything else is unknown.
+            return self._error(servo, ErrorCode.INSTRUCTION, True)
+        except PacketError:
+            return self._error(servo, ErrorCode.DATA_LENGTH, True)
+
+    def _audit_goal(self, servo_id: int, data: bytes) -> None:
+        self.stats.goals_decoded += 1
+        limits = self.goal_limits.get(servo_id)
+        if limits is not None:
+            goal = int.from_bytes(data, "little", signed=True)
+            if not limits[0] <= goal <= limits[1]:
+                self.stats.goals_outside += 1
+
+    def _error(self, servo: EmulatedServo, code: int, reply: bool) -> list[_Reply]:
+        return [self._reply(servo, servo.error_byte(code))] if reply else []
+
+    def _broadcast(self, inst: int, params: bytes, now: float) -> list[_Reply]:
+        try:
+            if inst == Instruction.SYNC_WRITE:
+                address, length, items = split_sync_write(params)
+                if address == GOAL_POSITION_ADDRESS and length == 4:
+                    for servo_id, data in items:
+                        self._audit_goal(servo_id, data)
+                if self.on_sync_write is not None:
+                    self.on_sync_write(now, address, list(items))
+                for servo_id, data in items:
+                    servo = self._servo_for(servo_id, now)
+                    if servo is not None:
+                        servo.write(address, data)
+                if address <= 7 < address + length:
+                    self._rebuild_ids()
+                return []
+            if inst == Instruction.FAST_SYNC_READ:
+                address, length, ids = split_sync_read(params)
+                return self._fast_read([(i, address, length) for i in ids], now)
+            if inst == Instruction.SYNC_READ:
+                address, length, ids = split_sync_read(params)
+                out: list[_Reply] = []
+                for servo_id in ids:
+                    servo = self._servo_for(servo_id, now)
+                    if servo is not None and servo.status_return_level >= 1:
+                        out.append(self._reply(servo, *servo.read(address, length)))
+                return out
+            if inst == Instruction.BULK_READ:
+                out = []
+                for servo_id, address, length in split_bulk_read(params):
+                    servo = self._servo_for(servo_id, now)
+                    if servo is not None and servo.status_return_level >= 1:
+                        out.append(self._reply(servo, *servo.read(address, length)))
+                return out
+            if inst == Instruction.FAST_BULK_READ:
+                return self._fast_read(split_bulk_read(params), now)
+            if inst == Instruction.BULK_WRITE:
+                for servo_id, address, data in split_bulk_write(params):
+                    servo = self._servo_for(servo_id, now)
+                    if servo is not None:
+                        servo.write(address, data)
+                self._rebuild_ids()
+                return []
+            if inst == Instruction.PING:
+                out = []
+                for servo in self._listening(now):
+                    out.append(self._reply(servo, *servo.ping()))
+                for servo_id in sorted(self.faults.missing):
+                    self.fault_counts["missing"] += 1
+                    _ = servo_id
+                return out
+            if inst == Instruction.ACTION:
+                for servo in self._listening(now):
+                    servo.action()
+                self._rebuild_ids()
+                return []
+            if inst == Instruction.REBOOT:
+                for servo in self._listening(now):
+                    servo.reboot(now)
+                return []
+            if inst in (Instruction.WRITE, Instruction.REG_WRITE) and len(params) >= 3:
+                address = params[0] | params[1] << 8
+                for servo in self._listening(now):
+                    if inst == Instruction.WRITE:
+                        servo.write(address, params[2:])
+                    else:
+                        servo.reg_write(address, params[2:])
+                self._rebuild_ids()
+                return []
+        except PacketError:
+            return []
+        return []  # broadcast instructions get no status, even when wrong
+
+    def _fast_read(
+        self, requests: Sequence[tuple[int, int, int]], now: float
+    ) -> list[_Reply]:
+        """One combined reply; it stops short at the first servo that does not answer.
+
+        A request the reply cannot carry (a range beyond the control table, a reply
+        longer than a packet) gets no reply at all."""
+        total = 8 + sum(n + 4 for _, _, n in requests)
+        if total > MAX_PACKET_LEN or any(n == 0 or a + n > READABLE_BYTES
+                                         for _, a, n in requests):
+            return []
+        chunks: list[tuple[int, int, bytes]] = []
+        complete = True
+        first_delay = 0.0
+        for servo_id, address, length in requests:
+            servo = self._servo_for(servo_id, now)
+            if servo is None or servo.status_return_level < 1:
+                complete = False
+                break
+            if not chunks:
+                first_delay = servo.return_delay_s
+            err, data = servo.read(address, length)
+            if not data:  # an error reply carries no data; keep the frame's shape
+                data = bytes(length)
+            chunks.append((servo_id, err, data))
+        if not chunks:
+            return []
+        missing = [(i, 0, bytes(n)) for i, _, n in requests[len(chunks):]]
+        sent = 8 + sum(len(d) + 4 for _, _, d in chunks)
+
+        def build(first_id: int) -> bytes:
+            first = (first_id, chunks[0][1], chunks[0][2])
+            packet = build_fast_read_reply([first, *chunks[1:], *missing])
+            return packet if complete else packet[:sent]
+
+        packet = build(chunks[0][0])
+        extra = 0.0
+        if self.faults.any_reply_fault:
+            packet, extra = self._apply_faults(packet, chunks[0][0], build)
+        return [_Reply(packet, first_delay, extra)]

@@ -1,0 +1,122 @@
+"""Switchable faults of the emulated bus (:class:`FaultSpec`) and how a reply suffers them.
+
+Dropped, CRC-corrupted, wrong-ID, truncated and delayed replies with given
+probabilities (explicit seed), missing servos, and an overload hardware error on
+chosen servos; the bus counts every fault in ``SimBus.fault_counts``.
+"""
+
+from __future__ import annotations
+
+import random
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from handrig.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """Switchable faults. Probabilities are per reply; ``seed`` makes them repeatable.
+
+    ``missing``: servo IDs that never answer (as if unplugged). ``overload``: servo
+    IDs that report an overload hardware error ``overload_after_s`` after the bus
+    starts (torque off, Alert bit set, only a reboot clears it). ``delay_s`` is the
+    extra latency of a delayed reply.
+    """
+
+    drop: float = 0.0
+    corrupt: float = 0.0
+    wrong_id: float = 0.0
+    truncate: float = 0.0
+    delay: float = 0.0
+    delay_s: float = 0.005
+    missing: frozenset[int] = field(default_factory=frozenset)
+    overload: frozenset[int] = field(default_factory=frozenset)
+    overload_after_s: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("drop", "corrupt", "wrong_id", "truncate", "delay"):
+            p = getattr(self, name)
+            if not 0.0 <= p <= 1.0:
+                raise ConfigError("fault probability out of range", key=name, value=p,
+                                  allowed="0..1")
+        if self.delay_s < 0 or self.overload_after_s < 0:
+            raise ConfigError("times must be >= 0", key="delay_s/overload_after_s",
+                              value=(self.delay_s, self.overload_after_s))
+
+    @property
+    def any_reply_fault(self) -> bool:
+        return any((self.drop, self.corrupt, self.wrong_id, self.truncate, self.delay))
+
+    @classmethod
+    def parse(cls, spec: str) -> FaultSpec:
+        """Parse ``"drop=0.02,corrupt=0.01,wrong_id=0.01,truncate=0.01,delay=0.01:0.005,
+        missing=7+9,overload=3@1.5,seed=42"`` (any subset, comma separated).
+
+        ``delay=P[:SECONDS]``; ``missing`` and ``overload`` take IDs joined by ``+``;
+        ``overload=IDS[@SECONDS]``.
+        """
+        allowed = "drop, corrupt, wrong_id, truncate, delay=P[:S], missing=ID+ID, " \
+                  "overload=ID+ID[@S], seed=N"
+        kw: dict[str, object] = {}
+        for part in filter(None, (p.strip() for p in spec.split(","))):
+            key, eq, value = part.partition("=")
+            key = key.strip().replace("-", "_")
+            if not eq:
+                raise ConfigError("expected key=value", file="--faults", key=part, allowed=allowed)
+            try:
+                if key in ("drop", "corrupt", "wrong_id", "truncate"):
+                    kw[key] = float(value)
+                elif key == "delay":
+                    p, _, s = value.partition(":")
+                    kw["delay"] = float(p)
+                    if s:
+                        kw["delay_s"] = float(s.removesuffix("s"))
+                elif key == "missing":
+                    kw["missing"] = frozenset(int(v) for v in value.split("+") if v)
+                elif key == "overload":
+                    ids, _, after = value.partition("@")
+                    kw["overload"] = frozenset(int(v) for v in ids.split("+") if v)
+                    if after:
+                        kw["overload_after_s"] = float(after.removesuffix("s"))
+                elif key == "seed":
+                    kw["seed"] = int(value)
+                else:
+                    raise ConfigError("unknown fault", file="--faults", key=key, allowed=allowed)
+            except ValueError as exc:
+                raise ConfigError(f"bad number ({exc})", file="--faults", key=key, value=value,
+                                  allowed=allowed) from None
+        try:
+            return cls(**kw)  # type: ignore[arg-type]
+        except ConfigError as exc:
+            raise exc.located("--faults") from None
+
+
+
+def apply_faults(
+    spec: FaultSpec, rng: random.Random, counts: Counter[str], packet: bytes, servo_id: int,
+    rebuild: Callable[[int], bytes],
+) -> tuple[bytes, float]:
+    """Drop, misaddress (``rebuild(other_id)``), corrupt, truncate or delay a reply:
+    the packet as sent (empty when dropped) and the extra delay, s."""
+    f = spec
+    if f.drop and rng.random() < f.drop:
+        counts["dropped"] += 1
+        return b"", 0.0
+    if f.wrong_id and rng.random() < f.wrong_id:
+        counts["wrong_id"] += 1
+        other = rng.choice([i for i in range(253) if i != servo_id])
+        packet = rebuild(other)
+    if f.corrupt and rng.random() < f.corrupt:
+        counts["corrupted"] += 1
+        packet = packet[:-1] + bytes((packet[-1] ^ 0x5A,))
+    if f.truncate and rng.random() < f.truncate:
+        counts["truncated"] += 1
+        packet = packet[: rng.randrange(1, len(packet))]
+    extra = 0.0
+    if f.delay and rng.random() < f.delay:
+        counts["delayed"] += 1
+        extra = f.delay_s
+    return packet, extra
