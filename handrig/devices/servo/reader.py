@@ -66,6 +66,7 @@ class StateReader:
         self._parts: dict[tuple[int, int], np.ndarray] = {}
         n = readings.n
         self.suspect = np.zeros(n, np.int64)  # reads in a row a chain stopped at the servo
+        self._suspects = False  # any suspect at all (the usual read skips the checks)
         self._shift: dict[tuple[int, int], int] = {}  # a part's chain start (see above)
         baud = link.budget.baud
         # a temperature Fast Sync Read (1 byte per servo)
@@ -173,7 +174,9 @@ class StateReader:
                 self.stats.retries += 1
             if self._attempt(pending, order, deadline_s) == WHOLE:
                 self.last_whole = True
-                self.suspect[:] = 0
+                if self._suspects:
+                    self.suspect[:] = 0
+                    self._suspects = False
                 return True
             self._blame(pending)
             left = self._retry_chain(pending)
@@ -186,6 +189,8 @@ class StateReader:
     def _chain(self, indices: np.ndarray) -> np.ndarray:
         """``indices`` (as ordered) with the servos that stopped answering at the end
         (counted in ``chain_ends``); ``indices`` itself when none did."""
+        if not self._suspects:
+            return indices
         out = self.suspect[indices] >= SILENT_AFTER
         if not out.any() or out.all():
             return indices
@@ -208,10 +213,12 @@ class StateReader:
         fresh = self.readings.fresh[asked]
         self.suspect[asked[fresh]] = 0
         if fresh.all():
+            self._suspects = self._suspects and bool(self.suspect.any())
             return True
         if not fresh.any():
             return False
         self.suspect[asked[int(np.argmin(fresh))]] += 1
+        self._suspects = True
         return True
 
     def _retry_s(self, k: int) -> float:
