@@ -12,6 +12,7 @@ the SDK's busy-wait on wall time.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import re
 import select
@@ -235,8 +236,16 @@ class SerialTransport(Transport):
                 f"dynamixel-sdk refuses baud {self.baud} on {self.port} "
                 "(allowed: 9600 ... 4000000 from the SDK's list)"
             )
+        fd = handler.ser.fileno()
+        try:  # as pyserial's exclusive=True: another handrig (or such a client) is refused
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handler.closePort()
+            raise DeviceError(
+                f"servo port {self.port} is busy: another program has it open (another "
+                f"handrig run?); find it with `fuser {self.port}`") from None
         self._handler = handler
-        self._fd = handler.ser.fileno()
+        self._fd = fd
         os.set_blocking(self._fd, False)
         self._buf.clear()
         self.wedged = False

@@ -1059,3 +1059,18 @@ def test_a_silent_servo_does_not_end_the_run_when_tripped_watchdogs_are_rearmed(
             sim.servo(3).mem[dx.Reg.STATUS_RETURN_LEVEL] = 2  # its torque-off confirmed
     finally:
         b.close()
+
+
+def test_a_servo_port_in_use_is_reported_busy(sim: SimBus) -> None:
+    first = SerialTransport(sim.port_path, 1_000_000, FakeClock(0.0))
+    first.open()
+    try:
+        second = SerialTransport(sim.port_path, 1_000_000, FakeClock(0.0))
+        with pytest.raises(DeviceError, match=f"servo port {sim.port_path} is busy.*fuser"):
+            second.open()
+        assert not second.is_open
+    finally:
+        first.close()
+    again = SerialTransport(sim.port_path, 1_000_000, FakeClock(0.0))
+    again.open()  # free once closed
+    again.close()
