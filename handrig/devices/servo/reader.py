@@ -311,6 +311,7 @@ class StateReader:
             self._housekeeping_s = took if took > est else est + SMOOTHING * (took - est)
 
     def _housekeeping_reads(self, deadline_s: float) -> None:
+        np.greater_equal(self.suspect, SILENT_AFTER, out=self.sweep.last)  # asked last
         if self.faults.torque_on and self.faults.watchdog_ms:
             self.faults.check_watchdogs(deadline_s)
             if deadline_s - self.clock.now() <= self._temperature_wire_s:
