@@ -433,6 +433,8 @@ FAULT_WORDS: dict[str, str] = {
     "watchdog_trips": "Bus Watchdog trips",
     "watchdog_gaps": "writes close to the Bus Watchdog",
     "late_replies": "late replies dropped",
+    "partial_replies": "Fast Sync Read replies cut short",
+    "chain_ends": "reads asking silent servos last",
     "skipped_reads": "reads skipped (no room on the wire)",
     "stale_readings": "stale servo readings",
     "hardware_errors": "servo hardware errors",

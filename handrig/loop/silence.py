@@ -61,6 +61,8 @@ class SilenceWatch:
         self.recoveries = 0
         self.recovery_reads_max = 0
         self._reads = np.zeros(n, np.int64)  # reads while silent
+        self._reboots = np.zeros(n, np.int64)  # the bus's reboots seen so far
+        self._from = np.full(n, np.nan)  # where a rebooted servo eases back from
         self._goals = np.zeros(n, np.float64)
         self._step = np.zeros(n, np.float64)
         self._t_ref = np.nan  # the first read: nobody is silent since before it
@@ -105,6 +107,7 @@ class SilenceWatch:
         """After a read: raise tiers, act on them, release servos that answer.
         DeviceTimeoutError when the action is ``"stop"``."""
         cfg = self.config
+        self._note_reboots(state)
         since_ref = now - self._t_ref if np.isfinite(self._t_ref) else 0.0
         silent_s = np.minimum(np.asarray(state.age_s, dtype=np.float64)
                               + (now - state.timestamp_s), since_ref)
@@ -156,6 +159,19 @@ class SilenceWatch:
             rest = ("stays held, the others continue" if len(indices) < self.n
                     else "stay held")
             self._say(f"{what}: {self._names(indices)} {rest} ([silence] action)")
+
+    def _note_reboots(self, state: ServoState) -> None:
+        """A servo the bus rebooted came back with torque on where it was (its goal is
+        the bus's last goal for it): it eases back to the loop's goals from there at
+        the slew limit, as a servo that answers again does."""
+        reboots = state.stats.reboots
+        if len(reboots) != self.n or not (reboots > self._reboots).any():
+            return
+        new = np.flatnonzero(reboots > self._reboots)
+        self._reboots[:] = reboots
+        self._from[new] = self.bus.last_goals_deg[new]
+        self.releasing[new] = True
+        self.steering = True
 
     def _recover(self, back: np.ndarray) -> None:
         reads = self._reads[back]
@@ -224,6 +240,10 @@ class SilenceWatch:
         np.copyto(out, goals_deg)
         if not self.steering:
             return out
+        rebooted = np.isfinite(self._from)
+        if rebooted.any():  # eases from where the rebooted servo is, not the last goal
+            last_goal_deg = np.where(rebooted, self._from, last_goal_deg)
+            self._from[:] = np.nan
         known = np.isfinite(last_goal_deg)
         hold = self.holding & known
         out[hold] = last_goal_deg[hold]

@@ -79,6 +79,8 @@ class BusStats:
     watchdog_gaps: int = 0  # goal writes after a silence near the Bus Watchdog (re-armed)
     skipped_reads: int = 0  # reads not sent: the wire could not carry them by their deadline
     late_reads: int = 0  # reads not sent: the caller came after the read's deadline
+    partial_replies: int = 0  # Fast Sync Read replies cut short (the servos before the cut taken)
+    chain_ends: int = 0  # reads that asked servos which stopped answering last in the chain
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -121,7 +123,8 @@ class BusStats:
             f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
             f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
             f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, skipped reads "
-            f"{self.skipped_reads}, late reads {self.late_reads}, stale readings "
+            f"{self.skipped_reads}, late reads {self.late_reads}, partial replies "
+            f"{self.partial_replies}, chain ends {self.chain_ends}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )

@@ -356,6 +356,12 @@ class DynamixelBus(ServoBus):
     def where(self) -> str:
         return self.roster.where()
 
+    def drain_events(self) -> list[str]:
+        """Hardware errors, reboots and Bus Watchdog trips since the last call, one line
+        each (once drained, they are no longer logged as well)."""
+        with self._lock:
+            return self.faults.drain_events()
+
     def housekeeping(self, deadline_s: float) -> bool:
         """Between state reads: the Bus Watchdogs, then the temperatures, when
         ``temperature_every`` reads have passed and the wire can carry them by

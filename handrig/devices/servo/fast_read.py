@@ -207,8 +207,9 @@ class FastSyncRead:
         return None, late
 
     def _take_partial(self, raw: bytes, order: Order, expected: int) -> bool:
-        if len(raw) < expected:
+        if len(raw) < expected:  # cut short: a servo in the chain did not answer
             self.stats.timeouts += 1
+            self.stats.partial_replies += 1
             self.link.failed()
         r = self.readings
         complete, taken, refused = codec.fast_sync_take(

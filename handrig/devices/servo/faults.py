@@ -12,7 +12,9 @@ What to do about a servo that stops answering is the loop's decision
 
 from __future__ import annotations
 
+import contextlib
 import logging
+from collections import deque
 
 import numpy as np
 
@@ -38,6 +40,8 @@ log = logging.getLogger("handrig.devices.servo")
 
 # A goal write after a silence this fraction of the Bus Watchdog time re-arms it first
 # (the servo's clock and ours differ).
+EVENTS_KEPT = 64
+REARM_ATTEMPTS = 2  # re-arming a watchdog mid-run: a servo that does not answer is silent
 WATCHDOG_GAP_FRACTION = 0.8
 
 
@@ -65,6 +69,10 @@ class FaultHandler:
             WATCHDOG_GAP_FRACTION * self.watchdog_ms / 1000.0 if self.watchdog_ms else np.inf)
         self.skip_run = 0  # reads in a row not sent for lack of wire time
         self._torque_on = False
+        # hardware errors, reboots and watchdog trips, for the run's events; until
+        # somebody drains them (the loop) they are logged instead
+        self.events: deque[str] = deque(maxlen=EVENTS_KEPT)
+        self.drained = False
 
     @property
     def torque_on(self) -> bool:
@@ -74,6 +82,21 @@ class FaultHandler:
         """The torque control switched torque (a reboot then restores it; the watchdog
         is re-armed only while it is on)."""
         self._torque_on = bool(on)
+
+    def _say(self, text: str) -> None:
+        """A fault and what was done about it: into the run's events (said once, by the
+        loop that drains them), or to the log when nobody drains them."""
+        if self.drained:
+            self.events.append(text)
+        else:
+            log.warning("%s", text)
+
+    def drain_events(self) -> list[str]:
+        """What was said since the last call, oldest first (see :meth:`_say`)."""
+        self.drained = True
+        out = list(self.events)
+        self.events.clear()
+        return out
 
     # ------------------------------------------------------------------ hardware errors
     def alerts_raised(self) -> None:
@@ -86,8 +109,8 @@ class FaultHandler:
         try:
             bits = self.link.read_register(index, Reg.HARDWARE_ERROR_STATUS)
         except DeviceError as exc:
-            log.warning("%s raised Alert but its Hardware Error Status is unreadable: %s",
-                        self.roster.describe(index), exc)
+            self._say(f"{self.roster.describe(index)} raised Alert but its Hardware Error "
+                      f"Status is unreadable: {exc}")
             return
         if bits:
             self.hardware_error(index, bits)
@@ -107,7 +130,7 @@ class FaultHandler:
                 "stopping (check the load, supply voltage and temperature)",
                 servo_id=r.ids[index], bits=bits,
             )
-        log.warning("%s; rebooting it", what)
+        self._say(f"{what}; rebooting it")
         self.reboot(index)
 
     def reboot(self, index: int) -> None:
@@ -128,17 +151,32 @@ class FaultHandler:
         self._wait_for_restart(index)
         remaining = self.link.read_register(index, Reg.HARDWARE_ERROR_STATUS)
         if remaining:
-            log.warning("%s still reports hardware error 0x%02x after a reboot: %s",
-                        r.describe(index), remaining, describe_hardware_error(remaining))
+            self._say(f"{r.describe(index)} still reports hardware error 0x{remaining:02x} "
+                      f"after a reboot: {describe_hardware_error(remaining)}")
         self.link.write_register(index, Reg.RETURN_DELAY_TIME, 0)
         self.link.write_register(index, Reg.STATUS_RETURN_LEVEL, STATUS_RETURN_ALL)
-        if self.torque_on:
-            goal = self.writer.last_goal_deg[index]
+        if not self.torque_on:
+            self._say(f"{r.describe(index)} rebooted: back, torque off")
+            return
+        # torque back on where it is (clamped into its limits), not at its last goal:
+        # the loop eases it back to its goals at the slew limit (it sees the reboot)
+        try:
+            ticks = self.link.read_register(index, Reg.PRESENT_POSITION)
+            goal = float(np.clip((ticks - r.zero_ticks[index]) / r.ticks_per_deg[index],
+                                 r.min_deg[index], r.max_deg[index]))
+            how = f"torque on where it is ({goal:.1f} deg), easing back to its goals"
+        except DeviceError:
+            goal = float(self.writer.last_goal_deg[index])
             if not np.isfinite(goal):
-                goal = r.hold_deg[index]
-            self.link.write_register(index, Reg.GOAL_POSITION, r.ticks(index, float(goal)))
-            self.link.write_register(index, Reg.TORQUE_ENABLE, 1)
-            self.arm_watchdog()
+                goal = float(r.hold_deg[index])
+            how = "torque on at its last goal (its position was unreadable)"
+        self.link.write_register(index, Reg.GOAL_POSITION, r.ticks(index, goal))
+        self.link.write_register(index, Reg.TORQUE_ENABLE, 1)
+        remembered = self.writer.last_goal_deg.copy()
+        remembered[index] = goal
+        self.writer.remember(remembered)
+        self.arm_watchdog(strict=False)
+        self._say(f"{r.describe(index)} rebooted: {how}")
 
     def _wait_for_restart(self, index: int) -> None:
         sid = self.roster.ids[index]
@@ -160,19 +198,22 @@ class FaultHandler:
                 )
 
     # ------------------------------------------------------------------ watchdog
-    def arm_watchdog(self) -> None:
+    def arm_watchdog(self, *, strict: bool = True) -> None:
         """Bus Watchdog to ``rig.bus.watchdog_ms`` on every servo at once, then checked.
 
         Broadcast Sync Writes reach every servo in one packet (servo by servo, the
         first ones armed could trip while a lossy bus delays the last); 0 first
-        clears a tripped watchdog (-1). Servos not confirmed get checked writes.
+        clears a tripped watchdog (-1). Servos not confirmed get checked writes;
+        not ``strict`` (re-arming mid-run), one that does not answer them is left
+        to the loop's silence tiers instead of ending the run (the broadcast
+        reached it if it hears the bus).
         """
         n = self.roster.n
         units = self.watchdog_ms // BUS_WATCHDOG_UNIT_MS
         self.link.sync_write(Reg.BUS_WATCHDOG, [0] * n)
         if units:
             self.link.sync_write(Reg.BUS_WATCHDOG, [units] * n)
-        for _ in range(COMMAND_ATTEMPTS):
+        for _ in range(COMMAND_ATTEMPTS if strict else 1):
             values = self.sweep.read(Reg.BUS_WATCHDOG, self.clock.now() + COMMAND_TIMEOUT_S)
             if all(v is not None for v in values):
                 break
@@ -183,8 +224,12 @@ class FaultHandler:
                 self.link.write_register(i, Reg.BUS_WATCHDOG, 0)
                 if units:
                     self.link.write_register(i, Reg.BUS_WATCHDOG, units)
-            else:
+            elif strict:
                 self.link.write_register(i, Reg.BUS_WATCHDOG, units)
+            else:
+                with contextlib.suppress(DeviceTimeoutError):
+                    self.link.write_register(i, Reg.BUS_WATCHDOG, units,
+                                             attempts=REARM_ATTEMPTS)
 
     def rearm_after_silence(self) -> None:
         """Before goals: if the host was silent near the Bus Watchdog time, the servos'
@@ -197,8 +242,8 @@ class FaultHandler:
         if silent_s < self._watchdog_gap_s:
             return
         self.stats.watchdog_gaps += 1
-        log.warning("the bus was silent for %.0f ms (Bus Watchdog %d ms): re-arming the "
-                    "watchdogs before the next goals", silent_s * 1e3, self.watchdog_ms)
+        self._say(f"the bus was silent for {silent_s * 1e3:.0f} ms (Bus Watchdog "
+                  f"{self.watchdog_ms} ms): re-arming the watchdogs before the next goals")
         n = self.roster.n
         self.link.sync_write(Reg.BUS_WATCHDOG, [0] * n)
         self.link.sync_write(Reg.BUS_WATCHDOG, [self.watchdog_ms // BUS_WATCHDOG_UNIT_MS] * n)
@@ -210,10 +255,10 @@ class FaultHandler:
         if not tripped:
             return
         self.stats.watchdog_trips += len(tripped)
-        log.warning("Bus Watchdog tripped on %s (the bus was quiet for more than %d ms): "
-                    "re-arming", ", ".join(self.roster.describe(i) for i in tripped),
-                    self.watchdog_ms)
-        self.arm_watchdog()
+        self._say(f"Bus Watchdog tripped on "
+                  f"{', '.join(self.roster.describe(i) for i in tripped)} (the bus was quiet "
+                  f"for more than {self.watchdog_ms} ms): re-arming")
+        self.arm_watchdog(strict=False)
 
     # ------------------------------------------------------------------ stale runs
     def read_sent(self) -> None:

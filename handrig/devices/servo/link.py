@@ -177,16 +177,18 @@ class Link:
         return None
 
     def command(
-        self, index: int, instruction: int, params: bytes, what: str, n_params: int = 0
+        self, index: int, instruction: int, params: bytes, what: str, n_params: int = 0,
+        attempts: int = COMMAND_ATTEMPTS,
     ) -> StatusPacket:
         """One instruction to servo ``index`` that must be answered without an error number."""
         r = self.roster
         sid = r.ids[index]
-        status = self.transact(build_instruction(sid, instruction, params), sid, n_params=n_params)
+        status = self.transact(build_instruction(sid, instruction, params), sid,
+                               n_params=n_params, attempts=attempts)
         if status is None:
             raise DeviceTimeoutError(
                 f"{r.describe(index)} did not answer {what} {r.where()} after "
-                f"{COMMAND_ATTEMPTS} attempts: check power, cable and ID"
+                f"{attempts} attempts: check power, cable and ID"
             )
         if status.error & 0x7F:
             raise ServoFault(
@@ -211,9 +213,10 @@ class Link:
             )
         return reg.decode(status.params)
 
-    def write_register(self, index: int, reg: Reg, value: int) -> None:
+    def write_register(self, index: int, reg: Reg, value: int,
+                       attempts: int = COMMAND_ATTEMPTS) -> None:
         """Write one control-table item of servo ``index`` and check the reply."""
         self.command(
             index, INST_WRITE, u16(reg.address) + reg.encode(value),
-            f"a write of {reg.name} = {value}",
+            f"a write of {reg.name} = {value}", attempts=attempts,
         )

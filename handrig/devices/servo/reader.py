@@ -5,6 +5,14 @@ its deadline is not sent: on a half-duplex bus its reply would still be arriving
 when the caller's next goals go out. Failed servos are retried while the
 deadline allows; a Fast Sync Read reply stops at the first servo that does not
 answer, so a retry asks the rest first and the one where it stopped last.
+
+One silent servo must cost that servo only. The servo where a chain's reply
+was cut short is a suspect; after ``SILENT_AFTER`` reads in a row as one it is
+asked at the end of the chain (where its silence costs the others nothing, and
+its answer, when it comes back, is read at once) and not retried. A read of a
+part that got nothing at all starts its chain one servo later next time (whole
+reads rotate anyway), so a silent first servo is found out too. When every
+servo asked is a suspect (the bus, not a servo, is quiet) all are asked.
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ from handrig.devices.servo.wire import read_bytes, wire_time_s
 HOUSEKEEPING_FORCE_S = 1.0  # housekeeping due this long runs where the wire has room
 SMOOTHING = 0.125  # weight of the newest figure in what a read learns (retries, housekeeping)
 ATTEMPT_EXTRA_MAX_S = 0.005  # an answer later than this beyond the wire is not learnt
+SILENT_AFTER = 2  # reads in a row a chain stopped at a servo: it goes to the chain's end
 
 
 class StateReader:
@@ -56,6 +65,9 @@ class StateReader:
         self._fast_fail_run = 0
         self._parts: dict[tuple[int, int], np.ndarray] = {}
         n = readings.n
+        self.suspect = np.zeros(n, np.int64)  # reads in a row a chain stopped at the servo
+        self._suspects = False  # any suspect at all (the usual read skips the checks)
+        self._shift: dict[tuple[int, int], int] = {}  # a part's chain start (see above)
         baud = link.budget.baud
         # a temperature Fast Sync Read (1 byte per servo)
         self._temperature_wire_s = wire_time_s(read_bytes(n, 1, True), baud) + 0.0005
@@ -130,8 +142,8 @@ class StateReader:
         if isinstance(begun, ServoState):
             return begun
         deadline_s = begun
-        fresh = self.readings.fresh
-        pending = indices
+        shift = self._shift.get(part, 0)
+        pending = self._chain(np.roll(indices, -shift) if shift else indices)
         for attempt in range(self.policy.read_retries + 1):
             if attempt:
                 if (self.link.request_start(self.clock.now())
@@ -139,7 +151,9 @@ class StateReader:
                     break
                 self.stats.retries += 1
             self._attempt(pending, None, deadline_s)
-            left = pending[~fresh[pending]]
+            if not self._blame(pending) and not attempt:
+                self._shift[part] = (shift + 1) % len(indices)
+            left = self._retry_chain(pending)
             if not left.size:
                 break
             # the first servo that did not answer goes last: in a Fast Sync Read the
@@ -149,10 +163,9 @@ class StateReader:
 
     def _attempts(self, deadline_s: float) -> bool:
         """The read and its retries; True when it was whole."""
-        fresh = self.readings.fresh
         first = self.fast.orders[self.stats.reads % len(self.fast.orders)]
-        order: Order | None = first
-        pending = first.indices
+        pending = self._chain(first.indices)
+        order: Order | None = first if pending is first.indices else None
         for attempt in range(self.policy.read_retries + 1):
             if attempt:
                 start = self.link.request_start(self.clock.now())
@@ -161,12 +174,52 @@ class StateReader:
                 self.stats.retries += 1
             if self._attempt(pending, order, deadline_s) == WHOLE:
                 self.last_whole = True
+                if self._suspects:
+                    self.suspect[:] = 0
+                    self._suspects = False
                 return True
-            if fresh.all():
+            self._blame(pending)
+            left = self._retry_chain(pending)
+            if not left.size:
                 break
-            pending = np.roll(pending[~fresh[pending]], -1)
+            pending = np.roll(left, -1)
             order = None
         return False
+
+    def _chain(self, indices: np.ndarray) -> np.ndarray:
+        """``indices`` (as ordered) with the servos that stopped answering at the end
+        (counted in ``chain_ends``); ``indices`` itself when none did."""
+        if not self._suspects:
+            return indices
+        out = self.suspect[indices] >= SILENT_AFTER
+        if not out.any() or out.all():
+            return indices
+        self.stats.chain_ends += 1
+        return np.concatenate((indices[~out], indices[out]))
+
+    def _retry_chain(self, asked: np.ndarray) -> np.ndarray:
+        """The servos of the chain ``asked`` worth a retry: those without a reading,
+        less those that stopped answering when others did answer."""
+        fresh = self.readings.fresh[asked]
+        left = asked[~fresh]
+        if not fresh.any():
+            return left  # nobody answered: the bus, not a servo, is quiet
+        return left[self.suspect[left] < SILENT_AFTER]
+
+    def _blame(self, asked: np.ndarray) -> bool:
+        """After a read of the chain ``asked``: the first servo without a reading, where
+        a reply was cut short, is a suspect once more; those that answered are cleared.
+        False when nobody answered (then nobody is blamed: the bus may be quiet)."""
+        fresh = self.readings.fresh[asked]
+        self.suspect[asked[fresh]] = 0
+        if fresh.all():
+            self._suspects = self._suspects and bool(self.suspect.any())
+            return True
+        if not fresh.any():
+            return False
+        self.suspect[asked[int(np.argmin(fresh))]] += 1
+        self._suspects = True
+        return True
 
     def _retry_s(self, k: int) -> float:
         """The time a retry of ``k`` servos is expected to take: its wire time and what
@@ -258,6 +311,7 @@ class StateReader:
             self._housekeeping_s = took if took > est else est + SMOOTHING * (took - est)
 
     def _housekeeping_reads(self, deadline_s: float) -> None:
+        np.greater_equal(self.suspect, SILENT_AFTER, out=self.sweep.last)  # asked last
         if self.faults.torque_on and self.faults.watchdog_ms:
             self.faults.check_watchdogs(deadline_s)
             if deadline_s - self.clock.now() <= self._temperature_wire_s:

@@ -68,6 +68,18 @@ class RegisterSweep:
         self.plan = plan
         self.stats = stats
         self._valid = np.zeros(roster.n, np.bool_)
+        # servos asked at the end of the chain (the state reader's silent ones): a Fast
+        # Sync Read reply stops at a servo that does not answer, and those after it
+        # would go unread too
+        self.last = np.zeros(roster.n, np.bool_)
+
+    def _order(self) -> tuple[np.ndarray, bytes]:
+        """Rig indices in the order asked, and their IDs."""
+        r = self.roster
+        if not self.last.any():
+            return np.arange(r.n), r.ids_bytes
+        order = np.concatenate((np.flatnonzero(~self.last), np.flatnonzero(self.last)))
+        return order, bytes(r.ids[int(i)] for i in order)
 
     def read(self, reg: Reg, deadline_s: float) -> list[int | None]:
         """``reg`` of every servo (rig order); None for a servo without a valid reply."""
@@ -82,20 +94,22 @@ class RegisterSweep:
 
     def _fast(self, reg: Reg, deadline: float) -> list[int | None]:
         r = self.roster
-        self.link.send(codec.read_request(codec.INST_FAST_SYNC_READ, reg.address, 1, r.ids_bytes))
+        order, ids = self._order()
+        self.link.send(codec.read_request(codec.INST_FAST_SYNC_READ, reg.address, 1, ids))
         raw = self.link.read_reply(codec.fast_reply_len(1, r.n), deadline)
-        codec.fast_sync_check(np.frombuffer(raw, np.uint8), np.frombuffer(r.ids_bytes, np.uint8),
+        codec.fast_sync_check(np.frombuffer(raw, np.uint8), np.frombuffer(ids, np.uint8),
                               1, self._valid)
         out: list[int | None] = [None] * r.n
-        for i in np.flatnonzero(self._valid).tolist():
-            err, _, data = codec.fast_block(raw, i, 1)
+        for k in np.flatnonzero(self._valid).tolist():
+            err, _, data = codec.fast_block(raw, k, 1)
             if not err & 0x7F:
-                out[i] = reg.decode(data)
+                out[int(order[k])] = reg.decode(data)
         return out
 
     def _sync(self, reg: Reg, deadline: float) -> list[int | None]:
         r = self.roster
-        self.link.send(codec.read_request(codec.INST_SYNC_READ, reg.address, 1, r.ids_bytes))
+        _, ids = self._order()
+        self.link.send(codec.read_request(codec.INST_SYNC_READ, reg.address, 1, ids))
         out: list[int | None] = [None] * r.n
         for _ in range(r.n):
             packet = self.link.transport.read_packet(deadline)

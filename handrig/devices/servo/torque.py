@@ -33,6 +33,8 @@ log = logging.getLogger("handrig.devices.servo")
 TORQUE_ON_SLACK_DEG = 1.0  # torque-on tolerates this much outside the limits (then clamps)
 MAX_APPROACH_DEG = 20.0  # further out than this at torque-on: refuse (likely a wrong zero)
 APPROACH_DPS = 30.0  # joint speed that brings a servo resting outside its limits back in
+CONFIRM_ATTEMPTS = 3  # torque-off: attempts per servo to confirm it
+CONFIRM_BUDGET_S = 1.0  # torque-off: time for all the confirmations
 # Caught inside a torque context: the loop's graceful stop (on_signal), else an exception.
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT)
 
@@ -139,7 +141,12 @@ class TorqueControl:
                               f"brought in at {APPROACH_DPS:g} deg/s")
 
     def disable(self) -> list[str]:
-        """Torque off on every servo and watchdog cleared; returns the servos that failed."""
+        """Torque off on every servo and watchdog cleared; returns the servos that failed.
+
+        The broadcast reaches every servo that hears the bus; each is then asked to
+        confirm, ``CONFIRM_ATTEMPTS`` times at most and within ``CONFIRM_BUDGET_S`` in
+        all (a bus that stopped answering must not hold the exit for 8 attempts of
+        every servo): the servos left are listed as not confirmed."""
         r = self.roster
         failed: list[str] = []
         if not self.link.transport.is_open:
@@ -150,12 +157,25 @@ class TorqueControl:
             self.link.sync_write(Reg.TORQUE_ENABLE, [0] * r.n)
         except DeviceError as exc:
             return [f"all servos: {exc}"]
+        end = self.clock.now() + CONFIRM_BUDGET_S
         for i in range(r.n):
+            if self.clock.now() >= end:
+                rest = ", ".join(r.describe(j) for j in range(i, r.n))
+                failed.append(f"{rest}: not confirmed (the {CONFIRM_BUDGET_S:g} s for "
+                              "confirmations went on the servos before)")
+                break
             try:
-                self.link.write_register(i, Reg.TORQUE_ENABLE, 0)
-                self.link.write_register(i, Reg.BUS_WATCHDOG, 0)
+                self.link.write_register(i, Reg.TORQUE_ENABLE, 0, attempts=CONFIRM_ATTEMPTS)
+                self.link.write_register(i, Reg.BUS_WATCHDOG, 0, attempts=CONFIRM_ATTEMPTS)
             except DeviceError as exc:
-                failed.append(f"{r.describe(i)}: {exc}")
+                t = self.link.transport
+                if t.wedged or not t.is_open:  # the port failed: nobody else can be asked
+                    rest = ", ".join(r.describe(j) for j in range(i, r.n))
+                    failed.append(f"{rest}: not confirmed: {exc}")
+                    break
+                text = str(exc)
+                failed.append(text if text.startswith(r.describe(i)) else
+                              f"{r.describe(i)}: {text}")
         self.faults.note_torque(False)
         return failed
 

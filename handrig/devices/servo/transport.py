@@ -11,9 +11,12 @@ the SDK's busy-wait on wall time.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import re
 import select
+import termios
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -22,11 +25,15 @@ from dynamixel_sdk.port_handler import PortHandler
 
 from handrig.clock import Clock
 from handrig.devices.servo.codec import HEADER, MAX_PACKET_LEN, packet_length
-from handrig.errors import DeviceError
+from handrig.errors import DeviceError, DeviceTimeoutError
 
 # FTDI adapters' default latency timer is 16 ms; 1 ms is the usual setting (REFERENCE.md 1).
 LATENCY_TIMER_WANTED_MS = 1
 MAX_POLLS = 100_000  # bounds a poll loop even on a clock that does not move
+# A write the port has taken none of for this long (plus the bytes' own wire time) has
+# met a wedged adapter: the kernel's buffer is full (about 19 KB on a pty, 4 KB in a
+# USB serial driver: a fifth of a second or more of our traffic already waiting).
+WRITE_TIMEOUT_S = 0.2
 _SYSFS_LATENCY = "/sys/bus/usb-serial/devices/{name}/latency_timer"
 
 
@@ -59,6 +66,7 @@ class Transport(ABC):
         self.bytes_written = 0
         self.bytes_read = 0
         self.last_rx_s = -np.inf  # clock time bytes last came in
+        self.wedged = False  # a write timed out: the port stopped draining (set by write)
 
     @property
     @abstractmethod
@@ -228,37 +236,73 @@ class SerialTransport(Transport):
                 f"dynamixel-sdk refuses baud {self.baud} on {self.port} "
                 "(allowed: 9600 ... 4000000 from the SDK's list)"
             )
+        fd = handler.ser.fileno()
+        try:  # as pyserial's exclusive=True: another handrig (or such a client) is refused
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handler.closePort()
+            raise DeviceError(
+                f"servo port {self.port} is busy: another program has it open (another "
+                f"handrig run?); find it with `fuser {self.port}`") from None
         self._handler = handler
-        self._fd = handler.ser.fileno()
+        self._fd = fd
         os.set_blocking(self._fd, False)
         self._buf.clear()
+        self.wedged = False
 
     def close(self) -> None:
+        """Close the port; after a timed-out write the bytes still queued are dropped
+        first (closing a serial port waits for its output to drain: up to 30 s)."""
         if self._handler is not None:
             try:
+                if self.wedged:
+                    with contextlib.suppress(OSError, termios.error):
+                        termios.tcflush(self._fd, termios.TCOFLUSH)
                 self._handler.closePort()
             finally:
                 self._handler = None
                 self._fd = -1
 
     def write(self, data: bytes | memoryview) -> None:
-        """Send ``data`` completely; DeviceError if the port went away. One ``os.write``
-        in the usual case: the goals' write is on the cycle's critical path."""
+        """Send ``data`` completely; DeviceError if the port went away, DeviceTimeoutError
+        naming the port when it takes none of the bytes for ``WRITE_TIMEOUT_S`` (plus
+        their wire time): a wedged adapter. One ``os.write`` in the usual case: the
+        goals' write is on the cycle's critical path."""
         view = data
         try:
-            while True:
-                try:
-                    n = os.write(self._fd, view)
-                except BlockingIOError:
-                    select.select([], [self._fd], [], 0.01)
-                    continue
-                if n == len(view):
-                    break
-                view = memoryview(view)[n:]
+            n = os.write(self._fd, view)
+            if n != len(view):
+                self._write_rest(memoryview(view)[n:])
+        except BlockingIOError:
+            self._write_rest(memoryview(view))
         except OSError as exc:
             self._check_open()  # closed: say so rather than "bad file descriptor"
             raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
         self.bytes_written += len(data)
+
+    def _write_rest(self, view: memoryview) -> None:
+        """The rest of a write the port did not take at once, against a deadline."""
+        clock, fd = self.clock, self._fd
+        timeout_s = WRITE_TIMEOUT_S + len(view) * 10 / self.baud
+        end = clock.now() + timeout_s
+        while view:
+            now = clock.now()
+            if now >= end:
+                self.wedged = True
+                raise DeviceTimeoutError(
+                    f"servo port {self.port} took no bytes for {timeout_s:.2f} s "
+                    f"({len(view)} bytes of a write still waiting): the USB adapter (or the "
+                    "emulator serving the port) has stopped draining; unplug and replug "
+                    "the adapter")
+            wait = min(end - now, 0.01)
+            try:
+                _, ready, _ = select.select([], [fd], [], wait)
+                if not ready:
+                    self.clock.sleep_until(now + wait)  # a fake clock learns time passed
+                    continue
+                view = view[os.write(fd, view):]
+            except (BlockingIOError, InterruptedError):
+                continue
 
     def _receive(
         self, deadline_s: float, spin_from_s: float | None, spin_until_s: float

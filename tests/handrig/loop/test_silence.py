@@ -172,3 +172,38 @@ def test_every_servo_quiet_on_an_emulated_bus_points_at_the_emulator() -> None:
         s.silent_until = math.inf
     with pytest.raises(DeviceTimeoutError, match="the emulator is not keeping up"):
         loop.until(1.0, np.zeros(6))
+
+
+def test_a_rebooted_servo_comes_back_where_it_is_and_eases_to_its_goals() -> None:
+    from firmware_protocol import dynamixel as dx
+
+    rig = small_rig()
+    bus, _, peer = make_bus(rig, fault_policy=POLICY)
+    loop = Loop(bus, silence("continue"))
+    cal = rig.servos[4]
+    goals = np.full(6, 0.5 * cal.max_deg)
+    with bus.torque(handle_signals=False):
+        assert bus.drain_events() == []  # the loop drains them: from now on events
+        loop.write(goals)
+        servo = peer.servo(5)
+        servo.inject_hardware_error(dx.HardwareError.OVERLOAD)  # torque off in it
+        servo.set_motion(float(cal.deg_to_ticks(cal.min_deg)), 0.0, 0.0)  # sagged to its stop
+        bus.clock.advance(0.01)  # type: ignore[attr-defined]
+        loop.read()  # the Alert: read its error, reboot it
+        assert bus.stats.reboots[4] == 1 and servo.torque_enabled
+        # torque came back where it is, not at the goal it had
+        assert servo.goal == cal.deg_to_ticks(cal.min_deg)
+        events = bus.drain_events()
+        assert any("hardware error 0x20" in e and "rebooting it" in e for e in events)
+        assert any(e.startswith("servo 5 (riThumbIPz) rebooted: torque on where it is")
+                   for e in events)
+        step = rig.loop.slew_deg_s / RATE_HZ
+        loop.write(goals)  # eases back at the slew limit
+        assert bus.last_goals_deg[4] == pytest.approx(cal.min_deg + step)
+        lo, hi = (np.array([getattr(s, k) for s in rig.servos]) for k in ("min_deg", "max_deg"))
+        follow = np.clip(goals, lo, hi)
+        assert (np.delete(bus.last_goals_deg, 4) == np.delete(follow, 4)).all()  # the others
+        for _ in range(int((goals[0] - cal.min_deg) / step) + 2):
+            loop.write(goals)
+        assert bus.last_goals_deg[4] == pytest.approx(goals[0])
+        assert not loop.watch.steering

@@ -1,0 +1,107 @@
+"""One servo stops answering mid-run (its Status Return Level set to 0 by a Sync
+Write, as the issue did): a real ``handrig run`` against ``handrig sim-bus`` in its
+own process must hold that servo only (``[silence] action = "continue"``), name it
+alone, and say at exit that it alone could not confirm torque off; with
+``action = "stop"`` the run ends naming it alone."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from firmware_protocol import dynamixel as dx
+from handrig.config.paths import CONFIG_DIR
+from sim.demo_recording import DEMO_RECORDING
+
+CLI = [sys.executable, "-m", "handrig.cli"]
+SILENT = "servo 7 (riIndexMCPy)"
+
+
+@pytest.fixture
+def sim_bus() -> Iterator[str]:
+    proc = subprocess.Popen([*CLI, "sim-bus", "--no-realtime"], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True, start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first.startswith("port: /dev/"), first
+        yield first.split()[1]
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _run_silencing_servo_7(port: str, tmp_path: Path, action: str) -> tuple[dict, str]:
+    rig = (CONFIG_DIR / "rig.toml").read_text()
+    rig, n = re.subn(r'(?m)^action = "\w+"', f'action = "{action}"', rig)
+    assert n == 1
+    config = tmp_path / "rig.toml"
+    config.write_text(rig)
+    err = tmp_path / "stderr.txt"
+    with open(err, "w") as f:
+        proc = subprocess.Popen(
+            [*CLI, "run", "--config", str(config), "--glove", f"replay:{DEMO_RECORDING}",
+             "--bus", port, "--seconds", "6", "--json"],
+            stdout=subprocess.PIPE, stderr=f, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while "commissioned" not in err.read_text():
+            assert proc.poll() is None, err.read_text()
+            assert time.monotonic() < deadline, "the rig never commissioned the servos"
+            time.sleep(0.05)
+        time.sleep(1.5)  # torque on, goals flowing
+        fd = os.open(port, os.O_RDWR | os.O_NOCTTY)
+        try:
+            os.write(fd, dx.build_instruction(
+                dx.BROADCAST_ID, dx.Instruction.SYNC_WRITE,
+                dx.sync_write_params(dx.Reg.STATUS_RETURN_LEVEL, 1, [(7, bytes([0]))])))
+        finally:
+            os.close(fd)
+        out, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return json.loads(out.strip().splitlines()[-1]), err.read_text()
+
+
+def _servos_named(text: str) -> set[str]:
+    return set(re.findall(r"servo \d+ \(\w+\)", text))
+
+
+def test_one_silent_servo_is_the_only_one_held(sim_bus: str, tmp_path: Path) -> None:
+    summary, err = _run_silencing_servo_7(sim_bus, tmp_path, "continue")
+    assert summary["silence"]["held"] == 1, summary["silence"]
+    assert summary["silence"]["silences"] == 1
+    assert summary["stop_reason"] == "6 s done"
+    said = "\n".join(e for e in summary["events"] if "no valid reply" in e or "holding" in e)
+    assert said and _servos_named(said) == {SILENT}, said
+    assert summary["bus"]["partial_replies"] > 0  # cut replies, seen as such
+    assert summary["bus"]["fallbacks"] == 0
+    # torque off at exit: the broadcast went out; it alone could not confirm it
+    assert "torque off failed" in summary["error"]
+    assert _servos_named(summary["error"]) == {SILENT}, summary["error"]
+    assert err.count(f"no valid reply from {SILENT}") == 2  # warned, then the action: once each
+
+
+def test_with_action_stop_the_run_ends_naming_the_one_servo(sim_bus: str,
+                                                           tmp_path: Path) -> None:
+    summary, _ = _run_silencing_servo_7(sim_bus, tmp_path, "stop")
+    assert summary["stop_reason"].startswith("device error")
+    assert f"no valid reply from {SILENT}" in summary["stop_reason"]
+    reply_part = summary["stop_reason"].split("no valid reply from")[1].split(";")[0]
+    assert _servos_named(reply_part) == {SILENT}, summary["stop_reason"]
+    assert summary["torque_off"] is not True or SILENT not in summary.get("error", "")

@@ -1,0 +1,125 @@
+"""A wedged adapter: the bus emulator stops draining the port (SIGSTOP, as a wedged USB
+adapter stops taking bytes). A real ``handrig run`` must end on its own within a
+second or two with a message naming the port, honour a SIGTERM during the stall at
+once, and leave the servos to their Bus Watchdog (tripped once the emulator runs again).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+from handrig.config.rig import load_rig_config
+from sim.demo_recording import DEMO_RECORDING
+
+CLI = [sys.executable, "-m", "handrig.cli"]
+BUS_WATCHDOG = 98
+TRIPPED = 0xFF
+# From the stall to the exit: the pty's buffer fills (about 19 KB: ~1 s of goals), the
+# write's deadline (0.2 s), the torque-off and its read-back (0.2 s each), the process
+# ending; with room for a loaded machine.
+EXIT_WITHIN_S = 3.5
+
+
+@pytest.fixture
+def sim_bus() -> Iterator[tuple[subprocess.Popen[str], str]]:
+    proc = subprocess.Popen([*CLI, "sim-bus", "--no-realtime"], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True, start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first.startswith("port: /dev/"), first
+        yield proc, first.split()[1]
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGCONT)
+            proc.kill()
+            proc.wait()
+
+
+def _start_rig(port: str, tmp_path: Path) -> tuple[subprocess.Popen[str], Path]:
+    err = tmp_path / "stderr.txt"
+    with open(err, "w") as f:
+        proc = subprocess.Popen(
+            [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", port,
+             "--seconds", "120", "--json"],
+            stdout=subprocess.PIPE, stderr=f, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while "commissioned" not in err.read_text():
+        assert proc.poll() is None, err.read_text()
+        assert time.monotonic() < deadline, "the rig never commissioned the servos"
+        time.sleep(0.05)
+    time.sleep(1.5)  # torque on, goals flowing
+    assert proc.poll() is None, err.read_text()
+    return proc, err
+
+
+def _wait_exit(proc: subprocess.Popen[str], from_s: float) -> float:
+    try:
+        proc.wait(timeout=EXIT_WITHIN_S + 30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+        pytest.fail("handrig run hung on the wedged port")
+    return time.monotonic() - from_s
+
+
+def _summary(proc: subprocess.Popen[str]) -> dict[str, object]:
+    assert proc.stdout is not None
+    out = proc.stdout.read()
+    return dict(json.loads(out.strip().splitlines()[-1]))
+
+
+def test_a_wedged_adapter_ends_the_run_within_seconds_naming_the_port(
+        sim_bus: tuple[subprocess.Popen[str], str], tmp_path: Path) -> None:
+    sim, port = sim_bus
+    rig_proc, _ = _start_rig(port, tmp_path)
+    os.kill(sim.pid, signal.SIGSTOP)
+    stalled = time.monotonic()
+    took = _wait_exit(rig_proc, stalled)
+    summary = _summary(rig_proc)
+    assert rig_proc.returncode == 1
+    assert took <= EXIT_WITHIN_S, f"the run took {took:.1f} s to end after the stall"
+    error = str(summary["error"])
+    assert port in error and "stopped draining" in error, error
+    assert summary["torque_off"] is not True  # it could not be confirmed: not claimed
+    # the emulator runs again: every servo's Bus Watchdog has tripped (it heard nothing
+    # after the stall), so it stopped where it was
+    os.kill(sim.pid, signal.SIGCONT)
+    time.sleep(0.5)
+    handler = PortHandler(port)
+    assert handler.openPort() and handler.setBaudRate(load_rig_config().bus.baud)
+    packets = PacketHandler(2.0)
+    try:
+        for s in load_rig_config().servos:
+            value, result, _ = packets.read1ByteTxRx(handler, s.id, BUS_WATCHDOG)
+            assert result == COMM_SUCCESS, f"servo {s.id} did not answer"
+            assert value == TRIPPED, f"servo {s.id}: Bus Watchdog {value}, not tripped"
+    finally:
+        handler.closePort()
+
+
+def test_a_sigterm_during_the_stall_ends_the_run_promptly(
+        sim_bus: tuple[subprocess.Popen[str], str], tmp_path: Path) -> None:
+    sim, port = sim_bus
+    rig_proc, err = _start_rig(port, tmp_path)
+    os.kill(sim.pid, signal.SIGSTOP)
+    time.sleep(0.3)  # replies lost, the port's buffer still filling
+    os.kill(rig_proc.pid, signal.SIGTERM)
+    signalled = time.monotonic()
+    took = _wait_exit(rig_proc, signalled)
+    summary = _summary(rig_proc)
+    os.kill(sim.pid, signal.SIGCONT)
+    assert took <= EXIT_WITHIN_S, f"the run took {took:.1f} s to end after SIGTERM"
+    assert summary.get("signals") == 1
+    assert "SIGTERM received" in err.read_text()
+    assert rig_proc.returncode in (0, 1)
