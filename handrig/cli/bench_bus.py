@@ -28,6 +28,7 @@ import numpy as np
 
 from handrig.cli._numbers import positive_float, positive_int
 from handrig.config.rig import BAUD_RATES, RigConfig, load_rig_config
+from handrig.devices.servo.wire import goal_write_bytes, read_bytes
 from handrig.errors import ConfigError, DeviceError
 from handrig.realtime import helper_env, pinned_loop
 
@@ -233,7 +234,8 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
     nbytes, limit = wire_limit_hz(n_servos, baud)
     write(
         f"{n_servos} servos at {baud} baud: {nbytes} bytes per cycle (Sync Write "
-        f"{14 + 5 * n_servos} + Fast Sync Read {14 + n_servos} + reply {8 + 8 * n_servos}) "
+        f"{goal_write_bytes(n_servos)} + Fast Sync Read and its reply "
+        f"{read_bytes(n_servos, 4, True)}) "
         "-> wire limit "
         f"{limit:.0f} Hz ({1e6 / limit:.0f} us per cycle); emulated servos "
         f"{'drive the MuJoCo puppet' if puppet else 'move kinematically'}\n"

@@ -375,9 +375,8 @@ class SerialTransport(Transport):
         real = os.path.realpath(self.port)
         name = os.path.basename(real)
         if not re.fullmatch(r"ttyUSB\d+", name):
-            kind = "a pseudo-terminal" if real.startswith("/dev/pts/") else f"{real}"
             return LatencyReport(
-                None, None, None, f"no USB latency timer on {kind}: skipped"
+                None, None, None, f"no USB latency timer on {real}: skipped"
             )
         path = _SYSFS_LATENCY.format(name=name)
         try:
