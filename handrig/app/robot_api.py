@@ -88,7 +88,8 @@ class RobotHand:
             bus.connect()
             # runs once torque is off, before the bus closes: read Torque Enable back
             stack.callback(self._confirm_torque_off, bus)
-            stack.enter_context(bus.torque(handle_signals=False))
+            # SIGTERM, SIGINT, SIGHUP end the block with an exception: torque goes off
+            stack.enter_context(bus.torque(handle_signals=True))
             state = bus.read_state()
             if state.stale.any():
                 missing = [self.joint_names[i] for i in np.flatnonzero(state.stale)]
@@ -143,7 +144,9 @@ class RobotHand:
         want = self.targets_deg(curves)
         last = want if self._last_deg is None else self._last_deg
         now = self._clock.now()
-        step = self.rig.loop.slew_deg_s * max(0.0, now - self._last_t)
+        # a pause does not earn a jump: at most one cycle's step at the loop's rate
+        dt = min(max(0.0, now - self._last_t), 1.0 / self.rig.loop.rate_hz)
+        step = self.rig.loop.slew_deg_s * dt
         goals = np.clip(want, last - step, last + step)
         bus.write_goals_deg(goals)
         self._last_deg, self._last_t = goals, now

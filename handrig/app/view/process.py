@@ -176,6 +176,10 @@ class ViewProcess:
         proc = self._proc
         if proc is None:
             return
+        if self._feeder is not None and self._feeder.is_alive():
+            # the feeder is stuck writing to a child that stopped reading: closing the
+            # pipe would wait for it, so the child goes first
+            proc.kill()
         with contextlib.suppress(OSError, ValueError):
             if proc.stdin is not None:
                 proc.stdin.close()

@@ -199,11 +199,24 @@ class ViewServer:
         given = parse_qs(urlsplit(path).query).get("token", [""])[0]
         return hmac.compare_digest(given.encode(), self.token.encode())
 
+    @staticmethod
+    def _same_origin(request: Request) -> bool:
+        """A browser names the page that opens a socket (Origin): it must be this server's
+        own page (the Host it asked for). Programs that send no Origin are let in (they
+        are on this machine, or hold the token)."""
+        origin = request.headers.get("Origin")
+        if origin is None:
+            return True
+        return urlsplit(origin).netloc.lower() == str(request.headers.get("Host", "")).lower()
+
     def _http(self, connection: ServerConnection, request: Request) -> Response | None:
         path = urlsplit(request.path).path
         if path == "/ws":
             if not self._authorised(request.path):
                 return connection.respond(HTTPStatus.FORBIDDEN, "token missing or wrong\n")
+            if not self._same_origin(request):
+                # another site's page in the user's browser must not press the buttons
+                return connection.respond(HTTPStatus.FORBIDDEN, "not this view's page\n")
             return None  # the WebSocket handshake goes on
         if path in ("/", "/index.html"):
             if not self._authorised(request.path):

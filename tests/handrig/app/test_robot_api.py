@@ -86,3 +86,36 @@ def test_goals_follow_the_curves_within_limits_and_slew() -> None:
 def test_a_human_rig_is_not_a_robot_hand() -> None:
     with pytest.raises(ConfigError, match="not a robot rig"):
         RobotHand(CONFIG_DIR / "rig.toml")
+
+
+def test_a_sigterm_inside_the_block_turns_torque_off() -> None:
+    """A robotics program killed politely (SIGTERM, as a process manager does) leaves the
+    hand with torque off: the signal ends the with-block, torque goes off and is read
+    back from the servos."""
+    import signal
+
+    script = (
+        "import sys, time\n"
+        "from handrig.app.robot_api import RobotHand\n"
+        "robot = RobotHand('leap', port='sim')\n"
+        "try:\n"
+        "    with robot:\n"
+        "        print('torque', robot.torque_on, flush=True)\n"
+        "        time.sleep(60)\n"
+        "finally:\n"
+        "    print('confirmed', robot.torque_off_confirmed, flush=True)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first.strip() == "torque True", (first, proc.stderr.read() if proc.poll() else "")
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert "confirmed True" in out, (out, err)
+    assert "SIGTERM received" in err

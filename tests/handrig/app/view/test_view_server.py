@@ -77,6 +77,20 @@ def test_token_guards_page_and_socket(human_rig) -> None:  # type: ignore[no-unt
             assert json.loads(ws.recv(timeout=5))["type"] == "scene"
 
 
+def test_another_sites_page_cannot_open_the_socket(human_rig) -> None:  # type: ignore[no-untyped-def]
+    """On loopback there is no token, so the browser's Origin is what keeps another site's
+    page (open in the same browser) from pressing relax or stop; the view's own page,
+    at whatever host name it was opened, gets in."""
+    with build_server("127.0.0.1:0", human_rig) as server:
+        url = f"ws://127.0.0.1:{server.port}/ws"
+        with pytest.raises(Exception, match="403"):
+            connect(url, origin="http://evil.example", open_timeout=5)  # type: ignore[arg-type]
+        with connect(url, origin=f"http://127.0.0.1:{server.port}") as ws:  # type: ignore[arg-type]
+            assert json.loads(ws.recv(timeout=5))["type"] == "scene"
+        with connect(url) as ws:  # a program on this machine sends no Origin
+            assert json.loads(ws.recv(timeout=5))["type"] == "scene"
+
+
 def test_page_and_vendored_files_served(human_rig) -> None:  # type: ignore[no-untyped-def]
     with build_server("127.0.0.1:0", human_rig) as server:
         base = f"http://127.0.0.1:{server.port}"
