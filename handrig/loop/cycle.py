@@ -28,7 +28,6 @@ import numpy as np
 
 from handrig.clock import Clock
 from handrig.config.rig import SilenceConfig
-from handrig.devices.servo.wire import goal_write_bytes, wire_time_s
 from handrig.errors import DeviceError
 from handrig.loop.easing import Easing
 from handrig.loop.modes import Mode, ModeMachine
@@ -283,9 +282,7 @@ class Cycle:
         """The least a read right after a write can take: the write's goal Sync Write
         still on the wire, then the read's request and replies (0 for a bus that has no
         serial wire)."""
-        if bus.baud <= 0:
-            return 0.0
-        return bus.read_wire_s(n) + wire_time_s(goal_write_bytes(bus.n_servos), bus.baud)
+        return bus.read_wire_s(n) + bus.write_wire_s()
 
     def _read(self, tick: Tick) -> None:
         """The present-state read, if the trigger finds room for one in this cycle."""

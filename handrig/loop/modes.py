@@ -34,6 +34,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable
 
+from handrig.config.rig import LoopConfig
 from handrig.loop.stats import RunStats
 
 
@@ -62,8 +63,8 @@ class ModeMachine:
         *,
         glove_timeout_s: float,
         relax_time_s: float,
-        resume_frames: int = 3,
-        resume_time_s: float = 0.3,
+        resume_frames: int = LoopConfig.resume_frames,
+        resume_time_s: float = LoopConfig.resume_time_s,
         event: Callable[[str], None] = lambda text: None,
         on_relax: Callable[[], None] = lambda: None,
         on_resume: Callable[[], None] = lambda: None,

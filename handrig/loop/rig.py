@@ -43,7 +43,6 @@ from typing import Any, Literal
 
 from handrig.clock import Clock
 from handrig.config.rig import BusConfig, LoopConfig, RigConfig, SilenceConfig
-from handrig.devices.servo.wire import goal_write_bytes, wire_time_s
 from handrig.errors import DeviceError
 from handrig.loop.cycle import Cycle
 from handrig.loop.modes import Mode, ModeMachine
@@ -92,8 +91,10 @@ class Rig:
         In loop mode "glove" the ceiling is also held below the rate at which goal Sync
         Writes fill the wire (``0.9 / wire time``), so writes never queue on the bus."""
         loop = config.loop
-        write_s = wire_time_s(goal_write_bytes(len(config.servos)), config.bus.baud)
-        ceiling_hz = max(loop.floor_hz, min(loop.ceiling_hz, WIRE_SHARE / write_s))
+        write_s = bus.write_wire_s()
+        ceiling_hz = loop.ceiling_hz
+        if write_s > 0.0:
+            ceiling_hz = max(loop.floor_hz, min(loop.ceiling_hz, WIRE_SHARE / write_s))
         return cls(
             glove, bus, pipeline, clock, controls_from_raw=controls_from_raw,
             orientation=orientation, rate_hz=loop.rate_hz, read_every=config.bus.read_every,

@@ -35,6 +35,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 from handrig.clock import Clock, MonotonicClock
+from handrig.config.rig import LoopConfig
 from handrig.devices.glove.source import GloveSource
 
 READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the next tick
@@ -225,7 +226,7 @@ class GloveTrigger(Trigger):
     """
 
     def __init__(self, clock: Clock, glove: GloveSource, *, floor_hz: float, ceiling_hz: float,
-                 catch_up: bool = False) -> None:
+                 catch_up: bool = LoopConfig.catch_up) -> None:
         if not 0.0 < floor_hz <= ceiling_hz:
             raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
         self.clock = clock

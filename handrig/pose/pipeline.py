@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from handrig import hand
 from handrig.config.loading import JointLimits
+from handrig.config.rig import LoopConfig
 from handrig.errors import ConfigError
 from handrig.pose import kernels
 from handrig.pose.sag import SagGrid, SagTables
@@ -167,7 +168,7 @@ class PosePipeline:
         *,
         servo_limits_deg: FloatArray | None = None,
         limits: JointLimits | None = None,
-        slew_deg_s: float = 720.0,
+        slew_deg_s: float = LoopConfig.slew_deg_s,
         sag_gain: float = 1.0,
         left_hand: Literal["map", "mirror", "relaxed"] = "map",
         control_means_deg: FloatArray | None = None,

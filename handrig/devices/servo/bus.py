@@ -236,6 +236,10 @@ class ServoBus(ABC):
         (0: no wire to wait for)."""
         return 0.0
 
+    def write_wire_s(self) -> float:
+        """Wire time of one goal write to every servo (0: no wire to wait for)."""
+        return 0.0
+
     def quiet_wait_s(self) -> float:
         """How long a read asked now would wait, beyond the wire, for the line to go
         quiet (after a failed reply); the loop counts it when fitting reads into gaps."""

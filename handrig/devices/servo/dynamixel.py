@@ -46,7 +46,13 @@ from handrig.devices.servo.roster import Roster
 from handrig.devices.servo.sync_read import RegisterSweep, SyncRead
 from handrig.devices.servo.torque import TorqueContext, TorqueControl
 from handrig.devices.servo.transport import SerialTransport, Transport
-from handrig.devices.servo.wire import WireBudget, cycle_bytes, read_bytes, wire_time_s
+from handrig.devices.servo.wire import (
+    WireBudget,
+    cycle_bytes,
+    goal_write_bytes,
+    read_bytes,
+    wire_time_s,
+)
 from handrig.errors import DeviceError
 
 __all__ = ["DynamixelBus", "ReadFields", "cycle_bytes", "wire_time_s"]
@@ -231,6 +237,10 @@ class DynamixelBus(ServoBus):
     def read_wire_s(self, n: int) -> float:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
         return self.reader.read_wire_s(n)
+
+    def write_wire_s(self) -> float:
+        """Wire time of the goal Sync Write to every servo (the wire model's figure)."""
+        return wire_time_s(goal_write_bytes(self.roster.n), self.baud)
 
     def quiet_wait_s(self) -> float:
         """How long a read asked now would wait, beyond the wire, for the line to go

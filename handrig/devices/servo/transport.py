@@ -25,6 +25,7 @@ from dynamixel_sdk.port_handler import PortHandler
 
 from handrig.clock import Clock
 from handrig.devices.servo.codec import HEADER, MAX_PACKET_LEN, packet_length
+from handrig.devices.servo.wire import wire_time_s
 from handrig.errors import DeviceError, DeviceTimeoutError
 
 # FTDI adapters' default latency timer is 16 ms; 1 ms is the usual setting (REFERENCE.md 1).
@@ -283,7 +284,7 @@ class SerialTransport(Transport):
     def _write_rest(self, view: memoryview) -> None:
         """The rest of a write the port did not take at once, against a deadline."""
         clock, fd = self.clock, self._fd
-        timeout_s = WRITE_TIMEOUT_S + len(view) * 10 / self.baud
+        timeout_s = WRITE_TIMEOUT_S + wire_time_s(len(view), self.baud)
         end = clock.now() + timeout_s
         while view:
             now = clock.now()
