@@ -11,7 +11,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from contextlib import AbstractContextManager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 import numpy as np
@@ -57,7 +57,7 @@ class ServoState:
         return fresh if self.asked is None else fresh & self.asked
 
 
-_ARRAY_COUNTERS = frozenset({"stale_readings", "hardware_errors", "reboots"})
+_ARRAY_COUNTERS = ("stale_readings", "hardware_errors", "reboots")
 
 
 @dataclass
@@ -93,18 +93,20 @@ class BusStats:
     @classmethod
     def total(cls, ledgers: Sequence[BusStats]) -> BusStats:
         """The bus's counters: the sum of its parts' own ledgers (each part counts what it
-        did in a ledger of its own; nobody writes another's)."""
-        first, rest = ledgers[0], ledgers[1:]
-        new = first.copy()
+        did in a ledger of its own; nobody writes another's). A few microseconds: it
+        runs once per read."""
+        new = ledgers[0].copy()
         d = new.__dict__
-        for other in rest:
-            for name, value in other.__dict__.items():
-                if name == "n_servos":
-                    continue
-                if name in _ARRAY_COUNTERS:
-                    d[name] = d[name] + value
-                elif value:
-                    d[name] += value
+        for other in ledgers[1:]:
+            od = other.__dict__
+            for name in _INT_COUNTERS:
+                v = od[name]
+                if v:
+                    d[name] += v
+            for name in _ARRAY_COUNTERS:
+                a = od[name]
+                if len(a):  # only the parts that count per servo have these
+                    d[name] = d[name] + a
         return new
 
     def copy(self) -> BusStats:
@@ -128,6 +130,10 @@ class BusStats:
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )
+
+
+_INT_COUNTERS = tuple(f.name for f in fields(BusStats)
+                      if f.name != "n_servos" and f.name not in _ARRAY_COUNTERS)
 
 
 @dataclass(frozen=True)

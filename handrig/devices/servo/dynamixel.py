@@ -63,8 +63,9 @@ REPLY_POLL_LEAD_S = 50e-6  # default spin_s
 
 
 # the parts that count what they do, each in a ledger of its own
-_PARTS_COUNTING = ("plan", "readings", "link", "writer", "sweep", "faults", "fast", "sync",
+_PARTS_COUNTING = ("readings", "faults", "plan", "link", "writer", "sweep", "fast", "sync",
                    "reader")
+_PER_SERVO = ("readings", "faults")
 
 
 class DynamixelBus(ServoBus):
@@ -115,7 +116,10 @@ class DynamixelBus(ServoBus):
         self.policy = fault_policy or FaultPolicy()
         self.roster = Roster(rig, port, self.baud)
         # each part counts what it did in a ledger of its own; ``stats`` sums them
-        self._ledgers = {name: BusStats(self.roster.n) for name in _PARTS_COUNTING}
+        # (per-servo arrays only where a part counts per servo: the readings' stale
+        # counts, the fault handler's hardware errors and reboots)
+        self._ledgers = {name: BusStats(self.roster.n if name in _PER_SERVO else 0)
+                         for name in _PARTS_COUNTING}
         self.commissioning: list[str] = []  # what connect() found and did, one line each
         self.plan = ReadPlan(read_fields, self._ledgers["plan"], self.roster.where(),
                              self.commissioning)
