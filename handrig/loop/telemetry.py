@@ -132,12 +132,12 @@ class SnapshotBuilder:
     while its newest frame is at most the glove timeout old and it reports no failure.
     """
 
-    def __init__(self, glove: object, bus: object, pipeline: PosePipeline,
+    def __init__(self, glove: GloveSource, bus: ServoBus, pipeline: PosePipeline,
                  machine: ModeMachine, stats: RunStats, started_s: Callable[[], float],
                  view: Callable[[], tuple[Any, ...]],
                  outputs: Callable[[], tuple[object, ...]]) -> None:
-        self.glove = glove if isinstance(glove, GloveSource) else None
-        self.bus = bus if isinstance(bus, ServoBus) else None
+        self.glove: GloveSource | None = glove
+        self.bus: ServoBus | None = bus
         self.pipeline = pipeline
         self.machine = machine
         self.stats = stats
