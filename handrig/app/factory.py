@@ -509,6 +509,7 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
         "cycles_without_frame": s.cycles_without_frame,
         "frames_skipped": s.frames_skipped,
         "frames_in_bursts": s.frames_in_bursts,
+        "frames_in_host_stalls": s.frames_in_host_stalls,
         "frames_caught_up": s.frames_caught_up,
         "ceiling_waits": s.ceiling_waits,
         "cpu_per_cycle_us": num(s.cpu_per_cycle_us, 1),

@@ -407,6 +407,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"                  of which compute p50 {comp.get('p50')} us, p99 {comp.get('p99')} us "
         f"(cycle start -> Sync Write; loop {summary.get('loop_mode', 'fixed')})",
         f"frame losses      {summary.get('frames_skipped', 0)} skipped by the loop, "
+        f"{summary.get('frames_in_host_stalls', 0)} left waiting by host stalls (the host "
+        "read nothing for 3 frame periods or more: not the glove), "
         f"{summary.get('frames_in_bursts', 0)} lost in the glove's own bursts (caught up: "
         f"{summary.get('frames_caught_up', 0)} written just before a newer one)",
         f"overruns          {summary['overruns']} (max {summary['overrun_max_us']} us late, "

@@ -226,11 +226,14 @@ class Cycle:
             count, before = sample.count, 0 if self.sample is None else self.sample.count
             # frames the glove sent back to back, superseded on arrival (not by a busy loop)
             bursts = self.trigger.take_bursts()
+            stalled = self.trigger.take_stalled()  # the host's backlog, not the glove's
             if before and count > before + 1:
                 superseded = count - before - 1
                 bursts = min(superseded, bursts)
+                stalled = min(superseded - bursts, stalled)
                 stats.frames_in_bursts += bursts
-                stats.frames_skipped += superseded - bursts
+                stats.frames_in_host_stalls += stalled
+                stats.frames_skipped += superseded - bursts - stalled
             self.sample = sample
         else:
             stats.cycles_without_frame += 1

@@ -30,18 +30,18 @@ def _time_keys(cls: type, prefix: tuple[str, ...] = ()) -> list[tuple[tuple[str,
     for f in dataclasses.fields(cls):
         tp = hints[f.name]
         if dataclasses.is_dataclass(tp):
-            out += _time_keys(typing.cast(type, tp), prefix + (f.name,))
+            out += _time_keys(typing.cast(type, tp), (*prefix, f.name))
             continue
         args = typing.get_args(tp)
         if args and any(dataclasses.is_dataclass(a) for a in args):
-            inner = [a for a in args if dataclasses.is_dataclass(a)][0]
-            nested = _time_keys(inner, prefix + (f.name,))
+            inner = next(a for a in args if dataclasses.is_dataclass(a))
+            nested = _time_keys(inner, (*prefix, f.name))
             # keys inside arrays of tables are not walked below: there must be none
             assert not nested, f"time keys in [[{f.name}]] are not covered: {nested}"
             continue
         if f.name.endswith(TIME_SUFFIXES):
             base = tp if tp in (int, float) else next(a for a in args if a in (int, float))
-            out.append((prefix + (f.name,), base))
+            out.append(((*prefix, f.name), base))
     return out
 
 
