@@ -305,7 +305,8 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
         # bytes) whenever that worker is queued on the loop's CPU.
         fields = read_fields_for(rig_cfg, parts.glove_config.glove.rate_hz)
         bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=fields,
-                           spin_s=0.0, emulated=proc is not None)
+                           spin_s=0.0, emulated=proc is not None,
+                           missing_ok=rig_cfg.silence.action == "continue")
         stack.callback(bus.close)
         yield OpenedBus(bus, port, proc)
 

@@ -138,8 +138,13 @@ class Cycle:
         DeviceError when neither is known (the loop must not start blind)."""
         held = np.asarray(self.bus.last_goals_deg, dtype=np.float64)
         pipeline = self.pipeline
-        if held.shape == (len(self.sent),) and np.all(np.isfinite(held)):
+        known = np.isfinite(held)
+        if held.shape == (len(self.sent),) and known.all():
             pipeline.seed(held)
+        elif held.shape == (len(self.sent),) and known.any():
+            # the bus holds the others: a servo it never sends a goal (left out at
+            # start-up) is seeded at 0, its goal is never written
+            pipeline.seed(np.where(known, held, 0.0))
         elif not pipeline.has_targets:
             state = self.bus.read_state()
             positions = np.asarray(state.positions_deg, dtype=np.float64)
