@@ -305,7 +305,8 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
         # bytes) whenever that worker is queued on the loop's CPU.
         fields = read_fields_for(rig_cfg, parts.glove_config.glove.rate_hz)
         bus = DynamixelBus(port, rig_cfg, clock=clock, read_fields=fields,
-                           spin_s=0.0, emulated=proc is not None)
+                           spin_s=0.0, emulated=proc is not None,
+                           missing_ok=rig_cfg.silence.action == "continue")
         stack.callback(bus.close)
         yield OpenedBus(bus, port, proc)
 
@@ -509,6 +510,7 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
         "cycles_without_frame": s.cycles_without_frame,
         "frames_skipped": s.frames_skipped,
         "frames_in_bursts": s.frames_in_bursts,
+        "frames_in_host_stalls": s.frames_in_host_stalls,
         "frames_caught_up": s.frames_caught_up,
         "ceiling_waits": s.ceiling_waits,
         "cpu_per_cycle_us": num(s.cpu_per_cycle_us, 1),

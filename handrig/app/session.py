@@ -85,8 +85,16 @@ class LiveResult:
 
 def torque_is_off(bus: DynamixelBus) -> bool | None:
     """Read Torque Enable back from every servo: True if all are off, None if unreadable."""
+    left_out = set(bus.left_out)  # never given torque: asked, but silence is no failure
     try:
-        return all(bus.read_register(i, Reg.TORQUE_ENABLE) == 0 for i in range(bus.n_servos))
+        for i in range(bus.n_servos):
+            if i in left_out:
+                with contextlib.suppress(HandrigError):
+                    if bus.read_register(i, Reg.TORQUE_ENABLE) != 0:
+                        return False
+            elif bus.read_register(i, Reg.TORQUE_ENABLE) != 0:
+                return False
+        return True
     except HandrigError:
         return None
 
@@ -177,6 +185,7 @@ class _Session:
         self.snapshot_times_s: list[float] = []
         self.outputs: list[Any] = []  # the VMC sender and recorder (closed by the end)
         self.ease_s = 0.0  # the easing to relaxed that ended the run
+        self.left_out: list[str] = []  # servos that did not answer at start-up, left out
         self.panel: Any = None  # the LivePanel while it is up
         self.started = False
 
@@ -210,6 +219,8 @@ class _Session:
             summary["stages_us"] = self.stages
         if self.signals.received:
             summary["signals"] = self.signals.received
+        if self.left_out:
+            summary["servos_left_out"] = self.left_out
         if error is not None:
             summary["error"] = str(error)
         return LiveResult(summary, self.snapshots,
@@ -227,8 +238,14 @@ class _Session:
         stack.callback(self._glove_figures, glove)
         bus.connect()
         stack.callback(self._bus_figures, bus)  # after torque-off, before the bus closes
-        header = [f"servo bus {bus.port}: {len(parts.rig_config.servos)} servos commissioned "
-                  f"({len(bus.commissioning)} settings checked or changed)"]
+        left_out = bus.left_out
+        self.left_out = [bus.describe(i) for i in left_out]
+        header = [f"servo bus {bus.port}: {len(parts.rig_config.servos) - len(left_out)} "
+                  f"servos commissioned ({len(bus.commissioning)} settings checked or "
+                  "changed)"]
+        if left_out and not opts.verbose:  # said once (verbose: the commissioning note)
+            log(f"{', '.join(self.left_out)} did not answer at start-up: the run goes on "
+                "without it ([silence] action continue); it gets no goal and no torque")
         if opts.verbose:
             header[:0] = bus.commissioning
         if not opts.panel:
@@ -406,7 +423,11 @@ def format_summary(summary: dict[str, Any]) -> str:
         "(glove frame's arrival -> Sync Write handed to the OS)",
         f"                  of which compute p50 {comp.get('p50')} us, p99 {comp.get('p99')} us "
         f"(cycle start -> Sync Write; loop {summary.get('loop_mode', 'fixed')})",
+        *([f"servos left out   {', '.join(summary['servos_left_out'])} (did not answer at "
+            "start-up: no goal, no torque)"] if summary.get("servos_left_out") else []),
         f"frame losses      {summary.get('frames_skipped', 0)} skipped by the loop, "
+        f"{summary.get('frames_in_host_stalls', 0)} left waiting by host stalls (the host "
+        "read nothing for 3 frame periods or more: not the glove), "
         f"{summary.get('frames_in_bursts', 0)} lost in the glove's own bursts (caught up: "
         f"{summary.get('frames_caught_up', 0)} written just before a newer one)",
         f"overruns          {summary['overruns']} (max {summary['overrun_max_us']} us late, "

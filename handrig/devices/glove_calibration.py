@@ -165,8 +165,11 @@ class FilterSettings:
 
     def check(self) -> None:
         for name in ("min_cutoff_hz", "d_cutoff_hz"):
-            if getattr(self, name) <= 0:
-                raise ConfigError("must be positive", key=name, value=getattr(self, name))
+            value = getattr(self, name)
+            # a cutoff at or above half the glove's rate filters nothing; NaN is refused
+            if not 0.01 <= value <= 1000.0:
+                raise ConfigError("cutoff out of range", key=name, value=value,
+                                  allowed="0.01..1000 Hz")
         if self.beta < 0:
             raise ConfigError("must be zero or positive", key="beta", value=self.beta)
 

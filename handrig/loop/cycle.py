@@ -137,8 +137,13 @@ class Cycle:
         DeviceError when neither is known (the loop must not start blind)."""
         held = np.asarray(self.bus.last_goals_deg, dtype=np.float64)
         pipeline = self.pipeline
-        if held.shape == (len(self.sent),) and np.all(np.isfinite(held)):
+        known = np.isfinite(held)
+        if held.shape == (len(self.sent),) and known.all():
             pipeline.seed(held)
+        elif held.shape == (len(self.sent),) and known.any():
+            # the bus holds the others: a servo it never sends a goal (left out at
+            # start-up) is seeded at 0, its goal is never written
+            pipeline.seed(np.where(known, held, 0.0))
         elif not pipeline.has_targets:
             state = self.bus.read_state()
             positions = np.asarray(state.positions_deg, dtype=np.float64)
@@ -225,11 +230,14 @@ class Cycle:
             count, before = sample.count, 0 if self.sample is None else self.sample.count
             # frames the glove sent back to back, superseded on arrival (not by a busy loop)
             bursts = self.trigger.take_bursts()
+            stalled = self.trigger.take_stalled()  # the host's backlog, not the glove's
             if before and count > before + 1:
                 superseded = count - before - 1
                 bursts = min(superseded, bursts)
+                stalled = min(superseded - bursts, stalled)
                 stats.frames_in_bursts += bursts
-                stats.frames_skipped += superseded - bursts
+                stats.frames_in_host_stalls += stalled
+                stats.frames_skipped += superseded - bursts - stalled
             self.sample = sample
         else:
             stats.cycles_without_frame += 1

@@ -72,6 +72,7 @@ class SilenceWatch:
         self.late_s = 0.0  # the host's worst lateness within the last action_s
         self._late_at = -np.inf
         self._late_reads = 0  # reads that came after their deadline, same window
+        self._left_out: np.ndarray | None = None  # the bus's, learnt at the first read
 
     # ------------------------------------------------------------------ host timing
     def note_read(self, now: float, late: bool = False) -> None:
@@ -112,6 +113,11 @@ class SilenceWatch:
         silent_s = np.minimum(np.asarray(state.age_s, dtype=np.float64)
                               + (now - state.timestamp_s), since_ref)
         silent = silent_s > cfg.warn_s
+        if self._left_out is None:  # after connect: the servos left out are known
+            self._left_out = np.zeros(self.n, bool)
+            self._left_out[list(self.bus.left_out)] = True
+        if self._left_out.any():  # named once at start-up, never sent a goal: no tiers
+            silent &= ~self._left_out
         self._reads[silent] += 1
         back = np.flatnonzero((self.tier > ANSWERING) & ~silent)
         if back.size:

@@ -179,6 +179,7 @@ class RunStats:
     writes_delayed: int = 0
     frames_skipped: int = 0  # glove frames superseded while the loop was busy
     frames_in_bursts: int = 0  # glove frames superseded on arrival (sent back to back)
+    frames_in_host_stalls: int = 0  # frames left waiting while the host read nothing
     frames_caught_up: int = 0  # frames written just before a newer one that came with them
     cycles_without_frame: int = 0
     ceiling_waits: int = 0

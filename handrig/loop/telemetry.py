@@ -194,7 +194,8 @@ class SnapshotBuilder:
         return LoopSnapshot(
             t_s=now, seq=seq, mode=mode, mode_reason=reason,
             rate_hz=self._rate(now, stats.frames), latency_p50_us=p50, latency_p99_us=p99,
-            frames_lost=stats.frames_skipped + int(glove_fields.pop("frames_lost")),
+            frames_lost=(stats.frames_skipped + stats.frames_in_host_stalls
+                         + int(glove_fields.pop("frames_lost"))),
             cycles=stats.frames, overruns=stats.overruns,
             elapsed_s=now - started if stats.frames else 0.0,
             events=tuple(stats.events[-3:]),

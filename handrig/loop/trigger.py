@@ -47,6 +47,7 @@ JITTER_MARGIN = 1.0  # a gap's read ends this many mean arrival deviations befor
 FORCED_READ_SHARE = 0.5  # a forced read ends this share of a period after the next frame
 CEILING_BURST = 3.0  # ticks the ceiling lets through back to back (after a quiet spell)
 CATCH_UP_CREDIT = 2.0  # a catch-up tick leaves the ceiling room for the newest's right after
+STALL_PERIODS = 3.0  # the port unread this many frame periods: the host stalled
 BACKLOG_QUIET_S = 0.0005  # at the start, the port is read until quiet this long
 BACKLOG_MAX_S = 0.05  # ... but no longer than this (a glove that never pauses)
 BACKLOG_PUMPS_MAX = 256
@@ -102,6 +103,11 @@ class Trigger(ABC):
 
     def take_bursts(self) -> int:
         """Glove frames superseded on arrival, sent back to back, since the last call."""
+        return 0
+
+    def take_stalled(self) -> int:
+        """Glove frames that came one by one while the host read nothing for
+        ``STALL_PERIODS`` frame periods or more (a host stall), since the last call."""
         return 0
 
     @abstractmethod
@@ -234,6 +240,7 @@ class GloveTrigger(Trigger):
         self.period_s = 1.0 / floor_hz
         self.min_gap_s = 1.0 / ceiling_hz
         self.burst_frames = 0  # frames superseded on arrival by a newer one in the same read
+        self.stall_frames = 0  # frames left waiting while the host read nothing (a stall)
         self.frame_period_s = math.nan
         self.frame_jitter_s = 0.0  # mean deviation of the arrivals from the period
         self.ceiling_waits = 0  # frame ticks held back to keep to the ceiling rate
@@ -301,9 +308,10 @@ class GloveTrigger(Trigger):
                 if left <= 0.0:
                     break
                 idle = not _readable(fd, 0.0)  # else bytes were waiting: the loop was busy
+                empty_s = clock.now()  # idle: the port was empty now
                 if idle and not _readable(fd, left):
                     break
-                self._pump(idle)
+                self._pump(idle, empty_s)
                 if self._new_frame():
                     return self._arrival(clock.now())
                 fd = _fd_of(glove)
@@ -335,37 +343,48 @@ class GloveTrigger(Trigger):
         newest = self.glove.peek()
         return 0 if newest is None else newest.count
 
-    def _pump(self, idle: bool) -> None:
+    def _pump(self, idle: bool, empty_s: float = math.nan) -> None:
         """Read the port (the glove stamps what it decodes now). ``idle``: the port was
-        seen empty since the loop began waiting, so frames that come together in this
-        read were sent together (a burst from the glove, counted in ``burst_frames``),
-        not left waiting by a busy loop. When the loop was busy, only as many frames as
-        the glove's period fits into the time since the port was last emptied can have
-        come one by one; any more came in a burst."""
+        seen empty at ``empty_s``, after the loop began waiting; else it was last emptied
+        by the previous pump. Only as many frames as the glove's period fits into the
+        time since the port was empty can have come one by one; any more were sent
+        together (a burst from the glove, counted in ``burst_frames``). When that time
+        is ``STALL_PERIODS`` periods or more, the host read nothing for that long (the
+        process was stopped or starved inside its wait or its cycle): the frames that
+        came one by one meanwhile are the host's backlog (``stall_frames``), not the
+        glove's. With the period not yet known, frames together after an empty port
+        are a burst."""
         glove = self.glove
-        if glove.pump_counts:  # the glove says how many frames a pump gave
-            drained = self._drained_s
+        counted = glove.pump_counts  # the glove says how many frames a pump gave
+        drained = self._drained_s
+        if counted:
             got = glove.pump()
-            now = self.clock.now()
-            self._drained_s = now
-            if got > 1:
-                period = self.frame_period_s
-                if idle:
-                    self.burst_frames += got - 1
-                elif period == period and period > 0.0 and drained == drained:
-                    one_by_one = int((now - drained) / period)
-                    self.burst_frames += max(0, got - 1 - one_by_one)
-            return
-        before = self._count()
-        glove.pump()
-        if idle:
+        else:
+            before = self._count()
+            glove.pump()
             got = self._count() - before
-            if got > 1:
-                self.burst_frames += got - 1
+        now = self.clock.now()
+        self._drained_s = now
+        if got <= 1:
+            return
+        since = empty_s if idle else drained
+        period = self.frame_period_s
+        if period == period and period > 0.0 and since == since:
+            one_by_one = min(got - 1, int((now - since) / period))
+            self.burst_frames += got - 1 - one_by_one
+            if now - since >= STALL_PERIODS * period:
+                self.stall_frames += one_by_one
+        elif idle:
+            self.burst_frames += got - 1
 
     def take_bursts(self) -> int:
         """Frames superseded in bursts since the last call (see :meth:`_pump`)."""
         n, self.burst_frames = self.burst_frames, 0
+        return n
+
+    def take_stalled(self) -> int:
+        """Frames left waiting by a host stall since the last call (see :meth:`_pump`)."""
+        n, self.stall_frames = self.stall_frames, 0
         return n
 
     def wait(self, tick: Tick, *, settle: bool = True) -> Tick:

@@ -232,6 +232,13 @@ class ServoBus(ABC):
         return np.full(self.n_servos, np.nan)
 
     @property
+    def left_out(self) -> tuple[int, ...]:
+        """Rig indices of servos that did not answer at connect and that the bus left
+        out for the run (``[silence] action = "continue"``): never sent a goal or
+        torque, already named once; the loop's silence tiers skip them (default: none)."""
+        return ()
+
+    @property
     def last_write_s(self) -> float:
         """When the last write was handed to the OS, clock time (NaN: unknown); where the
         loop's latency figure ends (default: when the loop's write call returned)."""

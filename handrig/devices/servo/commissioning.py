@@ -69,7 +69,7 @@ class Commissioner:
     def __init__(
         self, roster: Roster, link: Link, plan: ReadPlan, fast: FastSyncRead,
         faults: FaultHandler, clock: Clock, notes: list[str],
-        read_every_servo: Callable[[str], ServoState],
+        read_every_servo: Callable[[str], ServoState], missing_ok: bool = False,
     ) -> None:
         self.roster = roster
         self.link = link
@@ -79,6 +79,7 @@ class Commissioner:
         self.clock = clock
         self.notes = notes
         self.read_every_servo = read_every_servo
+        self.missing_ok = bool(missing_ok)  # [silence] action "continue": start without them
         self.models: dict[int, int] = {}
         self.firmware: dict[int, int] = {}
 
@@ -90,9 +91,11 @@ class Commissioner:
         self.link.transport.wait_quiet(0.02, 0.5)
         self.check_servos()
         for i in range(self.roster.n):
-            self.configure(i)
+            if not self.roster.absent[i]:
+                self.configure(i)
         self.notes.append(self.settings_note())
-        self.probe_fast_sync_read()
+        if not self.roster.absent.any():  # else the reader asks the absent ones last
+            self.probe_fast_sync_read()
         self.read_every_servo("finish commissioning")
 
     # ------------------------------------------------------------------ who is there
@@ -101,10 +104,13 @@ class Commissioner:
         r = self.roster
         problems: list[str] = []
         missing = 0
+        absent: list[int] = []
+        r.absent[:] = False
         for i, sid in enumerate(r.ids):
             status = self.link.transact(build_instruction(sid, INST_PING), sid, n_params=3)
             if status is None or len(status.params) < 3:
                 missing += 1
+                absent.append(i)
                 problems.append(f"{r.describe(i)} did not answer {r.where()}: check power and ID")
                 continue
             model = status.params[0] | status.params[1] << 8
@@ -117,8 +123,21 @@ class Commissioner:
                     f"{r.describe(i)} is model {model} ({names.get(model, 'unknown')}), "
                     f"the rig says {r.rig.servos[i].model} ({want}): fix config/rig.toml "
                     "or the servo")
+        if problems and self.missing_ok and len(problems) == missing < r.n:
+            r.absent[absent] = True
+            who = ", ".join(r.describe(i) for i in absent)
+            self.notes.append(
+                f"{who} did not answer at start-up {r.where()}: the run goes on without "
+                f"{'it' if missing == 1 else 'them'} ([silence] action continue); no goal "
+                "and no torque go to a servo left out, for the whole run")
+            self.notes.append(f"{r.n - missing} servos answered {r.where()} with the "
+                              "expected models")
+            return
         if problems:
-            raise DeviceError("; ".join(problems + self._hints(missing)))
+            policy = ([] if not missing or missing == r.n else
+                      ["[silence] action is not continue: the run does not start without "
+                       "a servo (set action = \"continue\" to start without it)"])
+            raise DeviceError("; ".join(problems + self._hints(missing) + policy))
         self.notes.append(f"{r.n} servos answered {r.where()} with the expected models")
 
     def _hints(self, missing: int) -> list[str]:

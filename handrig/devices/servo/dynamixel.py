@@ -107,6 +107,7 @@ class DynamixelBus(ServoBus):
         reply_gap_s: float | None = None,
         transport: Transport | None = None,
         emulated: bool = False,
+        missing_ok: bool = False,
     ) -> None:
         self.port = port
         self.emulated = bool(emulated)
@@ -127,6 +128,7 @@ class DynamixelBus(ServoBus):
         self._lock = threading.RLock()
         self._connected = False
         self._build_parts(transport, reply_timeout_s, reply_gap_s, spin_s, temperature_every)
+        self.commissioner.missing_ok = bool(missing_ok)
 
     def _build_parts(
         self, transport: Transport | None, reply_timeout_s: float | None,
@@ -238,6 +240,12 @@ class DynamixelBus(ServoBus):
         """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""
         return self.roster.describe(index)
 
+    @property
+    def left_out(self) -> tuple[int, ...]:
+        """Rig indices of the servos that did not answer at connect and were left out
+        for the run (``missing_ok``): never commissioned, sent a goal or given torque."""
+        return tuple(np.flatnonzero(self.roster.absent).tolist())
+
     def read_wire_s(self, n: int) -> float:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
         return self.reader.read_wire_s(n)
@@ -269,6 +277,8 @@ class DynamixelBus(ServoBus):
             self.transport.open()
             try:
                 self.commissioner.run()
+                if self.roster.absent.any():
+                    self.writer.leave_out(np.flatnonzero(self.roster.absent))
             except BaseException:
                 self.transport.close()
                 raise
@@ -389,7 +399,7 @@ class DynamixelBus(ServoBus):
         seen = np.zeros(self.roster.n, bool)
         for _ in range(COMMAND_ATTEMPTS):
             state = self.read_state(self.clock.now() + 4 * COMMAND_TIMEOUT_S)
-            seen |= ~state.stale
+            seen |= ~state.stale | self.roster.absent  # left out at start-up: not waited for
             if seen.all():
                 return state
         bad = [self.describe(int(i)) for i in np.flatnonzero(~seen)]

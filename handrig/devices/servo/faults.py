@@ -218,7 +218,7 @@ class FaultHandler:
             if all(v is not None for v in values):
                 break
         for i, value in enumerate(values):
-            if value == units:
+            if value == units or self.roster.absent[i]:  # left out at start-up: not asked
                 continue
             if value is not None:  # answered with another value: set it explicitly
                 self.link.write_register(i, Reg.BUS_WATCHDOG, 0)

@@ -25,14 +25,37 @@ class GoalWriter:
         self.link = link
         self.stats = stats
         n = roster.n
-        prefix = codec.sync_write_prefix(Reg.GOAL_POSITION.address, 4, n)
-        self.packet = np.zeros(codec.SYNC_WRITE_BODY + 5 * n + 2, np.uint8)
-        self.packet[: len(prefix)] = np.frombuffer(prefix, np.uint8)
-        self.packet[codec.SYNC_WRITE_BODY :: 5][:n] = roster.ids
-        self._view = self.packet.data  # a memoryview: what is written to the port
         self._goal_deg = np.zeros(n, np.float64)
         self.last_goal_deg = np.full(n, np.nan)
-        """The goals last sent, after clamping (NaN before the first write)."""
+        """The goals last sent, after clamping (NaN before the first write; NaN for a
+        servo left out)."""
+        self.left_out = np.zeros(n, bool)
+        self._build_packet()
+
+    def leave_out(self, indices: np.ndarray) -> None:
+        """Never send servos ``indices`` a goal (absent at start-up, not commissioned):
+        the Sync Write carries the others only."""
+        self.left_out[np.asarray(indices, np.intp)] = True
+        self._build_packet()
+
+    def _build_packet(self) -> None:
+        r = self.roster
+        keep = np.flatnonzero(~self.left_out)
+        self._keep = keep if keep.size < r.n else None
+        m = int(keep.size)
+        prefix = codec.sync_write_prefix(Reg.GOAL_POSITION.address, 4, m)
+        self.packet = np.zeros(codec.SYNC_WRITE_BODY + 5 * m + 2, np.uint8)
+        self.packet[: len(prefix)] = np.frombuffer(prefix, np.uint8)
+        self.packet[codec.SYNC_WRITE_BODY :: 5][:m] = np.asarray(r.ids, np.uint8)[keep]
+        self._view = self.packet.data  # a memoryview: what is written to the port
+        # the kernel's rows for the servos kept (when some are left out)
+        self._rows = tuple(np.ascontiguousarray(a[keep]) for a in (
+            r.min_deg, r.max_deg, r.hold_deg, r.ticks_per_deg, r.zero_ticks))
+        self._sub_goal = np.zeros(m, np.float64)
+        self._sub_in = np.zeros(m, np.float64)
+        self._sub_last = np.zeros(m, np.float64)
+        self._goal_deg[self.left_out] = np.nan
+        self.last_goal_deg[self.left_out] = np.nan
 
     def build(self, goals_deg: np.ndarray) -> int:
         """Clamp ``goals_deg`` and build the goal Sync Write; returns (and counts) how
@@ -62,6 +85,7 @@ class GoalWriter:
         """Take ``goal_deg`` as the goals last sent (a torque-on that wrote them servo by
         servo): a reboot then re-sends them."""
         self.last_goal_deg[:] = goal_deg
+        self.last_goal_deg[self.left_out] = np.nan
 
     def resend(self, goal_deg: np.ndarray) -> None:
         """Send ``goal_deg`` (already within limits) as the goal Sync Write, uncounted
@@ -74,6 +98,15 @@ class GoalWriter:
         g = np.ascontiguousarray(goals_deg, dtype=np.float64)
         if g.shape != (r.n,):
             raise ValueError(f"goals_deg must have shape ({r.n},), got {g.shape}")
-        return int(codec.goal_packet(
-            g, r.min_deg, r.max_deg, self.last_goal_deg, r.hold_deg, r.ticks_per_deg,
-            r.zero_ticks, goal, packet))
+        keep = self._keep
+        if keep is None:
+            return int(codec.goal_packet(
+                g, r.min_deg, r.max_deg, self.last_goal_deg, r.hold_deg, r.ticks_per_deg,
+                r.zero_ticks, goal, packet))
+        low, high, hold, tpd, zero = self._rows
+        np.take(g, keep, out=self._sub_in)
+        np.take(self.last_goal_deg, keep, out=self._sub_last)
+        changed = int(codec.goal_packet(self._sub_in, low, high, self._sub_last, hold, tpd,
+                                        zero, self._sub_goal, packet))
+        goal[keep] = self._sub_goal  # the servos left out keep NaN: never sent
+        return changed

@@ -44,6 +44,10 @@ class Roster:
             np.array([CURRENT_MA_PER_UNIT.get(m, 1.0) for m in self.expected_models]),
         ])
         self.zero_ticks, self.ticks_per_deg = self.scale[0], self.scale[1]
+        self.absent = np.zeros(self.n, bool)
+        """Servos that did not answer at start-up, left out for the run (commissioning
+        sets it when ``[silence] action`` is ``"continue"``): not commissioned, never
+        sent a goal or torque."""
 
     def describe(self, index: int) -> str:
         """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""

@@ -81,7 +81,7 @@ class TorqueControl:
         slow: list[int] = []  # servos given an approach speed, to be reset
         try:
             if outside.any() and self.hold_outside_limits:  # calibration: hold them
-                for i in range(r.n):
+                for i in np.flatnonzero(~r.absent).tolist():
                     self.link.write_register(i, Reg.GOAL_POSITION, r.ticks(i, float(pos[i])))
                 self.writer.remember(pos)  # a reboot re-sends where they were held
             else:
@@ -93,7 +93,8 @@ class TorqueControl:
                 self.write_goals(pos)  # hold where they are, clamped into the limits
             self.faults.note_torque(True)
             for i in range(r.n):
-                self.link.write_register(i, Reg.TORQUE_ENABLE, 1)
+                if not r.absent[i]:  # a servo left out at start-up gets no torque
+                    self.link.write_register(i, Reg.TORQUE_ENABLE, 1)
             self.faults.arm_watchdog()
             if slow:
                 self._finish_approach(np.array(slow), float(excess.max()))
@@ -159,6 +160,8 @@ class TorqueControl:
             return [f"all servos: {exc}"]
         end = self.clock.now() + CONFIRM_BUDGET_S
         for i in range(r.n):
+            if r.absent[i]:  # left out at start-up: never given torque (the broadcast
+                continue     # above reaches it anyway if it came back)
             if self.clock.now() >= end:
                 rest = ", ".join(r.describe(j) for j in range(i, r.n))
                 failed.append(f"{rest}: not confirmed (the {CONFIRM_BUDGET_S:g} s for "
