@@ -237,6 +237,15 @@ def _eeprom_ready(sp: ServoPort, servo_id: int) -> str:
     return ""
 
 
+def _answering(sp: ServoPort, servo_id: int, port: str, baud: int) -> int:
+    """The model number of the servo answering as ``servo_id``; a DeviceError if none does."""
+    model = sp.ping(servo_id)
+    if model is None:
+        raise DeviceError(f"no servo answers as ID {servo_id} on {port} at {baud} bps "
+                          "(`handrig servos scan` lists what is there)")
+    return model
+
+
 def set_id(port: str, baud: int, old_id: int, new_id: int) -> list[str]:
     """Give the servo answering as ``old_id`` at ``baud`` the ID ``new_id``. Refuses when
     no servo answers as ``old_id``, when ``new_id`` is taken at this baud, or when two
@@ -245,10 +254,7 @@ def set_id(port: str, baud: int, old_id: int, new_id: int) -> list[str]:
         raise DeviceError(f"ID {new_id} is out of range: servo IDs are 0..252")
     notes: list[str] = []
     with open_port(port, baud) as sp:
-        model = sp.ping(old_id)
-        if model is None:
-            raise DeviceError(f"no servo answers as ID {old_id} on {port} at {baud} bps "
-                              "(`handrig servos scan` lists what is there)")
+        model = _answering(sp, old_id, port, baud)
         if new_id == old_id:
             return [f"servo {old_id} already has ID {new_id}: nothing to do"]
         taken = sp.ping(new_id)
@@ -277,10 +283,7 @@ def set_baud(port: str, baud: int, servo_id: int, new_baud: int) -> list[str]:
                           f"({', '.join(map(str, BAUD_RATES))})")
     notes: list[str] = []
     with open_port(port, baud) as sp:
-        model = sp.ping(servo_id)
-        if model is None:
-            raise DeviceError(f"no servo answers as ID {servo_id} on {port} at {baud} bps "
-                              "(`handrig servos scan` lists what is there)")
+        model = _answering(sp, servo_id, port, baud)
         if new_baud == baud:
             return [f"servo {servo_id} already runs at {baud} bps: nothing to do"]
         sp.set_baud(new_baud)
@@ -307,9 +310,7 @@ def reboot(port: str, baud: int, servo_id: int, wait_s: float = REBOOT_WAIT_S) -
     """Reboot servo ``servo_id`` (clears a hardware error whose cause is gone) and
     return its state afterwards."""
     with open_port(port, baud) as sp:
-        model = sp.ping(servo_id)
-        if model is None:
-            raise DeviceError(f"no servo answers as ID {servo_id} on {port} at {baud} bps")
+        _answering(sp, servo_id, port, baud)
         sp.reboot(servo_id)
         deadline = time.monotonic() + wait_s + 2.0
         time.sleep(wait_s)
