@@ -14,10 +14,11 @@ colour (:data:`THUMB_RGBA`), the other fingers in skin tones, the palm and
 forearm darker, on a light background.
 
 With ``model`` (a robot rig's MJCF file, e.g. the LEAP hand) the robot is drawn
-instead: its joints are named by the rig's servos. A model shipped without meshes
-(the LEAP preset) shows its collision boxes: the palm, each finger's links and
-its fingertip as boxes, thumb bodies (``th_*``) in the thumb colour, fingertips
-(white material) light, the rest in :data:`ROBOT_RGBA`.
+instead: its joints are named by the rig's servos. The geom groups MuJoCo's own
+viewer shows by default (0, 1 and 2) are drawn, as in the live view: the LEAP and
+ORCA presets' meshes (group 2), not their collision geoms (group 3). Thumb bodies
+(``th_*``) are in the thumb colour, white geoms (e.g. fingertip pads) light, the
+rest in :data:`ROBOT_RGBA`.
 """
 
 from __future__ import annotations
@@ -123,16 +124,15 @@ def render_strip(
         hand_bodies = list(range(1, mj_model.nbody))
         distance, azimuth, elevation = 0.40, 150.0, -35.0
     return _draw(mj_model, data, mujoco, frames_deg, joint_names, labels, hand_bodies,
-                 (distance, azimuth, elevation), size, Path(out), all_groups=model is not None)
+                 (distance, azimuth, elevation), size, Path(out))
 
 
 def _draw(model: object, data: object, mujoco: object, frames_deg: Sequence[np.ndarray],
           joint_names: Sequence[str], labels: list[str], hand_bodies: list[int],
-          view: tuple[float, float, float], size: tuple[int, int], out: Path, *,
-          all_groups: bool = False) -> Path:
+          view: tuple[float, float, float], size: tuple[int, int], out: Path) -> Path:
     """Pose ``model`` at each picked frame, draw it from ``view`` (distance, azimuth,
-    elevation) looking at the mean of ``hand_bodies``, and save the strip;
-    ``all_groups``: draw every geom group (a robot model's collision boxes too)."""
+    elevation) looking at the mean of ``hand_bodies``, and save the strip (MuJoCo's
+    default geom groups 0-2)."""
     m: Any = model
     d: Any = data
     mj: Any = mujoco
@@ -151,8 +151,6 @@ def _draw(model: object, data: object, mujoco: object, frames_deg: Sequence[np.n
     cam = mj.MjvCamera()
     cam.distance, cam.azimuth, cam.elevation = view
     opt = mj.MjvOption()
-    if all_groups:
-        opt.geomgroup[:] = 1
     m.vis.headlight.ambient[:] = (0.42, 0.42, 0.42)
     m.vis.headlight.diffuse[:] = (0.62, 0.62, 0.62)
     m.vis.headlight.specular[:] = (0.1, 0.1, 0.1)
