@@ -83,20 +83,46 @@ class LiveResult:
     snapshot_times_s: list[float] = field(default_factory=list)  # of each snapshot
 
 
+READBACK_BUDGET_S = 1.5  # reading Torque Enable back at exit: a silent servo costs 0.4 s
+
+
 def torque_is_off(bus: DynamixelBus) -> bool | None:
     """Read Torque Enable back from every servo: True if all are off, None if unreadable."""
-    left_out = set(bus.left_out)  # never given torque: asked, but silence is no failure
-    try:
-        for i in range(bus.n_servos):
-            if i in left_out:
-                with contextlib.suppress(HandrigError):
-                    if bus.read_register(i, Reg.TORQUE_ENABLE) != 0:
-                        return False
-            elif bus.read_register(i, Reg.TORQUE_ENABLE) != 0:
-                return False
-        return True
-    except HandrigError:
-        return None
+    return torque_readback(bus)[0]
+
+
+def torque_readback(bus: DynamixelBus) -> tuple[bool | None, list[str]]:
+    """Torque Enable read back from every servo given torque: (True if every one reads
+    0, False if one reads 1, None if one could not be read; the servos not confirmed
+    off, each named with why). A port that stopped draining is not asked at all, and
+    the reads stop at ``READBACK_BUDGET_S`` (the servos not asked are named). A servo
+    left out at start-up is asked too, its silence no failure."""
+    left_out = set(bus.left_out)
+    given = [i for i in range(bus.n_servos) if i not in left_out]
+    if bus.port_stalled:
+        return None, [f"{bus.describe(i)}: not read back (servo port {bus.port} stopped "
+                      "draining)" for i in given]
+    unconfirmed: list[str] = []
+    on = unread = False
+    end = bus.clock.now() + READBACK_BUDGET_S
+    for i in range(bus.n_servos):
+        if bus.clock.now() >= end:
+            if i not in left_out:
+                unread = True
+                unconfirmed.append(f"{bus.describe(i)}: not read back (the "
+                                   f"{READBACK_BUDGET_S:g} s went on the servos before)")
+            continue
+        try:
+            value = bus.read_register(i, Reg.TORQUE_ENABLE)
+        except HandrigError as exc:
+            if i not in left_out:
+                unread = True
+                unconfirmed.append(f"{bus.describe(i)}: not read back ({exc})")
+            continue
+        if value != 0:
+            on = True
+            unconfirmed.append(f"{bus.describe(i)}: torque still on")
+    return (False if on else None if unread else True), unconfirmed
 
 
 class ExitSignals:
@@ -180,6 +206,7 @@ class _Session:
         self.bus_stats: Any = None
         self.glove_stats: Any = None
         self.torque_off: bool | None = None
+        self.torque_unconfirmed: list[str] = []  # servos whose torque-off was not read back
         self.stages: dict[str, dict[str, float]] | None = None
         self.snapshots: list[np.ndarray] = []
         self.snapshot_times_s: list[float] = []
@@ -221,6 +248,8 @@ class _Session:
             summary["signals"] = self.signals.received
         if self.left_out:
             summary["servos_left_out"] = self.left_out
+        if self.torque_unconfirmed:
+            summary["torque_off_unconfirmed"] = self.torque_unconfirmed
         if error is not None:
             summary["error"] = str(error)
         return LiveResult(summary, self.snapshots,
@@ -331,7 +360,7 @@ class _Session:
                 self.panel = None
 
     def _bus_figures(self, bus: DynamixelBus) -> None:
-        self.torque_off = torque_is_off(bus)
+        self.torque_off, self.torque_unconfirmed = torque_readback(bus)
         self.bus_stats = bus.stats
 
     def _glove_figures(self, glove: Any) -> None:
@@ -454,6 +483,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
         f"torque off        {summary['torque_off']}",
+        *([f"  not confirmed   {'; '.join(summary['torque_off_unconfirmed'])}"]
+          if summary.get("torque_off_unconfirmed") else []),
     ]
     if "error" in summary:
         lines.append(f"error             {summary['error']}")

@@ -261,6 +261,12 @@ class DynamixelBus(ServoBus):
         return self.link.quiet_wait_s()
 
     @property
+    def port_stalled(self) -> bool:
+        """Whether the port stopped draining (a wedged adapter, a stopped emulator): then
+        nothing can be read back through it; set when a write raised it."""
+        return self.transport.wedged
+
+    @property
     def last_read_whole(self) -> bool:
         """Whether the last read got every servo at once, no Alert raised (the short way)."""
         return self.reader.last_whole
