@@ -213,6 +213,8 @@ class _Session:
         self.outputs: list[Any] = []  # the VMC sender and recorder (closed by the end)
         self.ease_s = 0.0  # the easing to relaxed that ended the run
         self.left_out: list[str] = []  # servos that did not answer at start-up, left out
+        self._left_at_start: tuple[int, ...] = ()
+        self.admitted: list[str] = []  # of those, the ones admitted when they answered
         self.panel: Any = None  # the LivePanel while it is up
         self.started = False
 
@@ -248,6 +250,8 @@ class _Session:
             summary["signals"] = self.signals.received
         if self.left_out:
             summary["servos_left_out"] = self.left_out
+        if self.admitted:
+            summary["servos_admitted"] = self.admitted
         if self.torque_unconfirmed:
             summary["torque_off_unconfirmed"] = self.torque_unconfirmed
         if error is not None:
@@ -267,14 +271,15 @@ class _Session:
         stack.callback(self._glove_figures, glove)
         bus.connect()
         stack.callback(self._bus_figures, bus)  # after torque-off, before the bus closes
-        left_out = bus.left_out
+        left_out = self._left_at_start = bus.left_out
         self.left_out = [bus.describe(i) for i in left_out]
         header = [f"servo bus {bus.port}: {len(parts.rig_config.servos) - len(left_out)} "
                   f"servos commissioned ({len(bus.commissioning)} settings checked or "
                   "changed)"]
         if left_out and not opts.verbose:  # said once (verbose: the commissioning note)
             log(f"{', '.join(self.left_out)} did not answer at start-up: the run goes on "
-                "without it ([silence] action continue); it gets no goal and no torque")
+                "without it ([silence] action continue); it gets no goal and no torque "
+                "until it answers and is commissioned")
         if opts.verbose:
             header[:0] = bus.commissioning
         if not opts.panel:
@@ -361,6 +366,8 @@ class _Session:
 
     def _bus_figures(self, bus: DynamixelBus) -> None:
         self.torque_off, self.torque_unconfirmed = torque_readback(bus)
+        self.admitted = [bus.describe(i) for i in self._left_at_start
+                         if i not in bus.left_out]
         self.bus_stats = bus.stats
 
     def _glove_figures(self, glove: Any) -> None:
@@ -453,7 +460,11 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"                  of which compute p50 {comp.get('p50')} us, p99 {comp.get('p99')} us "
         f"(cycle start -> Sync Write; loop {summary.get('loop_mode', 'fixed')})",
         *([f"servos left out   {', '.join(summary['servos_left_out'])} (did not answer at "
-            "start-up: no goal, no torque)"] if summary.get("servos_left_out") else []),
+            "start-up: no goal, no torque until commissioned)"]
+          if summary.get("servos_left_out") else []),
+        *([f"  admitted        {', '.join(summary['servos_admitted'])} (answered later: "
+            "commissioned, eased in from where it was)"]
+          if summary.get("servos_admitted") else []),
         f"frame losses      {summary.get('frames_skipped', 0)} skipped by the loop, "
         f"{summary.get('frames_in_host_stalls', 0)} left waiting by host stalls (the host "
         "read nothing for 3 frame periods or more: not the glove), "
