@@ -176,6 +176,12 @@ class SilenceWatch:
                     else "stay held")
             self._say(f"{what}: {self._names(indices)} {rest} ([silence] action)")
 
+    def rebooted(self, state: ServoState) -> bool:
+        """Whether the bus rebooted (or found restarted) a servo since the last look: then
+        :meth:`update` must see this read, all fresh or not, to ease it back."""
+        reboots = state.stats.reboots
+        return len(reboots) == self.n and bool((reboots > self._reboots).any())
+
     def _note_reboots(self, state: ServoState) -> None:
         """A servo the bus rebooted came back with torque on where it was (its goal is
         the bus's last goal for it): it eases back to the loop's goals from there at

@@ -94,6 +94,24 @@ class Admission:
                "limit" if torque else "torque off, as every servo")
         return goal, f"{who} answered {r.where()}: commissioned, {how}"
 
+    def restore(self, index: int) -> str:
+        """Servo ``index`` restarted on its own with torque on in the run (a power loss):
+        commissioned again (its RAM settings are gone), then torque on where it is,
+        clamped into its limits, and remembered as its last goal (the loop eases it back
+        from there). Returns what was done; DeviceError if it could not be."""
+        r = self.roster
+        self.commissioner.configure(index)
+        ticks = self.link.read_register(index, Reg.PRESENT_POSITION)
+        pos = float((ticks - r.zero_ticks[index]) / r.ticks_per_deg[index])
+        goal = float(np.clip(pos, r.min_deg[index], r.max_deg[index]))
+        self.link.write_register(index, Reg.GOAL_POSITION, r.ticks(index, goal))
+        self.link.write_register(index, Reg.TORQUE_ENABLE, 1)
+        remembered = self.writer.last_goal_deg.copy()
+        remembered[index] = goal
+        self.writer.remember(remembered)
+        return (f"commissioned again, torque on where it is ({goal:.1f} deg), easing back to "
+                "its goals")
+
     def _torque_off(self, index: int) -> None:
         """Best effort after a failed admission: the servo stays out, torque off."""
         with contextlib.suppress(DeviceError):  # the broadcast at exit reaches it too

@@ -160,6 +160,7 @@ class DynamixelBus(ServoBus):
                                          self.commissioning, self._read_every_servo)
         self.admission = Admission(roster, self.link, self.writer, self.commissioner,
                                    self.faults, own["admission"])
+        self.faults.on_restart = self.admission.restore
         self.torque_control = TorqueControl(
             roster, self.link, self.writer, self.faults, clock, self.commissioning,
             self._read_every_servo, self.read_state, self.write_goals_deg)
