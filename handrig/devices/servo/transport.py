@@ -350,7 +350,8 @@ class SerialTransport(Transport):
         queued = self._output_queue()
         if queued is None:
             return  # a driver without an output queue to report: the deadline alone
-        if queued == 0 or queued < self.queued + written:
+        # empty at the last look (however long ago), empty now, or some gone since
+        if queued == 0 or self.queued == 0 or queued < self.queued + written:
             self._drained_s = now
         self.queued = queued
         stall_s = now - self._drained_s

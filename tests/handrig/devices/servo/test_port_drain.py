@@ -167,6 +167,27 @@ def test_a_queue_that_stops_shrinking_is_wedged_within_the_stall_time(
         t.close()
 
 
+def test_a_write_after_an_idle_port_starts_the_stall_clock_afresh(
+        pty_pair: tuple[int, str]) -> None:
+    master, path = pty_pair
+    clock = FakeClock(0.0)
+    t = ScriptedQueue(path, BAUD, clock)
+    t.open()
+    try:
+        t.write(GOALS)  # drained at once
+        clock.advance(5.0)  # nothing written for a while (commissioning, a pause)
+        t.queue = len(GOALS)  # the new write is still queued when looked at
+        t.write(GOALS)
+        _drain(master)
+        clock.advance(DRAIN_STALL_S / 2)
+        t.queue = 2 * len(GOALS)
+        t.write(GOALS)
+        _drain(master)
+        assert not t.wedged
+    finally:
+        t.close()
+
+
 def test_an_empty_queue_is_never_wedged(pty_pair: tuple[int, str]) -> None:
     master, path = pty_pair
     clock = FakeClock(0.0)
