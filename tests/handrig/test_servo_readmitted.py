@@ -4,7 +4,7 @@ Real ``handrig run`` processes (shipped ``[silence] action = "continue"``) again
 the bus emulator on a pty, servo 7 watched on the bus side: every goal Sync Write's
 goal for it, whether its torque was on, and no goal to any servo outside its limits.
 
-- Missing at start-up (``missing=7``), plugged back a second into the run, resting
+- Missing at start-up (``missing=7``), plugged back half a second into the run, resting
   away from its zero: no goal reaches it before its torque is on (commissioned), the
   first is where it rests, then its goals move at most the slew limit per write;
   the run names it, the summary lists and counts it as admitted.
@@ -12,7 +12,7 @@ goal for it, whether its torque was on, and no goal to any servo outside its lim
   off and RAM reset), resting away from its goal: found by its Bus Watchdog reading
   0, commissioned again, torque back where it rests, eased back the same way.
 - Silenced mid-run (Status Return Level 0: it hears and obeys, never answers) and
-  answering again a second later: it alone is held, then released at the slew limit.
+  answering again 0.6 s later: it alone is held, then released at the slew limit.
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ def _rest_at(servo: EmulatedServo, ticks: int) -> None:
 
 def _run(rig: RigConfig, sim: SimBus, tmp_path: Path,
          midway: Callable[[EmulatedServo], None]) -> tuple[dict[str, Any], Seen, int]:
-    """A 4 s run; ``midway(servo 7)`` a second in (under the emulator's lock). Returns
+    """A 3 s run; ``midway(servo 7)`` half a second in (under the emulator's lock). Returns
     the --json summary, servo 7's goals and how many came before ``midway``."""
     emulated = sim.servo(ID)
     seen: Seen = []
@@ -75,14 +75,14 @@ def _run(rig: RigConfig, sim: SimBus, tmp_path: Path,
     with open(err, "w") as f:
         proc = subprocess.Popen(
             [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", sim.port_path,
-             "--seconds", "4", "--json"], stdout=subprocess.PIPE, stderr=f, text=True, env=env)
+             "--seconds", "3", "--json"], stdout=subprocess.PIPE, stderr=f, text=True, env=env)
     try:
         deadline = time.monotonic() + 120
         while "commissioned" not in err.read_text():
             assert proc.poll() is None, err.read_text()
             assert time.monotonic() < deadline, "the rig never commissioned the servos"
             time.sleep(0.05)
-        time.sleep(1.0)  # the servos follow the glove
+        time.sleep(0.5)  # the servos follow the glove
         with sim.lock:
             midway(emulated)
             before = len(seen)
@@ -165,7 +165,7 @@ def test_a_servo_silenced_mid_run_is_held_alone_then_released_at_the_slew_limit(
     with SimBus.from_rig(rig) as sim:
 
         def answer_again() -> None:
-            time.sleep(1.0)
+            time.sleep(0.6)
             with sim.lock:
                 sim.servo(ID).mem[dx.Reg.STATUS_RETURN_LEVEL] = 2
 
@@ -177,8 +177,11 @@ def test_a_servo_silenced_mid_run_is_held_alone_then_released_at_the_slew_limit(
 
         summary, seen, before = _run(rig, sim, tmp_path, midway)
         later.join()
-    assert summary["silence"]["held"] == 1 and summary["silence"]["recoveries"] == 1
-    said = [e for e in summary["events"] if "holding" in e or "again after" in e]
-    assert said and all(who in e and e.count("servo ") == 1 for e in said), said
+    # it alone is held (on a loaded machine others may be warned about, and recover)
+    assert summary["silence"]["held"] == 1 and summary["silence"]["recoveries"] >= 1
+    held = [e for e in summary["events"] if e.startswith("holding")]
+    assert held and all(who in e and e.count("servo ") == 1 for e in held), held
+    assert any(e.startswith(f"{who} answers again") for e in summary["events"]), (
+        summary["events"])
     assert all(torque for _, _, torque in seen[before:])  # it kept its torque
     _eased_from(seen[before:], seen[before][1], ticks_per_deg, rig)
