@@ -292,6 +292,7 @@ class Rig:
             stats.servo_silences, stats.servos_held = watch.silences, watch.held
             stats.servo_recoveries = watch.recoveries
             stats.servo_recovery_reads_max = watch.recovery_reads_max
+            stats.servos_admitted = watch.admitted
             self._snapshot.finished = True
             self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats

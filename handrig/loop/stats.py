@@ -194,6 +194,7 @@ class RunStats:
     servos_held: int = 0  # servos whose goal was held for silence
     servo_recoveries: int = 0  # silent servos that answered again
     servo_recovery_reads_max: int = 0  # the longest silence that ended, in reads
+    servos_admitted: int = 0  # servos left out at connect, admitted when they answered
     estop: bool = False
     stop_reason: str = ""
     events: Ring[str] = field(default_factory=lambda: Ring(KEPT_EVENTS))
