@@ -180,8 +180,9 @@ def glove_spec(spec: str | None, cfg: GloveConfig, glove_file: Path | None = Non
         path = Path(spec.removeprefix("replay:"))
         if not path.is_file():
             raise ConfigError(f"glove recording not found: {path}", key="--glove", value=spec,
-                              allowed="replay:FILE with an existing recording "
-                              "(`handrig record` or `handrig sim-glove --save` make one)")
+                              allowed="replay:FILE with an existing glove take "
+                              "(`handrig record glove TAKE.csv` or `handrig run "
+                              "--record-glove TAKE.csv` make one)")
         return spec
     port = Path(spec.removeprefix("opengloves:"))
     if port.is_file() or (port.suffix.lower() in REPLAY_SUFFIXES and not port.exists()):
@@ -222,7 +223,12 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
     checked first (:func:`glove_spec`)."""
     spec = glove_spec(spec, cfg, glove_file)
     if spec.startswith("replay:"):
-        return ReplayGlove(read_glove_recording(spec.removeprefix("replay:")), clock)
+        from handrig.app.takes import check_glove_take
+
+        path = spec.removeprefix("replay:")
+        rec = read_glove_recording(path)
+        check_glove_take(rec, path, cfg, glove_file)
+        return ReplayGlove(rec, clock)
     if spec.startswith("opengloves:"):
         return SerialGlove(spec.removeprefix("opengloves:"), "opengloves", clock=clock,
                            baud=cfg.glove.baud, analog_max=cfg.glove.analog_max,
@@ -345,12 +351,13 @@ def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
 
 def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
               outputs: Sequence[Callable[[float, FloatArray], None]] = (),
-              log: Callable[[str], None] = print, profile: bool = False) -> Rig:
+              log: Callable[[str], None] = print, profile: bool = False,
+              ease_in: bool = False) -> Rig:
     """The loop on these devices, with the rig file's rates and safety timings
-    (:meth:`Rig.from_config`)."""
+    (:meth:`Rig.from_config`); ``ease_in``: the first frame eases in (a take played)."""
     return Rig.from_config(parts.rig_config, glove, bus, parts.pipeline, clock,
                            controls_from_raw=parts.controls, orientation=parts.orientation,
-                           outputs=outputs, log=log, profile=profile)
+                           outputs=outputs, log=log, profile=profile, ease_in=ease_in)
 
 
 def _die_with_parent() -> Callable[[], None] | None:
@@ -475,6 +482,11 @@ def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, A
         elif st.kind == "recorder":
             out["recording"] = {
                 "path": st.path, "format": st.name, "frames": st.frames_written,
+                "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
+                "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
+        elif st.kind == "glove take":
+            out["glove_take"] = {
+                "path": st.path, "frames": st.frames_written,
                 "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
                 "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
     return out

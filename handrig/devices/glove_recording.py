@@ -128,7 +128,13 @@ def read_glove_recording(path: str | Path) -> GloveRecording:
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{p}: cannot read glove recording: {exc}") from None
     if not lines or lines[0].strip() != MAGIC:
-        raise DataError(f"{p}:1: not a glove recording (the first line must be {MAGIC!r})")
+        hint = ""
+        if lines and lines[0].startswith("t_s,"):
+            hint = ("; it is a performance take (`handrig run --record`): play it onto the"
+                    f" servos with `handrig play {p} --bus PORT` (or sim)")
+        raise DataError(f"{p}:1: not a glove recording (the first line must be {MAGIC!r})"
+                        f"{hint}; `handrig record glove TAKE.csv` or `handrig run"
+                        " --record-glove TAKE.csv` make one")
     meta: dict[str, str] = {}
     lineno = 1
     while lineno < len(lines) and lines[lineno].startswith("#"):
@@ -156,7 +162,9 @@ def read_glove_recording(path: str | Path) -> GloveRecording:
             continue
         where = f"{p}:{lineno + 2 + j}"
         if len(row) != len(header):
-            raise DataError(f"{where}: {len(row)} columns, the header has {len(header)}")
+            cut = (" (the last line: the take is cut short; delete that line to keep the"
+                   " rest)" if j == len(rows) - 1 else "")
+            raise DataError(f"{where}: {len(row)} columns, the header has {len(header)}{cut}")
         try:
             t[i] = float(row[0])
             raw[i] = [float(v) for v in row[1:1 + len(names)]]
@@ -169,6 +177,9 @@ def read_glove_recording(path: str | Path) -> GloveRecording:
             buttons[i] = int(row[-1])
         except ValueError as exc:
             raise DataError(f"{where}: {exc}") from None
+        if i and not t[i] > t[i - 1]:
+            raise DataError(f"{where}: t_s {t[i]:g} does not come after {t[i - 1]:g}: the"
+                            " times must increase")
         i += 1
     try:
         rate = float(meta.get("rate_hz", "0") or 0)
