@@ -265,7 +265,8 @@ class _Session:
                               record_rate_hz=opts.record_rate_hz)
         if opts.record_glove:
             take = takes.open_glove_take(opts.record_glove, glove, parts.glove_config,
-                                         source=opts.glove or glove.name, log=log)
+                                         source=opts.glove or glove.name, log=log,
+                                         from_first_output=True)
             stack.callback(lambda: log(f"glove take: {take.close()}"))
             outputs.append(take)
         rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=self._rig_log,

@@ -87,11 +87,13 @@ def check_glove_take_path(path: str, flag: str = "--record-glove") -> None:
 
 def open_glove_take(path: str, glove: GloveSource, cfg: GloveConfig, *, source: str,
                     log: Callable[[str], None] | None = None,
-                    channel_names: tuple[str, ...] | None = None) -> GloveTake:
-    """A glove take at ``path`` that gets every frame ``glove`` sends from now on."""
-    names = channel_names if channel_names is not None else glove_channel_names(cfg)
-    take = GloveTake(path, channel_names=names, rate_hz=cfg.glove.rate_hz,
-                     meta={"source": source, "format": cfg.glove.format}, log=log)
+                    from_first_output: bool = False) -> GloveTake:
+    """A glove take at ``path`` that gets every frame ``glove`` sends from now on
+    (``from_first_output``: from the frame the loop's first cycle used, see
+    :class:`GloveTake`)."""
+    take = GloveTake(path, channel_names=glove_channel_names(cfg), rate_hz=cfg.glove.rate_hz,
+                     meta={"source": source, "format": cfg.glove.format}, log=log,
+                     from_first_output=from_first_output)
     glove.add_tap(take.tap)
     return take
 

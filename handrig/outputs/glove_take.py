@@ -45,13 +45,20 @@ class GloveTake(Output):
     ``ch<i>``); ``rate_hz``: the glove's nominal rate, written as ``# rate_hz``;
     ``meta``: more ``# key: value`` lines (the source, for a person). A frame with another
     channel count than the first is not written (counted in :attr:`frames_dropped`).
+    ``from_first_output``: the take starts at the newest frame queued when the loop first
+    calls it (the frame its first cycle used); the frames before it are the backlog the
+    glove sent while the rig commissioned, read in one go at the loop's start, and are
+    left out (:attr:`backlog_left_out`).
     """
 
     def __init__(self, path: str | Path, *, channel_names: Sequence[str] = (),
                  rate_hz: float = 0.0, meta: dict[str, str] | None = None,
                  flush_s: float = 0.5, sync: bool = True,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None,
+                 from_first_output: bool = False) -> None:
         self.path = Path(path)
+        self._skip_backlog = from_first_output
+        self.backlog_left_out = 0
         if self.path.suffix.lower() not in (".csv", ".txt"):
             raise DataError(f"{self.path}: a glove take is a CSV file; name it *.csv")
         check_new_take(self.path)
@@ -91,6 +98,12 @@ class GloveTake(Output):
 
     # -- on the loop's thread, after the write ---------------------------------------------
     def __call__(self, t_s: float, pose_deg: FloatArray) -> None:
+        if self._skip_backlog:
+            self._skip_backlog = False
+            samples = self._samples
+            while len(samples) > 1:
+                samples.popleft()
+                self.backlog_left_out += 1
         self.format_pending()
 
     def format_pending(self) -> None:
