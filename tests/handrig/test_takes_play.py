@@ -67,10 +67,10 @@ def summary_of(stdout: str) -> dict:
     return json.loads(stdout.strip().splitlines()[-1])
 
 
-@pytest.fixture()
-def glove_take(tmp_path: Path) -> Path:
+@pytest.fixture(scope="module")
+def glove_take(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """1.5 s of a 200 Hz emulated glove, stored by ``handrig record glove``'s code."""
-    take = tmp_path / "glove_take.csv"
+    take = tmp_path_factory.mktemp("glove") / "glove_take.csv"
     with GloveEmulator(SWEEP, "frames", rate_hz=200.0) as emu:
         done = record_glove_take(str(take), glove=emu.port_path, seconds=1.5)
     assert done["out"] == str(take) and done["errors"] == 0
@@ -255,9 +255,9 @@ def test_play_stops_safely_on_sigterm_mid_take(tmp_path: Path) -> None:
                                  "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, env=env)
         deadline = time.monotonic() + 60
-        while watch.writes < 300 and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.05)
-        assert watch.writes >= 300, "the take did not start"
+        while watch.writes < 100 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.02)
+        assert watch.writes >= 100, "the take did not start"
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=30)
         torque = [sim.servo(s.id).torque_enabled for s in rig.servos]
@@ -266,3 +266,44 @@ def test_play_stops_safely_on_sigterm_mid_take(tmp_path: Path) -> None:
     assert proc.returncode == 0, (s.get("error"), err[-2000:])
     assert s["stop_reason"] == "SIGTERM received" and s["ease_s"] == 1.0
     assert s["torque_off"] is True and not any(torque) and outside == 0
+
+
+def test_run_records_a_glove_take_that_replays_through_the_whole_pipeline(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    take = tmp_path / "glove.csv"
+    rig = load_rig_config()
+    with GloveEmulator(SWEEP, "frames", rate_hz=200.0, loop=True) as emu, \
+            SimBus.from_rig(rig) as sim:
+        status = main(["run", "--glove", emu.port_path, "--bus", sim.port_path, "--seconds",
+                       "1", "--record-glove", str(take), "--json"])
+        recorded = summary_of(capsys.readouterr().out)
+        assert status == 0, recorded.get("error")
+        # a take is never replaced: refused before the bus is touched
+        before = take.read_bytes()
+        goals = sim.stats.goals_decoded
+        status = main(["run", "--glove", emu.port_path, "--bus", sim.port_path, "--seconds",
+                       "1", "--record-glove", str(take), "--json"])
+        refused = summary_of(capsys.readouterr().out)
+        assert status == 2 and "--record-glove" in refused["error"]
+        assert str(take) in refused["error"] and "never replaced" in refused["error"]
+        assert take.read_bytes() == before and sim.stats.goals_decoded == goals
+        status = main(["run", "--glove", f"replay:{take}", "--bus", sim.port_path,
+                       "--seconds", "1.2", "--json"])
+        replayed = summary_of(capsys.readouterr().out)
+    rec = read_glove_recording(take)
+    stored = recorded["outputs"]["glove_take"]
+    assert stored["frames"] == len(rec) and stored["path"] == str(take)
+    # the run's 1 s and its 1 s ease to relaxed, less the frame its first cycle used
+    assert rec.duration_s == pytest.approx(2.0, abs=0.1)
+    assert len(rec) >= recorded["glove"]["frames_used"] - 2
+    assert status == 0, replayed.get("error")
+    assert replayed["glove"]["frames_used"] >= 0.95 * 1.2 * 200
+    assert replayed["frames_skipped"] == 0 and replayed["frames_in_bursts"] <= 2
+
+
+def test_a_performance_given_as_a_glove_replay_points_to_play(tmp_path: Path) -> None:
+    take = performance(tmp_path / "take.csv", seconds=0.2)
+    from handrig.errors import DataError
+
+    with pytest.raises(DataError, match=r"performance take.*handrig play .*--bus"):
+        read_glove_recording(take)
