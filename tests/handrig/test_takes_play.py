@@ -28,8 +28,8 @@ from handrig import hand
 from handrig.app.glove_take_session import record_glove_take
 from handrig.cli import main
 from handrig.config.rig import RigConfig, load_rig_config
-from handrig.errors import ConfigError
 from handrig.devices.glove_recording import read_glove_recording, sweep_recording
+from handrig.errors import ConfigError
 from handrig.outputs.recorder import Recorder
 from handrig.pose.pipeline import POSE_SIZE
 from sim.dxl_bus import GOAL_POSITION_ADDRESS, SimBus
@@ -203,7 +203,7 @@ def _swap_times(text: str) -> str:
 def _bad_glove_takes(folder: Path, good: Path) -> list[Path]:
     text = good.read_text()
     lines = text.splitlines()
-    head = [i for i, line in enumerate(lines) if line.startswith("t_s,")][0]
+    head = next(i for i, line in enumerate(lines) if line.startswith("t_s,"))
     few = folder / "three_channels_glove.csv"  # another glove: 3 channels, not 5
     few.write_text("\n".join(
         lines[:head] + [",".join(r.split(",")[:4] + r.split(",")[6:]) for r in lines[head:]])
@@ -234,7 +234,7 @@ def test_bad_takes_are_refused_naming_the_file_before_any_goal(
     with SimBus.from_rig(rig) as sim:
         sim.on_sync_write = watch
         for p in bad:
-            status, out, err = play([str(p), "--bus", sim.port_path, "--json"], capsys)
+            status, out, _err = play([str(p), "--bus", sim.port_path, "--json"], capsys)
             s = summary_of(out)
             assert status == 2, (p.name, s)
             assert str(p) in s["error"], (p.name, s["error"])
