@@ -39,7 +39,7 @@ from handrig.devices.glove_calibration import (
     default_glove_path,
     load_glove_config,
 )
-from handrig.devices.glove_recording import read_glove_recording
+from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 from handrig.errors import ConfigError, DeviceError
@@ -222,12 +222,11 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
     """``PORT``, ``opengloves:PORT`` or ``replay:FILE`` (None: the port in glove.toml),
     checked first (:func:`glove_spec`)."""
     spec = glove_spec(spec, cfg, glove_file)
+    needed = max(ch.raw_index() for ch in cfg.channels) + 1
     if spec.startswith("replay:"):
-        from handrig.app.takes import check_glove_take
-
         path = spec.removeprefix("replay:")
         rec = read_glove_recording(path)
-        check_glove_take(rec, path, cfg, glove_file)
+        check_channels(rec, needed, path, glove_file)  # a take of another glove
         return ReplayGlove(rec, clock)
     if spec.startswith("opengloves:"):
         return SerialGlove(spec.removeprefix("opengloves:"), "opengloves", clock=clock,
@@ -236,7 +235,6 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
     # reader="poll": the loop itself reads the port without blocking, so a frame is
     # handled in the cycle that reads it (no reader thread competing for the GIL).
     # a frame with fewer raw channels than the calibration reads is never settled on
-    needed = max(ch.raw_index() for ch in cfg.channels) + 1
     names = [""] * needed
     for ch in cfg.channels:
         names[ch.raw_index()] = names[ch.raw_index()] or ch.curve

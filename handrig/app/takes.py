@@ -20,24 +20,27 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
 
 from firmware_protocol.opengloves import CHANNEL_KEYS
+from handrig.app.factory import RigParts
 from handrig.clock import Clock
 from handrig.config.loading import load_joint_limits
 from handrig.devices.glove import GloveSample, GloveSource, ReplayGlove
 from handrig.devices.glove_calibration import GloveConfig
-from handrig.devices.glove_recording import MAGIC, GloveRecording, read_glove_recording
+from handrig.devices.glove_recording import (
+    MAGIC,
+    GloveRecording,
+    check_channels,
+    read_glove_recording,
+)
 from handrig.errors import ConfigError, DataError
 from handrig.outputs.glove_take import GloveTake
 from handrig.outputs.recorder import check_new_take, load_performance
 from handrig.pose.pipeline import POSE_NAMES, POSE_SIZE
 from handrig.pose.take_pipeline import PoseExpander, TakePipeline, copy_pose
-
-if TYPE_CHECKING:
-    from handrig.app.factory import RigParts
 
 TakeKind = Literal["glove", "performance"]
 
@@ -59,17 +62,8 @@ def needed_channels(cfg: GloveConfig) -> int:
 
 def check_glove_take(rec: GloveRecording, path: str | Path, cfg: GloveConfig,
                      glove_file: Path | None = None) -> None:
-    """DataError naming ``path`` when the take has fewer raw channels than the glove file's
-    calibration reads (it was recorded from another glove), or no frames."""
-    if len(rec) == 0:
-        raise DataError(f"{path}: a glove take without frames: nothing to play")
-    need = needed_channels(cfg)
-    if rec.n_channels < need:
-        where = f" ({glove_file})" if glove_file is not None else ""
-        raise DataError(
-            f"{path}: {rec.n_channels} raw channels, but the glove file{where} reads"
-            f" {need}: a take of another glove; play it with that glove's file"
-            " (--glove-config FILE)")
+    """:func:`~handrig.devices.glove_recording.check_channels` against the glove file."""
+    check_channels(rec, needed_channels(cfg), path, glove_file)
 
 
 def check_glove_take_path(path: str, flag: str = "--record-glove") -> None:

@@ -92,6 +92,20 @@ class GloveRecording:
         return float(1.0 / np.median(np.diff(self.t_s)))
 
 
+def check_channels(rec: GloveRecording, need: int, path: str | Path,
+                   glove_file: str | Path | None = None) -> None:
+    """DataError naming ``path`` when the recording has no frames, or fewer raw channels
+    than ``need`` (what the glove file ``glove_file`` reads: a take of another glove)."""
+    if len(rec) == 0:
+        raise DataError(f"{path}: a glove take without frames: nothing to play")
+    if rec.n_channels < need:
+        where = f" ({glove_file})" if glove_file is not None else ""
+        raise DataError(
+            f"{path}: {rec.n_channels} raw channels, but the glove file{where} reads"
+            f" {need}: a take of another glove; play it with that glove's file"
+            " (--glove-config FILE)")
+
+
 def write_glove_recording(path: str | Path, rec: GloveRecording) -> None:
     """Write ``rec`` to ``path`` in the format of this module."""
     p = Path(path)
