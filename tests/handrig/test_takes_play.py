@@ -307,3 +307,22 @@ def test_a_performance_given_as_a_glove_replay_points_to_play(tmp_path: Path) ->
 
     with pytest.raises(DataError, match=r"performance take.*handrig play .*--bus"):
         read_glove_recording(take)
+
+
+def test_the_e_stop_button_in_a_glove_take_ends_the_play_with_torque_off(
+        glove_take: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    lines = glove_take.read_text().splitlines()
+    head = [i for i, line in enumerate(lines) if line.startswith("t_s,")][0]
+    press = head + 100  # half a second in, the glove's relax / e-stop button goes down
+    lines[press:] = [line.rsplit(",", 1)[0] + ",1" for line in lines[press:]]
+    take = tmp_path / "estop.csv"
+    take.write_text("\n".join(lines) + "\n")
+    rig = load_rig_config()
+    with SimBus.from_rig(rig) as sim:
+        status, out, err = play([str(take), "--bus", sim.port_path, "--json"], capsys)
+        torque = [sim.servo(s.id).torque_enabled for s in rig.servos]
+    s = summary_of(out)
+    assert status == 0, (s.get("error"), err[-2000:])
+    assert s["estop"] is True and s["stop_reason"] == "e-stop"
+    assert s["torque_off"] is True and not any(torque)
+    assert s["duration_s"] == pytest.approx(0.5 + 1.0, abs=0.25)  # eased out from there
