@@ -100,7 +100,7 @@ def take_kind(path: str | Path) -> TakeKind:
         with p.open("rb") as f:
             first = f.readline(200)
     except FileNotFoundError:
-        raise DataError(f"{p}: take not found") from None
+        raise DataError(f"{p}: recording not found") from None
     except OSError as exc:
         raise DataError(f"{p}: cannot read the take: {exc.strerror or exc}") from None
     if first.decode("utf-8", errors="replace").strip() == MAGIC:

@@ -12,13 +12,13 @@ from typing import Any
 from handrig.app.factory import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import run_sources
-from handrig.app.takes import load_play_take, play_parts
+from handrig.app.takes import load_play_take, play_parts, take_kind
 from handrig.app.view import add_view_flag, view_playback, view_session
 from handrig.cli._display import check_gl_backend
 from handrig.cli._numbers import nonnegative_float, positive_float
 from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.clock import MonotonicClock
-from handrig.errors import ConfigError, HandrigError
+from handrig.errors import ConfigError, DataError, HandrigError
 from handrig.outputs.recorder import Playback
 from handrig.outputs.vmc import DEFAULT_PORT, VmcSender, parse_host_port
 
@@ -76,6 +76,10 @@ def run(args: argparse.Namespace) -> int:
         if value is not None:
             raise ConfigError("only with --bus", key=flag, value=value,
                               allowed="add --bus PORT (or --bus sim) to play onto the rig")
+    if take_kind(args.file) == "glove":
+        raise DataError(f"{args.file}: a glove take goes through the rig's pipeline: play it"
+                        f" with `handrig play {args.file} --bus PORT` (or --bus sim), adding"
+                        " --vmc HOST:PORT for a virtual puppet too")
     return run_to_vmc(args)
 
 
