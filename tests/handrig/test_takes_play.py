@@ -312,7 +312,7 @@ def test_a_performance_given_as_a_glove_replay_points_to_play(tmp_path: Path) ->
 def test_the_e_stop_button_in_a_glove_take_ends_the_play_with_torque_off(
         glove_take: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     lines = glove_take.read_text().splitlines()
-    head = [i for i, line in enumerate(lines) if line.startswith("t_s,")][0]
+    head = next(i for i, line in enumerate(lines) if line.startswith("t_s,"))
     press = head + 100  # half a second in, the glove's relax / e-stop button goes down
     lines[press:] = [line.rsplit(",", 1)[0] + ",1" for line in lines[press:]]
     take = tmp_path / "estop.csv"
