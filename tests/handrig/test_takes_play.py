@@ -326,3 +326,23 @@ def test_the_e_stop_button_in_a_glove_take_ends_the_play_with_torque_off(
     assert s["estop"] is True and s["stop_reason"] == "e-stop"
     assert s["torque_off"] is True and not any(torque)
     assert s["duration_s"] == pytest.approx(0.5 + 1.0, abs=0.25)  # eased out from there
+
+
+def test_record_glove_ends_cleanly_on_ctrl_c_in_a_real_process(tmp_path: Path) -> None:
+    take = tmp_path / "glove.csv"
+    env = {**os.environ, "HOME": str(tmp_path), "XDG_CONFIG_HOME": str(tmp_path / "cfg")}
+    with GloveEmulator(SWEEP, "frames", rate_hz=200.0, loop=True) as emu:
+        proc = subprocess.Popen([*CLI, "record", "glove", str(take), "--glove", emu.port_path,
+                                 "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=env)
+        partial = tmp_path / "glove.csv.partial"
+        deadline = time.monotonic() + 60
+        while (not partial.exists() or partial.stat().st_size < 2000) and (
+                time.monotonic() < deadline and proc.poll() is None):
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err[-2000:]
+    done = json.loads(out.strip().splitlines()[-1])
+    assert done["stopped_by"] == "SIGINT" and done["out"] == str(take)
+    assert not partial.exists() and len(read_glove_recording(take)) == done["frames"] > 20
