@@ -228,7 +228,9 @@ def test_bad_takes_are_refused_naming_the_file_before_any_goal(
     bvh = performance(tmp_path / "good.bvh", seconds=1.0)
     cut_bvh = tmp_path / "truncated.bvh"
     cut_bvh.write_bytes(bvh.read_bytes()[:-300])
-    bad += [cut_bvh, *_bad_glove_takes(tmp_path, glove_take)]
+    other_bvh = tmp_path / "another_skeleton.bvh"
+    other_bvh.write_text(bvh.read_text().replace("JOINT RightHandIndex1", "JOINT Index1", 1))
+    bad += [cut_bvh, other_bvh, *_bad_glove_takes(tmp_path, glove_take)]
     rig = load_rig_config()
     watch = GoalWatch(rig)
     with SimBus.from_rig(rig) as sim:
