@@ -43,6 +43,7 @@ from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 from handrig.errors import ConfigError, DeviceError
+from handrig.loop.ports import ControlsFromRaw, OrientationLike
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
 from handrig.outputs.base import Output
@@ -82,8 +83,8 @@ class RigParts:
     expander: Expander
     sag: SagGrid
     pipeline: PosePipeline
-    controls: GloveControls
-    orientation: ForearmAngles
+    controls: ControlsFromRaw  # the glove's GloveControls (a take played: its pose)
+    orientation: OrientationLike  # the glove's ForearmAngles (a take played: fixed)
     glove_file: Path | None = None  # where glove_config was read from
 
 

@@ -35,6 +35,7 @@ from handrig.app import factory as app
 from handrig.app import takes
 from handrig.app.factory import RigParts
 from handrig.clock import Clock, MonotonicClock
+from handrig.devices.glove import GloveSource
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
 from handrig.errors import DeviceError, HandrigError, SafetyStop
@@ -59,7 +60,7 @@ class LiveOptions:
     record: str | None = None
     record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
-    take: Callable[[Clock], Any] | None = None  # handrig play: the take's glove, for ``glove``
+    take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
     ease_in: bool = False  # the first frame eases in from where the servos are (play)
     panel: bool = False  # the live panel (plain lines when stdout is no terminal)
     keys: bool = True  # with the panel: read the show keys when stdin is a terminal

@@ -204,8 +204,8 @@ def play_parts(parts: RigParts, take: PlayTake) -> RigParts:
         control_means_deg=PoseExpander(rest).control_means_deg, retarget=live.retarget)
     forearm = (parts.glove_config.forearm.inclination_deg,
                parts.glove_config.forearm.rotation_deg)
-    return dataclasses.replace(parts, pipeline=pipeline, controls=copy_pose,  # type: ignore[arg-type]
-                               orientation=_FixedForearm(forearm))  # type: ignore[arg-type]
+    return dataclasses.replace(parts, pipeline=pipeline, controls=copy_pose,
+                               orientation=_FixedForearm(forearm))
 
 
 class _FixedForearm:
