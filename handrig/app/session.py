@@ -203,7 +203,7 @@ class _Session:
                 app.glove_spec(self.opts.glove, self.parts.glove_config, self.parts.glove_file)
             app.check_outputs(self.opts.vmc, self.opts.record)
             if self.opts.record_glove:
-                takes.check_glove_take_path(self.opts.record_glove)
+                takes.check_glove_take_path(self.opts.record_glove, record=self.opts.record)
             with contextlib.ExitStack() as stack:
                 opened = stack.enter_context(app.servo_bus(
                     self.opts.bus, self.parts, self.clock, wire_timing=self.opts.wire_timing,

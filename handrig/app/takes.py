@@ -66,9 +66,14 @@ def check_glove_take(rec: GloveRecording, path: str | Path, cfg: GloveConfig,
     check_channels(rec, needed_channels(cfg), path, glove_file)
 
 
-def check_glove_take_path(path: str, flag: str = "--record-glove") -> None:
-    """``--record-glove`` (``flag``) checked before the bus opens: a .csv name, never an
-    existing take (ConfigError naming the flag)."""
+def check_glove_take_path(path: str, flag: str = "--record-glove", *,
+                          record: str | None = None) -> None:
+    """``--record-glove`` (``flag``) checked before the bus opens: a .csv name, not the
+    performance take's (``record``), never an existing take (ConfigError naming the flag)."""
+    if record and Path(record).resolve() == Path(path).resolve():
+        raise ConfigError("the same file as --record", key=flag, value=path,
+                          allowed="another file name: the glove take and the performance"
+                          " are two takes")
     if Path(path).suffix.lower() != ".csv":
         raise ConfigError("a glove take is a CSV file", key=flag, value=path,
                           allowed="a file name ending in .csv")

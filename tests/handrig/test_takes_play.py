@@ -289,6 +289,13 @@ def test_run_records_a_glove_take_that_replays_through_the_whole_pipeline(
         assert status == 2 and "--record-glove" in refused["error"]
         assert str(take) in refused["error"] and "never replaced" in refused["error"]
         assert take.read_bytes() == before and sim.stats.goals_decoded == goals
+        same = tmp_path / "same.csv"
+        status = main(["run", "--glove", emu.port_path, "--bus", sim.port_path, "--seconds",
+                       "1", "--record", str(same), "--record-glove", str(same), "--json"])
+        refused = summary_of(capsys.readouterr().out)
+        assert status == 2 and "--record-glove" in refused["error"]
+        assert "same file as --record" in refused["error"] and not same.exists()
+        assert sim.stats.goals_decoded == goals
         status = main(["run", "--glove", f"replay:{take}", "--bus", sim.port_path,
                        "--seconds", "1.2", "--json"])
         replayed = summary_of(capsys.readouterr().out)
