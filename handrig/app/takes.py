@@ -168,6 +168,8 @@ def load_play_take(path: str | Path, cfg: GloveConfig, *, speed: float = 1.0,
         keep = np.append(np.diff(t) > 0, True)  # frames sharing a time: the last one
         t, raw = t[keep], raw[keep]
         quat, buttons, names, rate = None, np.zeros(len(t), dtype=np.int64), POSE_NAMES, 0.0
+    if len(t) < 2:
+        raise DataError(f"{p}: {len(t)} frame: a take needs two frames or more to play")
     t_rel = t - t[0]
     total = float(t_rel[-1])
     start = 0.0 if from_s is None else float(from_s)
