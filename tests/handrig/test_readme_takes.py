@@ -43,7 +43,7 @@ def test_the_readme_record_then_play_example_works_as_written(
         if argv[1] in ("run", "play"):
             assert summary["torque_off"] is True and summary["glove"]["frames_used"] > 100
     t_s, _, _ = load_performance("take1.csv")
-    assert t_s[-1] - t_s[0] == pytest.approx(4.0, abs=0.15)  # 3 s and the 1 s ease
+    assert t_s[-1] - t_s[0] == pytest.approx(3.0, abs=0.15)  # 2 s and the 1 s ease
     glove1 = read_glove_recording("glove1.csv")
-    assert glove1.duration_s == pytest.approx(4.0, abs=0.15)
+    assert glove1.duration_s == pytest.approx(3.0, abs=0.15)
     assert read_glove_recording("glove2.csv").duration_s == pytest.approx(1.0, abs=0.05)
