@@ -62,6 +62,7 @@ class LiveOptions:
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
     ease_in: bool = False  # the first frame eases in from where the servos are (play)
+    done_reason: str = ""  # the stop reason when frames/duration_s is reached ("": "S s done")
     panel: bool = False  # the live panel (plain lines when stdout is no terminal)
     keys: bool = True  # with the panel: read the show keys when stdin is a terminal
     sim_faults: str = ""
@@ -290,7 +291,8 @@ class _Session:
                     with (self._console(rig, header) if opts.panel else contextlib.nullcontext(),
                           pinned_loop(loop.pin_cpu, self._rig_log),
                           realtime_priority(loop.realtime_priority, self._rig_log)):
-                        rig.run(frames=opts.frames, duration_s=opts.duration_s)
+                        rig.run(frames=opts.frames, duration_s=opts.duration_s,
+                                done_reason=opts.done_reason)
                     self.ease_s = 0.0 if rig.machine.stop_now else rig.relax_time_s
                 finally:
                     self.signals.disarm()  # from here on: torque off, then shut down

@@ -232,10 +232,12 @@ class Rig:
         self.stats.events.append(text)
         self.log(text)
 
-    def run(self, frames: int | None = None, duration_s: float | None = None) -> RunStats:
+    def run(self, frames: int | None = None, duration_s: float | None = None, *,
+            done_reason: str = "") -> RunStats:
         """Run ``frames`` cycles or ``duration_s`` seconds (counted from the start, waiting
         for the glove included), then ease to the relaxed pose and return; an e-stop or a
-        stop request eases and returns early.
+        stop request eases and returns early. ``done_reason``: the stop reason when the
+        length is reached (default "N frames done" / "S s done").
 
         Until the first glove frame the servos hold where they are; no frame within
         ``glove_timeout_s`` eases them to the relaxed pose.
@@ -263,9 +265,9 @@ class Rig:
                 if machine.stop_now:
                     break
                 if frames is not None and stats.frames >= frames:
-                    machine.finish(f"{frames} frames done")
+                    machine.finish(done_reason or f"{frames} frames done")
                 elif duration_s is not None and clock.now() - t0 >= duration_s:
-                    machine.finish(f"{duration_s:g} s done")
+                    machine.finish(done_reason or f"{duration_s:g} s done")
                 self.trigger.wait(tick, settle=False)  # settled by the read schedule
                 over = cycle.run(tick)  # at once: the bookkeeping below is off the frame's path
                 if tick.skipped:
