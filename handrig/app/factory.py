@@ -39,10 +39,11 @@ from handrig.devices.glove_calibration import (
     default_glove_path,
     load_glove_config,
 )
-from handrig.devices.glove_recording import read_glove_recording
+from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 from handrig.errors import ConfigError, DeviceError
+from handrig.loop.ports import ControlsFromRaw, OrientationLike
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
 from handrig.outputs.base import Output
@@ -82,8 +83,8 @@ class RigParts:
     expander: Expander
     sag: SagGrid
     pipeline: PosePipeline
-    controls: GloveControls
-    orientation: ForearmAngles
+    controls: ControlsFromRaw  # the glove's GloveControls (a take played: its pose)
+    orientation: OrientationLike  # the glove's ForearmAngles (a take played: fixed)
     glove_file: Path | None = None  # where glove_config was read from
 
 
@@ -180,8 +181,9 @@ def glove_spec(spec: str | None, cfg: GloveConfig, glove_file: Path | None = Non
         path = Path(spec.removeprefix("replay:"))
         if not path.is_file():
             raise ConfigError(f"glove recording not found: {path}", key="--glove", value=spec,
-                              allowed="replay:FILE with an existing recording "
-                              "(`handrig record` or `handrig sim-glove --save` make one)")
+                              allowed="replay:FILE with an existing glove take "
+                              "(`handrig record glove TAKE.csv` or `handrig run "
+                              "--record-glove TAKE.csv` make one)")
         return spec
     port = Path(spec.removeprefix("opengloves:"))
     if port.is_file() or (port.suffix.lower() in REPLAY_SUFFIXES and not port.exists()):
@@ -221,8 +223,12 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
     """``PORT``, ``opengloves:PORT`` or ``replay:FILE`` (None: the port in glove.toml),
     checked first (:func:`glove_spec`)."""
     spec = glove_spec(spec, cfg, glove_file)
+    needed = max(ch.raw_index() for ch in cfg.channels) + 1
     if spec.startswith("replay:"):
-        return ReplayGlove(read_glove_recording(spec.removeprefix("replay:")), clock)
+        path = spec.removeprefix("replay:")
+        rec = read_glove_recording(path)
+        check_channels(rec, needed, path, glove_file)  # a take of another glove
+        return ReplayGlove(rec, clock)
     if spec.startswith("opengloves:"):
         return SerialGlove(spec.removeprefix("opengloves:"), "opengloves", clock=clock,
                            baud=cfg.glove.baud, analog_max=cfg.glove.analog_max,
@@ -230,7 +236,6 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
     # reader="poll": the loop itself reads the port without blocking, so a frame is
     # handled in the cycle that reads it (no reader thread competing for the GIL).
     # a frame with fewer raw channels than the calibration reads is never settled on
-    needed = max(ch.raw_index() for ch in cfg.channels) + 1
     names = [""] * needed
     for ch in cfg.channels:
         names[ch.raw_index()] = names[ch.raw_index()] or ch.curve
@@ -345,12 +350,13 @@ def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
 
 def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
               outputs: Sequence[Callable[[float, FloatArray], None]] = (),
-              log: Callable[[str], None] = print, profile: bool = False) -> Rig:
+              log: Callable[[str], None] = print, profile: bool = False,
+              ease_in: bool = False) -> Rig:
     """The loop on these devices, with the rig file's rates and safety timings
-    (:meth:`Rig.from_config`)."""
+    (:meth:`Rig.from_config`); ``ease_in``: the first frame eases in (a take played)."""
     return Rig.from_config(parts.rig_config, glove, bus, parts.pipeline, clock,
                            controls_from_raw=parts.controls, orientation=parts.orientation,
-                           outputs=outputs, log=log, profile=profile)
+                           outputs=outputs, log=log, profile=profile, ease_in=ease_in)
 
 
 def _die_with_parent() -> Callable[[], None] | None:
@@ -475,6 +481,11 @@ def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, A
         elif st.kind == "recorder":
             out["recording"] = {
                 "path": st.path, "format": st.name, "frames": st.frames_written,
+                "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
+                "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
+        elif st.kind == "glove take":
+            out["glove_take"] = {
+                "path": st.path, "frames": st.frames_written,
                 "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
                 "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
     return out

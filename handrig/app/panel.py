@@ -106,6 +106,8 @@ class Outputs:
     record_bytes: int = 0  # on disk so far
     record_duration_s: float = 0.0  # of performance recorded
     record_stopped: str = ""  # why the recording stopped during the run ("" = recording)
+    glove_take_path: str = ""  # a glove take (--record-glove) being written
+    glove_take_frames: int = 0
 
 
 @dataclass(frozen=True)
@@ -250,6 +252,9 @@ def outputs_line(o: Outputs) -> Text:
                         "bold red")
     else:
         text.append("rec off", "dim")
+    if o.glove_take_path:  # frames in the glove take (--record-glove)
+        n = o.glove_take_frames
+        text.append(f" +glove {n if n < 10000 else f'{n // 1000}k'}")
     return text
 
 
@@ -332,6 +337,8 @@ def plain_line(s: PanelSnapshot) -> str:
         (f"rec {o.record_path} {_size(o.record_bytes)} {_clock(o.record_duration_s)}"
          + (f" {o.record_stopped}" if o.record_stopped else "") if o.record_path
          else "rec off"),
+        *([f"glove take {o.glove_take_path} {o.glove_take_frames} frames"]
+          if o.glove_take_path else []),
     ]
     return " | ".join(parts)
 

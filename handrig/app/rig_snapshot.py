@@ -118,6 +118,7 @@ class RigSnapshot:
     def _outputs(self, s: LoopSnapshot) -> Outputs:
         vmc_target, vmc_rate, vmc_err = "", NAN, 0
         rec_path, rec_bytes, rec_s, rec_stopped = "", 0, 0.0, ""
+        glove_path, glove_frames = "", 0
         for out in s.outputs:
             if out.kind == "vmc":
                 vmc_target = out.address
@@ -126,4 +127,7 @@ class RigSnapshot:
             elif out.kind == "recorder":
                 rec_path, rec_bytes, rec_s = out.path, out.bytes_written, out.duration_s
                 rec_stopped = out.stopped_reason
-        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped)
+            elif out.kind == "glove take":
+                glove_path, glove_frames = out.path, out.frames_written
+        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped,
+                       glove_path, glove_frames)

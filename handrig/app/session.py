@@ -32,8 +32,10 @@ from typing import Any
 import numpy as np
 
 from handrig.app import factory as app
+from handrig.app import takes
 from handrig.app.factory import RigParts
 from handrig.clock import Clock, MonotonicClock
+from handrig.devices.glove import GloveSource
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
 from handrig.errors import DeviceError, HandrigError, SafetyStop
@@ -57,6 +59,10 @@ class LiveOptions:
     vmc: str | None = None
     record: str | None = None
     record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
+    record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
+    take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
+    ease_in: bool = False  # the first frame eases in from where the servos are (play)
+    done_reason: str = ""  # the stop reason when frames/duration_s is reached ("": "S s done")
     panel: bool = False  # the live panel (plain lines when stdout is no terminal)
     keys: bool = True  # with the panel: read the show keys when stdin is a terminal
     sim_faults: str = ""
@@ -223,8 +229,11 @@ class _Session:
         opened: app.OpenedBus | None = None
         try:
             # the checks that need no hardware, before the bus is opened and commissioned
-            app.glove_spec(self.opts.glove, self.parts.glove_config, self.parts.glove_file)
+            if self.opts.take is None:
+                app.glove_spec(self.opts.glove, self.parts.glove_config, self.parts.glove_file)
             app.check_outputs(self.opts.vmc, self.opts.record)
+            if self.opts.record_glove:
+                takes.check_glove_take_path(self.opts.record_glove, record=self.opts.record)
             with contextlib.ExitStack() as stack:
                 opened = stack.enter_context(app.servo_bus(
                     self.opts.bus, self.parts, self.clock, wire_timing=self.opts.wire_timing,
@@ -266,7 +275,8 @@ class _Session:
         """With the bus open: the glove, commissioning, the outputs, the rig, the run.
         Returns the error the run ended with (torque is off by then)."""
         opts, parts, log = self.opts, self.parts, self.log
-        glove = app.open_glove(opts.glove, parts.glove_config, self.clock, parts.glove_file)
+        glove = (opts.take(self.clock) if opts.take is not None else
+                 app.open_glove(opts.glove, parts.glove_config, self.clock, parts.glove_file))
         stack.enter_context(glove)
         stack.callback(self._glove_figures, glove)
         bus.connect()
@@ -289,8 +299,14 @@ class _Session:
                               record=opts.record, log=log,
                               glove_rate_hz=parts.glove_config.glove.rate_hz,
                               record_rate_hz=opts.record_rate_hz)
+        if opts.record_glove:
+            take = takes.open_glove_take(opts.record_glove, glove, parts.glove_config,
+                                         source=opts.glove or glove.name, log=log,
+                                         from_first_output=True)
+            stack.callback(lambda: log(f"glove take: {take.close()}"))
+            outputs.append(take)
         rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=self._rig_log,
-                            profile=opts.profile)
+                            profile=opts.profile, ease_in=opts.ease_in)
         self.outputs = list(outputs)
         self.stats = rig.stats
         if opts.on_rig is not None:
@@ -309,7 +325,8 @@ class _Session:
                     with (self._console(rig, header) if opts.panel else contextlib.nullcontext(),
                           pinned_loop(loop.pin_cpu, self._rig_log),
                           realtime_priority(loop.realtime_priority, self._rig_log)):
-                        rig.run(frames=opts.frames, duration_s=opts.duration_s)
+                        rig.run(frames=opts.frames, duration_s=opts.duration_s,
+                                done_reason=opts.done_reason)
                     self.ease_s = 0.0 if rig.machine.stop_now else rig.relax_time_s
                 finally:
                     self.signals.disarm()  # from here on: torque off, then shut down
@@ -391,6 +408,7 @@ def _counts(items: dict[str, int]) -> str:
 
 def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
     vmc, rec = outputs.get("vmc"), outputs.get("recording")
+    glove_take = outputs.get("glove_take")
     if vmc:
         rate = f", {vmc['rate_hz']} Hz" if vmc.get("rate_hz") is not None else ""
         errors = f", {vmc['errors']} send errors" if vmc.get("errors") else ""
@@ -407,7 +425,12 @@ def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
                     f"{rec['bytes']} bytes{dropped}")
     else:
         rec_text = "recording off"
-    return [f"outputs           {vmc_text}", f"                  {rec_text}"]
+    lines = [f"outputs           {vmc_text}", f"                  {rec_text}"]
+    if glove_take:
+        stopped = f" ({glove_take['stopped_reason']})" if glove_take.get("stopped_reason") else ""
+        lines.append(f"                  glove take {glove_take['path']}: {glove_take['frames']}"
+                     f" frames, {glove_take['duration_s']:.1f} s{stopped}")
+    return lines
 
 
 CLAMP_RANGE_FRACTION = 0.05

@@ -329,3 +329,12 @@ def test_a_key_reader_on_a_pipe_leaves_it_alone() -> None:
         assert calls == ["q"] and reader.eof
     finally:
         os.close(r)
+
+
+def test_a_glove_take_shows_on_the_outputs_line_within_80_columns() -> None:
+    outputs = Outputs("127.0.0.1:39539", 60.0, 0, "/shows/take1.bvh", 3_400_000, 201.0,
+                      glove_take_path="/shows/glove1.csv", glove_take_frames=40200)
+    lines = screen(show_snapshot(outputs=outputs))
+    assert max(len(line) for line in lines) <= 80
+    out = next(line for line in lines if line.startswith("out"))
+    assert "rec /shows/take1.bvh" in out and out.rstrip().endswith("+glove 40k")
