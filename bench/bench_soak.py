@@ -186,14 +186,15 @@ class Watch:
 
     def _note_holds(self, t_s: float) -> None:
         """Each span of cycles in which the ``[silence]`` tiers held a servo's goal."""
-        assert self.holding is not None
+        if self.holding is None:
+            return
         since = self._held_since
         if not since and not self.holding.any():
             return
-        for i in np.flatnonzero(self.holding):
-            since.setdefault(int(i), t_s)
-        for i in [i for i in since if not self.holding[i]]:
-            self.held_spans.append((i, since.pop(i), t_s))
+        for k in np.flatnonzero(self.holding):
+            since.setdefault(int(k), t_s)
+        for j in [j for j in since if not self.holding[j]]:
+            self.held_spans.append((j, since.pop(j), t_s))
 
     def end_holds(self, t_s: float) -> None:
         for i, t0 in sorted(self._held_since.items()):

@@ -26,6 +26,9 @@ Rules modelled (ROBOTIS e-manual, X-series control table and protocol 2.0):
   (:mod:`sim.puppet`). Goal Current starts at Current Limit after power-on or a
   reboot: an assumption of this emulator (the e-manual gives no initial value), so
   a servo put in mode 5 without a Goal Current write still has its full torque.
+- Goal PWM (100) caps the motor's PWM in the position modes (e-manual, Goal PWM);
+  it starts at PWM Limit after power-on or a reboot (assumed, as Goal Current);
+  :meth:`EmulatedServo.effort_fraction` is the cap, which the physics applies.
 
 Without a physics model attached (see :mod:`sim.puppet`), :meth:`advance` moves
 the motor toward the goal at the Velocity Limit (or Profile Velocity) so the
@@ -251,6 +254,8 @@ class EmulatedServo:
         self._publish_trajectory()
         if self.info.has_current:
             self.set(Reg.GOAL_CURRENT, self.get(Reg.CURRENT_LIMIT))
+        # Goal PWM starts at PWM Limit (the same assumption as Goal Current: full effort)
+        self.set(Reg.GOAL_PWM, self.get(Reg.PWM_LIMIT))
 
     @property
     def id(self) -> int:
@@ -306,6 +311,12 @@ class EmulatedServo:
             return None
         units = min(abs(self.get(Reg.GOAL_CURRENT)), self.get(Reg.CURRENT_LIMIT))
         return units * self.info.current_unit_ma
+
+    def effort_fraction(self) -> float:
+        """The share of full effort the motor may use: min(PWM Limit, |Goal PWM|) over
+        100 % PWM (Goal PWM caps it in every mode but PWM control)."""
+        pwm = min(self.get(Reg.PWM_LIMIT), abs(self.get(Reg.GOAL_PWM)))
+        return pwm / PWM_FULL
 
     def error_byte(self, code: int = 0) -> int:
         """ERR byte of a status: ``code`` plus the Alert bit while a hardware error stands."""
@@ -570,6 +581,8 @@ class EmulatedServo:
             if not low <= value <= high:
                 return ErrorCode.DATA_LIMIT
         if pos == Reg.GOAL_CURRENT and abs(value) > self.get(Reg.CURRENT_LIMIT):
+            return ErrorCode.DATA_LIMIT
+        if pos == Reg.GOAL_PWM and abs(value) > self.get(Reg.PWM_LIMIT):
             return ErrorCode.DATA_LIMIT
         if pos == Reg.GOAL_VELOCITY and abs(value) > self.get(Reg.VELOCITY_LIMIT):
             return ErrorCode.DATA_LIMIT

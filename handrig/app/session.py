@@ -450,6 +450,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['tracking_max_deg']} deg (present vs goal, {summary['reads']} reads, "
         f"{summary['stale_reads']} with stale servos)",
         *_outputs_lines(summary.get("outputs") or {}),
+        *_heat_lines(summary.get("heat") or {}),
         f"safety            {summary['relax_events']} relax events, "
         f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
@@ -458,6 +459,16 @@ def format_summary(summary: dict[str, Any]) -> str:
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
     return "\n".join(lines)
+
+
+def _heat_lines(heat: dict[str, Any]) -> list[str]:
+    """The ``heat`` line: the hottest servo read and what the [heat] tiers did."""
+    if not heat:
+        return []
+    hottest = heat.get("hottest") or "no temperature read"
+    return [f"heat              hottest {hottest}; {heat.get('warnings', 0)} warnings, "
+            f"{heat.get('reliefs', 0)} effort caps, {heat.get('actions', 0)} actions "
+            "([heat] tiers)"]
 
 
 def failed(error: HandrigError, parts: RigParts | None = None) -> LiveResult:

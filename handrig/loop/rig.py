@@ -42,7 +42,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 from handrig.clock import Clock
-from handrig.config.rig import BusConfig, LoopConfig, RigConfig, SilenceConfig
+from handrig.config.rig import BusConfig, HeatConfig, LoopConfig, RigConfig, SilenceConfig
 from handrig.errors import DeviceError
 from handrig.loop.cycle import Cycle
 from handrig.loop.modes import Mode, ModeMachine
@@ -102,7 +102,7 @@ class Rig:
             resume_frames=loop.resume_frames, resume_time_s=loop.resume_time_s,
             outputs=outputs, log=log, profile=profile, loop_mode=loop.mode,
             floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz, catch_up=loop.catch_up,
-            read_parts=config.bus.read_parts, silence=config.silence)
+            read_parts=config.bus.read_parts, silence=config.silence, heat=config.heat)
 
     def __init__(
         self,
@@ -129,6 +129,7 @@ class Rig:
         catch_up: bool = _LOOP.catch_up,
         read_parts: int = _BUS.read_parts,
         silence: SilenceConfig | None = None,
+        heat: HeatConfig | None = None,
     ) -> None:
         self.glove = glove
         self.bus = bus
@@ -161,7 +162,7 @@ class Rig:
             controls_from_raw=controls_from_raw, orientation=orientation,
             period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
             resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
-            read_parts=read_parts, silence=silence,
+            read_parts=read_parts, silence=silence, heat=heat,
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
@@ -292,6 +293,11 @@ class Rig:
             stats.servo_silences, stats.servos_held = watch.silences, watch.held
             stats.servo_recoveries = watch.recoveries
             stats.servo_recovery_reads_max = watch.recovery_reads_max
+            heat = self.cycle.heat
+            stats.heat_warnings, stats.heat_reliefs = heat.warnings, heat.reliefs
+            stats.heat_actions = heat.actions
+            stats.max_temperature_c = tuple(float(t) for t in heat.max_c)
+            stats.hottest = heat.hottest()
             self._snapshot.finished = True
             self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats
