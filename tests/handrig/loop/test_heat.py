@@ -137,3 +137,29 @@ def test_goal_pwm_above_the_pwm_limit_is_refused_by_the_servo() -> None:
     assert bus.limit_effort(0, 1.0)
     assert peer.servo(1).get(SimReg.GOAL_PWM) == 500  # full effort is the PWM Limit
     assert bus.limit_effort(0, 0.5) and peer.servo(1).get(SimReg.GOAL_PWM) == 250
+
+
+def test_temperatures_are_read_about_once_a_second_at_the_shipped_read_rate() -> None:
+    """The shipped rig reads present state 100 times a second (200 Hz, [bus] read_every
+    2, in two parts); the driver's default sweep brings every servo's temperature
+    about once a second (1.07 s here), far quicker than a servo warms (minutes)."""
+    rig = small_rig()
+    bus, _, peer = make_bus(rig)  # the driver's default temperature_every
+    parts = rig.bus.read_parts
+    clock = bus.clock
+    seen_at: list[float] = []
+    start = clock.now()
+    temp = 40
+    at(peer, 2, temp)
+    k = 0
+    while clock.now() - start < 4.5:
+        state = bus.read_state(clock.now() + 0.008, (k % parts, parts))
+        k += 1
+        if state.temperatures_c[1] == temp:
+            seen_at.append(clock.now() - start)
+            temp += 1
+            at(peer, 2, temp)
+        clock.advance(0.01)  # type: ignore[attr-defined]
+    gaps = np.diff([0.0, *seen_at])
+    assert len(seen_at) >= 3, seen_at
+    assert gaps.max() <= 1.5, gaps
