@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import math
 import signal
 import sys
 import threading
@@ -34,6 +35,7 @@ import numpy as np
 from handrig.app import factory as app
 from handrig.app.factory import RigParts
 from handrig.clock import Clock, MonotonicClock
+from handrig.config.rig import TEMPERATURE_LIMIT_C
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
 from handrig.errors import DeviceError, HandrigError, SafetyStop
@@ -311,7 +313,12 @@ class _Session:
                 sys.stdin.fileno(), toggle_relax=rig.toggle_relax,
                 stop=lambda: rig.request_stop("q pressed"), estop=rig.estop,
                 on_error=lambda exc: self._rig_log(f"key failed: {exc}"))
-        snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None)
+        rig_cfg = self.parts.rig_config
+        snapshot = RigSnapshot(
+            rig, glove_source=self.opts.glove or "", keys=keys is not None,
+            temperature_limit_c={s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
+                                 for s in rig_cfg.servos},
+            heat_c=(rig_cfg.heat.warn_c, rig_cfg.heat.act_c))
         console = show_console()
         if not console.is_terminal:  # plain status lines there; the log stays where it was
             for line in header:
