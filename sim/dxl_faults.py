@@ -26,7 +26,8 @@ class FaultSpec:
     that send no status from ``mute_from_s`` to ``mute_until_s`` after the bus starts
     (they still hear and obey every instruction, as with a broken reply line or a
     Status Return Level of 0; a Fast Sync Read's reply stops short at them). ``delay_s``
-    is the extra latency of a delayed reply.
+    is the extra latency of a delayed reply. ``hot``: servo IDs that start at
+    ``hot_c`` (a servo warm from an earlier run; it cools or warms from there).
     """
 
     drop: float = 0.0
@@ -41,6 +42,8 @@ class FaultSpec:
     mute: frozenset[int] = field(default_factory=frozenset)
     mute_from_s: float = 0.0
     mute_until_s: float = float("inf")
+    hot: frozenset[int] = field(default_factory=frozenset)
+    hot_c: float = 60.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -52,6 +55,9 @@ class FaultSpec:
         if self.delay_s < 0 or self.overload_after_s < 0:
             raise ConfigError("times must be >= 0", key="delay_s/overload_after_s",
                               value=(self.delay_s, self.overload_after_s))
+        if not 0.0 <= self.hot_c <= 120.0:
+            raise ConfigError("start temperature out of range", key="hot", value=self.hot_c,
+                              allowed="hot=ID+ID[@C], 0..120 C")
         if not 0.0 <= self.mute_from_s < self.mute_until_s:
             raise ConfigError("mute window must start at >= 0 s and end after it starts",
                               key="mute", value=(self.mute_from_s, self.mute_until_s),
@@ -67,10 +73,11 @@ class FaultSpec:
         missing=7+9,overload=3@1.5,mute=7@120-240,seed=42"`` (any subset, comma separated).
 
         ``delay=P[:SECONDS]``; ``missing``, ``overload`` and ``mute`` take IDs joined by
-        ``+``; ``overload=IDS[@SECONDS]``; ``mute=IDS[@FROM[-UNTIL]]`` (seconds).
+        ``+``; ``overload=IDS[@SECONDS]``; ``mute=IDS[@FROM[-UNTIL]]`` (seconds);
+        ``hot=IDS[@C]``.
         """
         allowed = "drop, corrupt, wrong_id, truncate, delay=P[:S], missing=ID+ID, " \
-                  "overload=ID+ID[@S], mute=ID+ID[@FROM[-UNTIL]], seed=N"
+                  "overload=ID+ID[@S], mute=ID+ID[@FROM[-UNTIL]], hot=ID+ID[@C], seed=N"
         kw: dict[str, object] = {}
         for part in filter(None, (p.strip() for p in spec.split(","))):
             key, eq, value = part.partition("=")
@@ -100,6 +107,11 @@ class FaultSpec:
                         kw["mute_from_s"] = float(start.removesuffix("s"))
                     if dash:
                         kw["mute_until_s"] = float(until.removesuffix("s"))
+                elif key == "hot":
+                    ids, _, temp = value.partition("@")
+                    kw["hot"] = frozenset(int(v) for v in ids.split("+") if v)
+                    if temp:
+                        kw["hot_c"] = float(temp.removesuffix("C"))
                 elif key == "seed":
                     kw["seed"] = int(value)
                 else:

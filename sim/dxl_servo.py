@@ -444,6 +444,12 @@ class EmulatedServo:
         if self.mem[146] > self.mem[31] and not self.mem[70] & HardwareError.OVERHEATING:
             self.inject_hardware_error(HardwareError.OVERHEATING)
 
+    def warm_to(self, temp_c: float) -> None:
+        """Set the servo's internal temperature (a servo warm from earlier use); the heat
+        model goes on from there."""
+        self.temperature_c = float(temp_c)
+        self.mem[146] = max(0, min(255, round(temp_c)))
+
     def speed_limit_ticks_per_s(self) -> float:
         """Motor speed limit: Profile Velocity if set, else Velocity Limit."""
         profile = int.from_bytes(self.mem[112:116], "little")

@@ -28,9 +28,7 @@ def heat(action: str = "relax") -> HeatConfig:
 
 def at(peer: object, servo_id: int, temp_c: int) -> None:
     """The emulated servo's internal temperature (what Present Temperature reads)."""
-    servo = peer.servo(servo_id)  # type: ignore[attr-defined]
-    servo.temperature_c = float(temp_c)
-    servo.mem[146] = temp_c
+    peer.servo(servo_id).warm_to(temp_c)  # type: ignore[attr-defined]
 
 
 def read(bus: DynamixelBus, watch: HeatWatch) -> list[str]:
