@@ -8,11 +8,10 @@ import math
 import pytest
 
 from firmware_protocol.dynamixel import ERROR_ALERT, MODELS, ErrorCode, HardwareError, Reg
-from sim.dxl_servo import (
+from sim.dxl_servo import REBOOT_S, EmulatedServo
+from sim.dxl_thermal import (
     AMBIENT_TEMPERATURE_C,
-    REBOOT_S,
     THERMAL,
-    EmulatedServo,
     idle_temperature_c,
     steady_temperature_c,
 )

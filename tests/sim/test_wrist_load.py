@@ -13,7 +13,7 @@ import pytest
 from firmware_protocol.dynamixel import MODELS, ErrorCode, Reg
 from handrig.config.rig import RigConfig, ServoCalibration, load_rig_config
 from sim.dxl_bus import servos_from_rig
-from sim.dxl_servo import steady_temperature_c
+from sim.dxl_thermal import steady_temperature_c
 from sim.hand_model import REFERENCE_HAND_LENGTH_M, hand_model_xml
 from sim.puppet import Puppet
 
