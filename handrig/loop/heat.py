@@ -26,6 +26,7 @@ from handrig.devices.servo.bus import ServoBus, ServoState
 from handrig.errors import ServoFault
 
 EVENTS_KEPT = 64
+CHECK_EVERY_S = 0.25  # temperatures come about once a second: look four times as often
 COOL, WARM, HOT, ACTED = 0, 1, 2, 3  # tiers of a servo's temperature
 
 
@@ -52,17 +53,22 @@ class HeatWatch:
         self.actions = 0
         self._reboots = np.zeros(n, np.int64)
         self._seen = np.full(n, np.nan)  # the temperatures at the last update
+        self._next_check_s = -np.inf
         thresholds = (config.warn_c, config.act_c, config.action_c)
         self._up = np.array(thresholds)
         self._down = self._up - HEAT_HYSTERESIS_C
 
     def update(self, state: ServoState) -> None:
-        """After a read: raise and lower tiers and act on them. ServoFault when a servo
+        """After a read: raise and lower tiers and act on them (looking at the
+        temperatures every :data:`CHECK_EVERY_S` of read time). ServoFault when a servo
         reaches ``action_c`` and the action is ``"stop"``."""
-        temps = np.asarray(state.temperatures_c, dtype=np.float64)
         self._recap_rebooted(state)
+        if state.timestamp_s < self._next_check_s:
+            return  # the cycle's path allocates nothing between checks
+        self._next_check_s = state.timestamp_s + CHECK_EVERY_S
+        temps = np.asarray(state.temperatures_c, dtype=np.float64)
         if np.array_equal(temps, self._seen, equal_nan=True):
-            return  # temperatures are read about once a second: mostly nothing new
+            return
         self._seen[:] = temps
         np.fmax(self.max_c, temps, out=self.max_c)
         known = np.isfinite(temps)

@@ -15,7 +15,7 @@ from firmware_protocol.dynamixel import Reg as SimReg
 from handrig.config.rig import HeatConfig
 from handrig.devices.servo import DynamixelBus
 from handrig.errors import ServoFault
-from handrig.loop.heat import HeatWatch
+from handrig.loop.heat import CHECK_EVERY_S, HeatWatch
 from tests.handrig.devices.servo.test_servo_parts import make_bus, small_rig
 
 FULL_PWM = 885  # PWM Limit's initial value on every X-series model
@@ -32,6 +32,7 @@ def at(peer: object, servo_id: int, temp_c: int) -> None:
 
 
 def read(bus: DynamixelBus, watch: HeatWatch) -> list[str]:
+    bus.clock.advance(CHECK_EVERY_S)  # type: ignore[attr-defined]
     state = bus.read_state()
     assert np.isfinite(state.temperatures_c).all()  # temperature_every=1: read each time
     watch.update(state)
@@ -115,6 +116,7 @@ def test_a_capped_servo_that_is_rebooted_is_capped_again() -> None:
         assert peer.servo(4).get(SimReg.GOAL_PWM) == round(FULL_PWM * 0.4)
         peer.servo(4).inject_hardware_error(HardwareError.OVERLOAD)
         for _ in range(20):  # the driver sees the Alert bit, reboots the servo
+            bus.clock.advance(0.01)  # type: ignore[attr-defined]
             bus.write_goals_deg(np.zeros(6))
             state = bus.read_state()
             watch.update(state)
