@@ -333,7 +333,12 @@ class Cycle:
         if trigger.delayed(tick, end):
             self.stats.writes_delayed += 1
         self.last_state = state
-        self.heat.update(state)  # ServoFault when a servo is too hot and the action is "stop"
+        heat = self.heat
+        heat.update(state)  # ServoFault when a servo is too hot and the action is "stop"
+        while heat.uncapped:  # full effort back: from where its joint gave way
+            i = heat.uncapped.pop()
+            if np.isfinite(state.positions_deg[i]):
+                self.silence.ease_from(i, float(state.positions_deg[i]))
         self._track(state, self.sent)
         self._take_events()
 

@@ -12,7 +12,9 @@ go on), ``"relax"`` (:attr:`HeatWatch.relax_reason` asks the mode machine to eas
 every servo to the relaxed pose until the servo cools below ``action_c``) or
 ``"stop"`` (ServoFault: the run ends, torque off). Each tier ends
 :data:`~handrig.config.rig.HEAT_HYSTERESIS_C` below its threshold, and says so.
-A servo the bus rebooted has lost its cap (Goal PWM is RAM): it gets it again.
+A servo the bus rebooted has lost its cap (Goal PWM is RAM): it gets it again. A
+servo given its full effort back is listed in :attr:`HeatWatch.uncapped` for the loop
+to ease its joint back to its goals from where it gave way, never in one jump.
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ class HeatWatch:
         self.reliefs = 0
         self.actions = 0
         self._reboots = np.zeros(n, np.int64)
+        self.uncapped: list[int] = []  # servos given full effort back, for the loop to ease
         self._seen = np.full(n, np.nan)  # the temperatures at the last update
         self._next_check_s = -np.inf
         thresholds = (config.warn_c, config.act_c, config.action_c)
@@ -105,7 +108,9 @@ class HeatWatch:
                 self.relax_reason = None
         if old >= HOT > new and self.capped[i] and self.bus.limit_effort(i, 1.0):
             self.capped[i] = False
-            self._say(f"{name} cooled to {temp_c:.0f} C: its full effort is back")
+            self.uncapped.append(i)
+            self._say(f"{name} cooled to {temp_c:.0f} C: its full effort is back, easing "
+                      "its joint back to its goals from where it is")
         if old >= WARM > new:
             self._say(f"{name} cooled to {temp_c:.0f} C, below [heat] warn_c {cfg.warn_c:g} C")
 

@@ -12,10 +12,11 @@ import pytest
 
 from firmware_protocol.dynamixel import HardwareError
 from firmware_protocol.dynamixel import Reg as SimReg
-from handrig.config.rig import HeatConfig
+from handrig.config.rig import HeatConfig, SilenceConfig
 from handrig.devices.servo import DynamixelBus
 from handrig.errors import ServoFault
 from handrig.loop.heat import CHECK_EVERY_S, HeatWatch
+from handrig.loop.silence import SilenceWatch
 from tests.handrig.devices.servo.test_servo_parts import make_bus, small_rig
 
 FULL_PWM = 885  # PWM Limit's initial value on every X-series model
@@ -74,7 +75,9 @@ def test_a_hot_servo_is_warned_capped_relaxes_the_rig_and_each_tier_ends_as_it_c
 
     at(peer, 3, 51)
     events = read(bus, watch)
-    assert events == ["servo 3 (riThumbCMCz) cooled to 51 C: its full effort is back"]
+    assert events == ["servo 3 (riThumbCMCz) cooled to 51 C: its full effort is back, easing "
+                      "its joint back to its goals from where it is"]
+    assert watch.uncapped == [2]
     assert peer.servo(3).get(SimReg.GOAL_PWM) == FULL_PWM
     at(peer, 3, 40)
     assert read(bus, watch) == [
@@ -163,3 +166,16 @@ def test_temperatures_are_read_about_once_a_second_at_the_shipped_read_rate() ->
     gaps = np.diff([0.0, *seen_at])
     assert len(seen_at) >= 3, seen_at
     assert gaps.max() <= 1.5, gaps
+
+
+def test_a_joint_given_its_effort_back_eases_to_its_goal_from_where_it_gave_way() -> None:
+    bus, _, _ = make_bus(small_rig())
+    silence = SilenceWatch(bus, SilenceConfig(), slew_deg_s=100.0)
+    goals, sent = np.full(6, 10.0), np.full(6, 10.0)
+    silence.ease_from(2, -30.0)  # the capped joint had sagged to -30 deg
+    out = silence.steer(goals, sent, 0.01)
+    assert out[2] == pytest.approx(-29.0)  # 100 deg/s x 10 ms from where it is
+    assert np.all(np.delete(out, 2) == 10.0)
+    for _ in range(60):
+        sent = silence.steer(goals, sent, 0.01).copy()
+    assert sent[2] == 10.0 and not silence.steering
