@@ -75,8 +75,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument("--record", default="", metavar="FILE.csv",
                    help="where the recording goes (default: a temporary file, removed)")
     p.add_argument("--mute", default="", metavar="ID@FROM-UNTIL",
-                   help="one servo sends no reply from FROM to UNTIL seconds into the run "
-                   "(it still hears and obeys: a broken reply line), e.g. 7@120-240")
+                   help="one servo sends no reply from FROM to UNTIL seconds after the "
+                   "emulated bus starts (a second or so before the run; it still hears "
+                   "and obeys: a broken reply line), e.g. 7@120-240")
     p.add_argument("--glove-child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args([a for a in argv if a not in ("soak", "bench_soak")])
     if args.mute:
