@@ -414,6 +414,17 @@ def report(r: dict[str, Any]) -> None:
         longest = max(runs, key=lambda r: r[1] - r[0])
         print(f"  held            servo {names[i]}: {len(runs)} times, {total:.2f} s in all, "
               f"longest {longest[1] - longest[0]:.2f} s from {longest[0]:.1f} s (run time)")
+    starts = sorted({round(t0, 1) for _, t0, _ in spans})
+    if starts:
+        print(f"  holds began at  {', '.join(f'{t:g}' for t in starts[:20])} s (run time)"
+              + (f" and {len(starts) - 20} more" if len(starts) > 20 else ""))
+    if r["mute"]:
+        muted_id, window = r["mute"].split("@")
+        lo, hi = (float(x) - r.get("run_after_bus_s", 0.0) for x in window.split("-"))
+        others = sorted({names[i] for i, t0, t1 in spans
+                         if names[i].split()[0] != muted_id and t0 < hi and t1 > lo})
+        print(f"  while muted     {lo:.1f}-{hi:.1f} s (run time): other servos held: "
+              + (", ".join(others) if others else "none"))
     temps = watch.max_temperature_c
     if temps.size == len(names) and np.isfinite(temps).any():
         hottest = int(np.nanargmax(temps))
