@@ -528,7 +528,7 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
         "stale_reads": s.stale_reads,
         "relax_events": s.relax_events,
         "silence": {"silences": s.servo_silences, "held": s.servos_held,
-                    "recoveries": s.servo_recoveries},
+                    "recoveries": s.servo_recoveries, "admitted": s.servos_admitted},
         "heat": {"warnings": s.heat_warnings, "reliefs": s.heat_reliefs,
                  "actions": s.heat_actions, "hottest": s.hottest,
                  "max_c": [num(t, 1) for t in s.max_temperature_c]},

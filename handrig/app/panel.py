@@ -76,6 +76,8 @@ class BusHealth:
     errors: int = 0  # CRC, malformed and refused replies
     stale_servos: int = 0  # servos whose newest reading is stale
     stale_worst_age_s: float = 0.0  # age of the oldest of those readings
+    left_out: int = 0  # servos left out at start-up, not (yet) admitted
+    admitted: int = 0  # of those, admitted when they answered
 
 
 @dataclass(frozen=True)
@@ -228,6 +230,8 @@ def bus_line(b: BusHealth) -> Text:
         f"  reads {_num(b.read_rate_hz)}/s  timeouts ",
         (str(b.timeouts), "yellow" if b.timeouts else ""), "  errors ",
         (str(b.errors), "bold red" if b.errors else ""), "  stale ", stale,
+        *([("  out ", ""), (str(b.left_out), "bold yellow")] if b.left_out else []),
+        *([("  admitted ", ""), (str(b.admitted), "green")] if b.admitted else []),
     )
 
 
@@ -327,7 +331,9 @@ def plain_line(s: PanelSnapshot) -> str:
         f"latency p50 {_num(s.latency_p50_us)} p99 {_num(s.latency_p99_us)} us",
         f"bus {_num(b.read_rate_hz)} reads/s timeouts {b.timeouts} errors {b.errors} stale "
         + (f"{b.stale_servos} (worst {_age(b.stale_worst_age_s)})" if b.stale_servos
-           else "none"),
+           else "none")
+        + (f" left out {b.left_out}" if b.left_out else "")
+        + (f" admitted {b.admitted}" if b.admitted else ""),
         f"servos max {_num(hot)} C" + (f" (past [heat] warn_c: {', '.join(warm)})"
                                        if warm else "") + f", {faults} with errors",
         f"vmc {o.vmc_target} {_num(o.vmc_rate_hz)} Hz" if o.vmc_target else "vmc off",

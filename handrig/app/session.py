@@ -85,20 +85,46 @@ class LiveResult:
     snapshot_times_s: list[float] = field(default_factory=list)  # of each snapshot
 
 
+READBACK_BUDGET_S = 1.5  # reading Torque Enable back at exit: a silent servo costs 0.4 s
+
+
 def torque_is_off(bus: DynamixelBus) -> bool | None:
     """Read Torque Enable back from every servo: True if all are off, None if unreadable."""
-    left_out = set(bus.left_out)  # never given torque: asked, but silence is no failure
-    try:
-        for i in range(bus.n_servos):
-            if i in left_out:
-                with contextlib.suppress(HandrigError):
-                    if bus.read_register(i, Reg.TORQUE_ENABLE) != 0:
-                        return False
-            elif bus.read_register(i, Reg.TORQUE_ENABLE) != 0:
-                return False
-        return True
-    except HandrigError:
-        return None
+    return torque_readback(bus)[0]
+
+
+def torque_readback(bus: DynamixelBus) -> tuple[bool | None, list[str]]:
+    """Torque Enable read back from every servo given torque: (True if every one reads
+    0, False if one reads 1, None if one could not be read; the servos not confirmed
+    off, each named with why). A port that stopped draining is not asked at all, and
+    the reads stop at ``READBACK_BUDGET_S`` (the servos not asked are named). A servo
+    left out at start-up is asked too, its silence no failure."""
+    left_out = set(bus.left_out)
+    given = [i for i in range(bus.n_servos) if i not in left_out]
+    if bus.port_stalled:
+        return None, [f"{bus.describe(i)}: not read back (servo port {bus.port} stopped "
+                      "draining)" for i in given]
+    unconfirmed: list[str] = []
+    on = unread = False
+    end = bus.clock.now() + READBACK_BUDGET_S
+    for i in range(bus.n_servos):
+        if bus.clock.now() >= end:
+            if i not in left_out:
+                unread = True
+                unconfirmed.append(f"{bus.describe(i)}: not read back (the "
+                                   f"{READBACK_BUDGET_S:g} s went on the servos before)")
+            continue
+        try:
+            value = bus.read_register(i, Reg.TORQUE_ENABLE)
+        except HandrigError as exc:
+            if i not in left_out:
+                unread = True
+                unconfirmed.append(f"{bus.describe(i)}: not read back ({exc})")
+            continue
+        if value != 0:
+            on = True
+            unconfirmed.append(f"{bus.describe(i)}: torque still on")
+    return (False if on else None if unread else True), unconfirmed
 
 
 class ExitSignals:
@@ -182,12 +208,15 @@ class _Session:
         self.bus_stats: Any = None
         self.glove_stats: Any = None
         self.torque_off: bool | None = None
+        self.torque_unconfirmed: list[str] = []  # servos whose torque-off was not read back
         self.stages: dict[str, dict[str, float]] | None = None
         self.snapshots: list[np.ndarray] = []
         self.snapshot_times_s: list[float] = []
         self.outputs: list[Any] = []  # the VMC sender and recorder (closed by the end)
         self.ease_s = 0.0  # the easing to relaxed that ended the run
         self.left_out: list[str] = []  # servos that did not answer at start-up, left out
+        self._left_at_start: tuple[int, ...] = ()
+        self.admitted: list[str] = []  # of those, the ones admitted when they answered
         self.panel: Any = None  # the LivePanel while it is up
         self.started = False
 
@@ -223,6 +252,10 @@ class _Session:
             summary["signals"] = self.signals.received
         if self.left_out:
             summary["servos_left_out"] = self.left_out
+        if self.admitted:
+            summary["servos_admitted"] = self.admitted
+        if self.torque_unconfirmed:
+            summary["torque_off_unconfirmed"] = self.torque_unconfirmed
         if error is not None:
             summary["error"] = str(error)
         return LiveResult(summary, self.snapshots,
@@ -240,14 +273,15 @@ class _Session:
         stack.callback(self._glove_figures, glove)
         bus.connect()
         stack.callback(self._bus_figures, bus)  # after torque-off, before the bus closes
-        left_out = bus.left_out
+        left_out = self._left_at_start = bus.left_out
         self.left_out = [bus.describe(i) for i in left_out]
         header = [f"servo bus {bus.port}: {len(parts.rig_config.servos) - len(left_out)} "
                   f"servos commissioned ({len(bus.commissioning)} settings checked or "
                   "changed)"]
         if left_out and not opts.verbose:  # said once (verbose: the commissioning note)
             log(f"{', '.join(self.left_out)} did not answer at start-up: the run goes on "
-                "without it ([silence] action continue); it gets no goal and no torque")
+                "without it ([silence] action continue); it gets no goal and no torque "
+                "until it answers and is commissioned")
         if opts.verbose:
             header[:0] = bus.commissioning
         if not opts.panel:
@@ -338,7 +372,9 @@ class _Session:
                 self.panel = None
 
     def _bus_figures(self, bus: DynamixelBus) -> None:
-        self.torque_off = torque_is_off(bus)
+        self.torque_off, self.torque_unconfirmed = torque_readback(bus)
+        self.admitted = [bus.describe(i) for i in self._left_at_start
+                         if i not in bus.left_out]
         self.bus_stats = bus.stats
 
     def _glove_figures(self, glove: Any) -> None:
@@ -431,7 +467,11 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"                  of which compute p50 {comp.get('p50')} us, p99 {comp.get('p99')} us "
         f"(cycle start -> Sync Write; loop {summary.get('loop_mode', 'fixed')})",
         *([f"servos left out   {', '.join(summary['servos_left_out'])} (did not answer at "
-            "start-up: no goal, no torque)"] if summary.get("servos_left_out") else []),
+            "start-up: no goal, no torque until commissioned)"]
+          if summary.get("servos_left_out") else []),
+        *([f"  admitted        {', '.join(summary['servos_admitted'])} (answered later: "
+            "commissioned, eased in from where it was)"]
+          if summary.get("servos_admitted") else []),
         f"frame losses      {summary.get('frames_skipped', 0)} skipped by the loop, "
         f"{summary.get('frames_in_host_stalls', 0)} left waiting by host stalls (the host "
         "read nothing for 3 frame periods or more: not the glove), "
@@ -462,6 +502,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
         f"torque off        {summary['torque_off']}",
+        *([f"  not confirmed   {'; '.join(summary['torque_off_unconfirmed'])}"]
+          if summary.get("torque_off_unconfirmed") else []),
     ]
     if "error" in summary:
         lines.append(f"error             {summary['error']}")

@@ -316,7 +316,8 @@ class Cycle:
         state = (self.bus.read_state(deadline, (self._part, parts)) if parts > 1
                  else self.bus.read_state(deadline))
         end = clock.now()
-        if silence.active or not state.all_fresh:
+        if (silence.active or silence.waiting or not state.all_fresh
+                or silence.rebooted(state)):
             silence.update(state, end)  # DeviceTimeoutError when the action is "stop"
         if not state.sent:
             # the bus found no room for it after all (a line to let go quiet, replies

@@ -199,6 +199,7 @@ class RunStats:
     hottest: str = ""  # "servo 19 (riWristFlexion) 41 C": the run's hottest reading
     servo_recoveries: int = 0  # silent servos that answered again
     servo_recovery_reads_max: int = 0  # the longest silence that ended, in reads
+    servos_admitted: int = 0  # servos left out at connect, admitted when they answered
     estop: bool = False
     stop_reason: str = ""
     events: Ring[str] = field(default_factory=lambda: Ring(KEPT_EVENTS))

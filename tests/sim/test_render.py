@@ -90,3 +90,65 @@ def test_one_tile_per_frame_with_the_thumb_in_colour(tmp_path: Path) -> None:
             assert tile[8:20, 10:60].mean() > 0.8  # the label's white box
         else:
             assert np.all(tile > 0.99)  # the empty sixth place is blank
+
+
+@pytest.mark.parametrize("robot", ["leap_hand", "orca_hand"])
+def test_a_robot_is_drawn_from_its_meshes_not_its_collision_geoms(robot: str) -> None:
+    """The scene a render draws (built without GL) holds every visual mesh of the robot
+    and none of its collision geoms."""
+    import mujoco
+
+    from sim.render import scene_option
+
+    path = Path(__file__).resolve().parents[2] / "data" / "robots" / robot / "right_hand.xml"
+    model = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    scene = mujoco.MjvScene(model, maxgeom=2 * model.ngeom)
+    mujoco.mjv_updateScene(model, data, scene_option(mujoco), None, mujoco.MjvCamera(),
+                           mujoco.mjtCatBit.mjCAT_ALL, scene)
+    drawn = {int(scene.geoms[i].objid) for i in range(scene.ngeom)
+             if scene.geoms[i].objtype == mujoco.mjtObj.mjOBJ_GEOM}
+    meshes = {g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH}
+    assert len(meshes) >= 20 and drawn == meshes
+
+
+DRAW_ROBOT = """
+import json, sys
+import numpy as np
+from handrig.app.robots import load_rig
+from sim.render import RenderUnavailable, render_strip
+rig = load_rig(sys.argv[2])
+names = [s.joint for s in rig.servos]
+frames = [np.array([s.min_deg + k * (s.max_deg - s.min_deg) for s in rig.servos])
+          for k in (0.2, 0.5)]
+try:
+    path = render_strip(frames, names, sys.argv[1], model=rig.robot.model)
+except RenderUnavailable as exc:
+    print(json.dumps({"unavailable": str(exc)}))
+else:
+    print(json.dumps({"path": str(path)}))
+"""
+
+
+@pytest.mark.slow
+def test_the_leap_strip_shows_the_robot_from_its_mesh_files(tmp_path: Path) -> None:
+    """The preset's model loaded as the render loads it (its mesh directory made
+    absolute): dark shells, white pads, the thumb in its colour and labelled."""
+    from matplotlib.image import imread
+
+    from sim.render import ROBOT_RGBA, TIP_RGBA
+
+    out = tmp_path / "leap.png"
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    res = subprocess.run([sys.executable, "-c", DRAW_ROBOT, str(out), "leap"],
+                         capture_output=True, text=True, timeout=120, env=env)
+    assert res.returncode == 0, res.stderr
+    said = json.loads(res.stdout.strip().splitlines()[-1])
+    if "unavailable" in said:
+        pytest.skip(said["unavailable"])
+    img = imread(out)[..., :3]
+    assert img.shape == (240, 2 * 320, 3)
+    for rgba in (THUMB_RGBA, ROBOT_RGBA, TIP_RGBA):  # lit or shaded: within 0.2
+        near = np.abs(img - np.array(rgba[:3])).max(axis=2) < 0.2
+        assert near.mean() > 0.002, rgba

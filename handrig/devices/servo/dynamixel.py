@@ -33,6 +33,7 @@ import numpy as np
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import RigConfig
 from handrig.devices.servo import codec
+from handrig.devices.servo.admission import Admission
 from handrig.devices.servo.bus import BusStats, FaultPolicy, ServoBus, ServoState
 from handrig.devices.servo.commissioning import Commissioner
 from handrig.devices.servo.fast_read import FastSyncRead
@@ -64,7 +65,7 @@ REPLY_POLL_LEAD_S = 50e-6  # default spin_s
 
 # the parts that count what they do, each in a ledger of its own
 _PARTS_COUNTING = ("readings", "faults", "plan", "link", "writer", "sweep", "fast", "sync",
-                   "reader")
+                   "reader", "admission")
 _PER_SERVO = ("readings", "faults")
 
 
@@ -158,6 +159,9 @@ class DynamixelBus(ServoBus):
             self.sweep, self.faults, self.policy, own["reader"], clock, temperature_every)
         self.commissioner = Commissioner(roster, self.link, plan, self.fast, self.faults, clock,
                                          self.commissioning, self._read_every_servo)
+        self.admission = Admission(roster, self.link, self.writer, self.commissioner,
+                                   self.faults, own["admission"])
+        self.faults.on_restart = self.admission.restore
         self.torque_control = TorqueControl(
             roster, self.link, self.writer, self.faults, clock, self.commissioning,
             self._read_every_servo, self.read_state, self.write_goals_deg)
@@ -243,9 +247,23 @@ class DynamixelBus(ServoBus):
 
     @property
     def left_out(self) -> tuple[int, ...]:
-        """Rig indices of the servos that did not answer at connect and were left out
-        for the run (``missing_ok``): never commissioned, sent a goal or given torque."""
+        """Rig indices of the servos that did not answer at connect and are left out
+        (``missing_ok``) until admitted (:meth:`admit`): not commissioned, sent a goal
+        or given torque before."""
         return tuple(np.flatnonzero(self.roster.absent).tolist())
+
+    def admit(self, index: int) -> tuple[float | None, str]:
+        """Bring servo ``index``, left out at connect and answering now, into the run
+        (:mod:`~handrig.devices.servo.admission`): (its goal, or None; what was done).
+        A DeviceError on the way leaves it out, said in the line."""
+        with self._lock:
+            try:
+                return self.admission.admit(index)
+            except DeviceError as exc:
+                if self.transport.wedged or not self.transport.is_open:
+                    raise  # the port failed: not the servo's affair
+                return None, (f"{self.describe(index)} answered but could not be "
+                              f"commissioned: {exc}; still left out")
 
     def read_wire_s(self, n: int) -> float:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
@@ -260,6 +278,12 @@ class DynamixelBus(ServoBus):
         quiet after a failed reply (0 almost always): a loop fitting reads into gaps
         counts it, or the bus declines the read."""
         return self.link.quiet_wait_s()
+
+    @property
+    def port_stalled(self) -> bool:
+        """Whether the port stopped draining (a wedged adapter, a stopped emulator): then
+        nothing can be read back through it; set when a write raised it."""
+        return self.transport.wedged
 
     @property
     def last_read_whole(self) -> bool:
