@@ -91,6 +91,8 @@ class ServoLine:
     stale: bool = False
     temperature_c: float = NAN
     temperature_limit_c: float = NAN  # the servo's Temperature Limit, if known
+    warn_c: float = NAN  # [heat] warn_c: yellow from here
+    act_c: float = NAN  # [heat] act_c: red from here (its effort is capped)
     current_ma: float = NAN  # Present Current (or load, as mA equivalent)
     hardware_error: int = 0  # Hardware Error Status bits, 0 = none
 
@@ -262,9 +264,12 @@ def _servo_cell(sv: ServoLine | None) -> Text:
     if sv is None:
         return Text(" " * 37)
     hot = ""
-    if math.isfinite(sv.temperature_c) and math.isfinite(sv.temperature_limit_c):
-        hot = ("bold red" if sv.temperature_c >= sv.temperature_limit_c else
-               "yellow" if sv.temperature_c >= sv.temperature_limit_c - 10 else "")
+    t = sv.temperature_c
+    if math.isfinite(t):
+        red = min(sv.act_c, sv.temperature_limit_c) if math.isfinite(sv.act_c) \
+            else sv.temperature_limit_c
+        yellow = sv.warn_c if math.isfinite(sv.warn_c) else sv.temperature_limit_c - 10
+        hot = "bold red" if t >= red else "yellow" if t >= yellow else ""
     err = error_letters(sv.hardware_error)
     current = abs(sv.current_ma) if math.isfinite(sv.current_ma) else NAN
     return Text.assemble(
@@ -322,6 +327,8 @@ def plain_line(s: PanelSnapshot) -> str:
     hot = max((sv.temperature_c for sv in s.servos if math.isfinite(sv.temperature_c)),
               default=NAN)
     faults = sum(1 for sv in s.servos if sv.hardware_error)
+    warm = [str(sv.id) for sv in s.servos if math.isfinite(sv.temperature_c)
+            and math.isfinite(sv.warn_c) and sv.temperature_c >= sv.warn_c]
     parts = [
         f"{_clock(s.elapsed_s)} {s.mode}" + (f" ({s.reason})" if s.reason else ""),
         f"glove {_num(g.rate_hz, '.0f')} Hz err {g.errors} last {_age(g.last_frame_age_s)}"
@@ -332,7 +339,8 @@ def plain_line(s: PanelSnapshot) -> str:
            else "none")
         + (f" left out {b.left_out}" if b.left_out else "")
         + (f" admitted {b.admitted}" if b.admitted else ""),
-        f"servos max {_num(hot)} C, {faults} with errors",
+        f"servos max {_num(hot)} C" + (f" (past [heat] warn_c: {', '.join(warm)})"
+                                       if warm else "") + f", {faults} with errors",
         f"vmc {o.vmc_target} {_num(o.vmc_rate_hz)} Hz" if o.vmc_target else "vmc off",
         (f"rec {o.record_path} {_size(o.record_bytes)} {_clock(o.record_duration_s)}"
          + (f" {o.record_stopped}" if o.record_stopped else "") if o.record_path

@@ -53,18 +53,21 @@ class RigSnapshot:
 
     Built from the newest telemetry snapshot; ages and the elapsed time are carried
     forward to the clock's now. Rates are taken over the last second between
-    snapshots. ``glove_source`` and ``temperature_limit_c`` (servo id -> limit) are
-    shown when given; ``keys``: whether a :class:`~handrig.app.keys.KeyReader` is
-    listening (the panel says so either way).
+    snapshots. ``glove_source``, ``temperature_limit_c`` (servo id -> limit) and
+    ``heat_c`` (``[heat]`` warn_c, act_c: the temperature colours) are used when
+    given; ``keys``: whether a :class:`~handrig.app.keys.KeyReader` is listening (the
+    panel says so either way).
     """
 
     def __init__(self, rig: Watched, *, glove_source: str = "",
                  temperature_limit_c: Mapping[int, float] | None = None,
+                 heat_c: tuple[float, float] = (NAN, NAN),
                  keys: bool = False) -> None:
         self.rig = rig
         self.glove_source = glove_source
         self.keys = keys
         self.temperature_limit_c = dict(temperature_limit_c or {})
+        self.warn_c, self.act_c = heat_c
         self._rates = {k: _Rate() for k in ("glove", "reads", "writes", "vmc")}
 
     def __call__(self) -> PanelSnapshot:
@@ -111,6 +114,7 @@ class RigSnapshot:
                       bool(s.stale[i]) if i < len(s.stale) else False,
                       at(s.temperatures_c, i),
                       self.temperature_limit_c.get(s.servo_ids[i], NAN),
+                      self.warn_c, self.act_c,
                       at(s.currents_ma, i),
                       s.hardware_errors[i] if i < len(s.hardware_errors) else 0)
             for i, joint in enumerate(s.servo_joints[:n]))

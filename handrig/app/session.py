@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import math
 import signal
 import sys
 import threading
@@ -35,6 +36,7 @@ from handrig.app import factory as app
 from handrig.app import takes
 from handrig.app.factory import RigParts
 from handrig.clock import Clock, MonotonicClock
+from handrig.config.rig import TEMPERATURE_LIMIT_C
 from handrig.devices.glove import GloveSource
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
@@ -362,7 +364,12 @@ class _Session:
                 sys.stdin.fileno(), toggle_relax=rig.toggle_relax,
                 stop=lambda: rig.request_stop("q pressed"), estop=rig.estop,
                 on_error=lambda exc: self._rig_log(f"key failed: {exc}"))
-        snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None)
+        rig_cfg = self.parts.rig_config
+        snapshot = RigSnapshot(
+            rig, glove_source=self.opts.glove or "", keys=keys is not None,
+            temperature_limit_c={s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
+                                 for s in rig_cfg.servos},
+            heat_c=(rig_cfg.heat.warn_c, rig_cfg.heat.act_c))
         console = show_console()
         if not console.is_terminal:  # plain status lines there; the log stays where it was
             for line in header:
@@ -513,6 +520,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['tracking_max_deg']} deg (present vs goal, {summary['reads']} reads, "
         f"{summary['stale_reads']} with stale servos)",
         *_outputs_lines(summary.get("outputs") or {}),
+        *_heat_lines(summary.get("heat") or {}),
         f"safety            {summary['relax_events']} relax events, "
         f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
@@ -523,6 +531,16 @@ def format_summary(summary: dict[str, Any]) -> str:
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
     return "\n".join(lines)
+
+
+def _heat_lines(heat: dict[str, Any]) -> list[str]:
+    """The ``heat`` line: the hottest servo read and what the [heat] tiers did."""
+    if not heat:
+        return []
+    hottest = heat.get("hottest") or "no temperature read"
+    return [f"heat              hottest {hottest}; {heat.get('warnings', 0)} warnings, "
+            f"{heat.get('reliefs', 0)} effort caps, {heat.get('actions', 0)} actions "
+            "([heat] tiers)"]
 
 
 def failed(error: HandrigError, parts: RigParts | None = None) -> LiveResult:

@@ -42,7 +42,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 from handrig.clock import Clock
-from handrig.config.rig import BusConfig, LoopConfig, RigConfig, SilenceConfig
+from handrig.config.rig import BusConfig, HeatConfig, LoopConfig, RigConfig, SilenceConfig
 from handrig.errors import DeviceError
 from handrig.loop.cycle import Cycle
 from handrig.loop.modes import Mode, ModeMachine
@@ -104,7 +104,8 @@ class Rig:
             resume_frames=loop.resume_frames, resume_time_s=loop.resume_time_s,
             outputs=outputs, log=log, profile=profile, loop_mode=loop.mode,
             floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz, catch_up=loop.catch_up,
-            read_parts=config.bus.read_parts, silence=config.silence, ease_in=ease_in)
+            read_parts=config.bus.read_parts, silence=config.silence, heat=config.heat,
+            ease_in=ease_in)
 
     def __init__(
         self,
@@ -131,6 +132,7 @@ class Rig:
         catch_up: bool = _LOOP.catch_up,
         read_parts: int = _BUS.read_parts,
         silence: SilenceConfig | None = None,
+        heat: HeatConfig | None = None,
         ease_in: bool = False,
     ) -> None:
         self.glove = glove
@@ -164,7 +166,7 @@ class Rig:
             controls_from_raw=controls_from_raw, orientation=orientation,
             period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
             resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
-            read_parts=read_parts, silence=silence,
+            read_parts=read_parts, silence=silence, heat=heat,
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
@@ -298,6 +300,11 @@ class Rig:
             stats.servo_recoveries = watch.recoveries
             stats.servo_recovery_reads_max = watch.recovery_reads_max
             stats.servos_admitted = watch.admitted
+            heat = self.cycle.heat
+            stats.heat_warnings, stats.heat_reliefs = heat.warnings, heat.reliefs
+            stats.heat_actions = heat.actions
+            stats.max_temperature_c = tuple(float(t) for t in heat.max_c)
+            stats.hottest = heat.hottest()
             self._snapshot.finished = True
             self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats

@@ -195,6 +195,14 @@ class SilenceWatch:
         self.releasing[new] = True
         self.steering = True
 
+    def ease_from(self, index: int, deg: float) -> None:
+        """Servo ``index`` eases to the loop's goals from ``deg`` at the slew limit, as a
+        rebooted servo does (the [heat] tiers: a joint that gave way under an effort cap
+        gets its full effort back where it is)."""
+        self._from[index] = deg
+        self.releasing[index] = True
+        self.steering = True
+
     def _admit(self, left_out: np.ndarray, state: ServoState, now: float) -> None:
         """Servos left out that answer in this read: the bus admits them (or says why
         not, once per reason, and is asked again after ``ADMIT_RETRY_S``); each admitted

@@ -46,7 +46,8 @@ def sim_bus() -> Iterator[str]:
 
 def _run_silencing_servo_7(port: str, tmp_path: Path, action: str) -> tuple[dict, str]:
     rig = (CONFIG_DIR / "rig.toml").read_text()
-    rig, n = re.subn(r'(?m)^action = "\w+"', f'action = "{action}"', rig)
+    # the first `action =` is [silence]'s ([heat] has one too, further down)
+    rig, n = re.subn(r'(?m)^action = "\w+"', f'action = "{action}"', rig, count=1)
     assert n == 1
     config = tmp_path / "rig.toml"
     config.write_text(rig)

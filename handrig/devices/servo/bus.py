@@ -278,6 +278,13 @@ class ServoBus(ABC):
         """What the bus did since the last call, one line each for the run's log."""
         return []
 
+    def limit_effort(self, index: int, fraction: float) -> bool:
+        """Cap the effort of the servo at rig index ``index`` at ``fraction`` (0..1] of
+        its full effort (1.0 lifts the cap): the loop's relief for a hot servo. True if
+        the cap is in place; False if this bus cannot cap a servo (the default) or the
+        servo did not take it (the bus says why in its events)."""
+        return False
+
     def describe(self, index: int) -> str:
         """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""
         return f"servo {self.ids[index]} ({self.joint_names[index]})"

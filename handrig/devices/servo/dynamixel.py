@@ -54,7 +54,7 @@ from handrig.devices.servo.wire import (
     read_bytes,
     wire_time_s,
 )
-from handrig.errors import DeviceError
+from handrig.errors import DeviceError, HandrigError
 
 __all__ = ["DynamixelBus", "ReadFields", "cycle_bytes", "wire_time_s"]
 
@@ -127,6 +127,7 @@ class DynamixelBus(ServoBus):
                              self.commissioning)
         codec.warm_up()
         self._lock = threading.RLock()
+        self._effort_events: list[str] = []  # limit_effort failures, for drain_events
         self._connected = False
         self._build_parts(transport, reply_timeout_s, reply_gap_s, spin_s, temperature_every)
         self.commissioner.missing_ok = bool(missing_ok)
@@ -333,6 +334,23 @@ class DynamixelBus(ServoBus):
         with self._lock:
             self.link.write_register(index, reg, value)
 
+    def limit_effort(self, index: int, fraction: float) -> bool:
+        """Goal PWM (100) of servo ``index`` at ``fraction`` of its PWM Limit (36): in the
+        position modes Goal PWM caps the motor's PWM (e-manual, Goal PWM), so the servo
+        pushes no harder than that and its current falls with it. RAM: a reboot or power
+        cycle lifts it. False, with an event, if the servo does not take it."""
+        if not 0.0 < fraction <= 1.0:
+            raise ValueError(f"effort fraction must be in (0, 1], got {fraction}")
+        try:
+            with self._lock:
+                limit = self.link.read_register(index, Reg.PWM_LIMIT)
+                self.link.write_register(index, Reg.GOAL_PWM, max(1, round(limit * fraction)))
+        except HandrigError as exc:
+            self._effort_events.append(f"{self.describe(index)}: could not cap its effort "
+                                       f"at {fraction:.0%} ({exc})")
+            return False
+        return True
+
     def reboot(self, index: int) -> None:
         """Reboot servo ``index`` (clears a hardware error), then restore its settings.
 
@@ -408,7 +426,11 @@ class DynamixelBus(ServoBus):
         """Hardware errors, reboots and Bus Watchdog trips since the last call, one line
         each (once drained, they are no longer logged as well)."""
         with self._lock:
-            return self.faults.drain_events()
+            out = self.faults.drain_events()
+            if self._effort_events:
+                out += self._effort_events
+                self._effort_events = []
+            return out
 
     def housekeeping(self, deadline_s: float) -> bool:
         """Between state reads: the Bus Watchdogs, then the temperatures, when
