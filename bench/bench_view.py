@@ -377,9 +377,13 @@ def main() -> None:
         rs = [r for r in results if r["case"] == case]
         drawn = (f", drawing {np.mean([r['drawn_hz'] for r in rs]):.1f} frames/s each"
                  if case.startswith("chromium") else "")
+        encoded = sum(int(r["stats"].get("frames_encoded", 0)) for r in rs)
+        encode_us = (1e6 * sum(float(r["stats"].get("encode_s", 0.0)) for r in rs) / encoded
+                     if encoded else float("nan"))
         print(f"- {CASES[case]}: in the rig's process the feeder thread "
               f"{np.mean([r['feeder_cpu_pct'] for r in rs]):.2f} % of a core; the view's "
-              f"process {np.mean([r['view_cpu_pct'] for r in rs]):.1f} %; the pages' (clients') "
+              f"process {np.mean([r['view_cpu_pct'] for r in rs]):.1f} % (a frame's kinematics "
+              f"and JSON {encode_us:.0f} us of its CPU); the pages' (clients') "
               f"own processes {np.mean([r['pages_cpu_pct'] for r in rs]):.1f} %{drawn}")
 
 

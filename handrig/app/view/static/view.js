@@ -29,12 +29,25 @@ const SOFTWARE_GL = (() => {
 // One canvas over both views (one WebGL context: each context costs a compositing
 // pass per frame); each view is drawn into its element's rectangle.
 const viewsEl = document.querySelector('.views');
-const renderer = new THREE.WebGLRenderer({ antialias: !SOFTWARE_GL, alpha: true });
-renderer.setPixelRatio(SOFTWARE_GL ? 1 : Math.min(window.devicePixelRatio, 2));
-renderer.setClearColor(0x000000, 0);
-renderer.setScissorTest(true);
-renderer.domElement.className = 'views3d';
-viewsEl.appendChild(renderer.domElement);
+// Without WebGL the page says so where the views would be; the tables and buttons work.
+function makeRenderer() {
+  try {
+    const r = new THREE.WebGLRenderer({ antialias: !SOFTWARE_GL, alpha: true });
+    r.setPixelRatio(SOFTWARE_GL ? 1 : Math.min(window.devicePixelRatio, 2));
+    r.setClearColor(0x000000, 0);
+    r.setScissorTest(true);
+    r.domElement.className = 'views3d';
+    viewsEl.appendChild(r.domElement);
+    return r;
+  } catch (err) {
+    for (const el of viewsEl.querySelectorAll('.view3d')) {
+      el.textContent = 'This browser cannot draw the 3D view (WebGL 2 is off or missing); the figures below are live.';
+      el.classList.add('nogl');
+    }
+    return null;
+  }
+}
+const renderer = makeRenderer();
 const views = [];
 let viewsDirty = true;
 
@@ -57,7 +70,7 @@ function makeView(el) {
 }
 
 function layout() {
-  renderer.setSize(viewsEl.clientWidth, viewsEl.clientHeight);
+  if (renderer) renderer.setSize(viewsEl.clientWidth, viewsEl.clientHeight);
   for (const view of views) {
     const el = view.el, w = el.clientWidth, h = el.clientHeight;
     // three.js counts the viewport from the canvas's bottom left corner
@@ -69,6 +82,7 @@ function layout() {
 }
 
 function render() {
+  if (!renderer) return;
   renderer.setClearColor(0x000000, 0);  // between the views: the page (the scenes clear to theirs)
   renderer.setScissor(0, 0, viewsEl.clientWidth, viewsEl.clientHeight);
   renderer.clear();
