@@ -32,12 +32,20 @@ with ``--disable-gpu-compositing``: with no GPU, chromium's compositing on
 SwiftShader costs about as much again as the page's drawing (docs/view.md).
 ``HANDRIG_BENCH_SECONDS`` sets each round's length (default 20 s; QUICK: 8 s),
 ``HANDRIG_BENCH_ROUNDS`` the rounds (default 2).
+
+``HANDRIG_BENCH_VIEW=pages`` measures only what one page costs: a ``handrig demo
+--view`` run and one headless chromium page on it, with chromium's GPU compositing
+(on SwiftShader) and with ``--disable-gpu-compositing``, in turn each round; CPU by
+chromium process (GPU process, renderer, the rest), frames drawn a second, and CPU
+milliseconds per frame drawn (the figure that does not depend on how starved the
+page was).
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import resource
 import shutil
 import subprocess
@@ -147,6 +155,99 @@ def chromium_available() -> bool:
 CHROMIUM_FLAGS = ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
                   "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
                   "--disable-gpu-compositing", "--window-size=1200,900")
+
+
+def page_cost(seconds: float, rounds: int) -> None:
+    """``HANDRIG_BENCH_VIEW=pages``: one page's CPU per frame drawn (module docstring)."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
+    if not (chromium and driver):
+        print("chromium or chromium-driver is not installed (make browser-deps)")
+        return
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    demo = subprocess.Popen([sys.executable, "-m", "handrig.cli", "demo", "--frames", "1000000",
+                             "--view", "127.0.0.1:0", "--json"], cwd=ROOT, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        assert demo.stderr is not None
+        url = ""
+        for line in demo.stderr:
+            found = re.search(r"view: (http://\S+)", line)
+            if found:
+                url = found.group(1)
+                break
+        threading.Thread(target=demo.stderr.read, daemon=True).start()
+        if not url:
+            print("the demo printed no view URL")
+            return
+        print(f"one page on a handrig demo --view run, {rounds} rounds of {seconds:g} s of "
+              f"each setting, in turn; {_load()}")
+        print("| round | chromium | CPU % | GPU process % | renderer % | rest % "
+              "| frames drawn/s | CPU ms per frame drawn |")
+        print("|---|---|---|---|---|---|---|---|")
+        settings = {"GPU compositing (SwiftShader)": (),
+                    "--disable-gpu-compositing": ("--disable-gpu-compositing",)}
+        with tempfile.TemporaryDirectory(prefix="bench_view_pages_") as tmp:
+            for i in range(rounds):
+                for name, extra in settings.items():
+                    marker = f"{tmp}/page{i}_{len(extra)}"
+                    opts = webdriver.ChromeOptions()
+                    opts.binary_location = chromium
+                    flags = [f for f in CHROMIUM_FLAGS if f != "--disable-gpu-compositing"]
+                    for arg in (*flags, *extra, f"--user-data-dir={marker}"):
+                        opts.add_argument(arg)
+                    page = webdriver.Chrome(options=opts,
+                                            service=Service(executable_path=driver))
+                    try:
+                        page.get(url)
+                        deadline = time.monotonic() + 60
+                        while _frames_drawn(page) < 10 and time.monotonic() < deadline:
+                            time.sleep(0.2)  # the scene is in and frames are drawn
+                        before, t0 = chromium_cpu_by_kind(marker), time.monotonic()
+                        d0 = _frames_drawn(page)
+                        time.sleep(seconds)
+                        after, d1 = chromium_cpu_by_kind(marker), _frames_drawn(page)
+                        wall = time.monotonic() - t0
+                    finally:
+                        page.quit()
+                    cpu = {k: after[k] - before.get(k, 0.0) for k in after}
+                    total = sum(cpu.values())
+                    gpu, rend = cpu.get("gpu-process", 0.0), cpu.get("renderer", 0.0)
+                    rate = (d1 - d0) / wall
+                    per = 1e3 * total / (d1 - d0) if d1 > d0 else float("nan")
+                    print(f"| {i + 1} | {name} | {100 * total / wall:.1f} | {100 * gpu / wall:.1f} "
+                          f"| {100 * rend / wall:.1f} | {100 * (total - gpu - rend) / wall:.1f} "
+                          f"| {rate:.1f} | {per:.1f} |", flush=True)
+        print(f"at the end: {_load()}")
+    finally:
+        demo.kill()
+        demo.wait()
+
+
+def _frames_drawn(page: Any) -> int:
+    return int(page.execute_script("return window.handrigView.framesDrawn()"))
+
+
+def chromium_cpu_by_kind(marker: str) -> dict[str, float]:
+    """CPU seconds so far of the chromium processes whose command line holds ``marker``,
+    by kind (``--type=``: gpu-process, renderer, utility, ...; "browser" without)."""
+    out: dict[str, float] = {}
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            cmd = (proc / "cmdline").read_bytes()
+            if marker.encode() not in cmd:
+                continue
+            fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        found = re.search(rb"--type=([\w-]+)", cmd)  # chromium rewrites its children's argv
+        kind = found.group(1).decode() if found else "browser"
+        out[kind] = out.get(kind, 0.0) + (int(fields[11]) + int(fields[12])) / CLK_TCK
+    return out
 
 
 def read_frames(url: str, n: int) -> None:
@@ -321,6 +422,9 @@ def main() -> None:
     quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 8.0 if quick else 20.0))
     rounds = int(os.environ.get("HANDRIG_BENCH_ROUNDS", 2))
+    if os.environ.get("HANDRIG_BENCH_VIEW") == "pages":
+        page_cost(seconds, rounds)
+        return
     confine = bool(shutil.which("chrt") and shutil.which("taskset") and cpu_split()[0] is not None)
     cases = ["none", "sockets"] + ((["chromium", "chromium-confined"] if confine
                                     else ["chromium"]) if chromium_available() else [])
