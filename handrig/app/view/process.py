@@ -2,7 +2,12 @@
 
 The run's process keeps one small thread (the feeder): 30 times a second it takes
 ``rig.telemetry.latest()`` and, when it is new, sends it pickled (a few KB, tens of
-microseconds) down the child's stdin. The child (``python -m
+microseconds) down the child's stdin. The feeder shares the interpreter lock with the
+loop: were it preempted while holding the lock (by a browser on the same machine),
+the loop would wait for it; so where the loop runs under SCHED_FIFO the feeder does
+too, one priority below (only the loop preempts it, and it holds the lock for
+microseconds). The child stays off the loop's CPU (``HANDRIG_CPUS``, as the
+emulators) at nice 10. The child (``python -m
 handrig.app.view.process``) builds the models, serves the page (:class:`ViewServer`)
 and does the kinematics and the JSON there. A button press comes back as one line
 on the child's stdout, read by a second thread that calls the rig at once.
@@ -27,6 +32,7 @@ import threading
 from typing import IO, TYPE_CHECKING, Any
 
 from handrig.errors import ConfigError
+from handrig.realtime import apply_cpus_from_env, helper_env, realtime_priority
 
 if TYPE_CHECKING:
     from handrig.app.view.server import RigControls
@@ -84,7 +90,7 @@ class ViewProcess:
         return self._feeder.native_id if self._feeder is not None else None
 
     def start(self) -> ViewProcess:
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        env = {**helper_env(), "PYTHONUNBUFFERED": "1"}  # off the loop's CPU
         # a session of its own: a Ctrl-C at the terminal goes to the run, which eases the
         # puppet down and then closes the view (the child ends when its stdin closes)
         self._proc = subprocess.Popen(
@@ -154,7 +160,17 @@ class ViewProcess:
         """:meth:`attach` for a :class:`handrig.loop.rig.Rig`."""
         self.attach(rig.telemetry.latest, rig)
 
+    def feeder_priority(self) -> int:
+        """The feeder's SCHED_FIFO priority: one below the loop's (0: normal, when the
+        loop's is 0 or 1)."""
+        loop = self.rig_config.loop.realtime_priority
+        return loop - 1 if loop > 1 else 0
+
     def _feed(self, source: Any) -> None:
+        with realtime_priority(self.feeder_priority()):
+            self._feed_loop(source)
+
+    def _feed_loop(self, source: Any) -> None:
         proc = self._proc
         assert proc is not None and proc.stdin is not None
         last = -1
@@ -227,6 +243,7 @@ def child_main() -> int:
 
     stdin, out = sys.stdin.buffer, sys.stdout
     sys.stdout = sys.stderr  # nothing else may write on the protocol's stream
+    apply_cpus_from_env()
     os.nice(CHILD_NICE)
     setup = _read(stdin)
     try:

@@ -9,10 +9,49 @@ const $ = (id) => document.getElementById(id);
 const HAND_OFFSET_M = { ri: -0.11, le: 0.11 };  // two hands side by side
 const SKELETON_COLOUR = 0x3cc8ff;
 
+// What a frame costs the machine the page runs on: where WebGL is drawn in software
+// (SwiftShader, llvmpipe: a headless browser or a machine without a GPU) every
+// frame is CPU time, which the rig's own processes may need, so the page draws
+// without multisampling there, at one pixel per CSS pixel, in one WebGL context for
+// both views, at most as often as frames come (and MAX_DRAW_HZ when orbiting),
+// and not at all while it is hidden. docs/view.md has the figures.
+const MAX_DRAW_HZ = 30;
+const SOFTWARE_GL = (() => {
+  const gl = document.createElement('canvas').getContext('webgl2');
+  if (!gl) return false;
+  const info = gl.getExtension('WEBGL_debug_renderer_info');
+  const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+  const lose = gl.getExtension('WEBGL_lose_context');
+  if (lose) lose.loseContext();
+  return /swiftshader|llvmpipe|softpipe|software/i.test(name);
+})();
+
+// One canvas over both views (one WebGL context: each context costs a compositing
+// pass per frame); each view is drawn into its element's rectangle.
+const viewsEl = document.querySelector('.views');
+// Without WebGL the page says so where the views would be; the tables and buttons work.
+function makeRenderer() {
+  try {
+    const r = new THREE.WebGLRenderer({ antialias: !SOFTWARE_GL, alpha: true });
+    r.setPixelRatio(SOFTWARE_GL ? 1 : Math.min(window.devicePixelRatio, 2));
+    r.setClearColor(0x000000, 0);
+    r.setScissorTest(true);
+    r.domElement.className = 'views3d';
+    viewsEl.appendChild(r.domElement);
+    return r;
+  } catch (err) {
+    for (const el of viewsEl.querySelectorAll('.view3d')) {
+      el.textContent = 'This browser cannot draw the 3D view (WebGL 2 is off or missing); the figures below are live.';
+      el.classList.add('nogl');
+    }
+    return null;
+  }
+}
+const renderer = makeRenderer();
+const views = [];
+let viewsDirty = true;
+
 function makeView(el) {
-  const renderer = new THREE.WebGLRenderer({ antialias: true });
-  renderer.setPixelRatio(window.devicePixelRatio);
-  el.appendChild(renderer.domElement);
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0x0f1115);
   scene.add(new THREE.HemisphereLight(0xffffff, 0x303040, 1.6));
@@ -22,20 +61,36 @@ function makeView(el) {
   const camera = new THREE.PerspectiveCamera(40, 1, 0.005, 20);
   camera.up.set(0, 0, 1);
   camera.position.set(0.05, -0.45, 0.35);
-  const controls = new OrbitControls(camera, renderer.domElement);
+  const controls = new OrbitControls(camera, el);
   controls.target.set(0.05, 0, 0);
-  const view = { el, renderer, scene, camera, controls, dirty: true, fitted: false };
-  controls.addEventListener('change', () => { view.dirty = true; });
-  const resize = () => {
-    const w = el.clientWidth, h = el.clientHeight;
-    renderer.setSize(w, h);
-    camera.aspect = w / h;
-    camera.updateProjectionMatrix();
-    view.dirty = true;
-  };
-  new ResizeObserver(resize).observe(el);
-  resize();
+  const view = { el, scene, camera, controls, fitted: false, rect: [0, 0, 1, 1] };
+  controls.addEventListener('change', () => { viewsDirty = true; });
+  views.push(view);
   return view;
+}
+
+function layout() {
+  if (renderer) renderer.setSize(viewsEl.clientWidth, viewsEl.clientHeight);
+  for (const view of views) {
+    const el = view.el, w = el.clientWidth, h = el.clientHeight;
+    // three.js counts the viewport from the canvas's bottom left corner
+    view.rect = [el.offsetLeft, viewsEl.clientHeight - el.offsetTop - h, w, h];
+    view.camera.aspect = w / Math.max(h, 1);
+    view.camera.updateProjectionMatrix();
+  }
+  viewsDirty = true;
+}
+
+function render() {
+  if (!renderer) return;
+  renderer.setClearColor(0x000000, 0);  // between the views: the page (the scenes clear to theirs)
+  renderer.setScissor(0, 0, viewsEl.clientWidth, viewsEl.clientHeight);
+  renderer.clear();
+  for (const view of views) {
+    renderer.setViewport(...view.rect);
+    renderer.setScissor(...view.rect);
+    renderer.render(view.scene, view.camera);
+  }
 }
 
 // Aim the camera at the objects (the hand, not the forearm): all of them in view,
@@ -108,8 +163,12 @@ function place(built, posed) {
 
 const puppet = makeView($('puppet'));
 const skeleton = makeView($('skeleton'));
+new ResizeObserver(layout).observe(viewsEl);
+layout();
 let models = {}, ghosts = {}, bones = {};
-let latest = null, socket = null, received = 0, drawn = 0, drawnTotal = 0;
+// the newest frame's text: parsed only when it is drawn (a frame that a newer one
+// replaced before the next draw, or that came while the page was hidden, costs nothing)
+let latest = null, socket = null, received = 0, drawn = 0, drawnTotal = 0, drawnAt = 0;
 const actions = new Set();
 
 function onScene(msg) {
@@ -134,8 +193,10 @@ function onScene(msg) {
     const geo = new THREE.BufferGeometry();
     geo.setAttribute('position', new THREE.Float32BufferAttribute(new Float32Array(6 * 64), 3));
     const group = new THREE.Group();
-    group.add(new THREE.LineSegments(geo, new THREE.LineBasicMaterial({ color: SKELETON_COLOUR })));
-    group.add(new THREE.Points(geo, new THREE.PointsMaterial({ color: 0xffffff, size: 5, sizeAttenuation: false })));
+    const lines = new THREE.LineSegments(geo, new THREE.LineBasicMaterial({ color: SKELETON_COLOUR }));
+    const joints = new THREE.Points(geo, new THREE.PointsMaterial({ color: 0xffffff, size: 5, sizeAttenuation: false }));
+    lines.frustumCulled = joints.frustumCulled = false;  // the bones move every frame: no bounds to keep
+    group.add(lines, joints);
     group.position.y = HAND_OFFSET_M[hand] || 0;
     group.userData.model = true;
     group.visible = false;
@@ -222,22 +283,23 @@ function drawFrame(f) {
     attr.array.set(segs.slice(0, attr.array.length));
     attr.needsUpdate = true;
     b.geo.setDrawRange(0, segs.length / 3);
-    b.geo.computeBoundingSphere();
-    b.geo.computeBoundingBox();
   }
+  if (!skeleton.fitted) for (const b of Object.values(bones)) b.geo.computeBoundingBox();
   if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
-  puppet.dirty = skeleton.dirty = true;
+  viewsDirty = true;
   drawMode(f);
   const now = performance.now();
   if (now - tablesAt >= TABLES_EVERY_MS) { tablesAt = now; drawTables(f); }
 }
 
-function animate() {
-  if (latest) { drawFrame(latest); latest = null; drawn += 1; drawnTotal += 1; }
-  for (const view of [puppet, skeleton]) {
-    if (view.dirty) { view.renderer.render(view.scene, view.camera); view.dirty = false; }
-  }
+function animate(now) {
   requestAnimationFrame(animate);
+  if (document.hidden || now - drawnAt < 1000 / MAX_DRAW_HZ - 2) return;
+  if (latest) {
+    drawFrame(JSON.parse(latest));
+    latest = null; drawn += 1; drawnTotal += 1;
+  }
+  if (viewsDirty) { render(); viewsDirty = false; drawnAt = now; }
 }
 
 function connect() {
@@ -245,9 +307,9 @@ function connect() {
   socket = new WebSocket(`${scheme}://${location.host}/ws${token ? `?token=${encodeURIComponent(token)}` : ''}`);
   socket.onopen = () => { $('link').textContent = 'live'; $('link').className = 'ok'; };
   socket.onmessage = (ev) => {
+    if (ev.data.startsWith('{"type":"frame"')) { latest = ev.data; received += 1; return; }
     const msg = JSON.parse(ev.data);
-    if (msg.type === 'scene') onScene(msg);
-    else if (msg.type === 'frame') { latest = msg; received += 1; }
+    if (msg.type === 'scene') { onScene(msg); latest = null; viewsDirty = true; }
   };
   socket.onclose = () => {
     $('link').textContent = 'not connected (the run may have ended)';
@@ -268,6 +330,6 @@ $('estop').addEventListener('keydown', (ev) => { if (ev.key === 'Enter' || ev.ke
 $('relax').addEventListener('click', () => send('relax'));
 $('stop').addEventListener('click', () => send('stop'));
 setInterval(() => { $('viewfps').textContent = `${received} frames/s received, ${drawn} drawn`; received = 0; drawn = 0; }, 1000);
-window.handrigView = { framesDrawn: () => drawnTotal };
+window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL };
 connect();
 requestAnimationFrame(animate);

@@ -238,3 +238,45 @@ def test_play_shows_the_recording_and_its_stop_button_ends_it(tmp_path: Path) ->
             browser.quit()
             run.kill()
     assert summary["bundles_sent"] > 0 and summary["interrupted"] is False
+
+
+def test_page_without_webgl_says_so_and_its_tables_still_work(tmp_path: Path) -> None:
+    """A browser without WebGL gets a message where the views would be, not a blank
+    canvas, and the figures from the telemetry."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.by import By
+
+    from handrig.app.factory import build_parts
+    from handrig.app.view import build_server
+    from handrig.loop.telemetry import LoopSnapshot
+    from handrig.pose.pipeline import POSE_NAMES
+
+    cfg = build_parts(None).rig_config
+    n = len(cfg.servos)
+    snap = LoopSnapshot(
+        t_s=1.0, seq=1, mode="running", mode_reason="", rate_hz=200.0, latency_p50_us=150.0,
+        latency_p99_us=300.0, frames_lost=0, cycles=200, overruns=0,
+        pose_deg=(10.0,) * len(POSE_NAMES), curve_names=POSE_NAMES,
+        servo_ids=tuple(s.id for s in cfg.servos), servo_joints=tuple(s.joint for s in cfg.servos),
+        goals_deg=(5.0,) * n, positions_deg=(4.0,) * n, temperatures_c=(31.0,) * n,
+        hardware_errors=(0,) * n, stale=(False,) * n)
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = str(CHROMIUM)
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-webgl",
+                "--disable-3d-apis", "--window-size=1200,900", f"--user-data-dir={tmp_path}"):
+        opts.add_argument(arg)
+    with build_server("127.0.0.1:0", cfg) as server:
+        server.attach(lambda: snap)
+        browser = webdriver.Chrome(options=opts, service=Service(executable_path=str(DRIVER)))
+        try:
+            browser.get(server.url)
+            puppet = browser.find_element(By.ID, "puppet")
+            wait_for(lambda: "cannot draw the 3D view" in puppet.text, 30, "the no-WebGL message")
+            assert not browser.find_elements(By.CSS_SELECTOR, "canvas")
+            wait_for(lambda: browser.find_element(By.ID, "mode").text == "running", 30,
+                     "the mode from the telemetry")
+            wait_for(lambda: len(browser.find_elements(By.CSS_SELECTOR, "#servos tbody tr")) == n,
+                     30, "a row per servo")
+        finally:
+            browser.quit()

@@ -289,3 +289,53 @@ def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None
         assert summary["estop"] is False and summary["signals"]
     with pytest.raises(OSError):  # the run's exit closed the view's server
         socket.create_connection(("127.0.0.1", port), timeout=2).close()
+
+
+def _may_use_fifo() -> bool:
+    """Whether a thread of this process may take SCHED_FIFO here (root, CAP_SYS_NICE)."""
+    import threading
+
+    from handrig.realtime import realtime_priority
+
+    got: list[bool] = []
+
+    def probe() -> None:
+        with realtime_priority(1) as ok:
+            got.append(ok)
+
+    t = threading.Thread(target=probe)
+    t.start()
+    t.join()
+    return got[0]
+
+
+def test_view_process_feeder_below_the_loop_child_off_its_cpu(human_rig) -> None:  # type: ignore[no-untyped-def]
+    """The feeder shares the GIL with the loop: it runs one SCHED_FIFO priority below the
+    loop's (where the host allows), so a browser cannot preempt it while it holds the
+    lock; the view's process stays off the loop's CPU, niced."""
+    from handrig.app.view.process import CHILD_NICE, ViewProcess
+    from handrig.realtime import cpu_split
+
+    assert human_rig.loop.realtime_priority > 1
+    snap = _snapshot(human_rig, positions=True)
+    with ViewProcess("127.0.0.1:0", human_rig) as view:
+        assert view.feeder_priority() == human_rig.loop.realtime_priority - 1
+        view.attach(lambda: snap)
+        tid = view.feeder_thread_id
+        assert tid is not None and view.pid is not None
+        fifo = _may_use_fifo()
+        deadline = time.monotonic() + 5
+        while os.sched_getscheduler(tid) != os.SCHED_FIFO and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if fifo:
+            assert os.sched_getscheduler(tid) == os.SCHED_FIFO
+            assert os.sched_getparam(tid).sched_priority == view.feeder_priority()
+        else:
+            assert os.sched_getscheduler(tid) == os.SCHED_OTHER
+        loop_cpu, others = cpu_split()
+        if loop_cpu is not None:
+            assert os.sched_getaffinity(view.pid) == set(others)
+        assert os.getpriority(os.PRIO_PROCESS, view.pid) >= CHILD_NICE
+        with connect(view.url.replace("http://", "ws://").rstrip("/") + "/ws") as ws:
+            assert json.loads(ws.recv(timeout=30))["type"] == "scene"
+            assert json.loads(ws.recv(timeout=30))["seq"] == snap.seq
