@@ -20,7 +20,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +43,7 @@ from handrig.devices.glove_recording import read_glove_recording
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 from handrig.errors import ConfigError, DeviceError
+from handrig.loop.ports import ControlsFromRaw, OrientationLike
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
 from handrig.outputs.base import Output
@@ -82,9 +83,10 @@ class RigParts:
     expander: Expander
     sag: SagGrid
     pipeline: PosePipeline
-    controls: GloveControls
-    orientation: ForearmAngles
+    controls: ControlsFromRaw  # a GloveControls (one glove), or a hand's of two gloves
+    orientation: OrientationLike  # a ForearmAngles, or a hand's of two gloves
     glove_file: Path | None = None  # where glove_config was read from
+    hand: str | None = None  # one hand's servos of a two-hand rig ("ri", "le"); None: all
 
 
 class ForearmAngles:
@@ -98,12 +100,12 @@ class ForearmAngles:
     stale.
     """
 
-    def __init__(self, cfg: GloveConfig) -> None:
+    def __init__(self, cfg: GloveConfig, hand: Literal["ri", "le"] = "ri") -> None:
         imu = cfg.imu
         self.orientation = ForearmOrientation(
             Rotation.from_quat(np.asarray(imu.mount_xyzw, dtype=np.float64)),
             scalar_first=imu.order == "wxyz",
-            world=imu.world,
+            world=imu.world, hand=hand,
         )
         self.configured = (cfg.forearm.inclination_deg, cfg.forearm.rotation_deg)
         self.last = self.configured
@@ -288,6 +290,8 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
         proc: subprocess.Popen[str] | None = None
         if bus_spec == "sim":
             argv = ["sim-bus", "--rig", str(parts.rig_file)]
+            if parts.hand is not None:
+                argv += ["--hand", parts.hand]
             if wire_timing:
                 argv.append("--wire-timing")
             if viewer:

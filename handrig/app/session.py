@@ -48,6 +48,9 @@ EXIT_SIGNALS: tuple[signal.Signals, ...] = tuple(
 @dataclass
 class LiveOptions:
     glove: str | None = None  # PORT, opengloves:PORT, replay:FILE (None: glove.toml)
+    glove_left: str | None = None  # a two-hand rig's left glove (handrig.app.two_hands)
+    bus_left: str | None = None  # a two-hand rig's left bus, with [left_bus] (None: its port)
+    show: str = ""  # the show file's name, for the panel (handrig run --show)
     recorded: str = ""  # the recording an emulated glove on ``glove`` streams (handrig demo)
     bus: str | None = None  # PORT or "sim" (None: rig.toml)
     frames: int | None = None
@@ -311,7 +314,8 @@ class _Session:
                 sys.stdin.fileno(), toggle_relax=rig.toggle_relax,
                 stop=lambda: rig.request_stop("q pressed"), estop=rig.estop,
                 on_error=lambda exc: self._rig_log(f"key failed: {exc}"))
-        snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None)
+        snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None,
+                               show=self.opts.show)
         console = show_console()
         if not console.is_terminal:  # plain status lines there; the log stays where it was
             for line in header:
@@ -460,6 +464,19 @@ def format_summary(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def format_hands_summary(summary: dict[str, Any]) -> str:
+    """The summary of a two-hand run: a part per hand, then torque and the error."""
+    lines = [*([f"show              {summary['show']}"] if summary.get("show") else [])]
+    for name, part in summary["hands"].items():
+        lines.append(f"--- {name} hand ({part.get('glove_source') or 'glove'}) ---")
+        lines += [line for line in format_summary(part).splitlines()
+                  if not line.startswith(("torque off", "error"))]
+    lines.append(f"torque off        {summary['torque_off']} (every servo of both hands)")
+    if "error" in summary:
+        lines.append(f"error             {summary['error']}")
+    return "\n".join(lines)
+
+
 def failed(error: HandrigError, parts: RigParts | None = None) -> LiveResult:
     """The result of a session that could not begin (a config, an emulator, a port)."""
     summary = app.summary_dict(RunStats(), None, None, None)
@@ -480,7 +497,8 @@ def print_result(result: LiveResult, as_json: bool) -> int:
         if as_json:
             print(json.dumps(summary), flush=True)
         elif result.started:
-            print(format_summary(summary), flush=True)
+            print(format_hands_summary(summary) if "hands" in summary
+                  else format_summary(summary), flush=True)
         if result.error is not None and (as_json or not result.started):
             print(f"handrig: error: {result.error}", file=sys.stderr, flush=True)
     if result.error is not None and not result.started:

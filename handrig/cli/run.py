@@ -7,13 +7,15 @@ import sys
 from typing import Any
 
 from handrig.app.factory import build_parts
+from handrig.app.hands import TwoHandParts, build_two_hand_parts, glove_specs
 from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import run_sources
+from handrig.app.two_hands import run_two_hands
 from handrig.app.view import add_view_flag, view_session
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._rig import add_rig_argument, print_sources
-from handrig.errors import HandrigError
+from handrig.errors import ConfigError, HandrigError
 
 
 def register(sub: Any) -> None:
@@ -32,9 +34,20 @@ def register(sub: Any) -> None:
                    help="glove file (default: the rig file's [loop] glove, else your calibrated "
                    "glove.toml, else config/glove.toml)")
     p.add_argument("--glove", default=None, metavar="SPEC",
-                   help="PORT (handrig frames), opengloves:PORT, or replay:FILE.csv")
+                   help="PORT (handrig frames), opengloves:PORT, or replay:FILE.csv (with "
+                   "--glove-left: the right hand's glove)")
+    p.add_argument("--glove-left", default=None, metavar="SPEC",
+                   help="the left hand's glove, as --glove takes it: a rig with servos for "
+                   "both hands (e.g. --rig puppet_two_hands) then drives each hand from its "
+                   "own glove, with the two-glove map (default: the rig file's [gloves] left)")
+    p.add_argument("--glove-left-config", default=None, metavar="FILE",
+                   help="the left glove's glove file (default: [gloves] left_config, else "
+                   "the right glove's)")
     p.add_argument("--bus", default=None, metavar="PORT",
                    help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
+    p.add_argument("--bus-left", default=None, metavar="PORT",
+                   help="a rig on two buses ([left_bus]): the left hand's servo port, or "
+                   "'sim' (default: [left_bus] port)")
     p.add_argument("--viewer", action="store_true",
                    help="with --bus sim: show the simulated puppet (needs a display)")
     p.add_argument("--vmc", default=None, metavar="HOST:PORT",
@@ -56,11 +69,26 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    two: TwoHandParts | None = None
     try:
         if args.viewer:
             check_display("--viewer")
         parts = build_parts(args.rig, args.glove_config)
-        if (args.bus or parts.rig_config.bus.port) == "sim":
+        rig = parts.rig_config
+        right, left = glove_specs(rig, args.glove, args.glove_left)
+        if left is not None or rig.left_bus is not None:
+            if left is None:
+                raise ConfigError(
+                    "this rig has the left hand's servos on a bus of their own: it needs a "
+                    "glove per hand", key="--glove-left", file=None,
+                    allowed="--glove-left PORT (or [gloves] left in the rig file)")
+            two = build_two_hand_parts(args.rig, args.glove_config, args.glove_left_config)
+        elif args.bus_left is not None:
+            raise ConfigError("a left bus needs a rig with [left_bus] and a glove per hand",
+                              key="--bus-left", value=args.bus_left,
+                              allowed="--rig puppet_two_buses --glove-left PORT")
+        if "sim" in ((args.bus or rig.bus.port),
+                     args.bus_left or (rig.left_bus.port if rig.left_bus else "")):
             check_gl_backend("--bus sim")
     except HandrigError as exc:
         if not args.json:
@@ -70,12 +98,12 @@ def run(args: argparse.Namespace) -> int:
         print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
     with view_session(args.view, parts.rig_config, _stderr) as on_rig:
         opts = LiveOptions(
-            glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
+            glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,
             wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
             record=args.record, record_rate_hz=args.record_rate, panel=not args.json,
-            verbose=not args.json, on_rig=on_rig,
+            verbose=not args.json, on_rig=on_rig, glove_left=left, bus_left=args.bus_left,
         )
-        result = run_live(parts, opts)
+        result = run_two_hands(two, opts) if two is not None else run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
         raise result.error
     return print_result(result, as_json=args.json)
