@@ -156,7 +156,7 @@ class _TwoHands:
                 log(f"{', '.join(bus.describe(i) for i in bus.left_out)} did not answer at "
                     "start-up: the run goes on without it ([silence] action continue)")
         if not parts.two_buses:
-            shared = SharedBus(owners[0])
+            shared = SharedBus(owners[0], self.clock)
             joints = owners[0].joint_names
             for h in HANDS:
                 buses[h] = shared.part([i for i, j in enumerate(joints)

@@ -6,9 +6,13 @@ and a lock; :meth:`SharedBus.part` gives each loop a :class:`BusPart`, itself a
 loop sees only its hand. On the wire there is one writer at a time: a part's
 write takes the lock, puts its goals into the whole bus's goal vector (the other
 part's are its last ones, already clamped) and sends one Sync Write to every
-servo; a read asks the whole bus and hands the part its own servos. A part's
-write waits at most for the other part's write or read in progress (at 4 Mbps, 40
-servos: about 0.5 ms for a write).
+servo. Only the first part (the reader) reads the servos back, every servo in one
+read; another part's read hands it its servos of the newest read it has not seen
+(its silence watch and tracking see every read once), and declines (``sent=False``)
+when there is none: reads by both loops would take twice the wire and make each
+hand's writes wait behind the other's reads. A part's write waits at most for the
+other part's write or the reader's read in progress (at 4 Mbps, 40 servos: about
+0.5 ms for a write).
 
 Torque, connect and close belong to whoever opened the bus (the session): a part's
 :meth:`BusPart.torque` does nothing, and the part's loop runs inside the whole
@@ -24,17 +28,29 @@ from contextlib import AbstractContextManager
 
 import numpy as np
 
+from handrig.clock import Clock
 from handrig.devices.servo.bus import BusStats, ServoBus, ServoState
+
+READ_HOLD_WIRES = 2.0
+READ_HOLD_EXTRA_S = 0.0003
+"""A read holds the shared wire at most this many times its wire time plus this long:
+a late reply is left stale (the silence tiers see it) rather than hold the other
+hand's next write back until the reader's own next frame."""
 
 
 class SharedBus:
-    """``bus`` (connected by its owner) shared by the loops of :meth:`part`."""
+    """``bus`` (connected by its owner) shared by the loops of :meth:`part`; ``clock``
+    the bus's (the reads' deadlines are on it)."""
 
-    def __init__(self, bus: ServoBus) -> None:
+    def __init__(self, bus: ServoBus, clock: Clock) -> None:
         self.bus = bus
+        self.clock = clock
         self.lock = threading.Lock()
         self._goals = np.full(bus.n_servos, np.nan)
         self._events_to: BusPart | None = None  # the part the bus's own events go to
+        self.reader: BusPart | None = None  # the part whose loop reads the servos back
+        self.latest: ServoState | None = None  # the reader's newest read
+        self.reads = 0  # reads the reader made
 
     def part(self, indices: Sequence[int]) -> BusPart:
         """The servos at rig indices ``indices`` (of the whole bus) as a bus of their
@@ -42,6 +58,8 @@ class SharedBus:
         p = BusPart(self, indices)
         if self._events_to is None:
             self._events_to = p
+        if self.reader is None:
+            self.reader = p
         return p
 
     def write(self, index: np.ndarray, goals_deg: np.ndarray) -> tuple[int, float]:
@@ -63,8 +81,15 @@ class SharedBus:
             return max(clamps, 0), bus.last_write_s
 
     def read(self, deadline_s: float | None, part: tuple[int, int] | None) -> ServoState:
+        n = self.bus.n_servos if part is None else -(-self.bus.n_servos // part[1])
+        cap = self.clock.now() + READ_HOLD_WIRES * self.bus.read_wire_s(n) + READ_HOLD_EXTRA_S
+        deadline_s = cap if deadline_s is None else min(deadline_s, cap)
         with self.lock:
-            return self.bus.read_state(deadline_s, part)
+            state = self.bus.read_state(deadline_s, part)
+            if state.sent:
+                self.latest = state
+                self.reads += 1
+            return state
 
     def housekeeping(self, deadline_s: float) -> bool:
         if not self.lock.acquire(blocking=False):
@@ -89,8 +114,7 @@ class BusPart(ServoBus):
         self._of_whole = {int(w): k for k, w in enumerate(self.index)}
         self.port, self.baud, self.emulated = bus.port, bus.baud, bus.emulated
         self._last_write_s = float("nan")
-        self._offset = int(self.index[0])
-        self._stride_ok = bool(np.all(np.diff(self.index) == 1))
+        self._seen = 0  # the reader's reads this part has had
 
     # -- the contract ---------------------------------------------------------------------
     @property
@@ -128,17 +152,44 @@ class BusPart(ServoBus):
 
     def read_state(self, deadline_s: float | None = None,
                    part: tuple[int, int] | None = None) -> ServoState:
-        whole_part = None
-        if part is not None and self._stride_ok and self._offset % part[1] == 0:
-            whole_part = part  # (i, m) of this part's servos is (i, m) of the whole's
-        st = self.shared.read(deadline_s, whole_part)
+        shared = self.shared
+        if shared.reader is not self:
+            return self._newest_read()
+        st = shared.read(deadline_s, part)  # the reader asks the whole bus's servos
+        return self._own(st)
+
+    def _newest_read(self) -> ServoState:
+        """The reader's newest read if this part has not had it, else a declined read
+        (every servo stale with its last reading)."""
+        latest, reads = self.shared.latest, self.shared.reads
+        if latest is not None and reads != self._seen:
+            self._seen = reads
+            return self._own(latest)
+        if latest is None:  # nothing read yet
+            n = len(self.index)
+            nan = np.full(n, np.nan)
+            return ServoState(nan, nan.copy(), nan.copy(), nan.copy(), np.zeros(n, np.uint8),
+                              np.zeros(n, np.uint8), np.ones(n, bool), np.full(n, np.inf),
+                              float("nan"), self._stats_of(self.shared.bus.stats.copy()),
+                              None, False)
+        st = self._own(latest)
+        st.stale = np.ones(len(self.index), bool)
+        st.sent = False
+        return st
+
+    def _stats_of(self, stats: BusStats) -> BusStats:
         ix = self.index
-        asked = None if st.asked is None else st.asked[ix]
-        stats = st.stats.copy()  # the per-servo counters of this part's servos
         stats.n_servos = len(ix)
         stats.stale_readings = stats.stale_readings[ix]
         stats.hardware_errors = stats.hardware_errors[ix]
         stats.reboots = stats.reboots[ix]
+        return stats
+
+    def _own(self, st: ServoState) -> ServoState:
+        """This part's servos of a read of the whole bus."""
+        ix = self.index
+        asked = None if st.asked is None else st.asked[ix]
+        stats = self._stats_of(st.stats.copy())  # this part's servos' counters
         return ServoState(
             st.positions_deg[ix], st.velocities_dps[ix], st.currents_ma[ix],
             st.temperatures_c[ix], st.status_errors[ix], st.hardware_errors[ix],
@@ -159,8 +210,10 @@ class BusPart(ServoBus):
         return self._last_write_s
 
     def read_wire_s(self, n: int) -> float:
-        """A read asks the whole bus's servos: ``n`` of this part's, as many of the
-        other's."""
+        """The reader asks the whole bus's servos: ``n`` of this part's, as many of the
+        other's; another part's read takes no wire."""
+        if self.shared.reader is not self:
+            return 0.0
         whole = self.shared.bus.n_servos
         return self.shared.bus.read_wire_s(min(whole, -(-n * whole // len(self.index))))
 
