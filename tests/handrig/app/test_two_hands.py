@@ -1,0 +1,143 @@
+"""Two hands, a glove each: emulated gloves on ptys -> two loops -> the real Dynamixel
+driver -> ``handrig sim-bus`` (MuJoCo puppet), on one bus and on two."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from handrig.app.hands import build_two_hand_parts, check_two_gloves
+from handrig.app.session import LiveOptions, format_hands_summary
+from handrig.app.two_hands import run_two_hands
+from handrig.cli import main
+from handrig.devices.glove_recording import read_glove_recording
+from handrig.errors import ConfigError
+from sim.demo_recording import DEMO_RECORDING
+from sim.glove_emulator import GloveEmulator
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return read_glove_recording(DEMO_RECORDING)
+
+
+def _run(rig: str, recording, frames: int, *, left_pause_s: float = 0.0):
+    parts = build_two_hand_parts(rig)
+    lines: list[str] = []
+    with (GloveEmulator(recording, "frames", rate_hz=200.0) as right,
+          GloveEmulator(recording, "frames", rate_hz=200.0) as left):
+        def quiet_left() -> None:
+            time.sleep(0.3)
+            left.pause()
+            time.sleep(left_pause_s)
+            left.resume()
+        script = threading.Thread(target=quiet_left)
+
+        def log(line: str) -> None:
+            lines.append(line)
+            if left_pause_s and line.startswith("two hands:"):  # the loops start now
+                script.start()
+
+        result = run_two_hands(parts, LiveOptions(
+            glove=right.port_path, glove_left=left.port_path, bus="sim", bus_left="sim",
+            frames=frames, log=log))
+        if left_pause_s:
+            script.join()
+    return result, lines
+
+
+def _hand_ran(s: dict, frames: int) -> None:
+    assert frames <= s["frames"] <= frames + 205 + 5  # the run, then the 1 s ease
+    assert s["glove"]["frames_ok"] >= frames and s["glove"]["crc_errors"] == 0
+    assert 0 < s["latency_us"]["p50"] <= s["latency_us"]["p99"]
+    assert s["reads"] > 5 and 0 < s["tracking_rms_deg"] < 10.0  # the puppet follows
+
+
+def test_two_gloves_on_one_bus_drive_both_hands_and_a_lost_glove_relaxes_its_hand_only(
+        recording):
+    result, lines = _run("puppet_two_hands", recording, 300, left_pause_s=0.5)
+    s = result.summary
+    assert result.started and "error" not in s, s.get("error")
+    assert s["torque_off"] is True and s["buses"] == "one"
+    right, left = s["hands"]["right"], s["hands"]["left"]
+    _hand_ran(right, 300)
+    _hand_ran(left, 300)
+    assert right["relax_events"] == 0 and left["relax_events"] >= 1
+    assert any(line.startswith("left hand:") and "silent or garbled" in line
+               for line in lines)
+    assert not any(line.startswith("right hand:") and "silent or garbled" in line
+                   for line in lines)
+    # one bus: both hands' writes counted on it, 40 servos
+    assert right["bus"]["writes"] == left["bus"]["writes"] >= 600
+    text = format_hands_summary(s)
+    assert "--- right hand" in text and "--- left hand" in text
+
+
+def test_two_gloves_on_two_buses_each_hand_its_own_bus(recording):
+    result, _ = _run("puppet_two_buses", recording, 150)
+    s = result.summary
+    assert result.started and "error" not in s, s.get("error")
+    assert s["torque_off"] is True and s["buses"] == "two"
+    right, left = s["hands"]["right"], s["hands"]["left"]
+    _hand_ran(right, 150)
+    _hand_ran(left, 150)
+    # a bus each: each hand's writes are its own loop's
+    assert right["bus"]["writes"] >= right["frames"] and left["bus"]["writes"] >= left["frames"]
+    assert right["bus"]["writes"] != left["bus"]["writes"] or right["frames"] == left["frames"]
+
+
+def test_the_same_glove_for_both_hands_is_refused_naming_both_flags(tmp_path, capsys):
+    take = tmp_path / "take.csv"
+    take.write_bytes(DEMO_RECORDING.read_bytes())
+    with pytest.raises(ConfigError) as err:
+        parts = build_two_hand_parts("puppet_two_hands")
+        check_two_gloves(f"replay:{take}", f"replay:{tmp_path}/../{tmp_path.name}/take.csv",
+                         parts.sides["ri"].glove_config, parts.sides["le"].glove_config)
+    assert "--glove-left" in str(err.value) and "--glove " in str(err.value)
+    # the command: refused before any bus opens (no emulator started, nothing sent)
+    status = main(["run", "--rig", "puppet_two_hands", "--glove", f"replay:{take}",
+                   "--glove-left", f"replay:{take}", "--bus", "sim", "--frames", "10"])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert "--glove-left" in err and "--glove " in err
+    assert "same" in err and "Traceback" not in err
+    assert "servo bus" not in err and "commissioned" not in err
+
+
+@pytest.mark.parametrize(("argv", "says"), [
+    (["--glove-left", "/dev/null"], ("both hands", "puppet_two_hands")),
+    (["--rig", "puppet_two_buses"], ("--glove-left", "a glove per hand")),
+    (["--bus-left", "sim"], ("--bus-left", "[left_bus]")),
+])
+def test_two_hand_flags_on_the_wrong_rig_are_refused_before_any_bus(argv, says, capsys):
+    status = main(["run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--frames",
+                   "1", *argv])
+    err = capsys.readouterr().err
+    assert status == 2 and "Traceback" not in err
+    assert all(word in err for word in says), err
+    assert "servo bus" not in err
+
+
+def test_each_hand_follows_its_own_glove_and_forearm():
+    parts = build_two_hand_parts("puppet_two_hands")
+    ri, le = parts.sides["ri"], parts.sides["le"]
+    assert all(j.startswith("ri") for j in ri.pipeline.servo_joints)
+    assert all(j.startswith("le") for j in le.pipeline.servo_joints)
+    controls = parts.shared.values.copy()
+    a = le.pipeline.servo_targets(controls, -60.0, 0.0, 1.0).copy()
+    b = le.pipeline.servo_targets(controls, 30.0, 80.0, 1.0).copy()
+    assert np.abs(a - b).max() > 1.0  # the left hand sags with the left forearm
+    r0 = ri.pipeline.servo_targets(controls, -60.0, 0.0, 1.0).copy()
+    moved = controls.copy()
+    moved[le.controls.slots] += 5.0  # the left glove's controls only
+    c = le.pipeline.servo_targets(moved, -60.0, 0.0, 1.0).copy()
+    r1 = ri.pipeline.servo_targets(moved, -60.0, 0.0, 1.0).copy()
+    # the thumb's CMC curves follow their own glove's control one to one in the map
+    for name in ("ThumbCMCx", "ThumbCMCy", "ThumbCMCz"):
+        i = ri.pipeline.servo_joints.index(f"ri{name}")
+        j = le.pipeline.servo_joints.index(f"le{name}")
+        assert r1[i] == pytest.approx(r0[i])
+        assert c[j] - a[j] == pytest.approx(5.0, abs=1e-6)
