@@ -122,14 +122,17 @@ class ForearmAngles:
         return self.last
 
 
-def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | None = None
+def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | None = None,
+                *, map_file: str | Path | None = None, grid_file: str | Path | None = None
                 ) -> RigParts:
     """Load the rig, glove, map and grid configs and build the pose pipeline.
 
     ``rig_file``: a rig file or a preset name (``"leap"``: ``config/rigs/leap.toml``);
     None is the user's ``rig.toml`` (:func:`handrig.config.paths.config_file`), else the
     installed ``config/rig.toml``. A robot rig's pipeline ends in its retarget table, with
-    the rig's effective sag gain (off unless ``[robot].sag`` is true)."""
+    the rig's effective sag gain (off unless ``[robot].sag`` is true). ``map_file`` and
+    ``grid_file`` (a show file's) stand in for the rig file's ``[loop] map`` and
+    ``sag_grid``."""
     rig_path = robotrig.rig_path(rig_file) if rig_file else config_file("rig.toml")
     rig = robotrig.load_rig(rig_path)
     retarget = (robotrig.robot_retarget(rig) if isinstance(rig, robotrig.RobotRigConfig)
@@ -140,10 +143,11 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
         base, loop.glove, default_glove_path(), rig_file=rig_path, key="loop.glove")
     glove_cfg = load_glove_config(glove_path)
     limits = load_joint_limits()
-    expander = Expander.from_file(_resolve(base, loop.map, CONFIG_DIR / "maps" / "default.toml",
-                                           rig_file=rig_path, key="loop.map"), limits)
-    sag = SagGrid.load(_resolve(base, loop.sag_grid, default_grid_path(), rig_file=rig_path,
-                                key="loop.sag_grid"))
+    expander = Expander.from_file(Path(map_file) if map_file else _resolve(
+        base, loop.map, CONFIG_DIR / "maps" / "default.toml", rig_file=rig_path,
+        key="loop.map"), limits)
+    sag = SagGrid.load(Path(grid_file) if grid_file else _resolve(
+        base, loop.sag_grid, default_grid_path(), rig_file=rig_path, key="loop.sag_grid"))
     pipeline = PosePipeline(
         expander, sag, [s.joint for s in rig.servos],
         servo_limits_deg=np.array([[s.min_deg, s.max_deg] for s in rig.servos]),

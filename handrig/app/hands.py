@@ -126,8 +126,9 @@ def check_two_gloves(right: str, left: str, cfg_right: GloveConfig, cfg_left: Gl
                      right_file: Path | None = None, left_file: Path | None = None
                      ) -> tuple[str, str]:
     """Both gloves' specs checked (:func:`handrig.app.factory.glove_spec`, the message
-    naming ``--glove-left`` for the left), and not the same port or recording twice:
-    ConfigError naming both flags. Nothing is opened."""
+    naming ``--glove-left`` for the left), and not the same port twice: ConfigError
+    naming both flags. (One recording may be replayed for both hands.) Nothing is
+    opened."""
     r = glove_spec(right, cfg_right, right_file)
     try:
         le = glove_spec(left, cfg_left, left_file)
@@ -143,10 +144,11 @@ def check_two_gloves(right: str, left: str, cfg_right: GloveConfig, cfg_left: Gl
             spec = spec.removeprefix(prefix)
         p = Path(spec)
         return str(p.resolve()) if p.exists() else spec
-    if where(r) == where(le):
+    replays = r.startswith("replay:") or le.startswith("replay:")
+    if not replays and where(r) == where(le):
         raise ConfigError(
-            f"the right and the left glove are the same: {where(r)}", key="--glove-left",
-            value=left, allowed=f"a port (or recording) of its own for each hand: --glove "
+            f"the right and the left glove are on the same port: {where(r)}",
+            key="--glove-left", value=left, allowed=f"a port of its own for each hand: --glove "
             f"{right} and --glove-left another (or [gloves] right and left in the rig file)")
     return r, le
 
@@ -164,10 +166,13 @@ def _glove_names(cal_curves: tuple[str, ...], wanted: list[str]) -> list[str]:
 
 def build_two_hand_parts(rig_file: str | Path | None = None,
                          glove_file: str | Path | None = None,
-                         left_glove_file: str | Path | None = None) -> TwoHandParts:
+                         left_glove_file: str | Path | None = None, *,
+                         map_file: str | Path | None = None,
+                         grid_file: str | Path | None = None) -> TwoHandParts:
     """The rig file (or preset) cut into its two hands, each with its glove file
     (``glove_file`` for the right; ``left_glove_file``, else ``[gloves] left_config``,
-    else the right's for the left), the two-glove map and the sag grid."""
+    else the right's for the left), the two-glove map and the sag grid (``map_file``,
+    ``grid_file``: a show file's, instead of the rig file's)."""
     rig_path = robotrig.rig_path(rig_file) if rig_file else config_file("rig.toml")
     rig = robotrig.load_rig(rig_path)
     if not is_two_hand(rig):
@@ -183,8 +188,8 @@ def build_two_hand_parts(rig_file: str | Path | None = None,
         base, rig.gloves.left_config, right_glove, rig_file=rig_path,
         key="gloves.left_config"))
     limits = load_joint_limits()
-    map_file = _resolve(base, loop.map, DEFAULT_TWO_GLOVE_MAP, rig_file=rig_path,
-                        key="loop.map")
+    map_file = Path(map_file) if map_file else _resolve(
+        base, loop.map, DEFAULT_TWO_GLOVE_MAP, rig_file=rig_path, key="loop.map")
     expander = Expander.from_file(map_file, limits)
     controls = list(expander.controls)
     slots = {h: np.array([i for i, c in enumerate(controls) if c.startswith(h)],
@@ -194,8 +199,8 @@ def build_two_hand_parts(rig_file: str | Path | None = None,
                           key="controls", value=controls,
                           allowed="controls of both hands (ri... and le...), e.g. "
                           "config/maps/default_two_gloves.toml")
-    sag = SagGrid.load(_resolve(base, loop.sag_grid, default_grid_path(), rig_file=rig_path,
-                                key="loop.sag_grid"))
+    sag = SagGrid.load(Path(grid_file) if grid_file else _resolve(
+        base, loop.sag_grid, default_grid_path(), rig_file=rig_path, key="loop.sag_grid"))
     shared = SharedControls(expander.control_means_deg)
     sides: dict[str, RigParts] = {}
     orientations: dict[str, SideOrientation] = {}

@@ -222,6 +222,8 @@ class _Session:
             summary["stages_us"] = self.stages
         if self.signals.received:
             summary["signals"] = self.signals.received
+        if self.opts.show:
+            summary["show"] = self.opts.show
         if self.left_out:
             summary["servos_left_out"] = self.left_out
         if error is not None:
@@ -421,6 +423,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     most = (", most at " + ", ".join(f"{c['joint']} ({c['clamps']})" for c in clamped)
             if clamped else "")
     lines = [
+        *([f"show              {summary['show']}"] if summary.get("show") else []),
         f"frames            {summary['frames']} in {summary['duration_s']} s "
         f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us){ease}",
         f"latency           p50 {lat['p50']} us, p99 {lat['p99']} us, max {lat['max']} us "
@@ -468,6 +471,7 @@ def format_hands_summary(summary: dict[str, Any]) -> str:
     """The summary of a two-hand run: a part per hand, then torque and the error."""
     lines = [*([f"show              {summary['show']}"] if summary.get("show") else [])]
     for name, part in summary["hands"].items():
+        part = {k: v for k, v in part.items() if k != "show"}
         lines.append(f"--- {name} hand ({part.get('glove_source') or 'glove'}) ---")
         lines += [line for line in format_summary(part).splitlines()
                   if not line.startswith(("torque off", "error"))]

@@ -15,6 +15,7 @@ from handrig.app.view import add_view_flag, view_session
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._rig import add_rig_argument, print_sources
+from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
 
 
@@ -30,6 +31,9 @@ def register(sub: Any) -> None:
         "--frames count the run before the ease to relaxed, which the summary includes.",
     )
     add_rig_argument(p)
+    p.add_argument("--show", default=None, metavar="FILE.toml",
+                   help="a show file naming the rig, gloves, map, grid, buses and outputs "
+                   "(examples/show.toml); flags given here win over it")
     p.add_argument("--glove-config", default=None, metavar="FILE",
                    help="glove file (default: the rig file's [loop] glove, else your calibrated "
                    "glove.toml, else config/glove.toml)")
@@ -68,12 +72,33 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
+def _from_show(args: argparse.Namespace) -> ShowFile | None:
+    """Fill the flags not given from ``--show``'s file (None without one)."""
+    if not args.show:
+        return None
+    show = load_show(args.show)
+    fill = {"rig": show.show.rig, "glove": show.gloves.right, "glove_left": show.gloves.left,
+            "glove_config": show.gloves.right_config,
+            "glove_left_config": show.gloves.left_config, "bus": show.buses.right,
+            "bus_left": show.buses.left, "vmc": show.outputs.vmc,
+            "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
+            "view": show.outputs.view}
+    for name, value in fill.items():
+        if getattr(args, name) is None and value:
+            setattr(args, name, value)
+    return show
+
+
 def run(args: argparse.Namespace) -> int:
     two: TwoHandParts | None = None
+    show: ShowFile | None = None
     try:
+        show = _from_show(args)
         if args.viewer:
             check_display("--viewer")
-        parts = build_parts(args.rig, args.glove_config)
+        files = ({"map_file": show.show.map or None, "grid_file": show.show.grid or None}
+                 if show is not None else {})
+        parts = build_parts(args.rig, args.glove_config, **files)
         rig = parts.rig_config
         right, left = glove_specs(rig, args.glove, args.glove_left)
         if left is not None or rig.left_bus is not None:
@@ -82,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
                     "this rig has the left hand's servos on a bus of their own: it needs a "
                     "glove per hand", key="--glove-left", file=None,
                     allowed="--glove-left PORT (or [gloves] left in the rig file)")
-            two = build_two_hand_parts(args.rig, args.glove_config, args.glove_left_config)
+            two = build_two_hand_parts(args.rig, args.glove_config, args.glove_left_config,
+                                       **files)
         elif args.bus_left is not None:
             raise ConfigError("a left bus needs a rig with [left_bus] and a glove per hand",
                               key="--bus-left", value=args.bus_left,
@@ -95,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
             raise
         return print_result(failed(exc), as_json=True)
     if not args.json:
+        if show is not None:
+            _stderr(f"show: {show.title} ({show.path})")
         print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
     with view_session(args.view, parts.rig_config, _stderr) as on_rig:
         opts = LiveOptions(
@@ -102,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
             wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
             record=args.record, record_rate_hz=args.record_rate, panel=not args.json,
             verbose=not args.json, on_rig=on_rig, glove_left=left, bus_left=args.bus_left,
+            show=show.title if show is not None else "",
         )
         result = run_two_hands(two, opts) if two is not None else run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

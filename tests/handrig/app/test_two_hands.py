@@ -89,22 +89,26 @@ def test_two_gloves_on_two_buses_each_hand_its_own_bus(recording):
     assert right["bus"]["writes"] != left["bus"]["writes"] or right["frames"] == left["frames"]
 
 
-def test_the_same_glove_for_both_hands_is_refused_naming_both_flags(tmp_path, capsys):
-    take = tmp_path / "take.csv"
-    take.write_bytes(DEMO_RECORDING.read_bytes())
-    with pytest.raises(ConfigError) as err:
-        parts = build_two_hand_parts("puppet_two_hands")
-        check_two_gloves(f"replay:{take}", f"replay:{tmp_path}/../{tmp_path.name}/take.csv",
-                         parts.sides["ri"].glove_config, parts.sides["le"].glove_config)
-    assert "--glove-left" in str(err.value) and "--glove " in str(err.value)
-    # the command: refused before any bus opens (no emulator started, nothing sent)
-    status = main(["run", "--rig", "puppet_two_hands", "--glove", f"replay:{take}",
-                   "--glove-left", f"replay:{take}", "--bus", "sim", "--frames", "10"])
-    err = capsys.readouterr().err
-    assert status == 2, err
-    assert "--glove-left" in err and "--glove " in err
-    assert "same" in err and "Traceback" not in err
-    assert "servo bus" not in err and "commissioned" not in err
+def test_the_same_glove_port_for_both_hands_is_refused_naming_both_flags(recording, capsys):
+    parts = build_two_hand_parts("puppet_two_hands")
+    with GloveEmulator(recording, "frames", rate_hz=200.0) as glove:
+        port = glove.port_path
+        with pytest.raises(ConfigError) as err:
+            check_two_gloves(port, port, parts.sides["ri"].glove_config,
+                             parts.sides["le"].glove_config)
+        assert "--glove-left" in str(err.value) and "--glove " in str(err.value)
+        # the command: refused before any bus opens (no emulator started, nothing sent)
+        status = main(["run", "--rig", "puppet_two_hands", "--glove", port,
+                       "--glove-left", port, "--bus", "sim", "--frames", "10"])
+    err_text = capsys.readouterr().err
+    assert status == 2, err_text
+    assert "--glove-left" in err_text and "--glove " in err_text
+    assert "same port" in err_text and "Traceback" not in err_text
+    assert "servo bus" not in err_text and "commissioned" not in err_text
+    # one recording replayed for both hands is no port: allowed
+    take = f"replay:{DEMO_RECORDING}"
+    assert check_two_gloves(take, take, parts.sides["ri"].glove_config,
+                            parts.sides["le"].glove_config) == (take, take)
 
 
 @pytest.mark.parametrize(("argv", "says"), [
@@ -141,3 +145,24 @@ def test_each_hand_follows_its_own_glove_and_forearm():
         j = le.pipeline.servo_joints.index(f"le{name}")
         assert r1[i] == pytest.approx(r0[i])
         assert c[j] - a[j] == pytest.approx(5.0, abs=1e-6)
+
+
+def test_the_panel_names_the_show_and_has_a_line_per_hand():
+    from handrig.app.panel import GloveLink, PanelSnapshot, plain_line, render
+    from handrig.app.rig_snapshot import hand_line
+
+    right = PanelSnapshot(mode="running", glove=GloveLink("/dev/ttyACM0", 200.0),
+                          latency_p50_us=180.0, latency_p99_us=420.0)
+    left = PanelSnapshot(mode="relaxing", reason="glove silent",
+                         glove=GloveLink("/dev/ttyACM1", float("nan")))
+    snap = PanelSnapshot(mode="running/relaxing", show="rehearsal 3",
+                         hands=(hand_line("right", right), hand_line("left", left)))
+    from rich.console import Console
+
+    console = Console(width=80, record=True, force_terminal=False)
+    console.print(render(snap))
+    text = console.export_text()
+    assert "show rehearsal 3" in text
+    assert "right  running" in text and "180/420 us" in text and "left   relaxing" in text
+    line = plain_line(snap)
+    assert line.startswith("show rehearsal 3") and "left   relaxing" in line
