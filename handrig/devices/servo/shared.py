@@ -92,10 +92,14 @@ class SharedBus:
             return state
 
     def housekeeping(self, deadline_s: float) -> bool:
+        """The bus's upkeep, in a gap the other loop is not using, and holding the wire
+        no longer than a read of every servo may (:data:`READ_HOLD_WIRES`)."""
         if not self.lock.acquire(blocking=False):
             return False  # the other loop has the wire: upkeep waits for a free gap
         try:
-            return self.bus.housekeeping(deadline_s)
+            cap = (self.clock.now() + READ_HOLD_WIRES * self.bus.read_wire_s(self.bus.n_servos)
+                   + READ_HOLD_EXTRA_S)
+            return self.bus.housekeeping(min(deadline_s, cap))
         finally:
             self.lock.release()
 
@@ -225,6 +229,9 @@ class BusPart(ServoBus):
         return self.shared.bus.quiet_wait_s()
 
     def housekeeping(self, deadline_s: float) -> bool:
+        """The reader's loop does the bus's upkeep; another part has none."""
+        if self.shared.reader is not self:
+            return False
         return self.shared.housekeeping(deadline_s)
 
     def drain_events(self) -> list[str]:
