@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 from handrig.app.factory import build_parts
 from handrig.app.hands import TwoHandParts, build_two_hand_parts, glove_specs
 from handrig.app.session import LiveOptions, failed, print_result, run_live
-from handrig.app.sources import run_sources
+from handrig.app.sources import Source, run_sources
 from handrig.app.two_hands import run_two_hands
 from handrig.app.view import add_view_flag, view_session
 from handrig.cli._display import check_display, check_gl_backend
@@ -123,7 +124,15 @@ def run(args: argparse.Namespace) -> int:
     if not args.json:
         if show is not None:
             _stderr(f"show: {show.title} ({show.path})")
-        print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
+        sources = run_sources(args.rig, args.glove_config, parts.rig_config)
+        if two is not None:  # a glove per hand: the two-glove map, the left glove's file
+            sources = [Source("map", two.map_file, "a glove per hand: the two-glove map "
+                              "unless [loop] map or the show names one")
+                       if s.role == "map" else s for s in sources]
+            sources.append(Source("left glove", two.sides["le"].glove_file or Path(),
+                                  "--glove-left-config, [gloves] left_config, else the "
+                                  "right glove's"))
+        print_sources(sources)
     with view_session(args.view, parts.rig_config, _stderr) as on_rig:
         opts = LiveOptions(
             glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,
