@@ -3,6 +3,9 @@ driver -> ``handrig sim-bus`` (MuJoCo puppet), on one bus and on two."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import threading
 import time
 
@@ -29,28 +32,32 @@ def _run(rig: str, recording, frames: int, *, left_pause_s: float = 0.0):
     lines: list[str] = []
     with (GloveEmulator(recording, "frames", rate_hz=200.0) as right,
           GloveEmulator(recording, "frames", rate_hz=200.0) as left):
-        def quiet_left() -> None:
-            time.sleep(0.3)
+        def quiet_left(rig) -> None:
+            deadline = time.monotonic() + 30.0
+            while rig.stats.frames < 60 and time.monotonic() < deadline:
+                time.sleep(0.01)  # the loops run: the right hand has had 60 cycles
             left.pause()
             time.sleep(left_pause_s)
             left.resume()
-        script = threading.Thread(target=quiet_left)
+        scripts: list[threading.Thread] = []
 
-        def log(line: str) -> None:
-            lines.append(line)
-            if left_pause_s and line.startswith("two hands:"):  # the loops start now
-                script.start()
+        def on_rig(rig) -> None:  # given the right hand's rig before torque goes on
+            if left_pause_s:
+                scripts.append(threading.Thread(target=quiet_left, args=(rig,)))
+                scripts[0].start()
 
         result = run_two_hands(parts, LiveOptions(
             glove=right.port_path, glove_left=left.port_path, bus="sim", bus_left="sim",
-            frames=frames, log=log))
-        if left_pause_s:
+            frames=frames, log=lines.append, on_rig=on_rig))
+        for script in scripts:
             script.join()
     return result, lines
 
 
 def _hand_ran(s: dict, frames: int) -> None:
-    assert frames <= s["frames"] <= frames + 205 + 5  # the run, then the 1 s ease
+    # the run, then the 1 s ease (about 200 cycles, more where a loaded host made the
+    # loop catch up on frames that came together)
+    assert frames <= s["frames"] <= frames + 260
     assert s["glove"]["frames_ok"] >= frames and s["glove"]["crc_errors"] == 0
     assert 0 < s["latency_us"]["p50"] <= s["latency_us"]["p99"]
     assert s["reads"] > 5 and 0 < s["tracking_rms_deg"] < 10.0  # the puppet follows
@@ -76,17 +83,20 @@ def test_two_gloves_on_one_bus_drive_both_hands_and_a_lost_glove_relaxes_its_han
     assert "--- right hand" in text and "--- left hand" in text
 
 
-def test_two_gloves_on_two_buses_each_hand_its_own_bus(recording):
-    result, _ = _run("puppet_two_buses", recording, 150)
-    s = result.summary
-    assert result.started and "error" not in s, s.get("error")
-    assert s["torque_off"] is True and s["buses"] == "two"
+def test_the_two_hand_demo_on_two_buses_each_hand_its_own_bus():
+    # the command as a user runs it: two glove emulators and two bus emulators, each a
+    # process of its own, both hands' loops in the one handrig process
+    out = subprocess.run([sys.executable, "-m", "handrig.cli", "demo", "--rig",
+                          "puppet_two_buses", "--frames", "150", "--json"],
+                         capture_output=True, text=True, timeout=180)
+    assert out.returncode == 0, out.stderr[-2000:]
+    s = json.loads(out.stdout)
+    assert "error" not in s and s["torque_off"] is True and s["buses"] == "two"
     right, left = s["hands"]["right"], s["hands"]["left"]
     _hand_ran(right, 150)
     _hand_ran(left, 150)
-    # a bus each: each hand's writes are its own loop's
+    # a bus each, each written by its own loop only
     assert right["bus"]["writes"] >= right["frames"] and left["bus"]["writes"] >= left["frames"]
-    assert right["bus"]["writes"] != left["bus"]["writes"] or right["frames"] == left["frames"]
 
 
 def test_the_same_glove_port_for_both_hands_is_refused_naming_both_flags(recording, capsys):
