@@ -9,12 +9,16 @@ pipeline, Dynamixel driver and recorder) runs for 10 minutes by default, with:
 - on the host: a 50 ms stall of the loop thread every minute;
 - on the glove (an emulator in its own process): bursts of garbage, frames with
   a bad CRC, and dropouts longer than the glove timeout;
-- a CSV recording of the full pose streamed to disk.
+- a CSV recording of the full pose streamed to disk;
+- VMC on: OSC bundles of the full pose to a UDP receiver in this process, counted;
+- with ``--mute ID@FROM-UNTIL``: one servo stops answering (it still hears and
+  obeys) from FROM to UNTIL seconds, e.g. ``--mute 7@120-240``.
 
 It prints the cycles, the faults injected (the emulators' counts) against the
 faults counted (the driver's and glove reader's), the recoveries (reads in a row
 with a stale servo, ended) and their length in cycles, the goals decoded on the
-bus side outside the rig's limits (must be 0), the loop process's RSS at the
+bus side outside the rig's limits (must be 0), the hottest each servo got (as the
+driver read it) and the servos held by the ``[silence]`` tiers, the loop process's RSS at the
 start and end with its growth in MB per hour (a least-squares slope after a
 warm-up; target under 5 MB/h with recording on), and whether torque was off at
 the end. ``python -m bench`` alone does not run it (it is long): name it.
@@ -70,8 +74,17 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=1, help="fault seed (default 1)")
     p.add_argument("--record", default="", metavar="FILE.csv",
                    help="where the recording goes (default: a temporary file, removed)")
+    p.add_argument("--mute", default="", metavar="ID@FROM-UNTIL",
+                   help="one servo sends no reply from FROM to UNTIL seconds after the "
+                   "emulated bus starts (a second or so before the run; it still hears "
+                   "and obeys: a broken reply line), e.g. 7@120-240")
     p.add_argument("--glove-child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args([a for a in argv if a not in ("soak", "bench_soak")])
+    if args.mute:
+        m = re.fullmatch(r"(\d+)@(\d+(?:\.\d*)?)-(\d+(?:\.\d*)?)", args.mute)
+        if not m or float(m.group(2)) >= float(m.group(3)):
+            p.error(f"--mute must be ID@FROM-UNTIL in seconds with FROM < UNTIL, e.g. "
+                    f"7@120-240; got {args.mute!r}")
     if not (np.isfinite(args.seconds) and args.seconds > 0):
         p.error(f"--seconds must be a positive number, got {args.seconds}")
     if not (np.isfinite(args.stall_every_s) and args.stall_every_s > 0):
@@ -150,6 +163,10 @@ class Watch:
     stalls: int = 0
     rss: list[tuple[float, float]] = field(default_factory=list)
     recoveries: Counter[int] = field(default_factory=Counter)  # length in cycles -> count
+    max_temperature_c: np.ndarray = field(default_factory=lambda: np.full(0, np.nan))
+    holding: np.ndarray | None = None  # the loop's [silence] hold flags (read, never written)
+    held_spans: list[tuple[int, float, float]] = field(default_factory=list)  # index, from, to
+    _held_since: dict[int, float] = field(default_factory=dict)
     _next_stall_s: float = 0.0
     _next_rss_s: float = 0.0
     _stale_run: int = 0
@@ -158,6 +175,8 @@ class Watch:
         self._next_stall_s = self.stall_every_s
 
     def output(self, t_s: float, pose: np.ndarray) -> None:
+        if self.holding is not None:
+            self._note_holds(t_s)
         if t_s >= self._next_stall_s:
             self._next_stall_s += self.stall_every_s
             self.stalls += 1
@@ -166,12 +185,34 @@ class Watch:
             self._next_rss_s += RSS_EVERY_S
             self.rss.append((t_s, rss_mb()))
 
+    def _note_holds(self, t_s: float) -> None:
+        """Each span of cycles in which the ``[silence]`` tiers held a servo's goal."""
+        if self.holding is None:
+            return
+        since = self._held_since
+        if not since and not self.holding.any():
+            return
+        for k in np.flatnonzero(self.holding):
+            since.setdefault(int(k), t_s)
+        for j in [j for j in since if not self.holding[j]]:
+            self.held_spans.append((j, since.pop(j), t_s))
+
+    def end_holds(self, t_s: float) -> None:
+        for i, t0 in sorted(self._held_since.items()):
+            self.held_spans.append((i, t0, t_s))
+        self._held_since.clear()
+
     def wrap_reads(self, bus: Any) -> None:
         read: Callable[..., Any] = bus.read_state
 
         def read_state(deadline_s: float | None = None,
                        part: tuple[int, int] | None = None) -> Any:
             state = read(deadline_s) if part is None else read(deadline_s, part)
+            temps = state.temperatures_c
+            if self.max_temperature_c.shape != temps.shape:
+                self.max_temperature_c = np.full(temps.shape, np.nan)
+            if not np.array_equal(temps, self.max_temperature_c, equal_nan=True):
+                np.fmax(self.max_temperature_c, temps, out=self.max_temperature_c)
             if state.stale.any():
                 self._stale_run += 1
             elif self._stale_run:
@@ -192,6 +233,41 @@ class Watch:
         return float(np.polyfit(t[keep], mb[keep], 1)[0] * 3600.0)
 
 
+class VmcReceiver:
+    """A UDP socket on localhost that takes the VMC sender's datagrams and counts them
+    (a thread drains it until :meth:`close`)."""
+
+    def __init__(self) -> None:
+        import socket
+        import threading
+
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.2)
+        self.address = f"127.0.0.1:{self.sock.getsockname()[1]}"
+        self.datagrams = 0
+        self.bytes = 0
+        self._stop = False
+        self._thread = threading.Thread(target=self._drain, daemon=True)
+        self._thread.start()
+
+    def _drain(self) -> None:
+        while not self._stop:
+            try:
+                data = self.sock.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            self.datagrams += 1
+            self.bytes += len(data)
+
+    def close(self) -> None:
+        self._stop = True
+        self._thread.join(timeout=1.0)
+        self.sock.close()
+
+
 def _counts(text: str, key: str) -> dict[str, int]:
     """``key: name N, name N`` from an emulator's last lines."""
     m = re.search(rf"{key}: ([^;\n]*)", text)
@@ -205,16 +281,22 @@ def _counts(text: str, key: str) -> dict[str, int]:
 
 
 # ---------------------------------------------------------------- the run
-def soak(seconds: float, stall_every_s: float, seed: int, record: str) -> dict[str, Any]:
-    """One soak run; returns its figures (what :func:`report` prints)."""
+def soak(seconds: float, stall_every_s: float, seed: int, record: str,
+         mute: str = "") -> dict[str, Any]:
+    """One soak run; returns its figures (what :func:`report` prints). ``mute``:
+    ``ID@FROM-UNTIL``, a servo that does not answer for that window."""
     clock = MonotonicClock()
     parts = app.build_parts()
     rig_cfg = parts.rig_config
     overload_id = rig_cfg.servos[len(rig_cfg.servos) // 2].id
     faults = f"{BUS_FAULTS},overload={overload_id}@{seconds * 0.4:.1f},seed={seed}"
+    if mute:
+        faults += f",mute={mute}"
     watch = Watch(stall_every_s, rig_cfg.bus.read_every)
     lines: list[str] = []
-    out: dict[str, Any] = {"seconds": seconds, "faults": faults, "error": ""}
+    out: dict[str, Any] = {"seconds": seconds, "faults": faults, "error": "", "mute": mute,
+                           "servo_names": [f"{c.id} {c.joint} {c.model}"
+                                           for c in rig_cfg.servos]}
     tmp = None
     if not record:
         tmp = tempfile.TemporaryDirectory(prefix="handrig-soak-")
@@ -222,20 +304,26 @@ def soak(seconds: float, stall_every_s: float, seed: int, record: str) -> dict[s
     out["rss_before_mb"] = rss_mb()
     opened: app.OpenedBus | None = None
     glove_proc: subprocess.Popen[str] | None = None
+    vmc = VmcReceiver()
     try:
         with contextlib.ExitStack() as stack:
+            stack.callback(vmc.close)
             glove_proc, glove_port = stack.enter_context(faulty_glove(seconds, seed))
             opened = stack.enter_context(app.servo_bus(
                 "sim", parts, clock, wire_timing=True, faults=faults, log=lines.append))
             bus = opened.bus
+            bus_started = time.monotonic()
             glove = app.open_glove(glove_port, parts.glove_config, clock)
             stack.enter_context(glove)
             bus.connect()
-            outs = app.outputs(stack, rig_cfg, clock, record=record, log=lines.append)
+            outs = app.outputs(stack, rig_cfg, clock, vmc=vmc.address, record=record,
+                               log=lines.append)
             rig = app.build_rig(parts, glove, bus, clock, outputs=[*outs, watch.output],
                                 log=lines.append)
             watch.wrap_reads(bus)
+            watch.holding = rig.cycle.silence.holding
             rig.prepare()
+            out["run_after_bus_s"] = time.monotonic() - bus_started
             try:
                 with bus.torque(handle_signals=False), \
                         pinned_loop(rig_cfg.loop.pin_cpu, lines.append), \
@@ -243,6 +331,7 @@ def soak(seconds: float, stall_every_s: float, seed: int, record: str) -> dict[s
                     rig.run(duration_s=seconds)
             except HandrigError as exc:
                 out["error"] = str(exc)
+            watch.end_holds(rig.stats.duration_s)
             out["torque_off"] = torque_is_off(bus)
             out["stats"] = rig.stats
             out["bus"] = bus.stats.copy()
@@ -264,6 +353,7 @@ def soak(seconds: float, stall_every_s: float, seed: int, record: str) -> dict[s
         tmp.cleanup()
     out["watch"] = watch
     out["lines"] = lines
+    out["vmc"] = (vmc.address, vmc.datagrams, vmc.bytes)
     return out
 
 
@@ -271,7 +361,11 @@ def report(r: dict[str, Any]) -> None:
     """Print the figures of a soak run."""
     watch: Watch = r["watch"]
     print(f"soak: {r['seconds']:g} s of the live rig on the emulated bus (handrig sim-bus, "
-          f"MuJoCo puppet, wire timing), recording on")
+          f"MuJoCo puppet, wire timing), recording on, VMC on"
+          + (f", servo {r['mute'].replace('@', ' muted from ').replace('-', ' s to ')} s"
+             if r["mute"] else "")
+          + (f" of the emulator's time (the run starts {r['run_after_bus_s']:.1f} s after it)"
+             if r["mute"] and "run_after_bus_s" in r else ""))
     print(f"  bus faults      {r['faults']}; a {STALL_S * 1e3:.0f} ms host stall every "
           f"{watch.stall_every_s:g} s ({watch.stalls} made)")
     if "stats" not in r:
@@ -308,6 +402,39 @@ def report(r: dict[str, Any]) -> None:
     print(f"  silences        {s.servo_silences} servos past the [silence] warning, "
           f"{s.servos_held} held, {s.servo_recoveries} answered again (longest "
           f"{s.servo_recovery_reads_max} reads)")
+    names = r["servo_names"]
+    spans = watch.held_spans
+    by_servo: dict[int, list[tuple[float, float]]] = {}
+    for i, t0, t1 in spans:
+        by_servo.setdefault(i, []).append((t0, t1))
+    if not by_servo:
+        print("  held            no servo's goal was held")
+    for i, runs in sorted(by_servo.items()):
+        total = sum(t1 - t0 for t0, t1 in runs)
+        longest = max(runs, key=lambda r: r[1] - r[0])
+        print(f"  held            servo {names[i]}: {len(runs)} times, {total:.2f} s in all, "
+              f"longest {longest[1] - longest[0]:.2f} s from {longest[0]:.1f} s (run time)")
+    starts = sorted({round(t0, 1) for _, t0, _ in spans})
+    if starts:
+        print(f"  holds began at  {', '.join(f'{t:g}' for t in starts[:20])} s (run time)"
+              + (f" and {len(starts) - 20} more" if len(starts) > 20 else ""))
+    if r["mute"]:
+        muted_id, window = r["mute"].split("@")
+        lo, hi = (float(x) - r.get("run_after_bus_s", 0.0) for x in window.split("-"))
+        others = sorted({names[i] for i, t0, t1 in spans
+                         if names[i].split()[0] != muted_id and t0 < hi and t1 > lo})
+        print(f"  while muted     {lo:.1f}-{hi:.1f} s (run time): other servos held: "
+              + (", ".join(others) if others else "none"))
+    temps = watch.max_temperature_c
+    if temps.size == len(names) and np.isfinite(temps).any():
+        hottest = int(np.nanargmax(temps))
+        print(f"  temperature     max {temps[hottest]:.0f} C at servo {names[hottest]}; per "
+              "servo (ID: max C) " + ", ".join(
+                  f"{n.split()[0]}: {t:.0f}" for n, t in zip(names, temps, strict=True)))
+    else:
+        print("  temperature     (never read)")
+    address, datagrams, size = r["vmc"]
+    print(f"  vmc             {datagrams} datagrams ({size / 1e6:.1f} MB) received at {address}")
     m = re.search(r"goals: (\d+) decoded, (\d+) outside", r["emulator"])
     goals = f"{m.group(2)} of {m.group(1)} decoded" if m else "(no count from the emulator)"
     print(f"  goals outside   {goals} on the bus side outside the rig's limits "
@@ -330,7 +457,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parse_args(sys.argv[1:] if argv is None else argv)
     if args.glove_child:
         sys.exit(glove_child(args.seconds, args.seed))
-    report(soak(args.seconds, args.stall_every_s, args.seed, args.record))
+    report(soak(args.seconds, args.stall_every_s, args.seed, args.record, args.mute))
 
 
 if __name__ == "__main__":

@@ -205,6 +205,9 @@ class SimBus(Dispatcher):
         self._last_advance = self._started_at
         for s in self.servos:
             s.last_heard = self._started_at
+            if s.id in self.faults.hot:
+                s.warm_to(self.faults.hot_c)
+                self.fault_counts["hot at start"] += 1
         driven = set()
         if self.puppet is not None:
             self.puppet.attach(self.servos, self.lock)

@@ -36,6 +36,7 @@ from firmware_protocol.dynamixel import (
     split_sync_read,
     split_sync_write,
 )
+from handrig.clock import Clock
 from sim.dxl_faults import FaultSpec, apply_faults
 from sim.dxl_rig import GOAL_POSITION_ADDRESS
 from sim.dxl_servo import READABLE_BYTES, EmulatedServo
@@ -91,6 +92,8 @@ class Dispatcher:
     _by_id: dict[int, EmulatedServo]
     _packet_baud: int
     _overload_done: bool
+    _started_at: float
+    clock: Clock
 
     @property
     def faults(self) -> FaultSpec:
@@ -118,8 +121,21 @@ class Dispatcher:
 
     # ------------------------------------------------------------ dispatch
 
+    def _muted(self, servo_id: int, now: float) -> bool:
+        """The ``mute`` fault: this servo sends no status now."""
+        f = self._faults
+        if servo_id not in f.mute:
+            return False
+        since = now - self._started_at
+        if f.mute_from_s <= since < f.mute_until_s:
+            self.fault_counts["muted replies"] += 1
+            return True
+        return False
+
     def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"") -> _Reply:
         """One status packet, with faults applied."""
+        if self._faults.mute and self._muted(servo.id, self.clock.now()):
+            return _Reply(b"", servo.return_delay_s)
         packet = build_status(servo.id, error, data)
         extra = 0.0
         if self.faults.any_reply_fault:
@@ -309,7 +325,8 @@ class Dispatcher:
         first_delay = 0.0
         for servo_id, address, length in requests:
             servo = self._servo_for(servo_id, now)
-            if servo is None or servo.status_return_level < 1:
+            if servo is None or servo.status_return_level < 1 \
+                    or (self._faults.mute and self._muted(servo_id, now)):
                 complete = False
                 break
             if not chunks:

@@ -1,8 +1,9 @@
 """Switchable faults of the emulated bus (:class:`FaultSpec`) and how a reply suffers them.
 
 Dropped, CRC-corrupted, wrong-ID, truncated and delayed replies with given
-probabilities (explicit seed), missing servos, and an overload hardware error on
-chosen servos; the bus counts every fault in ``SimBus.fault_counts``.
+probabilities (explicit seed), missing servos, a servo muted for a while (it hears
+and obeys but does not answer), and an overload hardware error on chosen servos;
+the bus counts every fault in ``SimBus.fault_counts``.
 """
 
 from __future__ import annotations
@@ -21,8 +22,12 @@ class FaultSpec:
 
     ``missing``: servo IDs that never answer (as if unplugged). ``overload``: servo
     IDs that report an overload hardware error ``overload_after_s`` after the bus
-    starts (torque off, Alert bit set, only a reboot clears it). ``delay_s`` is the
-    extra latency of a delayed reply.
+    starts (torque off, Alert bit set, only a reboot clears it). ``mute``: servo IDs
+    that send no status from ``mute_from_s`` to ``mute_until_s`` after the bus starts
+    (they still hear and obey every instruction, as with a broken reply line or a
+    Status Return Level of 0; a Fast Sync Read's reply stops short at them). ``delay_s``
+    is the extra latency of a delayed reply. ``hot``: servo IDs that start at
+    ``hot_c`` (a servo warm from an earlier run; it cools or warms from there).
     """
 
     drop: float = 0.0
@@ -34,6 +39,11 @@ class FaultSpec:
     missing: frozenset[int] = field(default_factory=frozenset)
     overload: frozenset[int] = field(default_factory=frozenset)
     overload_after_s: float = 0.0
+    mute: frozenset[int] = field(default_factory=frozenset)
+    mute_from_s: float = 0.0
+    mute_until_s: float = float("inf")
+    hot: frozenset[int] = field(default_factory=frozenset)
+    hot_c: float = 60.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -45,6 +55,13 @@ class FaultSpec:
         if self.delay_s < 0 or self.overload_after_s < 0:
             raise ConfigError("times must be >= 0", key="delay_s/overload_after_s",
                               value=(self.delay_s, self.overload_after_s))
+        if not 0.0 <= self.hot_c <= 120.0:
+            raise ConfigError("start temperature out of range", key="hot", value=self.hot_c,
+                              allowed="hot=ID+ID[@C], 0..120 C")
+        if not 0.0 <= self.mute_from_s < self.mute_until_s:
+            raise ConfigError("mute window must start at >= 0 s and end after it starts",
+                              key="mute", value=(self.mute_from_s, self.mute_until_s),
+                              allowed="mute=ID+ID[@FROM[-UNTIL]], seconds after the bus starts")
 
     @property
     def any_reply_fault(self) -> bool:
@@ -53,13 +70,14 @@ class FaultSpec:
     @classmethod
     def parse(cls, spec: str) -> FaultSpec:
         """Parse ``"drop=0.02,corrupt=0.01,wrong_id=0.01,truncate=0.01,delay=0.01:0.005,
-        missing=7+9,overload=3@1.5,seed=42"`` (any subset, comma separated).
+        missing=7+9,overload=3@1.5,mute=7@120-240,seed=42"`` (any subset, comma separated).
 
-        ``delay=P[:SECONDS]``; ``missing`` and ``overload`` take IDs joined by ``+``;
-        ``overload=IDS[@SECONDS]``.
+        ``delay=P[:SECONDS]``; ``missing``, ``overload`` and ``mute`` take IDs joined by
+        ``+``; ``overload=IDS[@SECONDS]``; ``mute=IDS[@FROM[-UNTIL]]`` (seconds);
+        ``hot=IDS[@C]``.
         """
         allowed = "drop, corrupt, wrong_id, truncate, delay=P[:S], missing=ID+ID, " \
-                  "overload=ID+ID[@S], seed=N"
+                  "overload=ID+ID[@S], mute=ID+ID[@FROM[-UNTIL]], hot=ID+ID[@C], seed=N"
         kw: dict[str, object] = {}
         for part in filter(None, (p.strip() for p in spec.split(","))):
             key, eq, value = part.partition("=")
@@ -81,6 +99,19 @@ class FaultSpec:
                     kw["overload"] = frozenset(int(v) for v in ids.split("+") if v)
                     if after:
                         kw["overload_after_s"] = float(after.removesuffix("s"))
+                elif key == "mute":
+                    ids, _, window = value.partition("@")
+                    kw["mute"] = frozenset(int(v) for v in ids.split("+") if v)
+                    start, dash, until = window.partition("-")
+                    if start:
+                        kw["mute_from_s"] = float(start.removesuffix("s"))
+                    if dash:
+                        kw["mute_until_s"] = float(until.removesuffix("s"))
+                elif key == "hot":
+                    ids, _, temp = value.partition("@")
+                    kw["hot"] = frozenset(int(v) for v in ids.split("+") if v)
+                    if temp:
+                        kw["hot_c"] = float(temp.removesuffix("C"))
                 elif key == "seed":
                     kw["seed"] = int(value)
                 else:

@@ -26,6 +26,8 @@ Rules modelled (ROBOTIS e-manual, X-series control table and protocol 2.0):
   (:mod:`sim.puppet`). Goal Current starts at Current Limit after power-on or a
   reboot: an assumption of this emulator (the e-manual gives no initial value), so
   a servo put in mode 5 without a Goal Current write still has its full torque.
+- Goal PWM (100) caps the motor's PWM (e-manual, Goal PWM), from PWM Limit after a
+  reboot (assumed, as Goal Current): :meth:`EmulatedServo.effort_fraction`, for the physics.
 
 Without a physics model attached (see :mod:`sim.puppet`), :meth:`advance` moves
 the motor toward the goal at the Velocity Limit (or Profile Velocity) so the
@@ -65,6 +67,7 @@ from sim.dxl_profile import (
     profile_step,
     profile_type,
 )
+from sim.dxl_thermal import AMBIENT_TEMPERATURE_C, THERMAL
 
 # Addresses above the modelled table up to the end of the XL330 table (661) read as 0.
 READABLE_BYTES = 662
@@ -77,22 +80,6 @@ CURRENT_BASED_POSITION_MODE = 5
 # Present Current (126, int16), Present Velocity (128, int32), Present Position (132, int32).
 _PRESENT = struct.Struct("<hii")
 _I16, _U16, _I32, _U32 = (struct.Struct(f) for f in ("<h", "<H", "<i", "<I"))
-# Thermal model, first order: dT/dt = (T_ambient + R_th x P - T) / tau, with P the
-# winding's I^2 R (R = V_nominal / I_stall, both from the datasheet) plus the
-# electronics' standby draw at the supply voltage. The standby current, R_th and tau
-# are assumptions of this emulator (no datasheet gives them): a small servo in free
-# air that warms by a few kelvin when idle and follows a change of load within minutes.
-AMBIENT_TEMPERATURE_C = 30
-STANDBY_CURRENT_A = 0.02
-THERMAL_RESISTANCE_K_PER_W = 50.0
-THERMAL_TIME_CONSTANT_S = 60.0
-
-
-def idle_temperature_c(volts: float) -> float:
-    """Where a powered servo's temperature settles with no motor current."""
-    return AMBIENT_TEMPERATURE_C + volts * STANDBY_CURRENT_A * THERMAL_RESISTANCE_K_PER_W
-
-
 def _defaults(info: ModelInfo, servo_id: int, baud: int) -> dict[Reg, int]:
     """Initial values: the model's e-manual table, this servo's ID and baud, and the
     supply at the model's recommended voltage."""
@@ -133,6 +120,7 @@ class EmulatedServo:
             raise ValueError(f"servo {servo_id}: {baud} baud is not an X-series rate; "
                              f"known: {', '.join(str(b) for b in INDEX_BY_BAUD)}")
         self.info = MODELS[model]
+        self.thermal = THERMAL[model]
         self._item_at = self.info.item_at()
         self.mem = bytearray(READABLE_BYTES)
         # the profile generator's output, in Present Position units and units/s
@@ -187,6 +175,8 @@ class EmulatedServo:
         self._publish_trajectory()
         if self.info.has_current:
             self.set(Reg.GOAL_CURRENT, self.get(Reg.CURRENT_LIMIT))
+        # Goal PWM starts at PWM Limit (the same assumption as Goal Current: full effort)
+        self.set(Reg.GOAL_PWM, self.get(Reg.PWM_LIMIT))
 
     @property
     def id(self) -> int:
@@ -242,6 +232,11 @@ class EmulatedServo:
             return None
         units = min(abs(self.get(Reg.GOAL_CURRENT)), self.get(Reg.CURRENT_LIMIT))
         return units * self.info.current_unit_ma
+
+    def effort_fraction(self) -> float:
+        """The motor's share of full effort: min(PWM Limit, |Goal PWM|) / 100 % PWM."""
+        pwm = min(self.get(Reg.PWM_LIMIT), abs(self.get(Reg.GOAL_PWM)))
+        return pwm / PWM_FULL
 
     def error_byte(self, code: int = 0) -> int:
         """ERR byte of a status: ``code`` plus the Alert bit while a hardware error stands."""
@@ -353,20 +348,26 @@ class EmulatedServo:
 
     def heat(self, dt_s: float) -> None:
         """Warm the servo by I^2 R at the present current plus its standby draw, and cool
-        it toward ambient (first order, see :data:`THERMAL_TIME_CONSTANT_S`); above the
-        Temperature Limit it reports overheating (torque off)."""
+        it toward ambient (first order with the model's :data:`THERMAL` figures); above
+        the Temperature Limit it reports overheating (torque off)."""
         if dt_s <= 0:
             return
         volts = self.mem[144] / 10.0
         resistance = volts / self.info.stall_current_a if volts else 1.0
         amps = self.motor_current_ma / 1000.0
-        power_w = amps * amps * resistance + volts * STANDBY_CURRENT_A
-        target = AMBIENT_TEMPERATURE_C + power_w * THERMAL_RESISTANCE_K_PER_W
-        alpha = 1.0 - math.exp(-dt_s / THERMAL_TIME_CONSTANT_S)  # exact for a constant P
+        spec = self.thermal
+        power_w = amps * amps * resistance + volts * spec.standby_current_a
+        target = AMBIENT_TEMPERATURE_C + power_w * spec.resistance_k_per_w
+        alpha = 1.0 - math.exp(-dt_s / spec.time_constant_s)  # exact for a constant P
         self.temperature_c += (target - self.temperature_c) * alpha
         self.mem[146] = max(0, min(255, round(self.temperature_c)))
         if self.mem[146] > self.mem[31] and not self.mem[70] & HardwareError.OVERHEATING:
             self.inject_hardware_error(HardwareError.OVERHEATING)
+
+    def warm_to(self, temp_c: float) -> None:
+        """Set the internal temperature (warm from earlier use); heat goes on from there."""
+        self.temperature_c = float(temp_c)
+        self.mem[146] = max(0, min(255, round(temp_c)))
 
     def speed_limit_ticks_per_s(self) -> float:
         """Motor speed limit: Profile Velocity if set, else Velocity Limit."""
@@ -505,6 +506,8 @@ class EmulatedServo:
             if not low <= value <= high:
                 return ErrorCode.DATA_LIMIT
         if pos == Reg.GOAL_CURRENT and abs(value) > self.get(Reg.CURRENT_LIMIT):
+            return ErrorCode.DATA_LIMIT
+        if pos == Reg.GOAL_PWM and abs(value) > self.get(Reg.PWM_LIMIT):
             return ErrorCode.DATA_LIMIT
         if pos == Reg.GOAL_VELOCITY and abs(value) > self.get(Reg.VELOCITY_LIMIT):
             return ErrorCode.DATA_LIMIT

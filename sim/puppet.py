@@ -220,10 +220,11 @@ class _HandSim:
             g = ch.cal.gear_ratio
             self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
             self.speed_rad_s[k] = s.speed_limit_ticks_per_s() / TICKS_PER_RAD / g
-            # P/D gain, Goal Current, Current Limit, PWM Limit, Operating Mode: act
+            # P/D gain, Goal Current, Current Limit, PWM Limit and Goal PWM, Operating
+            # Mode: act
             # only on a change
             key = (bytes(mem[80:82]), bytes(mem[84:86]), bytes(mem[102:104]),
-                   bytes(mem[38:40]), bytes(mem[36:38]), mem[11])
+                   bytes(mem[38:40]), bytes(mem[36:38]) + bytes(mem[100:102]), mem[11])
             if key != ch.limits_key:
                 self._apply_limits(ch, s)
                 ch.limits_key = key
@@ -239,7 +240,7 @@ class _HandSim:
         cap_ma = s.current_cap_ma()
         if cap_ma is not None:  # current-based position: the current cap bounds torque
             limit = min(limit, cap_ma / 1000.0 * ch.kt_nm_per_a)
-        limit *= g * min(1.0, s.get(Reg.PWM_LIMIT) / PWM_LIMIT)
+        limit *= g * min(1.0, s.effort_fraction())
         self.model.actuator_forcerange[ch.actuator] = (-limit, limit)
         ch.force_limit_nm = limit
 

@@ -14,10 +14,11 @@ colour (:data:`THUMB_RGBA`), the other fingers in skin tones, the palm and
 forearm darker, on a light background.
 
 With ``model`` (a robot rig's MJCF file, e.g. the LEAP hand) the robot is drawn
-instead: its joints are named by the rig's servos. A model shipped without meshes
-(the LEAP preset) shows its collision boxes: the palm, each finger's links and
-its fingertip as boxes, thumb bodies (``th_*``) in the thumb colour, fingertips
-(white material) light, the rest in :data:`ROBOT_RGBA`.
+instead: its joints are named by the rig's servos. The geom groups MuJoCo's own
+viewer shows by default (0, 1 and 2) are drawn, as in the live view: the LEAP and
+ORCA presets' meshes (group 2), not their collision geoms (group 3). Thumb bodies
+(``th_*``) are in the thumb colour, white geoms (e.g. fingertip pads) light, the
+rest in :data:`ROBOT_RGBA`.
 """
 
 from __future__ import annotations
@@ -115,24 +116,25 @@ def render_strip(
     data = mujoco.MjData(mj_model)
     if model is None:
         _colour(mj_model, mujoco)
+        thumb_coloured = True
         palm = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, "riPalm")
         hand_bodies = [i for i in range(mj_model.nbody) if i >= palm > 0]
         distance, azimuth, elevation = 0.30, -150.0, -20.0
     else:
-        _colour_robot(mj_model, mujoco)
+        thumb_coloured = _colour_robot(mj_model, mujoco)
         hand_bodies = list(range(1, mj_model.nbody))
         distance, azimuth, elevation = 0.40, 150.0, -35.0
     return _draw(mj_model, data, mujoco, frames_deg, joint_names, labels, hand_bodies,
-                 (distance, azimuth, elevation), size, Path(out), all_groups=model is not None)
+                 (distance, azimuth, elevation), size, Path(out), thumb_label=thumb_coloured)
 
 
 def _draw(model: object, data: object, mujoco: object, frames_deg: Sequence[np.ndarray],
           joint_names: Sequence[str], labels: list[str], hand_bodies: list[int],
           view: tuple[float, float, float], size: tuple[int, int], out: Path, *,
-          all_groups: bool = False) -> Path:
+          thumb_label: bool = True) -> Path:
     """Pose ``model`` at each picked frame, draw it from ``view`` (distance, azimuth,
-    elevation) looking at the mean of ``hand_bodies``, and save the strip;
-    ``all_groups``: draw every geom group (a robot model's collision boxes too)."""
+    elevation) looking at the mean of ``hand_bodies``, and save the strip (MuJoCo's
+    default geom groups 0-2); ``thumb_label``: say which colour is the thumb."""
     m: Any = model
     d: Any = data
     mj: Any = mujoco
@@ -150,9 +152,7 @@ def _draw(model: object, data: object, mujoco: object, frames_deg: Sequence[np.n
         ) from None
     cam = mj.MjvCamera()
     cam.distance, cam.azimuth, cam.elevation = view
-    opt = mj.MjvOption()
-    if all_groups:
-        opt.geomgroup[:] = 1
+    opt = scene_option(mj)
     m.vis.headlight.ambient[:] = (0.42, 0.42, 0.42)
     m.vis.headlight.diffuse[:] = (0.62, 0.62, 0.62)
     m.vis.headlight.specular[:] = (0.1, 0.1, 0.1)
@@ -170,7 +170,14 @@ def _draw(model: object, data: object, mujoco: object, frames_deg: Sequence[np.n
             images.append(renderer.render().copy())
     finally:
         renderer.close()
-    return _save(images, labels, out)
+    return _save(images, labels, out, thumb_label=thumb_label)
+
+
+def scene_option(mujoco: Any) -> Any:
+    """What a render draws: MuJoCo's default ``MjvOption``, whose geom groups 0-2 are
+    on and 3-5 off (a robot model's visual meshes, not its collision geoms in group 3),
+    the groups the live view draws too (``handrig.app.view.scene.VISIBLE_GROUPS``)."""
+    return mujoco.MjvOption()
 
 
 def _with_absolute_meshdir(path: Path) -> str:
@@ -187,10 +194,12 @@ def _with_absolute_meshdir(path: Path) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
-def _colour_robot(model: object, mujoco: object) -> None:
+def _colour_robot(model: object, mujoco: object) -> bool:
     """A robot model's thumb bodies (``th_*``) in the thumb colour, white geoms (the
-    fingertips) light, everything else dark grey."""
+    fingertips) light, everything else dark grey. True when a geom got the thumb
+    colour (a model whose bodies are named otherwise, e.g. ORCA's, has none)."""
     m: Any = model
+    thumb = False
     for g in range(m.ngeom):
         body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY,  # type: ignore[attr-defined]
                                  int(m.geom_bodyid[g])) or ""
@@ -200,6 +209,8 @@ def _colour_robot(model: object, mujoco: object) -> None:
         rgba = THUMB_RGBA if body.startswith("th_") else TIP_RGBA if white else ROBOT_RGBA
         m.geom_rgba[g] = rgba
         m.geom_matid[g] = -1
+        thumb = thumb or rgba is THUMB_RGBA
+    return thumb
 
 
 def _colour(model: object, mujoco: object) -> None:
@@ -213,7 +224,8 @@ def _colour(model: object, mujoco: object) -> None:
         m.geom_rgba[g] = rgba  # type: ignore[attr-defined]
 
 
-def _save(images: list[np.ndarray], labels: list[str], out: Path) -> Path:
+def _save(images: list[np.ndarray], labels: list[str], out: Path, *,
+          thumb_label: bool = True) -> Path:
     """Tiles in rows of :data:`COLUMNS`, each labelled, as one PNG."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure  # no pyplot: no backend switch in the caller
@@ -232,7 +244,7 @@ def _save(images: list[np.ndarray], labels: list[str], out: Path) -> Path:
         ax.text(0.03, 0.95, label, transform=ax.transAxes, ha="left", va="top",
                 fontsize=11, family="monospace", color="black",
                 bbox={"facecolor": "white", "alpha": 0.75, "edgecolor": "none", "pad": 2})
-        if i == 0:
+        if i == 0 and thumb_label:
             ax.text(0.97, 0.05, "thumb", transform=ax.transAxes, ha="right", va="bottom",
                     fontsize=9, color=THUMB_RGBA, fontweight="bold")
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -48,6 +48,28 @@ def pytest_unconfigure(config: pytest.Config) -> None:
 
 SPEC = Path(__file__).resolve().parents[1] / "firmware_protocol" / "SPEC.md"
 
+# `make test` runs the suite on two workers (pytest-xdist, `--dist loadgroup`). The tests
+# below only compute (maps, sag, baking, rendering, parsing, compiling): they share the
+# machine freely. Every other test runs a realtime loop, emulators on ptys, processes
+# with signals, or firmware builds in build/: those stay in one group, run one at a time
+# on one worker as they do in a plain `pytest`, so two loops never contend for the cores.
+COMPUTE_ONLY = (
+    "handrig/pose/", "handrig/offline/", "handrig/config/", "firmware_protocol/",
+    "firmware/", "sim/test_bake.py", "sim/test_bake_plot_state.py", "sim/test_passive.py",
+    "sim/test_hand_model.py", "sim/test_render.py", "sim/test_calibration_motion.py",
+    "sim/test_dxl_servo.py", "test_user_home.py", "test_layers.py",
+    "handrig/app/test_demo_render.py", "handrig/cli/test_sag_commands.py",
+)
+TESTS = Path(__file__).resolve().parent
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        rel = item.path.resolve().relative_to(TESTS).as_posix()
+        if not rel.startswith(COMPUTE_ONLY):
+            item.add_marker(pytest.mark.xdist_group("realtime"))
+
+
 
 @pytest.fixture(scope="session")
 def build_spec_c(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Path]:

@@ -39,7 +39,7 @@ from handrig.devices.glove_calibration import (
     default_glove_path,
     load_glove_config,
 )
-from handrig.devices.glove_recording import read_glove_recording
+from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 from handrig.errors import ConfigError, DeviceError
@@ -83,8 +83,9 @@ class RigParts:
     expander: Expander
     sag: SagGrid
     pipeline: PosePipeline
-    controls: ControlsFromRaw  # a GloveControls (one glove), or a hand's of two gloves
-    orientation: OrientationLike  # a ForearmAngles, or a hand's of two gloves
+    controls: ControlsFromRaw  # the glove's GloveControls (a take played: its pose; a
+    # hand of two gloves: its glove's into the shared vector, hands.SideControls)
+    orientation: OrientationLike  # the glove's ForearmAngles (a take played: fixed)
     glove_file: Path | None = None  # where glove_config was read from
     hand: str | None = None  # one hand's servos of a two-hand rig ("ri", "le"); None: all
 
@@ -186,8 +187,9 @@ def glove_spec(spec: str | None, cfg: GloveConfig, glove_file: Path | None = Non
         path = Path(spec.removeprefix("replay:"))
         if not path.is_file():
             raise ConfigError(f"glove recording not found: {path}", key="--glove", value=spec,
-                              allowed="replay:FILE with an existing recording "
-                              "(`handrig record` or `handrig sim-glove --save` make one)")
+                              allowed="replay:FILE with an existing glove take "
+                              "(`handrig record glove TAKE.csv` or `handrig run "
+                              "--record-glove TAKE.csv` make one)")
         return spec
     port = Path(spec.removeprefix("opengloves:"))
     if port.is_file() or (port.suffix.lower() in REPLAY_SUFFIXES and not port.exists()):
@@ -227,8 +229,12 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
     """``PORT``, ``opengloves:PORT`` or ``replay:FILE`` (None: the port in glove.toml),
     checked first (:func:`glove_spec`)."""
     spec = glove_spec(spec, cfg, glove_file)
+    needed = max(ch.raw_index() for ch in cfg.channels) + 1
     if spec.startswith("replay:"):
-        return ReplayGlove(read_glove_recording(spec.removeprefix("replay:")), clock)
+        path = spec.removeprefix("replay:")
+        rec = read_glove_recording(path)
+        check_channels(rec, needed, path, glove_file)  # a take of another glove
+        return ReplayGlove(rec, clock)
     if spec.startswith("opengloves:"):
         return SerialGlove(spec.removeprefix("opengloves:"), "opengloves", clock=clock,
                            baud=cfg.glove.baud, analog_max=cfg.glove.analog_max,
@@ -236,7 +242,6 @@ def open_glove(spec: str | None, cfg: GloveConfig, clock: Clock,
     # reader="poll": the loop itself reads the port without blocking, so a frame is
     # handled in the cycle that reads it (no reader thread competing for the GIL).
     # a frame with fewer raw channels than the calibration reads is never settled on
-    needed = max(ch.raw_index() for ch in cfg.channels) + 1
     names = [""] * needed
     for ch in cfg.channels:
         names[ch.raw_index()] = names[ch.raw_index()] or ch.curve
@@ -353,12 +358,13 @@ def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
 
 def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
               outputs: Sequence[Callable[[float, FloatArray], None]] = (),
-              log: Callable[[str], None] = print, profile: bool = False) -> Rig:
+              log: Callable[[str], None] = print, profile: bool = False,
+              ease_in: bool = False) -> Rig:
     """The loop on these devices, with the rig file's rates and safety timings
-    (:meth:`Rig.from_config`)."""
+    (:meth:`Rig.from_config`); ``ease_in``: the first frame eases in (a take played)."""
     return Rig.from_config(parts.rig_config, glove, bus, parts.pipeline, clock,
                            controls_from_raw=parts.controls, orientation=parts.orientation,
-                           outputs=outputs, log=log, profile=profile)
+                           outputs=outputs, log=log, profile=profile, ease_in=ease_in)
 
 
 def _die_with_parent() -> Callable[[], None] | None:
@@ -485,6 +491,11 @@ def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, A
                 "path": st.path, "format": st.name, "frames": st.frames_written,
                 "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
                 "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
+        elif st.kind == "glove take":
+            out["glove_take"] = {
+                "path": st.path, "frames": st.frames_written,
+                "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
+                "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
     return out
 
 
@@ -536,7 +547,10 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
         "stale_reads": s.stale_reads,
         "relax_events": s.relax_events,
         "silence": {"silences": s.servo_silences, "held": s.servos_held,
-                    "recoveries": s.servo_recoveries},
+                    "recoveries": s.servo_recoveries, "admitted": s.servos_admitted},
+        "heat": {"warnings": s.heat_warnings, "reliefs": s.heat_reliefs,
+                 "actions": s.heat_actions, "hottest": s.hottest,
+                 "max_c": [num(t, 1) for t in s.max_temperature_c]},
         "resumes": s.resumes,
         "estop": s.estop,
         "stop_reason": s.stop_reason,

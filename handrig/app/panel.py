@@ -76,6 +76,8 @@ class BusHealth:
     errors: int = 0  # CRC, malformed and refused replies
     stale_servos: int = 0  # servos whose newest reading is stale
     stale_worst_age_s: float = 0.0  # age of the oldest of those readings
+    left_out: int = 0  # servos left out at start-up, not (yet) admitted
+    admitted: int = 0  # of those, admitted when they answered
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,8 @@ class ServoLine:
     stale: bool = False
     temperature_c: float = NAN
     temperature_limit_c: float = NAN  # the servo's Temperature Limit, if known
+    warn_c: float = NAN  # [heat] warn_c: yellow from here
+    act_c: float = NAN  # [heat] act_c: red from here (its effort is capped)
     current_ma: float = NAN  # Present Current (or load, as mA equivalent)
     hardware_error: int = 0  # Hardware Error Status bits, 0 = none
 
@@ -104,6 +108,8 @@ class Outputs:
     record_bytes: int = 0  # on disk so far
     record_duration_s: float = 0.0  # of performance recorded
     record_stopped: str = ""  # why the recording stopped during the run ("" = recording)
+    glove_take_path: str = ""  # a glove take (--record-glove) being written
+    glove_take_frames: int = 0
 
 
 @dataclass(frozen=True)
@@ -231,6 +237,8 @@ def bus_line(b: BusHealth) -> Text:
         f"  reads {_num(b.read_rate_hz)}/s  timeouts ",
         (str(b.timeouts), "yellow" if b.timeouts else ""), "  errors ",
         (str(b.errors), "bold red" if b.errors else ""), "  stale ", stale,
+        *([("  out ", ""), (str(b.left_out), "bold yellow")] if b.left_out else []),
+        *([("  admitted ", ""), (str(b.admitted), "green")] if b.admitted else []),
     )
 
 
@@ -251,6 +259,9 @@ def outputs_line(o: Outputs) -> Text:
                         "bold red")
     else:
         text.append("rec off", "dim")
+    if o.glove_take_path:  # frames in the glove take (--record-glove)
+        n = o.glove_take_frames
+        text.append(f" +glove {n if n < 10000 else f'{n // 1000}k'}")
     return text
 
 
@@ -258,9 +269,12 @@ def _servo_cell(sv: ServoLine | None) -> Text:
     if sv is None:
         return Text(" " * 37)
     hot = ""
-    if math.isfinite(sv.temperature_c) and math.isfinite(sv.temperature_limit_c):
-        hot = ("bold red" if sv.temperature_c >= sv.temperature_limit_c else
-               "yellow" if sv.temperature_c >= sv.temperature_limit_c - 10 else "")
+    t = sv.temperature_c
+    if math.isfinite(t):
+        red = min(sv.act_c, sv.temperature_limit_c) if math.isfinite(sv.act_c) \
+            else sv.temperature_limit_c
+        yellow = sv.warn_c if math.isfinite(sv.warn_c) else sv.temperature_limit_c - 10
+        hot = "bold red" if t >= red else "yellow" if t >= yellow else ""
     err = error_letters(sv.hardware_error)
     current = abs(sv.current_ma) if math.isfinite(sv.current_ma) else NAN
     return Text.assemble(
@@ -319,6 +333,8 @@ def plain_line(s: PanelSnapshot) -> str:
     hot = max((sv.temperature_c for sv in s.servos if math.isfinite(sv.temperature_c)),
               default=NAN)
     faults = sum(1 for sv in s.servos if sv.hardware_error)
+    warm = [str(sv.id) for sv in s.servos if math.isfinite(sv.temperature_c)
+            and math.isfinite(sv.warn_c) and sv.temperature_c >= sv.warn_c]
     parts = [
         *([f"show {s.show}"] if s.show else []),
         f"{_clock(s.elapsed_s)} {s.mode}" + (f" ({s.reason})" if s.reason else ""),
@@ -328,12 +344,17 @@ def plain_line(s: PanelSnapshot) -> str:
         f"latency p50 {_num(s.latency_p50_us)} p99 {_num(s.latency_p99_us)} us",
         f"bus {_num(b.read_rate_hz)} reads/s timeouts {b.timeouts} errors {b.errors} stale "
         + (f"{b.stale_servos} (worst {_age(b.stale_worst_age_s)})" if b.stale_servos
-           else "none"),
-        f"servos max {_num(hot)} C, {faults} with errors",
+           else "none")
+        + (f" left out {b.left_out}" if b.left_out else "")
+        + (f" admitted {b.admitted}" if b.admitted else ""),
+        f"servos max {_num(hot)} C" + (f" (past [heat] warn_c: {', '.join(warm)})"
+                                       if warm else "") + f", {faults} with errors",
         f"vmc {o.vmc_target} {_num(o.vmc_rate_hz)} Hz" if o.vmc_target else "vmc off",
         (f"rec {o.record_path} {_size(o.record_bytes)} {_clock(o.record_duration_s)}"
          + (f" {o.record_stopped}" if o.record_stopped else "") if o.record_path
          else "rec off"),
+        *([f"glove take {o.glove_take_path} {o.glove_take_frames} frames"]
+          if o.glove_take_path else []),
     ]
     return " | ".join(parts)
 

@@ -53,19 +53,22 @@ class RigSnapshot:
 
     Built from the newest telemetry snapshot; ages and the elapsed time are carried
     forward to the clock's now. Rates are taken over the last second between
-    snapshots. ``glove_source`` and ``temperature_limit_c`` (servo id -> limit) are
-    shown when given; ``keys``: whether a :class:`~handrig.app.keys.KeyReader` is
-    listening (the panel says so either way).
+    snapshots. ``glove_source``, ``temperature_limit_c`` (servo id -> limit) and
+    ``heat_c`` (``[heat]`` warn_c, act_c: the temperature colours) are used when
+    given; ``keys``: whether a :class:`~handrig.app.keys.KeyReader` is listening (the
+    panel says so either way).
     """
 
     def __init__(self, rig: Watched, *, glove_source: str = "",
                  temperature_limit_c: Mapping[int, float] | None = None,
+                 heat_c: tuple[float, float] = (NAN, NAN),
                  keys: bool = False, show: str = "") -> None:
         self.rig = rig
         self.glove_source = glove_source
         self.keys = keys
         self.show = show
         self.temperature_limit_c = dict(temperature_limit_c or {})
+        self.warn_c, self.act_c = heat_c
         self._rates = {k: _Rate() for k in ("glove", "reads", "writes", "vmc")}
 
     def __call__(self) -> PanelSnapshot:
@@ -98,7 +101,8 @@ class RigSnapshot:
             port=s.bus_port, read_rate_hz=self._rates["reads"].update(s.t_s, s.bus_reads),
             write_rate_hz=self._rates["writes"].update(s.t_s, s.bus_writes),
             timeouts=s.bus_timeouts, errors=s.bus_errors, stale_servos=len(ages),
-            stale_worst_age_s=worst if math.isfinite(worst) else 0.0)
+            stale_worst_age_s=worst if math.isfinite(worst) else 0.0,
+            left_out=s.bus_left_out, admitted=s.bus_admitted)
 
     def _servos(self, s: LoopSnapshot) -> tuple[ServoLine, ...]:
         n = len(s.servo_joints)
@@ -111,6 +115,7 @@ class RigSnapshot:
                       bool(s.stale[i]) if i < len(s.stale) else False,
                       at(s.temperatures_c, i),
                       self.temperature_limit_c.get(s.servo_ids[i], NAN),
+                      self.warn_c, self.act_c,
                       at(s.currents_ma, i),
                       s.hardware_errors[i] if i < len(s.hardware_errors) else 0)
             for i, joint in enumerate(s.servo_joints[:n]))
@@ -118,6 +123,7 @@ class RigSnapshot:
     def _outputs(self, s: LoopSnapshot) -> Outputs:
         vmc_target, vmc_rate, vmc_err = "", NAN, 0
         rec_path, rec_bytes, rec_s, rec_stopped = "", 0, 0.0, ""
+        glove_path, glove_frames = "", 0
         for out in s.outputs:
             if out.kind == "vmc":
                 vmc_target = out.address
@@ -126,7 +132,11 @@ class RigSnapshot:
             elif out.kind == "recorder":
                 rec_path, rec_bytes, rec_s = out.path, out.bytes_written, out.duration_s
                 rec_stopped = out.stopped_reason
-        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped)
+            elif out.kind == "glove take":
+                glove_path, glove_frames = out.path, out.frames_written
+        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped,
+                       glove_path, glove_frames)
+
 
 
 HAND_LABELS = {"ri": "right", "le": "left"}

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import math
 import signal
 import sys
 import threading
@@ -32,8 +33,11 @@ from typing import Any
 import numpy as np
 
 from handrig.app import factory as app
+from handrig.app import takes
 from handrig.app.factory import RigParts
 from handrig.clock import Clock, MonotonicClock
+from handrig.config.rig import TEMPERATURE_LIMIT_C
+from handrig.devices.glove import GloveSource
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
 from handrig.errors import DeviceError, HandrigError, SafetyStop
@@ -60,6 +64,10 @@ class LiveOptions:
     vmc: str | None = None
     record: str | None = None
     record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
+    record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
+    take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
+    ease_in: bool = False  # the first frame eases in from where the servos are (play)
+    done_reason: str = ""  # the stop reason when frames/duration_s is reached ("": "S s done")
     panel: bool = False  # the live panel (plain lines when stdout is no terminal)
     keys: bool = True  # with the panel: read the show keys when stdin is a terminal
     sim_faults: str = ""
@@ -86,20 +94,46 @@ class LiveResult:
     snapshot_times_s: list[float] = field(default_factory=list)  # of each snapshot
 
 
+READBACK_BUDGET_S = 1.5  # reading Torque Enable back at exit: a silent servo costs 0.4 s
+
+
 def torque_is_off(bus: DynamixelBus) -> bool | None:
     """Read Torque Enable back from every servo: True if all are off, None if unreadable."""
-    left_out = set(bus.left_out)  # never given torque: asked, but silence is no failure
-    try:
-        for i in range(bus.n_servos):
-            if i in left_out:
-                with contextlib.suppress(HandrigError):
-                    if bus.read_register(i, Reg.TORQUE_ENABLE) != 0:
-                        return False
-            elif bus.read_register(i, Reg.TORQUE_ENABLE) != 0:
-                return False
-        return True
-    except HandrigError:
-        return None
+    return torque_readback(bus)[0]
+
+
+def torque_readback(bus: DynamixelBus) -> tuple[bool | None, list[str]]:
+    """Torque Enable read back from every servo given torque: (True if every one reads
+    0, False if one reads 1, None if one could not be read; the servos not confirmed
+    off, each named with why). A port that stopped draining is not asked at all, and
+    the reads stop at ``READBACK_BUDGET_S`` (the servos not asked are named). A servo
+    left out at start-up is asked too, its silence no failure."""
+    left_out = set(bus.left_out)
+    given = [i for i in range(bus.n_servos) if i not in left_out]
+    if bus.port_stalled:
+        return None, [f"{bus.describe(i)}: not read back (servo port {bus.port} stopped "
+                      "draining)" for i in given]
+    unconfirmed: list[str] = []
+    on = unread = False
+    end = bus.clock.now() + READBACK_BUDGET_S
+    for i in range(bus.n_servos):
+        if bus.clock.now() >= end:
+            if i not in left_out:
+                unread = True
+                unconfirmed.append(f"{bus.describe(i)}: not read back (the "
+                                   f"{READBACK_BUDGET_S:g} s went on the servos before)")
+            continue
+        try:
+            value = bus.read_register(i, Reg.TORQUE_ENABLE)
+        except HandrigError as exc:
+            if i not in left_out:
+                unread = True
+                unconfirmed.append(f"{bus.describe(i)}: not read back ({exc})")
+            continue
+        if value != 0:
+            on = True
+            unconfirmed.append(f"{bus.describe(i)}: torque still on")
+    return (False if on else None if unread else True), unconfirmed
 
 
 class ExitSignals:
@@ -183,12 +217,15 @@ class _Session:
         self.bus_stats: Any = None
         self.glove_stats: Any = None
         self.torque_off: bool | None = None
+        self.torque_unconfirmed: list[str] = []  # servos whose torque-off was not read back
         self.stages: dict[str, dict[str, float]] | None = None
         self.snapshots: list[np.ndarray] = []
         self.snapshot_times_s: list[float] = []
         self.outputs: list[Any] = []  # the VMC sender and recorder (closed by the end)
         self.ease_s = 0.0  # the easing to relaxed that ended the run
         self.left_out: list[str] = []  # servos that did not answer at start-up, left out
+        self._left_at_start: tuple[int, ...] = ()
+        self.admitted: list[str] = []  # of those, the ones admitted when they answered
         self.panel: Any = None  # the LivePanel while it is up
         self.started = False
 
@@ -197,8 +234,11 @@ class _Session:
         opened: app.OpenedBus | None = None
         try:
             # the checks that need no hardware, before the bus is opened and commissioned
-            app.glove_spec(self.opts.glove, self.parts.glove_config, self.parts.glove_file)
+            if self.opts.take is None:
+                app.glove_spec(self.opts.glove, self.parts.glove_config, self.parts.glove_file)
             app.check_outputs(self.opts.vmc, self.opts.record)
+            if self.opts.record_glove:
+                takes.check_glove_take_path(self.opts.record_glove, record=self.opts.record)
             with contextlib.ExitStack() as stack:
                 opened = stack.enter_context(app.servo_bus(
                     self.opts.bus, self.parts, self.clock, wire_timing=self.opts.wire_timing,
@@ -226,6 +266,10 @@ class _Session:
             summary["show"] = self.opts.show
         if self.left_out:
             summary["servos_left_out"] = self.left_out
+        if self.admitted:
+            summary["servos_admitted"] = self.admitted
+        if self.torque_unconfirmed:
+            summary["torque_off_unconfirmed"] = self.torque_unconfirmed
         if error is not None:
             summary["error"] = str(error)
         return LiveResult(summary, self.snapshots,
@@ -238,19 +282,21 @@ class _Session:
         """With the bus open: the glove, commissioning, the outputs, the rig, the run.
         Returns the error the run ended with (torque is off by then)."""
         opts, parts, log = self.opts, self.parts, self.log
-        glove = app.open_glove(opts.glove, parts.glove_config, self.clock, parts.glove_file)
+        glove = (opts.take(self.clock) if opts.take is not None else
+                 app.open_glove(opts.glove, parts.glove_config, self.clock, parts.glove_file))
         stack.enter_context(glove)
         stack.callback(self._glove_figures, glove)
         bus.connect()
         stack.callback(self._bus_figures, bus)  # after torque-off, before the bus closes
-        left_out = bus.left_out
+        left_out = self._left_at_start = bus.left_out
         self.left_out = [bus.describe(i) for i in left_out]
         header = [f"servo bus {bus.port}: {len(parts.rig_config.servos) - len(left_out)} "
                   f"servos commissioned ({len(bus.commissioning)} settings checked or "
                   "changed)"]
         if left_out and not opts.verbose:  # said once (verbose: the commissioning note)
             log(f"{', '.join(self.left_out)} did not answer at start-up: the run goes on "
-                "without it ([silence] action continue); it gets no goal and no torque")
+                "without it ([silence] action continue); it gets no goal and no torque "
+                "until it answers and is commissioned")
         if opts.verbose:
             header[:0] = bus.commissioning
         if not opts.panel:
@@ -260,8 +306,14 @@ class _Session:
                               record=opts.record, log=log,
                               glove_rate_hz=parts.glove_config.glove.rate_hz,
                               record_rate_hz=opts.record_rate_hz)
+        if opts.record_glove:
+            take = takes.open_glove_take(opts.record_glove, glove, parts.glove_config,
+                                         source=opts.glove or glove.name, log=log,
+                                         from_first_output=True)
+            stack.callback(lambda: log(f"glove take: {take.close()}"))
+            outputs.append(take)
         rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=self._rig_log,
-                            profile=opts.profile)
+                            profile=opts.profile, ease_in=opts.ease_in)
         self.outputs = list(outputs)
         self.stats = rig.stats
         if opts.on_rig is not None:
@@ -280,7 +332,8 @@ class _Session:
                     with (self._console(rig, header) if opts.panel else contextlib.nullcontext(),
                           pinned_loop(loop.pin_cpu, self._rig_log),
                           realtime_priority(loop.realtime_priority, self._rig_log)):
-                        rig.run(frames=opts.frames, duration_s=opts.duration_s)
+                        rig.run(frames=opts.frames, duration_s=opts.duration_s,
+                                done_reason=opts.done_reason)
                     self.ease_s = 0.0 if rig.machine.stop_now else rig.relax_time_s
                 finally:
                     self.signals.disarm()  # from here on: torque off, then shut down
@@ -316,8 +369,12 @@ class _Session:
                 sys.stdin.fileno(), toggle_relax=rig.toggle_relax,
                 stop=lambda: rig.request_stop("q pressed"), estop=rig.estop,
                 on_error=lambda exc: self._rig_log(f"key failed: {exc}"))
-        snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None,
-                               show=self.opts.show)
+        rig_cfg = self.parts.rig_config
+        snapshot = RigSnapshot(
+            rig, glove_source=self.opts.glove or "", keys=keys is not None,
+            temperature_limit_c={s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
+                                 for s in rig_cfg.servos},
+            heat_c=(rig_cfg.heat.warn_c, rig_cfg.heat.act_c), show=self.opts.show)
         console = show_console()
         if not console.is_terminal:  # plain status lines there; the log stays where it was
             for line in header:
@@ -337,7 +394,9 @@ class _Session:
                 self.panel = None
 
     def _bus_figures(self, bus: DynamixelBus) -> None:
-        self.torque_off = torque_is_off(bus)
+        self.torque_off, self.torque_unconfirmed = torque_readback(bus)
+        self.admitted = [bus.describe(i) for i in self._left_at_start
+                         if i not in bus.left_out]
         self.bus_stats = bus.stats
 
     def _glove_figures(self, glove: Any) -> None:
@@ -361,6 +420,7 @@ def _counts(items: dict[str, int]) -> str:
 
 def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
     vmc, rec = outputs.get("vmc"), outputs.get("recording")
+    glove_take = outputs.get("glove_take")
     if vmc:
         rate = f", {vmc['rate_hz']} Hz" if vmc.get("rate_hz") is not None else ""
         errors = f", {vmc['errors']} send errors" if vmc.get("errors") else ""
@@ -377,7 +437,12 @@ def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
                     f"{rec['bytes']} bytes{dropped}")
     else:
         rec_text = "recording off"
-    return [f"outputs           {vmc_text}", f"                  {rec_text}"]
+    lines = [f"outputs           {vmc_text}", f"                  {rec_text}"]
+    if glove_take:
+        stopped = f" ({glove_take['stopped_reason']})" if glove_take.get("stopped_reason") else ""
+        lines.append(f"                  glove take {glove_take['path']}: {glove_take['frames']}"
+                     f" frames, {glove_take['duration_s']:.1f} s{stopped}")
+    return lines
 
 
 CLAMP_RANGE_FRACTION = 0.05
@@ -431,7 +496,11 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"                  of which compute p50 {comp.get('p50')} us, p99 {comp.get('p99')} us "
         f"(cycle start -> Sync Write; loop {summary.get('loop_mode', 'fixed')})",
         *([f"servos left out   {', '.join(summary['servos_left_out'])} (did not answer at "
-            "start-up: no goal, no torque)"] if summary.get("servos_left_out") else []),
+            "start-up: no goal, no torque until commissioned)"]
+          if summary.get("servos_left_out") else []),
+        *([f"  admitted        {', '.join(summary['servos_admitted'])} (answered later: "
+            "commissioned, eased in from where it was)"]
+          if summary.get("servos_admitted") else []),
         f"frame losses      {summary.get('frames_skipped', 0)} skipped by the loop, "
         f"{summary.get('frames_in_host_stalls', 0)} left waiting by host stalls (the host "
         "read nothing for 3 frame periods or more: not the glove), "
@@ -457,10 +526,13 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['tracking_max_deg']} deg (present vs goal, {summary['reads']} reads, "
         f"{summary['stale_reads']} with stale servos)",
         *_outputs_lines(summary.get("outputs") or {}),
+        *_heat_lines(summary.get("heat") or {}),
         f"safety            {summary['relax_events']} relax events, "
         f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
         f"torque off        {summary['torque_off']}",
+        *([f"  not confirmed   {'; '.join(summary['torque_off_unconfirmed'])}"]
+          if summary.get("torque_off_unconfirmed") else []),
     ]
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
@@ -479,6 +551,16 @@ def format_hands_summary(summary: dict[str, Any]) -> str:
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
     return "\n".join(lines)
+
+
+def _heat_lines(heat: dict[str, Any]) -> list[str]:
+    """The ``heat`` line: the hottest servo read and what the [heat] tiers did."""
+    if not heat:
+        return []
+    hottest = heat.get("hottest") or "no temperature read"
+    return [f"heat              hottest {hottest}; {heat.get('warnings', 0)} warnings, "
+            f"{heat.get('reliefs', 0)} effort caps, {heat.get('actions', 0)} actions "
+            "([heat] tiers)"]
 
 
 def failed(error: HandrigError, parts: RigParts | None = None) -> LiveResult:

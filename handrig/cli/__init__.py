@@ -10,6 +10,7 @@ handrig raises on purpose print one line and exit 2; never a traceback.
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import pkgutil
 import sys
@@ -36,6 +37,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line (``argv``: default ``sys.argv[1:]``); returns the exit status.
+
+    Called as the program (no ``argv``), the heap is frozen on the way out: the
+    interpreter's last collection at exit would walk every object numba, MuJoCo and
+    numpy left (most of a second, measured with a ``run``), after the run has ended
+    and said so; the process would linger. A wedged adapter must end the run within a
+    second, counted to the process's exit."""
+    try:
+        return _main(argv)
+    finally:
+        if argv is None:
+            gc.freeze()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     apply_cpus_from_env()  # an emulator started by the rig stays off the loop's CPU
     parser = build_parser()
     try:

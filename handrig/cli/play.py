@@ -1,4 +1,6 @@
-"""``handrig play FILE``: play a recorded performance (CSV or BVH) to a VMC receiver."""
+"""``handrig play TAKE``: play a take onto the servos (``--bus PORT|sim``) through the
+live loop, with the live show's safety; without ``--bus``, a performance (CSV or BVH)
+to a VMC receiver only."""
 
 from __future__ import annotations
 
@@ -7,10 +9,16 @@ import json
 import sys
 from typing import Any
 
-from handrig.app.view import add_view_flag, view_playback
-from handrig.cli._numbers import positive_float
+from handrig.app.factory import build_parts
+from handrig.app.session import LiveOptions, failed, print_result, run_live
+from handrig.app.sources import run_sources
+from handrig.app.takes import load_play_take, play_parts, take_kind
+from handrig.app.view import add_view_flag, view_playback, view_session
+from handrig.cli._display import check_gl_backend
+from handrig.cli._numbers import nonnegative_float, positive_float
+from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.clock import MonotonicClock
-from handrig.errors import ConfigError
+from handrig.errors import ConfigError, DataError, HandrigError
 from handrig.outputs.recorder import Playback
 from handrig.outputs.vmc import DEFAULT_PORT, VmcSender, parse_host_port
 
@@ -18,25 +26,105 @@ from handrig.outputs.vmc import DEFAULT_PORT, VmcSender, parse_host_port
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "play",
-        help="play a recorded performance (.csv/.bvh) to a VMC receiver (no servos needed)",
-        description="Play a performance recorded by `handrig run --record` (or a Perception"
-        " Neuron BVH capture) to a VMC receiver such as VSeeFace, EVMC4U (Unity) or VMC4B"
-        " (Blender), at the recorded times.",
+        help="play a take onto the servos (--bus PORT|sim) or to a VMC receiver",
+        description="Play a take: a performance recorded by `handrig run --record` (.csv or"
+        " .bvh, or a Perception Neuron BVH capture) or a glove take (`handrig run"
+        " --record-glove`, `handrig record glove`). With --bus it plays onto the rig"
+        " through the live loop with the live show's safety: torque on only while it"
+        " plays, every goal inside the joint and servo limits and the slew limit, an ease"
+        " in from where the servos are and out to the relaxed pose at the end, the same"
+        " keys and panel as `handrig run` (space relaxes, q stops, e is the e-stop);"
+        " Ctrl-C, SIGTERM, SIGHUP or SIGQUIT eases to relaxed and turns torque off. A take"
+        " that does not fit the rig (another vocabulary, a different number of curves or"
+        " glove channels, cut short, times going backwards) is refused before the bus is"
+        " opened. Without --bus a performance goes to a VMC receiver only (VSeeFace, EVMC4U,"
+        " VMC4B), no servos needed.",
     )
-    p.add_argument("file", help="recording: .csv or .bvh")
-    p.add_argument("--vmc", default=f"127.0.0.1:{DEFAULT_PORT}", metavar="HOST:PORT",
-                   help=f"VMC receiver (default 127.0.0.1:{DEFAULT_PORT})")
+    p.add_argument("file", help="the take: a performance .csv/.bvh or a glove take .csv")
+    p.add_argument("--bus", default=None, metavar="PORT",
+                   help="play onto the servos on PORT, or 'sim' for the MuJoCo loopback")
+    add_rig_argument(p)
+    p.add_argument("--glove-config", default=None, metavar="FILE",
+                   help="with --bus: the glove file a glove take is calibrated with (default"
+                   " as `handrig run`); a performance uses its fixed [forearm] for the"
+                   " relaxed pose")
+    p.add_argument("--vmc", default=None, metavar="HOST:PORT",
+                   help=f"VMC receiver (without --bus the default is 127.0.0.1:{DEFAULT_PORT};"
+                   " with --bus only when given)")
     p.add_argument("--rate", type=positive_float, default=60.0, metavar="HZ",
-                   help="VMC bundles per second (default 60)")
+                   help="without --bus: VMC bundles per second (default 60)")
     p.add_argument("--speed", type=positive_float, default=1.0,
-                   help="time scale, 2 = twice as fast")
-    p.add_argument("--loop", action="store_true", help="start over at the end (until Ctrl-C)")
+                   help="time scale, 2 = twice as fast (0.05..20 with --bus)")
+    p.add_argument("--from", dest="from_s", type=nonnegative_float, default=None,
+                   metavar="S", help="with --bus: start S seconds into the take")
+    p.add_argument("--to", dest="to_s", type=positive_float, default=None, metavar="S",
+                   help="with --bus: end S seconds into the take")
+    p.add_argument("--loop", action="store_true",
+                   help="start over at the end, until stopped (an installation)")
+    p.add_argument("--no-wire-timing", action="store_true",
+                   help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_view_flag(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.bus is not None:
+        return run_on_rig(args)
+    for flag, value in (("--from", args.from_s), ("--to", args.to_s),
+                        ("--glove-config", args.glove_config)):
+        if value is not None:
+            raise ConfigError("only with --bus", key=flag, value=value,
+                              allowed="add --bus PORT (or --bus sim) to play onto the rig")
+    if take_kind(args.file) == "glove":
+        raise DataError(f"{args.file}: a glove take goes through the rig's pipeline: play it"
+                        f" with `handrig play {args.file} --bus PORT` (or --bus sim), adding"
+                        " --vmc HOST:PORT for a virtual puppet too")
+    return run_to_vmc(args)
+
+
+def run_on_rig(args: argparse.Namespace) -> int:
+    """The take onto the servos through the live session (:func:`run_live`)."""
+    try:
+        parts = build_parts(args.rig, args.glove_config)
+        take = load_play_take(args.file, parts.glove_config, speed=args.speed,
+                              from_s=args.from_s, to_s=args.to_s,
+                              glove_file=parts.glove_file)
+        parts = play_parts(parts, take)
+        if args.bus == "sim":
+            check_gl_backend("--bus sim")
+    except HandrigError as exc:
+        if not args.json:
+            raise
+        return print_result(failed(exc), as_json=True)
+    if not args.json:
+        print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
+        print(f"  take       {take.describe()}" + (", looped" if args.loop else ""),
+              flush=True)
+    rec = take.recording
+    one_frame = float(rec.t_s[1] - rec.t_s[0]) if len(rec) > 1 else 0.01
+    with view_session(args.view, parts.rig_config, _stderr) as on_rig:
+        opts = LiveOptions(
+            glove=f"replay:{args.file}", take=lambda clock: take.source(clock, loop=args.loop),
+            bus=args.bus,
+            duration_s=None if args.loop else round(take.duration_s + one_frame, 3),
+            wire_timing=not args.no_wire_timing, vmc=args.vmc, panel=not args.json,
+            verbose=not args.json, on_rig=on_rig, ease_in=True,
+            done_reason=f"the take played ({take.duration_s:.2f} s)")
+        result = run_live(parts, opts)
+    if result.error is not None and not result.started and not args.json:
+        raise result.error
+    return print_result(result, as_json=args.json)
+
+
+def _stderr(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def run_to_vmc(args: argparse.Namespace) -> int:
+    """A performance to a VMC receiver only, at its recorded times."""
+    if args.vmc is None:
+        args.vmc = f"127.0.0.1:{DEFAULT_PORT}"
     host, port = parse_host_port(args.vmc)
     if not 0 < args.rate <= 1000:
         raise ConfigError("VMC rate out of range", key="--rate", value=args.rate,

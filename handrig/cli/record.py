@@ -1,5 +1,6 @@
 """``handrig record repair FILE``: make a take cut short by a crash readable;
-``handrig record convert IN OUT``: a take in the other format, or a BVH at another rate."""
+``handrig record convert IN OUT``: a take in the other format, or a BVH at another rate;
+``handrig record glove OUT.csv``: a glove take, what the glove sent with its arrival times."""
 
 from __future__ import annotations
 
@@ -17,8 +18,9 @@ from handrig.outputs.recorder import Recorder, format_of, load_performance, repa
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "record",
-        help="recordings made by `handrig run --record`: repair a take cut short, convert",
-        description="Tools for takes recorded by `handrig run --record`.",
+        help="takes: record a glove take, repair a take cut short, convert",
+        description="Takes: record what a glove sends (a glove take), repair a take cut"
+        " short, convert a performance take (`handrig run --record`) to the other format.",
     )
     actions = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     r: argparse.ArgumentParser = actions.add_parser(
@@ -47,6 +49,26 @@ def register(sub: Any) -> None:
                    " frame rate, a CSV's median frame rate)")
     c.add_argument("--json", action="store_true", help="print what was done as JSON")
     c.set_defaults(func=run_convert)
+    g: argparse.ArgumentParser = actions.add_parser(
+        "glove",
+        help="record what the glove sends, with arrival times (a glove take)",
+        description="Store every good frame the glove sends (raw channels, forearm"
+        " quaternion, buttons) with the time its last byte arrived, until --seconds or"
+        " Ctrl-C/SIGTERM. No servos are needed. `handrig run --glove replay:OUT.csv` (or"
+        " `handrig play OUT.csv --bus PORT`) plays it back through the whole pipeline at"
+        " those times. OUT is never replaced.",
+    )
+    g.add_argument("out", help="the glove take to write: OUT.csv (must not exist)")
+    g.add_argument("--glove", default=None, metavar="SPEC",
+                   help="PORT (handrig frames), opengloves:PORT or replay:FILE.csv (default:"
+                   " the glove file's port)")
+    g.add_argument("--glove-config", default=None, metavar="FILE",
+                   help="glove file (default: your calibrated glove.toml, else"
+                   " config/glove.toml): its port, format, rate and channel names")
+    g.add_argument("--seconds", type=positive_float, default=None, metavar="S",
+                   help="stop after S s (default: at Ctrl-C)")
+    g.add_argument("--json", action="store_true", help="print what was done as JSON")
+    g.set_defaults(func=run_glove)
 
 
 def run_repair(args: argparse.Namespace) -> int:
@@ -85,4 +107,18 @@ def run_convert(args: argparse.Namespace) -> int:
         print(f"{done['out']}: {done['frames_out']} frames from {done['frames_in']}"
               f" ({done['duration_s']:.3f} s" + (f", {rate:g} frames/s)" if rec.fmt == "bvh"
                                                  else ")"))
+    return 0
+
+
+def run_glove(args: argparse.Namespace) -> int:
+    from handrig.app.glove_take_session import record_glove_take
+
+    done = record_glove_take(args.out, glove=args.glove, glove_file=args.glove_config,
+                             seconds=args.seconds)
+    if args.json:
+        print(json.dumps(done))
+    else:
+        print(f"{done['out']}: {done['frames']} glove frames in {done['duration_s']:.3f} s"
+              f" from {done['glove']} ({done['errors']} bad frames)"
+              + (f"; stopped by {done['stopped_by']}" if done["stopped_by"] else ""))
     return 0

@@ -59,6 +59,9 @@ def register(sub: Any) -> None:
                    help="also send the hands to a VMC receiver (VSeeFace, Unity, Blender)")
     p.add_argument("--record", default=None, metavar="FILE",
                    help="record the performance (.csv or .bvh; never replaces a file)")
+    p.add_argument("--record-glove", default=None, metavar="FILE.csv",
+                   help="also store what the glove sent, each frame with its arrival time"
+                   " (a glove take: --glove replay:FILE.csv plays it; never replaces a file)")
     p.add_argument("--record-rate", type=float_in(1.0, 2000.0), default=None, metavar="HZ",
                    help="a .bvh take's frames per second (default: the glove's [glove]"
                    " rate_hz; a CSV keeps each frame's own time)")
@@ -137,7 +140,8 @@ def run(args: argparse.Namespace) -> int:
         opts = LiveOptions(
             glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,
             wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
-            record=args.record, record_rate_hz=args.record_rate, panel=not args.json,
+            record=args.record, record_rate_hz=args.record_rate,
+            record_glove=args.record_glove, panel=not args.json,
             verbose=not args.json, on_rig=on_rig, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
         )

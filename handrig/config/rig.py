@@ -228,6 +228,55 @@ class SilenceConfig:
                               allowed="continue, relax, stop")
 
 
+HeatAction = Literal["continue", "relax", "stop"]
+# Temperature Limit (31) initial value per model, deg C: the servo turns its torque off
+# above it (e-manual control tables: X330 70, X430 80).
+TEMPERATURE_LIMIT_C: dict[str, int] = {
+    "XL330-M288": 70, "XL330-M077": 70, "XC330-M288": 70, "XC330-T288": 70,
+    "XM430-W350": 80, "XC430-W150": 80,
+}
+HEAT_HYSTERESIS_C = 3.0  # a tier ends once the servo is this far below it
+
+
+@dataclass(frozen=True)
+class HeatConfig:
+    """What the rig does about a servo that heats up (``[heat]``), in tiers, from the
+    temperatures the bus reads (about once a second).
+
+    At ``warn_c`` the servo is named in a warning; at ``act_c`` its effort is capped
+    (Goal PWM at ``relief_pwm_pct`` % of its PWM Limit: the joint then gives way to
+    the load toward where it needs less, and the motor current falls), the others go
+    on; at ``action_c`` comes ``action``: ``"continue"`` (keep the cap and go on),
+    ``"relax"`` (every servo eases to the relaxed pose until it cools below
+    ``action_c``) or ``"stop"`` (the run ends, torque off). Each tier ends
+    :data:`HEAT_HYSTERESIS_C` below its threshold. ``action_c`` must be below every
+    servo's own Temperature Limit, where the servo turns itself off.
+    """
+
+    warn_c: float = 55.0
+    act_c: float = 60.0
+    action_c: float = 65.0
+    relief_pwm_pct: float = 50.0
+    action: HeatAction = "relax"
+
+    def check(self) -> None:
+        for name in ("warn_c", "act_c", "action_c"):
+            value = getattr(self, name)
+            if not 35.0 <= value <= 95.0:
+                raise ConfigError("out of range", key=name, value=value,
+                                  allowed="35..95 deg C (below the servos' Temperature Limit)")
+        if not self.warn_c < self.act_c < self.action_c:
+            raise ConfigError("tiers out of order", key="act_c",
+                              value=[self.warn_c, self.act_c, self.action_c],
+                              allowed="warn_c < act_c < action_c")
+        if not 10.0 <= self.relief_pwm_pct <= 100.0:
+            raise ConfigError("out of range", key="relief_pwm_pct", value=self.relief_pwm_pct,
+                              allowed="10..100 % of the servo's PWM Limit")
+        if self.action not in ("continue", "relax", "stop"):
+            raise ConfigError("unknown action", key="action", value=self.action,
+                              allowed="continue, relax, stop")
+
+
 # ------------------------------------------------------------ servo settings
 # Operating Mode (11) values (REFERENCE.md section 2).
 OPERATING_MODES: dict[str, int] = {
@@ -418,15 +467,17 @@ class GlovesConfig:
 
 @dataclass(frozen=True)
 class RigConfig:
-    """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]``, ``[calibration]``,
-    ``[[servos]]``, and for two hands ``[gloves]`` and ``[left_bus]`` (the left hand's
-    servos on a bus of their own; without it both hands share ``[bus]``)."""
+    """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]``, ``[heat]``,
+    ``[calibration]``, ``[[servos]]``, and for two hands ``[gloves]`` and ``[left_bus]``
+    (the left hand's servos on a bus of their own; without it both hands share
+    ``[bus]``)."""
 
     bus: BusConfig = BusConfig()
     loop: LoopConfig = LoopConfig()
     servos: tuple[ServoCalibration, ...] = ()
     servo_settings: ServoSettings = ServoSettings()
     silence: SilenceConfig = SilenceConfig()
+    heat: HeatConfig = HeatConfig()
     calibration: CalibrationConfig = CalibrationConfig()
     gloves: GlovesConfig = GlovesConfig()
     left_bus: BusConfig | None = None
@@ -452,6 +503,13 @@ class RigConfig:
                 )
             seen_ids[s.id] = i
             seen_joints[s.joint] = i
+            limit = TEMPERATURE_LIMIT_C.get(s.model)
+            if limit is not None and self.heat.action_c >= limit:
+                raise ConfigError(
+                    f"[heat] action_c is not below servo {s.id}'s ({s.model}) Temperature "
+                    f"Limit of {limit} C, where it turns its torque off by itself",
+                    key="heat.action_c", value=self.heat.action_c,
+                    allowed=f"below {limit} C")
         if self.left_bus is not None and not any(s.joint.startswith("le")
                                                  for s in self.servos):
             raise ConfigError("[left_bus] is given but no servo drives a left-hand joint",

@@ -92,6 +92,20 @@ class GloveRecording:
         return float(1.0 / np.median(np.diff(self.t_s)))
 
 
+def check_channels(rec: GloveRecording, need: int, path: str | Path,
+                   glove_file: str | Path | None = None) -> None:
+    """DataError naming ``path`` when the recording has no frames, or fewer raw channels
+    than ``need`` (what the glove file ``glove_file`` reads: a take of another glove)."""
+    if len(rec) == 0:
+        raise DataError(f"{path}: a glove take without frames: nothing to play")
+    if rec.n_channels < need:
+        where = f" ({glove_file})" if glove_file is not None else ""
+        raise DataError(
+            f"{path}: {rec.n_channels} raw channels, but the glove file{where} reads"
+            f" {need}: a take of another glove; play it with that glove's file"
+            " (--glove-config FILE)")
+
+
 def write_glove_recording(path: str | Path, rec: GloveRecording) -> None:
     """Write ``rec`` to ``path`` in the format of this module."""
     p = Path(path)
@@ -128,7 +142,13 @@ def read_glove_recording(path: str | Path) -> GloveRecording:
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{p}: cannot read glove recording: {exc}") from None
     if not lines or lines[0].strip() != MAGIC:
-        raise DataError(f"{p}:1: not a glove recording (the first line must be {MAGIC!r})")
+        hint = ""
+        if lines and lines[0].startswith("t_s,"):
+            hint = ("; it is a performance take (`handrig run --record`): play it onto the"
+                    f" servos with `handrig play {p} --bus PORT` (or sim)")
+        raise DataError(f"{p}:1: not a glove recording (the first line must be {MAGIC!r})"
+                        f"{hint}; `handrig record glove TAKE.csv` or `handrig run"
+                        " --record-glove TAKE.csv` make one")
     meta: dict[str, str] = {}
     lineno = 1
     while lineno < len(lines) and lines[lineno].startswith("#"):
@@ -156,7 +176,9 @@ def read_glove_recording(path: str | Path) -> GloveRecording:
             continue
         where = f"{p}:{lineno + 2 + j}"
         if len(row) != len(header):
-            raise DataError(f"{where}: {len(row)} columns, the header has {len(header)}")
+            cut = (" (the last line: the take is cut short; delete that line to keep the"
+                   " rest)" if j == len(rows) - 1 else "")
+            raise DataError(f"{where}: {len(row)} columns, the header has {len(header)}{cut}")
         try:
             t[i] = float(row[0])
             raw[i] = [float(v) for v in row[1:1 + len(names)]]
@@ -169,6 +191,9 @@ def read_glove_recording(path: str | Path) -> GloveRecording:
             buttons[i] = int(row[-1])
         except ValueError as exc:
             raise DataError(f"{where}: {exc}") from None
+        if i and not t[i] > t[i - 1]:
+            raise DataError(f"{where}: t_s {t[i]:g} does not come after {t[i - 1]:g}: the"
+                            " times must increase")
         i += 1
     try:
         rate = float(meta.get("rate_hz", "0") or 0)

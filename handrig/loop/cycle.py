@@ -27,9 +27,10 @@ from typing import Any
 import numpy as np
 
 from handrig.clock import Clock
-from handrig.config.rig import SilenceConfig
+from handrig.config.rig import HeatConfig, SilenceConfig
 from handrig.errors import DeviceError
 from handrig.loop.easing import Easing
+from handrig.loop.heat import HeatWatch
 from handrig.loop.modes import Mode, ModeMachine
 from handrig.loop.ports import (
     ControlsFromRaw,
@@ -77,6 +78,7 @@ class Cycle:
         trigger: Trigger | None = None,
         read_parts: int = 1,
         silence: SilenceConfig | None = None,
+        heat: HeatConfig | None = None,
     ) -> None:
         self.bus = bus
         # each read asks one part of the servos in turn (1: every servo at once)
@@ -105,7 +107,8 @@ class Cycle:
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
         # port events of the glove, silence events of the bus: into the run's events
         self._drains: tuple[Callable[[], list[str]], ...] = (
-            glove.drain_events, bus.drain_events, lambda: self.silence.drain_events())
+            glove.drain_events, bus.drain_events, lambda: self.silence.drain_events(),
+            lambda: self.heat.drain_events())
         # the bus's upkeep (watchdogs, temperatures), midway between state reads
         self.housekeeping: Callable[[float], bool] = bus.housekeeping
         self._housekeeping_slot = self.read_every // 2 if self.read_every > 1 else -1
@@ -119,6 +122,8 @@ class Cycle:
         self._slew_deg_s = pipeline.slew_deg_s
         # the [silence] tiers for servos that stop answering: decided here, from the reads
         self.silence = SilenceWatch(bus, silence or SilenceConfig(), pipeline.slew_deg_s)
+        # the [heat] tiers for servos that warm up: decided here, from the temperatures read
+        self.heat = HeatWatch(bus, heat or HeatConfig())
         self.sample: GloveSample | None = None  # the newest glove sample
         self.last_state: ServoState | None = None  # the newest ServoState read back
         self.t0_s = 0.0
@@ -283,7 +288,7 @@ class Cycle:
         for drain in self._drains:
             for text in drain():
                 machine.event(text)
-        machine.servos_silent(self.silence.relax_reason)
+        machine.servos_silent(self.silence.relax_reason or self.heat.relax_reason)
 
     @staticmethod
     def _wire_floor(bus: ServoBus, n: int) -> float:
@@ -311,7 +316,8 @@ class Cycle:
         state = (self.bus.read_state(deadline, (self._part, parts)) if parts > 1
                  else self.bus.read_state(deadline))
         end = clock.now()
-        if silence.active or not state.all_fresh:
+        if (silence.active or silence.waiting or not state.all_fresh
+                or silence.rebooted(state)):
             silence.update(state, end)  # DeviceTimeoutError when the action is "stop"
         if not state.sent:
             # the bus found no room for it after all (a line to let go quiet, replies
@@ -328,6 +334,12 @@ class Cycle:
         if trigger.delayed(tick, end):
             self.stats.writes_delayed += 1
         self.last_state = state
+        heat = self.heat
+        heat.update(state)  # ServoFault when a servo is too hot and the action is "stop"
+        while heat.uncapped:  # full effort back: from where its joint gave way
+            i = heat.uncapped.pop()
+            if np.isfinite(state.positions_deg[i]):
+                self.silence.ease_from(i, float(state.positions_deg[i]))
         self._track(state, self.sent)
         self._take_events()
 

@@ -2,7 +2,8 @@
 
 ::
 
-    WAITING --first frame--> RUNNING
+    WAITING --first frame--> RUNNING (with ease_in: RESUMING, eased in from where the
+                             servos are, then RUNNING)
     WAITING, RUNNING, RESUMING --no frame for glove_timeout_s--> RELAXING
     RELAXING --resume_frames good frames in a row--> RESUMING --eased back--> RUNNING
     any --e-stop, stop request, frames or time done--> STOPPING --eased--> (the run ends)
@@ -69,7 +70,9 @@ class ModeMachine:
         on_relax: Callable[[], None] = lambda: None,
         on_resume: Callable[[], None] = lambda: None,
         stats: RunStats | None = None,
+        ease_in: bool = False,
     ) -> None:
+        self.ease_in = ease_in  # the first frame eases in over resume_time_s (a take played)
         self.glove_timeout_s = float(glove_timeout_s)
         self.relax_time_s = float(relax_time_s)
         self.resume_frames = max(1, int(resume_frames))
@@ -167,7 +170,12 @@ class ModeMachine:
             self.stop_reason = "e-stop"
             self._relax(Mode.STOPPING, "e-stop pressed on the glove")
         mode = self.mode
-        if mode is Mode.WAITING:
+        if mode is Mode.WAITING and self.ease_in:
+            self.mode = Mode.RESUMING
+            self.on_resume()
+            self.event(f"first frame: easing in from where the servos are over "
+                       f"{self.resume_time_s:.2f} s")
+        elif mode is Mode.WAITING:
             self.mode = Mode.RUNNING
         elif mode is Mode.RELAXING and not self._servos_silent and not self.held:
             in_a_row = previous is not None and now_s - previous <= self.glove_timeout_s

@@ -42,7 +42,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 from handrig.clock import Clock
-from handrig.config.rig import BusConfig, LoopConfig, RigConfig, SilenceConfig
+from handrig.config.rig import BusConfig, HeatConfig, LoopConfig, RigConfig, SilenceConfig
 from handrig.errors import DeviceError
 from handrig.loop.cycle import Cycle
 from handrig.loop.modes import Mode, ModeMachine
@@ -75,6 +75,8 @@ class Rig:
     :class:`FixedRateTrigger` at ``rate_hz`` or a :class:`GloveTrigger` between
     ``floor_hz`` and ``ceiling_hz``; either stamps the glove's frames as they arrive).
     ``profile``: time the critical path's stages (:attr:`stage_profile`).
+    ``ease_in``: the first frame eases the servos in from where they are over
+    ``resume_time_s`` (a take played onto the rig) instead of the slew limit alone.
     The defaults are the config's (:class:`~handrig.config.rig.LoopConfig`,
     :class:`~handrig.config.rig.BusConfig`); :meth:`from_config` builds a rig from a
     rig file's settings.
@@ -85,7 +87,7 @@ class Rig:
         cls, config: RigConfig, glove: GloveSource, bus: ServoBus, pipeline: PosePipeline,
         clock: Clock, *, controls_from_raw: ControlsFromRaw, orientation: OrientationLike,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
-        log: Callable[[str], None] = print, profile: bool = False,
+        log: Callable[[str], None] = print, profile: bool = False, ease_in: bool = False,
     ) -> Rig:
         """The loop with the rig file's rates and safety timings (``[loop]``, ``[bus]``).
         In loop mode "glove" the ceiling is also held below the rate at which goal Sync
@@ -102,7 +104,8 @@ class Rig:
             resume_frames=loop.resume_frames, resume_time_s=loop.resume_time_s,
             outputs=outputs, log=log, profile=profile, loop_mode=loop.mode,
             floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz, catch_up=loop.catch_up,
-            read_parts=config.bus.read_parts, silence=config.silence)
+            read_parts=config.bus.read_parts, silence=config.silence, heat=config.heat,
+            ease_in=ease_in)
 
     def __init__(
         self,
@@ -129,6 +132,8 @@ class Rig:
         catch_up: bool = _LOOP.catch_up,
         read_parts: int = _BUS.read_parts,
         silence: SilenceConfig | None = None,
+        heat: HeatConfig | None = None,
+        ease_in: bool = False,
     ) -> None:
         self.glove = glove
         self.bus = bus
@@ -154,14 +159,14 @@ class Rig:
         self.machine = ModeMachine(
             glove_timeout_s=glove_timeout_s, relax_time_s=relax_time_s,
             resume_frames=resume_frames, resume_time_s=resume_time_s, event=self._event,
-            stats=self.stats,
+            stats=self.stats, ease_in=ease_in,
         )
         self.cycle = Cycle(
             glove, bus, pipeline, clock, self.machine, self.stats,
             controls_from_raw=controls_from_raw, orientation=orientation,
             period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
             resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
-            read_parts=read_parts, silence=silence,
+            read_parts=read_parts, silence=silence, heat=heat,
         )
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
@@ -229,10 +234,12 @@ class Rig:
         self.stats.events.append(text)
         self.log(text)
 
-    def run(self, frames: int | None = None, duration_s: float | None = None) -> RunStats:
+    def run(self, frames: int | None = None, duration_s: float | None = None, *,
+            done_reason: str = "") -> RunStats:
         """Run ``frames`` cycles or ``duration_s`` seconds (counted from the start, waiting
         for the glove included), then ease to the relaxed pose and return; an e-stop or a
-        stop request eases and returns early.
+        stop request eases and returns early. ``done_reason``: the stop reason when the
+        length is reached (default "N frames done" / "S s done").
 
         Until the first glove frame the servos hold where they are; no frame within
         ``glove_timeout_s`` eases them to the relaxed pose.
@@ -260,9 +267,9 @@ class Rig:
                 if machine.stop_now:
                     break
                 if frames is not None and stats.frames >= frames:
-                    machine.finish(f"{frames} frames done")
+                    machine.finish(done_reason or f"{frames} frames done")
                 elif duration_s is not None and clock.now() - t0 >= duration_s:
-                    machine.finish(f"{duration_s:g} s done")
+                    machine.finish(done_reason or f"{duration_s:g} s done")
                 self.trigger.wait(tick, settle=False)  # settled by the read schedule
                 over = cycle.run(tick)  # at once: the bookkeeping below is off the frame's path
                 if tick.skipped:
@@ -292,6 +299,12 @@ class Rig:
             stats.servo_silences, stats.servos_held = watch.silences, watch.held
             stats.servo_recoveries = watch.recoveries
             stats.servo_recovery_reads_max = watch.recovery_reads_max
+            stats.servos_admitted = watch.admitted
+            heat = self.cycle.heat
+            stats.heat_warnings, stats.heat_reliefs = heat.warnings, heat.reliefs
+            stats.heat_actions = heat.actions
+            stats.max_temperature_c = tuple(float(t) for t in heat.max_c)
+            stats.hottest = heat.hottest()
             self._snapshot.finished = True
             self.telemetry.offer(clock.now(), self._snapshot, force=True)
         return stats

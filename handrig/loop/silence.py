@@ -10,7 +10,10 @@ is held where it was (goals still go out, so the Bus Watchdogs stay fed); after
 ``"relax"`` (:attr:`SilenceWatch.relax_reason` asks the mode machine to ease to
 the relaxed pose until it answers) or ``"stop"`` (DeviceTimeoutError: the run
 ends, torque off). A servo that answers again is brought back to its goals at
-the slew limit.
+the slew limit. A servo left out at connect (``ServoBus.left_out``) gets no tiers;
+when it answers, the bus is asked to admit it (:meth:`ServoBus.admit`: commissioned,
+torque on where it is) and it is eased from there to its goals at the slew limit,
+as a servo that answers again; refused, it is asked again after ``ADMIT_RETRY_S``.
 
 What is said names what was seen: which servos, for how long, whether the host
 itself was late (the gaps between reads) and whether every servo went quiet at
@@ -30,6 +33,7 @@ from handrig.errors import DeviceTimeoutError
 HOST_LATE_S = 0.02  # a read this much later than the usual gap: the host was late
 GAP_WARM_UP = 16  # gaps between reads learnt before any is judged late
 EVENTS_KEPT = 64
+ADMIT_RETRY_S = 1.0  # a servo left out that answers but was not admitted: asked again
 ANSWERING, WARNED, HELD, ACTED = 0, 1, 2, 3  # tiers of a silent servo
 
 
@@ -73,6 +77,10 @@ class SilenceWatch:
         self._late_at = -np.inf
         self._late_reads = 0  # reads that came after their deadline, same window
         self._left_out: np.ndarray | None = None  # the bus's, learnt at the first read
+        self.waiting = True  # servos left out (or not yet known): every read is looked at
+        self.admitted = 0  # servos left out at connect, admitted when they answered
+        self._admit_after = np.full(n, -np.inf)
+        self._admit_said = [""] * n
 
     # ------------------------------------------------------------------ host timing
     def note_read(self, now: float, late: bool = False) -> None:
@@ -117,7 +125,9 @@ class SilenceWatch:
             self._left_out = np.zeros(self.n, bool)
             self._left_out[list(self.bus.left_out)] = True
         if self._left_out.any():  # named once at start-up, never sent a goal: no tiers
+            self._admit(self._left_out, state, now)
             silent &= ~self._left_out
+        self.waiting = bool(self._left_out.any())
         self._reads[silent] += 1
         back = np.flatnonzero((self.tier > ANSWERING) & ~silent)
         if back.size:
@@ -166,6 +176,12 @@ class SilenceWatch:
                     else "stay held")
             self._say(f"{what}: {self._names(indices)} {rest} ([silence] action)")
 
+    def rebooted(self, state: ServoState) -> bool:
+        """Whether the bus rebooted (or found restarted) a servo since the last look: then
+        :meth:`update` must see this read, all fresh or not, to ease it back."""
+        reboots = state.stats.reboots
+        return len(reboots) == self.n and bool((reboots > self._reboots).any())
+
     def _note_reboots(self, state: ServoState) -> None:
         """A servo the bus rebooted came back with torque on where it was (its goal is
         the bus's last goal for it): it eases back to the loop's goals from there at
@@ -178,6 +194,34 @@ class SilenceWatch:
         self._from[new] = self.bus.last_goals_deg[new]
         self.releasing[new] = True
         self.steering = True
+
+    def ease_from(self, index: int, deg: float) -> None:
+        """Servo ``index`` eases to the loop's goals from ``deg`` at the slew limit, as a
+        rebooted servo does (the [heat] tiers: a joint that gave way under an effort cap
+        gets its full effort back where it is)."""
+        self._from[index] = deg
+        self.releasing[index] = True
+        self.steering = True
+
+    def _admit(self, left_out: np.ndarray, state: ServoState, now: float) -> None:
+        """Servos left out that answer in this read: the bus admits them (or says why
+        not, once per reason, and is asked again after ``ADMIT_RETRY_S``); each admitted
+        one eases from where the bus gave it torque to its goals at the slew limit."""
+        answering = left_out & state.answered & (now >= self._admit_after)
+        for i in np.flatnonzero(answering).tolist():
+            goal, text = self.bus.admit(i)
+            if goal is None:
+                self._admit_after[i] = now + ADMIT_RETRY_S
+                if text != self._admit_said[i]:
+                    self._admit_said[i] = text
+                    self._say(text)
+                continue
+            left_out[i] = False
+            self._from[i] = goal
+            self.releasing[i] = True
+            self.steering = True
+            self.admitted += 1
+            self._say(text)
 
     def _recover(self, back: np.ndarray) -> None:
         reads = self._reads[back]

@@ -192,8 +192,14 @@ class RunStats:
     resumes: int = 0  # times the glove came back and the puppet eased back to it
     servo_silences: int = 0  # servos past the [silence] warning
     servos_held: int = 0  # servos whose goal was held for silence
+    heat_warnings: int = 0  # servos past [heat] warn_c
+    heat_reliefs: int = 0  # effort caps put on servos past [heat] act_c
+    heat_actions: int = 0  # servos past [heat] action_c
+    max_temperature_c: tuple[float, ...] = ()  # the hottest reading per servo (NaN: never read)
+    hottest: str = ""  # "servo 19 (riWristFlexion) 41 C": the run's hottest reading
     servo_recoveries: int = 0  # silent servos that answered again
     servo_recovery_reads_max: int = 0  # the longest silence that ended, in reads
+    servos_admitted: int = 0  # servos left out at connect, admitted when they answered
     estop: bool = False
     stop_reason: str = ""
     events: Ring[str] = field(default_factory=lambda: Ring(KEPT_EVENTS))

@@ -80,6 +80,8 @@ class LoopSnapshot:
     bus_writes: int = 0
     bus_timeouts: int = 0
     bus_errors: int = 0
+    bus_left_out: int = 0  # servos left out at connect, not (yet) admitted
+    bus_admitted: int = 0  # servos left out at connect, admitted when they answered
     # the outputs
     outputs: tuple[OutputStatus, ...] = ()
 
@@ -229,7 +231,8 @@ class SnapshotBuilder:
             b = bus.stats
             out.update(bus_port=bus.port, bus_reads=b.reads, bus_writes=b.writes,
                        bus_timeouts=b.timeouts,
-                       bus_errors=b.crc_errors + b.malformed + b.status_errors)
+                       bus_errors=b.crc_errors + b.malformed + b.status_errors,
+                       bus_left_out=len(bus.left_out), bus_admitted=b.admissions)
         if not isinstance(state, ServoState):
             out.update(positions_deg=(None,) * n, temperatures_c=(None,) * n,
                        currents_ma=(None,) * n, hardware_errors=(0,) * n,

@@ -13,7 +13,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_a_short_soak_prints_its_figures_with_no_goal_outside_the_limits() -> None:
     out = subprocess.run(
-        [sys.executable, "-m", "bench", "soak", "--seconds", "12", "--stall-every-s", "4"],
+        [sys.executable, "-m", "bench", "soak", "--seconds", "12", "--stall-every-s", "4",
+         "--mute", "4@3-6"],
         capture_output=True, text=True, timeout=240, cwd=ROOT)
     text = out.stdout
     assert out.returncode == 0, out.stderr[-2000:]
@@ -25,6 +26,14 @@ def test_a_short_soak_prints_its_figures_with_no_goal_outside_the_limits() -> No
     assert re.search(r"rss\s+[\d.]+ MB at the start, [\d.]+ MB at the end; growth", text), text
     assert re.search(r"stopped\s+12 s done\n", text), text
     assert "torque off      True" in text, text
+    # VMC on: the bundles reached a real UDP socket
+    vmc = re.search(r"vmc\s+(\d+) datagrams", text)
+    assert vmc and int(vmc.group(1)) > 500, text
+    # the hottest reading per servo, as the driver read it
+    assert re.search(r"temperature\s+max \d+ C at servo \d+ \w+ X[LCM]\d+", text), text
+    # the muted servo was held while it was silent, and answered again
+    assert re.search(r"held\s+servo 4 riThumbMCPz XL330-M288: \d+ times, [1-3]\.\d+ s", text), text
+    assert "muted replies" in text, text
 
 
 def test_the_soak_is_not_part_of_a_plain_bench_run() -> None:

@@ -46,7 +46,8 @@ def sim_bus() -> Iterator[str]:
 
 def _run_silencing_servo_7(port: str, tmp_path: Path, action: str) -> tuple[dict, str]:
     rig = (CONFIG_DIR / "rig.toml").read_text()
-    rig, n = re.subn(r'(?m)^action = "\w+"', f'action = "{action}"', rig)
+    # the first `action =` is [silence]'s ([heat] has one too, further down)
+    rig, n = re.subn(r'(?m)^action = "\w+"', f'action = "{action}"', rig, count=1)
     assert n == 1
     config = tmp_path / "rig.toml"
     config.write_text(rig)
@@ -94,6 +95,9 @@ def test_one_silent_servo_is_the_only_one_held(sim_bus: str, tmp_path: Path) -> 
     # torque off at exit: the broadcast went out; it alone could not confirm it
     assert "torque off failed" in summary["error"]
     assert _servos_named(summary["error"]) == {SILENT}, summary["error"]
+    unconfirmed = summary["torque_off_unconfirmed"]  # the read-back at exit names it alone
+    assert _servos_named("; ".join(unconfirmed)) == {SILENT}, unconfirmed
+    assert summary["torque_off"] is None
     assert err.count(f"no valid reply from {SILENT}") == 2  # warned, then the action: once each
 
 

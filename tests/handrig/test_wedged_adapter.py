@@ -1,7 +1,11 @@
 """A wedged adapter: the bus emulator stops draining the port (SIGSTOP, as a wedged USB
 adapter stops taking bytes). A real ``handrig run`` must end on its own within a
-second or two with a message naming the port, honour a SIGTERM during the stall at
-once, and leave the servos to their Bus Watchdog (tripped once the emulator runs again).
+second of the stall, measured from outside (SIGSTOP sent -> the process gone), with a
+message naming the port, also when a SIGTERM comes during the stall, and leave the
+servos to their Bus Watchdog (tripped once the emulator runs again). The port is a
+pty, whose queue cannot be seen: the rig judges it by its answers
+(``SerialTransport._judge_drain``), long before the pty's ~19 KB buffer is full.
+``python -m bench wedge`` prints the figure over several runs.
 """
 
 from __future__ import annotations
@@ -24,10 +28,9 @@ from sim.demo_recording import DEMO_RECORDING
 CLI = [sys.executable, "-m", "handrig.cli"]
 BUS_WATCHDOG = 98
 TRIPPED = 0xFF
-# From the stall to the exit: the pty's buffer fills (about 19 KB: ~1 s of goals), the
-# write's deadline (0.2 s), the torque-off and its read-back (0.2 s each), the process
-# ending; with room for a loaded machine.
-EXIT_WITHIN_S = 3.5
+# From the stall to the exit: no answer for ANSWER_STALL_S (0.5 s), the torque-off
+# broadcast (nothing can be read back), the summary and the process ending.
+EXIT_WITHIN_S = 1.0
 
 
 @pytest.fixture
@@ -88,10 +91,13 @@ def test_a_wedged_adapter_ends_the_run_within_seconds_naming_the_port(
     took = _wait_exit(rig_proc, stalled)
     summary = _summary(rig_proc)
     assert rig_proc.returncode == 1
-    assert took <= EXIT_WITHIN_S, f"the run took {took:.1f} s to end after the stall"
+    assert took <= EXIT_WITHIN_S, f"the run took {took:.2f} s to end after the stall"
     error = str(summary["error"])
     assert port in error and "stopped draining" in error, error
-    assert summary["torque_off"] is not True  # it could not be confirmed: not claimed
+    assert summary["torque_off"] is None  # it could not be confirmed: not claimed
+    unconfirmed = "; ".join(summary["torque_off_unconfirmed"])  # each servo named
+    rig = load_rig_config()
+    assert all(f"servo {s.id} ({s.joint})" in unconfirmed for s in rig.servos), unconfirmed
     # the emulator runs again: every servo's Bus Watchdog has tripped (it heard nothing
     # after the stall), so it stopped where it was
     os.kill(sim.pid, signal.SIGCONT)
@@ -113,13 +119,16 @@ def test_a_sigterm_during_the_stall_ends_the_run_promptly(
     sim, port = sim_bus
     rig_proc, err = _start_rig(port, tmp_path)
     os.kill(sim.pid, signal.SIGSTOP)
-    time.sleep(0.3)  # replies lost, the port's buffer still filling
+    stalled = time.monotonic()
+    time.sleep(0.2)  # replies lost: the stall not yet judged
     os.kill(rig_proc.pid, signal.SIGTERM)
-    signalled = time.monotonic()
-    took = _wait_exit(rig_proc, signalled)
+    took = _wait_exit(rig_proc, stalled)
     summary = _summary(rig_proc)
     os.kill(sim.pid, signal.SIGCONT)
-    assert took <= EXIT_WITHIN_S, f"the run took {took:.1f} s to end after SIGTERM"
+    assert took <= EXIT_WITHIN_S, f"the run took {took:.2f} s to end after the stall"
     assert summary.get("signals") == 1
-    assert "SIGTERM received" in err.read_text()
-    assert rig_proc.returncode in (0, 1)
+    said = err.read_text()
+    assert "SIGTERM received" in said, said
+    # the signal began the ease to the relaxed pose; the stalled port ended it early
+    assert rig_proc.returncode == 1 and port in str(summary["error"]), summary
+    assert summary["torque_off"] is not True

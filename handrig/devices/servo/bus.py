@@ -81,6 +81,7 @@ class BusStats:
     late_reads: int = 0  # reads not sent: the caller came after the read's deadline
     partial_replies: int = 0  # Fast Sync Read replies cut short (the servos before the cut taken)
     chain_ends: int = 0  # reads that asked servos which stopped answering last in the chain
+    admissions: int = 0  # servos left out at connect, commissioned when they answered
     stale_readings: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     hardware_errors: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     reboots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -126,7 +127,8 @@ class BusStats:
             f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
             f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, skipped reads "
             f"{self.skipped_reads}, late reads {self.late_reads}, partial replies "
-            f"{self.partial_replies}, chain ends {self.chain_ends}, stale readings "
+            f"{self.partial_replies}, chain ends {self.chain_ends}, admissions "
+            f"{self.admissions}, stale readings "
             f"{int(self.stale_readings.sum())}, hardware errors "
             f"{int(self.hardware_errors.sum())}, reboots {int(self.reboots.sum())}"
         )
@@ -234,9 +236,18 @@ class ServoBus(ABC):
     @property
     def left_out(self) -> tuple[int, ...]:
         """Rig indices of servos that did not answer at connect and that the bus left
-        out for the run (``[silence] action = "continue"``): never sent a goal or
-        torque, already named once; the loop's silence tiers skip them (default: none)."""
+        out (``[silence] action = "continue"``): never sent a goal or torque until
+        admitted (:meth:`admit`), already named once; the loop's silence tiers skip
+        them (default: none)."""
         return ()
+
+    def admit(self, index: int) -> tuple[float | None, str]:
+        """Bring servo ``index``, left out at connect and answering now, into the run:
+        commissioned as at connect, given torque where it is (clamped into its limits)
+        and from then on sent goals. Returns (the goal it is held at, joint degrees,
+        or None when it stays left out; one line saying what was done or why not).
+        The loop eases it from there to its goals (default: nobody is left out)."""
+        return None, f"servo index {index}: this bus leaves no servo out"
 
     @property
     def last_write_s(self) -> float:
@@ -266,6 +277,13 @@ class ServoBus(ABC):
     def drain_events(self) -> list[str]:
         """What the bus did since the last call, one line each for the run's log."""
         return []
+
+    def limit_effort(self, index: int, fraction: float) -> bool:
+        """Cap the effort of the servo at rig index ``index`` at ``fraction`` (0..1] of
+        its full effort (1.0 lifts the cap): the loop's relief for a hot servo. True if
+        the cap is in place; False if this bus cannot cap a servo (the default) or the
+        servo did not take it (the bus says why in its events)."""
+        return False
 
     def describe(self, index: int) -> str:
         """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""

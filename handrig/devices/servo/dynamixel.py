@@ -33,6 +33,7 @@ import numpy as np
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import RigConfig
 from handrig.devices.servo import codec
+from handrig.devices.servo.admission import Admission
 from handrig.devices.servo.bus import BusStats, FaultPolicy, ServoBus, ServoState
 from handrig.devices.servo.commissioning import Commissioner
 from handrig.devices.servo.fast_read import FastSyncRead
@@ -53,7 +54,7 @@ from handrig.devices.servo.wire import (
     read_bytes,
     wire_time_s,
 )
-from handrig.errors import DeviceError
+from handrig.errors import DeviceError, HandrigError
 
 __all__ = ["DynamixelBus", "ReadFields", "cycle_bytes", "wire_time_s"]
 
@@ -64,7 +65,7 @@ REPLY_POLL_LEAD_S = 50e-6  # default spin_s
 
 # the parts that count what they do, each in a ledger of its own
 _PARTS_COUNTING = ("readings", "faults", "plan", "link", "writer", "sweep", "fast", "sync",
-                   "reader")
+                   "reader", "admission")
 _PER_SERVO = ("readings", "faults")
 
 
@@ -126,6 +127,7 @@ class DynamixelBus(ServoBus):
                              self.commissioning)
         codec.warm_up()
         self._lock = threading.RLock()
+        self._effort_events: list[str] = []  # limit_effort failures, for drain_events
         self._connected = False
         self._build_parts(transport, reply_timeout_s, reply_gap_s, spin_s, temperature_every)
         self.commissioner.missing_ok = bool(missing_ok)
@@ -157,6 +159,9 @@ class DynamixelBus(ServoBus):
             self.sweep, self.faults, self.policy, own["reader"], clock, temperature_every)
         self.commissioner = Commissioner(roster, self.link, plan, self.fast, self.faults, clock,
                                          self.commissioning, self._read_every_servo)
+        self.admission = Admission(roster, self.link, self.writer, self.commissioner,
+                                   self.faults, own["admission"])
+        self.faults.on_restart = self.admission.restore
         self.torque_control = TorqueControl(
             roster, self.link, self.writer, self.faults, clock, self.commissioning,
             self._read_every_servo, self.read_state, self.write_goals_deg)
@@ -242,9 +247,23 @@ class DynamixelBus(ServoBus):
 
     @property
     def left_out(self) -> tuple[int, ...]:
-        """Rig indices of the servos that did not answer at connect and were left out
-        for the run (``missing_ok``): never commissioned, sent a goal or given torque."""
+        """Rig indices of the servos that did not answer at connect and are left out
+        (``missing_ok``) until admitted (:meth:`admit`): not commissioned, sent a goal
+        or given torque before."""
         return tuple(np.flatnonzero(self.roster.absent).tolist())
+
+    def admit(self, index: int) -> tuple[float | None, str]:
+        """Bring servo ``index``, left out at connect and answering now, into the run
+        (:mod:`~handrig.devices.servo.admission`): (its goal, or None; what was done).
+        A DeviceError on the way leaves it out, said in the line."""
+        with self._lock:
+            try:
+                return self.admission.admit(index)
+            except DeviceError as exc:
+                if self.transport.wedged or not self.transport.is_open:
+                    raise  # the port failed: not the servo's affair
+                return None, (f"{self.describe(index)} answered but could not be "
+                              f"commissioned: {exc}; still left out")
 
     def read_wire_s(self, n: int) -> float:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
@@ -259,6 +278,12 @@ class DynamixelBus(ServoBus):
         quiet after a failed reply (0 almost always): a loop fitting reads into gaps
         counts it, or the bus declines the read."""
         return self.link.quiet_wait_s()
+
+    @property
+    def port_stalled(self) -> bool:
+        """Whether the port stopped draining (a wedged adapter, a stopped emulator): then
+        nothing can be read back through it; set when a write raised it."""
+        return self.transport.wedged
 
     @property
     def last_read_whole(self) -> bool:
@@ -308,6 +333,23 @@ class DynamixelBus(ServoBus):
         """Write one control-table item of servo ``index`` and check the reply."""
         with self._lock:
             self.link.write_register(index, reg, value)
+
+    def limit_effort(self, index: int, fraction: float) -> bool:
+        """Goal PWM (100) of servo ``index`` at ``fraction`` of its PWM Limit (36): in the
+        position modes Goal PWM caps the motor's PWM (e-manual, Goal PWM), so the servo
+        pushes no harder than that and its current falls with it. RAM: a reboot or power
+        cycle lifts it. False, with an event, if the servo does not take it."""
+        if not 0.0 < fraction <= 1.0:
+            raise ValueError(f"effort fraction must be in (0, 1], got {fraction}")
+        try:
+            with self._lock:
+                limit = self.link.read_register(index, Reg.PWM_LIMIT)
+                self.link.write_register(index, Reg.GOAL_PWM, max(1, round(limit * fraction)))
+        except HandrigError as exc:
+            self._effort_events.append(f"{self.describe(index)}: could not cap its effort "
+                                       f"at {fraction:.0%} ({exc})")
+            return False
+        return True
 
     def reboot(self, index: int) -> None:
         """Reboot servo ``index`` (clears a hardware error), then restore its settings.
@@ -384,7 +426,11 @@ class DynamixelBus(ServoBus):
         """Hardware errors, reboots and Bus Watchdog trips since the last call, one line
         each (once drained, they are no longer logged as well)."""
         with self._lock:
-            return self.faults.drain_events()
+            out = self.faults.drain_events()
+            if self._effort_events:
+                out += self._effort_events
+                self._effort_events = []
+            return out
 
     def housekeeping(self, deadline_s: float) -> bool:
         """Between state reads: the Bus Watchdogs, then the temperatures, when

@@ -141,7 +141,7 @@ class FastSyncRead:
             arrival = budget.free_at + expected * budget.byte_s
             spin_from = arrival - self.spin_s
             spin_until = arrival + REPLY_POLL_AFTER_S
-        head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until)
+        head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until, answer=True)
         if len(head) < 7:
             self.stats.timeouts += 1
             self.link.failed()

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 
@@ -73,6 +74,9 @@ class FaultHandler:
         # somebody drains them (the loop) they are logged instead
         self.events: deque[str] = deque(maxlen=EVENTS_KEPT)
         self.drained = False
+        # given torque back, where it is, a servo found restarted on its own; returns
+        # what was done (the bus wires it to its admission part)
+        self.on_restart: Callable[[int], str] | None = None
 
     @property
     def torque_on(self) -> bool:
@@ -178,6 +182,26 @@ class FaultHandler:
         self.arm_watchdog(strict=False)
         self._say(f"{r.describe(index)} rebooted: {how}")
 
+    def restarted(self, index: int) -> None:
+        """Servo ``index`` restarted on its own: given torque back where it is (the bus's
+        ``on_restart``), counted with the reboots so that the loop eases it back from
+        there, as after a reboot."""
+        r = self.roster
+        if self.on_restart is None:
+            self._say(f"{r.describe(index)} restarted on its own (its Bus Watchdog reads 0) "
+                      f"{r.where()}: torque is off in it")
+            return
+        try:
+            how = self.on_restart(index)
+        except DeviceError as exc:
+            self._say(f"{r.describe(index)} restarted on its own (its Bus Watchdog reads 0) "
+                      f"{r.where()} and could not be given torque back: {exc}")
+            return
+        self.stats.reboots[index] += 1
+        self.arm_watchdog(strict=False)
+        self._say(f"{r.describe(index)} restarted on its own (its Bus Watchdog reads 0: a "
+                  f"power loss?) {r.where()}: {how}")
+
     def _wait_for_restart(self, index: int) -> None:
         sid = self.roster.ids[index]
         deadline = self.clock.now() + self.policy.reboot_wait_s
@@ -252,6 +276,13 @@ class FaultHandler:
         """Read every Bus Watchdog back and re-arm them if one tripped."""
         watchdogs = self.sweep.read(Reg.BUS_WATCHDOG, deadline_s)
         tripped = [i for i, v in enumerate(watchdogs) if v == BUS_WATCHDOG_TRIPPED]
+        if self.watchdog_ms and self.torque_on:
+            # armed by us, read 0: the servo restarted on its own (a power loss): torque
+            # off, its RAM settings gone
+            restarted = [i for i, v in enumerate(watchdogs)
+                         if v == 0 and not self.roster.absent[i]]
+            for i in restarted:
+                self.restarted(i)
         if not tripped:
             return
         self.stats.watchdog_trips += len(tripped)

@@ -38,6 +38,14 @@ class GoalWriter:
         self.left_out[np.asarray(indices, np.intp)] = True
         self._build_packet()
 
+    def admit(self, index: int, goal_deg: float) -> None:
+        """Send servo ``index`` goals from now on, starting from ``goal_deg`` (where it
+        was given torque, within its limits): the Sync Write carries it again."""
+        self.left_out[index] = False
+        self._build_packet()
+        self._goal_deg[index] = goal_deg
+        self.last_goal_deg[index] = goal_deg
+
     def _build_packet(self) -> None:
         r = self.roster
         keep = np.flatnonzero(~self.left_out)

@@ -109,12 +109,13 @@ class Link:
         self.send(build_instruction(BROADCAST_ID, INST_SYNC_WRITE, params))
 
     # ------------------------------------------------------------------ replies
-    def next_status(self, deadline: float) -> StatusPacket | None:
+    def next_status(self, deadline: float, *, answer: bool = False) -> StatusPacket | None:
         """The next status packet that passes its CRC before ``deadline``. Packets failing
         it are counted and skipped; none in time counts a timeout, marks the line
-        failed (a late reply may still arrive) and returns None."""
+        failed (a late reply may still arrive) and returns None. ``answer``: the first
+        answer to a state read (the transport counts it when none comes)."""
         while True:
-            raw = self.transport.read_packet(deadline)
+            raw = self.transport.read_packet(deadline, answer=answer)
             if raw is None:
                 self.stats.timeouts += 1
                 self.failed()

@@ -33,6 +33,7 @@ class Reg(Enum):
     POSITION_I_GAIN = (82, 2, False, "RW")
     POSITION_P_GAIN = (84, 2, False, "RW")
     BUS_WATCHDOG = (98, 1, True, "RW")
+    GOAL_PWM = (100, 2, True, "RW")  # in the position modes, a cap on the motor's PWM
     GOAL_CURRENT = (102, 2, True, "RW")
     PROFILE_VELOCITY = (112, 4, False, "RW")
     GOAL_POSITION = (116, 4, True, "RW")

@@ -39,7 +39,7 @@ class SyncRead:
         want = {sid: int(i) for sid, i in zip(ids, indices, strict=True)}
         got = 0
         while got < len(ids):
-            status = self.link.next_status(deadline)
+            status = self.link.next_status(deadline, answer=got == 0)
             if status is None:
                 break
             index = want.pop(status.servo_id, None)

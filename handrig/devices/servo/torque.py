@@ -96,6 +96,7 @@ class TorqueControl:
                 if not r.absent[i]:  # a servo left out at start-up gets no torque
                     self.link.write_register(i, Reg.TORQUE_ENABLE, 1)
             self.faults.arm_watchdog()
+            self.link.transport.judge_answers(True)
             if slow:
                 self._finish_approach(np.array(slow), float(excess.max()))
         finally:
@@ -147,23 +148,35 @@ class TorqueControl:
         The broadcast reaches every servo that hears the bus; each is then asked to
         confirm, ``CONFIRM_ATTEMPTS`` times at most and within ``CONFIRM_BUDGET_S`` in
         all (a bus that stopped answering must not hold the exit for 8 attempts of
-        every servo): the servos left are listed as not confirmed."""
+        every servo): the servos left are listed as not confirmed. After the port
+        stopped draining (``transport.wedged``) only the broadcast is tried: nothing
+        could be read back, and every servo given torque is named as not confirmed."""
         r = self.roster
         failed: list[str] = []
-        if not self.link.transport.is_open:
+        given = [i for i in range(r.n) if not r.absent[i]]  # left out: never given torque
+        every = ", ".join(r.describe(i) for i in given)
+        t = self.link.transport
+        if not t.is_open:
             was_on = self.faults.torque_on
             self.faults.note_torque(False)
-            return [f"all servos: port {r.port} is closed"] if was_on else []
+            return [f"{every}: not confirmed: port {r.port} is closed"] if was_on else []
+        wedged = t.wedged
+        t.judge_answers(False)
         try:
             self.link.sync_write(Reg.TORQUE_ENABLE, [0] * r.n)
         except DeviceError as exc:
-            return [f"all servos: {exc}"]
+            self.faults.note_torque(False)
+            return [f"{every}: not confirmed: {exc}"]
+        if wedged:  # nothing can be read back through a port that stopped draining
+            self.faults.note_torque(False)
+            return [f"{every}: not confirmed: servo port {r.port} stopped draining (the "
+                    "torque-off broadcast is queued behind the bytes it holds)"]
         end = self.clock.now() + CONFIRM_BUDGET_S
         for i in range(r.n):
             if r.absent[i]:  # left out at start-up: never given torque (the broadcast
                 continue     # above reaches it anyway if it came back)
             if self.clock.now() >= end:
-                rest = ", ".join(r.describe(j) for j in range(i, r.n))
+                rest = ", ".join(r.describe(j) for j in given if j >= i)
                 failed.append(f"{rest}: not confirmed (the {CONFIRM_BUDGET_S:g} s for "
                               "confirmations went on the servos before)")
                 break
@@ -173,7 +186,7 @@ class TorqueControl:
             except DeviceError as exc:
                 t = self.link.transport
                 if t.wedged or not t.is_open:  # the port failed: nobody else can be asked
-                    rest = ", ".join(r.describe(j) for j in range(i, r.n))
+                    rest = ", ".join(r.describe(j) for j in given if j >= i)
                     failed.append(f"{rest}: not confirmed: {exc}")
                     break
                 text = str(exc)

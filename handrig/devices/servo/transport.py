@@ -16,6 +16,7 @@ import fcntl
 import os
 import re
 import select
+import struct
 import termios
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -35,6 +36,17 @@ MAX_POLLS = 100_000  # bounds a poll loop even on a clock that does not move
 # met a wedged adapter: the kernel's buffer is full (about 19 KB on a pty, 4 KB in a
 # USB serial driver: a fifth of a second or more of our traffic already waiting).
 WRITE_TIMEOUT_S = 0.2
+# A port whose queue has not shrunk for this long (plus the wire time of a USB
+# transfer's worth of it) has stopped draining, long before its buffer is full. On a
+# pseudo-terminal, whose queue cannot be seen, ANSWER_STALL_S without a byte and no
+# answer to at least UNANSWERED_WEDGED state reads: longer, as an emulator starved of
+# CPU on a loaded machine looks the same for a while.
+DRAIN_STALL_S = 0.3
+ANSWER_STALL_S = 0.5
+UNANSWERED_WEDGED = 5
+DRAIN_CHUNK_BYTES = 512  # a USB serial driver drains its queue a bulk transfer at a time
+# Unix98 pseudo-terminal slaves (/dev/pts/N): Linux's devices.txt, majors 136-143
+PTY_SLAVE_MAJORS = range(136, 144)
 _SYSFS_LATENCY = "/sys/bus/usb-serial/devices/{name}/latency_timer"
 
 
@@ -67,7 +79,9 @@ class Transport(ABC):
         self.bytes_written = 0
         self.bytes_read = 0
         self.last_rx_s = -np.inf  # clock time bytes last came in
-        self.wedged = False  # a write timed out: the port stopped draining (set by write)
+        self.wedged = False  # the port stopped draining (set by write)
+        self.unanswered = 0  # waits for an answer that ended with no byte since the last byte
+        self.judging_answers = False  # see judge_answers
 
     @property
     @abstractmethod
@@ -99,6 +113,14 @@ class Transport(ABC):
     def _take_pending(self) -> bytes:
         """Bytes that have already arrived, without waiting (b"" if none)."""
 
+    def judge_answers(self, on: bool) -> None:
+        """Whether a port whose queue cannot be seen is judged by its answers (see
+        :meth:`SerialTransport._judge_drain`): on while torque is on and the loop
+        reads every servo; off while commissioning probes servos that may not answer
+        (a missing one, Fast Sync Read on firmware without it) and at torque-off."""
+        self.judging_answers = bool(on)
+        self.unanswered = 0
+
     def latency_timer(self, *, set_to_ms: int = LATENCY_TIMER_WANTED_MS) -> LatencyReport:
         """The USB adapter's latency timer, checked and set (none by default)."""
         return LatencyReport(None, None, None, f"no USB latency timer on {self.port}: skipped")
@@ -108,12 +130,17 @@ class Transport(ABC):
             raise DeviceError(f"servo port {self.port} is not open (call connect() first)")
 
     def _fill(
-        self, deadline_s: float, spin_from_s: float | None = None, spin_until_s: float = np.inf
+        self, deadline_s: float, spin_from_s: float | None = None, spin_until_s: float = np.inf,
+        *, answer: bool = False,
     ) -> bool:
-        """Wait until bytes arrive (appended to the buffer) or the deadline; True if some did."""
+        """Wait until bytes arrive (appended to the buffer) or the deadline; True if some did.
+        ``answer``: the wait was for the first answer to a request several servos answer
+        (a state read), counted in ``unanswered`` when none came."""
         chunk = self._receive(deadline_s, spin_from_s, spin_until_s)
         if not chunk:
+            self.unanswered += answer
             return False
+        self.unanswered = 0
         self.last_rx_s = self.clock.now()
         self.bytes_read += len(chunk)
         self._buf += chunk
@@ -127,6 +154,7 @@ class Transport(ABC):
         while chunk := self._take_pending():
             n += len(chunk)
             self.last_rx_s = self.clock.now()
+            self.unanswered = 0
         return n
 
     def wait_quiet(self, quiet_s: float, max_s: float, since_s: float = -np.inf) -> int:
@@ -151,21 +179,22 @@ class Transport(ABC):
 
     def read_exact(
         self, n: int, deadline_s: float, spin_from_s: float | None = None,
-        gap_s: float | None = None, spin_until_s: float = np.inf,
+        gap_s: float | None = None, spin_until_s: float = np.inf, *, answer: bool = False,
     ) -> bytes:
         """Up to ``n`` bytes: all ``n`` unless the deadline passed first (then fewer).
 
         ``spin_from_s``: poll instead of sleeping from that clock time on (see
         ``_fill``). ``gap_s``: once bytes flow, give up when none arrive for this
         long, counting from the call (for the rest of a reply whose start has come:
-        a reply cut short then ends early instead of at the deadline).
+        a reply cut short then ends early instead of at the deadline). ``answer``: see
+        ``_fill``.
         """
         self._check_open()
         buf = self._buf
         if gap_s is not None and len(buf) < n:
             deadline_s = min(deadline_s, self.clock.now() + gap_s)
         while len(buf) < n:
-            if not self._fill(deadline_s, spin_from_s, spin_until_s):
+            if not self._fill(deadline_s, spin_from_s, spin_until_s, answer=answer):
                 break
             if gap_s is not None:
                 deadline_s = min(deadline_s, self.clock.now() + gap_s)
@@ -173,12 +202,13 @@ class Transport(ABC):
         del buf[:n]
         return out
 
-    def read_packet(self, deadline_s: float) -> bytes | None:
+    def read_packet(self, deadline_s: float, *, answer: bool = False) -> bytes | None:
         """The next framed packet (not CRC-checked), or None at the deadline.
 
         Bytes before a ``FF FF FD 00`` header are skipped; a LEN beyond the
         protocol's maximum is taken as a false header and skipped too. A packet cut
-        short by the deadline is left in the buffer and None is returned.
+        short by the deadline is left in the buffer and None is returned. ``answer``:
+        see ``_fill``.
         """
         self._check_open()
         buf = self._buf
@@ -202,7 +232,7 @@ class Transport(ABC):
                     out = bytes(buf[:total])
                     del buf[:total]
                     return out
-            if not self._fill(deadline_s):
+            if not self._fill(deadline_s, answer=answer):
                 return None
 
 
@@ -213,6 +243,10 @@ class SerialTransport(Transport):
         super().__init__(port, baud, clock)
         self._handler: PortHandler | None = None
         self._fd = -1
+        self.pty = False  # a pseudo-terminal: its queue cannot be seen (set by open)
+        self.queued = 0  # bytes in the driver's output queue at the last write (TIOCOUTQ)
+        self._drained_s = -np.inf  # when the queue was last seen empty or shrinking
+        self._outq = bytearray(4)  # TIOCOUTQ's answer, reused
 
     @property
     def is_open(self) -> bool:
@@ -250,6 +284,10 @@ class SerialTransport(Transport):
         os.set_blocking(self._fd, False)
         self._buf.clear()
         self.wedged = False
+        self.judge_answers(False)
+        self.queued = 0
+        self._drained_s = self.clock.now()
+        self.pty = os.major(os.fstat(fd).st_rdev) in PTY_SLAVE_MAJORS
 
     def close(self) -> None:
         """Close the port; after a timed-out write the bytes still queued are dropped
@@ -266,9 +304,10 @@ class SerialTransport(Transport):
 
     def write(self, data: bytes | memoryview) -> None:
         """Send ``data`` completely; DeviceError if the port went away, DeviceTimeoutError
-        naming the port when it takes none of the bytes for ``WRITE_TIMEOUT_S`` (plus
-        their wire time): a wedged adapter. One ``os.write`` in the usual case: the
-        goals' write is on the cycle's critical path."""
+        naming the port when it has stopped draining: a wedged adapter. One ``os.write``
+        in the usual case (the goals' write is on the cycle's critical path), then the
+        port's queue is judged (:meth:`_judge_drain`); a write the port takes none of
+        waits at most ``WRITE_TIMEOUT_S`` plus the bytes' wire time."""
         view = data
         try:
             n = os.write(self._fd, view)
@@ -280,6 +319,57 @@ class SerialTransport(Transport):
             self._check_open()  # closed: say so rather than "bad file descriptor"
             raise DeviceError(f"write to servo port {self.port} failed: {exc}") from None
         self.bytes_written += len(data)
+        self._judge_drain(len(data))
+
+    def _judge_drain(self, written: int) -> None:
+        """Whether the port still drains, from what is queued against what the wire
+        should have carried, not from the buffer filling (a second of goals on a pty).
+
+        A serial driver reports its output queue (TIOCOUTQ: a USB serial driver counts
+        its FIFO and the transfer in flight): a queue that was not seen empty or
+        shrinking for ``DRAIN_STALL_S`` plus the wire time of a transfer's worth is
+        wedged. A pseudo-terminal reports 0 whatever the program at its other end has
+        not read (its bytes go straight to that side's input), so there the only sign
+        of draining is an answer: no answer to ``UNANSWERED_WEDGED`` state reads in a row
+        (reads several servos answer; single-servo commands are not counted) and no
+        byte for ``ANSWER_STALL_S`` is taken as the program serving it stopped (only
+        while :meth:`judge_answers` is on)."""
+        now = self.clock.now()
+        if self.pty:
+            # before the first answer (all servos missing?) commissioning says why
+            if (self.judging_answers and self.unanswered >= UNANSWERED_WEDGED
+                    and np.isfinite(self.last_rx_s)
+                    and now - self.last_rx_s > ANSWER_STALL_S):
+                self.wedged = True
+                raise DeviceTimeoutError(
+                    f"servo port {self.port} answered none of the last {self.unanswered} "
+                    f"state reads, for {now - self.last_rx_s:.2f} s (a pseudo-terminal: its "
+                    "queue cannot be seen, answers are the sign it drains): the emulator "
+                    "(or the program serving the port) has stopped draining it")
+            return
+        queued = self._output_queue()
+        if queued is None:
+            return  # a driver without an output queue to report: the deadline alone
+        # empty at the last look (however long ago), empty now, or some gone since
+        if queued == 0 or self.queued == 0 or queued < self.queued + written:
+            self._drained_s = now
+        self.queued = queued
+        stall_s = now - self._drained_s
+        if stall_s > DRAIN_STALL_S + wire_time_s(min(queued, DRAIN_CHUNK_BYTES), self.baud):
+            self.wedged = True
+            raise DeviceTimeoutError(
+                f"servo port {self.port} drained none of its {queued} queued bytes for "
+                f"{stall_s:.2f} s (the wire carries them in "
+                f"{wire_time_s(queued, self.baud) * 1e3:.1f} ms): the USB adapter has "
+                "stopped draining; unplug and replug the adapter")
+
+    def _output_queue(self) -> int | None:
+        """Bytes in the driver's output queue (TIOCOUTQ), None if it cannot say."""
+        try:
+            fcntl.ioctl(self._fd, termios.TIOCOUTQ, self._outq, True)
+        except OSError:
+            return None
+        return int(struct.unpack("i", self._outq)[0])
 
     def _write_rest(self, view: memoryview) -> None:
         """The rest of a write the port did not take at once, against a deadline."""

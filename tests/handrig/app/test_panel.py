@@ -108,6 +108,23 @@ def test_plain_line_carries_the_same_figures() -> None:
     assert "\n" not in line
 
 
+def test_heat_tiers_colour_the_temperatures_and_name_the_warm_servos() -> None:
+    rig = load_rig_config()
+    temps = {18: 56.0, 19: 61.0}  # past warn_c 55; past act_c 60 (capped)
+    servos = tuple(ServoLine(s.id, s.joint, temperature_c=temps.get(s.id, 35.0),
+                             temperature_limit_c=70.0 if s.id < 19 else 80.0,
+                             warn_c=55.0, act_c=60.0) for s in rig.servos)
+    snap = show_snapshot(servos=servos)
+    assert "servos max 61 C (past [heat] warn_c: 18, 19), 0 with errors" in plain_line(snap)
+    console = Console(width=80, height=30, record=True, file=io.StringIO(),
+                      force_terminal=True, color_system="standard")
+    console.print(render(snap, 30))
+    styled = console.export_text(styles=True)
+    assert "\x1b[1;31m 61" in styled  # bold red from act_c
+    assert "\x1b[33m 56" in styled  # yellow from warn_c
+    assert "\x1b[33m 35" not in styled and "\x1b[1;31m 35" not in styled
+
+
 def test_live_panel_without_a_terminal_prints_plain_lines_after_the_header_once() -> None:
     out = io.StringIO()
     console = Console(file=out, width=200)
@@ -329,3 +346,12 @@ def test_a_key_reader_on_a_pipe_leaves_it_alone() -> None:
         assert calls == ["q"] and reader.eof
     finally:
         os.close(r)
+
+
+def test_a_glove_take_shows_on_the_outputs_line_within_80_columns() -> None:
+    outputs = Outputs("127.0.0.1:39539", 60.0, 0, "/shows/take1.bvh", 3_400_000, 201.0,
+                      glove_take_path="/shows/glove1.csv", glove_take_frames=40200)
+    lines = screen(show_snapshot(outputs=outputs))
+    assert max(len(line) for line in lines) <= 80
+    out = next(line for line in lines if line.startswith("out"))
+    assert "rec /shows/take1.bvh" in out and out.rstrip().endswith("+glove 40k")

@@ -73,3 +73,17 @@ def test_play_bad_inputs_are_one_line_errors(
     assert "--vmc" in capsys.readouterr().err
     assert main(["play", str(tmp_path / "take.csv"), "--rate", "0"]) == 2
     assert "--rate" in capsys.readouterr().err
+
+
+def test_without_bus_a_glove_take_or_a_window_is_refused_saying_what_to_add(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from handrig.devices.glove_recording import sweep_recording, write_glove_recording
+
+    glove = tmp_path / "glove.csv"
+    write_glove_recording(glove, sweep_recording(0.2))
+    assert main(["play", str(glove)]) != 0
+    err = capsys.readouterr().err
+    assert str(glove) in err and "--bus" in err
+    _recording(tmp_path / "take.csv")
+    assert main(["play", str(tmp_path / "take.csv"), "--from", "0.1"]) != 0
+    assert "--from" in capsys.readouterr().err

@@ -55,6 +55,29 @@ def test_silence_tiers_are_read_and_checked():
         build(RigConfig, {"servos": servos, "silence": {"warn_s": 0.0}})
 
 
+def test_heat_tiers_are_read_and_bounded_with_messages():
+    servos = [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0.0, "max_deg": 90.0}]
+    shipped = load_rig_config().heat
+    assert (shipped.warn_c, shipped.act_c, shipped.action_c) == (55.0, 60.0, 65.0)
+    assert shipped.action == "relax" and shipped.relief_pwm_pct == 50.0
+    rig = build(RigConfig, {"servos": servos, "heat": {"action": "stop", "warn_c": 45.0}})
+    assert rig.heat.action == "stop" and rig.heat.warn_c == 45.0
+    with pytest.raises(ConfigError, match=r"heat\.act_c.*tiers out of order"):
+        build(RigConfig, {"servos": servos, "heat": {"warn_c": 62.0}})
+    with pytest.raises(ConfigError, match=r"heat\.warn_c.*out of range.*35\.\.95"):
+        build(RigConfig, {"servos": servos, "heat": {"warn_c": 20.0}})
+    with pytest.raises(ConfigError, match=r"heat\.relief_pwm_pct.*10\.\.100"):
+        build(RigConfig, {"servos": servos, "heat": {"relief_pwm_pct": 5.0}})
+    with pytest.raises(ConfigError, match=r"heat\.action.*'continue', 'relax', 'stop'"):
+        build(RigConfig, {"servos": servos, "heat": {"action": "panic"}})
+    # the action comes before the servo's own Temperature Limit: 70 C on an XL330 ...
+    with pytest.raises(ConfigError, match=r"servo 1's \(XL330-M288\) Temperature Limit of 70"):
+        build(RigConfig, {"servos": servos, "heat": {"action_c": 72.0}})
+    # ... 80 C on an XM430
+    xm = [{**servos[0], "model": "XM430-W350"}]
+    assert build(RigConfig, {"servos": xm, "heat": {"action_c": 75.0}}).heat.action_c == 75.0
+
+
 def test_loop_mode_and_its_rates_are_checked():
     servo = [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0}]
     assert load_rig_config().loop.mode == "glove"

@@ -170,3 +170,12 @@ def test_estop_key_ends_at_once_without_easing() -> None:
     assert calls[-1] == "e-stop key: torque off now, no easing"
     m.finish("100 frames done")
     assert m.stop_reason == "e-stop key"
+
+
+def test_ease_in_eases_the_first_frame_from_where_the_servos_are() -> None:
+    m, calls = machine(ease_in=True)
+    assert m.frame(0.0, False) is Mode.RESUMING
+    assert calls[0] == "<resume>" and "easing in" in calls[1]
+    assert m.resumes == 0  # an ease in is no glove coming back
+    m.resumed()
+    assert m.frame(0.01, False) is Mode.RUNNING

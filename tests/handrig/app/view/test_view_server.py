@@ -165,11 +165,15 @@ def test_scene_from_the_rigs_model(rig: str | None) -> None:
     geometry = scene.geometry()
     assert len(geometry["bodies"]) == models["ri"].nbody
     assert len(geometry["geoms"]) >= 10
-    if models["ri"].nmesh:  # the ORCA hand is drawn from its meshes
-        assert geometry["meshes"] and all(
-            len(m["vertices"]) % 3 == 0 and len(m["faces"]) % 3 == 0
-            and max(m["faces"]) < len(m["vertices"]) // 3
-            for m in geometry["meshes"].values())
+    if rig is not None:  # a robot hand is drawn from its meshes, not its collision geoms
+        assert {g["kind"] for g in geometry["geoms"]} == {"mesh"}
+        assert len(geometry["meshes"]) == models["ri"].nmesh >= 10
+        assert all(len(m["vertices"]) % 3 == 0 and len(m["faces"]) % 3 == 0
+                   and max(m["faces"]) < len(m["vertices"]) // 3
+                   for m in geometry["meshes"].values())
+        palm_body = {"leap": "palm", "orca": "right_R-Carpals_8d1f1041"}[rig]
+        palm = [i for i, b in enumerate(geometry["bodies"]) if b["name"] == palm_body]
+        assert palm and any(g["body"] == palm[0] for g in geometry["geoms"])  # the palm's mesh
     joint = cfg.servos[1].joint
     rest, bent = scene.pose({}), scene.pose({joint: 40.0})
     nbody = models["ri"].nbody

@@ -1,0 +1,78 @@
+"""A servo that is hot: a real ``handrig run --json`` against ``handrig sim-bus`` in its
+own process, the wrist servo starting at 62 C (``--faults hot=19@62``, as after a long
+hold). The run warns, caps its effort and names it in the events and the summary;
+with ``[heat] action = "stop"`` and the servo past action_c the run ends naming it,
+torque off."""
+
+from __future__ import annotations
+
+import json
+import re
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from handrig.config.paths import CONFIG_DIR
+from sim.demo_recording import DEMO_RECORDING
+
+CLI = [sys.executable, "-m", "handrig.cli"]
+WRIST = "servo 19 (riWristFlexion)"
+
+
+@contextmanager
+def sim_bus(faults: str) -> Iterator[str]:
+    proc = subprocess.Popen([*CLI, "sim-bus", "--no-realtime", "--faults", faults],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                            start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first.startswith("port: /dev/"), first
+        yield first.split()[1]
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def run(port: str, tmp_path: Path, heat_action: str) -> dict:
+    rig = (CONFIG_DIR / "rig.toml").read_text()
+    heat = rig.index("[heat]")
+    tail, n = re.subn(r'(?m)^action = "\w+"', f'action = "{heat_action}"', rig[heat:], count=1)
+    assert n == 1
+    config = tmp_path / "rig.toml"
+    config.write_text(rig[:heat] + tail)
+    out = subprocess.run(
+        [*CLI, "run", "--config", str(config), "--glove", f"replay:{DEMO_RECORDING}",
+         "--bus", port, "--seconds", "2", "--json"],
+        capture_output=True, text=True, timeout=120)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_a_hot_wrist_is_warned_and_capped_by_name_and_the_show_goes_on(tmp_path: Path) -> None:
+    with sim_bus("hot=19@62") as port:
+        summary = run(port, tmp_path, "relax")
+    assert summary["stop_reason"] == "2 s done" and summary["torque_off"] is True
+    heat = summary["heat"]
+    assert (heat["warnings"], heat["reliefs"], heat["actions"]) == (1, 1, 0), heat
+    assert heat["hottest"] == f"{WRIST} 62 C" and heat["max_c"][18] == 62.0
+    assert max(t for i, t in enumerate(heat["max_c"]) if i != 18) < 40.0
+    said = [e for e in summary["events"] if "[heat]" in e]
+    assert len(said) == 2 and all(e.startswith(f"{WRIST} is at 62 C") for e in said), said
+    assert "capped at 50 %" in said[1]
+
+
+def test_past_action_c_with_stop_the_run_ends_naming_it_with_torque_off(
+        tmp_path: Path) -> None:
+    with sim_bus("hot=19@66") as port:
+        summary = run(port, tmp_path, "stop")
+    assert summary["stop_reason"].startswith("device error")
+    assert f"{WRIST} is at 66 C ([heat] action_c 65 C)" in summary["stop_reason"]
+    assert "[heat] action is stop" in summary["stop_reason"]
+    assert summary["torque_off"] is True
