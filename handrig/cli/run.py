@@ -113,6 +113,12 @@ def run(args: argparse.Namespace) -> int:
                     allowed="--glove-left PORT (or [gloves] left in the rig file)")
             two = build_two_hand_parts(args.rig, args.glove_config, args.glove_left_config,
                                        **files)
+            if args.record_glove:  # refused, not dropped: a take is never lost in silence
+                raise ConfigError("a glove take records one glove; a run with a glove per "
+                                  "hand cannot record one yet", key="--record-glove",
+                                  value=args.record_glove,
+                                  allowed="--record FILE.csv|.bvh (both hands' pose), or "
+                                  "one glove (no --glove-left)")
         elif args.bus_left is not None:
             raise ConfigError("a left bus needs a rig with [left_bus] and a glove per hand",
                               key="--bus-left", value=args.bus_left,

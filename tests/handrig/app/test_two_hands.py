@@ -125,6 +125,8 @@ def test_the_same_glove_port_for_both_hands_is_refused_naming_both_flags(recordi
     (["--glove-left", "/dev/null"], ("both hands", "puppet_two_hands")),
     (["--rig", "puppet_two_buses"], ("--glove-left", "a glove per hand")),
     (["--bus-left", "sim"], ("--bus-left", "[left_bus]")),
+    (["--rig", "puppet_two_hands", "--glove-left", f"replay:{DEMO_RECORDING}",
+      "--record-glove", "take.csv"], ("--record-glove", "a glove per hand")),
 ])
 def test_two_hand_flags_on_the_wrong_rig_are_refused_before_any_bus(argv, says, capsys):
     status = main(["run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--frames",
