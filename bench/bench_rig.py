@@ -18,11 +18,17 @@ gloves, it reports:
 * writes and reads per second, writes delayed by reads, glove frames the loop
   skipped, overruns, CPU of the loop's thread per cycle.
 
+Then the two-hand cases (:mod:`bench.bench_rig_hands`): two gloves at 200 Hz and
+40 servos, on one bus at 4 Mbps and on two buses at 1 Mbps each, latency and frames
+lost per hand.
+
 ``HANDRIG_BENCH_SECONDS`` sets each case's length (default 60 s;
 ``HANDRIG_BENCH_QUICK=1``: 10 s); ``HANDRIG_BENCH_CASES`` picks cases, as
-``MODE/GLOVE_HZ/MBPS`` separated by commas (``glove/500/4,glove/200/4``; default all
-eight); ``HANDRIG_BENCH_APPEND=1`` also appends the table as a dated section to
-``docs/measurements-history.md`` (docs/measurements.md keeps the current figures).
+``MODE/GLOVE_HZ/MBPS`` separated by commas (``glove/500/4,glove/200/4``), and
+``hands/1`` (one bus) and ``hands/2`` (two buses) for the two-hand ones (default all
+eight and both two-hand cases); ``HANDRIG_BENCH_APPEND=1`` also appends the table as
+a dated section to ``docs/measurements-history.md`` (docs/measurements.md keeps the
+current figures).
 """
 
 from __future__ import annotations
@@ -204,12 +210,14 @@ HEADER = ("| loop | glove Hz | Mbps | in-process end to end p50 / p99 / max (us)
 
 def parse_cases(text: str) -> list[Case]:
     """``MODE/GLOVE_HZ/MBPS,...`` as cases (empty: all eight, fixed and glove-triggered
-    at 200 and 500 Hz, 1 and 4 Mbps)."""
+    at 200 and 500 Hz, 1 and 4 Mbps); the two-hand cases (``hands/N``) are left out."""
     if not text.strip():
         return [Case(mode, hz, baud) for hz in (200.0, 500.0)
                 for baud in (1_000_000, 4_000_000) for mode in ("fixed", "glove")]
     cases = []
     for item in text.split(","):
+        if item.strip().startswith("hands/"):
+            continue
         parts = item.strip().split("/")
         if (len(parts) != 3 or parts[0] not in ("fixed", "glove")
                 or not parts[1].replace(".", "", 1).isdigit() or not parts[2].isdigit()):
@@ -219,24 +227,55 @@ def parse_cases(text: str) -> list[Case]:
     return cases
 
 
+def parse_hands_cases(text: str) -> list[Any]:
+    """The two-hand cases ``hands/1`` and ``hands/2`` in ``text`` (empty: both)."""
+    from bench.bench_rig_hands import CASES
+
+    if not text.strip():
+        return list(CASES)
+    wanted = [item.strip() for item in text.split(",") if item.strip().startswith("hands/")]
+    by_name = {f"hands/{c.buses}": c for c in CASES}
+    unknown = [w for w in wanted if w not in by_name]
+    if unknown:
+        raise SystemExit(f"HANDRIG_BENCH_CASES: {unknown[0]!r} is not hands/1 (one bus) or "
+                         "hands/2 (two buses)")
+    return [by_name[w] for w in wanted]
+
+
 def main() -> None:
     quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 10.0 if quick else 60.0))
-    cases = parse_cases(os.environ.get("HANDRIG_BENCH_CASES", ""))
+    text = os.environ.get("HANDRIG_BENCH_CASES", "")
+    only_hands = bool(text.strip()) and all(
+        item.strip().startswith("hands/") for item in text.split(",") if item.strip())
+    cases = [] if only_hands else parse_cases(text)
+    hands_cases = parse_hands_cases(text)
     rows = []
+    hand_rows: list[str] = []
     with tempfile.TemporaryDirectory(prefix="bench_rig_") as tmp:
         folder = Path(tmp)
         rec = step_recording()
         rec_path = folder / "steps.csv"
         write_glove_recording(rec_path, rec)
         values = rec.raw[:, INDEX_CHANNEL].copy()
-        print(f"rig loop, 20 emulated servos with wire timing, {seconds:g} s per case; "
-              f"index channel steps every {STEP_S:g} s", flush=True)
-        print(HEADER, flush=True)
+        if cases:
+            print(f"rig loop, 20 emulated servos with wire timing, {seconds:g} s per case; "
+                  f"index channel steps every {STEP_S:g} s", flush=True)
+            print(HEADER, flush=True)
         for case in cases:
             r = run_case(case, seconds, folder, rec_path, values)
             rows.append(r)
             print(_row(r), flush=True)
+        if hands_cases:
+            from bench.bench_rig_hands import HANDS_HEADER, hands_rows, run_hands_case
+
+            print(f"\ntwo hands: two gloves at 200 Hz, 40 emulated servos with wire timing, "
+                  f"{seconds:g} s per case", flush=True)
+            print(HANDS_HEADER, flush=True)
+            for hc in hands_cases:
+                for line in hands_rows(run_hands_case(hc, seconds, folder)):
+                    hand_rows.append(line)
+                    print(line, flush=True)
     if os.environ.get("HANDRIG_BENCH_APPEND"):
         env = " ".join(f"{k}={os.environ[k]}" for k in ("HANDRIG_BENCH_SECONDS",)
                        if k in os.environ)
@@ -249,7 +288,9 @@ def main() -> None:
                 "frame's arrival (stamped by the loop blocking on the port) to the Sync "
                 "Write handed to the OS; outside: glove emulator send time to the bus "
                 "emulator's receipt of the first Sync Write that moved, CLOCK_MONOTONIC.\n\n"
-                + HEADER + "\n" + "\n".join(_row(r) for r in rows) + "\n")
+                + HEADER + "\n" + "\n".join(_row(r) for r in rows) + "\n"
+                + (("\nTwo hands (two gloves at 200 Hz, 40 servos):\n\n" + HANDS_HEADER + "\n"
+                    + "\n".join(hand_rows) + "\n") if hand_rows else ""))
         with (ROOT / "docs" / "measurements-history.md").open("a", encoding="utf-8") as f:
             f.write(text)
 

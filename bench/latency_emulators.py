@@ -53,9 +53,11 @@ def _glove(args: argparse.Namespace) -> int:
 
 def _bus(args: argparse.Namespace) -> int:
     from handrig.app import simulator
-    from handrig.config.rig import load_rig_config
+    from handrig.config.rig import hand_rig, load_rig_config
 
     rig = load_rig_config(args.rig)
+    if args.hand:  # one hand's servos of a two-hand rig, on that hand's bus
+        rig = hand_rig(rig, args.hand)
     # kinematic servos: no physics thread in this process to hold up the receipt stamps
     bus, _ = simulator.servo_bus(rig, puppet=False, wire_timing=True)
     with open(args.log, "w", buffering=1, encoding="ascii") as log:
@@ -88,6 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     b = sub.add_parser("bus")
     b.add_argument("--rig", required=True)
     b.add_argument("--log", required=True)
+    b.add_argument("--hand", choices=("ri", "le"), default=None)
     args = p.parse_args(argv)
     return _glove(args) if args.which == "glove" else _bus(args)
 

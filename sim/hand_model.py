@@ -430,3 +430,41 @@ def ramp_ctrl(
 
 
 FINGER_NAMES: tuple[str, ...] = FINGERS
+
+
+TWO_HANDS_APART_M = 0.3  # the two forearms side by side, this far apart (a puppeteer's)
+
+
+def two_hands_xml(
+    hand_length_m: float = REFERENCE_HAND_LENGTH_M,
+    *,
+    passive: PassiveParams | None = None,
+    actuated: Mapping[str, ActuatorParams] | None = None,
+    apart_m: float = TWO_HANDS_APART_M,
+    timestep_s: float = 0.001,
+) -> str:
+    """MJCF text of both hands in one model: :func:`hand_model_xml` of each hand, the
+    right forearm at ``y = -apart_m / 2`` and the left at ``+apart_m / 2`` (palms down,
+    forearms along x), every body, joint and actuator keeping its hand's prefix.
+    ``actuated``: DOF name (of either hand) -> :class:`ActuatorParams`. One model has
+    one gravity: the emulated puppet keeps a model per hand (:class:`sim.puppet.Puppet`,
+    each forearm's gravity its own); this one draws and poses both hands together."""
+    actuated = dict(actuated or {})
+    unknown = sorted(set(actuated) - set(DOF_NAMES["ri"]) - set(DOF_NAMES["le"]))
+    if unknown:
+        raise ValueError(f"actuated names not DOFs of either hand: {unknown}")
+    bodies, actuators = [], []
+    sides: tuple[tuple[Literal["ri", "le"], float], ...] = (("ri", -apart_m / 2),
+                                                          ("le", apart_m / 2))
+    for hand, y in sides:
+        mine = {k: v for k, v in actuated.items() if k in DOF_NAMES[hand]}
+        xml = hand_model_xml(hand, hand_length_m, passive=passive, actuated=mine,
+                             timestep_s=timestep_s)
+        world = xml[xml.index("<worldbody>") + len("<worldbody>"):xml.index("</worldbody>")]
+        bodies.append(f'<body name="{hand}Side" pos="0 {y:.9g} 0">{world}</body>')
+        actuators.append(xml[xml.index("<actuator>") + len("<actuator>"):
+                             xml.index("</actuator>")])
+        head = xml[:xml.index("<worldbody>")]
+    head = head.replace('model="handrig_le_hand"', 'model="handrig_two_hands"')
+    return (f"{head}<worldbody>{''.join(bodies)}</worldbody>"
+            f"<actuator>{''.join(actuators)}</actuator></mujoco>")

@@ -20,7 +20,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -83,9 +83,11 @@ class RigParts:
     expander: Expander
     sag: SagGrid
     pipeline: PosePipeline
-    controls: ControlsFromRaw  # the glove's GloveControls (a take played: its pose)
+    controls: ControlsFromRaw  # the glove's GloveControls (a take played: its pose; a
+    # hand of two gloves: its glove's into the shared vector, hands.SideControls)
     orientation: OrientationLike  # the glove's ForearmAngles (a take played: fixed)
     glove_file: Path | None = None  # where glove_config was read from
+    hand: str | None = None  # one hand's servos of a two-hand rig ("ri", "le"); None: all
 
 
 class ForearmAngles:
@@ -99,12 +101,12 @@ class ForearmAngles:
     stale.
     """
 
-    def __init__(self, cfg: GloveConfig) -> None:
+    def __init__(self, cfg: GloveConfig, hand: Literal["ri", "le"] = "ri") -> None:
         imu = cfg.imu
         self.orientation = ForearmOrientation(
             Rotation.from_quat(np.asarray(imu.mount_xyzw, dtype=np.float64)),
             scalar_first=imu.order == "wxyz",
-            world=imu.world,
+            world=imu.world, hand=hand,
         )
         self.configured = (cfg.forearm.inclination_deg, cfg.forearm.rotation_deg)
         self.last = self.configured
@@ -121,14 +123,17 @@ class ForearmAngles:
         return self.last
 
 
-def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | None = None
+def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | None = None,
+                *, map_file: str | Path | None = None, grid_file: str | Path | None = None
                 ) -> RigParts:
     """Load the rig, glove, map and grid configs and build the pose pipeline.
 
     ``rig_file``: a rig file or a preset name (``"leap"``: ``config/rigs/leap.toml``);
     None is the user's ``rig.toml`` (:func:`handrig.config.paths.config_file`), else the
     installed ``config/rig.toml``. A robot rig's pipeline ends in its retarget table, with
-    the rig's effective sag gain (off unless ``[robot].sag`` is true)."""
+    the rig's effective sag gain (off unless ``[robot].sag`` is true). ``map_file`` and
+    ``grid_file`` (a show file's) stand in for the rig file's ``[loop] map`` and
+    ``sag_grid``."""
     rig_path = robotrig.rig_path(rig_file) if rig_file else config_file("rig.toml")
     rig = robotrig.load_rig(rig_path)
     retarget = (robotrig.robot_retarget(rig) if isinstance(rig, robotrig.RobotRigConfig)
@@ -139,10 +144,11 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
         base, loop.glove, default_glove_path(), rig_file=rig_path, key="loop.glove")
     glove_cfg = load_glove_config(glove_path)
     limits = load_joint_limits()
-    expander = Expander.from_file(_resolve(base, loop.map, CONFIG_DIR / "maps" / "default.toml",
-                                           rig_file=rig_path, key="loop.map"), limits)
-    sag = SagGrid.load(_resolve(base, loop.sag_grid, default_grid_path(), rig_file=rig_path,
-                                key="loop.sag_grid"))
+    expander = Expander.from_file(Path(map_file) if map_file else _resolve(
+        base, loop.map, CONFIG_DIR / "maps" / "default.toml", rig_file=rig_path,
+        key="loop.map"), limits)
+    sag = SagGrid.load(Path(grid_file) if grid_file else _resolve(
+        base, loop.sag_grid, default_grid_path(), rig_file=rig_path, key="loop.sag_grid"))
     pipeline = PosePipeline(
         expander, sag, [s.joint for s in rig.servos],
         servo_limits_deg=np.array([[s.min_deg, s.max_deg] for s in rig.servos]),
@@ -293,6 +299,8 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
         proc: subprocess.Popen[str] | None = None
         if bus_spec == "sim":
             argv = ["sim-bus", "--rig", str(parts.rig_file)]
+            if parts.hand is not None:
+                argv += ["--hand", parts.hand]
             if wire_timing:
                 argv.append("--wire-timing")
             if viewer:

@@ -129,6 +129,8 @@ class PanelSnapshot:
     outputs: Outputs = field(default_factory=Outputs)
     events: tuple[str, ...] = ()  # the newest last
     keys: bool = True  # whether the show keys are read (a KeyReader on a terminal)
+    show: str = ""  # the show running (handrig run --show), "" when none
+    hands: tuple[str, ...] = ()  # a two-hand run: one line per hand (mode, glove, latency)
 
 
 # -- formatting -----------------------------------------------------------------------
@@ -193,7 +195,10 @@ def _deg(value: float) -> str:
 
 def mode_line(s: PanelSnapshot) -> Text:
     mode = s.mode.upper()
-    text = Text.assemble(("handrig ", "bold"), (f" {mode} ", MODE_STYLES.get(s.mode, "bold")))
+    text = Text.assemble(("handrig ", "bold"))
+    if s.show:
+        text.append(f"show {_fit(s.show, 20)} ", "bold cyan")
+    text.append(f" {mode} ", MODE_STYLES.get(s.mode, "bold"))
     right = f"  {_clock(s.elapsed_s)}"
     room = WIDTH - len(text.plain) - len(right) - 2
     if s.reason and room > 3:
@@ -310,7 +315,8 @@ def keys_line(s: PanelSnapshot) -> Text:
 
 def render(s: PanelSnapshot, height: int = HEIGHT) -> Group:
     """One frame of the panel: at most 80 columns and ``height`` lines."""
-    lines = [mode_line(s), glove_line(s.glove), loop_line(s), bus_line(s.bus),
+    hands = [Text(_fit(line, WIDTH)) for line in s.hands]
+    lines = [mode_line(s), *(hands or [glove_line(s.glove), loop_line(s)]), bus_line(s.bus),
              outputs_line(s.outputs), *servo_rows(s.servos), Text(_fit(LEGEND, WIDTH), "dim")]
     room = height - len(lines) - 1
     for event in s.events[-max(0, min(room, 3)):] if room > 0 else ():
@@ -330,7 +336,9 @@ def plain_line(s: PanelSnapshot) -> str:
     warm = [str(sv.id) for sv in s.servos if math.isfinite(sv.temperature_c)
             and math.isfinite(sv.warn_c) and sv.temperature_c >= sv.warn_c]
     parts = [
+        *([f"show {s.show}"] if s.show else []),
         f"{_clock(s.elapsed_s)} {s.mode}" + (f" ({s.reason})" if s.reason else ""),
+        *s.hands,
         f"glove {_num(g.rate_hz, '.0f')} Hz err {g.errors} last {_age(g.last_frame_age_s)}"
         f" reconnects {g.reconnects}",
         f"latency p50 {_num(s.latency_p50_us)} p99 {_num(s.latency_p99_us)} us",

@@ -62,10 +62,11 @@ class RigSnapshot:
     def __init__(self, rig: Watched, *, glove_source: str = "",
                  temperature_limit_c: Mapping[int, float] | None = None,
                  heat_c: tuple[float, float] = (NAN, NAN),
-                 keys: bool = False) -> None:
+                 keys: bool = False, show: str = "") -> None:
         self.rig = rig
         self.glove_source = glove_source
         self.keys = keys
+        self.show = show
         self.temperature_limit_c = dict(temperature_limit_c or {})
         self.warn_c, self.act_c = heat_c
         self._rates = {k: _Rate() for k in ("glove", "reads", "writes", "vmc")}
@@ -74,7 +75,7 @@ class RigSnapshot:
         snap = self.rig.telemetry.latest()
         if snap is None:
             return PanelSnapshot(reason="starting", keys=self.keys,
-                                 glove=GloveLink(self.glove_source))
+                                 glove=GloveLink(self.glove_source), show=self.show)
         since = max(0.0, self.rig.clock.now() - snap.t_s)
         return PanelSnapshot(
             mode=snap.mode, reason=snap.mode_reason,
@@ -83,7 +84,7 @@ class RigSnapshot:
             latency_p50_us=_nan(snap.latency_p50_us), latency_p99_us=_nan(snap.latency_p99_us),
             glove=self._glove(snap, since), bus=self._bus(snap, since),
             servos=self._servos(snap), outputs=self._outputs(snap), events=snap.events,
-            keys=self.keys)
+            keys=self.keys, show=self.show)
 
     def _glove(self, s: LoopSnapshot, since: float) -> GloveLink:
         return GloveLink(
@@ -135,3 +136,52 @@ class RigSnapshot:
                 glove_path, glove_frames = out.path, out.frames_written
         return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped,
                        glove_path, glove_frames)
+
+
+
+HAND_LABELS = {"ri": "right", "le": "left"}
+
+
+class HandsSnapshot:
+    """The panel of a two-hand run: a line per hand (its mode, glove and latency), the
+    servos of both, the first hand's bus and outputs (the second's bus when it has its
+    own is named in its line), the events of both. ``sides``: hand -> the hand's
+    :class:`RigSnapshot`, right first."""
+
+    def __init__(self, sides: Mapping[str, RigSnapshot], *, keys: bool = False,
+                 show: str = "") -> None:
+        self.sides = dict(sides)
+        self.keys = keys
+        self.show = show
+
+    def __call__(self) -> PanelSnapshot:
+        snaps = {h: side() for h, side in self.sides.items()}
+        first = next(iter(snaps.values()))
+        modes = {s.mode for s in snaps.values()}
+        mode = first.mode if len(modes) == 1 else "/".join(s.mode for s in snaps.values())
+        reasons = [f"{HAND_LABELS.get(h, h)}: {s.reason}" for h, s in snaps.items()
+                   if s.reason]
+        lines = tuple(hand_line(HAND_LABELS.get(h, h), s) for h, s in snaps.items())
+        events = tuple(e for s in snaps.values() for e in s.events)
+        return PanelSnapshot(
+            mode=mode, reason="; ".join(reasons), elapsed_s=first.elapsed_s,
+            loop_rate_hz=first.loop_rate_hz,
+            overruns=sum(s.overruns for s in snaps.values()),
+            latency_p50_us=max(s.latency_p50_us for s in snaps.values()),
+            latency_p99_us=max(s.latency_p99_us for s in snaps.values()),
+            glove=first.glove, bus=first.bus,
+            servos=tuple(sv for s in snaps.values() for sv in s.servos),
+            outputs=first.outputs, events=events[-6:], keys=self.keys, show=self.show,
+            hands=lines)
+
+
+def hand_line(label: str, s: PanelSnapshot) -> str:
+    """One hand of a two-hand run in a line: mode, glove (rate, errors, age), latency."""
+    g = s.glove
+    age = g.last_frame_age_s
+    age_text = "-" if not math.isfinite(age) else f"{age * 1000:.0f} ms"
+    lat = ("-" if not math.isfinite(s.latency_p50_us)
+           else f"{s.latency_p50_us:.0f}/{s.latency_p99_us:.0f} us")
+    rate = "-" if not math.isfinite(g.rate_hz) else f"{g.rate_hz:.0f} Hz"
+    return (f"{label:<5}  {s.mode:<8} glove {rate} err {g.errors} last {age_text}  "
+            f"p50/p99 {lat}  over {s.overruns}")

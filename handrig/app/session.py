@@ -52,6 +52,9 @@ EXIT_SIGNALS: tuple[signal.Signals, ...] = tuple(
 @dataclass
 class LiveOptions:
     glove: str | None = None  # PORT, opengloves:PORT, replay:FILE (None: glove.toml)
+    glove_left: str | None = None  # a two-hand rig's left glove (handrig.app.two_hands)
+    bus_left: str | None = None  # a two-hand rig's left bus, with [left_bus] (None: its port)
+    show: str = ""  # the show file's name, for the panel (handrig run --show)
     recorded: str = ""  # the recording an emulated glove on ``glove`` streams (handrig demo)
     bus: str | None = None  # PORT or "sim" (None: rig.toml)
     frames: int | None = None
@@ -259,6 +262,8 @@ class _Session:
             summary["stages_us"] = self.stages
         if self.signals.received:
             summary["signals"] = self.signals.received
+        if self.opts.show:
+            summary["show"] = self.opts.show
         if self.left_out:
             summary["servos_left_out"] = self.left_out
         if self.admitted:
@@ -369,7 +374,7 @@ class _Session:
             rig, glove_source=self.opts.glove or "", keys=keys is not None,
             temperature_limit_c={s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
                                  for s in rig_cfg.servos},
-            heat_c=(rig_cfg.heat.warn_c, rig_cfg.heat.act_c))
+            heat_c=(rig_cfg.heat.warn_c, rig_cfg.heat.act_c), show=self.opts.show)
         console = show_console()
         if not console.is_terminal:  # plain status lines there; the log stays where it was
             for line in header:
@@ -483,6 +488,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     most = (", most at " + ", ".join(f"{c['joint']} ({c['clamps']})" for c in clamped)
             if clamped else "")
     lines = [
+        *([f"show              {summary['show']}"] if summary.get("show") else []),
         f"frames            {summary['frames']} in {summary['duration_s']} s "
         f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us){ease}",
         f"latency           p50 {lat['p50']} us, p99 {lat['p99']} us, max {lat['max']} us "
@@ -533,6 +539,20 @@ def format_summary(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def format_hands_summary(summary: dict[str, Any]) -> str:
+    """The summary of a two-hand run: a part per hand, then torque and the error."""
+    lines = [*([f"show              {summary['show']}"] if summary.get("show") else [])]
+    for name, part in summary["hands"].items():
+        part = {k: v for k, v in part.items() if k != "show"}
+        lines.append(f"--- {name} hand ({part.get('glove_source') or 'glove'}) ---")
+        lines += [line for line in format_summary(part).splitlines()
+                  if not line.startswith(("torque off", "error"))]
+    lines.append(f"torque off        {summary['torque_off']} (every servo of both hands)")
+    if "error" in summary:
+        lines.append(f"error             {summary['error']}")
+    return "\n".join(lines)
+
+
 def _heat_lines(heat: dict[str, Any]) -> list[str]:
     """The ``heat`` line: the hottest servo read and what the [heat] tiers did."""
     if not heat:
@@ -563,7 +583,8 @@ def print_result(result: LiveResult, as_json: bool) -> int:
         if as_json:
             print(json.dumps(summary), flush=True)
         elif result.started:
-            print(format_summary(summary), flush=True)
+            print(format_hands_summary(summary) if "hands" in summary
+                  else format_summary(summary), flush=True)
         if result.error is not None and (as_json or not result.started):
             print(f"handrig: error: {result.error}", file=sys.stderr, flush=True)
     if result.error is not None and not result.started:

@@ -146,3 +146,23 @@ def human_hand_models() -> dict[str, Any]:
     from sim.hand_model import hand_model_xml
 
     return {h: mujoco.MjModel.from_xml_string(hand_model_xml(h)) for h in ("ri", "le")}
+
+
+def recording_from(path: str | Path, offset_s: float, folder: str | Path) -> Path:
+    """The glove recording at ``path`` started ``offset_s`` seconds in (what came before
+    goes to the end, so it is as long), written into ``folder``: the demo's left glove,
+    which should not move as the right one does."""
+    import dataclasses
+
+    from handrig.devices.glove_recording import read_glove_recording, write_glove_recording
+
+    rec = read_glove_recording(path)
+    n = len(rec.t_s)
+    k = int(np.searchsorted(rec.t_s - rec.t_s[0], offset_s)) % max(n, 1)
+    order = np.r_[k:n, 0:k]
+    rolled = dataclasses.replace(
+        rec, raw=rec.raw[order], buttons=rec.buttons[order],
+        quat_xyzw=None if rec.quat_xyzw is None else rec.quat_xyzw[order])
+    out = Path(folder) / f"{Path(path).stem}_from_{offset_s:g}s.csv"
+    write_glove_recording(out, rolled)
+    return out

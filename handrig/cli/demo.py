@@ -7,6 +7,11 @@ pipeline (calibration, One Euro filter, map expansion, sag, limits, slew) and th
 real Dynamixel driver into ``handrig sim-bus``'s MuJoCo puppet, with wire timing
 at the rig's baud rate. Prints a summary of what was measured.
 
+``--rig puppet_two_hands`` (or ``puppet_two_buses``) runs both hands of the
+two-hand puppet, each from an emulated glove of its own (the same recording, the
+left glove starting ``--left-offset`` seconds into it), with the two-glove map:
+on one bus at 4 Mbps, or on two buses at 1 Mbps.
+
 ``--rig leap`` (a robot rig preset, or any robot rig file) runs the same path
 into the robot: the pipeline ends in the rig's retarget table, the emulated
 servos are the rig's (XC330-M288s at 4 Mbps for LEAP) and the puppet is the
@@ -18,13 +23,16 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
 from handrig.app import simulator
 from handrig.app.factory import build_parts, port_process, robot_model
+from handrig.app.hands import build_two_hand_parts, is_two_hand
 from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
 from handrig.app.sources import Source, format_sources, run_sources
+from handrig.app.two_hands import run_two_hands
 from handrig.app.view import add_view_flag, view_session
 from handrig.cli._display import check_gl_backend, check_renderer
 from handrig.cli._numbers import positive_float, positive_int
@@ -49,6 +57,9 @@ def register(sub: Any) -> None:
                    help="glove recording to stream (default config/recordings/demo_glove.csv)")
     p.add_argument("--glove-rate", type=positive_float, default=200.0, metavar="HZ",
                    help="rate the emulated glove sends at (default 200)")
+    p.add_argument("--left-offset", type=positive_float, default=5.0, metavar="S",
+                   help="a two-hand rig: the left glove starts this far into the recording "
+                   "(default 5 s), so the hands do not move alike")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="switch on emulated bus faults (see handrig sim-bus --help)")
     add_view_flag(p)
@@ -66,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     if args.render:
         check_renderer("--render")
     parts = build_parts(args.rig)
+    two = build_two_hand_parts(args.rig) if is_two_hand(parts.rig_config) else None
     log(format_sources([*run_sources(args.rig, rig_cfg=parts.rig_config), Source(
         "recording", Path(recording), "--recording" if args.recording else
         "shipped demo: raw glove counts, calibrated with the glove file above")]))
@@ -74,16 +86,30 @@ def run(args: argparse.Namespace) -> int:
           view_session(args.view, parts.rig_config,
                        lambda text: print(text, file=sys.stderr, flush=True)) as on_rig):
         try:
-            with port_process(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
-                              "the glove emulator (handrig sim-glove)") as (_, glove_port):
+            with contextlib.ExitStack() as gloves:
+                _, glove_port = gloves.enter_context(port_process(
+                    ["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
+                    "the glove emulator (handrig sim-glove)"))
                 log(f"glove emulator streaming on {glove_port}")
+                left_port = None
+                if two is not None:
+                    left = simulator.recording_from(recording, args.left_offset,
+                                                    gloves.enter_context(
+                                                        tempfile.TemporaryDirectory()))
+                    _, left_port = gloves.enter_context(port_process(
+                        ["sim-glove", str(left), "--rate", f"{args.glove_rate:g}"],
+                        "the left glove's emulator (handrig sim-glove)"))
+                    log(f"left glove emulator streaming on {left_port} ({recording} from "
+                        f"{args.left_offset:g} s)")
                 opts = LiveOptions(glove=glove_port, recorded=recording, bus="sim",
-                                   frames=args.frames,
+                                   frames=args.frames, glove_left=left_port,
+                                   bus_left="sim" if two is not None else None,
                                    sim_faults=args.faults, log=log, panel=not args.json,
                                    on_rig=on_rig,
                                    snapshot_every=max(1, args.frames // 6) if args.render else 0)
                 signals.disarm()  # the session handles its own; after it: shut down, print
-                result = run_live(parts, opts)
+                result = (run_two_hands(two, opts) if two is not None
+                          else run_live(parts, opts))
         except HandrigError as exc:
             result = failed(exc, parts)
     if result.error is not None and not result.started and not args.json:

@@ -4,16 +4,20 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 from handrig.app.factory import build_parts
+from handrig.app.hands import TwoHandParts, build_two_hand_parts, glove_specs
 from handrig.app.session import LiveOptions, failed, print_result, run_live
-from handrig.app.sources import run_sources
+from handrig.app.sources import Source, run_sources
+from handrig.app.two_hands import run_two_hands
 from handrig.app.view import add_view_flag, view_session
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._rig import add_rig_argument, print_sources
-from handrig.errors import HandrigError
+from handrig.config.show import ShowFile, load_show
+from handrig.errors import ConfigError, HandrigError
 
 
 def register(sub: Any) -> None:
@@ -28,13 +32,27 @@ def register(sub: Any) -> None:
         "--frames count the run before the ease to relaxed, which the summary includes.",
     )
     add_rig_argument(p)
+    p.add_argument("--show", default=None, metavar="FILE.toml",
+                   help="a show file naming the rig, gloves, map, grid, buses and outputs "
+                   "(examples/show.toml); flags given here win over it")
     p.add_argument("--glove-config", default=None, metavar="FILE",
                    help="glove file (default: the rig file's [loop] glove, else your calibrated "
                    "glove.toml, else config/glove.toml)")
     p.add_argument("--glove", default=None, metavar="SPEC",
-                   help="PORT (handrig frames), opengloves:PORT, or replay:FILE.csv")
+                   help="PORT (handrig frames), opengloves:PORT, or replay:FILE.csv (with "
+                   "--glove-left: the right hand's glove)")
+    p.add_argument("--glove-left", default=None, metavar="SPEC",
+                   help="the left hand's glove, as --glove takes it: a rig with servos for "
+                   "both hands (e.g. --rig puppet_two_hands) then drives each hand from its "
+                   "own glove, with the two-glove map (default: the rig file's [gloves] left)")
+    p.add_argument("--glove-left-config", default=None, metavar="FILE",
+                   help="the left glove's glove file (default: [gloves] left_config, else "
+                   "the right glove's)")
     p.add_argument("--bus", default=None, metavar="PORT",
                    help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
+    p.add_argument("--bus-left", default=None, metavar="PORT",
+                   help="a rig on two buses ([left_bus]): the left hand's servo port, or "
+                   "'sim' (default: [left_bus] port)")
     p.add_argument("--viewer", action="store_true",
                    help="with --bus sim: show the simulated puppet (needs a display)")
     p.add_argument("--vmc", default=None, metavar="HOST:PORT",
@@ -58,28 +76,82 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
+def _from_show(args: argparse.Namespace) -> ShowFile | None:
+    """Fill the flags not given from ``--show``'s file (None without one)."""
+    if not args.show:
+        return None
+    show = load_show(args.show)
+    fill = {"rig": show.show.rig, "glove": show.gloves.right, "glove_left": show.gloves.left,
+            "glove_config": show.gloves.right_config,
+            "glove_left_config": show.gloves.left_config, "bus": show.buses.right,
+            "bus_left": show.buses.left, "vmc": show.outputs.vmc,
+            "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
+            "view": show.outputs.view}
+    for name, value in fill.items():
+        if getattr(args, name) is None and value:
+            setattr(args, name, value)
+    return show
+
+
 def run(args: argparse.Namespace) -> int:
+    two: TwoHandParts | None = None
+    show: ShowFile | None = None
     try:
+        show = _from_show(args)
         if args.viewer:
             check_display("--viewer")
-        parts = build_parts(args.rig, args.glove_config)
-        if (args.bus or parts.rig_config.bus.port) == "sim":
+        files = ({"map_file": show.show.map or None, "grid_file": show.show.grid or None}
+                 if show is not None else {})
+        parts = build_parts(args.rig, args.glove_config, **files)
+        rig = parts.rig_config
+        right, left = glove_specs(rig, args.glove, args.glove_left)
+        if left is not None or rig.left_bus is not None:
+            if left is None:
+                raise ConfigError(
+                    "this rig has the left hand's servos on a bus of their own: it needs a "
+                    "glove per hand", key="--glove-left", file=None,
+                    allowed="--glove-left PORT (or [gloves] left in the rig file)")
+            two = build_two_hand_parts(args.rig, args.glove_config, args.glove_left_config,
+                                       **files)
+            if args.record_glove:  # refused, not dropped: a take is never lost in silence
+                raise ConfigError("a glove take records one glove; a run with a glove per "
+                                  "hand cannot record one yet", key="--record-glove",
+                                  value=args.record_glove,
+                                  allowed="--record FILE.csv|.bvh (both hands' pose), or "
+                                  "one glove (no --glove-left)")
+        elif args.bus_left is not None:
+            raise ConfigError("a left bus needs a rig with [left_bus] and a glove per hand",
+                              key="--bus-left", value=args.bus_left,
+                              allowed="--rig puppet_two_buses --glove-left PORT")
+        if "sim" in ((args.bus or rig.bus.port),
+                     args.bus_left or (rig.left_bus.port if rig.left_bus else "")):
             check_gl_backend("--bus sim")
     except HandrigError as exc:
         if not args.json:
             raise
         return print_result(failed(exc), as_json=True)
     if not args.json:
-        print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
+        if show is not None:
+            _stderr(f"show: {show.title} ({show.path})")
+        sources = run_sources(args.rig, args.glove_config, parts.rig_config)
+        if two is not None:  # a glove per hand: the two-glove map, the left glove's file
+            sources = [Source("map", two.map_file, "a glove per hand: the two-glove map "
+                              "unless [loop] map or the show names one")
+                       if s.role == "map" else s for s in sources]
+            sources.append(Source("left glove", two.sides["le"].glove_file or Path(),
+                                  "--glove-left-config, [gloves] left_config, else the "
+                                  "right glove's"))
+        print_sources(sources)
     with view_session(args.view, parts.rig_config, _stderr) as on_rig:
         opts = LiveOptions(
-            glove=args.glove, bus=args.bus, frames=args.frames, duration_s=args.seconds,
+            glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,
             wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
             record=args.record, record_rate_hz=args.record_rate,
             record_glove=args.record_glove, panel=not args.json,
-            verbose=not args.json, on_rig=on_rig,
+            verbose=not args.json, on_rig=on_rig, glove_left=left, bus_left=args.bus_left,
+            show=show.title if show is not None else "",
         )
-        result = run_live(parts, opts)
+        result = run_two_hands(two, opts) if two is not None else run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
         raise result.error
     return print_result(result, as_json=args.json)

@@ -18,6 +18,7 @@ from typing import Any, TextIO
 
 from handrig.app.robots import load_rig
 from handrig.cli._numbers import whole_int
+from handrig.config.rig import hand_rig
 from handrig.errors import ConfigError, HandrigError
 
 REPORT_EVERY_S = 10.0
@@ -53,6 +54,9 @@ def register(sub: Any) -> None:
     p.add_argument("--no-puppet", action="store_true",
                    help="no MuJoCo hand: servos move kinematically at their speed limit")
     p.add_argument("--viewer", action="store_true", help="show the puppet (needs a display)")
+    p.add_argument("--hand", choices=("ri", "le"), default=None,
+                   help="only this hand's servos, on its bus (a two-hand rig on two buses: "
+                   "the left hand's at [left_bus]'s baud)")
     p.add_argument("--no-realtime", action="store_true",
                    help="do not ask for SCHED_FIFO priority for the bus thread")
     p.set_defaults(func=run)
@@ -119,6 +123,8 @@ def run(args: argparse.Namespace) -> int:
     from firmware_protocol.dynamixel import MODELS
     from handrig.app import simulator
     rig = load_rig(args.rig)
+    if args.hand is not None:
+        rig = hand_rig(rig, args.hand)
     ids: list[int] | None = None
     if args.servos is not None:
         if not 1 <= args.servos <= 253:

@@ -15,6 +15,7 @@ servo's own 0..4095 position range.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -453,9 +454,23 @@ class CalibrationConfig:
 
 
 @dataclass(frozen=True)
+class GlovesConfig:
+    """``[gloves]``: a glove per hand (a rig with servos for both hands). ``right`` and
+    ``left`` are glove specs as ``--glove`` takes them (a port, ``opengloves:PORT``,
+    ``replay:FILE.csv``; empty: none from the rig file); ``left_config`` the left glove's
+    glove file (empty: the right glove's)."""
+
+    right: str = ""
+    left: str = ""
+    left_config: str = ""
+
+
+@dataclass(frozen=True)
 class RigConfig:
     """The whole rig file: ``[bus]``, ``[loop]``, ``[silence]``, ``[heat]``,
-    ``[calibration]`` and ``[[servos]]``."""
+    ``[calibration]``, ``[[servos]]``, and for two hands ``[gloves]`` and ``[left_bus]``
+    (the left hand's servos on a bus of their own; without it both hands share
+    ``[bus]``)."""
 
     bus: BusConfig = BusConfig()
     loop: LoopConfig = LoopConfig()
@@ -464,6 +479,8 @@ class RigConfig:
     silence: SilenceConfig = SilenceConfig()
     heat: HeatConfig = HeatConfig()
     calibration: CalibrationConfig = CalibrationConfig()
+    gloves: GlovesConfig = GlovesConfig()
+    left_bus: BusConfig | None = None
 
     def check(self) -> None:
         if not self.servos:
@@ -493,6 +510,11 @@ class RigConfig:
                     f"Limit of {limit} C, where it turns its torque off by itself",
                     key="heat.action_c", value=self.heat.action_c,
                     allowed=f"below {limit} C")
+        if self.left_bus is not None and not any(s.joint.startswith("le")
+                                                 for s in self.servos):
+            raise ConfigError("[left_bus] is given but no servo drives a left-hand joint",
+                              key="left_bus", allowed="left-hand servos (joints le...) in "
+                              "[[servos]], or no [left_bus]")
         check_servo_settings(self)
 
     def servo(self, servo_id: int) -> ServoCalibration:
@@ -510,6 +532,28 @@ class RigConfig:
     def servo_settings_for(self, servo_id: int) -> ResolvedServoSettings:
         """What commissioning writes to servo ``servo_id`` ([servo_settings], groups applied)."""
         return resolve_servo_settings(self.servo_settings, servo_id)
+
+
+HAND_NAMES = {"ri": "right", "le": "left"}
+
+
+def hand_of_joint(joint: str) -> str:
+    """``"ri"`` or ``"le"``: the hand a servo's joint belongs to (by its prefix)."""
+    return "le" if joint.startswith("le") else "ri"
+
+
+def hand_rig(rig: RigConfig, hand: str) -> RigConfig:
+    """One hand's part of a rig: that hand's servos (joints ``ri...`` or ``le...``) on
+    that hand's bus (``[left_bus]`` for the left hand when the rig has one, else
+    ``[bus]``). ConfigError when the rig drives no servo of that hand."""
+    if hand not in HAND_NAMES:
+        raise ConfigError("unknown hand", key="hand", value=hand, allowed="ri or le")
+    servos = tuple(s for s in rig.servos if hand_of_joint(s.joint) == hand)
+    if not servos:
+        raise ConfigError(f"the rig drives no servo of the {HAND_NAMES[hand]} hand",
+                          key="servos", allowed=f"[[servos]] with joints {hand}...")
+    bus = rig.left_bus if hand == "le" and rig.left_bus is not None else rig.bus
+    return dataclasses.replace(rig, servos=servos, bus=bus, left_bus=None)
 
 
 DEFAULT_RIG = CONFIG_DIR / "rig.toml"

@@ -155,6 +155,12 @@ class PosePipeline:
     ``left_forearm_deg`` (inclination, rotation) is where the left forearm is
     taken to be for its sag (default: hanging at rest).
 
+    ``glove_hand``: the hand whose forearm the orientation given to each step is
+    (``"ri"``, the one-glove rig; ``"le"``: the left hand's loop of a two-glove rig,
+    whose servos drive left-hand joints); the other forearm is taken to be at
+    :attr:`other_forearm_deg` (``left_forearm_deg`` for the left, ``right_forearm_deg``
+    for the right), which a two-hand run updates from the other glove.
+
     ``retarget``: a robot hand; ``servo_joints`` then name the robot's joints (rows of
     the table, in bus order) and the servo limits are intersected with the table's
     ranges instead of the human joint limits.
@@ -174,6 +180,8 @@ class PosePipeline:
         control_means_deg: FloatArray | None = None,
         left_forearm_deg: tuple[float, float] = (-90.0, 0.0),
         retarget: RetargetLike | None = None,
+        glove_hand: Literal["ri", "le"] = "ri",
+        right_forearm_deg: tuple[float, float] = (-90.0, 0.0),
     ) -> None:
         self.expander = expander
         self.sag = sag
@@ -181,7 +189,19 @@ class PosePipeline:
         self.slew_deg_s = float(slew_deg_s)
         self.sag_gain = float(sag_gain)
         self.left_hand = left_hand
+        if glove_hand not in ("ri", "le"):
+            raise ConfigError("unknown glove hand", key="glove_hand", value=glove_hand,
+                              allowed="ri or le")
+        if glove_hand == "le" and (left_hand != "map" or retarget is not None):
+            raise ConfigError("a left-hand glove needs the left hand from the map",
+                              key="loop.left_hand", value=left_hand,
+                              allowed='"map" (and a human rig) with a glove per hand')
+        self.glove_hand = glove_hand
         self.left_forearm_deg = left_forearm_deg
+        self.other_forearm_deg = (left_forearm_deg if glove_hand == "ri"
+                                  else right_forearm_deg)
+        """Where the forearm without this pipeline's glove is (inclination, rotation):
+        its sag in :meth:`full_pose` and :meth:`relaxed_pose`."""
         self.retarget = retarget
         limits = limits or JointLimits()
         n = len(self.servo_joints)
@@ -300,11 +320,13 @@ class PosePipeline:
         map_low = np.full(n, -np.inf)
         map_high = np.full(n, np.inf)
         slot = np.full(n, hand.DOFS_PER_HAND, dtype=np.int64)  # index 23 = no sag
-        left_const = np.zeros(hand.DOFS_PER_HAND)
+        live = self.glove_hand  # the hand whose sag follows the glove's forearm
+        other: str = "le" if live == "ri" else "ri"
+        left_const = np.zeros(hand.DOFS_PER_HAND)  # the other hand's constant sag
         left_rest = np.zeros(hand.DOFS_PER_HAND)
-        left_grid = self._grids.get("le")
+        left_grid = self._grids.get(other)
         if left_grid is not None and self.left_hand != "mirror":
-            left_grid.offsets(*self.left_forearm_deg, out=left_const)
+            left_grid.offsets(*self.other_forearm_deg, out=left_const)
             left_rest[:] = left_grid.rest_deg
         for j, name in enumerate(joints):
             i = pose_index(name)
@@ -323,13 +345,13 @@ class PosePipeline:
             if not len(hits):
                 continue  # finger twist: no DOF in the relaxed-hand model
             d = int(hits[0])
-            if h == "ri" or self.left_hand == "mirror":
+            if h == live or self.left_hand == "mirror":
                 slot[j] = d
             else:
                 b[j] += self.sag_gain * left_const[d]
                 if self.left_hand == "relaxed":
                     b[j] += left_rest[d]
-        grid = self._grids.get("ri")
+        grid = self._grids.get(live)
         tables = grid.kernel_tables() if grid is not None else SagTables.empty()
         return ServoPath(np.ascontiguousarray(a), b, slot, self.sag_gain, tables, map_low,
                          map_high)
@@ -362,10 +384,14 @@ class PosePipeline:
         pose[50:] = 0.0  # no active wrist sensor: the wrist is the passive model's
         if self.left_hand == "mirror":
             pose[25:50] = pose[0:25]
+        if self.glove_hand == "le":  # the left hand's loop of a two-glove rig
+            self._add_sag(pose, "le", inclination_deg, rotation_deg, absolute=False)
+            self._add_sag(pose, "ri", *self.other_forearm_deg, absolute=False)
+            return pose
         self._add_sag(pose, "ri", inclination_deg, rotation_deg, absolute=False)
         left_incl, left_rot = (
             (inclination_deg, rotation_deg) if self.left_hand == "mirror"
-            else self.left_forearm_deg
+            else self.other_forearm_deg
         )
         self._add_sag(pose, "le", left_incl, left_rot, absolute=self.left_hand == "relaxed")
         return pose
@@ -376,8 +402,9 @@ class PosePipeline:
         self.expander.expand(self.control_means_deg, out=self.curves)
         self.relaxed[:50] = self.curves
         self.relaxed[50:] = 0.0
-        self._add_sag(self.relaxed, "ri", inclination_deg, rotation_deg, absolute=True)
-        self._add_sag(self.relaxed, "le", *self.left_forearm_deg, absolute=True)
+        live, other = ("le", "ri") if self.glove_hand == "le" else ("ri", "le")
+        self._add_sag(self.relaxed, live, inclination_deg, rotation_deg, absolute=True)
+        self._add_sag(self.relaxed, other, *self.other_forearm_deg, absolute=True)
         return self.relaxed
 
     # -- the per-cycle step ----------------------------------------------------------------

@@ -122,3 +122,21 @@ def test_actuated_joint_tracks_its_goal_at_limited_speed() -> None:
     assert d.qpos[qadr] == pytest.approx(1.0, abs=0.02)
     with pytest.raises(ValueError, match="not DOFs"):
         hand_model_xml("ri", passive=ZERO, actuated={"leIndexMCPy": act})
+
+
+def test_both_hands_in_one_model_keep_each_hand_s_joints_and_actuators():
+    import mujoco
+
+    from sim.hand_model import ActuatorParams, two_hands_xml
+
+    act = {"riIndexMCPy": ActuatorParams(), "leIndexMCPy": ActuatorParams()}
+    m = mujoco.MjModel.from_xml_string(two_hands_xml(actuated=act))
+    names = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, i) for i in range(m.njnt)}
+    assert names == set(DOF_NAMES["ri"]) | set(DOF_NAMES["le"])  # 23 DOFs a hand
+    assert {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, i)
+            for i in range(m.nu)} == set(act)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    ri = d.xpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "riPalm")]
+    le = d.xpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "lePalm")]
+    assert le[1] - ri[1] == pytest.approx(0.3)  # side by side, the forearms 0.3 m apart

@@ -1,0 +1,163 @@
+"""A show file: one TOML naming everything a live show uses.
+
+``handrig run --show show.toml`` starts the show it describes: the rig (a preset
+or a rig file), the gloves (one, or one per hand), the map and the sag grid (when
+they differ from the rig file's), the buses, and the outputs (VMC, a recording,
+the live view). A flag given on the command line wins over the show file. Paths
+are relative to the show file's folder. Every key is checked on load; an error
+names the file and the key (``examples/show.toml`` is the commented example)::
+
+    [show]
+    name = "Two-hand puppet"   # shown by the panel (default: the file's name)
+    rig = "puppet_two_hands"   # a preset or a rig file
+    map = ""                   # empty: the rig file's [loop] map
+    grid = ""                  # empty: the rig file's [loop] sag_grid
+
+    [gloves]
+    right = "/dev/ttyACM0"     # as --glove
+    left = "/dev/ttyACM1"      # as --glove-left (empty: one glove)
+    right_config = ""          # as --glove-config
+    left_config = ""           # as --glove-left-config
+
+    [buses]
+    right = ""                 # as --bus (empty: the rig file's [bus] port)
+    left = ""                  # as --bus-left
+
+    [outputs]
+    vmc = ""                   # HOST:PORT
+    record = ""                # a new take, .csv or .bvh
+    record_rate_hz = 0.0       # a BVH take's rate (0: the glove's)
+    view = ""                  # [HOST:]PORT of the live view
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from handrig.config.loading import load
+from handrig.errors import ConfigError
+
+GLOVE_PREFIXES = ("replay:", "opengloves:")
+
+
+@dataclass(frozen=True)
+class ShowHead:
+    name: str = ""
+    rig: str = ""
+    map: str = ""
+    grid: str = ""
+
+
+@dataclass(frozen=True)
+class ShowGloves:
+    right: str = ""
+    left: str = ""
+    right_config: str = ""
+    left_config: str = ""
+
+
+@dataclass(frozen=True)
+class ShowBuses:
+    right: str = ""
+    left: str = ""
+
+
+@dataclass(frozen=True)
+class ShowOutputs:
+    vmc: str = ""
+    record: str = ""
+    record_rate_hz: float = 0.0
+    view: str = ""
+
+    def check(self) -> None:
+        if self.vmc and ":" not in self.vmc:
+            raise ConfigError("no port given", key="vmc", value=self.vmc,
+                              allowed="HOST:PORT, e.g. 127.0.0.1:39539")
+        if self.record and Path(self.record).suffix.lower() not in (".csv", ".bvh"):
+            raise ConfigError("unknown recording suffix", key="record", value=self.record,
+                              allowed="a file name ending in .csv or .bvh")
+        if self.record_rate_hz and not 1.0 <= self.record_rate_hz <= 2000.0:
+            raise ConfigError("out of range", key="record_rate_hz",
+                              value=self.record_rate_hz, allowed="0 (the glove's) or 1..2000")
+
+
+@dataclass(frozen=True)
+class ShowFile:
+    """A show file (see the module docstring). ``path``: where it was read from."""
+
+    show: ShowHead = ShowHead()
+    gloves: ShowGloves = ShowGloves()
+    buses: ShowBuses = ShowBuses()
+    outputs: ShowOutputs = ShowOutputs()
+    path: str = ""
+
+    def check(self) -> None:
+        if not self.show.rig:
+            raise ConfigError("no rig named", key="show.rig",
+                              allowed="a rig preset (puppet_two_hands, leap, ...) or a rig "
+                              "file, relative to the show file")
+        left = self.gloves.left
+        if left and left == self.gloves.right and not left.startswith("replay:"):
+            raise ConfigError("the right and the left glove are on the same port",
+                              key="gloves.left", value=left,
+                              allowed="a port of its own for each hand")
+
+    @property
+    def title(self) -> str:
+        """The show's name for the panel: ``[show] name``, else the file's name."""
+        return self.show.name or Path(self.path).stem
+
+
+def _file(base: Path, value: str, key: str, show: Path, *, must_exist: bool = True) -> str:
+    """``value`` (relative to the show file's folder) as a path; a file that is not there
+    is a ConfigError naming the show file and ``key``."""
+    if not value:
+        return ""
+    p = Path(value)
+    p = p if p.is_absolute() else Path(os.path.normpath(base / p))
+    if must_exist and not p.is_file():
+        raise ConfigError(f"no such file: {p}", file=str(show), key=key, value=value,
+                          allowed="an existing file (relative to the show file's folder)")
+    return str(p)
+
+
+def _glove(base: Path, value: str, key: str, show: Path) -> str:
+    """A glove spec; a recording (``replay:FILE``) relative to the show file's folder."""
+    if not value.startswith("replay:"):
+        return value
+    return "replay:" + _file(base, value.removeprefix("replay:"), key, show)
+
+
+def load_show(path: str | Path) -> ShowFile:
+    """Load and check a show file; its paths come back resolved (a rig given as a file,
+    the map, grid, glove files, recordings to replay and the take to record, relative to
+    the show file's folder). ConfigError names the file and the key."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError("no such show file", key="--show", value=str(path),
+                          allowed="a show file (see examples/show.toml)")
+    show = load(p, ShowFile)
+    base = p.resolve().parent
+    rig = show.show.rig
+    if "/" in rig or rig.endswith(".toml"):
+        rig = _file(base, rig, "show.rig", p)
+    try:
+        return dataclasses.replace(
+            show, path=str(p),
+            show=dataclasses.replace(
+                show.show, rig=rig, map=_file(base, show.show.map, "show.map", p),
+                grid=_file(base, show.show.grid, "show.grid", p)),
+            gloves=dataclasses.replace(
+                show.gloves, right=_glove(base, show.gloves.right, "gloves.right", p),
+                left=_glove(base, show.gloves.left, "gloves.left", p),
+                right_config=_file(base, show.gloves.right_config, "gloves.right_config", p),
+                left_config=_file(base, show.gloves.left_config, "gloves.left_config", p)),
+            outputs=dataclasses.replace(
+                show.outputs,
+                record=_file(base, show.outputs.record, "outputs.record", p,
+                             must_exist=False)))
+    except ConfigError as exc:
+        raise exc.located(str(p)) from None
