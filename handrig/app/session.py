@@ -66,7 +66,9 @@ class LiveOptions:
     record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
-    ease_in: bool = False  # the first frame eases in from where the servos are (play)
+    # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
+    # show never starts with a jump (run, demo, play); False: straight to the first goal
+    ease_in: bool = True
     done_reason: str = ""  # the stop reason when frames/duration_s is reached ("": "S s done")
     panel: bool = False  # the live panel (plain lines when stdout is no terminal)
     keys: bool = True  # with the panel: read the show keys when stdin is a terminal

@@ -89,8 +89,11 @@ def test_takes_last_as_long_as_the_run_at_any_glove_rate(tmp_path: Path,
     bvh_s = len(tb) * frame_s
     print(f"{glove_hz:g} Hz glove: run {run_from_first_s:.4f} s from its first frame,"
           f" CSV {csv_s:.4f} s ({len(t)} rows), BVH {bvh_s:.4f} s ({len(tb)} frames)")
-    assert abs(csv_s - run_from_first_s) <= frame_s
-    assert abs(bvh_s - run_from_first_s) <= frame_s
+    # within one frame of the run; the run itself is known only to within the delay of
+    # the clock read in the last output call (a host scheduling delay: up to 2 ms here)
+    read_jitter_s = 0.002
+    assert abs(csv_s - run_from_first_s) <= frame_s + read_jitter_s
+    assert abs(bvh_s - run_from_first_s) <= frame_s + read_jitter_s
     # the silence is in both: the CSV has no second-long gap it made up or dropped,
     # its times cover the silence, and each BVH frame is the newest CSV row at its time
     assert np.all(np.diff(t) >= 0)
