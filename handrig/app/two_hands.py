@@ -181,7 +181,7 @@ class _TwoHands:
                 side.rig_config, gloves[h], hand_bus, side.pipeline, self.clock,
                 controls_from_raw=side.controls, orientation=side.orientation,
                 outputs=outputs if h == "ri" else (), log=self._side_log(h),
-                profile=opts.profile)
+                profile=opts.profile, ease_in=opts.ease_in)
             self.stats[h] = self.rigs[h].stats
         if opts.on_rig is not None:
             opts.on_rig(self.rigs["ri"])

@@ -77,6 +77,10 @@ def test_two_gloves_on_one_bus_drive_both_hands_and_a_lost_glove_relaxes_its_han
                for line in lines)
     assert not any(line.startswith("right hand:") and "silent or garbled" in line
                    for line in lines)
+    # each hand's first frame eases in from where its servos rest, as a one-hand show's
+    for hand in ("right", "left"):
+        assert any(line.startswith(f"{hand} hand:") and "easing in from where the servos are"
+                   in line for line in lines), lines[:20]
     # one bus: both hands' writes counted on it, 40 servos
     assert right["bus"]["writes"] == left["bus"]["writes"] >= 600
     text = format_hands_summary(s)
