@@ -81,6 +81,9 @@ class SilenceWatch:
         self.admitted = 0  # servos left out at connect, admitted when they answered
         self._admit_after = np.full(n, -np.inf)
         self._admit_said = [""] * n
+        # servos whose last read asked 2+ servos and had no answer at all (a read part
+        # that went quiet as a whole, not each servo's cable)
+        self._quiet_together = np.zeros(n, bool)
 
     # ------------------------------------------------------------------ host timing
     def note_read(self, now: float, late: bool = False) -> None:
@@ -117,6 +120,11 @@ class SilenceWatch:
         DeviceTimeoutError when the action is ``"stop"``."""
         cfg = self.config
         self._note_reboots(state)
+        if state.sent:
+            asked = (np.ones(self.n, bool) if state.asked is None
+                     else np.asarray(state.asked, dtype=bool))
+            together = asked.sum() >= 2 and not bool(state.answered.any())
+            self._quiet_together[asked] = together
         since_ref = now - self._t_ref if np.isfinite(self._t_ref) else 0.0
         silent_s = np.minimum(np.asarray(state.age_s, dtype=np.float64)
                               + (now - state.timestamp_s), since_ref)
@@ -261,6 +269,13 @@ class SilenceWatch:
         elif everyone:
             why = ("every servo went quiet at once: check the bus's power supply, the USB "
                    "adapter and the baud rate")
+        elif len(indices) >= 2 and bool(self._quiet_together[indices].all()):
+            k = len(indices)
+            why = (f"all {k} went quiet at once, every servo one read asks, while the other "
+                   f"servos answer: a read unanswered as a whole, not {k} cables; "
+                   + ("the emulator is not keeping up (a loaded machine)" if emulated
+                      else "check the bus's power supply and the USB adapter")
+                   + (f"; {late_text}" if late else ""))
         elif late:
             why = f"{late_text}; the other servos answer: check its cable, power and ID"
         else:

@@ -174,6 +174,42 @@ def test_every_servo_quiet_on_an_emulated_bus_points_at_the_emulator() -> None:
         loop.until(1.0, np.zeros(6))
 
 
+@pytest.mark.parametrize("emulated, says", [
+    (True, "the emulator is not keeping up"), (False, "check the bus's power supply")])
+def test_one_read_part_quiet_as_a_whole_is_not_blamed_on_each_servos_cable(
+        emulated: bool, says: str) -> None:
+    """Reads alternate between the bus's two parts (servos 0, 2, 4 and 1, 3, 5); when
+    every servo of one part goes quiet at once, the message says so instead of asking
+    for three cables to be checked."""
+    bus, _, peer = make_bus(small_rig(), fault_policy=POLICY, emulated=emulated)
+    watch = SilenceWatch(bus, silence("continue"), bus.rig.loop.slew_deg_s)
+    for k in range(4):
+        watch.note_read(bus.clock.now())
+        watch.update(bus.read_state(part=(k % 2, 2)), bus.clock.now())
+        bus.clock.advance(0.02)  # type: ignore[attr-defined]
+    for i in (0, 2, 4):
+        peer.servos[i].silent_until = math.inf
+    for k in range(30):
+        bus.write_goals_deg(np.zeros(6))
+        watch.note_read(bus.clock.now())
+        watch.update(bus.read_state(part=(k % 2, 2)), bus.clock.now())
+        bus.clock.advance(0.02)  # type: ignore[attr-defined]
+    text = " | ".join(watch.drain_events())
+    assert "every servo one read asks" in text and says in text, text
+    assert "check its cable" not in text, text
+    # a single servo of a part going quiet is still its own cable's business
+    bus, _, peer = make_bus(small_rig(), fault_policy=POLICY, emulated=emulated)
+    watch = SilenceWatch(bus, silence("continue"), bus.rig.loop.slew_deg_s)
+    peer.servos[2].silent_until = math.inf
+    for k in range(30):
+        bus.write_goals_deg(np.zeros(6))
+        watch.note_read(bus.clock.now())
+        watch.update(bus.read_state(part=(k % 2, 2)), bus.clock.now())
+        bus.clock.advance(0.02)  # type: ignore[attr-defined]
+    text = " | ".join(watch.drain_events())
+    assert "check its cable" in text and "every servo one read asks" not in text, text
+
+
 def test_a_rebooted_servo_comes_back_where_it_is_and_eases_to_its_goals() -> None:
     from firmware_protocol import dynamixel as dx
 
