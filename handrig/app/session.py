@@ -65,6 +65,7 @@ class LiveOptions:
     record: str | None = None
     record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
+    record_glove_left: str | None = None  # a two-hand run's left glove take
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
     # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
     # show never starts with a jump (run, demo, play); False: straight to the first goal

@@ -26,9 +26,11 @@ import gc
 import sys
 import threading
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 from handrig.app import factory as app
+from handrig.app import takes
 from handrig.app.hands import HAND_NAMES, TwoHandParts, check_two_gloves
 from handrig.app.session import (
     ExitSignals,
@@ -44,7 +46,7 @@ from handrig.config.rig import hand_of_joint
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.bus import ServoBus
 from handrig.devices.servo.shared import SharedBus
-from handrig.errors import DeviceError, HandrigError
+from handrig.errors import ConfigError, DeviceError, HandrigError
 from handrig.loop.modes import Mode
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
@@ -76,7 +78,7 @@ class _TwoHands:
         self.glove_stats: dict[str, Any] = {}
         self.bus_stats: dict[str, Any] = {}  # per hand: its bus's counters (shared: the same)
         self.torque_off: dict[str, bool | None] = {}  # per bus port
-        self.outputs: list[Any] = []
+        self.outputs: dict[str, list[Any]] = {"ri": [], "le": []}  # each hand's loop's
         self.ease_s: dict[str, float] = {h: 0.0 for h in HANDS}
         self.errors: dict[str, BaseException] = {}
         self.opened: list[app.OpenedBus] = []  # read once the emulators have stopped
@@ -93,6 +95,7 @@ class _TwoHands:
                                      sides["ri"].glove_config, sides["le"].glove_config,
                                      sides["ri"].glove_file, sides["le"].glove_file)
             app.check_outputs(self.opts.vmc, self.opts.record)
+            self._check_glove_takes()
             with contextlib.ExitStack() as stack:
                 buses, owners = self._open_buses(stack)
                 error = self._devices_open(stack, dict(zip(HANDS, specs, strict=True)),
@@ -102,6 +105,24 @@ class _TwoHands:
         except OSError as exc:
             error = error or DeviceError(f"{type(exc).__name__}: {exc}")
         return self._result(error)
+
+    def _glove_takes(self) -> dict[str, tuple[str, str]]:
+        """hand -> (flag, path) of the glove takes asked for."""
+        asked = {"ri": ("--record-glove", self.opts.record_glove),
+                 "le": ("--record-glove-left", self.opts.record_glove_left)}
+        return {h: (flag, path) for h, (flag, path) in asked.items() if path}
+
+    def _check_glove_takes(self) -> None:
+        """Before any bus opens: each take a new .csv, not the performance's, not the
+        other hand's (ConfigError naming the flag)."""
+        wanted = self._glove_takes()
+        for flag, path in wanted.values():
+            takes.check_glove_take_path(path, flag, record=self.opts.record)
+        if len(wanted) == 2 and (Path(wanted["ri"][1]).resolve()
+                                 == Path(wanted["le"][1]).resolve()):
+            raise ConfigError("the same file as --record-glove", key="--record-glove-left",
+                              value=wanted["le"][1],
+                              allowed="a file of its own: a glove take per hand")
 
     def _open_buses(self, stack: contextlib.ExitStack
                     ) -> tuple[dict[str, ServoBus | None], list[DynamixelBus]]:
@@ -172,7 +193,12 @@ class _TwoHands:
         outputs = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
                               record=opts.record, log=log, glove_rate_hz=glove_rate,
                               record_rate_hz=opts.record_rate_hz)
-        self.outputs = list(outputs)
+        self.outputs = {"ri": list(outputs), "le": []}
+        for h, (_, path) in self._glove_takes().items():
+            take = takes.open_glove_take(path, gloves[h], parts.sides[h].glove_config,
+                                         source=specs[h], log=log, from_first_output=True)
+            stack.callback(_close_take, take, f"{HAND_NAMES[h]} glove take", log)
+            self.outputs[h].append(take)
         for h in HANDS:
             side = parts.sides[h]
             hand_bus = buses[h]
@@ -180,7 +206,7 @@ class _TwoHands:
             self.rigs[h] = Rig.from_config(
                 side.rig_config, gloves[h], hand_bus, side.pipeline, self.clock,
                 controls_from_raw=side.controls, orientation=side.orientation,
-                outputs=outputs if h == "ri" else (), log=self._side_log(h),
+                outputs=self.outputs[h], log=self._side_log(h),
                 profile=opts.profile, ease_in=opts.ease_in)
             self.stats[h] = self.rigs[h].stats
         if opts.on_rig is not None:
@@ -323,7 +349,7 @@ class _TwoHands:
         for h in HANDS:
             side = parts.sides[h]
             stats = self.stats[h]
-            outs = app.outputs_summary(self.outputs if h == "ri" else [], stats.duration_s)
+            outs = app.outputs_summary(self.outputs[h], stats.duration_s)
             s = app.summary_dict(stats, self.bus_stats.get(h), self.glove_stats.get(h),
                                  None, outputs=outs,
                                  clamped=app.clamped_joints(side.pipeline),
@@ -352,3 +378,7 @@ class _TwoHands:
         return LiveResult(summary, [], joints,
                           "".join(o.emulator_output() for o in self.opened), error,
                           self.started)
+
+
+def _close_take(take: Any, what: str, log: Callable[[str], None]) -> None:
+    log(f"{what}: {take.close()}")

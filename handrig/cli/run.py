@@ -62,6 +62,9 @@ def register(sub: Any) -> None:
     p.add_argument("--record-glove", default=None, metavar="FILE.csv",
                    help="also store what the glove sent, each frame with its arrival time"
                    " (a glove take: --glove replay:FILE.csv plays it; never replaces a file)")
+    p.add_argument("--record-glove-left", default=None, metavar="FILE.csv",
+                   help="with --glove-left: store what the left glove sent (--record-glove"
+                   " then stores the right glove's)")
     p.add_argument("--record-rate", type=float_in(1.0, 2000.0), default=None, metavar="HZ",
                    help="a .bvh take's frames per second (default: the glove's [glove]"
                    " rate_hz; a CSV keeps each frame's own time)")
@@ -113,12 +116,10 @@ def run(args: argparse.Namespace) -> int:
                     allowed="--glove-left PORT (or [gloves] left in the rig file)")
             two = build_two_hand_parts(args.rig, args.glove_config, args.glove_left_config,
                                        **files)
-            if args.record_glove:  # refused, not dropped: a take is never lost in silence
-                raise ConfigError("a glove take records one glove; a run with a glove per "
-                                  "hand cannot record one yet", key="--record-glove",
-                                  value=args.record_glove,
-                                  allowed="--record FILE.csv|.bvh (both hands' pose), or "
-                                  "one glove (no --glove-left)")
+        elif args.record_glove_left is not None:
+            raise ConfigError("a left glove take needs a glove per hand",
+                              key="--record-glove-left", value=args.record_glove_left,
+                              allowed="--glove-left PORT, or --record-glove for one glove")
         elif args.bus_left is not None:
             raise ConfigError("a left bus needs a rig with [left_bus] and a glove per hand",
                               key="--bus-left", value=args.bus_left,
@@ -147,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
             glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,
             wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
             record=args.record, record_rate_hz=args.record_rate,
-            record_glove=args.record_glove, panel=not args.json,
+            record_glove=args.record_glove, record_glove_left=args.record_glove_left,
+            panel=not args.json,
             verbose=not args.json, on_rig=on_rig, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
         )

@@ -27,7 +27,7 @@ def recording():
     return read_glove_recording(DEMO_RECORDING)
 
 
-def _run(rig: str, recording, frames: int, *, left_pause_s: float = 0.0):
+def _run(rig: str, recording, frames: int, *, left_pause_s: float = 0.0, **opts):
     parts = build_two_hand_parts(rig)
     lines: list[str] = []
     with (GloveEmulator(recording, "frames", rate_hz=200.0) as right,
@@ -48,7 +48,7 @@ def _run(rig: str, recording, frames: int, *, left_pause_s: float = 0.0):
 
         result = run_two_hands(parts, LiveOptions(
             glove=right.port_path, glove_left=left.port_path, bus="sim", bus_left="sim",
-            frames=frames, log=lines.append, on_rig=on_rig))
+            frames=frames, log=lines.append, on_rig=on_rig, **opts))
         for script in scripts:
             script.join()
     return result, lines
@@ -129,8 +129,7 @@ def test_the_same_glove_port_for_both_hands_is_refused_naming_both_flags(recordi
     (["--glove-left", "/dev/null"], ("both hands", "puppet_two_hands")),
     (["--rig", "puppet_two_buses"], ("--glove-left", "a glove per hand")),
     (["--bus-left", "sim"], ("--bus-left", "[left_bus]")),
-    (["--rig", "puppet_two_hands", "--glove-left", f"replay:{DEMO_RECORDING}",
-      "--record-glove", "take.csv"], ("--record-glove", "a glove per hand")),
+    (["--record-glove-left", "take.csv"], ("--record-glove-left", "a glove per hand")),
 ])
 def test_two_hand_flags_on_the_wrong_rig_are_refused_before_any_bus(argv, says, capsys):
     status = main(["run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--frames",
@@ -182,3 +181,40 @@ def test_the_panel_names_the_show_and_has_a_line_per_hand():
     assert "right  running" in text and "180/420 us" in text and "left   relaxing" in text
     line = plain_line(snap)
     assert line.startswith("show rehearsal 3") and "left   relaxing" in line
+
+
+def test_a_glove_take_per_hand_each_replays_as_that_hands_glove(recording, tmp_path, capsys):
+    right_take, left_take = tmp_path / "right.csv", tmp_path / "left.csv"
+    result, lines = _run("puppet_two_hands", recording, 200, record_glove=str(right_take),
+                         record_glove_left=str(left_take))
+    s = result.summary
+    assert result.started and "error" not in s, s.get("error")
+    assert s["torque_off"] is True
+    for hand, take in (("right", right_take), ("left", left_take)):
+        stored = read_glove_recording(take)  # a glove recording, replayable as it is
+        summary = s["hands"][hand]
+        assert summary["outputs"]["glove_take"]["path"] == str(take)
+        assert summary["outputs"]["glove_take"]["frames"] == len(stored)
+        # every frame the hand's loop used, from its first cycle on (the 1 s ease too)
+        assert len(stored) >= summary["glove"]["frames_used"] - 2
+        assert any(line.startswith(f"{hand} glove take:") for line in lines), lines[-10:]
+    # both takes replay, each as its hand's glove
+    status = main(["run", "--rig", "puppet_two_hands", "--glove", f"replay:{right_take}",
+                   "--glove-left", f"replay:{left_take}", "--bus", "sim", "--seconds", "0.5",
+                   "--json"])
+    replayed = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert status == 0 and replayed["torque_off"] is True, replayed.get("error")
+    for hand in ("right", "left"):
+        assert replayed["hands"][hand]["glove"]["frames_used"] >= 80  # 0.5 s at 200 Hz
+    # never replaced, and never the same file for both hands: refused before any bus
+    for argv, flag in ((["--record-glove", str(right_take)], "--record-glove"),
+                       (["--record-glove", str(tmp_path / "a.csv"), "--record-glove-left",
+                         str(tmp_path / "a.csv")], "--record-glove-left")):
+        before = right_take.read_bytes()
+        status = main(["run", "--rig", "puppet_two_hands", "--glove",
+                       f"replay:{right_take}", "--glove-left", f"replay:{left_take}",
+                       "--bus", "sim", "--frames", "10", *argv])
+        err = capsys.readouterr().err
+        assert status == 2 and flag in err and "Traceback" not in err, err
+        assert "commissioned" not in err and right_take.read_bytes() == before
+        assert not (tmp_path / "a.csv").exists()
