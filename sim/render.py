@@ -98,10 +98,11 @@ def render_strip(
         raise RenderUnavailable(
             f"mujoco does not load with MUJOCO_GL={os.environ.get('MUJOCO_GL')}: {exc!r}; "
             "`make render-deps` installs the EGL/OSMesa libraries") from None
+    two_hands = model is None and any(name.startswith("le") for name in joint_names)
     if model is None:
-        from sim.hand_model import hand_model_xml
+        from sim.hand_model import hand_model_xml, two_hands_xml
 
-        xml = hand_model_xml("ri")
+        xml = two_hands_xml() if two_hands else hand_model_xml("ri")
     else:
         try:
             xml = _with_absolute_meshdir(Path(model))
@@ -117,9 +118,15 @@ def render_strip(
     if model is None:
         _colour(mj_model, mujoco)
         thumb_coloured = True
-        palm = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, "riPalm")
-        hand_bodies = [i for i in range(mj_model.nbody) if i >= palm > 0]
-        distance, azimuth, elevation = 0.30, -150.0, -20.0
+        hand_bodies = []
+        for prefix in ("ri", "le") if two_hands else ("ri",):
+            palm = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, f"{prefix}Palm")
+            hand_bodies += [i for i in range(palm, mj_model.nbody) if palm > 0 and (
+                mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_BODY, i) or ""
+            ).startswith(prefix)]
+        # both hands side by side (sim.hand_model.TWO_HANDS_APART_M) fit a wider view
+        distance, azimuth, elevation = (0.55, -150.0, -30.0) if two_hands else (
+            0.30, -150.0, -20.0)
     else:
         thumb_coloured = _colour_robot(mj_model, mujoco)
         hand_bodies = list(range(1, mj_model.nbody))

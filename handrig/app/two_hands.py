@@ -29,6 +29,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from handrig.app import factory as app
 from handrig.app import takes
 from handrig.app.hands import HAND_NAMES, TwoHandParts, check_two_gloves
@@ -79,6 +81,8 @@ class _TwoHands:
         self.bus_stats: dict[str, Any] = {}  # per hand: its bus's counters (shared: the same)
         self.torque_off: dict[str, bool | None] = {}  # per bus port
         self.outputs: dict[str, list[Any]] = {"ri": [], "le": []}  # each hand's loop's
+        self.snapshots: list[np.ndarray] = []  # both hands' present positions (--render)
+        self.snapshot_times_s: list[float] = []
         self.ease_s: dict[str, float] = {h: 0.0 for h in HANDS}
         self.errors: dict[str, BaseException] = {}
         self.opened: list[app.OpenedBus] = []  # read once the emulators have stopped
@@ -209,6 +213,9 @@ class _TwoHands:
                 outputs=self.outputs[h], log=self._side_log(h),
                 profile=opts.profile, ease_in=opts.ease_in)
             self.stats[h] = self.rigs[h].stats
+        if opts.snapshot_every > 0:  # on the right hand's loop: both hands' positions
+            right = self.rigs["ri"]
+            right.outputs = (*right.outputs, self._snapshots(opts.snapshot_every))
         if opts.on_rig is not None:
             opts.on_rig(self.rigs["ri"])
         gc.collect()
@@ -375,9 +382,23 @@ class _TwoHands:
         if error is not None:
             summary["error"] = str(error)
         joints = tuple(s.joint for h in HANDS for s in parts.sides[h].rig_config.servos)
-        return LiveResult(summary, [], joints,
+        return LiveResult(summary, self.snapshots, joints,
                           "".join(o.emulator_output() for o in self.opened), error,
-                          self.started)
+                          self.started, self.snapshot_times_s)
+
+    def _snapshots(self, every: int) -> Callable[[float, np.ndarray], None]:
+        """An output for the right hand's loop: every ``every`` frames, both hands'
+        present positions (right then left, the order of the result's joint names)."""
+        counter = [0]
+
+        def snap(t_s: float, pose: np.ndarray) -> None:
+            counter[0] += 1
+            states = [self.rigs[h].last_state for h in HANDS]
+            if counter[0] % every == 0 and all(st is not None for st in states):
+                self.snapshots.append(np.concatenate(
+                    [np.asarray(st.positions_deg) for st in states if st is not None]))
+                self.snapshot_times_s.append(float(t_s))
+        return snap
 
 
 def _close_take(take: Any, what: str, log: Callable[[str], None]) -> None:

@@ -43,6 +43,11 @@ leap = load_rig("leap")
 frames = [np.array([s.min_deg + k * (s.max_deg - s.min_deg) for s in leap.servos])
           for k in (0.2, 0.5)]
 render_strip(frames, [s.joint for s in leap.servos], sys.argv[2], model=leap.robot.model)
+# the two-hand puppet (both hands' joints: the two-hand model, both hands in view)
+both = load_rig("puppet_two_hands")
+frames = [np.array([k / 4 * (s.max_deg if "Thumb" in s.joint else 0.6 * s.max_deg)
+                    if "Wrist" not in s.joint else 0.0 for s in both.servos]) for k in (1, 3)]
+render_strip(frames, [s.joint for s in both.servos], sys.argv[3])
 print(json.dumps({"path": str(path)}))
 """
 
@@ -73,9 +78,10 @@ def strips(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The puppet hand's strip and the LEAP preset's, drawn by one fresh process (MuJoCo
     picks its GL backend when it is first imported); skips where rendering cannot work."""
     tmp = tmp_path_factory.mktemp("strips")
-    out = {"hand": tmp / "strip.png", "leap": tmp / "leap.png"}
+    out = {"hand": tmp / "strip.png", "leap": tmp / "leap.png", "two": tmp / "two.png"}
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    res = subprocess.run([sys.executable, "-c", DRAW, str(out["hand"]), str(out["leap"])],
+    res = subprocess.run([sys.executable, "-c", DRAW, str(out["hand"]), str(out["leap"]),
+                          str(out["two"])],
                          capture_output=True, text=True, timeout=120, env=env)
     assert res.returncode == 0, res.stderr
     said = json.loads(res.stdout.strip().splitlines()[-1])
@@ -103,6 +109,25 @@ def test_one_tile_per_frame_with_the_thumb_in_colour(strips: dict[str, Path]) ->
             assert tile[8:20, 10:60].mean() > 0.8  # the label's white box
         else:
             assert np.all(tile > 0.99)  # the empty sixth place is blank
+
+
+@pytest.mark.slow
+def test_the_two_hand_puppet_draws_both_hands_side_by_side(strips: dict[str, Path]) -> None:
+    from matplotlib.image import imread
+
+    img = imread(strips["two"])[..., :3]
+    assert img.shape == (240, 2 * 320, 3)  # two tiles
+    thumb = np.array(THUMB_RGBA[:3])
+    for c in range(2):
+        tile = img[:, c * 320:(c + 1) * 320]
+        near = np.abs(tile / np.maximum(tile.max(axis=2, keepdims=True), 1e-6)
+                      - thumb / thumb.max()).max(axis=2) < 0.12
+        thumbs = near & (tile.max(axis=2) > 0.3)
+        hand = tile.min(axis=2) < 0.75  # not the pale background
+        # a hand (and its thumb) in each half of the tile: both hands are in view
+        for half in (slice(0, 160), slice(160, 320)):
+            assert hand[:, half].sum() > 1500, f"tile {c}: a hand missing"
+        assert thumbs.sum() > 100, f"tile {c}: no thumb"
 
 
 @pytest.mark.parametrize("robot", ["leap_hand", "orca_hand"])
