@@ -111,6 +111,10 @@ class GloveTake(Output):
         samples = self._samples
         if not samples:
             return
+        if self.error:  # the take stopped (a full disk): what comes now is not written
+            self.frames_dropped += len(samples)
+            samples.clear()
+            return
         lines: list[bytes] = []
         while samples:
             s = samples.popleft()

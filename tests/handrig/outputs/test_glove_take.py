@@ -88,3 +88,26 @@ def test_a_replayed_glove_taps_what_it_serves(tmp_path: Path) -> None:
     back = read_glove_recording(tmp_path / "g.csv")
     np.testing.assert_allclose(back.raw, rec.raw)
     np.testing.assert_allclose(back.t_s, rec.t_s, atol=1e-6)
+
+
+def test_a_full_disk_stops_the_glove_take_and_what_follows_is_counted_dropped(
+        tmp_path: Path) -> None:
+    import os
+
+    if not Path("/dev/full").exists():
+        pytest.skip("needs /dev/full (Linux)")
+    take = GloveTake(tmp_path / "g.csv", sync=False, flush_s=60.0)
+    os.close(take._fd)
+    take._fd = os.open("/dev/full", os.O_WRONLY)  # every write fails: ENOSPC
+    take.tap(sample(0.0, 1))
+    take(0.0, np.zeros(54))
+    take._write_pending()  # the writer's turn: the disk is full
+    assert "the glove take stopped" in take.status().stopped_reason
+    written = take.frames_written
+    for k in range(2, 6):
+        take.tap(sample(k * 0.01, k))
+    take(0.05, np.zeros(54))
+    # nothing more is claimed as written: the frames after the stop are dropped, counted
+    assert take.frames_written == written and take.frames_dropped == 4
+    line = take.close()
+    assert "stopped" in line and "4 dropped" in line
