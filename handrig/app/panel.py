@@ -316,8 +316,16 @@ def keys_line(s: PanelSnapshot) -> Text:
 def render(s: PanelSnapshot, height: int = HEIGHT) -> Group:
     """One frame of the panel: at most 80 columns and ``height`` lines."""
     hands = [Text(_fit(line, WIDTH)) for line in s.hands]
-    lines = [mode_line(s), *(hands or [glove_line(s.glove), loop_line(s)]), bus_line(s.bus),
-             outputs_line(s.outputs), *servo_rows(s.servos), Text(_fit(LEGEND, WIDTH), "dim")]
+    head = [mode_line(s), *(hands or [glove_line(s.glove), loop_line(s)]), bus_line(s.bus),
+            outputs_line(s.outputs)]
+    rows = servo_rows(s.servos)
+    fits = height - len(head) - 2  # the legend and the keys are always shown
+    if len(rows) > fits:  # 40 servos in a short terminal: the keys stay, rows are cut
+        hidden = len(rows) - max(1, fits - 1)
+        rows = [*rows[:max(1, fits - 1)],
+                Text(_fit(f"... {hidden} more rows of servos: a taller terminal shows them",
+                          WIDTH), "dim")]
+    lines = [*head, *rows, Text(_fit(LEGEND, WIDTH), "dim")]
     room = height - len(lines) - 1
     for event in s.events[-max(0, min(room, 3)):] if room > 0 else ():
         lines.append(Text(_fit(event, WIDTH), "yellow"))
@@ -415,7 +423,7 @@ class LivePanel:
         first = self._snapshot()
         if first is None:
             return
-        height = min(HEIGHT, self.console.size.height)
+        height = max(8, self.console.size.height)  # all of a taller terminal (40 servos)
         with Live(render(first, height), console=self.console, auto_refresh=False,
                   transient=False, vertical_overflow="crop") as live:
             self._live = live
@@ -423,7 +431,7 @@ class LivePanel:
                 snap = self._snapshot()
                 if snap is None:
                     break
-                live.update(render(snap, min(HEIGHT, self.console.size.height)), refresh=True)
+                live.update(render(snap, max(8, self.console.size.height)), refresh=True)
             snap = self._snapshot()
             if snap is not None:
                 live.update(render(snap, height), refresh=True)

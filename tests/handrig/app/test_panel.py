@@ -88,6 +88,21 @@ def test_a_small_terminal_keeps_the_head_and_the_keys() -> None:
     assert lines[0].startswith("handrig") and "space" in lines[-1]
 
 
+def test_forty_servos_keep_the_keys_in_24_lines_and_all_show_in_a_taller_terminal() -> None:
+    one = show_snapshot().servos
+    forty = one + tuple(ServoLine(s.id + 20, "le" + s.joint[2:], goal_deg=s.goal_deg)
+                        for s in one)
+    snap = show_snapshot(servos=forty, hands=("right hand: running", "left hand: running"))
+    lines = screen(snap, height=24)
+    assert len(lines) <= 24 and "space" in lines[-1] and "e-stop" in lines[-1]
+    assert any("more rows of servos: a taller terminal shows them" in line for line in lines)
+    assert any(line.startswith("er: V voltage") for line in lines)  # the legend stays
+    lines = screen(snap, height=34)  # a taller terminal: every one of the 40, 20 rows
+    rows = [line for line in lines if "│" in line][1:]
+    assert len(rows) == 20 and "more rows" not in "\n".join(lines)
+    assert rows[19].split("│")[1].split()[0] == "40" and "space" in lines[-1]
+
+
 def test_without_outputs_or_readings_it_says_so() -> None:
     snap = PanelSnapshot(servos=(ServoLine(1, "riIndexMCPy"),), keys=False)
     text = "\n".join(screen(snap))
