@@ -363,7 +363,6 @@ class _Session:
         """The show console: the panel (on a terminal, else plain lines) and, when stdin
         is a terminal, the show keys."""
         from handrig.app.keys import KeyReader
-        from handrig.app.panel import LivePanel, show_console
         from handrig.app.rig_snapshot import RigSnapshot
 
         keys: KeyReader | None = None
@@ -372,29 +371,13 @@ class _Session:
                 sys.stdin.fileno(), toggle_relax=rig.toggle_relax,
                 stop=lambda: rig.request_stop("q pressed"), estop=rig.estop,
                 on_error=lambda exc: self._rig_log(f"key failed: {exc}"))
-        rig_cfg = self.parts.rig_config
-        snapshot = RigSnapshot(
-            rig, glove_source=self.opts.glove or "", keys=keys is not None,
-            temperature_limit_c={s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
-                                 for s in rig_cfg.servos},
-            heat_c=(rig_cfg.heat.warn_c, rig_cfg.heat.act_c), show=self.opts.show)
-        console = show_console()
-        if not console.is_terminal:  # plain status lines there; the log stays where it was
-            for line in header:
-                self.log(line)
-            header = []
-        panel = LivePanel(snapshot, console=console, header=header)
-        with panel:
-            if console.is_terminal:
-                self.panel = panel
-            try:
-                if keys is not None:
-                    with keys.start():
-                        yield
-                else:
-                    yield
-            finally:
-                self.panel = None
+        snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None,
+                               show=self.opts.show, **heat_colours(self.parts.rig_config))
+        with show_panel(snapshot, header, keys, self.log, self._set_panel):
+            yield
+
+    def _set_panel(self, panel: Any) -> None:
+        self.panel = panel
 
     def _bus_figures(self, bus: DynamixelBus) -> None:
         self.torque_off, self.torque_unconfirmed = torque_readback(bus)
@@ -415,6 +398,42 @@ class _Session:
                 self.snapshots.append(np.array(state.positions_deg))
                 self.snapshot_times_s.append(float(t_s))
         return snap
+
+
+def heat_colours(rig_cfg: Any) -> dict[str, Any]:
+    """The panel's temperature colours for a rig (RigSnapshot's keywords): each servo's
+    Temperature Limit by its model, and the rig's [heat] warn and act tiers."""
+    return {"temperature_limit_c": {s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
+                                    for s in rig_cfg.servos},
+            "heat_c": (rig_cfg.heat.warn_c, rig_cfg.heat.act_c)}
+
+
+@contextlib.contextmanager
+def show_panel(snapshot: Any, header: list[str], keys: Any, log: Callable[[str], None],
+               on_panel: Callable[[Any], None]) -> Iterator[None]:
+    """The live panel over ``snapshot`` for the block: drawn on a terminal (``header``
+    above it), else plain status lines after ``header`` is logged; the show ``keys``
+    (a KeyReader, or None) read meanwhile. ``on_panel`` gets the panel while it draws
+    on a terminal (log lines then go above it), and None when it ends."""
+    from handrig.app.panel import LivePanel, show_console
+
+    console = show_console()
+    if not console.is_terminal:  # plain status lines there; the log stays where it was
+        for line in header:
+            log(line)
+        header = []
+    panel = LivePanel(snapshot, console=console, header=header)
+    with panel:
+        if console.is_terminal:
+            on_panel(panel)
+        try:
+            if keys is not None:
+                with keys.start():
+                    yield
+            else:
+                yield
+        finally:
+            on_panel(None)
 
 
 def _counts(items: dict[str, int]) -> str:

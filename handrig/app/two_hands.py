@@ -41,6 +41,8 @@ from handrig.app.session import (
     _is_terminal,
     _never_raises,
     clamp_advice,
+    heat_colours,
+    show_panel,
     torque_is_off,
 )
 from handrig.clock import Clock, MonotonicClock
@@ -308,7 +310,6 @@ class _TwoHands:
     @contextlib.contextmanager
     def _console(self, header: list[str]) -> Iterator[None]:
         from handrig.app.keys import KeyReader
-        from handrig.app.panel import LivePanel, show_console
         from handrig.app.rig_snapshot import HandsSnapshot, RigSnapshot
 
         keys: KeyReader | None = None
@@ -321,25 +322,14 @@ class _TwoHands:
                 on_error=lambda exc: self.log(f"key failed: {exc}"))
         sources = {"ri": self.opts.glove or "", "le": self.opts.glove_left or ""}
         snapshot = HandsSnapshot(
-            {h: RigSnapshot(rigs[h], glove_source=sources[h]) for h in HANDS},
+            {h: RigSnapshot(rigs[h], glove_source=sources[h],
+                            **heat_colours(self.parts.sides[h].rig_config)) for h in HANDS},
             keys=keys is not None, show=self.opts.show)
-        console = show_console()
-        if not console.is_terminal:
-            for line in header:
-                self.log(line)
-            header = []
-        panel = LivePanel(snapshot, console=console, header=header)
-        with panel:
-            if console.is_terminal:
-                self.panel = panel
-            try:
-                if keys is not None:
-                    with keys.start():
-                        yield
-                else:
-                    yield
-            finally:
-                self.panel = None
+        with show_panel(snapshot, header, keys, self.log, self._set_panel):
+            yield
+
+    def _set_panel(self, panel: Any) -> None:
+        self.panel = panel
 
     def _bus_figures(self, bus: DynamixelBus) -> None:
         self.torque_off[bus.port] = torque_is_off(bus)
