@@ -18,10 +18,12 @@ is tested without a rig and fed by whatever runs the loop:
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from rich.console import Console, Group
 from rich.live import Live
@@ -29,6 +31,7 @@ from rich.text import Text
 
 from firmware_protocol.dynamixel import HardwareError
 from handrig.app.keys import SHOW_KEYS
+from handrig.config.rig import TEMPERATURE_LIMIT_C
 
 WIDTH = 80
 HEIGHT = 24
@@ -463,3 +466,37 @@ class LivePanel:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+
+
+def heat_colours(rig_cfg: Any) -> dict[str, Any]:
+    """The panel's temperature colours for a rig (RigSnapshot's keywords): each servo's
+    Temperature Limit by its model, and the rig's [heat] warn and act tiers."""
+    return {"temperature_limit_c": {s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
+                                    for s in rig_cfg.servos},
+            "heat_c": (rig_cfg.heat.warn_c, rig_cfg.heat.act_c)}
+
+
+@contextlib.contextmanager
+def show_panel(snapshot: Any, header: list[str], keys: Any, log: Callable[[str], None],
+               on_panel: Callable[[Any], None]) -> Iterator[None]:
+    """The live panel over ``snapshot`` for the block: drawn on a terminal (``header``
+    above it), else plain status lines after ``header`` is logged; the show ``keys``
+    (a KeyReader, or None) read meanwhile. ``on_panel`` gets the panel while it draws
+    on a terminal (log lines then go above it), and None when it ends."""
+    console = show_console()
+    if not console.is_terminal:  # plain status lines there; the log stays where it was
+        for line in header:
+            log(line)
+        header = []
+    panel = LivePanel(snapshot, console=console, header=header)
+    with panel:
+        if console.is_terminal:
+            on_panel(panel)
+        try:
+            if keys is not None:
+                with keys.start():
+                    yield
+            else:
+                yield
+        finally:
+            on_panel(None)

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import contextlib
 import gc
-import math
 import signal
 import sys
 import threading
@@ -36,7 +35,6 @@ from handrig.app import factory as app
 from handrig.app import takes
 from handrig.app.factory import RigParts
 from handrig.clock import Clock, MonotonicClock
-from handrig.config.rig import TEMPERATURE_LIMIT_C
 from handrig.devices.glove import GloveSource
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
@@ -363,6 +361,7 @@ class _Session:
         """The show console: the panel (on a terminal, else plain lines) and, when stdin
         is a terminal, the show keys."""
         from handrig.app.keys import KeyReader
+        from handrig.app.panel import heat_colours, show_panel
         from handrig.app.rig_snapshot import RigSnapshot
 
         keys: KeyReader | None = None
@@ -398,42 +397,6 @@ class _Session:
                 self.snapshots.append(np.array(state.positions_deg))
                 self.snapshot_times_s.append(float(t_s))
         return snap
-
-
-def heat_colours(rig_cfg: Any) -> dict[str, Any]:
-    """The panel's temperature colours for a rig (RigSnapshot's keywords): each servo's
-    Temperature Limit by its model, and the rig's [heat] warn and act tiers."""
-    return {"temperature_limit_c": {s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
-                                    for s in rig_cfg.servos},
-            "heat_c": (rig_cfg.heat.warn_c, rig_cfg.heat.act_c)}
-
-
-@contextlib.contextmanager
-def show_panel(snapshot: Any, header: list[str], keys: Any, log: Callable[[str], None],
-               on_panel: Callable[[Any], None]) -> Iterator[None]:
-    """The live panel over ``snapshot`` for the block: drawn on a terminal (``header``
-    above it), else plain status lines after ``header`` is logged; the show ``keys``
-    (a KeyReader, or None) read meanwhile. ``on_panel`` gets the panel while it draws
-    on a terminal (log lines then go above it), and None when it ends."""
-    from handrig.app.panel import LivePanel, show_console
-
-    console = show_console()
-    if not console.is_terminal:  # plain status lines there; the log stays where it was
-        for line in header:
-            log(line)
-        header = []
-    panel = LivePanel(snapshot, console=console, header=header)
-    with panel:
-        if console.is_terminal:
-            on_panel(panel)
-        try:
-            if keys is not None:
-                with keys.start():
-                    yield
-            else:
-                yield
-        finally:
-            on_panel(None)
 
 
 def _counts(items: dict[str, int]) -> str:

@@ -41,8 +41,6 @@ from handrig.app.session import (
     _is_terminal,
     _never_raises,
     clamp_advice,
-    heat_colours,
-    show_panel,
     torque_is_off,
 )
 from handrig.clock import Clock, MonotonicClock
@@ -310,6 +308,7 @@ class _TwoHands:
     @contextlib.contextmanager
     def _console(self, header: list[str]) -> Iterator[None]:
         from handrig.app.keys import KeyReader
+        from handrig.app.panel import heat_colours, show_panel
         from handrig.app.rig_snapshot import HandsSnapshot, RigSnapshot
 
         keys: KeyReader | None = None
