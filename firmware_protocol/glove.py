@@ -236,6 +236,12 @@ class FrameDecoder:
     :data:`MAX_ENCODED` bytes without a delimiter is dropped at once (counted as
     one overflow) and the decoder discards until the next delimiter. Empty
     segments (repeated 0x00) are idle fill, not errors.
+
+    A decoder that starts (or is :meth:`reset`) may join a stream in the middle of
+    a frame, as a host does when it opens a glove that is already sending: the
+    bytes before the first delimiter are the tail of a frame it never saw. If
+    they do not decode they are dropped as ``garbage_bytes`` but not counted as
+    an error (a monitor opened mid-frame must not report a CRC error).
     """
 
     def __init__(self) -> None:
@@ -243,6 +249,7 @@ class FrameDecoder:
         self._buf = bytearray()
         self._discarding = False
         self._last_seq: int | None = None
+        self._joined = False  # a delimiter seen since start/reset: segments are whole
         self.last_error: FrameError | None = None
 
     def reset(self) -> None:
@@ -250,6 +257,7 @@ class FrameDecoder:
         self._buf.clear()
         self._discarding = False
         self._last_seq = None
+        self._joined = False
 
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[GloveFrame]:
         """Frames completed by ``chunk`` (possibly none)."""
@@ -259,6 +267,7 @@ class FrameDecoder:
         if (not self._buf and not self._discarding and 1 < end <= MAX_ENCODED + 1
                 and data.find(b"\x00") == end - 1):
             self._segment(data[:-1], out)  # the usual read: exactly one whole frame
+            self._joined = True
             return out
         start = 0
         while start < end:
@@ -268,6 +277,7 @@ class FrameDecoder:
                 break
             self._absorb(data, start, z)
             self._segment_done(out)
+            self._joined = True
             start = z + 1
         return out
 
@@ -297,7 +307,10 @@ class FrameDecoder:
         try:
             frame = decode_frame(seg)
         except FrameError as exc:
-            self._reject(exc, len(seg) + 1)
+            if self._joined:
+                self._reject(exc, len(seg) + 1)
+            else:  # the tail of a frame sent before this decoder joined the stream
+                self.stats.garbage_bytes += len(seg) + 1
             return
         s = self.stats
         s.frames_ok += 1

@@ -215,7 +215,8 @@ def test_a_truncated_frame_costs_at_most_the_next_one(
     kept = keep % len(wires[i])
     wires[i] = wires[i][:kept]  # cut before its delimiter: it merges with frame i + 1
     dec = FrameDecoder()
-    out = dec.feed(b"".join(wires))
+    # joined at a delimiter: from there on every bad segment is an error
+    out = dec.feed(b"\x00" + b"".join(wires))
     assert out[:i] == frames[:i]
     tail = frames[i + 2:]
     assert out[len(out) - len(tail):] == tail
@@ -231,8 +232,28 @@ def test_a_bit_flip_never_forges_a_frame(frames: list[GloveFrame], bit: int) -> 
     pos = bit % (len(wire) * 8)
     wire[pos // 8] ^= 1 << (pos % 8)
     dec = FrameDecoder()
-    out = dec.feed(bytes(wire))
+    out = dec.feed(b"\x00" + bytes(wire))  # joined at a delimiter, as the glove starts
     assert set(out) <= set(frames)
     assert len(out) < len(frames)
     if pos // 8 < len(wire) - 1:  # a flip in the very last delimiter only holds the frame back
         assert dec.stats.errors >= 1
+
+
+@settings(max_examples=200, deadline=None)
+@given(frames=st.lists(frames_st, min_size=2, max_size=5), cut=st.integers(1, 999))
+def test_joining_a_stream_mid_frame_is_not_an_error(frames: list[GloveFrame], cut: int) -> None:
+    # a host that opens a glove already sending sees the tail of a frame first
+    wires = [encode_frame(f) for f in frames]
+    head = wires[0][cut % (len(wires[0]) - 1) + 1:]  # a proper tail, ending at its 0x00
+    dec = FrameDecoder()
+    out = dec.feed(head + b"".join(wires[1:]))
+    assert out[-(len(frames) - 1):] == frames[1:]
+    assert dec.stats.errors == 0 and dec.stats.resyncs == 0
+    # after that first delimiter a bad segment is an error again, and so after a reset
+    bad = bytearray(wires[1])
+    bad[1] ^= 0x01 if bad[1] != 0x01 else 0x02
+    dec.feed(bytes(bad))
+    assert dec.stats.errors == 1
+    dec.reset()
+    dec.feed(head)
+    assert dec.stats.errors == 1
