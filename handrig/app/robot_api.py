@@ -37,6 +37,12 @@ from handrig.clock import Clock, MonotonicClock
 from handrig.devices.servo.dynamixel import DynamixelBus
 from handrig.errors import ConfigError, HandrigError
 
+READ_BUDGET_S = 0.1
+"""How long a read the caller asked for (:meth:`RobotHand.present_deg`, the reading
+at the start) may take with its retries. Not the loop's realtime budget (1.5 times
+the reply's wire time): a program waiting for an answer would rather have it a few
+milliseconds late, from a loaded machine or a USB adapter's latency timer, than NaN."""
+
 Curves = Mapping[str, float] | Sequence[float] | np.ndarray
 
 
@@ -90,7 +96,7 @@ class RobotHand:
             stack.callback(self._confirm_torque_off, bus)
             # SIGTERM, SIGINT, SIGHUP end the block with an exception: torque goes off
             stack.enter_context(bus.torque(handle_signals=True))
-            state = bus.read_state()
+            state = bus.read_state(self._clock.now() + READ_BUDGET_S)
             if state.stale.any():
                 missing = [self.joint_names[i] for i in np.flatnonzero(state.stale)]
                 raise HandrigError(f"no reading from the servos of {', '.join(missing)}: "
@@ -154,7 +160,7 @@ class RobotHand:
 
     def present_deg(self) -> dict[str, float]:
         """The robot's joint angles as the servos report them (NaN: no reading)."""
-        state = self._open_bus().read_state()
+        state = self._open_bus().read_state(self._clock.now() + READ_BUDGET_S)
         return {name: float("nan") if state.stale[i] else float(state.positions_deg[i])
                 for i, name in enumerate(self.joint_names)}
 
