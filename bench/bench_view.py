@@ -14,10 +14,14 @@ The cases, in turn, each round:
   own (the view's own cost, without a browser's drawing);
 * the view with two headless chromium pages, at normal priority on any CPU: they
   draw WebGL in software (SwiftShader), on the same two cores as the rig and its
-  emulated servos;
-* the same pages kept off the loop's CPU (``taskset``, the CPUs the emulators get)
-  and under the idle scheduling class (``chrt --idle 0``: they get only the CPU the
-  rig and the emulators leave), as a show machine without a GPU would run them.
+  emulated servos, so the page spares the CPU as it does wherever WebGL is software
+  (half the pixels each way, at most 15 draws a second);
+* the same two pages with ``?full`` in the URL: full size, up to 30 draws a second
+  (what the page drew everywhere before it learnt to spare a GPU-less machine).
+
+``HANDRIG_BENCH_VIEW_CASES`` picks cases (comma-separated keys of :data:`CASES`);
+``chromium-confined`` (the pages off the loop's CPU, ``taskset``, under the idle
+scheduling class, ``chrt --idle 0``) is there for asking.
 
 Reported per round and pooled over rounds: end-to-end latency in the process (frame
 arrival to Sync Write handed to the OS) and from outside (glove emulator send to
@@ -34,8 +38,8 @@ SwiftShader costs about as much again as the page's drawing (docs/view.md).
 ``HANDRIG_BENCH_ROUNDS`` the rounds (default 2).
 
 ``HANDRIG_BENCH_VIEW=pages`` measures only what one page costs: a ``handrig demo
---view`` run and one headless chromium page on it, with chromium's GPU compositing
-(on SwiftShader) and with ``--disable-gpu-compositing``, in turn each round; CPU by
+--view`` run and one headless chromium page on it, at full size and rate (``?full``)
+and as it draws by default where WebGL is software, in turn each round; CPU by
 chromium process (GPU process, renderer, the rest), frames drawn a second, and CPU
 milliseconds per frame drawn (the figure that does not depend on how starved the
 page was).
@@ -184,24 +188,23 @@ def page_cost(seconds: float, rounds: int) -> None:
             return
         print(f"one page on a handrig demo --view run, {rounds} rounds of {seconds:g} s of "
               f"each setting, in turn; {_load()}")
-        print("| round | chromium | CPU % | GPU process % | renderer % | rest % "
+        print("| round | page | CPU % | GPU process % | renderer % | rest % "
               "| frames drawn/s | CPU ms per frame drawn |")
         print("|---|---|---|---|---|---|---|---|")
-        settings = {"GPU compositing (SwiftShader)": (),
-                    "--disable-gpu-compositing": ("--disable-gpu-compositing",)}
+        settings = {"?full: full size, up to 30/s": with_full(url),
+                    "default: half size, up to 15/s": url}
         with tempfile.TemporaryDirectory(prefix="bench_view_pages_") as tmp:
             for i in range(rounds):
-                for name, extra in settings.items():
-                    marker = f"{tmp}/page{i}_{len(extra)}"
+                for k, (name, page_url) in enumerate(settings.items()):
+                    marker = f"{tmp}/page{i}_{k}"
                     opts = webdriver.ChromeOptions()
                     opts.binary_location = chromium
-                    flags = [f for f in CHROMIUM_FLAGS if f != "--disable-gpu-compositing"]
-                    for arg in (*flags, *extra, f"--user-data-dir={marker}"):
+                    for arg in (*CHROMIUM_FLAGS, f"--user-data-dir={marker}"):
                         opts.add_argument(arg)
                     page = webdriver.Chrome(options=opts,
                                             service=Service(executable_path=driver))
                     try:
-                        page.get(url)
+                        page.get(page_url)
                         deadline = time.monotonic() + 60
                         while _frames_drawn(page) < 10 and time.monotonic() < deadline:
                             time.sleep(0.2)  # the scene is in and frames are drawn
@@ -224,6 +227,11 @@ def page_cost(seconds: float, rounds: int) -> None:
     finally:
         demo.kill()
         demo.wait()
+
+
+def with_full(url: str) -> str:
+    """The page's URL asking for full size and rate where WebGL is software."""
+    return url + ("&" if "?" in url else "?") + "full"
 
 
 def _frames_drawn(page: Any) -> int:
@@ -268,11 +276,12 @@ def read_frames(url: str, n: int) -> None:
 
 
 @contextlib.contextmanager
-def browsers(url: str, n: int, folder: Path, real: bool, confined: bool = False
+def browsers(url: str, n: int, folder: Path, real: bool, confined: bool = False,
+             full: bool = False
              ) -> Iterator[tuple[str, Callable[[], float], Callable[[], float]]]:
     """``n`` pages on ``url``: headless chromium (``real``; ``confined``: off the loop's
-    CPU and under the idle scheduling class), else WebSocket clients in a process of
-    their own that read every frame. Yields what they are, a function giving their CPU
+    CPU and under the idle scheduling class; ``full``: ``?full`` in the URL), else
+    WebSocket clients in a process of their own that read every frame. Yields what they are, a function giving their CPU
     seconds so far, and one giving the frames their pages drew so far (0: clients)."""
     chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
     if real and chromium and driver:
@@ -297,7 +306,7 @@ def browsers(url: str, n: int, folder: Path, real: bool, confined: bool = False
                     opts.add_argument(arg)
                 page = webdriver.Chrome(options=opts, service=Service(executable_path=driver))
                 pages.append(page)
-                page.get(url)
+                page.get(with_full(url) if full else url)
             for page in pages:  # each has the scene and draws before the round starts
                 deadline = time.monotonic() + 60
                 while (page.execute_script("return window.handrigView.framesDrawn()") < 2
@@ -346,7 +355,8 @@ def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
             server = stack.enter_context(ViewProcess("127.0.0.1:0", parts.rig_config))
             out["browsers"], pages_cpu, drawn = stack.enter_context(
                 browsers(server.url, 2, folder, real=case.startswith("chromium"),
-                         confined=case == "chromium-confined"))
+                         confined=case == "chromium-confined",
+                         full=case == "chromium-full"))
             on_rig = server.attach_rig
         cpu0, pages0, drawn0 = process_cpu_s(), pages_cpu(), drawn()
         child0 = pid_cpu_s(server.pid) if server else 0.0
@@ -379,6 +389,7 @@ def _pct(xs: np.ndarray, q: float) -> float:
 
 CASES = {"none": "no view", "sockets": "view + 2 WebSocket clients",
          "chromium": "view + 2 chromium pages",
+         "chromium-full": "view + 2 chromium pages at full size and rate (?full)",
          "chromium-confined": "view + 2 chromium pages, off the loop's CPU, idle class"}
 
 
@@ -425,9 +436,18 @@ def main() -> None:
     if os.environ.get("HANDRIG_BENCH_VIEW") == "pages":
         page_cost(seconds, rounds)
         return
+    asked = os.environ.get("HANDRIG_BENCH_VIEW_CASES")
+    cases = (["none"] + [c for c in asked.split(",") if c and c != "none"] if asked
+             else ["none", "sockets", "chromium", "chromium-full"])
+    unknown = [c for c in cases if c not in CASES]
+    if unknown:
+        raise SystemExit(f"HANDRIG_BENCH_VIEW_CASES: unknown case {unknown[0]!r} "
+                         f"(one of {', '.join(CASES)})")
     confine = bool(shutil.which("chrt") and shutil.which("taskset") and cpu_split()[0] is not None)
-    cases = ["none", "sockets"] + ((["chromium", "chromium-confined"] if confine
-                                    else ["chromium"]) if chromium_available() else [])
+    if not confine:
+        cases = [c for c in cases if c != "chromium-confined"]
+    if not chromium_available():
+        cases = [c for c in cases if not c.startswith("chromium")]
     results: list[dict[str, Any]] = []
     ticks0 = cpu_times()
     with tempfile.TemporaryDirectory(prefix="bench_view_") as tmp:
@@ -441,7 +461,7 @@ def main() -> None:
               flush=True)
         print(loop_scheduling(_rig_file(folder, "glove", RATE_HZ, BAUD)), flush=True)
         print(f"at the start: {_load()}", flush=True)
-        if "chromium" not in cases:
+        if not chromium_available():
             print("chromium or chromium-driver is not installed (make browser-deps): the "
                   "cases with chromium pages are left out", flush=True)
         print("| round | case | in-process p50 / p99 us | outside p50 / p99 us | rate Hz "

@@ -11,11 +11,14 @@ const SKELETON_COLOUR = 0x3cc8ff;
 
 // What a frame costs the machine the page runs on: where WebGL is drawn in software
 // (SwiftShader, llvmpipe: a headless browser or a machine without a GPU) every
-// frame is CPU time, which the rig's own processes may need, so the page draws
-// without multisampling there, at one pixel per CSS pixel, in one WebGL context for
-// both views, at most as often as frames come (and MAX_DRAW_HZ when orbiting),
-// and not at all while it is hidden. docs/view.md has the figures.
-const MAX_DRAW_HZ = 30;
+// frame is CPU time, which the rig's own processes may need (on a 2-core machine,
+// two such pages at full size and rate took the loop's p99 latency up 2.5 times).
+// So there the page draws without multisampling, at half the pixels each way
+// (scaled up by the browser) and at most SOFTWARE_DRAW_HZ frames a second; `?full`
+// in the URL draws at full size and rate anyway. Everywhere: one WebGL context for
+// both views, a draw only when a new frame came (or the camera moved), at most
+// MAX_DRAW_HZ, nothing while the page is hidden. docs/view.md has the figures.
+const FULL = new URLSearchParams(location.search).has('full');
 const SOFTWARE_GL = (() => {
   const gl = document.createElement('canvas').getContext('webgl2');
   if (!gl) return false;
@@ -25,6 +28,9 @@ const SOFTWARE_GL = (() => {
   if (lose) lose.loseContext();
   return /swiftshader|llvmpipe|softpipe|software/i.test(name);
 })();
+const SAVE_CPU = SOFTWARE_GL && !FULL;
+const MAX_DRAW_HZ = SAVE_CPU ? 15 : 30;
+const PIXEL_RATIO = SAVE_CPU ? 0.5 : (SOFTWARE_GL ? 1 : Math.min(window.devicePixelRatio, 2));
 
 // One canvas over both views (one WebGL context: each context costs a compositing
 // pass per frame); each view is drawn into its element's rectangle.
@@ -33,7 +39,7 @@ const viewsEl = document.querySelector('.views');
 function makeRenderer() {
   try {
     const r = new THREE.WebGLRenderer({ antialias: !SOFTWARE_GL, alpha: true });
-    r.setPixelRatio(SOFTWARE_GL ? 1 : Math.min(window.devicePixelRatio, 2));
+    r.setPixelRatio(PIXEL_RATIO);
     r.setClearColor(0x000000, 0);
     r.setScissorTest(true);
     r.domElement.className = 'views3d';
@@ -329,7 +335,8 @@ $('estop').addEventListener('pointerdown', () => send('estop'));
 $('estop').addEventListener('keydown', (ev) => { if (ev.key === 'Enter' || ev.key === ' ') send('estop'); });
 $('relax').addEventListener('click', () => send('relax'));
 $('stop').addEventListener('click', () => send('stop'));
-setInterval(() => { $('viewfps').textContent = `${received} frames/s received, ${drawn} drawn`; received = 0; drawn = 0; }, 1000);
-window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL };
+const SAVING_NOTE = SAVE_CPU ? ` (WebGL in software: half size, at most ${MAX_DRAW_HZ}/s to spare the rig's CPU; add ?full to the URL for full)` : '';
+setInterval(() => { $('viewfps').textContent = `${received} frames/s received, ${drawn} drawn${SAVING_NOTE}`; received = 0; drawn = 0; }, 1000);
+window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO };
 connect();
 requestAnimationFrame(animate);
