@@ -281,8 +281,9 @@ def browsers(url: str, n: int, folder: Path, real: bool, confined: bool = False,
              ) -> Iterator[tuple[str, Callable[[], float], Callable[[], float]]]:
     """``n`` pages on ``url``: headless chromium (``real``; ``confined``: off the loop's
     CPU and under the idle scheduling class; ``full``: ``?full`` in the URL), else
-    WebSocket clients in a process of their own that read every frame. Yields what they are, a function giving their CPU
-    seconds so far, and one giving the frames their pages drew so far (0: clients)."""
+    WebSocket clients in a process of their own that read every frame. Yields what they
+    are, a function giving their CPU seconds so far, and one giving the frames their
+    pages drew so far (0: clients)."""
     chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
     if real and chromium and driver:
         if confined:
