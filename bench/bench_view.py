@@ -15,9 +15,9 @@ The cases, in turn, each round:
 * the view with two headless chromium pages, at normal priority on any CPU: they
   draw WebGL in software (SwiftShader), on the same two cores as the rig and its
   emulated servos, so the page spares the CPU as it does wherever WebGL is software
-  (half the pixels each way, at most 15 draws a second);
-* the same two pages with ``?full`` in the URL: full size, up to 30 draws a second
-  (what the page drew everywhere before it learnt to spare a GPU-less machine).
+  (at most 15 draws a second);
+* the same two pages with ``?full`` in the URL: up to 30 draws a second (what the
+  page drew everywhere before it learnt to spare a GPU-less machine).
 
 ``HANDRIG_BENCH_VIEW_CASES`` picks cases (comma-separated keys of :data:`CASES`);
 ``chromium-confined`` (the pages off the loop's CPU, ``taskset``, under the idle
@@ -38,7 +38,7 @@ SwiftShader costs about as much again as the page's drawing (docs/view.md).
 ``HANDRIG_BENCH_ROUNDS`` the rounds (default 2).
 
 ``HANDRIG_BENCH_VIEW=pages`` measures only what one page costs: a ``handrig demo
---view`` run and one headless chromium page on it, at full size and rate (``?full``)
+--view`` run and one headless chromium page on it, at the full rate (``?full``)
 and as it draws by default where WebGL is software, in turn each round; CPU by
 chromium process (GPU process, renderer, the rest), frames drawn a second, and CPU
 milliseconds per frame drawn (the figure that does not depend on how starved the
@@ -191,8 +191,8 @@ def page_cost(seconds: float, rounds: int) -> None:
         print("| round | page | CPU % | GPU process % | renderer % | rest % "
               "| frames drawn/s | CPU ms per frame drawn |")
         print("|---|---|---|---|---|---|---|---|")
-        settings = {"?full: full size, up to 30/s": with_full(url),
-                    "default: half size, up to 15/s": url}
+        settings = {"?full: up to 30/s": with_full(url),
+                    "default where WebGL is software: up to 15/s": url}
         with tempfile.TemporaryDirectory(prefix="bench_view_pages_") as tmp:
             for i in range(rounds):
                 for k, (name, page_url) in enumerate(settings.items()):
@@ -230,7 +230,7 @@ def page_cost(seconds: float, rounds: int) -> None:
 
 
 def with_full(url: str) -> str:
-    """The page's URL asking for full size and rate where WebGL is software."""
+    """The page's URL asking for the full rate where WebGL is software."""
     return url + ("&" if "?" in url else "?") + "full"
 
 
@@ -390,7 +390,7 @@ def _pct(xs: np.ndarray, q: float) -> float:
 
 CASES = {"none": "no view", "sockets": "view + 2 WebSocket clients",
          "chromium": "view + 2 chromium pages",
-         "chromium-full": "view + 2 chromium pages at full size and rate (?full)",
+         "chromium-full": "view + 2 chromium pages at 30/s (?full)",
          "chromium-confined": "view + 2 chromium pages, off the loop's CPU, idle class"}
 
 

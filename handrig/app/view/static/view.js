@@ -12,10 +12,11 @@ const SKELETON_COLOUR = 0x3cc8ff;
 // What a frame costs the machine the page runs on: where WebGL is drawn in software
 // (SwiftShader, llvmpipe: a headless browser or a machine without a GPU) every
 // frame is CPU time, which the rig's own processes may need (on a 2-core machine,
-// two such pages at full size and rate took the loop's p99 latency up 2.5 times).
-// So there the page draws without multisampling, at half the pixels each way
-// (scaled up by the browser) and at most SOFTWARE_DRAW_HZ frames a second; `?full`
-// in the URL draws at full size and rate anyway. Everywhere: one WebGL context for
+// two such pages at 30 frames a second took the loop's p99 latency up 2.5 times).
+// So there the page draws without multisampling, at one pixel per CSS pixel and at
+// most 15 frames a second (a frame costs about the same CPU whatever its size: the
+// browser's compositing of the page, not the pixels of the scene); `?full` in the
+// URL draws at up to 30 a second anyway. Everywhere: one WebGL context for
 // both views, a draw only when a new frame came (or the camera moved), at most
 // MAX_DRAW_HZ, nothing while the page is hidden. docs/view.md has the figures.
 const FULL = new URLSearchParams(location.search).has('full');
@@ -30,7 +31,7 @@ const SOFTWARE_GL = (() => {
 })();
 const SAVE_CPU = SOFTWARE_GL && !FULL;
 const MAX_DRAW_HZ = SAVE_CPU ? 15 : 30;
-const PIXEL_RATIO = SAVE_CPU ? 0.5 : (SOFTWARE_GL ? 1 : Math.min(window.devicePixelRatio, 2));
+const PIXEL_RATIO = SOFTWARE_GL ? 1 : Math.min(window.devicePixelRatio, 2);
 
 // One canvas over both views (one WebGL context: each context costs a compositing
 // pass per frame); each view is drawn into its element's rectangle.
@@ -335,7 +336,7 @@ $('estop').addEventListener('pointerdown', () => send('estop'));
 $('estop').addEventListener('keydown', (ev) => { if (ev.key === 'Enter' || ev.key === ' ') send('estop'); });
 $('relax').addEventListener('click', () => send('relax'));
 $('stop').addEventListener('click', () => send('stop'));
-const SAVING_NOTE = SAVE_CPU ? ` (WebGL in software: half size, at most ${MAX_DRAW_HZ}/s to spare the rig's CPU; add ?full to the URL for full)` : '';
+const SAVING_NOTE = SAVE_CPU ? ` (WebGL in software: at most ${MAX_DRAW_HZ}/s to spare the rig's CPU; add ?full to the URL for 30/s)` : '';
 setInterval(() => { $('viewfps').textContent = `${received} frames/s received, ${drawn} drawn${SAVING_NOTE}`; received = 0; drawn = 0; }, 1000);
 window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO };
 connect();
