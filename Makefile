@@ -16,8 +16,16 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/handrig demo
 
+# Two pytest processes side by side: the compute-only tests (tests/conftest.py) beside
+# the realtime ones, which run one at a time; the second's report follows the first's.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
+	@log=$$(mktemp); \
+	$(BIN)/python -m pytest -q -p no:cacheprovider -m compute_only >"$$log" 2>&1 & pid=$$!; \
+	$(BIN)/python -m pytest -q -m "not compute_only"; rt=$$?; \
+	wait $$pid; ct=$$?; \
+	echo "== the compute-only tests, run beside them (pytest -m compute_only) =="; \
+	cat "$$log"; rm -f "$$log"; \
+	test $$rt -eq 0 && test $$ct -eq 0
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

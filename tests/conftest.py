@@ -55,11 +55,14 @@ def pytest_unconfigure(config: pytest.Config) -> None:
 
 SPEC = Path(__file__).resolve().parents[1] / "firmware_protocol" / "SPEC.md"
 
-# `make test` runs the suite on two workers (pytest-xdist, `--dist loadgroup`). The tests
-# below only compute (maps, sag, baking, rendering, parsing, compiling): they share the
-# machine freely. Every other test runs a realtime loop, emulators on ptys, processes
-# with signals, or firmware builds in build/: those stay in one group, run one at a time
-# on one worker as they do in a plain `pytest`, so two loops never contend for the cores.
+# `make test` runs the suite as two pytest processes side by side: the tests below only
+# compute (maps, sag, baking, rendering, parsing, compiling) and carry the marker
+# `compute_only` (`pytest -m compute_only`); every other test runs a realtime loop,
+# emulators on ptys, processes with signals, or firmware builds in build/, and those
+# run one at a time in the other process (`pytest -m "not compute_only"`), as in a
+# plain `pytest`, so two loops never contend for the cores. (pytest-xdist's
+# `--dist loadgroup` did this before, until pytest 9 stopped it from seeing the groups
+# and the realtime tests ran two at a time.)
 COMPUTE_ONLY = (
     "handrig/pose/", "handrig/offline/", "handrig/config/", "firmware_protocol/",
     "firmware/", "sim/test_bake.py", "sim/test_bake_plot_state.py", "sim/test_passive.py",
@@ -70,11 +73,12 @@ COMPUTE_ONLY = (
 TESTS = Path(__file__).resolve().parent
 
 
+@pytest.hookimpl(tryfirst=True)  # before `-m` selects by the markers
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         rel = item.path.resolve().relative_to(TESTS).as_posix()
-        if not rel.startswith(COMPUTE_ONLY):
-            item.add_marker(pytest.mark.xdist_group("realtime"))
+        if rel.startswith(COMPUTE_ONLY):
+            item.add_marker(pytest.mark.compute_only)
 
 
 
