@@ -57,6 +57,19 @@ function makeRenderer() {
 const renderer = makeRenderer();
 const views = [];
 let viewsDirty = true;
+// Drawing is driven by events (a frame came, the camera moved, the page was resized or
+// shown again), not by a loop of animation frames: a page with nothing new to draw
+// asks its browser for nothing (an idle loop of 60 animation frames a second cost a
+// headless page about as much CPU as its drawing did).
+let drawPending = false;
+let drawnAt = -Infinity;
+function requestDraw() {
+  if (drawPending || document.hidden) return;
+  drawPending = true;
+  const wait = Math.max(0, drawnAt + 1000 / MAX_DRAW_HZ - performance.now());
+  setTimeout(() => requestAnimationFrame(animate), wait);
+}
+function markDirty() { viewsDirty = true; requestDraw(); }
 
 function makeView(el) {
   const scene = new THREE.Scene();
@@ -71,7 +84,7 @@ function makeView(el) {
   const controls = new OrbitControls(camera, el);
   controls.target.set(0.05, 0, 0);
   const view = { el, scene, camera, controls, fitted: false, rect: [0, 0, 1, 1] };
-  controls.addEventListener('change', () => { viewsDirty = true; });
+  controls.addEventListener('change', markDirty);
   views.push(view);
   return view;
 }
@@ -85,7 +98,7 @@ function layout() {
     view.camera.aspect = w / Math.max(h, 1);
     view.camera.updateProjectionMatrix();
   }
-  viewsDirty = true;
+  markDirty();
 }
 
 function render() {
@@ -175,7 +188,7 @@ layout();
 let models = {}, ghosts = {}, bones = {};
 // the newest frame's text: parsed only when it is drawn (a frame that a newer one
 // replaced before the next draw, or that came while the page was hidden, costs nothing)
-let latest = null, socket = null, received = 0, drawn = 0, drawnTotal = 0, drawnAt = 0;
+let latest = null, socket = null, received = 0, drawn = 0, drawnTotal = 0;
 const actions = new Set();
 
 function onScene(msg) {
@@ -299,24 +312,25 @@ function drawFrame(f) {
   if (now - tablesAt >= TABLES_EVERY_MS) { tablesAt = now; drawTables(f); }
 }
 
-function animate(now) {
-  requestAnimationFrame(animate);
-  if (document.hidden || now - drawnAt < 1000 / MAX_DRAW_HZ - 2) return;
+function animate() {
+  drawPending = false;
+  if (document.hidden) return;
   if (latest) {
     drawFrame(JSON.parse(latest));
     latest = null; drawn += 1; drawnTotal += 1;
   }
-  if (viewsDirty) { render(); viewsDirty = false; drawnAt = now; }
+  if (viewsDirty) { render(); viewsDirty = false; drawnAt = performance.now(); }
 }
+document.addEventListener('visibilitychange', requestDraw);
 
 function connect() {
   const scheme = location.protocol === 'https:' ? 'wss' : 'ws';
   socket = new WebSocket(`${scheme}://${location.host}/ws${token ? `?token=${encodeURIComponent(token)}` : ''}`);
   socket.onopen = () => { $('link').textContent = 'live'; $('link').className = 'ok'; };
   socket.onmessage = (ev) => {
-    if (ev.data.startsWith('{"type":"frame"')) { latest = ev.data; received += 1; return; }
+    if (ev.data.startsWith('{"type":"frame"')) { latest = ev.data; received += 1; requestDraw(); return; }
     const msg = JSON.parse(ev.data);
-    if (msg.type === 'scene') { onScene(msg); latest = null; viewsDirty = true; }
+    if (msg.type === 'scene') { onScene(msg); latest = null; markDirty(); }
   };
   socket.onclose = () => {
     $('link').textContent = 'not connected (the run may have ended)';
@@ -340,4 +354,4 @@ const SAVING_NOTE = SAVE_CPU ? ` (WebGL in software: at most ${MAX_DRAW_HZ}/s to
 setInterval(() => { $('viewfps').textContent = `${received} frames/s received, ${drawn} drawn${SAVING_NOTE}`; received = 0; drawn = 0; }, 1000);
 window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO };
 connect();
-requestAnimationFrame(animate);
+requestDraw();
