@@ -16,12 +16,15 @@ The cases, in turn, each round:
   draw WebGL in software (SwiftShader), on the same two cores as the rig and its
   emulated servos, so the page spares the CPU as it does wherever WebGL is software
   (at most 15 draws a second);
-* the same two pages with ``?full`` in the URL: up to 30 draws a second (what the
-  page drew everywhere before it learnt to spare a GPU-less machine).
+* the same two pages kept off the loop's CPU (``taskset -c`` the CPUs the emulators
+  get), at normal priority: a browser started as docs/view.md advises for a machine
+  without a GPU that also runs the rig.
 
 ``HANDRIG_BENCH_VIEW_CASES`` picks cases (comma-separated keys of :data:`CASES`);
-``chromium-confined`` (the pages off the loop's CPU, ``taskset``, under the idle
-scheduling class, ``chrt --idle 0``) is there for asking.
+``chromium-full`` (the pages with ``?full`` in the URL: up to 30 draws a second, as
+the page drew everywhere before it learnt to spare a GPU-less machine) and
+``chromium-confined`` (off the loop's CPU and under the idle scheduling class,
+``chrt --idle 0``) are there for asking.
 
 Reported per round and pooled over rounds: end-to-end latency in the process (frame
 arrival to Sync Write handed to the OS) and from outside (glove emulator send to
@@ -277,21 +280,22 @@ def read_frames(url: str, n: int) -> None:
 
 @contextlib.contextmanager
 def browsers(url: str, n: int, folder: Path, real: bool, confined: bool = False,
-             full: bool = False
+             full: bool = False, off_cpu: bool = False
              ) -> Iterator[tuple[str, Callable[[], float], Callable[[], float]]]:
     """``n`` pages on ``url``: headless chromium (``real``; ``confined``: off the loop's
-    CPU and under the idle scheduling class; ``full``: ``?full`` in the URL), else
+    CPU and under the idle scheduling class; ``off_cpu``: off it at normal priority;
+    ``full``: ``?full`` in the URL), else
     WebSocket clients in a process of their own that read every frame. Yields what they
     are, a function giving their CPU seconds so far, and one giving the frames their
     pages drew so far (0: clients)."""
     chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
     if real and chromium and driver:
-        if confined:
+        if confined or off_cpu:
             _, others = cpu_split()
             cpus = ",".join(str(c) for c in sorted(others))
             wrapper = folder / "chromium-confined"
-            wrapper.write_text(f'#!/bin/sh\nexec taskset -c {cpus} chrt --idle 0 '
-                               f'{chromium} "$@"\n')
+            idle = "chrt --idle 0 " if confined else ""
+            wrapper.write_text(f'#!/bin/sh\nexec taskset -c {cpus} {idle}{chromium} "$@"\n')
             wrapper.chmod(0o755)
             chromium = str(wrapper)
         from selenium import webdriver
@@ -357,6 +361,7 @@ def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
             out["browsers"], pages_cpu, drawn = stack.enter_context(
                 browsers(server.url, 2, folder, real=case.startswith("chromium"),
                          confined=case == "chromium-confined",
+                         off_cpu=case == "chromium-offcpu",
                          full=case == "chromium-full"))
             on_rig = server.attach_rig
         cpu0, pages0, drawn0 = process_cpu_s(), pages_cpu(), drawn()
@@ -391,6 +396,7 @@ def _pct(xs: np.ndarray, q: float) -> float:
 CASES = {"none": "no view", "sockets": "view + 2 WebSocket clients",
          "chromium": "view + 2 chromium pages",
          "chromium-full": "view + 2 chromium pages at 30/s (?full)",
+         "chromium-offcpu": "view + 2 chromium pages off the loop's CPU (taskset)",
          "chromium-confined": "view + 2 chromium pages, off the loop's CPU, idle class"}
 
 
@@ -439,14 +445,14 @@ def main() -> None:
         return
     asked = os.environ.get("HANDRIG_BENCH_VIEW_CASES")
     cases = (["none"] + [c for c in asked.split(",") if c and c != "none"] if asked
-             else ["none", "sockets", "chromium", "chromium-full"])
+             else ["none", "sockets", "chromium", "chromium-offcpu"])
     unknown = [c for c in cases if c not in CASES]
     if unknown:
         raise SystemExit(f"HANDRIG_BENCH_VIEW_CASES: unknown case {unknown[0]!r} "
                          f"(one of {', '.join(CASES)})")
     confine = bool(shutil.which("chrt") and shutil.which("taskset") and cpu_split()[0] is not None)
     if not confine:
-        cases = [c for c in cases if c != "chromium-confined"]
+        cases = [c for c in cases if c not in ("chromium-confined", "chromium-offcpu")]
     if not chromium_available():
         cases = [c for c in cases if not c.startswith("chromium")]
     results: list[dict[str, Any]] = []
