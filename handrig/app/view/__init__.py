@@ -21,7 +21,7 @@ from handrig.app.view.address import (
     parse_view_address,
     secrets_token,
 )
-from handrig.app.view.encode import FrameEncoder
+from handrig.app.view.encode import FrameEncoder, HandsSnapshot
 from handrig.app.view.playback import view_playback
 from handrig.app.view.scene import ModelScene
 from handrig.app.view.server import RigControls, ViewServer, ViewStats
@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from handrig.app.view.process import ViewProcess
     from handrig.config.rig import RigConfig
 
-__all__ = ["FrameEncoder", "ModelScene", "RigControls", "ViewServer", "ViewStats",
+__all__ = ["FrameEncoder", "HandsSnapshot", "ModelScene", "RigControls", "ViewServer", "ViewStats",
            "add_view_flag", "build_server", "is_loopback", "parse_view_address", "view_playback",
            "view_session"]
 

@@ -288,7 +288,7 @@ function drawHandsTables(f) {
   $('source').textContent = sources.length === 1 ? SOURCES[sources[0]]
     : hands.map((h) => `${h.label}: ${SOURCES[h.source]}`).join('; ');
   const head = $('loop').tHead || $('loop').createTHead();
-  if (!head.rows.length) cells(head.insertRow(), ['', ...hands.map((h) => h.label)]);
+  if (!head.rows.length) head.insertRow().replaceChildren(...['', ...hands.map((h) => h.label)].map((label) => { const th = document.createElement('th'); th.textContent = label; return th; }));
   handCells('rate', hands.map((h) => fmt(h.rate_hz, ' Hz')));
   handCells('latency', hands.map((h) => `${fmt(h.latency_p50_us, ' µs', 0)} / ${fmt(h.latency_p99_us, ' µs', 0)}`));
   handCells('lost', hands.map((h) => String(h.frames_lost)));

@@ -241,6 +241,47 @@ def test_frame_from_a_snapshot(human_rig) -> None:  # type: ignore[no-untyped-de
     assert scene["type"] == "scene" and set(scene["rest"]) == set(scene["models"]) == {"ri"}
 
 
+def test_two_hand_frame_has_each_hands_part_and_poses_each_from_its_own() -> None:
+    """A two-hand run's frame: each hand's figures, its own glove controls and servos;
+    each hand of the model posed from its own loop's snapshot (the right from its
+    readings with a ghost, the left, without readings, from its goals)."""
+    import dataclasses
+
+    from handrig.app.view import HandsSnapshot
+    from handrig.config.rig import hand_rig
+
+    cfg = build_parts("puppet_two_hands").rig_config
+    encoder = build_server("127.0.0.1:0", cfg).encoder
+    right = dataclasses.replace(_snapshot(hand_rig(cfg, "ri"), positions=True),
+                                control_names=("riIndexMCPy", "leIndexMCPy"),
+                                controls=(0.5, -0.25))
+    left = dataclasses.replace(_snapshot(hand_rig(cfg, "le"), positions=False), seq=5,
+                               mode="relaxing", mode_reason="the left glove is silent",
+                               control_names=("riIndexMCPy", "leIndexMCPy"),
+                               controls=(0.5, -0.25), raw=(1800.0,))
+    both = HandsSnapshot({"ri": right, "le": left})
+    assert both.seq == 8  # changes when either hand's does
+    read = json.loads(encoder.frame(both))
+    ri, le = read["hands"]
+    assert (ri["hand"], ri["label"], le["hand"], le["label"]) == ("ri", "right", "le", "left")
+    assert (ri["mode"], le["mode"], le["mode_reason"]) == ("running", "relaxing",
+                                                          "the left glove is silent")
+    assert (ri["source"], le["source"]) == ("positions", "goals")
+    assert ri["glove"]["names"] == ["riIndexMCPy"] and ri["glove"]["controls"] == [0.5]
+    assert le["glove"]["names"] == ["leIndexMCPy"] and le["glove"]["controls"] == [-0.25]
+    assert le["glove"]["raw"] == [1800.0]
+    assert all(j.startswith("ri") for j in ri["servos"]["joints"])
+    assert all(j.startswith("le") for j in le["servos"]["joints"])
+    assert len(ri["servos"]["ids"]) + len(le["servos"]["ids"]) == len(cfg.servos)
+    assert set(read["bodies"]) == {"ri", "le"} and set(read["ghost"]) == {"ri"}
+    assert set(read["skeleton"]) == {"ri", "le"}
+    # the left hand is posed from its goals: the same as a one-hand frame of its snapshot
+    alone = json.loads(encoder.frame(left))
+    assert read["bodies"]["le"] == alone["bodies"]["le"]
+    assert read["bodies"]["ri"] != alone["bodies"]["ri"]  # the right from its readings
+    assert len(read["outputs"]) == 2  # both loops' outputs
+
+
 @pytest.mark.parametrize("end", ["estop", "ctrl-c"])
 def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None:
     """Without a browser: ``handrig run --view`` on the simulated rig; a WebSocket
