@@ -77,6 +77,7 @@ class BothHands:
 
     def __init__(self, rigs: Mapping[str, Rig]) -> None:
         self.rigs = rigs  # filled once the loops are built
+        self.estop_reason = ""  # set before either rig is e-stopped
 
     def toggle_relax(self) -> None:
         for rig in self.rigs.values():
@@ -87,6 +88,7 @@ class BothHands:
             rig.request_stop(reason)
 
     def estop(self, reason: str = "e-stop key") -> None:
+        self.estop_reason = reason
         for rig in self.rigs.values():
             rig.estop(reason)
 
@@ -299,7 +301,8 @@ class _TwoHands:
             other.estop(f"the {name} hand's loop stopped: {exc}")
             return
         if rig.machine.estop:
-            other.estop(f"the {name} hand's e-stop")
+            if not self.both.estop_reason:  # else both were e-stopped: each keeps its reason
+                other.estop(f"the {name} hand's e-stop")
         elif other.machine.stop_requests == 0 and other.mode is not Mode.STOPPING:
             # asked once only: a second request would cut the other hand's ease short
             other.request_stop(f"the {name} hand stopped: {rig.machine.stop_reason}")
