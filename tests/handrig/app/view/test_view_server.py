@@ -332,6 +332,56 @@ def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None
         socket.create_connection(("127.0.0.1", port), timeout=2).close()
 
 
+def test_two_bus_run_view_streams_both_hands_and_its_estop_ends_both() -> None:
+    """Without a browser: ``handrig run --rig puppet_two_buses --bus sim --bus-left sim``
+    with a glove per hand and ``--view``: the frames carry both hands, each with its
+    own bus's servos read back; the socket's e-stop ends both loops with torque off on
+    both buses."""
+    recording = simulator.demo_recording()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handrig.cli", "run", "--rig", "puppet_two_buses", "--bus",
+         "sim", "--bus-left", "sim", "--glove", f"replay:{recording}", "--glove-left",
+         f"replay:{recording}", "--frames", "20000", "--json", "--view", "127.0.0.1:0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        url = ""
+        deadline = time.monotonic() + 120
+        while not url and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            if line.startswith("view: "):
+                url = line.split()[1]
+        port = int(url.rsplit(":", 1)[1].strip("/"))
+        with connect(f"ws://127.0.0.1:{port}/ws") as ws:
+            scene = json.loads(ws.recv(timeout=30))
+            assert set(scene["models"]) == {"ri", "le"}
+            frame: dict = {}
+            for _ in range(100):  # until both hands' servos have answered
+                frame = json.loads(ws.recv(timeout=30))
+                if all(h["source"] == "positions" for h in frame["hands"]):
+                    break
+            assert [h["label"] for h in frame["hands"]] == ["right", "left"]
+            for h in frame["hands"]:
+                assert len(h["servos"]["ids"]) == 20
+                assert all(j.startswith(h["hand"]) for j in h["servos"]["joints"])
+                assert any(p is not None for p in h["servos"]["position_deg"])
+                assert h["cycles"] > 0 and h["rate_hz"] is not None
+            assert set(frame["bodies"]) == {"ri", "le"} and set(frame["ghost"]) == {"ri", "le"}
+            ws.send(json.dumps({"action": "estop"}))
+            out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["buses"] == "two" and summary["torque_off"] is True
+    for hand in ("right", "left"):
+        s = summary["hands"][hand]
+        assert s["estop"] is True and s["stop_reason"] == "e-stop button (view)", hand
+
+
 def _may_use_fifo() -> bool:
     """Whether a thread of this process may take SCHED_FIFO here (root, CAP_SYS_NICE)."""
     import threading
