@@ -24,7 +24,7 @@ import gc
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from types import FrameType, TracebackType
 from typing import Any
@@ -77,6 +77,9 @@ class LiveOptions:
     profile: bool = False  # time the critical path's stages (bench_rig)
     log: Callable[[str], None] = field(default=lambda text: print(text, file=sys.stderr))
     on_rig: Callable[[Any], None] | None = None  # given the rig once built (the --view)
+    # a two-hand run (app/two_hands.py) instead: both hands' rigs by hand and the
+    # controls that act on both, as the keys do (the --view)
+    on_hands: Callable[[Mapping[str, Any], Any], None] | None = None
 
 
 @dataclass

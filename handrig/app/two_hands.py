@@ -25,7 +25,7 @@ import dataclasses
 import gc
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +70,29 @@ def run_two_hands(parts: TwoHandParts, opts: LiveOptions,
         return _TwoHands(parts, opts, clock or MonotonicClock(), signals).run()
 
 
+class BothHands:
+    """The show's controls acting on both hands at once (the keys, the view's buttons):
+    relax/resume both, stop both (each eases down), e-stop both. Safe from any thread,
+    as each rig's are."""
+
+    def __init__(self, rigs: Mapping[str, Rig]) -> None:
+        self.rigs = rigs  # filled once the loops are built
+        self.estop_reason = ""  # set before either rig is e-stopped
+
+    def toggle_relax(self) -> None:
+        for rig in self.rigs.values():
+            rig.toggle_relax()
+
+    def request_stop(self, reason: str = "stop requested") -> None:
+        for rig in self.rigs.values():
+            rig.request_stop(reason)
+
+    def estop(self, reason: str = "e-stop key") -> None:
+        self.estop_reason = reason
+        for rig in self.rigs.values():
+            rig.estop(reason)
+
+
 class _TwoHands:
     def __init__(self, parts: TwoHandParts, opts: LiveOptions, clock: Clock,
                  signals: ExitSignals) -> None:
@@ -89,6 +112,7 @@ class _TwoHands:
         self.bus_hands: dict[str, tuple[str, ...]] = {}  # bus port -> the hands on it
         self.panel: Any = None
         self.started = False
+        self.both = BothHands(self.rigs)  # the keys' and the view's buttons
 
     # -- the session --------------------------------------------------------------------
     def run(self) -> LiveResult:
@@ -216,8 +240,8 @@ class _TwoHands:
         if opts.snapshot_every > 0:  # on the right hand's loop: both hands' positions
             right = self.rigs["ri"]
             right.outputs = (*right.outputs, self._snapshots(opts.snapshot_every))
-        if opts.on_rig is not None:
-            opts.on_rig(self.rigs["ri"])
+        if opts.on_hands is not None:
+            opts.on_hands(dict(self.rigs), self.both)
         gc.collect()
         for rig in self.rigs.values():
             rig.prepare()
@@ -277,22 +301,20 @@ class _TwoHands:
             other.estop(f"the {name} hand's loop stopped: {exc}")
             return
         if rig.machine.estop:
-            other.estop(f"the {name} hand's e-stop")
+            if not self.both.estop_reason:  # else both were e-stopped: each keeps its reason
+                other.estop(f"the {name} hand's e-stop")
         elif other.machine.stop_requests == 0 and other.mode is not Mode.STOPPING:
             # asked once only: a second request would cut the other hand's ease short
             other.request_stop(f"the {name} hand stopped: {rig.machine.stop_reason}")
 
     def _stop_both(self, reason: str) -> None:
-        for rig in self.rigs.values():
-            rig.request_stop(reason)
+        self.both.request_stop(reason)
 
     def _relax_both(self) -> None:
-        for rig in self.rigs.values():
-            rig.toggle_relax()
+        self.both.toggle_relax()
 
     def _estop_both(self) -> None:
-        for rig in self.rigs.values():
-            rig.estop()
+        self.both.estop()
 
     def _side_log(self, h: str) -> Callable[[str], None]:
         def log(text: str) -> None:

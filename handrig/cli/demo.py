@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     log(f"demo: {recording} -> glove emulator -> pipeline -> Dynamixel driver -> MuJoCo puppet")
     with (ExitSignals() as signals,  # a Ctrl-C while the glove emulator starts unwinds
           view_session(args.view, parts.rig_config,
-                       lambda text: print(text, file=sys.stderr, flush=True)) as on_rig):
+                       lambda text: print(text, file=sys.stderr, flush=True)) as view):
         try:
             with contextlib.ExitStack() as gloves:
                 _, glove_port = gloves.enter_context(port_process(
@@ -105,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
                                    frames=args.frames, glove_left=left_port,
                                    bus_left="sim" if two is not None else None,
                                    sim_faults=args.faults, log=log, panel=not args.json,
-                                   on_rig=on_rig,
+                                   on_rig=view.attach_rig if view is not None else None,
+                                   on_hands=view.attach_hands if view is not None else None,
                                    snapshot_every=max(1, args.frames // 6) if args.render else 0)
                 signals.disarm()  # the session handles its own; after it: shut down, print
                 result = (run_two_hands(two, opts) if two is not None

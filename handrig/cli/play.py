@@ -103,13 +103,13 @@ def run_on_rig(args: argparse.Namespace) -> int:
               flush=True)
     rec = take.recording
     one_frame = float(rec.t_s[1] - rec.t_s[0]) if len(rec) > 1 else 0.01
-    with view_session(args.view, parts.rig_config, _stderr) as on_rig:
+    with view_session(args.view, parts.rig_config, _stderr) as view:
         opts = LiveOptions(
             glove=f"replay:{args.file}", take=lambda clock: take.source(clock, loop=args.loop),
             bus=args.bus,
             duration_s=None if args.loop else round(take.duration_s + one_frame, 3),
             wire_timing=not args.no_wire_timing, vmc=args.vmc, panel=not args.json,
-            verbose=not args.json, on_rig=on_rig,
+            verbose=not args.json, on_rig=view.attach_rig if view is not None else None,
             done_reason=f"the take played ({take.duration_s:.2f} s)")
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

@@ -143,15 +143,17 @@ def run(args: argparse.Namespace) -> int:
                                   "--glove-left-config, [gloves] left_config, else the "
                                   "right glove's"))
         print_sources(sources)
-    with view_session(args.view, parts.rig_config, _stderr) as on_rig:
+    with view_session(args.view, parts.rig_config, _stderr) as view:
         opts = LiveOptions(
             glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,
             wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
             record=args.record, record_rate_hz=args.record_rate,
             record_glove=args.record_glove, record_glove_left=args.record_glove_left,
             panel=not args.json,
-            verbose=not args.json, on_rig=on_rig, glove_left=left, bus_left=args.bus_left,
+            verbose=not args.json, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
+            on_rig=view.attach_rig if view is not None else None,
+            on_hands=view.attach_hands if view is not None else None,
         )
         result = run_two_hands(two, opts) if two is not None else run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

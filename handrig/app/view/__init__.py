@@ -21,16 +21,16 @@ from handrig.app.view.address import (
     parse_view_address,
     secrets_token,
 )
-from handrig.app.view.encode import FrameEncoder
+from handrig.app.view.encode import FrameEncoder, HandsSnapshot
 from handrig.app.view.playback import view_playback
 from handrig.app.view.scene import ModelScene
 from handrig.app.view.server import RigControls, ViewServer, ViewStats
 
 if TYPE_CHECKING:
+    from handrig.app.view.process import ViewProcess
     from handrig.config.rig import RigConfig
-    from handrig.loop.rig import Rig
 
-__all__ = ["FrameEncoder", "ModelScene", "RigControls", "ViewServer", "ViewStats",
+__all__ = ["FrameEncoder", "HandsSnapshot", "ModelScene", "RigControls", "ViewServer", "ViewStats",
            "add_view_flag", "build_server", "is_loopback", "parse_view_address", "view_playback",
            "view_session"]
 
@@ -60,10 +60,11 @@ def build_server(address: str, rig_config: RigConfig, *, rate_hz: float = 30.0,
 
 @contextlib.contextmanager
 def view_session(address: str | None, rig_config: RigConfig, log: Callable[[str], None]
-                 ) -> Iterator[Callable[[Rig], None] | None]:
+                 ) -> Iterator[ViewProcess | None]:
     """Serve the view for the block when ``address`` is given, in a process of its own
-    (:class:`handrig.app.view.process.ViewProcess`), and yield the function that
-    attaches the rig (its telemetry and its key actions); yields None without
+    (:class:`handrig.app.view.process.ViewProcess`), and yield it: the run hands it the
+    rig (``attach_rig``, a one-hand run's ``LiveOptions.on_rig``) or both hands' rigs
+    (``attach_hands``, a two-hand run's ``on_hands``); yields None without
     ``--view``. The server closes when the block ends, however it ends."""
     if address is None:
         yield None
@@ -73,7 +74,6 @@ def view_session(address: str | None, rig_config: RigConfig, log: Callable[[str]
     view = ViewProcess(address, rig_config).start()
     try:
         log(f"view: {view.url}")
-        yield view.attach_rig
+        yield view
     finally:
         view.close()
-

@@ -11,9 +11,11 @@ import enum
 import json
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from handrig.app.view.scene import ModelScene
+from handrig.config.rig import HAND_NAMES
 
 if TYPE_CHECKING:
     from handrig.loop.telemetry import LoopSnapshot
@@ -69,45 +71,108 @@ class FrameEncoder:
             "skeleton_hands": list(self.skeletons),
         }, separators=(",", ":"))
 
-    def frame(self, snap: LoopSnapshot) -> str:
-        """One snapshot as the page's frame message."""
-        pose = {n: float(v) for n, v in zip(snap.curve_names, snap.pose_deg, strict=False)}
-        reported = {j: float(p) for j, p in zip(snap.servo_joints, snap.positions_deg,
-                                                strict=False) if p is not None}
-        goals = {j: float(g) for j, g in zip(snap.servo_joints, snap.goals_deg, strict=False)
-                 if g is not None}
-        if reported:
-            source, angles = "positions", {**pose, **goals, **reported}
-        elif goals:
-            source, angles = "goals", {**pose, **goals}
-        else:
-            source, angles = "pose", dict(pose)
-        ghost = {**pose, **goals}
+    def frame(self, snap: LoopSnapshot | HandsSnapshot) -> str:
+        """One snapshot as the page's frame message (both hands' for a two-hand run)."""
+        if isinstance(snap, HandsSnapshot):
+            return self._hands_frame(snap)
+        source, angles, ghost = _angles(snap)
         msg: dict[str, Any] = {
             "type": "frame", "seq": int(snap.seq), "t_s": _num(snap.t_s, 3),
-            "mode": str(snap.mode), "mode_reason": str(snap.mode_reason),
-            "rate_hz": _num(snap.rate_hz, 1), "latency_p50_us": _num(snap.latency_p50_us, 0),
-            "latency_p99_us": _num(snap.latency_p99_us, 0), "frames_lost": int(snap.frames_lost),
-            "cycles": int(snap.cycles), "overruns": int(snap.overruns),
-            "glove": {
-                "connected": bool(snap.glove_connected),
-                "names": list(snap.control_names), "controls": _nums(snap.controls, 3),
-                "raw": _nums(snap.raw, 0), "inclination_deg": _num(snap.inclination_deg, 1),
-                "rotation_deg": _num(snap.rotation_deg, 1),
-            },
-            "servos": {
-                "ids": [int(i) for i in snap.servo_ids], "joints": list(snap.servo_joints),
-                "goal_deg": _nums(snap.goals_deg, 1), "position_deg": _nums(snap.positions_deg, 1),
-                "temperature_c": _nums(snap.temperatures_c, 0),
-                "errors": [int(e) for e in snap.hardware_errors],
-                "stale": [bool(s) for s in snap.stale],
-            },
+            **_hand_fields(snap, tuple(snap.control_names)),
             "outputs": [_plain(o) for o in snap.outputs],
             "source": source,
             "bodies": {h: s.pose(angles) for h, s in self.models.items()},
             "ghost": ({h: s.pose(ghost) for h, s in self.models.items()}
-                      if reported and goals else None),
-            "skeleton": {h: s.skeleton(pose) for h, s in self.skeletons.items()
+                      if ghost is not None else None),
+            "skeleton": {h: s.skeleton(_pose(snap)) for h, s in self.skeletons.items()
                          if any(n.startswith(h) for n in snap.curve_names)},
         }
         return json.dumps(msg, separators=(",", ":"))
+
+    def _hands_frame(self, snaps: HandsSnapshot) -> str:
+        """A two-hand run's frame: a part per hand (its loop's figures, its glove's
+        controls, its servos) in ``hands``; each hand of the model posed from its own
+        loop's snapshot, each skeleton from its own hand's pipeline."""
+        hands: list[dict[str, Any]] = []
+        bodies: dict[str, Any] = {}
+        ghosts: dict[str, Any] = {}
+        for h, snap in snaps.hands.items():
+            source, angles, ghost = _angles(snap)
+            own = tuple(n for n in snap.control_names if n.startswith(h))
+            hands.append({"hand": h, "label": HAND_NAMES.get(h, h), "source": source,
+                          **_hand_fields(snap, own)})
+            model = self.models.get(h)
+            if model is not None:
+                bodies[h] = model.pose(angles)
+                if ghost is not None:
+                    ghosts[h] = model.pose(ghost)
+        first = next(iter(snaps.hands.values()))
+        msg: dict[str, Any] = {
+            "type": "frame", "seq": int(snaps.seq), "t_s": _num(first.t_s, 3),
+            "hands": hands,
+            "outputs": [_plain(o) for snap in snaps.hands.values() for o in snap.outputs],
+            "bodies": bodies, "ghost": ghosts or None,
+            "skeleton": {h: s.skeleton(_pose(snaps.hands[h])) for h, s in self.skeletons.items()
+                         if h in snaps.hands},
+        }
+        return json.dumps(msg, separators=(",", ":"))
+
+
+@dataclass(frozen=True)
+class HandsSnapshot:
+    """The snapshots of a two-hand run's loops, by hand (``"ri"``, ``"le"``), taken
+    together by the view's feeder. ``seq`` changes whenever either hand's does."""
+
+    hands: Mapping[str, LoopSnapshot]
+
+    @property
+    def seq(self) -> int:
+        return sum(int(s.seq) for s in self.hands.values())
+
+
+def _pose(snap: LoopSnapshot) -> dict[str, float]:
+    return {n: float(v) for n, v in zip(snap.curve_names, snap.pose_deg, strict=False)}
+
+
+def _angles(snap: LoopSnapshot) -> tuple[str, dict[str, float], dict[str, float] | None]:
+    """What the model is posed from (``positions``, ``goals`` or ``pose``), the joint
+    angles, and the ghost's (the goals; None unless there are readings and goals)."""
+    pose = _pose(snap)
+    reported = {j: float(p) for j, p in zip(snap.servo_joints, snap.positions_deg,
+                                            strict=False) if p is not None}
+    goals = {j: float(g) for j, g in zip(snap.servo_joints, snap.goals_deg, strict=False)
+             if g is not None}
+    if reported:
+        source, angles = "positions", {**pose, **goals, **reported}
+    elif goals:
+        source, angles = "goals", {**pose, **goals}
+    else:
+        source, angles = "pose", dict(pose)
+    return source, angles, ({**pose, **goals} if reported and goals else None)
+
+
+def _hand_fields(snap: LoopSnapshot, controls: tuple[str, ...]) -> dict[str, Any]:
+    """One loop's figures, its glove (the ``controls`` named, calibrated, with the
+    glove's raw counts in order) and its servos."""
+    index = {n: i for i, n in enumerate(snap.control_names)}
+    calibrated = [snap.controls[index[n]] if index[n] < len(snap.controls) else None
+                  for n in controls]
+    return {
+        "mode": str(snap.mode), "mode_reason": str(snap.mode_reason),
+        "rate_hz": _num(snap.rate_hz, 1), "latency_p50_us": _num(snap.latency_p50_us, 0),
+        "latency_p99_us": _num(snap.latency_p99_us, 0), "frames_lost": int(snap.frames_lost),
+        "cycles": int(snap.cycles), "overruns": int(snap.overruns),
+        "glove": {
+            "connected": bool(snap.glove_connected),
+            "names": list(controls), "controls": _nums(calibrated, 3),
+            "raw": _nums(snap.raw, 0), "inclination_deg": _num(snap.inclination_deg, 1),
+            "rotation_deg": _num(snap.rotation_deg, 1),
+        },
+        "servos": {
+            "ids": [int(i) for i in snap.servo_ids], "joints": list(snap.servo_joints),
+            "goal_deg": _nums(snap.goals_deg, 1), "position_deg": _nums(snap.positions_deg, 1),
+            "temperature_c": _nums(snap.temperatures_c, 0),
+            "errors": [int(e) for e in snap.hardware_errors],
+            "stale": [bool(s) for s in snap.stale],
+        },
+    }

@@ -29,8 +29,10 @@ import struct
 import subprocess
 import sys
 import threading
+from collections.abc import Mapping
 from typing import IO, TYPE_CHECKING, Any
 
+from handrig.app.view.encode import HandsSnapshot
 from handrig.errors import ConfigError
 from handrig.realtime import apply_cpus_from_env, helper_env, realtime_priority
 
@@ -160,6 +162,20 @@ class ViewProcess:
         """:meth:`attach` for a :class:`handrig.loop.rig.Rig`."""
         self.attach(rig.telemetry.latest, rig)
 
+    def attach_hands(self, rigs: Mapping[str, Any], controls: RigControls) -> None:
+        """:meth:`attach` for a two-hand run: ``rigs`` by hand (``"ri"``, ``"le"``), each
+        loop's snapshot read by the same feeder (a :class:`HandsSnapshot` once every
+        hand has published one); the buttons call ``controls``, which act on both hands
+        as the keys do."""
+        latest = {h: rig.telemetry.latest for h, rig in rigs.items()}
+
+        def both() -> HandsSnapshot | None:
+            snaps = {h: read() for h, read in latest.items()}
+            if any(s is None for s in snaps.values()):
+                return None
+            return HandsSnapshot(snaps)
+        self.attach(both, controls)
+
     def feeder_priority(self) -> int:
         """The feeder's SCHED_FIFO priority: one below the loop's (0: normal, when the
         loop's is 0 or 1)."""
@@ -176,7 +192,7 @@ class ViewProcess:
         last = -1
         period = 1.0 / FEED_HZ
         while not self._stop.wait(period):
-            snap: LoopSnapshot | None = source()
+            snap: LoopSnapshot | HandsSnapshot | None = source()
             if snap is None or snap.seq == last:
                 continue
             last = snap.seq
@@ -255,7 +271,7 @@ def child_main() -> int:
         out.write(f"error {json.dumps({'detail': detail, 'allowed': allowed})}\n")
         out.flush()
         return 1
-    latest: list[LoopSnapshot | None] = [None]
+    latest: list[LoopSnapshot | HandsSnapshot | None] = [None]
     server.attach(lambda: latest[0], _Relay(out))
     out.write(f"ready {server.port} {server.url}\n")
     out.flush()

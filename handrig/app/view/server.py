@@ -33,7 +33,7 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
-from handrig.app.view.encode import FrameEncoder
+from handrig.app.view.encode import FrameEncoder, HandsSnapshot
 from handrig.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -100,7 +100,7 @@ class ViewServer:
         self.flag = flag
         self.stats = ViewStats()
         self._files = _files()
-        self._source: Callable[[], LoopSnapshot | None] = lambda: None
+        self._source: Callable[[], LoopSnapshot | HandsSnapshot | None] = lambda: None
         self._controls: RigControls | None = None
         self._scene = ""
         self._latest: tuple[int, str] | None = None
@@ -122,10 +122,11 @@ class ViewServer:
         """The server thread's OS id while it runs (its CPU time is in /proc)."""
         return self._thread.native_id if self._thread is not None else None
 
-    def attach(self, source: Callable[[], LoopSnapshot | None],
+    def attach(self, source: Callable[[], LoopSnapshot | HandsSnapshot | None],
                controls: RigControls | None = None) -> None:
-        """Show what ``source`` returns (``rig.telemetry.latest``); the buttons call
-        ``controls`` (the rig), none when None."""
+        """Show what ``source`` returns (``rig.telemetry.latest``, or both hands'
+        snapshots in a two-hand run); the buttons call ``controls`` (the rig, or what
+        acts on both hands), none when None."""
         self._source = source
         self._controls = controls
 

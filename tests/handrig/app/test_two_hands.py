@@ -41,14 +41,14 @@ def _run(rig: str, recording, frames: int, *, left_pause_s: float = 0.0, **opts)
             left.resume()
         scripts: list[threading.Thread] = []
 
-        def on_rig(rig) -> None:  # given the right hand's rig before torque goes on
+        def on_hands(rigs, both) -> None:  # given both hands' rigs before torque goes on
             if left_pause_s:
-                scripts.append(threading.Thread(target=quiet_left, args=(rig,)))
+                scripts.append(threading.Thread(target=quiet_left, args=(rigs["ri"],)))
                 scripts[0].start()
 
         result = run_two_hands(parts, LiveOptions(
             glove=right.port_path, glove_left=left.port_path, bus="sim", bus_left="sim",
-            frames=frames, log=lines.append, on_rig=on_rig, **opts))
+            frames=frames, log=lines.append, on_hands=on_hands, **opts))
         for script in scripts:
             script.join()
     return result, lines

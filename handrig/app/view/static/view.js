@@ -8,6 +8,8 @@ const token = new URLSearchParams(location.search).get('token');
 const $ = (id) => document.getElementById(id);
 const HAND_OFFSET_M = { ri: -0.11, le: 0.11 };  // two hands side by side
 const SKELETON_COLOUR = 0x3cc8ff;
+const TWO_HANDS_FROM = new THREE.Vector3(-0.5, 0.0, 1.0);  // the rig has two hands: the right on the right
+const TWO_SKELETONS_FROM = new THREE.Vector3(-0.3, 0.0, 1.0);
 
 // What a frame costs the machine the page runs on: where WebGL is drawn in software
 // (SwiftShader, llvmpipe: a headless browser or a machine without a GPU) every
@@ -185,7 +187,7 @@ const puppet = makeView($('puppet'));
 const skeleton = makeView($('skeleton'));
 new ResizeObserver(layout).observe(viewsEl);
 layout();
-let models = {}, ghosts = {}, bones = {};
+let models = {}, ghosts = {}, bones = {}, twoHands = false;
 // the newest frame's text: parsed only when it is drawn (a frame that a newer one
 // replaced before the next draw, or that came while the page was hidden, costs nothing)
 let latest = null, socket = null, received = 0, drawn = 0, drawnTotal = 0;
@@ -198,6 +200,7 @@ function onScene(msg) {
   }
   models = {}; ghosts = {}; bones = {};
   const hands = Object.keys(msg.models);
+  twoHands = hands.length > 1;
   for (const hand of hands) {
     const shift = hands.length > 1 ? HAND_OFFSET_M[hand] || 0 : 0;
     for (const [store, ghost] of [[models, false], [ghosts, true]]) {
@@ -226,7 +229,9 @@ function onScene(msg) {
   // the camera is aimed at the hand at rest (not the forearm), with room for it to move
   for (const [hand, posed] of Object.entries(msg.rest)) place(models[hand], posed);
   const handBodies = Object.values(models).flatMap((m) => (m.bodies.length > 2 ? m.bodies.slice(2) : m.bodies));
-  fit(puppet, handBodies, new THREE.Vector3(0.15, -0.75, 0.85), 1.6);
+  // two hands (side by side along y) are seen from above and behind the wrists, as
+  // the puppeteer sees their own: the right hand on the right
+  fit(puppet, handBodies, twoHands ? TWO_HANDS_FROM : new THREE.Vector3(0.15, -0.75, 0.85), 1.6);
   $('title').textContent = msg.title;
   actions.clear();
   for (const a of msg.actions) actions.add(a);
@@ -247,8 +252,11 @@ function cells(row, values) {
 }
 
 function drawMode(f) {
-  if ($('mode').textContent !== f.mode) $('mode').textContent = f.mode;
-  const reason = f.mode_reason ? `(${f.mode_reason})` : '';
+  // a two-hand run: each hand's mode ("right running · left relaxing") and why
+  const mode = f.hands ? f.hands.map((h) => `${h.label} ${h.mode}`).join(' · ') : f.mode;
+  if ($('mode').textContent !== mode) $('mode').textContent = mode;
+  const why = f.hands ? f.hands.filter((h) => h.mode_reason).map((h) => `${h.label}: ${h.mode_reason}`).join('; ') : f.mode_reason;
+  const reason = why ? `(${why})` : '';
   if ($('reason').textContent !== reason) $('reason').textContent = reason;
 }
 
@@ -257,8 +265,82 @@ function drawMode(f) {
 const TABLES_EVERY_MS = 250;
 let tablesAt = 0;
 
+const SOURCES = { positions: 'the servos\' present positions', goals: 'the goals (no readings)', pose: 'the pipeline\'s pose (no readings)' };
+
+// A two-hand run's table: a heading row per hand, then its rows. ``groups``: per hand
+// {title, bad, rows: [{values, className, errCell}]}.
+function groupRows(tbody, groups, width) {
+  const all = rows(tbody, groups.reduce((n, g) => n + 1 + g.rows.length, 0));
+  let i = 0;
+  for (const g of groups) {
+    const head = all[i++];
+    while (head.cells.length > 1) head.deleteCell(-1);
+    cells(head, [g.title]);
+    head.cells[0].colSpan = width;
+    head.className = g.bad ? 'hand bad' : 'hand';
+    for (const r of g.rows) {
+      const row = all[i++];
+      if (row.cells.length && row.cells[0].colSpan !== 1) row.cells[0].colSpan = 1;
+      cells(row, r.values);
+      row.className = r.className || '';
+      if (r.errCell !== undefined) row.cells[r.errCell.at].className = r.errCell.bad ? 'err' : '';
+    }
+  }
+}
+
+// A row of the loop's table with a cell per hand (and a heading row naming them).
+function handCells(id, values) {
+  const row = $(id).parentElement;
+  while (row.cells.length < values.length + 1) row.insertCell();
+  values.forEach((v, i) => { if (row.cells[i + 1].textContent !== v) row.cells[i + 1].textContent = v; });
+}
+
+function servoRow(s, i) {
+  const err = s.errors[i];
+  return { values: [String(s.ids[i]), s.joints[i], fmt(s.goal_deg[i]), fmt(s.position_deg[i]),
+    fmt(s.temperature_c[i], '', 0), err ? `0x${err.toString(16).padStart(2, '0')}` : '–'],
+  className: s.stale[i] ? 'stale' : '', errCell: { at: 5, bad: Boolean(err) } };
+}
+
+function drawHandsTables(f) {
+  const hands = f.hands;
+  const sources = [...new Set(hands.map((h) => h.source))];
+  $('source').textContent = sources.length === 1 ? SOURCES[sources[0]]
+    : hands.map((h) => `${h.label}: ${SOURCES[h.source]}`).join('; ');
+  const head = $('loop').tHead || $('loop').createTHead();
+  if (!head.rows.length) head.insertRow().replaceChildren(...['', ...hands.map((h) => h.label)].map((label) => { const th = document.createElement('th'); th.textContent = label; return th; }));
+  handCells('rate', hands.map((h) => fmt(h.rate_hz, ' Hz')));
+  handCells('latency', hands.map((h) => `${fmt(h.latency_p50_us, ' µs', 0)} / ${fmt(h.latency_p99_us, ' µs', 0)}`));
+  handCells('lost', hands.map((h) => String(h.frames_lost)));
+  handCells('cycles', hands.map((h) => `${h.cycles} / ${h.overruns}`));
+  const lost = hands.filter((h) => !h.glove.connected).map((h) => h.label);
+  $('glovelink').textContent = lost.length ? `(${lost.join(' and ')} not connected)` : '';
+  $('glovelink').className = lost.length ? 'bad' : '';
+  $('incl').textContent = hands.map((h) => `${h.label} ${fmt(h.glove.inclination_deg, '°')}`).join(', ');
+  $('rot').textContent = hands.map((h) => `${h.label} ${fmt(h.glove.rotation_deg, '°')}`).join(', ');
+  groupRows($('glove').tBodies[0], hands.map((h) => ({
+    title: `${h.label} glove${h.glove.connected ? '' : ' (not connected)'}`, bad: !h.glove.connected,
+    rows: h.glove.names.map((n, i) => ({ values: [n, fmt(h.glove.controls[i], '', 3), fmt(h.glove.raw[i], '', 0)] })),
+  })), 3);
+  groupRows($('servos').tBodies[0], hands.map((h) => ({
+    title: `${h.label} hand`, rows: h.servos.ids.map((_, i) => servoRow(h.servos, i)),
+  })), 6);
+  drawOutputs(f);
+}
+
+function drawOutputs(f) {
+  const outs = $('outputs');
+  const text = f.outputs.map((o) => (typeof o === 'object' && o !== null
+    ? Object.entries(o).map(([k, v]) => `${k}: ${JSON.stringify(v)}`).join(', ') : String(o)));
+  if (outs.dataset.text !== JSON.stringify(text)) {
+    outs.dataset.text = JSON.stringify(text);
+    outs.replaceChildren(...(text.length ? text : ['none']).map((t) => { const li = document.createElement('li'); li.textContent = t; return li; }));
+  }
+}
+
 function drawTables(f) {
-  $('source').textContent = { positions: 'the servos\' present positions', goals: 'the goals (no readings)', pose: 'the pipeline\'s pose (no readings)' }[f.source];
+  if (f.hands) { drawHandsTables(f); return; }
+  $('source').textContent = SOURCES[f.source];
   $('rate').textContent = fmt(f.rate_hz, ' Hz');
   $('latency').textContent = `${fmt(f.latency_p50_us, ' µs', 0)} / ${fmt(f.latency_p99_us, ' µs', 0)}`;
   $('lost').textContent = String(f.frames_lost);
@@ -279,13 +361,7 @@ function drawTables(f) {
     srows[i].className = s.stale[i] ? 'stale' : '';
     srows[i].cells[5].className = err ? 'err' : '';
   });
-  const outs = $('outputs');
-  const text = f.outputs.map((o) => (typeof o === 'object' && o !== null
-    ? Object.entries(o).map(([k, v]) => `${k}: ${JSON.stringify(v)}`).join(', ') : String(o)));
-  if (outs.dataset.text !== JSON.stringify(text)) {
-    outs.dataset.text = JSON.stringify(text);
-    outs.replaceChildren(...(text.length ? text : ['none']).map((t) => { const li = document.createElement('li'); li.textContent = t; return li; }));
-  }
+  drawOutputs(f);
 }
 
 function drawFrame(f) {
@@ -305,7 +381,7 @@ function drawFrame(f) {
     b.geo.setDrawRange(0, segs.length / 3);
   }
   if (!skeleton.fitted) for (const b of Object.values(bones)) b.geo.computeBoundingBox();
-  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
+  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), twoHands ? TWO_SKELETONS_FROM : new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
   viewsDirty = true;
   drawMode(f);
   const now = performance.now();

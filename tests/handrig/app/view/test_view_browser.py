@@ -199,6 +199,77 @@ def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: ViewRun, tmp_pat
     assert summary["frames"] < FRAMES
 
 
+def test_two_hand_page_draws_and_moves_both_hands_relaxes_and_estops_both(tmp_path: Path
+                                                                         ) -> None:
+    """``handrig demo --rig puppet_two_hands --view``: a glove and a loop per hand. The
+    page draws both hands of the puppet (the right on the right) and both skeletons,
+    both move; the relax button relaxes both hands, the e-stop ends both with torque
+    off on every servo."""
+    from selenium.webdriver.common.by import By
+
+    run = ViewRun("demo", "--rig", "puppet_two_hands", "--frames", str(FRAMES))
+    browser = chromium(tmp_path / "profile")
+    shooting = bool(os.environ.get("HANDRIG_VIEW_TWO_HANDS_SCREENSHOT"))
+    try:
+        browser.get(with_full(run.url) if shooting else run.url)  # the docs' picture: 30/s
+        wait_for(lambda: browser.execute_script("return window.handrigView.framesDrawn()") > 5,
+                 90, "the page to draw frames")
+        puppet = browser.find_element(By.ID, "puppet")
+        first = pixels(puppet.screenshot_as_png)
+        time.sleep(1.5)
+        second = pixels(puppet.screenshot_as_png)
+        bones = pixels(browser.find_element(By.ID, "skeleton").screenshot_as_png)
+        if os.environ.get("HANDRIG_VIEW_TWO_HANDS_SCREENSHOT"):
+            save_small(browser.get_screenshot_as_png(),
+                       os.environ["HANDRIG_VIEW_TWO_HANDS_SCREENSHOT"])
+
+        # a hand in each half of the model's view (left hand left, right hand right),
+        # each moved between the two moments
+        w = first.shape[1]
+        for name, half in (("left", slice(0, w // 2)), ("right", slice(w // 2, w))):
+            for shot in (first, second):
+                share = skin(shot[:, half]).mean()
+                assert share > 0.01, f"only {share:.2%} of the {name} half is the hand's colour"
+            moved = (skin(first[:, half]) != skin(second[:, half])).mean()
+            assert moved > 0.001, f"the {name} hand moved over only {moved:.3%}"
+        # a skeleton in each half of the skeleton's view
+        near = np.abs(bones - np.array(SKELETON_RGB)).max(axis=-1) < 60
+        bw = bones.shape[1]
+        assert near[:, :bw // 2].sum() > 50 and near[:, bw // 2:].sum() > 50
+        # the tables: each hand's loop figures, its glove, every servo grouped by hand
+        assert [c.text for c in browser.find_elements(By.CSS_SELECTOR, "#loop thead th")
+                ][1:] == ["right", "left"]
+        assert len(browser.find_element(By.ID, "rate").find_element(By.XPATH, "..")
+                   .find_elements(By.TAG_NAME, "td")) == 2
+        heads = [r.text for r in browser.find_elements(By.CSS_SELECTOR, "#servos tr.hand")]
+        assert heads == ["right hand", "left hand"]
+        joints = [r.find_elements(By.TAG_NAME, "td")[1].text for r in
+                  browser.find_elements(By.CSS_SELECTOR, "#servos tbody tr:not(.hand)")]
+        assert len(joints) == 40 and all(j.startswith("ri") for j in joints[:20])
+        assert all(j.startswith("le") for j in joints[20:])
+        gloves = [r.text for r in browser.find_elements(By.CSS_SELECTOR, "#glove tr.hand")]
+        assert gloves == ["right glove", "left glove"]
+
+        mode = browser.find_element(By.ID, "mode")
+        browser.find_element(By.ID, "relax").click()
+        wait_for(lambda: mode.text == "right relaxing · left relaxing", 10,
+                 f"both hands to relax (the page says {mode.text!r})")
+        time.sleep(0.5)
+        browser.find_element(By.ID, "estop").click()  # acts on pointerdown
+        summary = run.summary(timeout_s=60)
+    finally:
+        browser.quit()
+        run.kill()
+    assert summary["torque_off"] is True  # every servo of both hands
+    for hand in ("right", "left"):
+        s = summary["hands"][hand]
+        events = "\n".join(s["events"])
+        assert "relaxed until it is pressed again" in events, (hand, events)
+        assert s["estop"] is True and s["stop_reason"] == "e-stop button (view)", hand
+        assert "e-stop button (view): torque off now" in events, (hand, events)
+        assert s["frames"] < FRAMES and s["torque_off"] is True
+
+
 def with_full(url: str) -> str:
     """The page's URL asking for the full rate where WebGL is software."""
     return url + ("&" if "?" in url else "?") + "full"

@@ -241,6 +241,47 @@ def test_frame_from_a_snapshot(human_rig) -> None:  # type: ignore[no-untyped-de
     assert scene["type"] == "scene" and set(scene["rest"]) == set(scene["models"]) == {"ri"}
 
 
+def test_two_hand_frame_has_each_hands_part_and_poses_each_from_its_own() -> None:
+    """A two-hand run's frame: each hand's figures, its own glove controls and servos;
+    each hand of the model posed from its own loop's snapshot (the right from its
+    readings with a ghost, the left, without readings, from its goals)."""
+    import dataclasses
+
+    from handrig.app.view import HandsSnapshot
+    from handrig.config.rig import hand_rig
+
+    cfg = build_parts("puppet_two_hands").rig_config
+    encoder = build_server("127.0.0.1:0", cfg).encoder
+    right = dataclasses.replace(_snapshot(hand_rig(cfg, "ri"), positions=True),
+                                control_names=("riIndexMCPy", "leIndexMCPy"),
+                                controls=(0.5, -0.25))
+    left = dataclasses.replace(_snapshot(hand_rig(cfg, "le"), positions=False), seq=5,
+                               mode="relaxing", mode_reason="the left glove is silent",
+                               control_names=("riIndexMCPy", "leIndexMCPy"),
+                               controls=(0.5, -0.25), raw=(1800.0,))
+    both = HandsSnapshot({"ri": right, "le": left})
+    assert both.seq == 8  # changes when either hand's does
+    read = json.loads(encoder.frame(both))
+    ri, le = read["hands"]
+    assert (ri["hand"], ri["label"], le["hand"], le["label"]) == ("ri", "right", "le", "left")
+    assert (ri["mode"], le["mode"], le["mode_reason"]) == ("running", "relaxing",
+                                                          "the left glove is silent")
+    assert (ri["source"], le["source"]) == ("positions", "goals")
+    assert ri["glove"]["names"] == ["riIndexMCPy"] and ri["glove"]["controls"] == [0.5]
+    assert le["glove"]["names"] == ["leIndexMCPy"] and le["glove"]["controls"] == [-0.25]
+    assert le["glove"]["raw"] == [1800.0]
+    assert all(j.startswith("ri") for j in ri["servos"]["joints"])
+    assert all(j.startswith("le") for j in le["servos"]["joints"])
+    assert len(ri["servos"]["ids"]) + len(le["servos"]["ids"]) == len(cfg.servos)
+    assert set(read["bodies"]) == {"ri", "le"} and set(read["ghost"]) == {"ri"}
+    assert set(read["skeleton"]) == {"ri", "le"}
+    # the left hand is posed from its goals: the same as a one-hand frame of its snapshot
+    alone = json.loads(encoder.frame(left))
+    assert read["bodies"]["le"] == alone["bodies"]["le"]
+    assert read["bodies"]["ri"] != alone["bodies"]["ri"]  # the right from its readings
+    assert len(read["outputs"]) == 2  # both loops' outputs
+
+
 @pytest.mark.parametrize("end", ["estop", "ctrl-c"])
 def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None:
     """Without a browser: ``handrig run --view`` on the simulated rig; a WebSocket
@@ -289,6 +330,56 @@ def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None
         assert summary["estop"] is False and summary["signals"]
     with pytest.raises(OSError):  # the run's exit closed the view's server
         socket.create_connection(("127.0.0.1", port), timeout=2).close()
+
+
+def test_two_bus_run_view_streams_both_hands_and_its_estop_ends_both() -> None:
+    """Without a browser: ``handrig run --rig puppet_two_buses --bus sim --bus-left sim``
+    with a glove per hand and ``--view``: the frames carry both hands, each with its
+    own bus's servos read back; the socket's e-stop ends both loops with torque off on
+    both buses."""
+    recording = simulator.demo_recording()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handrig.cli", "run", "--rig", "puppet_two_buses", "--bus",
+         "sim", "--bus-left", "sim", "--glove", f"replay:{recording}", "--glove-left",
+         f"replay:{recording}", "--frames", "20000", "--json", "--view", "127.0.0.1:0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        url = ""
+        deadline = time.monotonic() + 120
+        while not url and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            if line.startswith("view: "):
+                url = line.split()[1]
+        port = int(url.rsplit(":", 1)[1].strip("/"))
+        with connect(f"ws://127.0.0.1:{port}/ws") as ws:
+            scene = json.loads(ws.recv(timeout=30))
+            assert set(scene["models"]) == {"ri", "le"}
+            frame: dict = {}
+            for _ in range(100):  # until both hands' servos have answered
+                frame = json.loads(ws.recv(timeout=30))
+                if all(h["source"] == "positions" for h in frame["hands"]):
+                    break
+            assert [h["label"] for h in frame["hands"]] == ["right", "left"]
+            for h in frame["hands"]:
+                assert len(h["servos"]["ids"]) == 20
+                assert all(j.startswith(h["hand"]) for j in h["servos"]["joints"])
+                assert any(p is not None for p in h["servos"]["position_deg"])
+                assert h["cycles"] > 0 and h["rate_hz"] is not None
+            assert set(frame["bodies"]) == {"ri", "le"} and set(frame["ghost"]) == {"ri", "le"}
+            ws.send(json.dumps({"action": "estop"}))
+            out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["buses"] == "two" and summary["torque_off"] is True
+    for hand in ("right", "left"):
+        s = summary["hands"][hand]
+        assert s["estop"] is True and s["stop_reason"] == "e-stop button (view)", hand
 
 
 def _may_use_fifo() -> bool:
