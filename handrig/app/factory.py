@@ -364,7 +364,19 @@ def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
     (:meth:`Rig.from_config`); ``ease_in``: the first frame eases in (a take played)."""
     return Rig.from_config(parts.rig_config, glove, bus, parts.pipeline, clock,
                            controls_from_raw=parts.controls, orientation=parts.orientation,
-                           outputs=outputs, log=log, profile=profile, ease_in=ease_in)
+                           outputs=outputs, log=log, profile=profile, ease_in=ease_in,
+                           raw_channels=control_channels(parts.glove_config,
+                                                         parts.pipeline.expander.controls))
+
+
+def control_channels(glove_cfg: GloveConfig, controls: Sequence[str]) -> tuple[int, ...]:
+    """The raw channel driving each of ``controls`` (the glove file's ``[[channels]]``),
+    so the telemetry shows each control beside its own channel's count; empty when a
+    control has no channel."""
+    by_curve = {ch.curve: ch.raw_index() for ch in glove_cfg.channels}
+    if not all(c in by_curve for c in controls):
+        return ()
+    return tuple(by_curve[c] for c in controls)
 
 
 def _die_with_parent() -> Callable[[], None] | None:

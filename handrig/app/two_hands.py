@@ -235,7 +235,9 @@ class _TwoHands:
                 side.rig_config, gloves[h], hand_bus, side.pipeline, self.clock,
                 controls_from_raw=side.controls, orientation=side.orientation,
                 outputs=self.outputs[h], log=self._side_log(h),
-                profile=opts.profile, ease_in=opts.ease_in)
+                profile=opts.profile, ease_in=opts.ease_in,
+                raw_channels=app.control_channels(side.glove_config,
+                                                  side.pipeline.expander.controls))
             self.stats[h] = self.rigs[h].stats
         if opts.snapshot_every > 0:  # on the right hand's loop: both hands' positions
             right = self.rigs["ri"]

@@ -88,6 +88,7 @@ class Rig:
         clock: Clock, *, controls_from_raw: ControlsFromRaw, orientation: OrientationLike,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         log: Callable[[str], None] = print, profile: bool = False, ease_in: bool = False,
+        raw_channels: Sequence[int] = (),
     ) -> Rig:
         """The loop with the rig file's rates and safety timings (``[loop]``, ``[bus]``).
         In loop mode "glove" the ceiling is also held below the rate at which goal Sync
@@ -105,7 +106,7 @@ class Rig:
             outputs=outputs, log=log, profile=profile, loop_mode=loop.mode,
             floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz, catch_up=loop.catch_up,
             read_parts=config.bus.read_parts, silence=config.silence, heat=config.heat,
-            ease_in=ease_in)
+            ease_in=ease_in, raw_channels=raw_channels)
 
     def __init__(
         self,
@@ -134,6 +135,7 @@ class Rig:
         silence: SilenceConfig | None = None,
         heat: HeatConfig | None = None,
         ease_in: bool = False,
+        raw_channels: Sequence[int] = (),
     ) -> None:
         self.glove = glove
         self.bus = bus
@@ -174,7 +176,7 @@ class Rig:
         """The newest :class:`~handrig.loop.telemetry.LoopSnapshot`, for any thread."""
         self._snapshot = SnapshotBuilder(
             glove, bus, pipeline, self.machine, self.stats, lambda: self.started_at,
-            self._view, lambda: self.cycle.outputs)
+            self._view, lambda: self.cycle.outputs, raw_channels=raw_channels)
         self.stage_profile = StageProfile(clock) if profile else None
         if self.stage_profile is not None:
             self.stage_profile.wrap(self.cycle)

@@ -10,7 +10,7 @@ one), without a lock and without touching the loop's live arrays.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -51,7 +51,7 @@ class LoopSnapshot:
     events: tuple[str, ...] = ()
     # the glove
     controls: tuple[float, ...] = ()
-    raw: tuple[float, ...] = ()
+    raw: tuple[float, ...] = ()  # each control's channel's count (see SnapshotBuilder)
     control_names: tuple[str, ...] = ()
     inclination_deg: float = 0.0
     rotation_deg: float = 0.0
@@ -137,7 +137,8 @@ class SnapshotBuilder:
     def __init__(self, glove: GloveSource, bus: ServoBus, pipeline: PosePipeline,
                  machine: ModeMachine, stats: RunStats, started_s: Callable[[], float],
                  view: Callable[[], tuple[Any, ...]],
-                 outputs: Callable[[], tuple[object, ...]]) -> None:
+                 outputs: Callable[[], tuple[object, ...]],
+                 raw_channels: Sequence[int] = ()) -> None:
         self.glove: GloveSource | None = glove
         self.bus: ServoBus | None = bus
         self.pipeline = pipeline
@@ -147,6 +148,10 @@ class SnapshotBuilder:
         self.view = view
         self.outputs = outputs
         self.control_names = tuple(pipeline.expander.controls)
+        self.raw_channels = tuple(int(i) for i in raw_channels)
+        """The raw channel driving each control, in control order (the glove file's
+        ``[[channels]] index``): the snapshot's ``raw`` is those channels' counts, beside
+        their controls. Empty: ``raw`` is the glove's channels in their own order."""
         self.servo_joints = tuple(pipeline.servo_joints)
         n = len(self.servo_joints)
         self.servo_ids = (tuple(self.bus.ids) if self.bus is not None
@@ -202,7 +207,7 @@ class SnapshotBuilder:
             elapsed_s=now - started if stats.frames else 0.0,
             events=tuple(stats.events[-3:]),
             controls=tuple(np.asarray(controls, dtype=np.float64).tolist()),
-            raw=tuple(np.asarray(raw, dtype=np.float64).tolist()) if raw is not None else (),
+            raw=self._raw(raw),
             control_names=self.control_names,
             inclination_deg=float(inc), rotation_deg=float(rot),
             pose_deg=pose_t, curve_names=POSE_NAMES,
@@ -211,6 +216,15 @@ class SnapshotBuilder:
             outputs=tuple(o.status() for o in self.outputs() if isinstance(o, Output)),
             **glove_fields, **bus_fields,
         )
+
+    def _raw(self, raw: Any) -> tuple[float, ...]:
+        if raw is None:
+            return ()
+        counts = np.asarray(raw, dtype=np.float64)
+        if not self.raw_channels:
+            return tuple(counts.tolist())
+        return tuple(float(counts[i]) if i < counts.size else math.nan
+                     for i in self.raw_channels)
 
     def _glove(self) -> dict[str, Any]:
         glove = self.glove

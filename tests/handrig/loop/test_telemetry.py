@@ -100,3 +100,34 @@ def test_a_run_publishes_what_the_loop_did(tmp_path: Path) -> None:
     assert kinds["test"].frames_written == counter.frames > 0
     assert kinds["recorder"].path == str(tmp_path / "take.csv")
     assert isinstance(last.controls, tuple) and isinstance(last.goals_deg, tuple)
+
+
+def test_each_control_is_shown_with_its_own_channels_count() -> None:
+    """A glove wired in another order than the map's controls (the glove file's
+    ``[[channels]] index``): each control's raw count is its own channel's."""
+    from handrig.app.factory import build_parts, control_channels
+
+    parts = build_parts()
+    controls = parts.pipeline.expander.controls
+    cfg = parts.glove_config
+    n = len(cfg.channels)
+    wired = dataclasses.replace(cfg, channels=tuple(  # channel k now on raw input n-1-k
+        dataclasses.replace(ch, index=n - 1 - ch.raw_index()) for ch in cfg.channels))
+    channels = control_channels(wired, controls)
+    assert sorted(channels) == list(range(n)) and channels != tuple(range(n))
+    assert control_channels(cfg, controls) == tuple(range(n))  # the shipped glove: in order
+    assert control_channels(cfg, (*controls, "riRingMCPy")) == ()  # a control unwired
+    clock = FakeClock(10.0)
+    raw = np.arange(1000.0, 1000.0 + 100 * n, 100.0)  # each input's own count
+    glove = ScriptedGlove(clock, lambda t: raw)
+    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock, raw_channels=channels)
+    rig.run(frames=20)
+    last = rig.telemetry.latest()
+    assert last is not None
+    np.testing.assert_allclose(last.raw, raw[list(channels)])
+    plain = make_rig(parts, ScriptedGlove(clock, lambda t: raw), bus, clock)
+    plain.run(frames=20)
+    snap = plain.telemetry.latest()
+    assert snap is not None
+    np.testing.assert_allclose(snap.raw, raw)  # no wiring given: the glove's own order
