@@ -79,6 +79,7 @@ def render_strip(
     times_s: Sequence[float] | None = None,
     size: tuple[int, int] = (320, 240),
     model: str | Path | None = None,
+    view: tuple[float, float, float] | None = None,
 ) -> Path:
     """Pose the puppet hand at each of ``frames_deg`` and save the tiles as one PNG.
 
@@ -86,7 +87,8 @@ def render_strip(
     ``joint_names`` order (the rig's servo order); other joints stay at zero.
     ``len(picked(len(frames_deg)))`` tiles are drawn. ``times_s``: each frame's
     time, written on its tile. ``model``: an MJCF file to draw instead of the puppet
-    hand (a robot rig's ``[robot].model``).
+    hand (a robot rig's ``[robot].model``). ``view``: the camera's distance (m),
+    azimuth and elevation (degrees) around the hand, instead of the default.
     """
     _renderer_backend()
     if not frames_deg:
@@ -132,7 +134,8 @@ def render_strip(
         hand_bodies = list(range(1, mj_model.nbody))
         distance, azimuth, elevation = 0.40, 150.0, -35.0
     return _draw(mj_model, data, mujoco, frames_deg, joint_names, labels, hand_bodies,
-                 (distance, azimuth, elevation), size, Path(out), thumb_label=thumb_coloured)
+                 view or (distance, azimuth, elevation), size, Path(out),
+                 thumb_label=thumb_coloured)
 
 
 def _draw(model: object, data: object, mujoco: object, frames_deg: Sequence[np.ndarray],

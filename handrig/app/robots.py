@@ -52,11 +52,20 @@ class RobotConfig:
     retarget: str
     name: str = ""
     sag: bool = False  # robot servos hold position: no passive sag unless switched on
+    render_view: tuple[float, ...] = ()
+    """Where ``--render`` looks from: distance (m), azimuth and elevation (degrees)
+    around the hand; empty: the default view (each robot's palm faces another way)."""
 
     def check(self) -> None:
         for key in ("model", "retarget"):
             if not getattr(self, key):
                 raise ConfigError("must name a file", key=key)
+        view = tuple(self.render_view)
+        if view and (len(view) != 3 or not 0.05 <= float(view[0]) <= 5.0
+                     or not -90.0 <= float(view[2]) <= 90.0):
+            raise ConfigError("not a camera view", key="render_view", value=list(view),
+                              allowed="[distance m (0.05..5), azimuth deg, elevation deg "
+                              "(-90..90)], e.g. [0.40, 30.0, -35.0]")
 
 
 @dataclass(frozen=True)
@@ -195,3 +204,12 @@ def check_servos_against_retarget(rig: RigConfig, table: Retarget, *, file: str)
             raise ConfigError("the retarget table has no row for this joint", file=file,
                               key=f"servos[{i}].joint", value=s.joint,
                               allowed=f"add [joints.{s.joint}] to the retarget table")
+
+
+def render_view(rig: RigConfig) -> tuple[float, float, float] | None:
+    """A robot rig's ``[robot].render_view`` (distance, azimuth, elevation); None: the
+    renderer's default."""
+    if isinstance(rig, RobotRigConfig) and rig.robot and rig.robot.render_view:
+        d, a, e = (float(x) for x in rig.robot.render_view)
+        return d, a, e
+    return None

@@ -30,6 +30,7 @@ from typing import Any
 from handrig.app import simulator
 from handrig.app.factory import build_parts, port_process, robot_model
 from handrig.app.hands import build_two_hand_parts, is_two_hand
+from handrig.app.robots import render_view
 from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
 from handrig.app.sources import Source, format_sources, run_sources
 from handrig.app.two_hands import run_two_hands
@@ -119,7 +120,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             path = simulator.render_strip(result.snapshots, result.joint_names, args.render,
                                           model=robot_model(parts.rig_config),
-                                          times_s=result.snapshot_times_s)
+                                          times_s=result.snapshot_times_s,
+                                          view=render_view(parts.rig_config))
             result.summary["render"] = str(path)
             tiles = simulator.tiles_drawn(len(result.snapshots))
             log(f"rendered {tiles} frames of the simulated hand to {path} "

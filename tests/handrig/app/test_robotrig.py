@@ -13,6 +13,7 @@ from handrig.app.robots import (
     RobotRigConfig,
     load_rig,
     load_robot_rig,
+    render_view,
     rig_path,
     robot_retarget,
 )
@@ -106,6 +107,10 @@ def test_a_copy_of_the_preset_loads_with_paths_relative_to_it(tmp_path: Path) ->
     assert Path(rig.robot.retarget) == (tmp_path / "leap_retarget.toml").resolve()
     switched = load_robot_rig(_write_rig(tmp_path, "sag = true", "sag = false"))
     assert switched.effective_sag_gain == 1.0
+    # --render looks at LEAP from its palm's side; a rig without render_view: the default
+    assert render_view(rig) == (0.40, 30.0, -35.0)
+    plain = load_robot_rig(_write_rig(tmp_path, "", "render_view = [0.40, 30.0, -35.0]"))
+    assert render_view(plain) is None and render_view(load_rig_config()) is None
 
 
 @pytest.mark.parametrize(("old", "new", "match"), [
@@ -122,6 +127,10 @@ def test_a_copy_of_the_preset_loads_with_paths_relative_to_it(tmp_path: Path) ->
      r"operating_mode.*'current'.*current_based_position"),
     ("position_p_gain = 600", "position_p_gain = 20000", r"position_p_gain.*gain out of range"),
     ('retarget = "leap_retarget.toml"', 'retarget = "missing.toml"', r"missing.toml.*not found"),
+    ("render_view = [0.40, 30.0, -35.0]", "render_view = [30.0, -35.0]",
+     r"render_view.*\[30.0, -35.0\].*distance m"),
+    ("render_view = [0.40, 30.0, -35.0]", "render_view = [0.4, 30.0, -135.0]",
+     r"render_view.*elevation deg"),
 ])
 def test_bad_robot_rigs_name_file_key_value(tmp_path: Path, old: str, new: str,
                                            match: str) -> None:
