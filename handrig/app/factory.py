@@ -369,14 +369,16 @@ def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
                                                          parts.pipeline.expander.controls))
 
 
-def control_channels(glove_cfg: GloveConfig, controls: Sequence[str]) -> tuple[int, ...]:
+def control_channels(glove_cfg: GloveConfig, controls: Sequence[str],
+                     glove_names: Sequence[str] | None = None) -> tuple[int, ...]:
     """The raw channel driving each of ``controls`` (the glove file's ``[[channels]]``),
-    so the telemetry shows each control beside its own channel's count; empty when a
-    control has no channel."""
+    so the telemetry shows each control beside its own channel's count; -1 for a
+    control this glove does not drive (its count shows as missing). ``glove_names``:
+    the glove file's curve for each control, where it differs (a left glove calibrated
+    with the right glove's names)."""
     by_curve = {ch.curve: ch.raw_index() for ch in glove_cfg.channels}
-    if not all(c in by_curve for c in controls):
-        return ()
-    return tuple(by_curve[c] for c in controls)
+    return tuple(by_curve.get(n, -1) for n in (controls if glove_names is None
+                                                else glove_names))
 
 
 def _die_with_parent() -> Callable[[], None] | None:

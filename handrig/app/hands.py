@@ -25,6 +25,7 @@ from handrig.app.factory import (
     ForearmAngles,
     RigParts,
     _resolve,
+    control_channels,
     glove_spec,
 )
 from handrig.config.loading import load_joint_limits
@@ -162,6 +163,16 @@ def _glove_names(cal_curves: tuple[str, ...], wanted: list[str]) -> list[str]:
         out.append(name if name in cal_curves or mirror_name(name) not in cal_curves
                    else mirror_name(name))
     return out
+
+
+def side_control_channels(side: RigParts) -> tuple[int, ...]:
+    """The raw channel of the side's glove driving each control of its loop (both hands'
+    controls, in the map's order; -1 for the other hand's), for its telemetry."""
+    controls = side.pipeline.expander.controls
+    cal = tuple(c.curve for c in side.glove_config.channels)
+    own = [c for c in controls if hand_of_joint(c) == side.hand]
+    names = dict(zip(own, _glove_names(cal, own), strict=True))
+    return control_channels(side.glove_config, controls, [names.get(c, "") for c in controls])
 
 
 def build_two_hand_parts(rig_file: str | Path | None = None,

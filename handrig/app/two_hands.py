@@ -33,7 +33,7 @@ import numpy as np
 
 from handrig.app import factory as app
 from handrig.app import takes
-from handrig.app.hands import HAND_NAMES, TwoHandParts, check_two_gloves
+from handrig.app.hands import HAND_NAMES, TwoHandParts, check_two_gloves, side_control_channels
 from handrig.app.session import (
     ExitSignals,
     LiveOptions,
@@ -236,8 +236,7 @@ class _TwoHands:
                 controls_from_raw=side.controls, orientation=side.orientation,
                 outputs=self.outputs[h], log=self._side_log(h),
                 profile=opts.profile, ease_in=opts.ease_in,
-                raw_channels=app.control_channels(side.glove_config,
-                                                  side.pipeline.expander.controls))
+                raw_channels=side_control_channels(side))
             self.stats[h] = self.rigs[h].stats
         if opts.snapshot_every > 0:  # on the right hand's loop: both hands' positions
             right = self.rigs["ri"]

@@ -150,8 +150,9 @@ class SnapshotBuilder:
         self.control_names = tuple(pipeline.expander.controls)
         self.raw_channels = tuple(int(i) for i in raw_channels)
         """The raw channel driving each control, in control order (the glove file's
-        ``[[channels]] index``): the snapshot's ``raw`` is those channels' counts, beside
-        their controls. Empty: ``raw`` is the glove's channels in their own order."""
+        ``[[channels]] index``; -1: none): the snapshot's ``raw`` is those channels'
+        counts, beside their controls (NaN for none). Empty: ``raw`` is the glove's
+        channels in their own order."""
         self.servo_joints = tuple(pipeline.servo_joints)
         n = len(self.servo_joints)
         self.servo_ids = (tuple(self.bus.ids) if self.bus is not None
@@ -223,7 +224,7 @@ class SnapshotBuilder:
         counts = np.asarray(raw, dtype=np.float64)
         if not self.raw_channels:
             return tuple(counts.tolist())
-        return tuple(float(counts[i]) if i < counts.size else math.nan
+        return tuple(float(counts[i]) if 0 <= i < counts.size else math.nan
                      for i in self.raw_channels)
 
     def _glove(self) -> dict[str, Any]:

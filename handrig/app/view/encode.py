@@ -152,11 +152,12 @@ def _angles(snap: LoopSnapshot) -> tuple[str, dict[str, float], dict[str, float]
 
 
 def _hand_fields(snap: LoopSnapshot, controls: tuple[str, ...]) -> dict[str, Any]:
-    """One loop's figures, its glove (the ``controls`` named, calibrated, with the
-    glove's raw counts in order) and its servos."""
+    """One loop's figures, its glove (the ``controls`` named, calibrated, each with its
+    channel's raw count) and its servos."""
     index = {n: i for i, n in enumerate(snap.control_names)}
     calibrated = [snap.controls[index[n]] if index[n] < len(snap.controls) else None
                   for n in controls]
+    raw = [snap.raw[index[n]] if index[n] < len(snap.raw) else None for n in controls]
     return {
         "mode": str(snap.mode), "mode_reason": str(snap.mode_reason),
         "rate_hz": _num(snap.rate_hz, 1), "latency_p50_us": _num(snap.latency_p50_us, 0),
@@ -165,7 +166,7 @@ def _hand_fields(snap: LoopSnapshot, controls: tuple[str, ...]) -> dict[str, Any
         "glove": {
             "connected": bool(snap.glove_connected),
             "names": list(controls), "controls": _nums(calibrated, 3),
-            "raw": _nums(snap.raw, 0), "inclination_deg": _num(snap.inclination_deg, 1),
+            "raw": _nums(raw, 0), "inclination_deg": _num(snap.inclination_deg, 1),
             "rotation_deg": _num(snap.rotation_deg, 1),
         },
         "servos": {

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import re
 import threading
 from pathlib import Path
 
@@ -116,7 +117,8 @@ def test_each_control_is_shown_with_its_own_channels_count() -> None:
     channels = control_channels(wired, controls)
     assert sorted(channels) == list(range(n)) and channels != tuple(range(n))
     assert control_channels(cfg, controls) == tuple(range(n))  # the shipped glove: in order
-    assert control_channels(cfg, (*controls, "riRingMCPy")) == ()  # a control unwired
+    # a control this glove does not drive: -1, its count shown as missing
+    assert control_channels(cfg, (*controls, "riRingMCPy")) == (*range(n), -1)
     clock = FakeClock(10.0)
     raw = np.arange(1000.0, 1000.0 + 100 * n, 100.0)  # each input's own count
     glove = ScriptedGlove(clock, lambda t: raw)
@@ -131,3 +133,24 @@ def test_each_control_is_shown_with_its_own_channels_count() -> None:
     snap = plain.telemetry.latest()
     assert snap is not None
     np.testing.assert_allclose(snap.raw, raw)  # no wiring given: the glove's own order
+    unwired = make_rig(parts, ScriptedGlove(clock, lambda t: raw), bus, clock,
+                       raw_channels=(*channels[:-1], -1))
+    unwired.run(frames=20)
+    u = unwired.telemetry.latest()
+    assert u is not None and math.isnan(u.raw[-1])
+    np.testing.assert_allclose(u.raw[:-1], raw[list(channels[:-1])])
+
+
+def test_two_hands_each_loop_shows_its_own_gloves_channels(tmp_path: Path) -> None:
+    """In a two-hand rig each loop's controls are both hands'; its glove drives its
+    own hand's only (a left glove may be calibrated with the right's curve names)."""
+    from handrig.app.hands import build_two_hand_parts, side_control_channels
+    from handrig.config.loading import CONFIG_DIR
+
+    text = (CONFIG_DIR / "glove.toml").read_text()
+    left = tmp_path / "left_glove.toml"  # the right glove's file, its inputs reversed
+    left.write_text(re.sub(r"(?m)^index = (\d)", lambda m: f"index = {4 - int(m[1])}", text))
+    two = build_two_hand_parts("puppet_two_hands", left_glove_file=left)
+    right, lefts = (side_control_channels(two.sides[h]) for h in ("ri", "le"))
+    assert right == (0, 1, 2, 3, 4, -1, -1, -1, -1, -1)
+    assert lefts == (-1, -1, -1, -1, -1, 4, 3, 2, 1, 0)

@@ -4,6 +4,7 @@ input on the socket, closing; the scene export from the real MuJoCo models."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import socket
@@ -254,11 +255,11 @@ def test_two_hand_frame_has_each_hands_part_and_poses_each_from_its_own() -> Non
     encoder = build_server("127.0.0.1:0", cfg).encoder
     right = dataclasses.replace(_snapshot(hand_rig(cfg, "ri"), positions=True),
                                 control_names=("riIndexMCPy", "leIndexMCPy"),
-                                controls=(0.5, -0.25))
+                                controls=(0.5, -0.25), raw=(2000.0, math.nan))
     left = dataclasses.replace(_snapshot(hand_rig(cfg, "le"), positions=False), seq=5,
                                mode="relaxing", mode_reason="the left glove is silent",
                                control_names=("riIndexMCPy", "leIndexMCPy"),
-                               controls=(0.5, -0.25), raw=(1800.0,))
+                               controls=(0.5, -0.25), raw=(math.nan, 1800.0))
     both = HandsSnapshot({"ri": right, "le": left})
     assert both.seq == 8  # changes when either hand's does
     read = json.loads(encoder.frame(both))
@@ -269,7 +270,8 @@ def test_two_hand_frame_has_each_hands_part_and_poses_each_from_its_own() -> Non
     assert (ri["source"], le["source"]) == ("positions", "goals")
     assert ri["glove"]["names"] == ["riIndexMCPy"] and ri["glove"]["controls"] == [0.5]
     assert le["glove"]["names"] == ["leIndexMCPy"] and le["glove"]["controls"] == [-0.25]
-    assert le["glove"]["raw"] == [1800.0]
+    # raw is in control order (each control's own channel; the other hand's: none)
+    assert ri["glove"]["raw"] == [2000.0] and le["glove"]["raw"] == [1800.0]
     assert all(j.startswith("ri") for j in ri["servos"]["joints"])
     assert all(j.startswith("le") for j in le["servos"]["joints"])
     assert len(ri["servos"]["ids"]) + len(le["servos"]["ids"]) == len(cfg.servos)
