@@ -21,6 +21,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	@log=$$(mktemp); \
 	$(BIN)/python -m pytest -q -p no:cacheprovider -m compute_only >"$$log" 2>&1 & pid=$$!; \
+	trap 'kill $$pid 2>/dev/null; rm -f "$$log"; exit 130' INT TERM HUP; \
 	$(BIN)/python -m pytest -q -m "not compute_only"; rt=$$?; \
 	wait $$pid; ct=$$?; \
 	echo "== the compute-only tests, run beside them (pytest -m compute_only) =="; \

@@ -257,3 +257,11 @@ def test_joining_a_stream_mid_frame_is_not_an_error(frames: list[GloveFrame], cu
     dec.reset()
     dec.feed(head)
     assert dec.stats.errors == 1
+    dec.feed(bytes(bad))  # joined again at the tail's delimiter
+    assert dec.stats.errors == 2
+    # an overflow before any delimiter is an error; after its delimiter, bad counts
+    fresh = FrameDecoder()
+    fresh.feed(b"\x01" * 300 + b"\x00")
+    assert fresh.stats.overflows == 1
+    fresh.feed(bytes(bad))
+    assert fresh.stats.errors == 2

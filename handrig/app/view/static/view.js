@@ -13,12 +13,11 @@ const TWO_SKELETONS_FROM = new THREE.Vector3(-0.3, 0.0, 1.0);
 
 // What a frame costs the machine the page runs on: where WebGL is drawn in software
 // (SwiftShader, llvmpipe: a headless browser or a machine without a GPU) every
-// frame is CPU time, which the rig's own processes may need (on a 2-core machine,
-// two such pages at 30 frames a second took the loop's p99 latency up 2.5 times).
-// So there the page draws without multisampling, at one pixel per CSS pixel and at
-// most 15 frames a second (a frame costs about the same CPU whatever its size: the
-// browser's compositing of the page, not the pixels of the scene); `?full` in the
-// URL draws at up to 30 a second anyway. Everywhere: one WebGL context for
+// frame is CPU time, which the rig's own processes may need (docs/view.md: what two
+// such pages cost the loop on a 2-core machine). So there the page draws without
+// multisampling, at one pixel per CSS pixel and at most 15 frames a second (a frame
+// costs about the same CPU whatever its size: the browser's compositing of the page,
+// not the pixels of the scene); `?full` in the URL draws at up to 30 a second anyway. Everywhere: one WebGL context for
 // both views, a draw only when a new frame came (or the camera moved), at most
 // MAX_DRAW_HZ, nothing while the page is hidden. docs/view.md has the figures.
 const FULL = new URLSearchParams(location.search).has('full');
@@ -61,14 +60,14 @@ const views = [];
 let viewsDirty = true;
 // Drawing is driven by events (a frame came, the camera moved, the page was resized or
 // shown again), not by a loop of animation frames: a page with nothing new to draw
-// asks its browser for nothing (an idle loop of 60 animation frames a second cost a
-// headless page about as much CPU as its drawing did).
+// asks its browser for nothing.
 let drawPending = false;
 let drawnAt = -Infinity;
 function requestDraw() {
   if (drawPending || document.hidden) return;
   drawPending = true;
-  const wait = Math.max(0, drawnAt + 1000 / MAX_DRAW_HZ - performance.now());
+  // less half a display frame: the animation frame after the timeout comes up to one later
+  const wait = Math.max(0, drawnAt + 1000 / MAX_DRAW_HZ - 8 - performance.now());
   setTimeout(() => requestAnimationFrame(animate), wait);
 }
 function markDirty() { viewsDirty = true; requestDraw(); }
