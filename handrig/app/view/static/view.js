@@ -337,7 +337,14 @@ function drawOutputs(f) {
   }
 }
 
+// The tables are laid out for one hand or two when the first frame comes; a page that
+// reconnects (on the same port) to a run with the other number of loops starts afresh.
+let tablesKind = null;
+
 function drawTables(f) {
+  const kind = f.hands ? 'hands' : 'one';
+  if (tablesKind !== null && kind !== tablesKind) { location.reload(); return; }
+  tablesKind = kind;
   if (f.hands) { drawHandsTables(f); return; }
   $('source').textContent = SOURCES[f.source];
   $('rate').textContent = fmt(f.rate_hz, ' Hz');
