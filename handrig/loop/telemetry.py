@@ -1,7 +1,7 @@
 """What the loop publishes for anyone watching: an immutable :class:`LoopSnapshot`.
 
 The loop thread calls :meth:`Telemetry.publish` after each cycle's work; at most
-every ``every_s`` (50 ms) it builds a snapshot of plain tuples from the loop's
+every ``every_s`` (1/30 s) it builds a snapshot of plain tuples from the loop's
 state and swaps it in with one reference assignment. Readers on any thread call
 :meth:`Telemetry.latest` and get the newest snapshot whole (never a half-written
 one), without a lock and without touching the loop's live arrays.
@@ -23,7 +23,7 @@ from handrig.loop.stats import RunStats
 from handrig.outputs.base import Output, OutputStatus
 from handrig.pose.pipeline import POSE_NAMES, PosePipeline
 
-PUBLISH_EVERY_S = 0.05  # a snapshot at most this often (20 a second)
+PUBLISH_EVERY_S = 1.0 / 30.0  # a snapshot at most this often (30 a second)
 RATE_WINDOW_S = 1.0  # the loop rate is taken over about this long
 RECENT_LATENCIES = 1000  # the latency percentiles are of the newest this many frames
 

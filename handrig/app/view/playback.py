@@ -24,7 +24,7 @@ from handrig.loop.telemetry import PUBLISH_EVERY_S, LoopSnapshot, Telemetry
 
 class PlaybackView:
     """What ``play`` hands each frame to (:meth:`show`, cheap: a snapshot at most every
-    50 ms); ``stop_requested`` once the page's stop button was pressed."""
+    1/30 s); ``stop_requested`` once the page's stop button was pressed."""
 
     def __init__(self, name: str) -> None:
         self.name = name

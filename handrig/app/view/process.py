@@ -1,6 +1,6 @@
 """The view in a process of its own, so that its work never holds the loop's GIL.
 
-The run's process keeps one small thread (the feeder): 30 times a second it takes
+The run's process keeps one small thread (the feeder): 60 times a second it takes
 ``rig.telemetry.latest()`` and, when it is new, sends it pickled (a few KB, tens of
 microseconds) down the child's stdin. The feeder shares the interpreter lock with the
 loop: were it preempted while holding the lock (by a browser on the same machine),
@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from handrig.config.rig import RigConfig
     from handrig.loop.telemetry import LoopSnapshot
 
-FEED_HZ = 30.0
+FEED_HZ = 60.0  # twice the loop's publication rate: each snapshot is sent soon after it is made
 CHILD_NICE = 10  # the view yields the CPU to the run, its emulators and everything else
 START_TIMEOUT_S = 120.0
 

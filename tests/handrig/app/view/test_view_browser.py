@@ -155,7 +155,8 @@ def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: ViewRun, tmp_pat
         assert view["softwareGL"] is True  # headless chromium: SwiftShader
         if not shooting:  # so it spares the CPU: at most 15 draws a second
             assert (view["pixelRatio"], view["maxDrawHz"]) == (1, 15)
-            assert "add ?full to the URL" in browser.find_element(By.ID, "viewfps").text
+            fps = browser.find_element(By.ID, "viewfps")  # written once a second
+            wait_for(lambda: "add ?full to the URL" in fps.text, 10, "the page's note on its rate")
         puppet = browser.find_element(By.ID, "puppet")
         skeleton_view = browser.find_element(By.ID, "skeleton")
         first = pixels(puppet.screenshot_as_png)
