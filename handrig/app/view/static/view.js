@@ -434,6 +434,15 @@ $('relax').addEventListener('click', () => send('relax'));
 $('stop').addEventListener('click', () => send('stop'));
 const SAVING_NOTE = SAVE_CPU ? ` (WebGL in software: at most ${MAX_DRAW_HZ}/s to spare the rig's CPU; add ?full to the URL for 30/s)` : '';
 setInterval(() => { $('viewfps').textContent = `${received} frames/s received, ${drawn} drawn${SAVING_NOTE}`; received = 0; drawn = 0; }, 1000);
-window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO };
+// Where each hand of the model is on screen: the centre of its drawn bodies, projected
+// by the model view's camera, from -1 (left edge) to 1 (right edge) (for the tests).
+function handScreenX(hand) {
+  const built = models[hand];
+  if (!built) return null;
+  const box = new THREE.Box3().setFromObject(built.root);
+  if (box.isEmpty()) return null;
+  return box.getCenter(new THREE.Vector3()).project(puppet.camera).x;
+}
+window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO, handScreenX };
 connect();
 requestDraw();

@@ -224,8 +224,11 @@ def test_two_hand_page_draws_and_moves_both_hands_relaxes_and_estops_both(tmp_pa
             save_small(browser.get_screenshot_as_png(),
                        os.environ["HANDRIG_VIEW_TWO_HANDS_SCREENSHOT"])
 
-        # a hand in each half of the model's view (left hand left, right hand right),
-        # each moved between the two moments
+        # the right hand is drawn on the right of the view, the left on the left
+        xs = {h: browser.execute_script(f"return window.handrigView.handScreenX('{h}')")
+              for h in ("ri", "le")}
+        assert xs["le"] < 0.0 < xs["ri"], xs
+        # a hand in each half of the model's view, each moved between the two moments
         w = first.shape[1]
         for name, half in (("left", slice(0, w // 2)), ("right", slice(w // 2, w))):
             for shot in (first, second):
