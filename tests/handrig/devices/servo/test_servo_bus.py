@@ -53,17 +53,9 @@ def sim() -> Iterator[SimBus]:
         yield bus
 
 
-# The emulator runs in this process, a thread sharing the interpreter with the test: a
-# loaded machine can hold its reply for more than the loop's default read budget (4 ms;
-# seen: whole reads stale, tests failing at load 7-14). Tests here that are not about
-# that budget get the robot API's 0.1 s (a read ends as soon as its replies are in);
-# those about the budget or timeouts set their own policy.
-POLICY = FaultPolicy(read_budget_s=0.1)
-
-
 @pytest.fixture
 def bus(sim: SimBus) -> Iterator[DynamixelBus]:
-    b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000, fault_policy=POLICY)
+    b = DynamixelBus(sim.port_path, small_rig(), baud=1_000_000)
     b.connect()
     yield b
     b.close()
