@@ -39,8 +39,7 @@ from handrig.errors import ConfigError, HandrigError
 
 READ_BUDGET_S = 0.1
 """How long a read the caller asked for (:meth:`RobotHand.present_deg`, the reading
-at the start) may take with its retries: reads are repeated until every servo answered
-or this is spent. Not the loop's realtime budget (1.5 times
+at the start) may take with its retries. Not the loop's realtime budget (1.5 times
 the reply's wire time): a program waiting for an answer would rather have it a few
 milliseconds late, from a loaded machine or a USB adapter's latency timer, than NaN."""
 
@@ -97,16 +96,16 @@ class RobotHand:
             stack.callback(self._confirm_torque_off, bus)
             # SIGTERM, SIGINT, SIGHUP end the block with an exception: torque goes off
             stack.enter_context(bus.torque(handle_signals=True))
-            positions, stale = self._read(bus)
-            if stale.any():
-                missing = [self.joint_names[i] for i in np.flatnonzero(stale)]
+            state = bus.read_state(self._clock.now() + READ_BUDGET_S)
+            if state.stale.any():
+                missing = [self.joint_names[i] for i in np.flatnonzero(state.stale)]
                 raise HandrigError(f"no reading from the servos of {', '.join(missing)}: "
                                    "the hand is not where it can be ramped from")
         except BaseException:
             stack.close()
             raise
         self._stack, self._bus = stack, bus
-        self._last_deg = np.clip(positions, self._low, self._high)
+        self._last_deg = np.clip(state.positions_deg, self._low, self._high)
         self._last_t = self._clock.now()
         return self
 
@@ -161,26 +160,9 @@ class RobotHand:
 
     def present_deg(self) -> dict[str, float]:
         """The robot's joint angles as the servos report them (NaN: no reading)."""
-        positions, stale = self._read(self._open_bus())
-        return {name: float("nan") if stale[i] else float(positions[i])
+        state = self._open_bus().read_state(self._clock.now() + READ_BUDGET_S)
+        return {name: float("nan") if state.stale[i] else float(state.positions_deg[i])
                 for i, name in enumerate(self.joint_names)}
-
-    def _read(self, bus: DynamixelBus) -> tuple[np.ndarray, np.ndarray]:
-        """Every servo's present position (deg) and whether it is missing: read again until
-        each servo has answered or READ_BUDGET_S is spent. One read gives a reply its
-        retries' reply timeouts only (a few milliseconds, whatever its deadline), which a
-        loaded machine or USB adapter can miss; a servo that does not answer costs the
-        whole budget."""
-        end = self._clock.now() + READ_BUDGET_S
-        state = bus.read_state(end)
-        positions = np.array(state.positions_deg, dtype=np.float64)
-        stale = np.array(state.stale, dtype=bool)
-        while stale.any() and state.sent and self._clock.now() < end:
-            state = bus.read_state(end)
-            fresh = ~np.asarray(state.stale, dtype=bool)
-            positions[fresh] = np.asarray(state.positions_deg)[fresh]
-            stale &= ~fresh
-        return positions, stale
 
     # ---------------------------------------------------------------- helpers
 
