@@ -797,10 +797,10 @@ def test_a_loop_held_up_writes_the_frames_it_was_late_for_then_the_newest(parts_
     holds the loop up 35 ms once in a while (a slow read, the host): the two frames that
     came before the newest meanwhile are still written, oldest first, filtered a period
     apart, and then the newest at once. Every frame the glove sent is written, in order,
-    or counted as lost in a host stall: on a loaded machine a hold-up can last longer
-    than the sleep asked, and a fourth frame then comes before the newest, beyond the
-    ceiling's burst (CEILING_BURST: two caught up and the newest); that frame is the
-    host's backlog, said as such, never skipped unsaid."""
+    or counted as lost: on a loaded machine a hold-up can last longer than the sleep
+    asked, and a fourth frame then comes before the newest, beyond the ceiling's burst
+    (CEILING_BURST: two caught up and the newest); that frame is counted (a host stall,
+    or skipped), never lost unsaid."""
     import os
     import time
     import tty
@@ -870,10 +870,12 @@ def test_a_loop_held_up_writes_the_frames_it_was_late_for_then_the_newest(parts_
     got = [(r - 1500) // 5 for r in seen]
     assert np.all(np.diff(got) > 0) and got[-1] == sent - 1  # each once, in order
     lost = sent - len(got)
-    assert stats.frames_skipped == 0 and stats.glove_samples == len(got)
-    assert stats.frames_in_host_stalls + stats.frames_in_bursts == lost, (
-        sorted(set(range(sent)) - set(got)), stats.frames_in_host_stalls,
-        stats.frames_in_bursts)
+    assert stats.glove_samples == len(got)
+    # every frame not written is counted, and as what it was (a hold-up that ran long:
+    # the host's stall; a shorter one that let a fourth frame in: skipped by the loop)
+    assert (stats.frames_skipped + stats.frames_in_host_stalls + stats.frames_in_bursts
+            == lost), (sorted(set(range(sent)) - set(got)), stats.frames_skipped,
+                       stats.frames_in_host_stalls, stats.frames_in_bursts)
     assert np.all(np.diff(filtered) > 0.0)  # and at times that only move on
     # every cycle's pose reaches the outputs in order, a caught-up frame's after the
     # newest frame's write but before its pose
