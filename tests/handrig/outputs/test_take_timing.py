@@ -1,12 +1,12 @@
 """Takes keep time on the live rig: gloves at 100, 200 and 500 Hz on a pty drive the
-glove-triggered loop and the emulated bus for 10 s (plus the 1 s ease to relaxed), with
+glove-triggered loop and the emulated bus for 5 s (plus the 1 s ease to relaxed), with
 a 1 s glove silence in the middle, recorded to CSV and BVH at once. Each take lasts as
 long as the run did (from its first frame to its end) within one frame, the BVH holds
 what the CSV says was sent at each of its frame times, and an outside BVH reader agrees.
 
 "The run" is the cycles' own times, the clock read at each tick's start, which the loop
 hands its outputs: the take must hold exactly those. They are checked against the clock
-the outputs live on (never ahead of it; the run they span lasts 10 s and the ease), not
+the outputs live on (never ahead of it; the run they span lasts 5 s and the ease), not
 against the clock read inside the output call, which a loaded host delays by a few
 milliseconds more at one end of the run than at the other."""
 
@@ -28,8 +28,8 @@ from handrig.outputs.recorder import Recorder, load_performance
 from sim.demo_recording import DEMO_RECORDING
 from sim.glove_emulator import GloveEmulator
 
-RUN_S = 10.0
-SILENCE_AT_S, SILENCE_S = 4.0, 1.0
+RUN_S = 5.0
+SILENCE_AT_S, SILENCE_S = 2.0, 1.0
 
 
 def _record_a_run(glove_hz: float, folder: Path
@@ -88,12 +88,12 @@ def test_takes_last_as_long_as_the_run_at_any_glove_rate(tmp_path: Path,
     t, poses, _ = load_performance(csv_path)
     tb, pb, _ = load_performance(bvh_path)
     assert any("silent or garbled" in e for e in events)  # the silence happened
-    assert RUN_S + 0.9 <= run_s <= RUN_S + 1.5  # 10 s and the 1 s ease to relaxed
+    assert RUN_S + 0.9 <= run_s <= RUN_S + 1.5  # the run and the 1 s ease to relaxed
     assert 0.0 <= t[0] <= 0.5 and len(given) == len(t)
     # the times handed along are the clock's: none later than the call that got it (an
     # output's time made up from a frame count or the glove's rate would not be)
     assert np.all(given <= handed), float(np.max(given - handed))
-    # the run the outputs were handed, a frame each: 10 s and the 1 s ease from the first
+    # the run the outputs were handed, a frame each: 5 s and the 1 s ease from the first
     # frame on (later on a loaded machine: a host stall near the end lengthens the run,
     # and the take with it; a run that lost the silence would be 1 s short)
     run_from_first_s = given[-1] - given[0] + frame_s
