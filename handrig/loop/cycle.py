@@ -283,6 +283,15 @@ class Cycle:
         for out in self.outputs:
             out(t_s, pose)
 
+    def claim_events(self) -> None:
+        """From here on what the glove and the bus say is the run's events (the loop takes
+        them after each read), not only lines in the log: a part says a thing to the log
+        alone while nobody has drained its events, and a hardware error found by the
+        start-up read or the run's first read would be missing from the run's events."""
+        for drain in self._drains:
+            for text in drain():
+                self.machine.event(text)
+
     def _take_events(self) -> None:
         machine = self.machine
         for drain in self._drains:

@@ -247,6 +247,7 @@ class Rig:
         ``glove_timeout_s`` eases them to the relaxed pose.
         """
         stats, clock, machine, cycle = self.stats, self.clock, self.machine, self.cycle
+        cycle.claim_events()
         try:
             cycle.seed()
         except DeviceError as exc:

@@ -28,7 +28,10 @@ SILENT = "servo 7 (riIndexMCPy)"
 
 @pytest.fixture
 def sim_bus() -> Iterator[str]:
-    proc = subprocess.Popen([*CLI, "sim-bus", "--no-realtime"], stdout=subprocess.PIPE,
+    # kinematic servos (no MuJoCo puppet): what is tested is the bus, and a loaded
+    # machine starves a lighter emulator less
+    proc = subprocess.Popen([*CLI, "sim-bus", "--no-realtime", "--no-puppet"],
+                            stdout=subprocess.PIPE,
                             stderr=subprocess.DEVNULL, text=True, start_new_session=True)
     try:
         assert proc.stdout is not None
@@ -85,11 +88,28 @@ def _servos_named(text: str) -> set[str]:
 
 def test_one_silent_servo_is_the_only_one_held(sim_bus: str, tmp_path: Path) -> None:
     summary, err = _run_silencing_servo_7(sim_bus, tmp_path, "continue")
-    assert summary["silence"]["held"] == 1, summary["silence"]
-    assert summary["silence"]["silences"] == 1
     assert summary["stop_reason"] == "6 s done"
-    said = "\n".join(e for e in summary["events"] if "no valid reply" in e or "holding" in e)
-    assert said and _servos_named(said) == {SILENT}, said
+    said = [e for e in summary["events"] if "no valid reply" in e or "holding" in e]
+    # servo 7: warned about, held, then the action, which names it alone (the others
+    # continue); each once. On a loaded machine the emulator's process can miss its
+    # replies to every servo at once (seen: 'all 9 went quiet at once', 'every servo
+    # went quiet at once'), even just as servo 7 stops: said so, as the bus's or the
+    # host's trouble; no other servo is ever named as the one that stopped answering
+    about_it = [e for e in said if SILENT in e]
+    assert len(about_it) == 3, said
+    warned, held, action = about_it
+    assert "no valid reply" in warned and (
+        (_servos_named(warned) == {SILENT} and "the other servos answer" in warned)
+        or "at once" in warned), warned
+    assert held.startswith("holding") and SILENT in held, held
+    assert _servos_named(action) == {SILENT}, action
+    assert "stays held, the others continue" in action, action
+    for e in said:
+        if "no valid reply" in e and _servos_named(e) - {SILENT}:
+            assert "at once" in e, e
+    together = [e for e in said if "at once" in e]
+    assert summary["silence"]["silences"] == 1 or together, said
+    assert summary["silence"]["held"] == 1 or together, said
     assert summary["bus"]["partial_replies"] > 0  # cut replies, seen as such
     assert summary["bus"]["fallbacks"] == 0
     # torque off at exit: the broadcast went out; it alone could not confirm it
@@ -98,7 +118,8 @@ def test_one_silent_servo_is_the_only_one_held(sim_bus: str, tmp_path: Path) -> 
     unconfirmed = summary["torque_off_unconfirmed"]  # the read-back at exit names it alone
     assert _servos_named("; ".join(unconfirmed)) == {SILENT}, unconfirmed
     assert summary["torque_off"] is None
-    assert err.count(f"no valid reply from {SILENT}") == 2  # warned, then the action: once each
+    # warned, then the action: once each
+    assert sum(SILENT in line for line in err.splitlines() if "no valid reply" in line) == 2
 
 
 def test_with_action_stop_the_run_ends_naming_the_one_servo(sim_bus: str,

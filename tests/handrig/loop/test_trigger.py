@@ -446,35 +446,52 @@ def test_a_frame_the_loop_was_late_for_gets_its_cycle_just_before_the_newest(cat
         trig.start(clock.now())
         tick = Tick()
         trig.wait(tick)  # the first floor tick is due at the start
+        sent_at = []
         for _ in range(8):  # a 50 Hz glove: the period is learnt, the ceiling stays full
             time.sleep(0.02)
             send()
+            sent_at.append(time.monotonic())
             trig.wait(tick)
             assert tick.frame and not tick.catch_up and glove.take() is not None
-        assert trig.frame_period_s == pytest.approx(0.02, rel=0.3)
+        # the period learnt is the one the frames came at (20 ms asked; a loaded host's
+        # sleeps last longer)
+        sent_period = float(np.mean(np.diff(sent_at)))
+        assert trig.frame_period_s == pytest.approx(sent_period, rel=0.3)
         send()  # the loop is busy for two periods: a frame, then the next one
         time.sleep(0.02)
         send()
         time.sleep(0.003)
+        period = trig.frame_period_s
         trig.wait(tick)
         assert tick.frame and tick.catch_up is catch_up
         if catch_up:
             behind = glove.take_behind()
-            assert behind is not None and tick.behind_s == pytest.approx(0.02, rel=0.3)
+            # its filter time: one period of the glove, as learnt, before the newest's
+            assert behind is not None and tick.behind_s == period
             begun = clock.now()
             trig.wait(tick)  # the newest is there: its tick comes at once
             assert tick.frame and not tick.catch_up and clock.now() - begun < 0.005
             newest = glove.take()
             assert newest is not None and newest.count == behind.count + 1
             assert trig.catch_ups == 1
-            send()  # late again at once: the ceiling has no room, the newest wins
-            time.sleep(0.01)
+            # late again at once (two frames one after the other, the newest's tick just
+            # gone): the ceiling (60 Hz) has no room for a catch-up, the newest wins. The
+            # ceiling refills one tick every 1/60 s: a host that took longer than that
+            # between the two ticks (seen on their own times) gave it that room after all
+            newest_tick = tick.now_s
             send()
-            time.sleep(0.002)
+            send()
             trig.wait(tick)
-            assert tick.frame and not tick.catch_up and glove.take() is not None
+            assert tick.frame
+            extra = int(tick.catch_up)
+            if tick.catch_up:
+                assert tick.now_s - newest_tick >= trig.min_gap_s, tick.now_s - newest_tick
+                assert glove.take_behind() is not None
+                trig.wait(tick)
+            assert glove.take() is not None
         else:
             assert glove.take() is not None and trig.catch_ups == 0
+            extra = 0
         time.sleep(0.1)  # the ceiling fills up again
         trig.take_bursts()
         import threading
@@ -489,7 +506,7 @@ def test_a_frame_the_loop_was_late_for_gets_its_cycle_just_before_the_newest(cat
             trig.wait(tick)
             assert tick.frame and not tick.catch_up and trig.take_bursts() == 0
         assert glove.take() is not None
-        assert trig.catch_ups == (2 if catch_up else 0)
+        assert trig.catch_ups == (2 + extra if catch_up else 0)
     finally:
         glove.close()
         os.close(master)
