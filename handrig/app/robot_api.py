@@ -96,7 +96,7 @@ class RobotHand:
             stack.callback(self._confirm_torque_off, bus)
             # SIGTERM, SIGINT, SIGHUP end the block with an exception: torque goes off
             stack.enter_context(bus.torque(handle_signals=True))
-            state = bus.read_state(self._clock.now() + READ_BUDGET_S)
+            state = bus.read_state(self._clock.now() + READ_BUDGET_S, patient=True)
             if state.stale.any():
                 missing = [self.joint_names[i] for i in np.flatnonzero(state.stale)]
                 raise HandrigError(f"no reading from the servos of {', '.join(missing)}: "
@@ -160,7 +160,7 @@ class RobotHand:
 
     def present_deg(self) -> dict[str, float]:
         """The robot's joint angles as the servos report them (NaN: no reading)."""
-        state = self._open_bus().read_state(self._clock.now() + READ_BUDGET_S)
+        state = self._open_bus().read_state(self._clock.now() + READ_BUDGET_S, patient=True)
         return {name: float("nan") if state.stale[i] else float(state.positions_deg[i])
                 for i, name in enumerate(self.joint_names)}
 

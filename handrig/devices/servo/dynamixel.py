@@ -396,7 +396,8 @@ class DynamixelBus(ServoBus):
 
     # ------------------------------------------------------------------ present state
     def read_state(self, deadline_s: float | None = None,
-                   part: tuple[int, int] | None = None) -> ServoState:
+                   part: tuple[int, int] | None = None, *, patient: bool = False
+                   ) -> ServoState:
         """Read present state (Fast Sync Read, or Sync Read after a fallback).
 
         ``part=(i, m)`` reads only part ``i`` of ``m`` (the servos at rig indices
@@ -415,9 +416,14 @@ class DynamixelBus(ServoBus):
         row that were not late raise DeviceTimeoutError. A servo raising its Alert
         bit is handled per policy (reboot or ServoFault). What to do about a servo
         that stays silent is the loop's decision (:mod:`handrig.loop.silence`).
+
+        ``patient=True`` (a caller that waits for the answer, not the loop: the robot
+        API) waits for the replies until ``deadline_s`` instead of each attempt's reply
+        deadline (twice the replies' wire time plus 2 ms): a loaded machine or a USB
+        adapter's latency timer makes replies late, not missing.
         """
         with self._lock:
-            return self.reader.read(deadline_s, part)
+            return self.reader.read(deadline_s, part, patient)
 
     def where(self) -> str:
         return self.roster.where()

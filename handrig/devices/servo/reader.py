@@ -90,8 +90,8 @@ class StateReader:
         """Wire time of a present-state read of ``n`` servos: the request and every reply."""
         return read_bytes(n, self.plan.data_len, self.plan.fast) * self.link.budget.byte_s
 
-    def read(self, deadline_s: float | None, part: tuple[int, int] | None = None
-             ) -> ServoState:
+    def read(self, deadline_s: float | None, part: tuple[int, int] | None = None,
+             patient: bool = False) -> ServoState:
         """One present-state read (see :meth:`handrig.devices.servo.DynamixelBus.read_state`)."""
         if part is not None and part[1] > 1:
             return self._read_part(part, deadline_s)
@@ -99,7 +99,7 @@ class StateReader:
         if isinstance(begun, ServoState):
             return begun
         deadline_s = begun
-        if self._attempts(deadline_s) and not (
+        if self._attempts(deadline_s, patient) and not (
                 self.temperature_every and self.stats.reads >= self._next_temperature_read):
             return self.readings.take_whole(self.fast.whole_at)
         return self._finish(deadline_s)
@@ -161,7 +161,7 @@ class StateReader:
             pending = np.roll(left, -1)
         return self._finish(deadline_s, indices)
 
-    def _attempts(self, deadline_s: float) -> bool:
+    def _attempts(self, deadline_s: float, patient: bool = False) -> bool:
         """The read and its retries; True when it was whole."""
         first = self.fast.orders[self.stats.reads % len(self.fast.orders)]
         pending = self._chain(first.indices)
@@ -172,7 +172,7 @@ class StateReader:
                 if start + self._retry_s(len(pending)) > deadline_s:
                     break
                 self.stats.retries += 1
-            if self._attempt(pending, order, deadline_s) == WHOLE:
+            if self._attempt(pending, order, deadline_s, patient) == WHOLE:
                 self.last_whole = True
                 if self._suspects:
                     self.suspect[:] = 0
@@ -232,10 +232,14 @@ class StateReader:
         if extra <= ATTEMPT_EXTRA_MAX_S:  # longer: a stalled host, not the bus's way
             self._attempt_extra_s += SMOOTHING * (extra - self._attempt_extra_s)
 
-    def _attempt(self, indices: np.ndarray, order: Order | None, deadline_s: float) -> int:
-        """One read of ``indices``: what :meth:`FastSyncRead.read` returns (Sync Read: 1/0)."""
+    def _attempt(self, indices: np.ndarray, order: Order | None, deadline_s: float,
+                 patient: bool = False) -> int:
+        """One read of ``indices``: what :meth:`FastSyncRead.read` returns (Sync Read: 1/0).
+        ``patient``: its replies are waited for until ``deadline_s``, not only until the
+        reply deadline their wire time gives."""
         start = self.clock.now()
-        deadline = min(deadline_s, self.link.budget.reply_deadline(start))
+        deadline = (deadline_s if patient
+                    else min(deadline_s, self.link.budget.reply_deadline(start)))
         if not self.plan.fast:
             got = int(self.sync.read(indices, deadline))
             if got:

@@ -1099,3 +1099,27 @@ def test_a_silent_servo_does_not_starve_the_temperature_reads_of_those_after_it(
             sim.servo(7).mem[dx.Reg.STATUS_RETURN_LEVEL] = 2  # its torque-off confirmed
         finally:
             bus.close()
+
+
+def test_a_patient_read_waits_for_late_replies_the_loops_read_does_not() -> None:
+    """Replies 15 ms late (a loaded machine, a USB adapter's latency timer): the loop's
+    read gives up at its reply deadline and marks the servos stale; a patient read (the
+    robot API's) waits for them until its own deadline and has every reading."""
+    rig = small_rig()
+    with SimBus.from_rig(rig) as sim:
+        bus = DynamixelBus(sim.port_path, rig, baud=1_000_000, temperature_every=0)
+        bus.connect()
+        try:
+            assert not bus.read_state(bus.clock.now() + 0.1, patient=True).stale.any()
+            sim.faults = FaultSpec(delay=1.0, delay_s=0.015)  # every reply late
+            impatient = bus.read_state(bus.clock.now() + 0.1)
+            assert impatient.stale.all()
+            time.sleep(0.05)  # the late replies of that read have come and gone
+            bus.link.quiet_line(bus.clock.now() + 0.05)
+            t0 = time.monotonic()
+            patient = bus.read_state(bus.clock.now() + 0.1, patient=True)
+            took = time.monotonic() - t0
+            assert not patient.stale.any() and took >= 0.015
+        finally:
+            sim.faults = FaultSpec()
+            bus.close()
