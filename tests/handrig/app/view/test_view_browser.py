@@ -91,7 +91,12 @@ class ViewRun:
         raise AssertionError("no view URL printed:\n" + "".join(self.stderr))
 
     def summary(self, timeout_s: float = 60) -> dict[str, Any]:
-        out, _ = self.proc.communicate(timeout=timeout_s)
+        try:
+            out, _ = self.proc.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:  # say what the run said before it hung
+            self.kill()
+            raise AssertionError(f"the run did not end within {timeout_s:g} s; its last "
+                                 "lines:\n" + "".join(self.stderr[-30:])) from None
         return json.loads(out.strip().splitlines()[-1])
 
     def kill(self) -> None:
