@@ -262,7 +262,26 @@ function drawMode(f) {
 // The figures change every frame but nobody reads them 20 times a second; redrawing
 // the tables (layout and paint) costs the browser more than the 3D view.
 const TABLES_EVERY_MS = 250;
-let tablesAt = 0;
+let tablesAt = -Infinity, tablesTimer = null, tablesFrame = null;
+
+// The tables at most every TABLES_EVERY_MS, and always with the newest frame in the end:
+// a frame that comes within that time of the last update is drawn when it is over (the
+// run's last figures, or a view that sends one frame, are never left undrawn).
+function scheduleTables(f) {
+  tablesFrame = f;
+  const wait = tablesAt + TABLES_EVERY_MS - performance.now();
+  if (wait <= 0) { flushTables(); return; }
+  if (tablesTimer === null) tablesTimer = setTimeout(flushTables, wait);
+}
+
+function flushTables() {
+  tablesTimer = null;
+  if (tablesFrame === null) return;
+  const f = tablesFrame;
+  tablesFrame = null;
+  tablesAt = performance.now();
+  drawTables(f);
+}
 
 const SOURCES = { positions: 'the servos\' present positions', goals: 'the goals (no readings)', pose: 'the pipeline\'s pose (no readings)' };
 
@@ -390,8 +409,7 @@ function drawFrame(f) {
   if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), twoHands ? TWO_SKELETONS_FROM : new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
   viewsDirty = true;
   drawMode(f);
-  const now = performance.now();
-  if (now - tablesAt >= TABLES_EVERY_MS) { tablesAt = now; drawTables(f); }
+  scheduleTables(f);
 }
 
 function animate() {
