@@ -284,6 +284,21 @@ def test_two_hand_frame_has_each_hands_part_and_poses_each_from_its_own() -> Non
     assert len(read["outputs"]) == 2  # both loops' outputs
 
 
+def view_port(proc: subprocess.Popen[str]) -> int:
+    """The port of the view a ``handrig ... --view 127.0.0.1:0`` run prints at its start."""
+    assert proc.stderr is not None
+    url = ""
+    deadline = time.monotonic() + 120
+    while not url and time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        if line.startswith("view: "):
+            url = line.split()[1]
+    assert url.startswith("http://127.0.0.1:"), url
+    return int(url.rsplit(":", 1)[1].strip("/"))
+
+
 @pytest.mark.parametrize("end", ["estop", "ctrl-c"])
 def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None:
     """Without a browser: ``handrig run --view`` on the simulated rig; a WebSocket
@@ -296,17 +311,7 @@ def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None
          f"replay:{recording}", "--frames", "20000", "--json", "--view", "127.0.0.1:0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        assert proc.stderr is not None
-        url = ""
-        deadline = time.monotonic() + 120
-        while not url and time.monotonic() < deadline:
-            line = proc.stderr.readline()
-            if not line:
-                break
-            if line.startswith("view: "):
-                url = line.split()[1]
-        assert url.startswith("http://127.0.0.1:")
-        port = int(url.rsplit(":", 1)[1].strip("/"))
+        port = view_port(proc)
         with connect(f"ws://127.0.0.1:{port}/ws") as ws:
             assert json.loads(ws.recv(timeout=30))["type"] == "scene"
             frames = [json.loads(ws.recv(timeout=30)) for _ in range(5)]
@@ -346,16 +351,7 @@ def test_two_bus_run_view_streams_both_hands_and_its_estop_ends_both() -> None:
          f"replay:{recording}", "--frames", "20000", "--json", "--view", "127.0.0.1:0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        assert proc.stderr is not None
-        url = ""
-        deadline = time.monotonic() + 120
-        while not url and time.monotonic() < deadline:
-            line = proc.stderr.readline()
-            if not line:
-                break
-            if line.startswith("view: "):
-                url = line.split()[1]
-        port = int(url.rsplit(":", 1)[1].strip("/"))
+        port = view_port(proc)
         with connect(f"ws://127.0.0.1:{port}/ws") as ws:
             scene = json.loads(ws.recv(timeout=30))
             assert set(scene["models"]) == {"ri", "le"}
