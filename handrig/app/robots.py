@@ -31,6 +31,7 @@ from handrig.config.rig import (
     POSITION_TICKS_MIN,
     RigConfig,
     ServoCalibration,
+    hand_of_joint,
     load_rig_config,
 )
 from handrig.errors import ConfigError
@@ -116,6 +117,12 @@ class RobotRigConfig(RigConfig):
     def effective_sag_gain(self) -> float:
         """The sag gain the pipeline uses: 0 unless ``[robot].sag`` is true."""
         return self.loop.sag_gain if self.robot is not None and self.robot.sag else 0.0
+
+
+def is_two_hand(rig: RigConfig) -> bool:
+    """Whether ``rig`` drives servos of both hands (a robot rig never does)."""
+    hands = {hand_of_joint(s.joint) for s in rig.servos}
+    return hands == {"ri", "le"} and not isinstance(rig, RobotRigConfig)
 
 
 def rig_path(name_or_path: str | Path | None) -> Path:
