@@ -67,6 +67,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from handrig.app import simulator
+    from handrig.app.robots import find_rig
 
     recording = args.recording or str(simulator.demo_recording())
     check_gl_backend("the demo's simulated puppet")
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     # The emulators start first, so that their start-ups (MuJoCo puppet, pty) overlap
     # this process's (its imports, the map's kernels); the session takes the bus's
     # (by its arguments) where it used to start it. Those not taken stop on the way out.
-    rig_file, rig_cfg = _rig(args.rig)
+    rig_file, rig_cfg = find_rig(args.rig)
     with StartedEmulators() as started:
         for hand in _sim_bus_hands(rig_cfg):
             started.start(sim_bus_argv(rig_file, hand, wire_timing=WIRE_TIMING,
@@ -153,16 +154,6 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
             result.summary["render"] = None
             print(f"handrig demo: no render: {exc}", file=sys.stderr)
     return print_result(result, as_json=args.json)
-
-
-def _rig(rig: str | None) -> tuple[Path, RigConfig]:
-    """The rig file the run loads (as :func:`handrig.app.factory.build_parts` finds it)
-    and its config."""
-    from handrig.app import robots
-    from handrig.config.paths import config_file
-
-    path = robots.rig_path(rig) if rig else config_file("rig.toml")
-    return path, robots.load_rig(path)
 
 
 def _sim_bus_hands(rig: RigConfig) -> list[str | None]:
