@@ -3,20 +3,17 @@
 Everything else takes its dependencies as arguments; only this module (and the
 commands that call it) decide which glove, bus, map, grid and outputs a run uses.
 The simulated rig's emulators run as subprocesses (``handrig sim-bus``,
-``handrig sim-glove``) started here, each in its own session so that a Ctrl-C
-in the terminal reaches the rig alone: the rig eases, turns torque off, and
-only then stops them. In-process simulator parts come through
-:mod:`handrig.app.simulator`.
+``handrig sim-glove``) started through :mod:`handrig.app.port_processes`, each in
+its own session so that a Ctrl-C in the terminal reaches the rig alone: the rig
+eases, turns torque off, and only then stops them. In-process simulator parts
+come through :mod:`handrig.app.simulator`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
-import selectors
-import signal
 import subprocess
-import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +25,13 @@ from scipy.spatial.transform import Rotation
 
 from firmware_protocol.glove import FLAG_IMU_ABSENT
 from handrig.app import robots as robotrig
+from handrig.app.port_processes import (  # noqa: F401 (stop_process: named here as before)
+    SIM_BUS,
+    StartedEmulators,
+    port_process,
+    sim_bus_argv,
+    stop_process,
+)
 from handrig.clock import Clock
 from handrig.config.loading import CONFIG_DIR, load_joint_limits
 from handrig.config.paths import config_file
@@ -42,7 +46,7 @@ from handrig.devices.glove_calibration import (
 from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
-from handrig.errors import ConfigError, DeviceError
+from handrig.errors import ConfigError
 from handrig.loop.ports import ControlsFromRaw, OrientationLike
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
@@ -51,7 +55,6 @@ from handrig.pose.expand import Expander
 from handrig.pose.orientation import ForearmOrientation
 from handrig.pose.pipeline import PosePipeline
 from handrig.pose.sag import SagGrid, default_grid_path
-from handrig.realtime import helper_env
 
 FloatArray = NDArray[np.float64]
 
@@ -289,26 +292,26 @@ class OpenedBus:
 @contextlib.contextmanager
 def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: bool = True,
               viewer: bool = False, faults: str = "",
-              log: Callable[[str], None] = print) -> Iterator[OpenedBus]:
+              log: Callable[[str], None] = print,
+              started: StartedEmulators | None = None) -> Iterator[OpenedBus]:
     """The servo bus on ``spec`` (a port, ``"sim"``, None: rig.toml's port); closed on exit
     (torque off if still on). ``"sim"`` starts ``handrig sim-bus`` (the MuJoCo puppet,
-    ``wire_timing``, ``viewer``, ``faults``) first and stops it after the bus is closed."""
+    ``wire_timing``, ``viewer``, ``faults``) first, or takes the one ``started`` holds
+    for these arguments (:func:`~handrig.app.port_processes.sim_bus_argv`), and stops it
+    after the bus is closed."""
     rig_cfg = parts.rig_config
     bus_spec = spec or rig_cfg.bus.port
     with contextlib.ExitStack() as stack:
         proc: subprocess.Popen[str] | None = None
         if bus_spec == "sim":
-            argv = ["sim-bus", "--rig", str(parts.rig_file)]
-            if parts.hand is not None:
-                argv += ["--hand", parts.hand]
-            if wire_timing:
-                argv.append("--wire-timing")
-            if viewer:
-                argv.append("--viewer")
-            if faults:
-                argv += ["--faults", faults]
-            proc, port = stack.enter_context(
-                port_process(argv, "the simulated servo bus (handrig sim-bus)"))
+            argv = sim_bus_argv(parts.rig_file, parts.hand, wire_timing=wire_timing,
+                                viewer=viewer, faults=faults)
+            emulator = started.take(argv) if started is not None else None
+            if emulator is None:
+                proc, port = stack.enter_context(port_process(argv, SIM_BUS))
+            else:
+                stack.enter_context(emulator)
+                proc, port = emulator.proc, emulator.port()
             log(f"simulated servo bus (MuJoCo puppet) on {port}")
         else:
             port = bus_spec
@@ -379,77 +382,6 @@ def control_channels(glove_cfg: GloveConfig, controls: Sequence[str],
     by_curve = {ch.curve: ch.raw_index() for ch in glove_cfg.channels}
     return tuple(by_curve.get(n, -1) for n in (controls if glove_names is None
                                                 else glove_names))
-
-
-def _die_with_parent() -> Callable[[], None] | None:
-    """A ``preexec_fn`` that has the child get SIGTERM when this process dies (Linux
-    ``PR_SET_PDEATHSIG``): an emulator in its own session would otherwise outlive a
-    rig that was killed. None where there is no such thing."""
-    try:
-        import ctypes
-
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):
-        return None
-    pr_set_pdeathsig = 1
-
-    def preexec() -> None:
-        prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
-    return preexec
-
-
-@contextlib.contextmanager
-def port_process(argv: Sequence[str], what: str, timeout_s: float = 30.0, *,
-                 module: str = "handrig.cli", cwd: str | Path | None = None
-                 ) -> Iterator[tuple[subprocess.Popen[str], str]]:
-    """Start ``python -m module ARGV`` (a handrig subcommand by default) that prints
-    ``port: PATH`` first; stop it on exit.
-
-    Yields the process and the port path. The process runs in its own session (the
-    terminal's Ctrl-C does not reach it) and gets SIGTERM if this process dies; on
-    exit it gets SIGTERM and is waited for, so the emulators shut down cleanly.
-    """
-    cmd = [sys.executable, "-m", module, *argv]
-    env = helper_env()  # off the loop's CPU
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env, cwd=cwd, start_new_session=True,
-                            preexec_fn=_die_with_parent())
-    try:
-        assert proc.stdout is not None
-        sel = selectors.DefaultSelector()
-        sel.register(proc.stdout, selectors.EVENT_READ)
-        line = ""
-        if sel.select(timeout_s):
-            line = proc.stdout.readline().strip()
-        sel.close()
-        if not line.startswith("port: "):
-            proc.kill()
-            _, err = proc.communicate(timeout=5)
-            raise DeviceError(
-                f"{what} did not start ({' '.join(argv)}): "
-                f"{(line + ' ' + err).strip()[-400:] or 'no output'}"
-            )
-        yield proc, line.removeprefix("port: ")
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-
-
-def stop_process(proc: subprocess.Popen[str]) -> str:
-    """SIGTERM a port process, wait, and return what it printed after its port line."""
-    if proc.poll() is None:
-        proc.terminate()
-    try:
-        out, err = proc.communicate(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate()
-    return (out or "") + (err or "")
 
 
 FAULT_WORDS: dict[str, str] = {

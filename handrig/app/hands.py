@@ -28,6 +28,7 @@ from handrig.app.factory import (
     control_channels,
     glove_spec,
 )
+from handrig.app.robots import is_two_hand
 from handrig.config.loading import load_joint_limits
 from handrig.config.paths import config_file
 from handrig.config.rig import HAND_NAMES, RigConfig, hand_of_joint, hand_rig
@@ -109,12 +110,6 @@ class TwoHandParts:
     @property
     def two_buses(self) -> bool:
         return self.rig_config.left_bus is not None
-
-
-def is_two_hand(rig: RigConfig) -> bool:
-    """Whether ``rig`` drives servos of both hands (a robot rig never does)."""
-    hands = {hand_of_joint(s.joint) for s in rig.servos}
-    return hands == {"ri", "le"} and not isinstance(rig, robotrig.RobotRigConfig)
 
 
 def glove_specs(rig: RigConfig, right: str | None, left: str | None

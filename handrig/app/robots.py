@@ -26,11 +26,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from handrig.config.loading import CONFIG_DIR, load, load_toml
+from handrig.config.paths import config_file
 from handrig.config.rig import (
     POSITION_TICKS_MAX,
     POSITION_TICKS_MIN,
     RigConfig,
     ServoCalibration,
+    hand_of_joint,
     load_rig_config,
 )
 from handrig.errors import ConfigError
@@ -116,6 +118,20 @@ class RobotRigConfig(RigConfig):
     def effective_sag_gain(self) -> float:
         """The sag gain the pipeline uses: 0 unless ``[robot].sag`` is true."""
         return self.loop.sag_gain if self.robot is not None and self.robot.sag else 0.0
+
+
+def find_rig(name_or_path: str | Path | None) -> tuple[Path, RigConfig]:
+    """The rig file a run loads for ``--rig`` (a preset name or a path; None: the user's
+    ``rig.toml``, else the installed one), as :func:`handrig.app.factory.build_parts`
+    finds it, and its config."""
+    path = rig_path(name_or_path) if name_or_path else config_file("rig.toml")
+    return path, load_rig(path)
+
+
+def is_two_hand(rig: RigConfig) -> bool:
+    """Whether ``rig`` drives servos of both hands (a robot rig never does)."""
+    hands = {hand_of_joint(s.joint) for s in rig.servos}
+    return hands == {"ri", "le"} and not isinstance(rig, RobotRigConfig)
 
 
 def rig_path(name_or_path: str | Path | None) -> Path:

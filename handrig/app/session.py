@@ -72,6 +72,8 @@ class LiveOptions:
     panel: bool = False  # the live panel (plain lines when stdout is no terminal)
     keys: bool = True  # with the panel: read the show keys when stdin is a terminal
     sim_faults: str = ""
+    # "sim" buses' emulators already started (handrig demo: their start-ups overlap)
+    started: app.StartedEmulators | None = None
     snapshot_every: int = 0  # keep present positions every N frames (for rendering)
     verbose: bool = False  # log every commissioning step
     profile: bool = False  # time the critical path's stages (bench_rig)
@@ -246,7 +248,8 @@ class _Session:
             with contextlib.ExitStack() as stack:
                 opened = stack.enter_context(app.servo_bus(
                     self.opts.bus, self.parts, self.clock, wire_timing=self.opts.wire_timing,
-                    viewer=self.opts.viewer, faults=self.opts.sim_faults, log=self.log))
+                    viewer=self.opts.viewer, faults=self.opts.sim_faults, log=self.log,
+                    started=self.opts.started))
                 error = self._devices_open(stack, opened.bus)
         except HandrigError as exc:
             error = error or exc

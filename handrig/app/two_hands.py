@@ -165,7 +165,7 @@ class _TwoHands:
                 opened = stack.enter_context(app.servo_bus(
                     spec, side, self.clock, wire_timing=opts.wire_timing,
                     viewer=opts.viewer, faults=opts.sim_faults,
-                    log=self._prefixed(h)))
+                    log=self._prefixed(h), started=opts.started))
                 self.opened.append(opened)
                 buses[h] = opened.bus
                 owners.append(opened.bus)
@@ -175,7 +175,7 @@ class _TwoHands:
                                     hand=None)
         opened = stack.enter_context(app.servo_bus(
             opts.bus, whole, self.clock, wire_timing=opts.wire_timing, viewer=opts.viewer,
-            faults=opts.sim_faults, log=self.log))
+            faults=opts.sim_faults, log=self.log, started=opts.started))
         self.opened.append(opened)
         self.bus_hands[opened.bus.port] = HANDS
         return {"ri": None, "le": None}, [opened.bus]

@@ -25,22 +25,20 @@ import contextlib
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from handrig.app import simulator
-from handrig.app.factory import build_parts, port_process, robot_model
-from handrig.app.hands import build_two_hand_parts, is_two_hand
-from handrig.app.robots import render_view
-from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
-from handrig.app.sources import Source, format_sources, run_sources
-from handrig.app.two_hands import run_two_hands
-from handrig.app.view import add_view_flag, view_session
+from handrig.app.port_processes import SIM_BUS, PortProcess, StartedEmulators, sim_bus_argv
+from handrig.app.view import add_view_flag
 from handrig.cli._display import check_gl_backend, check_renderer
 from handrig.cli._numbers import positive_float, positive_int
 from handrig.cli._rig import add_rig_argument
 from handrig.errors import HandrigError
 
+if TYPE_CHECKING:
+    from handrig.config.rig import RigConfig
+
 DEFAULT_FRAMES = 3000  # 15 s at 200 Hz
+WIRE_TIMING = True  # the emulated bus answers at the rig's baud rate
 
 
 def register(sub: Any) -> None:
@@ -68,15 +66,42 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    def log(text: str) -> None:
-        if not args.json:
-            with contextlib.suppress(OSError, ValueError):  # the terminal may be gone
-                print(text, flush=True)
+    from handrig.app import simulator
+    from handrig.app.robots import find_rig
 
     recording = args.recording or str(simulator.demo_recording())
     check_gl_backend("the demo's simulated puppet")
     if args.render:
         check_renderer("--render")
+    # The emulators start first, so that their start-ups (MuJoCo puppet, pty) overlap
+    # this process's (its imports, the map's kernels); the session takes the bus's
+    # (by its arguments) where it used to start it. Those not taken stop on the way out.
+    rig_file, rig_cfg = find_rig(args.rig)
+    with StartedEmulators() as started:
+        for hand in _sim_bus_hands(rig_cfg):
+            started.start(sim_bus_argv(rig_file, hand, wire_timing=WIRE_TIMING,
+                                       faults=args.faults), SIM_BUS)
+        with PortProcess(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
+                         "the glove emulator (handrig sim-glove)") as glove:
+            return _run(args, recording, started, glove)
+
+
+def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
+         glove: PortProcess) -> int:
+    from handrig.app import simulator
+    from handrig.app.factory import build_parts, robot_model
+    from handrig.app.hands import build_two_hand_parts, is_two_hand
+    from handrig.app.robots import render_view
+    from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
+    from handrig.app.sources import Source, format_sources, run_sources
+    from handrig.app.two_hands import run_two_hands
+    from handrig.app.view import view_session
+
+    def log(text: str) -> None:
+        if not args.json:
+            with contextlib.suppress(OSError, ValueError):  # the terminal may be gone
+                print(text, flush=True)
+
     parts = build_parts(args.rig)
     two = build_two_hand_parts(args.rig) if is_two_hand(parts.rig_config) else None
     log(format_sources([*run_sources(args.rig, rig_cfg=parts.rig_config), Source(
@@ -88,24 +113,23 @@ def run(args: argparse.Namespace) -> int:
                        lambda text: print(text, file=sys.stderr, flush=True)) as view):
         try:
             with contextlib.ExitStack() as gloves:
-                _, glove_port = gloves.enter_context(port_process(
-                    ["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
-                    "the glove emulator (handrig sim-glove)"))
+                glove_port = gloves.enter_context(glove).port()
                 log(f"glove emulator streaming on {glove_port}")
                 left_port = None
                 if two is not None:
                     left = simulator.recording_from(recording, args.left_offset,
                                                     gloves.enter_context(
                                                         tempfile.TemporaryDirectory()))
-                    _, left_port = gloves.enter_context(port_process(
+                    left_port = gloves.enter_context(PortProcess(
                         ["sim-glove", str(left), "--rate", f"{args.glove_rate:g}"],
-                        "the left glove's emulator (handrig sim-glove)"))
+                        "the left glove's emulator (handrig sim-glove)")).port()
                     log(f"left glove emulator streaming on {left_port} ({recording} from "
                         f"{args.left_offset:g} s)")
                 opts = LiveOptions(glove=glove_port, recorded=recording, bus="sim",
                                    frames=args.frames, glove_left=left_port,
                                    bus_left="sim" if two is not None else None,
-                                   sim_faults=args.faults, log=log, panel=not args.json,
+                                   sim_faults=args.faults, wire_timing=WIRE_TIMING,
+                                   started=started, log=log, panel=not args.json,
                                    on_rig=view.attach_rig if view is not None else None,
                                    on_hands=view.attach_hands if view is not None else None,
                                    snapshot_every=max(1, args.frames // 6) if args.render else 0)
@@ -130,3 +154,13 @@ def run(args: argparse.Namespace) -> int:
             result.summary["render"] = None
             print(f"handrig demo: no render: {exc}", file=sys.stderr)
     return print_result(result, as_json=args.json)
+
+
+def _sim_bus_hands(rig: RigConfig) -> list[str | None]:
+    """The ``--hand`` of each simulated bus the session opens for ``rig`` (None: the
+    whole rig): a two-hand rig on two buses has one per hand."""
+    from handrig.app.robots import is_two_hand
+
+    if is_two_hand(rig) and rig.left_bus is not None:
+        return ["ri", "le"]
+    return [None]

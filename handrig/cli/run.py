@@ -5,19 +5,18 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from handrig.app.factory import build_parts
-from handrig.app.hands import TwoHandParts, build_two_hand_parts, glove_specs
-from handrig.app.session import LiveOptions, failed, print_result, run_live
-from handrig.app.sources import Source, run_sources
-from handrig.app.two_hands import run_two_hands
-from handrig.app.view import add_view_flag, view_session
+from handrig.app.port_processes import SIM_BUS, StartedEmulators, sim_bus_argv
+from handrig.app.view import add_view_flag
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
+
+if TYPE_CHECKING:
+    from handrig.app.hands import TwoHandParts
 
 
 def register(sub: Any) -> None:
@@ -97,12 +96,44 @@ def _from_show(args: argparse.Namespace) -> ShowFile | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    with StartedEmulators() as started:  # one the session did not take: stopped on the way
+        try:
+            show = _from_show(args)
+            if args.viewer:
+                check_display("--viewer")
+            _start_sim_bus(args, started)
+        except HandrigError as exc:
+            if not args.json:
+                raise
+            from handrig.app.session import failed, print_result
+
+            return print_result(failed(exc), as_json=True)
+        return _run(args, show, started)
+
+
+def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
+    """Start the simulated bus of a one-bus rig whose bus is ``sim`` now, before this
+    process imports the run's modules and builds the map's kernels, so that the
+    emulator's start-up (MuJoCo puppet, pty) overlaps them; the session takes it
+    (by its arguments) where it would start one. A rig with a left bus: none started."""
+    from handrig.app.robots import find_rig
+
+    rig_file, rig = find_rig(args.rig)
+    if rig.left_bus is None and (args.bus or rig.bus.port) == "sim":
+        started.start(sim_bus_argv(rig_file, None, wire_timing=not args.no_wire_timing,
+                                   viewer=args.viewer), SIM_BUS)
+
+
+def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulators) -> int:
+    from handrig.app.factory import build_parts
+    from handrig.app.hands import build_two_hand_parts, glove_specs
+    from handrig.app.session import LiveOptions, failed, print_result, run_live
+    from handrig.app.sources import Source, run_sources
+    from handrig.app.two_hands import run_two_hands
+    from handrig.app.view import view_session
+
     two: TwoHandParts | None = None
-    show: ShowFile | None = None
     try:
-        show = _from_show(args)
-        if args.viewer:
-            check_display("--viewer")
         files = ({"map_file": show.show.map or None, "grid_file": show.show.grid or None}
                  if show is not None else {})
         parts = build_parts(args.rig, args.glove_config, **files)
@@ -153,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
             verbose=not args.json, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
             on_rig=view.attach_rig if view is not None else None,
-            on_hands=view.attach_hands if view is not None else None,
+            on_hands=view.attach_hands if view is not None else None, started=started,
         )
         result = run_two_hands(two, opts) if two is not None else run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
