@@ -157,7 +157,7 @@ def _as_dict(s: bringup.FoundServo) -> dict[str, Any]:
     return {"id": s.id, "baud": s.baud, "model": s.model, "model_number": s.model_number,
             "firmware": s.firmware, "operating_mode": s.operating_mode,
             "voltage_v": s.voltage_v, "temperature_c": s.temperature_c,
-            "hardware_error": s.hardware_error}
+            "hardware_error": s.hardware_error, "unread": list(s.unread)}
 
 
 def run_scan(args: argparse.Namespace) -> int:

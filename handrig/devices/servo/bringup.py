@@ -46,6 +46,7 @@ BAUD_INDEX: dict[int, int] = {baud: i for i, baud in enumerate(BAUD_RATES)}
 EEPROM_WRITE_S = 0.05  # time given to an EEPROM write (and a status at the old ID or baud)
 FACTORY_ID, FACTORY_BAUD = 1, 57600
 REBOOT_WAIT_S = 0.5  # a rebooted servo is silent for a moment (ORCA measures about 0.3 s)
+DESCRIBE_TRIES = 3  # reads of a found servo's registers, each tried this many times
 ONE_AT_A_TIME = (
     "two or more servos share an ID (new servos all come as ID 1 at 57600): connect one "
     "servo at a time and give each its own ID with `handrig servos set-id`"
@@ -64,6 +65,7 @@ class FoundServo:
     voltage_v: float | None = None
     temperature_c: int | None = None
     hardware_error: int | None = None
+    unread: tuple[str, ...] = ()  # the registers that did not answer (their fields None)
 
     @property
     def model(self) -> str:
@@ -185,22 +187,32 @@ class ServoPort:
                               f"take the reboot ({self.packet.getTxRxResult(result)})")
 
     def describe(self, servo_id: int, model_number: int, firmware: int) -> FoundServo:
-        """A found servo with its mode, voltage, temperature and errors read (a read that
-        fails leaves its field None)."""
+        """A found servo with its mode, voltage, temperature and errors read. Each read is
+        tried up to :data:`DESCRIBE_TRIES` times (one lost or late reply on a busy bus is
+        not a finding); one that still fails leaves its field None and is named in
+        ``unread``."""
+        unread: list[str] = []
 
         def read_or_none(reg: Reg) -> int | None:
-            try:
-                return self.read(servo_id, reg)
-            except DeviceError:
-                return None
+            for _ in range(DESCRIBE_TRIES):
+                try:
+                    return self.read(servo_id, reg)
+                except DeviceError:
+                    continue
+            unread.append(reg.name)
+            return None
 
+        mode = read_or_none(Reg.OPERATING_MODE)
         volts = read_or_none(Reg.PRESENT_INPUT_VOLTAGE)
+        temperature = read_or_none(Reg.PRESENT_TEMPERATURE)
+        errors = read_or_none(Reg.HARDWARE_ERROR_STATUS)
         return FoundServo(
             servo_id, self.baud, model_number, firmware,
-            operating_mode=read_or_none(Reg.OPERATING_MODE),
+            operating_mode=mode,
             voltage_v=None if volts is None else volts / 10.0,
-            temperature_c=read_or_none(Reg.PRESENT_TEMPERATURE),
-            hardware_error=read_or_none(Reg.HARDWARE_ERROR_STATUS),
+            temperature_c=temperature,
+            hardware_error=errors,
+            unread=tuple(unread),
         )
 
 
@@ -327,7 +339,7 @@ class Finding:
     """One difference between the bus and the rig file, with what to do about it."""
 
     servo_id: int
-    what: str  # "missing", "extra", "model", "mode", "voltage", "hardware error"
+    what: str  # "missing", "extra", "model", "mode", "voltage", "hardware error", "unread"
     detail: str
     fix: str
 
@@ -380,6 +392,12 @@ def check(port: str, rig: RigConfig, *, baud: int | None = None) -> tuple[list[F
             findings.append(Finding(
                 servo_id, "hardware error", f"servo {servo_id}: {got.errors_text}",
                 f"remove the cause, then `handrig servos reboot {servo_id}`"))
+        if got.unread:  # not checked is not fine: say so
+            findings.append(Finding(
+                servo_id, "unread", f"servo {servo_id} answered its ping but not the reads of "
+                f"{', '.join(got.unread)} ({DESCRIBE_TRIES} tries each): not checked",
+                "check its cable and the chain's wiring (a reply garbled or late), then run "
+                "`handrig servos check` again"))
     for servo_id in sorted(set(by_id) - set(wanted)):
         s = by_id[servo_id]
         findings.append(Finding(

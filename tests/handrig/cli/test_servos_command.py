@@ -124,3 +124,23 @@ def test_scan_and_set_through_sim_bus_servo_baud(capsys: pytest.CaptureFixture[s
         capsys.readouterr()
         assert scan(port, capsys, 57600, 115200, 1_000_000) == [
             (1, 57600), (3, 1_000_000), (5, 1_000_000)]
+
+
+def test_a_servo_whose_registers_do_not_answer_is_a_finding_not_a_pass(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A servo that answered its ping but none of the reads after it (a reply line that
+    broke meanwhile: muted here from the start, the ping's answer given by hand) is not
+    'fine': its fields are unknown, each read tried DESCRIBE_TRIES times, and the check
+    says which registers were not checked."""
+    from handrig.devices.servo import bringup
+    from sim.dxl_faults import FaultSpec
+
+    servo = EmulatedServo(5)
+    with (SimBus([servo], faults=FaultSpec(mute=frozenset({5})), realtime=False) as bus,
+          bringup.open_port(bus.port_path, 1_000_000) as sp):
+        assert sp.ping(5) is None  # muted: it hears, it does not answer
+        found = sp.describe(5, 1200, 50)
+    assert found.hardware_error is None and found.operating_mode is None
+    assert found.unread == ("OPERATING_MODE", "PRESENT_INPUT_VOLTAGE",
+                            "PRESENT_TEMPERATURE", "HARDWARE_ERROR_STATUS")
+    assert bus.stats.packets >= 1 + 4 * bringup.DESCRIBE_TRIES  # every read tried again
