@@ -249,9 +249,30 @@ function buildModel(model, ghost) {
   return { root, parts, nbody: model.bodies.length };
 }
 
+// Which bodies of the ghost (the goals) are away from the model's (the present
+// positions): more than GHOST_APART_M or GHOST_APART_DEG. Only those are drawn (the
+// others would lie inside the model: a pale tint over it, at the cost of drawing the
+// hand's pixels once more, about a sixth of a frame in software WebGL).
+const GHOST_APART_M = 0.001, GHOST_APART_DEG = 1.0;
+const GHOST_APART_DOT = Math.cos(THREE.MathUtils.degToRad(GHOST_APART_DEG) / 2);
+function apart(goal, now) {
+  const n = goal.pos.length / 3;
+  if (!now || now.pos.length !== goal.pos.length) return new Array(n).fill(true);
+  const out = new Array(n);
+  for (let b = 0; b < n; b++) {
+    const dx = goal.pos[3 * b] - now.pos[3 * b], dy = goal.pos[3 * b + 1] - now.pos[3 * b + 1];
+    const dz = goal.pos[3 * b + 2] - now.pos[3 * b + 2];
+    let dot = 0;
+    for (let k = 0; k < 4; k++) dot += goal.quat[4 * b + k] * now.quat[4 * b + k];
+    out[b] = dx * dx + dy * dy + dz * dz > GHOST_APART_M ** 2 || Math.abs(dot) < GHOST_APART_DOT;
+  }
+  return out;
+}
+
 // Each body's vertices to where MuJoCo put the body (world position, quaternion w x y z),
-// and (the model, not the ghost) their colours lit as they face now.
-function place(built, posed) {
+// and (the model, not the ghost) their colours lit as they face now. A body that is not
+// ``shown`` (when given) has its vertices all at its origin: no pixel drawn.
+function place(built, posed, shown = null) {
   const p = posed.pos, q = posed.quat;
   const k = LIGHT_INTENSITY / Math.PI;  // three.js's Lambert: albedo / pi times irradiance
   for (const part of built.parts) {
@@ -263,6 +284,10 @@ function place(built, posed) {
       const r10 = 2 * (x * y + w * z), r11 = 1 - 2 * (x * x + z * z), r12 = 2 * (y * z - w * x);
       const r20 = 2 * (x * z - w * y), r21 = 2 * (y * z + w * x), r22 = 1 - 2 * (x * x + y * y);
       const tx = p[3 * b], ty = p[3 * b + 1], tz = p[3 * b + 2];
+      if (shown && !shown[b]) {
+        for (let i = 3 * first; i < 3 * end; i += 3) { out[i] = tx; out[i + 1] = ty; out[i + 2] = tz; }
+        continue;
+      }
       for (let i = 3 * first; i < 3 * end; i += 3) {
         const vx = local[i], vy = local[i + 1], vz = local[i + 2];
         out[i] = r00 * vx + r01 * vy + r02 * vz + tx;
@@ -513,8 +538,10 @@ function bonesBox() {
 function drawFrame(f) {
   for (const [hand, posed] of Object.entries(f.bodies)) if (models[hand]) place(models[hand], posed);
   for (const [hand, built] of Object.entries(ghosts)) {
-    built.root.visible = Boolean(f.ghost && f.ghost[hand]);
-    if (built.root.visible) place(built, f.ghost[hand]);
+    const goal = f.ghost && f.ghost[hand], now = f.bodies[hand];
+    const away = goal ? apart(goal, now) : null;
+    built.root.visible = Boolean(away && away.some(Boolean));
+    if (built.root.visible) place(built, goal, away);
   }
   for (const [hand, b] of Object.entries(bones)) {
     const segs = f.skeleton[hand];
