@@ -105,9 +105,11 @@ function layout() {
   markDirty();
 }
 
+let modelDrawCalls = 0;  // the model view's draw calls in the last frame (for the tests)
 function render() {
   if (!renderer) return;
   renderer.render(puppet.scene, puppet.camera);
+  modelDrawCalls = renderer.info.render.calls;
   drawBones();
 }
 
@@ -602,6 +604,6 @@ function handScreenX(hand) {
   if (box.isEmpty()) return null;
   return box.getCenter(new THREE.Vector3()).project(puppet.camera).x;
 }
-window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO, handScreenX };
+window.handrigView = { framesDrawn: () => drawnTotal, modelDrawCalls: () => modelDrawCalls, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO, handScreenX };
 connect();
 requestDraw();
