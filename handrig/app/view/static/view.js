@@ -7,7 +7,8 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 const token = new URLSearchParams(location.search).get('token');
 const $ = (id) => document.getElementById(id);
 const HAND_OFFSET_M = { ri: -0.11, le: 0.11 };  // two hands side by side
-const SKELETON_COLOUR = 0x3cc8ff;
+const SKELETON_CSS = '#3cc8ff';
+const BACKGROUND = 0x0f1115, BACKGROUND_CSS = '#0f1115';
 const TWO_HANDS_FROM = new THREE.Vector3(-0.5, 0.0, 1.0);  // the rig has two hands: the right on the right
 const TWO_SKELETONS_FROM = new THREE.Vector3(-0.3, 0.0, 1.0);
 
@@ -17,9 +18,12 @@ const TWO_SKELETONS_FROM = new THREE.Vector3(-0.3, 0.0, 1.0);
 // such pages cost the loop on a 2-core machine). So there the page draws without
 // multisampling, at one pixel per CSS pixel and at most 15 frames a second (a frame
 // costs about the same CPU whatever its size: the browser's compositing of the page,
-// not the pixels of the scene); `?full` in the URL draws at up to 30 a second anyway. Everywhere: one WebGL context for
-// both views, a draw only when a new frame came (or the camera moved), at most
-// MAX_DRAW_HZ, nothing while the page is hidden. docs/view.md has the figures.
+// not the pixels of the scene); `?full` in the URL draws at up to 30 a second anyway.
+// Everywhere: one WebGL canvas, over the model's view only (the skeleton's lines are
+// drawn on a 2D canvas: a WebGL canvas's every frame is read back or composited by
+// the browser, at a cost by its size), each model one mesh (one draw call) lit at its
+// vertices (buildModel), a draw only when a new frame came (or the camera moved), at
+// most MAX_DRAW_HZ, nothing while the page is hidden. docs/view.md has the figures.
 const FULL = new URLSearchParams(location.search).has('full');
 const SOFTWARE_GL = (() => {
   const gl = document.createElement('canvas').getContext('webgl2');
@@ -34,18 +38,17 @@ const SAVE_CPU = SOFTWARE_GL && !FULL;
 const MAX_DRAW_HZ = SAVE_CPU ? 15 : 30;
 const PIXEL_RATIO = SOFTWARE_GL ? 1 : Math.min(window.devicePixelRatio, 2);
 
-// One canvas over both views (one WebGL context: each context costs a compositing
-// pass per frame); each view is drawn into its element's rectangle.
-const viewsEl = document.querySelector('.views');
+// One WebGL canvas, in the model's view, opaque (nothing under it to blend with).
 // Without WebGL the page says so where the views would be; the tables and buttons work.
+const viewsEl = document.querySelector('.views');
 function makeRenderer() {
   try {
-    const r = new THREE.WebGLRenderer({ antialias: !SOFTWARE_GL, alpha: true });
+    const r = new THREE.WebGLRenderer({ antialias: !SOFTWARE_GL, alpha: false, stencil: false,
+      powerPreference: 'low-power' });
     r.setPixelRatio(PIXEL_RATIO);
-    r.setClearColor(0x000000, 0);
-    r.setScissorTest(true);
-    r.domElement.className = 'views3d';
-    viewsEl.appendChild(r.domElement);
+    r.setClearColor(BACKGROUND, 1);
+    r.domElement.className = 'view-canvas';
+    $('puppet').appendChild(r.domElement);
     return r;
   } catch (err) {
     for (const el of viewsEl.querySelectorAll('.view3d')) {
@@ -73,56 +76,79 @@ function requestDraw() {
 function markDirty() { viewsDirty = true; requestDraw(); }
 
 function makeView(el) {
-  const scene = new THREE.Scene();
-  scene.background = new THREE.Color(0x0f1115);
-  scene.add(new THREE.HemisphereLight(0xffffff, 0x303040, 1.6));
-  const sun = new THREE.DirectionalLight(0xffffff, 1.6);
-  sun.position.set(0.3, -0.4, 1.0);
-  scene.add(sun);
+  const scene = new THREE.Scene();  // lit at the vertices: no lights (buildModel)
   const camera = new THREE.PerspectiveCamera(40, 1, 0.005, 20);
   camera.up.set(0, 0, 1);
   camera.position.set(0.05, -0.45, 0.35);
   const controls = new OrbitControls(camera, el);
   controls.target.set(0.05, 0, 0);
-  const view = { el, scene, camera, controls, fitted: false, rect: [0, 0, 1, 1] };
+  const view = { el, scene, camera, controls, fitted: false, width: 1, height: 1 };
   controls.addEventListener('change', markDirty);
   views.push(view);
   return view;
 }
 
 function layout() {
-  if (renderer) renderer.setSize(viewsEl.clientWidth, viewsEl.clientHeight);
   for (const view of views) {
-    const el = view.el, w = el.clientWidth, h = el.clientHeight;
-    // three.js counts the viewport from the canvas's bottom left corner
-    view.rect = [el.offsetLeft, viewsEl.clientHeight - el.offsetTop - h, w, h];
+    const w = view.el.clientWidth, h = view.el.clientHeight;
+    view.width = w; view.height = h;
     view.camera.aspect = w / Math.max(h, 1);
     view.camera.updateProjectionMatrix();
+  }
+  if (renderer) renderer.setSize(puppet.width, puppet.height);
+  if (bonesCanvas) {
+    bonesCanvas.width = Math.round(skeleton.width * PIXEL_RATIO);
+    bonesCanvas.height = Math.round(skeleton.height * PIXEL_RATIO);
+    bonesCanvas.style.width = `${skeleton.width}px`;
+    bonesCanvas.style.height = `${skeleton.height}px`;
   }
   markDirty();
 }
 
+let modelDrawCalls = 0;  // the model view's draw calls in the last frame (for the tests)
 function render() {
   if (!renderer) return;
-  renderer.setClearColor(0x000000, 0);  // between the views: the page (the scenes clear to theirs)
-  renderer.setScissor(0, 0, viewsEl.clientWidth, viewsEl.clientHeight);
-  renderer.clear();
-  for (const view of views) {
-    renderer.setViewport(...view.rect);
-    renderer.setScissor(...view.rect);
-    renderer.render(view.scene, view.camera);
-  }
+  renderer.render(puppet.scene, puppet.camera);
+  modelDrawCalls = renderer.info.render.calls;
+  drawBones();
 }
 
-// Aim the camera at the objects (the hand, not the forearm): all of them in view,
-// seen from the direction ``from`` (above and in front).
-function fit(view, objects, from, margin) {
-  const box = new THREE.Box3();
-  for (const o of objects) {
-    if (!o.visible) continue;
-    o.updateMatrixWorld(true);
-    box.expandByObject(o);
+// The skeletons on their 2D canvas: each bone a line, each joint a white square,
+// projected by the skeleton view's camera (a few dozen lines: no WebGL canvas for them).
+const bonePoint = new THREE.Vector3();
+function project(segs, i, shift, w, h) {
+  bonePoint.set(segs[i], segs[i + 1] + shift, segs[i + 2]).project(skeleton.camera);
+  return [(bonePoint.x + 1) * w / 2, (1 - bonePoint.y) * h / 2, bonePoint.z];
+}
+
+function drawBones() {
+  const ctx = bonesCtx, w = bonesCanvas.width, h = bonesCanvas.height;
+  ctx.fillStyle = BACKGROUND_CSS;
+  ctx.fillRect(0, 0, w, h);
+  skeleton.camera.updateMatrixWorld();
+  const joints = [];
+  ctx.strokeStyle = SKELETON_CSS;
+  ctx.lineWidth = PIXEL_RATIO;
+  ctx.beginPath();
+  for (const b of Object.values(bones)) {
+    if (!b.segs) continue;
+    for (let i = 0; i + 5 < b.segs.length; i += 6) {
+      const [x0, y0, z0] = project(b.segs, i, b.shift, w, h);
+      const [x1, y1, z1] = project(b.segs, i + 3, b.shift, w, h);
+      if (Math.abs(z0) > 1 || Math.abs(z1) > 1) continue;  // outside the camera's depth
+      ctx.moveTo(x0, y0); ctx.lineTo(x1, y1);
+      joints.push(x0, y0, x1, y1);
+    }
   }
+  ctx.stroke();
+  ctx.fillStyle = '#ffffff';
+  const r = 2.5 * PIXEL_RATIO;
+  for (let i = 0; i < joints.length; i += 2) ctx.fillRect(joints[i] - r, joints[i + 1] - r, 2 * r, 2 * r);
+}
+
+// Aim the camera at what is in the box (the hand, not the forearm): all of it in view,
+// seen from the direction ``from`` (above and in front).
+function fit(view, box, from, margin) {
   if (box.isEmpty()) return;
   const sphere = box.getBoundingSphere(new THREE.Sphere());
   const halfFov = THREE.MathUtils.degToRad(view.camera.fov / 2) * Math.min(1, view.camera.aspect);
@@ -155,35 +181,159 @@ function geometryOf(g, meshes) {
   return geo;
 }
 
-// One MuJoCo model: a group per body, its geoms inside at their place in the body.
+// The light the models are lit by: a sky over a dark ground (three.js's
+// HemisphereLight's, from +y) and a sun, each at LIGHT_INTENSITY, with Lambert's law,
+// as three.js's MeshLambertMaterial computes them (linear colours) but at the vertices,
+// in JavaScript, each frame (an unlit material then only interpolates colours: the
+// least a pixel can cost where WebGL is drawn in software).
+const LIGHT_INTENSITY = 1.6;
+const SKY = new THREE.Color(0xffffff), GROUND = new THREE.Color(0x303040);
+const SUN = new THREE.Vector3(0.3, -0.4, 1.0).normalize();
+
+// One MuJoCo model as one mesh per opacity (the puppet hand: 1, where a mesh per geom
+// took 34 draw calls): every geom's triangles in one buffer, placed in its body's frame
+// once, sorted by body; each frame moves each body's vertices to where MuJoCo put the
+// body and lights them (place).
 function buildModel(model, ghost) {
   const root = new THREE.Group();
-  const bodies = model.bodies.map(() => { const b = new THREE.Group(); root.add(b); return b; });
+  const groups = new Map();  // opacity -> its geoms
   for (const g of model.geoms) {
     const geo = geometryOf(g, model.meshes);
     if (!geo) continue;
-    const colour = new THREE.Color().setRGB(g.rgba[0], g.rgba[1], g.rgba[2], THREE.SRGBColorSpace);
-    const material = ghost
-      ? new THREE.MeshBasicMaterial({ color: 0x9fd0ff, transparent: true, opacity: 0.18, depthWrite: false })
-      : new THREE.MeshLambertMaterial({ color: colour, transparent: g.rgba[3] < 1, opacity: g.rgba[3] });
-    const mesh = new THREE.Mesh(geo, material);
-    mesh.position.set(g.pos[0], g.pos[1], g.pos[2]);
-    mesh.quaternion.set(g.quat[1], g.quat[2], g.quat[3], g.quat[0]);
-    bodies[g.body].add(mesh);
+    geo.applyQuaternion(new THREE.Quaternion(g.quat[1], g.quat[2], g.quat[3], g.quat[0]));
+    geo.translate(g.pos[0], g.pos[1], g.pos[2]);
+    const opacity = ghost ? 0.18 : g.rgba[3];
+    if (!groups.has(opacity)) groups.set(opacity, []);
+    groups.get(opacity).push({ geo, body: g.body, rgba: g.rgba });
   }
-  return { root, bodies };
+  const parts = [];
+  for (const [opacity, geoms] of groups) {
+    geoms.sort((a, b) => a.body - b.body);  // each body's vertices in one run
+    const count = (p) => p.geo.getAttribute('position').count;
+    const nv = geoms.reduce((n, p) => n + count(p), 0);
+    const ni = geoms.reduce((n, p) => n + (p.geo.index ? p.geo.index.count : count(p)), 0);
+    const local = new Float32Array(3 * nv), localNormal = new Float32Array(3 * nv);
+    const albedo = new Float32Array(3 * nv), index = new Uint32Array(ni);
+    const ranges = [];  // [body, first vertex, end vertex]
+    let v = 0, k = 0;
+    for (const p of geoms) {
+      const pos = p.geo.getAttribute('position'), nrm = p.geo.getAttribute('normal');
+      const c = new THREE.Color().setRGB(p.rgba[0], p.rgba[1], p.rgba[2], THREE.SRGBColorSpace);
+      for (let i = 0; i < pos.count; i++) {
+        const at = 3 * (v + i);
+        local[at] = pos.getX(i); local[at + 1] = pos.getY(i); local[at + 2] = pos.getZ(i);
+        localNormal[at] = nrm.getX(i); localNormal[at + 1] = nrm.getY(i); localNormal[at + 2] = nrm.getZ(i);
+        albedo[at] = c.r; albedo[at + 1] = c.g; albedo[at + 2] = c.b;
+      }
+      if (p.geo.index) for (let i = 0; i < p.geo.index.count; i++) index[k++] = v + p.geo.index.getX(i);
+      else for (let i = 0; i < pos.count; i++) index[k++] = v + i;
+      const last = ranges[ranges.length - 1];
+      if (last && last[0] === p.body) last[2] = v + pos.count;
+      else ranges.push([p.body, v, v + pos.count]);
+      v += pos.count;
+      p.geo.dispose();
+    }
+    const geo = new THREE.BufferGeometry();
+    const position = new THREE.BufferAttribute(local.slice(), 3).setUsage(THREE.DynamicDrawUsage);
+    geo.setAttribute('position', position);
+    geo.setIndex(new THREE.BufferAttribute(index, 1));
+    // the ghost is one pale colour, unlit; the model its geoms' colours, lit at the vertices
+    const colour = ghost ? null : new THREE.BufferAttribute(new Float32Array(3 * nv), 3).setUsage(THREE.DynamicDrawUsage);
+    if (colour) geo.setAttribute('color', colour);
+    const material = ghost
+      ? new THREE.MeshBasicMaterial({ color: 0x9fd0ff, transparent: true, opacity, depthWrite: false })
+      : new THREE.MeshBasicMaterial({ vertexColors: true, transparent: opacity < 1, opacity });
+    const mesh = new THREE.Mesh(geo, material);
+    mesh.frustumCulled = false;  // its vertices move every frame: no bounds kept
+    root.add(mesh);
+    parts.push({ geo, local, localNormal, albedo, position, colour, ranges });
+  }
+  return { root, parts, nbody: model.bodies.length };
 }
 
-function place(built, posed) {
+// Which bodies of the ghost (the goals) are away from the model's (the present
+// positions): more than GHOST_APART_M or GHOST_APART_DEG. Only those are drawn (the
+// others would lie inside the model: a pale tint over it, at the cost of drawing the
+// hand's pixels once more, about a sixth of a frame in software WebGL).
+const GHOST_APART_M = 0.001, GHOST_APART_DEG = 1.0;
+const GHOST_APART_DOT = Math.cos(THREE.MathUtils.degToRad(GHOST_APART_DEG) / 2);
+function apart(goal, now) {
+  const n = goal.pos.length / 3;
+  if (!now || now.pos.length !== goal.pos.length) return new Array(n).fill(true);
+  const out = new Array(n);
+  for (let b = 0; b < n; b++) {
+    const dx = goal.pos[3 * b] - now.pos[3 * b], dy = goal.pos[3 * b + 1] - now.pos[3 * b + 1];
+    const dz = goal.pos[3 * b + 2] - now.pos[3 * b + 2];
+    let dot = 0;
+    for (let k = 0; k < 4; k++) dot += goal.quat[4 * b + k] * now.quat[4 * b + k];
+    out[b] = dx * dx + dy * dy + dz * dz > GHOST_APART_M ** 2 || Math.abs(dot) < GHOST_APART_DOT;
+  }
+  return out;
+}
+
+// Each body's vertices to where MuJoCo put the body (world position, quaternion w x y z),
+// and (the model, not the ghost) their colours lit as they face now. A body that is not
+// ``shown`` (when given) has its vertices all at its origin: no pixel drawn.
+function place(built, posed, shown = null) {
   const p = posed.pos, q = posed.quat;
-  built.bodies.forEach((b, i) => {
-    b.position.set(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
-    b.quaternion.set(q[4 * i + 1], q[4 * i + 2], q[4 * i + 3], q[4 * i]);
-  });
+  const k = LIGHT_INTENSITY / Math.PI;  // three.js's Lambert: albedo / pi times irradiance
+  for (const part of built.parts) {
+    const { local, localNormal, albedo, ranges } = part;
+    const out = part.position.array, lit = part.colour ? part.colour.array : null;
+    for (const [b, first, end] of ranges) {
+      const w = q[4 * b], x = q[4 * b + 1], y = q[4 * b + 2], z = q[4 * b + 3];
+      const r00 = 1 - 2 * (y * y + z * z), r01 = 2 * (x * y - w * z), r02 = 2 * (x * z + w * y);
+      const r10 = 2 * (x * y + w * z), r11 = 1 - 2 * (x * x + z * z), r12 = 2 * (y * z - w * x);
+      const r20 = 2 * (x * z - w * y), r21 = 2 * (y * z + w * x), r22 = 1 - 2 * (x * x + y * y);
+      const tx = p[3 * b], ty = p[3 * b + 1], tz = p[3 * b + 2];
+      if (shown && !shown[b]) {
+        for (let i = 3 * first; i < 3 * end; i += 3) { out[i] = tx; out[i + 1] = ty; out[i + 2] = tz; }
+        continue;
+      }
+      for (let i = 3 * first; i < 3 * end; i += 3) {
+        const vx = local[i], vy = local[i + 1], vz = local[i + 2];
+        out[i] = r00 * vx + r01 * vy + r02 * vz + tx;
+        out[i + 1] = r10 * vx + r11 * vy + r12 * vz + ty;
+        out[i + 2] = r20 * vx + r21 * vy + r22 * vz + tz;
+        if (!lit) continue;
+        const nx = localNormal[i], ny = localNormal[i + 1], nz = localNormal[i + 2];
+        const wx = r00 * nx + r01 * ny + r02 * nz;
+        const wy = r10 * nx + r11 * ny + r12 * nz;
+        const wz = r20 * nx + r21 * ny + r22 * nz;
+        const sky = 0.5 * wy + 0.5;  // the hemisphere light's weight (its sky is +y)
+        const sun = Math.max(0, wx * SUN.x + wy * SUN.y + wz * SUN.z);
+        lit[i] = albedo[i] * k * (GROUND.r + (SKY.r - GROUND.r) * sky + SKY.r * sun);
+        lit[i + 1] = albedo[i + 1] * k * (GROUND.g + (SKY.g - GROUND.g) * sky + SKY.g * sun);
+        lit[i + 2] = albedo[i + 2] * k * (GROUND.b + (SKY.b - GROUND.b) * sky + SKY.b * sun);
+      }
+    }
+    part.position.needsUpdate = true;
+    if (part.colour) part.colour.needsUpdate = true;
+    part.geo.boundingBox = null;  // recomputed when asked for (handScreenX)
+    part.geo.boundingSphere = null;
+  }
+}
+
+// The bounds (in the scene) of a placed model's bodies from ``fromBody`` on.
+function bodiesBox(built, fromBody, box) {
+  const v = new THREE.Vector3();
+  for (const part of built.parts) {
+    const a = part.position.array;
+    for (const [b, first, end] of part.ranges) {
+      if (b < fromBody) continue;
+      for (let i = 3 * first; i < 3 * end; i += 3) {
+        box.expandByPoint(v.set(a[i], a[i + 1], a[i + 2]).add(built.root.position));
+      }
+    }
+  }
+  return box;
 }
 
 const puppet = makeView($('puppet'));
 const skeleton = makeView($('skeleton'));
+const bonesCanvas = renderer ? document.createElement('canvas') : null;
+const bonesCtx = bonesCanvas ? bonesCanvas.getContext('2d', { alpha: false }) : null;
+if (bonesCanvas) { bonesCanvas.className = 'view-canvas'; skeleton.el.appendChild(bonesCanvas); }
 new ResizeObserver(layout).observe(viewsEl);
 layout();
 let models = {}, ghosts = {}, bones = {}, twoHands = false;
@@ -193,10 +343,9 @@ let latest = null, socket = null, received = 0, drawn = 0, drawnTotal = 0;
 const actions = new Set();
 
 function onScene(msg) {
-  for (const view of [puppet, skeleton]) {
-    for (const child of [...view.scene.children]) if (child.userData.model) view.scene.remove(child);
-    view.fitted = false;
-  }
+  for (const child of [...puppet.scene.children]) puppet.scene.remove(child);
+  puppet.fitted = false;
+  skeleton.fitted = false;
   models = {}; ghosts = {}; bones = {};
   const hands = Object.keys(msg.models);
   twoHands = hands.length > 1;
@@ -205,32 +354,21 @@ function onScene(msg) {
     for (const [store, ghost] of [[models, false], [ghosts, true]]) {
       const built = buildModel(msg.models[hand], ghost);
       built.root.position.y = shift;
-      built.root.userData.model = true;
       built.root.visible = !ghost;
       puppet.scene.add(built.root);
       store[hand] = built;
     }
   }
-  for (const hand of msg.skeleton_hands) {
-    const geo = new THREE.BufferGeometry();
-    geo.setAttribute('position', new THREE.Float32BufferAttribute(new Float32Array(6 * 64), 3));
-    const group = new THREE.Group();
-    const lines = new THREE.LineSegments(geo, new THREE.LineBasicMaterial({ color: SKELETON_COLOUR }));
-    const joints = new THREE.Points(geo, new THREE.PointsMaterial({ color: 0xffffff, size: 5, sizeAttenuation: false }));
-    lines.frustumCulled = joints.frustumCulled = false;  // the bones move every frame: no bounds to keep
-    group.add(lines, joints);
-    group.position.y = HAND_OFFSET_M[hand] || 0;
-    group.userData.model = true;
-    group.visible = false;
-    skeleton.scene.add(group);
-    bones[hand] = { group, geo };
-  }
+  // each hand's bones: segments (x0 y0 z0 x1 y1 z1 ...), shifted along y as the hands are
+  for (const hand of msg.skeleton_hands) bones[hand] = { segs: null, shift: HAND_OFFSET_M[hand] || 0 };
   // the camera is aimed at the hand at rest (not the forearm), with room for it to move
   for (const [hand, posed] of Object.entries(msg.rest)) place(models[hand], posed);
-  const handBodies = Object.values(models).flatMap((m) => (m.bodies.length > 2 ? m.bodies.slice(2) : m.bodies));
+  // the hand's bodies: all but the world and the forearm (the first two) where there are more
+  const handBox = new THREE.Box3();
+  for (const m of Object.values(models)) bodiesBox(m, m.nbody > 2 ? 2 : 0, handBox);
   // two hands (side by side along y) are seen from above and behind the wrists, as
   // the puppeteer sees their own: the right hand on the right
-  fit(puppet, handBodies, twoHands ? TWO_HANDS_FROM : new THREE.Vector3(0.15, -0.75, 0.85), 1.6);
+  fit(puppet, handBox, twoHands ? TWO_HANDS_FROM : new THREE.Vector3(0.15, -0.75, 0.85), 1.6);
   $('title').textContent = msg.title;
   actions.clear();
   for (const a of msg.actions) actions.add(a);
@@ -389,24 +527,29 @@ function drawTables(f) {
   drawOutputs(f);
 }
 
+// The bounds of the skeletons as they are now (the skeleton view's camera is aimed once).
+function bonesBox() {
+  const box = new THREE.Box3(), v = new THREE.Vector3();
+  for (const b of Object.values(bones)) {
+    if (!b.segs) continue;
+    for (let i = 0; i + 2 < b.segs.length; i += 3) box.expandByPoint(v.set(b.segs[i], b.segs[i + 1] + b.shift, b.segs[i + 2]));
+  }
+  return box;
+}
+
 function drawFrame(f) {
   for (const [hand, posed] of Object.entries(f.bodies)) if (models[hand]) place(models[hand], posed);
   for (const [hand, built] of Object.entries(ghosts)) {
-    built.root.visible = Boolean(f.ghost && f.ghost[hand]);
-    if (built.root.visible) place(built, f.ghost[hand]);
+    const goal = f.ghost && f.ghost[hand], now = f.bodies[hand];
+    const away = goal ? apart(goal, now) : null;
+    built.root.visible = Boolean(away && away.some(Boolean));
+    if (built.root.visible) place(built, goal, away);
   }
   for (const [hand, b] of Object.entries(bones)) {
     const segs = f.skeleton[hand];
-    b.group.visible = Boolean(segs && segs.length);
-    if (!b.group.visible) continue;
-    const attr = b.geo.getAttribute('position');
-    attr.array.fill(0);
-    attr.array.set(segs.slice(0, attr.array.length));
-    attr.needsUpdate = true;
-    b.geo.setDrawRange(0, segs.length / 3);
+    b.segs = segs && segs.length ? segs : null;
   }
-  if (!skeleton.fitted) for (const b of Object.values(bones)) b.geo.computeBoundingBox();
-  if (!skeleton.fitted) fit(skeleton, Object.values(bones).map((b) => b.group), twoHands ? TWO_SKELETONS_FROM : new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
+  if (!skeleton.fitted) fit(skeleton, bonesBox(), twoHands ? TWO_SKELETONS_FROM : new THREE.Vector3(0.0, -0.45, 1.45), 1.15);
   viewsDirty = true;
   drawMode(f);
   scheduleTables(f);
@@ -461,6 +604,6 @@ function handScreenX(hand) {
   if (box.isEmpty()) return null;
   return box.getCenter(new THREE.Vector3()).project(puppet.camera).x;
 }
-window.handrigView = { framesDrawn: () => drawnTotal, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO, handScreenX };
+window.handrigView = { framesDrawn: () => drawnTotal, modelDrawCalls: () => modelDrawCalls, softwareGL: SOFTWARE_GL, maxDrawHz: MAX_DRAW_HZ, pixelRatio: PIXEL_RATIO, handScreenX };
 connect();
 requestDraw();

@@ -184,6 +184,9 @@ def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: ViewRun, tmp_pat
         # the skeleton's view draws bones in their colour, not the puppet's skin
         near = np.abs(bones - np.array(SKELETON_RGB)).max(axis=-1) < 60
         assert near.sum() > 50 and skin(bones).mean() < 0.001
+        # the model is one mesh (one draw call), and its ghost one more when drawn: not a
+        # mesh per geom (the puppet hand has 34), each a draw call that software WebGL pays for
+        assert 1 <= browser.execute_script("return window.handrigView.modelDrawCalls()") <= 2
         # the tables are filled from the telemetry
         assert browser.find_element(By.ID, "servos").find_elements(By.CSS_SELECTOR, "tbody tr")
         assert browser.find_element(By.ID, "glove").find_elements(By.CSS_SELECTOR, "tbody tr")
@@ -233,6 +236,8 @@ def test_two_hand_page_draws_and_moves_both_hands_relaxes_and_estops_both(tmp_pa
         xs = {h: browser.execute_script(f"return window.handrigView.handScreenX('{h}')")
               for h in ("ri", "le")}
         assert xs["le"] < 0.0 < xs["ri"], xs
+        # a mesh per hand and per hand's ghost at most (docs/view.md)
+        assert 2 <= browser.execute_script("return window.handrigView.modelDrawCalls()") <= 4
         # a hand in each half of the model's view, each moved between the two moments
         w = first.shape[1]
         for name, half in (("left", slice(0, w // 2)), ("right", slice(w // 2, w))):
