@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 from handrig.app.view.address import (
     DEFAULT_HOST,
     DEFAULT_PORT,
+    browser_advice,
     is_loopback,
     parse_view_address,
     secrets_token,
@@ -74,6 +75,8 @@ def view_session(address: str | None, rig_config: RigConfig, log: Callable[[str]
     view = ViewProcess(address, rig_config).start()
     try:
         log(f"view: {view.url}")
+        if advice := browser_advice(view.url):
+            log(advice)
         yield view
     finally:
         view.close()

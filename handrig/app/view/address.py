@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ipaddress
 import secrets
+from pathlib import Path
 
 from handrig.errors import ConfigError
 
@@ -41,3 +42,29 @@ def is_loopback(host: str) -> bool:
 def secrets_token() -> str:
     """The random token a view on another interface needs in its URL."""
     return secrets.token_urlsafe(16)
+
+
+def has_gpu(dri: Path = Path("/dev/dri")) -> bool:
+    """Whether this machine has a GPU a browser could draw with (a DRM render node)."""
+    try:
+        return any(p.name.startswith("renderD") for p in dri.iterdir())
+    except OSError:
+        return False
+
+
+def browser_advice(url: str, *, gpu: bool | None = None) -> str | None:
+    """A line for the run's start when a browser on this machine would draw the page in
+    software (no GPU): where to open it so it does not take the loop's CPU. None when
+    there is a GPU, or one CPU (nothing to keep apart)."""
+    from handrig.realtime import cpu_split
+
+    if gpu if gpu is not None else has_gpu():
+        return None
+    loop_cpu, others = cpu_split()
+    if loop_cpu is None or not others:
+        return None
+    cpus = ",".join(str(c) for c in sorted(others))
+    return ("view: this machine has no GPU, so a browser here draws the page in software "
+            "and competes with the rig for the CPU (docs/view.md); open it from another "
+            "machine (--view 0.0.0.0:PORT), or start the browser off the loop's CPU "
+            f"{loop_cpu} at idle priority: taskset -c {cpus} chrt --idle 0 chromium '{url}'")
