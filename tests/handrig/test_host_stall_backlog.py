@@ -67,11 +67,11 @@ def test_a_sigstopped_rig_counts_the_gloves_frames_as_the_hosts_backlog(
                     s.torque_enabled for s in servos):
                 time.sleep(0.01)
             assert all(s.torque_enabled for s in servos), "the rig never turned torque on"
-            time.sleep(1.0)  # following the glove
+            time.sleep(0.5)  # following the glove, past the 0.3 s ease-in
             os.kill(proc.pid, signal.SIGSTOP)
             time.sleep(STALL_S)
             os.kill(proc.pid, signal.SIGCONT)
-            time.sleep(1.0)
+            time.sleep(0.5)  # the backlog is met on the first cycles after the stall
             os.kill(proc.pid, signal.SIGTERM)
             out, _err = proc.communicate(timeout=30)
         finally:

@@ -37,7 +37,7 @@ def test_a_hardware_error_and_its_reboot_are_events_in_json(tmp_path: Path) -> N
         with open(err, "w") as f:
             proc = subprocess.Popen(
                 [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", sim.port_path,
-                 "--seconds", "3", "--json"], stdout=subprocess.PIPE, stderr=f, text=True)
+                 "--seconds", "2", "--json"], stdout=subprocess.PIPE, stderr=f, text=True)
         try:
             deadline = time.monotonic() + 120
             while "first frame" not in err.read_text():  # the loop runs

@@ -72,7 +72,7 @@ def test_a_servo_missing_at_start_is_left_out_when_silence_action_is_continue(
         sim.on_sync_write = seen
         proc = subprocess.run(
             [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", sim.port_path,
-             "--seconds", "3", "--json"],
+             "--seconds", "1.5", "--json"],  # 300 cycles following the glove, 1 s ease
             capture_output=True, text=True, env=env, timeout=120)
         left = sim.servo(MISSING)
         others = [sim.servo(s.id) for s in rig.servos if s.id != MISSING]

@@ -57,7 +57,7 @@ def _rest_at(servo: EmulatedServo, ticks: int) -> None:
 
 def _run(rig: RigConfig, sim: SimBus, tmp_path: Path,
          midway: Callable[[EmulatedServo], None]) -> tuple[dict[str, Any], Seen, int]:
-    """A 3 s run; ``midway(servo 7)`` half a second in (under the emulator's lock). Returns
+    """A 2 s run; ``midway(servo 7)`` half a second in (under the emulator's lock). Returns
     the --json summary, servo 7's goals and how many came before ``midway``."""
     emulated = sim.servo(ID)
     seen: Seen = []
@@ -75,7 +75,7 @@ def _run(rig: RigConfig, sim: SimBus, tmp_path: Path,
     with open(err, "w") as f:
         proc = subprocess.Popen(
             [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", sim.port_path,
-             "--seconds", "3", "--json"], stdout=subprocess.PIPE, stderr=f, text=True, env=env)
+             "--seconds", "2", "--json"], stdout=subprocess.PIPE, stderr=f, text=True, env=env)
     try:
         deadline = time.monotonic() + 120
         while "commissioned" not in err.read_text():

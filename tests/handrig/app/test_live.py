@@ -47,13 +47,14 @@ def test_sigterm_mid_run_relaxes_then_turns_torque_off(tmp_path):
     )
     try:
         deadline = time.monotonic() + 60
-        # wait until the loop runs (the panel is off with --json: watch stderr for the bus)
+        # wait until the loop runs (the panel is off with --json: watch stderr for the
+        # loop's first frame), then past its 0.3 s ease-in: following the glove
         assert proc.stderr is not None
         while time.monotonic() < deadline:
             line = proc.stderr.readline()
-            if "commissioned" in line:
+            if line.startswith("first frame") or not line:
                 break
-        time.sleep(1.5)
+        time.sleep(0.6)
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=60)
     finally:
@@ -87,7 +88,8 @@ def test_glove_going_quiet_or_garbled_relaxes_the_puppet_and_recovers():
             if "commissioned" in line:  # the loop starts now: so do the glove's faults
                 t.start()
 
-        result = run_live(parts, LiveOptions(glove=emu.port_path, bus="sim", frames=800,
+        # 600 frames: 3 s of the glove's, the faults in its first 1.7 s
+        result = run_live(parts, LiveOptions(glove=emu.port_path, bus="sim", frames=600,
                                              log=log))
         t.join()
     s = result.summary
@@ -142,9 +144,10 @@ def test_run_sends_vmc_and_records_the_performance(tmp_path):
 
 def _start_and_signal(argv: list[str], sig: signal.Signals, *, group: bool,
                       watch_stdout: bool = False) -> tuple[int, str, str]:
-    """Start ``handrig ARGV`` in a session of its own, wait until its servos are
-    commissioned, let it run 1 s, then send ``sig`` to it (``group``: to its whole
-    process group, as a terminal's Ctrl-C does). Returns (status, stdout, stderr)."""
+    """Start ``handrig ARGV`` in a session of its own, wait for its loop's first frame,
+    let it run 0.5 s (past its 0.3 s ease-in), then send ``sig`` to it (``group``: to
+    its whole process group, as a terminal's Ctrl-C does). Returns (status, stdout,
+    stderr)."""
     import os
 
     proc = subprocess.Popen([*CLI, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -157,9 +160,9 @@ def _start_and_signal(argv: list[str], sig: signal.Signals, *, group: bool,
         while time.monotonic() < deadline:
             line = stream.readline()
             seen.append(line)
-            if "commissioned" in line or not line:
+            if line.startswith("first frame") or not line:
                 break
-        time.sleep(1.0)
+        time.sleep(0.5)
         if group:
             os.killpg(proc.pid, sig)
         else:

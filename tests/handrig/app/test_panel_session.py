@@ -25,9 +25,10 @@ def test_run_draws_the_panel_on_a_terminal(tmp_path: Path) -> None:
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
     env = {**os.environ, "TERM": "xterm", "COLUMNS": "80", "LINES": "24",
            "XDG_CONFIG_HOME": str(tmp_path / "config"), "XDG_DATA_HOME": str(tmp_path / "data")}
+    # 300 frames: 1.5 s at 200 Hz, six of the panel's redraws at 4 a second, and the ease
     proc = subprocess.Popen(
         [sys.executable, "-m", "handrig.cli", "run", "--glove",
-         "replay:config/recordings/demo_glove.csv", "--bus", "sim", "--frames", "600"],
+         "replay:config/recordings/demo_glove.csv", "--bus", "sim", "--frames", "300"],
         stdin=slave, stdout=slave, stderr=slave, env=env, cwd=CHECKOUT,
         start_new_session=True)
     os.close(slave)

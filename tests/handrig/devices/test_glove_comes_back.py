@@ -51,7 +51,7 @@ def test_a_glove_unplugged_and_plugged_back_is_reopened_and_the_puppet_resumes(
 
             def unplug_and_replug() -> None:
                 nonlocal second
-                time.sleep(1.5)
+                time.sleep(1.0)
                 first.hang_up()  # the glove is gone, and so is its device node
                 link.unlink()
                 time.sleep(1.0)
@@ -62,7 +62,7 @@ def test_a_glove_unplugged_and_plugged_back_is_reopened_and_the_puppet_resumes(
             with opened.bus.torque(handle_signals=False):
                 script = threading.Thread(target=unplug_and_replug)
                 script.start()
-                stats = rig.run(duration_s=5.0)
+                stats = rig.run(duration_s=4.0)  # 2 s to reopen and resume after it
                 script.join()
             glove_stats = glove.stats()
     finally:
@@ -91,7 +91,7 @@ def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Pat
     second: GloveEmulator | None = None
     _point(link, first.port_path)
     proc = subprocess.Popen([sys.executable, "-m", "handrig.cli", "run", "--glove", str(link),
-                             "--bus", "sim", "--seconds", "6", "--json"],
+                             "--bus", "sim", "--seconds", "5", "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert proc.stderr is not None
@@ -100,7 +100,7 @@ def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Pat
             lines.append(line)
             if "commissioned" in line:
                 break
-        time.sleep(1.5)
+        time.sleep(1.0)
         first.hang_up()
         link.unlink()
         time.sleep(1.0)
@@ -119,5 +119,5 @@ def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Pat
     assert g["disconnects"] == 1 and g["reconnects"] == 1, summary
     assert summary["relax_events"] >= 1, summary
     assert summary["resumes"] == summary["relax_events"], summary
-    assert summary["torque_off"] is True and summary["stop_reason"] == "6 s done"
+    assert summary["torque_off"] is True and summary["stop_reason"] == "5 s done"
     assert f"glove port {link} is back after" in err

@@ -67,7 +67,9 @@ def test_sigkill_mid_take_loses_at_most_about_a_second(tmp_path: Path, fmt: str)
     proc = subprocess.Popen([sys.executable, "-c", script, str(take)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        before, buf = _last_count(proc, until=int(3 * RATE_HZ), timeout_s=60.0)
+        # killed 2 s in: four of the writer's batches on disk, and twice the second the
+        # test lets it lose
+        before, buf = _last_count(proc, until=int(2 * RATE_HZ), timeout_s=60.0)
         assert before > 0, proc.stderr.read() if proc.stderr else ""
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
@@ -160,10 +162,10 @@ def test_a_sigkilled_handrig_run_leaves_a_repairable_take(tmp_path: Path) -> Non
     try:
         deadline = time.monotonic() + 120
         seen = 0
-        while seen < 2 * RATE_HZ and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.2)
+        while seen < RATE_HZ and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)  # a second of the take on disk: two of the writer's batches
             seen = _frame_lines(partial_path(take))
-        assert seen >= 2 * RATE_HZ, proc.stderr.read() if proc.poll() is not None else seen
+        assert seen >= RATE_HZ, proc.stderr.read() if proc.poll() is not None else seen
         time.sleep(0.7)  # past the next flush
         seen = _frame_lines(partial_path(take))
         kids = _descendants(proc.pid)

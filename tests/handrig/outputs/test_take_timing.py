@@ -1,12 +1,12 @@
 """Takes keep time on the live rig: gloves at 100, 200 and 500 Hz on a pty drive the
-glove-triggered loop and the emulated bus for 5 s (plus the 1 s ease to relaxed), with
+glove-triggered loop and the emulated bus for 3.5 s (plus the 1 s ease to relaxed), with
 a 1 s glove silence in the middle, recorded to CSV and BVH at once. Each take lasts as
 long as the run did (from its first frame to its end) within one frame, the BVH holds
 what the CSV says was sent at each of its frame times, and an outside BVH reader agrees.
 
 "The run" is the cycles' own times, the clock read at each tick's start, which the loop
 hands its outputs: the take must hold exactly those. They are checked against the clock
-the outputs live on (never ahead of it; the run they span lasts 5 s and the ease), not
+the outputs live on (never ahead of it; the run they span lasts 3.5 s and the ease), not
 against the clock read inside the output call, which a loaded host delays by a few
 milliseconds more at one end of the run than at the other."""
 
@@ -28,8 +28,10 @@ from handrig.outputs.recorder import Recorder, load_performance
 from sim.demo_recording import DEMO_RECORDING
 from sim.glove_emulator import GloveEmulator
 
-RUN_S = 5.0
-SILENCE_AT_S, SILENCE_S = 2.0, 1.0
+# 3.5 s: a second of frames before the silence, its second, 1.5 s after it to resume in;
+# each check below is on every frame of the run, whatever its length
+RUN_S = 3.5
+SILENCE_AT_S, SILENCE_S = 1.0, 1.0
 
 
 def _record_a_run(glove_hz: float, folder: Path
@@ -93,7 +95,7 @@ def test_takes_last_as_long_as_the_run_at_any_glove_rate(tmp_path: Path,
     # the times handed along are the clock's: none later than the call that got it (an
     # output's time made up from a frame count or the glove's rate would not be)
     assert np.all(given <= handed), float(np.max(given - handed))
-    # the run the outputs were handed, a frame each: 5 s and the 1 s ease from the first
+    # the run the outputs were handed, a frame each: RUN_S and the 1 s ease from the first
     # frame on (later on a loaded machine: a host stall near the end lengthens the run,
     # and the take with it; a run that lost the silence would be 1 s short)
     run_from_first_s = given[-1] - given[0] + frame_s

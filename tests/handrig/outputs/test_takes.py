@@ -256,9 +256,9 @@ def test_handrig_run_goes_on_when_the_disk_fills_and_says_so_at_once(tmp_path: P
     from sim.demo_recording import DEMO_RECORDING
 
     take = tmp_path / "take.csv"
-    limit = 150_000  # bytes: about 1.2 s of the 200 Hz take (the run is 4 s and the ease)
+    limit = 75_000  # bytes: about 0.6 s of the 200 Hz take (the run is 3 s and the ease)
     proc = subprocess.Popen(
-        [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--seconds", "4",
+        [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--seconds", "3",
          "--record", str(take), "--json"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         preexec_fn=lambda: _file_size_limit(limit))
@@ -274,11 +274,11 @@ def test_handrig_run_goes_on_when_the_disk_fills_and_says_so_at_once(tmp_path: P
     assert "the file size limit was reached" in lines[stopped[0]]
     assert f"{take} keeps its first" in lines[stopped[0]]
     assert "the show goes on" in lines[stopped[0]]
-    done = next(i for i, ln in enumerate(lines) if "4 s done" in ln)
+    done = next(i for i, ln in enumerate(lines) if "3 s done" in ln)
     assert stopped[0] < done  # said while the show ran, not after it
     summary = json.loads(out)
     assert summary["torque_off"] is True and "error" not in summary
-    assert summary["stop_reason"] == "4 s done" and summary["frames"] > 500
+    assert summary["stop_reason"] == "3 s done" and summary["frames"] > 500
     rec = summary["outputs"]["recording"]
     assert rec["stopped_reason"] == lines[stopped[0]]
     assert rec["frames"] > 0 and rec["frames_dropped"] > 0

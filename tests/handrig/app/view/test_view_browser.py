@@ -115,6 +115,18 @@ def wait_for(check: Any, timeout_s: float, what: str) -> Any:
     raise AssertionError(f"timed out waiting for {what}")
 
 
+def shot_after_moving(element: Any, moved: Any, timeout_s: float = 10.0) -> np.ndarray:
+    """Screenshots of ``element`` every 0.2 s until ``moved(shot)`` (the hand has moved
+    since the first shot) or ``timeout_s``; the last shot, for the test to check (it
+    fails there when nothing moved)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        time.sleep(0.2)
+        shot = pixels(element.screenshot_as_png)
+        if moved(shot) or time.monotonic() > deadline:
+            return shot
+
+
 def pixels(png: bytes) -> np.ndarray:
     from PIL import Image
 
@@ -165,8 +177,8 @@ def test_page_draws_and_moves_the_hand_relaxes_and_estops(demo: ViewRun, tmp_pat
         puppet = browser.find_element(By.ID, "puppet")
         skeleton_view = browser.find_element(By.ID, "skeleton")
         first = pixels(puppet.screenshot_as_png)
-        time.sleep(1.5)
-        second = pixels(puppet.screenshot_as_png)
+        second = shot_after_moving(  # a moment later: the hand moved (checked below)
+            puppet, lambda shot: (skin(first) != skin(shot)).mean() > 0.002)
         bones = pixels(skeleton_view.screenshot_as_png)
         if os.environ.get("HANDRIG_VIEW_SCREENSHOT"):
             save_small(browser.get_screenshot_as_png(), os.environ["HANDRIG_VIEW_SCREENSHOT"])
@@ -225,8 +237,11 @@ def test_two_hand_page_draws_and_moves_both_hands_relaxes_and_estops_both(tmp_pa
                  90, "the page to draw frames")
         puppet = browser.find_element(By.ID, "puppet")
         first = pixels(puppet.screenshot_as_png)
-        time.sleep(1.5)
-        second = pixels(puppet.screenshot_as_png)
+        w = first.shape[1]
+        halves = (("left", slice(0, w // 2)), ("right", slice(w // 2, w)))
+        second = shot_after_moving(  # a moment later: both hands moved (checked below)
+            puppet, lambda shot: all((skin(first[:, half]) != skin(shot[:, half])).mean()
+                                     > 0.001 for _, half in halves))
         bones = pixels(browser.find_element(By.ID, "skeleton").screenshot_as_png)
         if os.environ.get("HANDRIG_VIEW_TWO_HANDS_SCREENSHOT"):
             save_small(browser.get_screenshot_as_png(),
@@ -239,8 +254,7 @@ def test_two_hand_page_draws_and_moves_both_hands_relaxes_and_estops_both(tmp_pa
         # a mesh per hand and per hand's ghost at most (docs/view.md)
         assert 2 <= browser.execute_script("return window.handrigView.modelDrawCalls()") <= 4
         # a hand in each half of the model's view, each moved between the two moments
-        w = first.shape[1]
-        for name, half in (("left", slice(0, w // 2)), ("right", slice(w // 2, w))):
+        for name, half in halves:
             for shot in (first, second):
                 share = skin(shot[:, half]).mean()
                 assert share > 0.01, f"only {share:.2%} of the {name} half is the hand's colour"
