@@ -83,7 +83,14 @@ class PortProcess:
 
     def stop(self) -> None:
         """SIGTERM and wait (SIGKILL after 10 s); nothing when it has ended."""
-        stop_process(self.proc)
+        proc = self.proc
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
     def __enter__(self) -> PortProcess:
         return self
