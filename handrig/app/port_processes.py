@@ -82,7 +82,11 @@ class PortProcess:
         return self._port
 
     def stop(self) -> None:
-        """SIGTERM and wait (SIGKILL after 10 s); nothing when it has ended."""
+        """SIGTERM and wait (SIGKILL after 10 s); nothing when it has ended.
+
+        The pipes stay open: callers read what the stopped process said afterwards
+        (the emulator's counts and warnings), so this does not use
+        :func:`stop_process`, whose communicate() consumes and closes them."""
         proc = self.proc
         if proc.poll() is None:
             proc.terminate()
