@@ -19,6 +19,7 @@ import errno
 import hmac
 import json
 import mimetypes
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -41,7 +42,16 @@ if TYPE_CHECKING:
 
 STATIC_DIR = Path(__file__).with_name("static")
 MAX_MESSAGE_BYTES = 1024  # a button press is a few dozen bytes; more closes the socket
-WRITE_LIMIT_BYTES = 64 * 1024  # a browser this far behind skips frames
+# How far behind a browser may fall before it skips frames: what waits in the server's
+# buffer (WRITE_LIMIT_BYTES) and in the kernel's send buffer (SEND_BUFFER_BYTES, which
+# Linux doubles). A frame of the human rig is about 5 kB, so at most about 17 frames
+# (0.55 s at 30 a second) are on their way to a slow browser; left to itself the kernel
+# grows its buffer to 4 MB, 20 s of stale frames for a browser on a weak link.
+WRITE_LIMIT_BYTES = 16 * 1024
+SEND_BUFFER_BYTES = 32 * 1024
+# At close, how long browsers have to answer the close; then their sockets are cut (a
+# browser that stopped reading, or whose network is gone, must not hold the run's exit).
+CLOSE_GRACE_S = 1.0
 
 
 class RigControls(Protocol):
@@ -105,6 +115,7 @@ class ViewServer:
         self._scene = ""
         self._latest: tuple[int, str] | None = None
         self._browsers: set[_Browser] = set()
+        self._sockets: set[ServerConnection] = set()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
         self._thread: threading.Thread | None = None
@@ -182,7 +193,7 @@ class ViewServer:
         server: Server
         async with serve(self._handle, self.host, self.port, process_request=self._http,
                          max_size=MAX_MESSAGE_BYTES, write_limit=WRITE_LIMIT_BYTES,
-                         ping_interval=10, ping_timeout=20, close_timeout=1,
+                         ping_interval=10, ping_timeout=20, close_timeout=CLOSE_GRACE_S,
                          server_header=None) as server:
             sock = next(iter(server.sockets))
             self.port = int(sock.getsockname()[1])
@@ -190,9 +201,16 @@ class ViewServer:
             producer = asyncio.create_task(self._produce())
             await self._stop.wait()
             producer.cancel()
-            server.close(close_connections=True)
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(server.wait_closed(), 3.0)
+            server.close(close_connections=True)  # a close frame to every browser
+            try:
+                await asyncio.wait_for(asyncio.shield(server.wait_closed()), CLOSE_GRACE_S)
+            except asyncio.TimeoutError:
+                # a browser that does not read cannot take its close frame (its close
+                # waits behind the frames it did not read, with no deadline): cut it
+                for ws in list(self._sockets):
+                    ws.transport.abort()
+                with contextlib.suppress(asyncio.TimeoutError):
+                    await asyncio.wait_for(server.wait_closed(), CLOSE_GRACE_S)
 
     def _authorised(self, path: str) -> bool:
         if self.token is None:
@@ -253,6 +271,11 @@ class ViewServer:
             await asyncio.sleep(self.period_s)
 
     async def _handle(self, ws: ServerConnection) -> None:
+        sock = ws.transport.get_extra_info("socket")
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
+        self._sockets.add(ws)
         browser = _Browser()
         self._browsers.add(browser)
         self.stats.browsers = len(self._browsers)
@@ -264,6 +287,7 @@ class ViewServer:
         except ConnectionClosed:
             pass
         finally:
+            self._sockets.discard(ws)
             self._browsers.discard(browser)
             self.stats.browsers = len(self._browsers)
             sender.cancel()

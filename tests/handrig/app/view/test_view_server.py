@@ -3,6 +3,9 @@ input on the socket, closing; the scene export from the real MuJoCo models."""
 
 from __future__ import annotations
 
+import base64
+import dataclasses
+import itertools
 import json
 import math
 import os
@@ -10,6 +13,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import urllib.error
 import urllib.request
@@ -157,6 +161,91 @@ def test_close_frees_the_port(human_rig) -> None:  # type: ignore[no-untyped-def
     with pytest.raises(OSError):
         socket.create_connection(("127.0.0.1", port), timeout=2).close()
     build_server(f"127.0.0.1:{port}", human_rig).start().close()  # the port is free again
+
+
+class _StalledBrowser:
+    """A WebSocket client on a raw socket with a small receive buffer, that reads only
+    when told to (a frozen tab, or a phone whose network went away)."""
+
+    def __init__(self, port: int) -> None:
+        self.sock = socket.socket()
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        self.sock.settimeout(5)
+        self.sock.connect(("127.0.0.1", port))
+        key = base64.b64encode(os.urandom(16)).decode()
+        self.sock.sendall(
+            f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+            "Sec-WebSocket-Version: 13\r\n\r\n".encode())
+        self.buf = b""
+        while b"\r\n\r\n" not in self.buf:
+            self.buf += self._recv()
+        head, self.buf = self.buf.split(b"\r\n\r\n", 1)
+        assert head.startswith(b"HTTP/1.1 101"), head
+
+    def _recv(self) -> bytes:
+        data = self.sock.recv(65536)
+        if not data:
+            raise EOFError
+        return data
+
+    def _need(self, n: int) -> bytes:
+        while len(self.buf) < n:
+            self.buf += self._recv()
+        out, self.buf = self.buf[:n], self.buf[n:]
+        return out
+
+    def message(self) -> dict:
+        """The next text message (the server's are unmasked and unfragmented)."""
+        b0, b1 = self._need(2)
+        assert b0 == 0x81 and b1 & 0x80 == 0, (b0, b1)  # FIN + text, not masked
+        n = b1 & 0x7F
+        if n == 126:
+            n = int.from_bytes(self._need(2), "big")
+        elif n == 127:
+            n = int.from_bytes(self._need(8), "big")
+        return json.loads(self._need(n))
+
+
+def test_a_browser_that_stops_reading_skips_frames_and_cannot_hold_the_close(human_rig) -> None:  # type: ignore[no-untyped-def]
+    """A browser that stops reading has at most a few frames on their way to it (left to
+    the kernel, 4 MB: 20 s of stale frames), gets the newest frame when it reads again,
+    and cannot hold the server's close: its socket is cut after the close's grace, and
+    the server's thread ends (it used to wait on that browser for ever)."""
+    base = _snapshot(human_rig, positions=True)
+    seqs = itertools.count(1)
+    server = build_server("127.0.0.1:0", human_rig).start()
+    server.attach(lambda: dataclasses.replace(base, seq=next(seqs)))
+    stalled = _StalledBrowser(server.port)
+    try:
+        assert stalled.message()["type"] == "scene"
+
+        def behind(frames: int) -> None:  # frames encoded that the browser did not get
+            deadline = time.monotonic() + 10
+            start = server.stats.frames_encoded
+            while server.stats.frames_encoded - start < frames:
+                assert time.monotonic() < deadline, server.stats
+                time.sleep(0.05)
+        behind(30)  # 1 s at 30 frames a second, not read
+        newest = server.stats.frames_encoded
+        assert server.stats.frames_sent < newest - 10, server.stats  # the sender waits
+        stale = 0
+        while (seq := stalled.message()["seq"]) < newest:
+            stale += 1
+        assert stale <= 25, f"{stale} stale frames were on their way to the browser"
+        assert server.stats.frames_skipped > 0  # it got the newest, not every frame
+        assert seq >= newest
+
+        behind(30)  # stalled again, then the run ends
+        server.close()
+        threads = [t.name for t in threading.enumerate() if t.name == "handrig-view"]
+        assert threads == [], "the view's thread still waits on the stalled browser"
+        with pytest.raises((EOFError, ConnectionResetError)):
+            while True:  # what was queued, then the cut
+                stalled.message()
+    finally:
+        stalled.sock.close()
+        server.close()
 
 
 @pytest.mark.parametrize("rig", [None, "leap", "orca"])
@@ -314,10 +403,9 @@ def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None
     try:
         port = view_port(proc)
         # max_queue=None: the client takes in every frame while the run eases down, as a
-        # browser does; with the default bound it stops reading after 16 unread frames,
-        # misses the server's close and the run's exit waits out the server's close
-        # timeouts (~10 s more; the run ends all the same, tested by a stalled client in
-        # no test yet)
+        # browser does; with the default bound it stops reading after 16 unread frames and
+        # misses the server's close, which then waits its grace (1 s) and cuts the socket
+        # (test_a_browser_that_stops_reading_skips_frames_and_cannot_hold_the_close)
         with connect(f"ws://127.0.0.1:{port}/ws", max_queue=None) as ws:
             assert json.loads(ws.recv(timeout=30))["type"] == "scene"
             frames = [json.loads(ws.recv(timeout=30)) for _ in range(5)]
