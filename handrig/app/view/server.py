@@ -204,7 +204,7 @@ class ViewServer:
             server.close(close_connections=True)  # a close frame to every browser
             try:
                 await asyncio.wait_for(asyncio.shield(server.wait_closed()), CLOSE_GRACE_S)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 # a browser that does not read cannot take its close frame (its close
                 # waits behind the frames it did not read, with no deadline): cut it
                 for ws in list(self._sockets):
