@@ -23,7 +23,8 @@ from types import ModuleType
 import bench
 
 # only when named: long, or (bench_view) driving headless chromium pages
-LONG = frozenset({"bench_soak", "bench_arrival", "bench_skips", "bench_view", "bench_wedge"})
+LONG = frozenset({"bench_soak", "bench_arrival", "bench_skips", "bench_view", "bench_view_exit",
+                  "bench_wedge"})
 HELP = ("-h", "--help")
 
 

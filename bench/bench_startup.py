@@ -33,14 +33,13 @@ import os
 import statistics
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from bench.bench_rig import cpu_times, steal_percent
-from bench.compare import check_imports
+from bench.compare import base_worktree, resolve_commit
 
 ROOT = Path(__file__).resolve().parent.parent
 GOAL_POSITION = 116  # X-series control table: Goal Position (4 bytes)
@@ -209,24 +208,12 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(f"this tree ({head}), {args.runs} runs per case; median and worst")
         measure({"new": ROOT}, args.runs)
     else:
-        rev = subprocess.run(["git", "rev-parse", "--verify", f"{args.base}^{{commit}}"],
-                             cwd=ROOT, capture_output=True, text=True)
-        if rev.returncode != 0:
-            raise SystemExit(f"--base {args.base!r} is not a commit here: {rev.stderr.strip()}")
-        sha = rev.stdout.strip()
-        with tempfile.TemporaryDirectory(prefix="bench_startup_") as tmp:
-            base_root = Path(tmp) / "base"
-            subprocess.run(["git", "worktree", "add", "--detach", str(base_root), sha],
-                           cwd=ROOT, check=True, capture_output=True)
-            try:
-                check_imports(base_root)
-                print(f"base {sha[:9]} (a worktree) against new: this tree ({head}); "
-                      f"{args.runs} runs per case per side, alternating, after a warm-up "
-                      "run each; median and worst")
-                measure({"base": base_root, "new": ROOT}, args.runs)
-            finally:
-                subprocess.run(["git", "worktree", "remove", "--force", str(base_root)],
-                               cwd=ROOT, capture_output=True)
+        sha = resolve_commit(args.base)
+        with base_worktree(sha, prefix="bench_startup_") as base_root:
+            print(f"base {sha[:9]} (a worktree) against new: this tree ({head}); "
+                  f"{args.runs} runs per case per side, alternating, after a warm-up "
+                  "run each; median and worst")
+            measure({"base": base_root, "new": ROOT}, args.runs)
     steal = steal_percent(before, cpu_times())
     print(f"load average {load0[0]:.2f} at the start, {os.getloadavg()[0]:.2f} at the end; "
           f"steal {steal} %")

@@ -23,13 +23,14 @@ clean tree) to see the noise.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import statistics
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent.parent
@@ -117,6 +118,31 @@ def check_imports(root: Path) -> None:
                          f"{out.stdout.strip()} {out.stderr[-1000:]}")
 
 
+def resolve_commit(ref: str) -> str:
+    """The full hash of ``ref`` in this repository; SystemExit naming it when it is none."""
+    rev = subprocess.run(["git", "rev-parse", "--verify", f"{ref}^{{commit}}"],
+                         cwd=HERE, capture_output=True, text=True)
+    if rev.returncode != 0:
+        raise SystemExit(f"--base {ref!r} is not a commit here: {rev.stderr.strip()}")
+    return rev.stdout.strip()
+
+
+@contextlib.contextmanager
+def base_worktree(sha: str, prefix: str = "bench_compare_") -> Iterator[Path]:
+    """Commit ``sha`` checked out in a temporary git worktree (removed on exit), whose
+    ``handrig`` and ``bench`` import from it (:func:`check_imports`)."""
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+        base_root = Path(tmp) / "base"
+        subprocess.run(["git", "worktree", "add", "--detach", str(base_root), sha],
+                       cwd=HERE, check=True, capture_output=True)
+        try:
+            check_imports(base_root)
+            yield base_root
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(base_root)],
+                           cwd=HERE, capture_output=True)
+
+
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m bench.compare",
                                 description=__doc__.split("\n")[0])
@@ -138,42 +164,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.rounds < 1:
         raise SystemExit("--rounds must be at least 1")
     benches = [b.strip() for b in args.benches.split(",") if b.strip()]
-    rev = subprocess.run(["git", "rev-parse", "--verify", f"{args.base}^{{commit}}"],
-                         cwd=HERE, capture_output=True, text=True)
-    if rev.returncode != 0:
-        raise SystemExit(f"--base {args.base!r} is not a commit here: {rev.stderr.strip()}")
-    sha = rev.stdout.strip()
+    sha = resolve_commit(args.base)
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE,
                           capture_output=True, text=True).stdout.strip()
     dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
                            cwd=HERE, capture_output=True, text=True).stdout.strip()
-    with tempfile.TemporaryDirectory(prefix="bench_compare_") as tmp:
-        base_root = Path(tmp) / "base"
-        subprocess.run(["git", "worktree", "add", "--detach", str(base_root), sha],
-                       cwd=HERE, check=True, capture_output=True)
-        try:
-            sides = {"base": base_root, "new": HERE}
-            for root in sides.values():
-                check_imports(root)
-            print(f"base {sha[:9]} (a worktree in {base_root}) against new: this tree "
-                  f"({head}{', with uncommitted changes' if dirty else ''}); {args.rounds} "
-                  f"rounds, alternating; numbers are base->new, "
-                  f"{'every round' if args.each else 'medians over the rounds'}",
-                  flush=True)
-            for name in benches:
-                outs: dict[str, list[str]] = {"base": [], "new": []}
-                if args.warm_up:
-                    for root in sides.values():
-                        run_bench(root, name, args.seconds)
-                for k in range(args.rounds):
-                    order = ("base", "new") if k % 2 == 0 else ("new", "base")
-                    for side in order:
-                        outs[side].append(run_bench(sides[side], name, args.seconds))
-                print(f"== {name} ==")
-                print("\n".join(merge(outs["base"], outs["new"], args.each)), flush=True)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(base_root)],
-                           cwd=HERE, capture_output=True)
+    with base_worktree(sha) as base_root:
+        sides = {"base": base_root, "new": HERE}
+        check_imports(HERE)
+        print(f"base {sha[:9]} (a worktree in {base_root}) against new: this tree "
+              f"({head}{', with uncommitted changes' if dirty else ''}); {args.rounds} "
+              f"rounds, alternating; numbers are base->new, "
+              f"{'every round' if args.each else 'medians over the rounds'}",
+              flush=True)
+        for name in benches:
+            outs: dict[str, list[str]] = {"base": [], "new": []}
+            if args.warm_up:
+                for root in sides.values():
+                    run_bench(root, name, args.seconds)
+            for k in range(args.rounds):
+                order = ("base", "new") if k % 2 == 0 else ("new", "base")
+                for side in order:
+                    outs[side].append(run_bench(sides[side], name, args.seconds))
+            print(f"== {name} ==")
+            print("\n".join(merge(outs["base"], outs["new"], args.each)), flush=True)
     return 0
 
 
