@@ -2,7 +2,8 @@
 beside this one, and the ADC's noise and burst time for each ADC clock and oversampling.
 
 The noise is measured on the emulated chip: four channels held at constant levels (at
-different places between two ADC codes) with the harness's input noise, the frames read
+different places between two ADC codes) with the harness's input noise, the forearm's
+IMU still, the frames read
 from the chip's pty and decoded, the standard deviation of each channel over the run in
 the frame's counts (12-bit scale: 4 counts are one 10-bit ADC step). simavr converts
 the input at the conversion's start, exactly, whatever the ADC clock: it shows what
@@ -30,23 +31,27 @@ from sim.avr_glove import ROOT, AvrGlove, build_variant
 # 4 is pinned at full scale, where the firmware must raise "sensor pinned"
 NOISE_LEVELS = (1000.3, 1700.55, 2400.8, 3100.05)
 WARMUP_S = 0.7  # the pinned flag needs half a second at the rail
+# a forearm tilted about all three axes: no zero byte in its Q14 quaternion, as with a
+# worn glove's IMU (a level one's zeros would end the frame's head later, so more of the
+# frame would go out during the burst than it does on an arm)
+FOREARM_XYZW = (0.1, -0.3, 0.2, float(np.sqrt(1 - 0.01 - 0.09 - 0.04)))
 
 
-def base_firmware(ref: str) -> tuple[Path, str, str]:
-    """The firmware of commit ``ref`` (its ``firmware/glove`` exported with ``git
-    archive``, built with this Makefile into ``build/fwbase-SHA``): ELF, size report,
-    short hash."""
+def base_source(ref: str) -> tuple[Path, str]:
+    """``firmware/glove`` of commit ``ref``, exported with ``git archive`` into
+    ``build/fwbase-SHA/src`` (once), to build with this Makefile (``FW_SRC``); and the
+    commit's short hash."""
     from bench.compare import resolve_commit
 
     sha = resolve_commit(ref)
-    src = ROOT / "build" / f"fwbase-{sha[:12]}" / "src"
-    if not (src / "firmware" / "glove" / "glove.ino").is_file():
-        src.mkdir(parents=True, exist_ok=True)
+    root = ROOT / "build" / f"fwbase-{sha[:12]}" / "src"
+    src = root / "firmware" / "glove"
+    if not (src / "glove.ino").is_file():
+        root.mkdir(parents=True, exist_ok=True)
         archive = subprocess.run(["git", "archive", sha, "firmware/glove"], cwd=ROOT,
                                  capture_output=True, check=True)
-        subprocess.run(["tar", "-x", "-C", str(src)], input=archive.stdout, check=True)
-    elf, report = build_variant(f"build/fwbase-{sha[:12]}/obj", source=src / "firmware" / "glove")
-    return elf, report, sha[:7]
+        subprocess.run(["tar", "-x", "-C", str(root)], input=archive.stdout, check=True)
+    return src, sha[:7]
 
 
 def constant_recording(path: Path) -> None:
@@ -56,7 +61,8 @@ def constant_recording(path: Path) -> None:
     raw[:, 4] = 4095.0
     write_glove_recording(path, GloveRecording(
         t_s=t, raw=raw, buttons=np.zeros(len(t), dtype=np.int64),
-        channel_names=tuple(f"ch{k}" for k in range(5)), quat_xyzw=None, rate_hz=1000.0))
+        channel_names=tuple(f"ch{k}" for k in range(5)),
+        quat_xyzw=np.tile(FOREARM_XYZW, (len(t), 1)), rate_hz=1000.0))
 
 
 def read_frames(chip: AvrGlove, seconds: float) -> list[GloveFrame]:
@@ -101,8 +107,7 @@ def noise_row(prescaler: int, os_log2: int, rate_hz: int, seconds: float,
     rec = folder / "constant.csv"
     if not rec.is_file():
         constant_recording(rec)
-    chip = AvrGlove(rec, seconds=seconds, imu=False, noise_mv=noise_mv, firmware=elf,
-                    whole_frames=True)
+    chip = AvrGlove(rec, seconds=seconds, noise_mv=noise_mv, firmware=elf, whole_frames=True)
     with chip:
         frames = read_frames(chip, seconds)
     figures = chip.figures
