@@ -55,6 +55,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                                 description=(__doc__ or "").split("\n")[0])
     p.add_argument("--base", default=None,
                    help="also run this commit's firmware, alternated with this one's")
+    p.add_argument("--variant", action="append", default=[], metavar="DEFINES",
+                   help="also run this firmware built with these -D settings, e.g. "
+                        "'-DGLOVE_ADC_PRESCALER=64' (repeatable)")
     p.add_argument("--rates", default="200,500", help="glove rates in Hz (default 200,500)")
     p.add_argument("--rounds", type=int, default=1, help="runs of each firmware and rate")
     p.add_argument("--noise", action="store_true",
@@ -190,16 +193,18 @@ def main() -> None:
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS")
                     or (8 if os.environ.get("HANDRIG_BENCH_QUICK") else 20))
     rates = [int(r) for r in args.rates.split(",") if r]
-    sources: list[tuple[str, Path | None]] = [("this firmware", None)]
+    sources: list[tuple[str, Path | None, list[str]]] = [("this firmware", None, [])]
     if args.base:
         src, sha = base_source(args.base)
-        sources.insert(0, (f"base {sha}", src))
+        sources.insert(0, (f"base {sha}", src, []))
+    sources += [(f"this firmware {v}", None, v.split()) for v in args.variant]
     runs: dict[tuple[int, int], Run] = {}
     elves: dict[tuple[int, int], Path] = {}
-    for i, (label, src) in enumerate(sources):
+    for i, (label, src, defines) in enumerate(sources):
         for rate in rates:
-            folder = f"build/fwbench/{label.replace(' ', '-')}-{rate}"
-            elves[i, rate], size = build_variant(folder, [f"-DGLOVE_RATE_HZ={rate}"], source=src)
+            folder = f"build/fwbench/{re.sub(r'[^A-Za-z0-9_=.-]+', '-', label)}-{rate}"
+            elves[i, rate], size = build_variant(folder, [f"-DGLOVE_RATE_HZ={rate}", *defines],
+                                                 source=src)
             runs[i, rate] = Run(label, rate, size, [], [], [], [], [], [], [], [], [])
     print(f"date {datetime.date.today().isoformat()}, {seconds:g} s a run, {args.rounds} "
           f"round(s), alternated; load {os.getloadavg()[0]:.1f}", flush=True)

@@ -28,14 +28,13 @@
 #define GLOVE_N_CHANNELS 5
 #define GLOVE_ADC_INPUTS {0, 1, 2, 3, 6}
 
-/* The ADC: its clock is F_CPU / GLOVE_ADC_PRESCALER and a conversion takes 13 of its
- * clocks; each frame averages 2^GLOVE_OVERSAMPLE_LOG2 samples per channel, taken round
- * robin over the channels, scaled to 12 bits (0..4092), and stamped with the burst's
- * middle. Chosen from measured noise (docs/measurements.md, issue 36): 128 gives 125 kHz,
- * inside the datasheet's 50-200 kHz for full 10-bit resolution, 104 us a conversion;
- * one sample per channel keeps the burst at 0.53 ms, so its middle is 0.27 ms before its
- * end. More samples (8 x 5 at 250 kHz was 2.2 ms) cost latency the host's filter does
- * not need: see firmware/README.md section 6. */
+/* The ADC: its clock is F_CPU / GLOVE_ADC_PRESCALER (8..128) and a conversion takes 13
+ * of its clocks; each frame averages 2^GLOVE_OVERSAMPLE_LOG2 samples per channel (0..4),
+ * taken round robin over the channels, scaled to 12 bits (0..4092) and stamped with the
+ * burst's middle. 128 and 0: 125 kHz (inside the datasheet's 50-200 kHz for 10 bits),
+ * one sample per channel, a 0.54 ms burst. Chosen from measured noise: firmware/README.md
+ * section 6 and docs/measurements.md (issue 36); more samples or a faster clock trade
+ * latency or accuracy for a count or so of noise. */
 #ifndef GLOVE_ADC_PRESCALER
 #define GLOVE_ADC_PRESCALER 128
 #endif
