@@ -57,7 +57,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                    help="also run this commit's firmware, alternated with this one's")
     p.add_argument("--variant", action="append", default=[], metavar="DEFINES",
                    help="also run this firmware built with these -D settings, e.g. "
-                        "'-DGLOVE_ADC_PRESCALER=64' (repeatable)")
+                        "--variant=-DGLOVE_ADC_PRESCALER=64 (repeatable)")
     p.add_argument("--rates", default="200,500", help="glove rates in Hz (default 200,500)")
     p.add_argument("--rounds", type=int, default=1, help="runs of each firmware and rate")
     p.add_argument("--noise", action="store_true",

@@ -55,11 +55,11 @@ uint8_t board_burst_started(uint32_t *mid_us, uint8_t *skipped) {
     return 1;
 }
 
-uint8_t board_burst_done(uint16_t *sums) {
+uint8_t board_burst_final(uint16_t *sums) {
     if (!burst_pending) return 0;
     burst_pending = 0;
     for (uint8_t i = 0; i < GLOVE_N_CHANNELS; i++) sums[i] = burst[i];
-    return 1;
+    return GLOVE_N_CHANNELS;
 }
 
 uint8_t board_button_pressed(void) { return digitalRead(GLOVE_BUTTON_PIN) == LOW; }

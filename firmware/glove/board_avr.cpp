@@ -42,6 +42,7 @@ static const uint8_t adc_inputs[GLOVE_N_CHANNELS] = GLOVE_ADC_INPUTS;
 static volatile uint16_t sums[GLOVE_N_CHANNELS];
 static volatile uint8_t adc_channel, adc_round;
 static volatile uint8_t burst_running, burst_done, burst_started, imu_due, missed, missed_out;
+static volatile uint8_t final_n; /* channels whose sums are complete */
 static volatile uint32_t start_us;
 /* Timer1 counts at the first and at the last conversion's start: the burst's span */
 static volatile uint16_t first_t1, last_t1;
@@ -76,6 +77,7 @@ ISR(TIMER1_COMPA_vect) {
     for (uint8_t i = 0; i < GLOVE_N_CHANNELS; i++) sums[i] = 0;
     adc_channel = 0;
     adc_round = 0;
+    final_n = 0;
     burst_running = 1;
     missed_out = missed;
     missed = 0;
@@ -89,6 +91,7 @@ ISR(TIMER1_COMPA_vect) {
 
 ISR(ADC_vect) {
     sums[adc_channel] += ADC;
+    if (adc_round == OVERSAMPLE - 1) final_n = (uint8_t)(adc_channel + 1);
     if (++adc_channel == GLOVE_N_CHANNELS) {
         adc_channel = 0;
         if (++adc_round == OVERSAMPLE) {
@@ -146,13 +149,16 @@ uint8_t board_burst_started(uint32_t *mid_us, uint8_t *skipped) {
     return got;
 }
 
-uint8_t board_burst_done(uint16_t *out) {
-    if (!burst_done) return 0;
-    for (uint8_t i = 0; i < GLOVE_N_CHANNELS; i++) out[i] = sums[i];
-    noInterrupts();
-    burst_done = 0;
-    interrupts();
-    return 1;
+uint8_t board_burst_final(uint16_t *out) {
+    uint8_t n = final_n; /* the interrupt no longer adds to sums[0..n) in this burst */
+    for (uint8_t i = 0; i < n; i++) out[i] = sums[i];
+    if (n == GLOVE_N_CHANNELS) {
+        noInterrupts();
+        burst_done = 0;
+        final_n = 0;
+        interrupts();
+    }
+    return n;
 }
 
 uint8_t board_button_pressed(void) { return !(PIND & _BV(PD2)); }

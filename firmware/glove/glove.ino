@@ -91,10 +91,12 @@ void setup() {
 
 /* Per period: the IMU is read GLOVE_IMU_LEAD_US before the tick; the tick starts the ADC
  * burst and the frame's head (everything before the channels, stamped with the burst's
- * middle) goes on the wire while the burst runs; when the burst ends only the channels,
- * the CRC and the delimiter are left to send. */
+ * middle) goes on the wire while the burst runs; each channel is added to the frame as
+ * its samples are complete, so when the burst ends only the last channel, the CRC and
+ * the delimiter are left to build. */
 static gc_stream stream;
 static size_t head_len;
+static uint8_t channels_added;
 static uint8_t frame_flags;
 static uint16_t pinned_mask; /* from the last frame's channels */
 
@@ -114,13 +116,20 @@ void loop() {
         head_len = gc_frame_head(&stream, wire, &f);
         Serial.write(wire, head_len);
         frame_flags = flags;
+        channels_added = 0;
     }
-    if (!board_burst_done(sums)) {
+    uint8_t final = board_burst_final(sums);
+    if (final > channels_added) {
+        uint8_t k = (uint8_t)(final - channels_added);
+        gc_decimate(sums + channels_added, k, GLOVE_OVERSAMPLE_LOG2, channels + channels_added);
+        gc_frame_channels(&stream, wire, k, channels + channels_added);
+        channels_added = final;
+    }
+    if (final < GLOVE_N_CHANNELS) {
         board_idle();
         return;
     }
-    gc_decimate(sums, GLOVE_N_CHANNELS, GLOVE_OVERSAMPLE_LOG2, channels);
-    size_t n = gc_frame_tail(&stream, wire, GLOVE_N_CHANNELS, channels);
+    size_t n = gc_frame_end(&stream, wire);
     Serial.write(wire + head_len, n - head_len);
     board_test_point(0);
     pinned_mask = gc_rails_update(&rails, channels, GLOVE_N_CHANNELS, 4095, GLOVE_RAIL_FRAMES);

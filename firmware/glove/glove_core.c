@@ -102,17 +102,27 @@ size_t gc_frame_head(gc_stream *s, uint8_t wire[GC_MAX_WIRE], const gc_frame *f)
     return s->code_at;
 }
 
-size_t gc_frame_tail(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
-    uint8_t tail[2 * GC_MAX_CHANNELS + 2];
+void gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
+    uint8_t bytes[2 * GC_MAX_CHANNELS];
     if (n > GC_MAX_CHANNELS) n = GC_MAX_CHANNELS;
-    for (uint8_t i = 0; i < n; i++) put_u16(tail + 2 * i, channels[i]);
-    uint8_t len = (uint8_t)(2 * n);
-    put_u16(tail + len, crc_bytes(s->crc, tail, len)); /* little-endian, after the CRC'd bytes */
-    stream_stuff(s, wire, tail, (uint8_t)(len + 2));
+    for (uint8_t i = 0; i < n; i++) put_u16(bytes + 2 * i, channels[i]);
+    s->crc = crc_bytes(s->crc, bytes, (uint8_t)(2 * n));
+    stream_stuff(s, wire, bytes, (uint8_t)(2 * n));
+}
+
+size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]) {
+    uint8_t crc[2];
+    put_u16(crc, s->crc); /* little-endian, not itself part of the CRC */
+    stream_stuff(s, wire, crc, 2);
     wire[s->code_at] = s->code;
     wire[s->out] = 0x00;
     s->out++;
     return s->out;
+}
+
+size_t gc_frame_tail(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
+    gc_frame_channels(s, wire, n, channels);
+    return gc_frame_end(s, wire);
 }
 
 size_t gc_frame_build(uint8_t wire[GC_MAX_WIRE], const gc_frame *f) {

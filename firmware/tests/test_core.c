@@ -78,7 +78,16 @@ static void check_split_build(void) {
         gc_stream s;
         size_t k = gc_frame_head(&s, wire, &f);
         memcpy(early, wire, k);
-        size_t n = gc_frame_tail(&s, wire, f.n, f.channels);
+        size_t n;
+        if (trial % 2) {
+            n = gc_frame_tail(&s, wire, f.n, f.channels);
+        } else { /* the channels in two pieces, as they become final */
+            uint8_t n_ch = f.n > GC_MAX_CHANNELS ? GC_MAX_CHANNELS : f.n;
+            uint8_t first = (uint8_t)(next_random() % (n_ch + 1u));
+            gc_frame_channels(&s, wire, first, f.channels);
+            gc_frame_channels(&s, wire, (uint8_t)(n_ch - first), f.channels + first);
+            n = gc_frame_end(&s, wire);
+        }
         CHECK(n == n_want && k < n);
         CHECK(memcmp(wire, want, n_want) == 0);
         CHECK(memcmp(early, want, k) == 0);
