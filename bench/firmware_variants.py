@@ -13,17 +13,14 @@ ADC clock costs a real chip in accuracy (the datasheet's part).
 
 from __future__ import annotations
 
-import os
-import select
 import subprocess
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from firmware_protocol.glove import FLAG_SENSOR_RAIL, FrameDecoder, GloveFrame
+from firmware_protocol.glove import FLAG_SENSOR_RAIL
 from handrig.devices.glove_recording import GloveRecording, write_glove_recording
 from sim.avr_glove import ROOT, AvrGlove, build_variant
 
@@ -65,29 +62,6 @@ def constant_recording(path: Path) -> None:
         quat_xyzw=np.tile(FOREARM_XYZW, (len(t), 1)), rate_hz=1000.0))
 
 
-def read_frames(chip: AvrGlove, seconds: float) -> list[GloveFrame]:
-    """Every frame the chip sends until it stops (it runs ``seconds`` of chip time)."""
-    fd = os.open(chip.port, os.O_RDONLY | os.O_NOCTTY)
-    data = b""
-    try:
-        end = time.monotonic() + 10 * seconds + 5
-        while time.monotonic() < end:
-            r, _, _ = select.select([fd], [], [], 0.1)
-            if r:
-                try:
-                    chunk = os.read(fd, 4096)
-                except OSError:
-                    break
-                if not chunk:
-                    break
-                data += chunk
-            elif not chip.running():
-                break
-    finally:
-        os.close(fd)
-    return FrameDecoder().feed(data)
-
-
 @dataclass(frozen=True)
 class NoiseRow:
     prescaler: int
@@ -109,7 +83,7 @@ def noise_row(prescaler: int, os_log2: int, rate_hz: int, seconds: float,
         constant_recording(rec)
     chip = AvrGlove(rec, seconds=seconds, noise_mv=noise_mv, firmware=elf, whole_frames=True)
     with chip:
-        frames = read_frames(chip, seconds)
+        frames = chip.read_frames()
     figures = chip.figures
     t0 = frames[0].timestamp_us if frames else 0
     steady = [f for f in frames if (f.timestamp_us - t0) / 1e6 >= WARMUP_S]

@@ -19,6 +19,8 @@ Example::
 
 from __future__ import annotations
 
+import os
+import select
 import shutil
 import signal
 import subprocess
@@ -26,6 +28,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
 
+from firmware_protocol.glove import FrameDecoder, GloveFrame
 from handrig.errors import DataError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -151,6 +154,28 @@ class AvrGlove:
         self.close()
         raise DataError("the emulated chip stopped before opening its pty:\n"
                         + "\n".join(self.output))
+
+    def read_frames(self) -> list[GloveFrame]:
+        """Every SPEC.md frame the chip sends on its pty until it stops (give it
+        ``seconds``), decoded; the frames before a reader opened the pty are lost."""
+        fd = os.open(self.port, os.O_RDONLY | os.O_NOCTTY)
+        data = b""
+        try:
+            while True:
+                ready, _, _ = select.select([fd], [], [], 0.1)
+                if ready:
+                    try:
+                        chunk = os.read(fd, 4096)
+                    except OSError:
+                        break
+                    if not chunk:
+                        break
+                    data += chunk
+                elif not self.running():
+                    break
+        finally:
+            os.close(fd)
+        return FrameDecoder().feed(data)
 
     def running(self) -> bool:
         """The chip has started and not stopped (``seconds`` of chip time not run out)."""

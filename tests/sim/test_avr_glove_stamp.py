@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.firmware_variants import read_frames
 from sim.avr_glove import AvrGlove, build, toolchain_missing
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -32,7 +31,7 @@ def test_each_frame_is_stamped_with_its_bursts_middle_and_sent_while_it_runs(
     timing = tmp_path / "timing.txt"
     chip = AvrGlove(DEMO, seconds=1.0, speed=2.0, timing=timing)
     with chip:
-        frames = read_frames(chip, 1.0)
+        frames = chip.read_frames()
     # per frame: number, ..., [6] the middle in chip time, [9] on the micros() clock,
     # [10] the frame's bytes out before the burst's last conversion started
     rows = {int(r[0]): r for r in (line.split() for line in timing.read_text().splitlines())}
