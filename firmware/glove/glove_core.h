@@ -45,12 +45,13 @@ typedef struct {
  * The same bytes as gc_frame_head then gc_frame_tail. */
 size_t gc_frame_build(uint8_t wire[GC_MAX_WIRE], const gc_frame *f);
 
-/* A frame built in two steps, so that most of it is on the wire before its samples are
- * known: gc_frame_head stuffs everything before the channels (version .. quaternion,
- * CRC running) and returns how many wire bytes are final, wire[0..k), ready to send;
- * gc_frame_tail adds the channels, the CRC and the delimiter and returns the frame's
- * length: wire[k..len) are the rest. COBS makes a byte final once the zero that ends
- * its group is seen, so k stops at the head's last zero byte (0 when it has none). */
+/* A frame built in two steps, so that part of it is on the wire before its samples are
+ * known (typically 9 of 32 bytes: up to the buttons byte, when it is 0): gc_frame_head
+ * stuffs everything before the channels (version .. quaternion, CRC running) and
+ * returns how many wire bytes are final, wire[0..k), ready to send; gc_frame_tail
+ * adds the channels, the CRC and the delimiter and returns the frame's length:
+ * wire[k..len) are the rest. COBS makes a byte final once the zero that ends its group
+ * is seen, so k stops at the head's last zero byte (0 when it has none). */
 typedef struct {
     uint8_t out;         /* wire bytes written */
     uint8_t code_at;     /* wire index of the open group's code byte */
