@@ -79,6 +79,7 @@ class Run:
     tick_e2e: list[float]
     early_bytes: list[float]
     cpu_busy: list[float]
+    behind_s: list[float]
     rig_p50: list[float]
     rig_p99: list[float]
     frames_ok: int = 0
@@ -145,6 +146,7 @@ def run_once(run: Run, elf: Path, seconds: float) -> None:
     run.span += [float(f[7]) for f in steady]
     run.early_bytes += [float(f[10]) for f in steady]
     run.cpu_busy.append(figures.get("cpu_busy", float("nan")))
+    run.behind_s.append(figures.get("behind_wall_s", float("nan")))
     s = result.summary
     run.rig_p50.append(float(s["latency_us"]["p50"]))
     run.rig_p99.append(float(s["latency_us"]["p99"]))
@@ -165,6 +167,8 @@ def report(runs: list[Run]) -> None:
         print(f"   CPU awake {100 * float(np.mean(r.cpu_busy)):.1f} %; rig in process p50 "
               f"{np.median(r.rig_p50):.0f}, p99 {np.median(r.rig_p99):.0f} us; glove frames ok "
               f"{r.frames_ok}, CRC errors {r.crc_errors}")
+        print(f"   the chip behind wall time at the end of each run (s): "
+              f"{', '.join(f'{b:.3f}' for b in r.behind_s)} (a starved emulator: its frames late)")
 
 
 def print_noise_table() -> None:
@@ -205,7 +209,7 @@ def main() -> None:
             folder = f"build/fwbench/{re.sub(r'[^A-Za-z0-9_=.-]+', '-', label)}-{rate}"
             elves[i, rate], size = build_variant(folder, [f"-DGLOVE_RATE_HZ={rate}", *defines],
                                                  source=src)
-            runs[i, rate] = Run(label, rate, size, [], [], [], [], [], [], [], [], [])
+            runs[i, rate] = Run(label, rate, size, [], [], [], [], [], [], [], [], [], [])
     print(f"date {datetime.date.today().isoformat()}, {seconds:g} s a run, {args.rounds} "
           f"round(s), alternated; load {os.getloadavg()[0]:.1f}", flush=True)
     for _ in range(args.rounds):
