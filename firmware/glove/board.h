@@ -8,11 +8,18 @@
 
 /* Pins, ADC, the sample timer at rate_hz, I2C at 400 kHz. */
 void board_init(uint16_t rate_hz);
-/* 1 once per sample tick (and clears it); *t_us is the tick's time. */
-uint8_t board_tick(uint32_t *t_us);
-/* 1 when the tick's ADC burst is complete: sums[] holds 2^GLOVE_OVERSAMPLE_LOG2
- * 10-bit samples per channel; *missed counts ticks skipped since the last burst. */
-uint8_t board_burst_done(uint16_t *sums, uint8_t *missed);
+/* 1 once per period, GLOVE_IMU_LEAD_US before the next sample tick (and clears it):
+ * time to read the IMU, so that no frame waits for I2C. */
+uint8_t board_imu_due(void);
+/* 1 once per sample tick, when the tick has started its ADC burst (and clears it).
+ * *mid_us: the time of the burst's middle (the mean of its samples' times), on the
+ * micros() clock; *missed: ticks skipped since the last burst. */
+uint8_t board_burst_started(uint32_t *mid_us, uint8_t *missed);
+/* How many channels of the burst are final, their sums (2^GLOVE_OVERSAMPLE_LOG2 10-bit
+ * samples each) copied to sums[0..k): channels become final in order during the burst's
+ * last round; GLOVE_N_CHANNELS once the burst is complete, returned once (the burst is
+ * then over); 0 while none is. */
+uint8_t board_burst_final(uint16_t *sums);
 /* I2C at 400 kHz (board_i2c_wire.cpp, every core); register access returns 0 on NACK
  * or timeout (never hangs). */
 void board_i2c_begin(void);

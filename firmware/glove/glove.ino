@@ -1,6 +1,6 @@
 /* handrig reference glove firmware (Arduino sketch).
  *
- * Five analog sensors sampled on a hardware timer (200 Hz, oversampled), a BNO055
+ * Five analog sensors sampled on a hardware timer (200 Hz), a BNO055
  * IMU on I2C when present, a relax button, sent as firmware_protocol/SPEC.md frames
  * over the serial port. Settings: glove_config.h. Build guide: firmware/README.md.
  *
@@ -40,7 +40,7 @@ static uint8_t imu_fails;
 static uint16_t imu_wait; /* frames until the next attempt or until fusion runs */
 static uint8_t imu_calibrated;
 
-/* One IMU step per frame, so no frame waits for it. */
+/* One IMU step per frame, before the tick, so no frame waits for it. */
 static void imu_step(void) {
     uint8_t buf[8];
     quat_ok = 0;
@@ -89,32 +89,51 @@ void setup() {
     board_watchdog_start();
 }
 
+/* Per period: the IMU is read GLOVE_IMU_LEAD_US before the tick; the tick starts the ADC
+ * burst and the frame's head (everything before the channels, stamped with the burst's
+ * middle) goes on the wire while the burst runs; each channel is added to the frame as
+ * its samples are complete, so when the burst ends only the last channel, the CRC and
+ * the delimiter are left to build. */
+static gc_stream stream;
+static size_t head_len;
+static uint8_t channels_added;
+static uint8_t frame_flags;
+static uint16_t pinned_mask; /* from the last frame's channels */
+
 void loop() {
-    uint32_t t_us;
+    uint32_t mid_us;
     uint8_t missed;
-    static uint32_t sample_us;
-    if (board_tick(&t_us)) {
-        sample_us = t_us;
-        imu_step(); /* the I2C read overlaps the ADC burst */
+    if (board_imu_due()) imu_step();
+    if (board_burst_started(&mid_us, &missed)) {
+        uint8_t flags = base_flags;
+        if (imu_state == GC_IMU_ABSENT) flags |= GC_FLAG_IMU_ABSENT;
+        else if (quat_ok && !imu_calibrated) flags |= GC_FLAG_IMU_UNCALIBRATED;
+        if (pinned_mask) flags |= GC_FLAG_SENSOR_RAIL;
+        if (missed) flags |= GC_FLAG_OVERRUN;
+        uint8_t buttons = gc_debounce_update(&button, board_button_pressed(), GLOVE_DEBOUNCE_FRAMES);
+        gc_frame f = {flags, seq++, mid_us, buttons, GLOVE_N_CHANNELS, channels,
+                      quat_ok ? quat : (const int16_t *)0};
+        head_len = gc_frame_head(&stream, wire, &f);
+        Serial.write(wire, head_len);
+        frame_flags = flags;
+        channels_added = 0;
     }
-    if (!board_burst_done(sums, &missed)) {
+    uint8_t final = board_burst_final(sums);
+    if (final > channels_added) {
+        uint8_t k = (uint8_t)(final - channels_added);
+        gc_decimate(sums + channels_added, k, GLOVE_OVERSAMPLE_LOG2, channels + channels_added);
+        gc_frame_channels(&stream, wire, k, channels + channels_added);
+        channels_added = final;
+    }
+    if (final < GLOVE_N_CHANNELS) {
         board_idle();
         return;
     }
-    gc_decimate(sums, GLOVE_N_CHANNELS, GLOVE_OVERSAMPLE_LOG2, channels);
-    uint8_t flags = base_flags;
-    if (imu_state == GC_IMU_ABSENT) flags |= GC_FLAG_IMU_ABSENT;
-    else if (quat_ok && !imu_calibrated) flags |= GC_FLAG_IMU_UNCALIBRATED;
-    if (gc_rails_update(&rails, channels, GLOVE_N_CHANNELS, 4095, GLOVE_RAIL_FRAMES))
-        flags |= GC_FLAG_SENSOR_RAIL;
-    if (missed) flags |= GC_FLAG_OVERRUN;
-    uint8_t buttons = gc_debounce_update(&button, board_button_pressed(), GLOVE_DEBOUNCE_FRAMES);
-    gc_frame f = {flags, seq++, sample_us, buttons, GLOVE_N_CHANNELS, channels,
-                  quat_ok ? quat : (const int16_t *)0};
-    size_t n = gc_frame_build(wire, &f);
-    Serial.write(wire, n);
+    size_t n = gc_frame_end(&stream, wire);
+    Serial.write(wire + head_len, n - head_len);
     board_test_point(0);
-    board_led(gc_led_level(flags, frames, GLOVE_RATE_HZ));
+    pinned_mask = gc_rails_update(&rails, channels, GLOVE_N_CHANNELS, 4095, GLOVE_RAIL_FRAMES);
+    board_led(gc_led_level(frame_flags, frames, GLOVE_RATE_HZ));
     frames++;
     board_watchdog_feed();
 }

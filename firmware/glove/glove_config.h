@@ -28,19 +28,27 @@
 #define GLOVE_N_CHANNELS 5
 #define GLOVE_ADC_INPUTS {0, 1, 2, 3, 6}
 
-/* Samples per channel per frame, as a power of two (3: 8 samples), averaged and
- * scaled to 12 bits (0..4092). A conversion takes 52 us, so the burst (5 channels x 8)
- * takes 2.1 ms and must end, with the frame built, within one period: above 300 Hz
- * the default drops to 4 samples. */
-#ifndef GLOVE_OVERSAMPLE_LOG2
-#if GLOVE_RATE_HZ > 300
-#define GLOVE_OVERSAMPLE_LOG2 2
-#else
-#define GLOVE_OVERSAMPLE_LOG2 3
+/* The ADC: its clock is F_CPU / GLOVE_ADC_PRESCALER (8..128) and a conversion takes 13
+ * of its clocks; each frame averages 2^GLOVE_OVERSAMPLE_LOG2 samples per channel (0..4),
+ * taken round robin over the channels, scaled to 12 bits (0..4092) and stamped with the
+ * burst's middle. 128 and 0: 125 kHz (inside the datasheet's 50-200 kHz for 10 bits),
+ * one sample per channel, a 0.54 ms burst. Chosen from measured noise: firmware/README.md
+ * section 6 and docs/measurements.md (issue 36); more samples or a faster clock trade
+ * latency or accuracy for a count or so of noise. */
+#ifndef GLOVE_ADC_PRESCALER
+#define GLOVE_ADC_PRESCALER 128
 #endif
+#ifndef GLOVE_OVERSAMPLE_LOG2
+#define GLOVE_OVERSAMPLE_LOG2 0
 #endif
 
-/* A channel reading within 8 counts of 0 or full scale for this many frames in a row
+/* The IMU is read this long before each sample tick, so no frame waits for I2C (an
+ * 8-byte read at 400 kHz takes about 0.3 ms; a missing IMU at most the 1 ms timeout). */
+#ifndef GLOVE_IMU_LEAD_US
+#define GLOVE_IMU_LEAD_US 1000
+#endif
+
+/* A channel reading within 16 counts of 0 or full scale for this many frames in a row
  * is flagged as pinned (0.5 s at 200 Hz). */
 #define GLOVE_RAIL_FRAMES (GLOVE_RATE_HZ / 2)
 

@@ -5,19 +5,22 @@
 #include <util/crc16.h>
 #endif
 
-uint16_t gc_crc16(const uint8_t *p, size_t n) {
-    /* CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection (SPEC.md section 4) */
-    uint16_t crc = 0xFFFF;
-    while (n--) {
+/* One CRC-16/CCITT-FALSE step: poly 0x1021, MSB first (SPEC.md section 4) */
+static uint16_t crc_step(uint16_t crc, uint8_t b) {
 #if defined(__AVR__)
-        /* avr-libc's XMODEM step is this CRC's step (same polynomial, MSB first) */
-        crc = _crc_xmodem_update(crc, *p++);
+    /* avr-libc's XMODEM step is this CRC's step (same polynomial, MSB first) */
+    return _crc_xmodem_update(crc, b);
 #else
-        crc ^= (uint16_t)((uint16_t)(*p++) << 8);
-        for (uint8_t b = 0; b < 8; b++)
-            crc = (crc & 0x8000) ? (uint16_t)((crc << 1) ^ 0x1021) : (uint16_t)(crc << 1);
+    crc ^= (uint16_t)((uint16_t)b << 8);
+    for (uint8_t k = 0; k < 8; k++)
+        crc = (crc & 0x8000) ? (uint16_t)((crc << 1) ^ 0x1021) : (uint16_t)(crc << 1);
+    return crc;
 #endif
-    }
+}
+
+uint16_t gc_crc16(const uint8_t *p, size_t n) {
+    uint16_t crc = 0xFFFF; /* init 0xFFFF, no reflection, no final XOR */
+    while (n--) crc = crc_step(crc, *p++);
     return crc;
 }
 
@@ -43,32 +46,89 @@ size_t gc_cobs_encode(const uint8_t *src, size_t n, uint8_t *dst) {
     return out;
 }
 
+/* Stuffs n payload bytes onto the stream (gc_cobs_encode's steps, resumable): the wire
+ * bytes before the open group's code byte are final. The state is kept in locals while
+ * the loop runs (a store through `wire` could otherwise alias it, on every byte). */
+static void stream_stuff(gc_stream *s, uint8_t *wire, const uint8_t *src, uint8_t n) {
+    uint8_t out = s->out, code_at = s->code_at, code = s->code;
+    for (uint8_t i = 0; i < n; i++) {
+        uint8_t b = src[i];
+        if (b == 0) {
+            wire[code_at] = code;
+            code_at = out++;
+            code = 1;
+            continue;
+        }
+        wire[out++] = b;
+        if (++code == 0xFF) { /* never for a version 1 payload (at most 52 bytes) */
+            wire[code_at] = code;
+            code_at = out++;
+            code = 1;
+        }
+    }
+    s->out = out;
+    s->code_at = code_at;
+    s->code = code;
+}
+
+static uint16_t crc_bytes(uint16_t crc, const uint8_t *p, uint8_t n) {
+    while (n--) crc = crc_step(crc, *p++);
+    return crc;
+}
+
 static void put_u16(uint8_t *p, uint16_t v) {
     p[0] = (uint8_t)(v & 0xFF);
     p[1] = (uint8_t)(v >> 8);
 }
 
-size_t gc_frame_build(uint8_t wire[GC_MAX_WIRE], const gc_frame *f) {
-    uint8_t payload[GC_MAX_PAYLOAD];
+size_t gc_frame_head(gc_stream *s, uint8_t wire[GC_MAX_WIRE], const gc_frame *f) {
+    uint8_t head[18];
     uint8_t n = f->n > GC_MAX_CHANNELS ? GC_MAX_CHANNELS : f->n;
     uint8_t flags = (uint8_t)(f->flags & ~GC_FLAG_IMU_VALID);
     if (f->q14) flags |= GC_FLAG_IMU_VALID;
-    payload[0] = GC_VERSION;
-    payload[1] = flags;
-    put_u16(payload + 2, f->seq);
-    put_u16(payload + 4, (uint16_t)(f->t_us & 0xFFFF));
-    put_u16(payload + 6, (uint16_t)(f->t_us >> 16));
-    payload[8] = f->buttons;
-    payload[9] = n;
-    for (uint8_t i = 0; i < 4; i++)
-        put_u16(payload + 10 + 2 * i, f->q14 ? (uint16_t)f->q14[i] : 0);
-    for (uint8_t i = 0; i < n; i++) put_u16(payload + 18 + 2 * i, f->channels[i]);
-    size_t len = 18 + 2 * (size_t)n;
-    put_u16(payload + len, gc_crc16(payload, len));
-    len += 2;
-    size_t out = gc_cobs_encode(payload, len, wire);
-    wire[out++] = 0x00;
-    return out;
+    head[0] = GC_VERSION;
+    head[1] = flags;
+    put_u16(head + 2, f->seq);
+    put_u16(head + 4, (uint16_t)(f->t_us & 0xFFFF));
+    put_u16(head + 6, (uint16_t)(f->t_us >> 16));
+    head[8] = f->buttons;
+    head[9] = n;
+    for (uint8_t i = 0; i < 4; i++) put_u16(head + 10 + 2 * i, f->q14 ? (uint16_t)f->q14[i] : 0);
+    s->out = 1;
+    s->code_at = 0;
+    s->code = 1;
+    s->crc = crc_bytes(0xFFFF, head, sizeof head);
+    stream_stuff(s, wire, head, sizeof head);
+    return s->code_at;
+}
+
+void gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
+    uint8_t bytes[2 * GC_MAX_CHANNELS];
+    if (n > GC_MAX_CHANNELS) n = GC_MAX_CHANNELS;
+    for (uint8_t i = 0; i < n; i++) put_u16(bytes + 2 * i, channels[i]);
+    s->crc = crc_bytes(s->crc, bytes, (uint8_t)(2 * n));
+    stream_stuff(s, wire, bytes, (uint8_t)(2 * n));
+}
+
+size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]) {
+    uint8_t crc[2];
+    put_u16(crc, s->crc); /* little-endian, not itself part of the CRC */
+    stream_stuff(s, wire, crc, 2);
+    wire[s->code_at] = s->code;
+    wire[s->out] = 0x00;
+    s->out++;
+    return s->out;
+}
+
+size_t gc_frame_tail(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
+    gc_frame_channels(s, wire, n, channels);
+    return gc_frame_end(s, wire);
+}
+
+size_t gc_frame_build(uint8_t wire[GC_MAX_WIRE], const gc_frame *f) {
+    gc_stream s;
+    gc_frame_head(&s, wire, f);
+    return gc_frame_tail(&s, wire, f->n, f->channels);
 }
 
 void gc_decimate(const uint16_t *sums, uint8_t n, uint8_t os_log2, uint16_t *out) {

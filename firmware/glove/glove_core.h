@@ -41,8 +41,30 @@ typedef struct {
     const int16_t *q14;     /* x, y, z, w in Q14, or NULL when not valid */
 } gc_frame;
 
-/* Builds one frame as it goes on the wire (delimiter included); returns its length. */
+/* Builds one frame as it goes on the wire (delimiter included); returns its length.
+ * The same bytes as gc_frame_head then gc_frame_tail. */
 size_t gc_frame_build(uint8_t wire[GC_MAX_WIRE], const gc_frame *f);
+
+/* A frame built in two steps, so that part of it is on the wire before its samples are
+ * known (typically 9 of 32 bytes: up to the buttons byte, when it is 0): gc_frame_head
+ * stuffs everything before the channels (version .. quaternion, CRC running) and
+ * returns how many wire bytes are final, wire[0..k), ready to send; gc_frame_tail
+ * adds the channels, the CRC and the delimiter and returns the frame's length:
+ * wire[k..len) are the rest. COBS makes a byte final once the zero that ends its group
+ * is seen, so k stops at the head's last zero byte (0 when it has none). */
+typedef struct {
+    uint8_t out;         /* wire bytes written */
+    uint8_t code_at;     /* wire index of the open group's code byte */
+    uint8_t code;        /* the open group's length + 1 */
+    uint16_t crc;        /* CRC-16/CCITT-FALSE of the payload so far */
+} gc_stream;
+size_t gc_frame_head(gc_stream *s, uint8_t wire[GC_MAX_WIRE], const gc_frame *f);
+size_t gc_frame_tail(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels);
+/* gc_frame_tail in pieces, for channels that become final one after another: add n more
+ * channels (in order; f->n in all), then gc_frame_end adds the CRC and the delimiter and
+ * returns the frame's length. */
+void gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels);
+size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]);
 
 /* Oversampling: n channel sums of 2^os_log2 samples of a 10-bit ADC each, scaled to
  * 12 bits (0..4092). os_log2 is 0..4. */
@@ -56,8 +78,9 @@ uint8_t gc_debounce_update(gc_debounce *d, uint8_t level, uint8_t need);
 
 /* Rails: a channel at <= GC_RAIL_LOW or >= full_scale - GC_RAIL_LOW for `need` calls in
  * a row is pinned (a broken wire or a shorted sensor). Returns the mask of pinned
- * channels (bit i = channel i). */
-#define GC_RAIL_LOW 8
+ * channels (bit i = channel i). 16 counts are 4 steps of a 10-bit ADC: a single sample
+ * at a rail stays inside with a step or two of noise (8 counts did not: issue 36). */
+#define GC_RAIL_LOW 16
 typedef struct {
     uint16_t run[GC_MAX_CHANNELS];
 } gc_rails;

@@ -27,7 +27,7 @@ STATUS_NAMES: dict[int, str] = {
 }
 """Status bit -> the short name the monitor and the summary print."""
 
-RAIL_MARGIN = 8
+RAIL_MARGIN = 16
 """Counts from 0 or full scale within which a channel counts as pinned (the firmware's
 ``GC_RAIL_LOW``)."""
 FULL_SCALES = (1023, 4095, 65535)

@@ -19,12 +19,16 @@ Example::
 
 from __future__ import annotations
 
+import os
+import select
 import shutil
 import signal
 import subprocess
+from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
 
+from firmware_protocol.glove import FrameDecoder, GloveFrame
 from handrig.errors import DataError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,15 +62,33 @@ def build() -> None:
         raise DataError(f"make firmware sim-avr-glove failed:\n{done.stdout}{done.stderr}")
 
 
+def build_variant(build_dir: str | Path, defines: Sequence[str] = (),
+                  source: str | Path | None = None) -> tuple[Path, str]:
+    """``make firmware FW_BUILD=build_dir FW_DEFS=defines [FW_SRC=source]``: the firmware
+    with other settings (``-DGLOVE_RATE_HZ=500``) or from other sources (an older
+    commit's ``firmware/glove``). Returns the ELF and make's flash and RAM report;
+    raises DataError with make's output."""
+    args = ["make", "-s", "firmware", f"FW_BUILD={build_dir}", f"FW_DEFS={' '.join(defines)}"]
+    if source is not None:
+        args.append(f"FW_SRC={source}")
+    done = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise DataError(f"{' '.join(args)} failed:\n{done.stdout}{done.stderr}")
+    report = "\n".join(line for line in done.stdout.splitlines()
+                       if line.startswith(("flash:", "RAM:")))
+    return ROOT / build_dir / "glove.elf", report
+
+
 def parse_figures(line: str) -> dict[str, float]:
     """The harness's last line, ``figures: key value ... key mean A min B max C ...``,
-    as a dict (``sample_to_last_byte_us_mean`` and so on)."""
+    as a dict (``sample_to_last_byte_us_mean``, ``burst_middle_to_last_byte_us_max`` and
+    so on)."""
     words = line.split()[1:]
     out: dict[str, float] = {}
     i = 0
     while i + 1 < len(words):
         key = words[i]
-        if key == "sample_to_last_byte_us":
+        if words[i + 1] == "mean" and i + 6 < len(words):
             for j in range(3):
                 out[f"{key}_{words[i + 1 + 2 * j]}"] = float(words[i + 2 + 2 * j])
             i += 7
@@ -84,14 +106,17 @@ class AvrGlove:
     then. ``pinned``: raw channel -> counts held there (a broken wire). ``timing``: a
     file for per-frame times. ``speed``: chip time per wall time. ``noise_mv``: the
     analog inputs' noise (standard deviation, mV). ``whole_frames``: the pty gets each
-    frame in one write (default: byte by byte, as the UART sends them).
+    frame in one write (default: byte by byte, as the UART sends them). ``firmware``:
+    another ELF than ``make firmware``'s (a variant built with other settings).
     """
 
     def __init__(self, recording: str | Path, *, seconds: float | None = None, imu: bool = True,
                  imu_off_at_s: float | None = None, pinned: dict[int, int] | None = None,
                  timing: str | Path | None = None, speed: float = 1.0,
-                 noise_mv: float = 2.0, whole_frames: bool = False) -> None:
-        self.args = [str(HARNESS), str(FIRMWARE_ELF), str(recording)]
+                 noise_mv: float = 2.0, whole_frames: bool = False,
+                 firmware: str | Path | None = None) -> None:
+        self.firmware = Path(firmware) if firmware is not None else FIRMWARE_ELF
+        self.args = [str(HARNESS), str(self.firmware), str(recording)]
         if seconds is not None:
             self.args += ["--seconds", f"{seconds:g}"]
         if not imu:
@@ -114,7 +139,7 @@ class AvrGlove:
 
     def start(self) -> AvrGlove:
         """Start the chip; returns once its UART's pty exists (:attr:`port`)."""
-        for path in (HARNESS, FIRMWARE_ELF):
+        for path in (HARNESS, self.firmware):
             if not path.is_file():
                 raise DataError(f"{path} not built: run `make firmware sim-avr-glove`")
         self._proc = subprocess.Popen(self.args, stdout=subprocess.PIPE, text=True)
@@ -129,6 +154,32 @@ class AvrGlove:
         self.close()
         raise DataError("the emulated chip stopped before opening its pty:\n"
                         + "\n".join(self.output))
+
+    def read_frames(self) -> list[GloveFrame]:
+        """Every SPEC.md frame the chip sends on its pty until it stops (give it
+        ``seconds``), decoded; the frames before a reader opened the pty are lost."""
+        fd = os.open(self.port, os.O_RDONLY | os.O_NOCTTY)
+        data = b""
+        try:
+            while True:
+                ready, _, _ = select.select([fd], [], [], 0.1)
+                if ready:
+                    try:
+                        chunk = os.read(fd, 4096)
+                    except OSError:
+                        break
+                    if not chunk:
+                        break
+                    data += chunk
+                elif not self.running():
+                    break
+        finally:
+            os.close(fd)
+        return FrameDecoder().feed(data)
+
+    def running(self) -> bool:
+        """The chip has started and not stopped (``seconds`` of chip time not run out)."""
+        return self._proc is not None and self._proc.poll() is None
 
     def pull_imu(self) -> None:
         """The BNO055 stops answering now (its wire pulled)."""

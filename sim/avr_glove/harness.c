@@ -12,8 +12,11 @@
  *   - paces the chip to wall-clock time and bridges its UART to a pseudo-terminal,
  *     whose path it prints first: "port: /dev/pts/N".
  * It measures, from outside the firmware, each frame's time from the sample tick
- * (the test point D8 rising) to the frame's last bit on the wire, and the fraction of
- * cycles the CPU was awake; they are printed at the end ("figures: ...").
+ * (the test point D8 rising) to the frame's last bit on the wire; the frame's ADC burst
+ * (the conversions started while D8 is high), its span and its middle (the mean of its
+ * conversions' start times: simavr takes the input when a conversion starts), and the
+ * time from that middle to the last bit; and the fraction of cycles the CPU was awake.
+ * They are printed at the end ("figures: ...").
  *
  * Options:
  *   --seconds S      stop after S s of chip time (default: run until SIGTERM/SIGINT)
@@ -22,7 +25,12 @@
  *                    it at once
  *   --pin CH=COUNTS  hold raw channel CH at COUNTS (0..4095), e.g. a broken wire
  *   --timing FILE    per frame: its number, the tick and the last byte on CLOCK_MONOTONIC
- *                    (s), tick to last byte (us), the tick in chip time (s)
+ *                    (s), tick to last byte (us), the tick in chip time (s), the burst's
+ *                    middle to the last byte (us), the middle in chip time (s), the burst's
+ *                    span from its first to its last conversion start (us), its conversions,
+ *                    the middle on the Arduino core's micros() clock (us since timer 0 was
+ *                    started: what the frame's timestamp says when it stamps the middle),
+ *                    the frame's bytes sent before its burst's last conversion started
  *   --noise MV       ADC input noise, standard deviation in mV (default 2)
  *   --speed X        chip time runs X times wall time (default 1)
  *   --whole-frames   hand the pty each frame at once when its last byte is out (default:
@@ -158,9 +166,12 @@ static double gauss(void) { /* Box-Muller on a xorshift generator */
     return sqrt(-2 * log(u[0])) * cos(2 * M_PI * u[1]);
 }
 
+static void burst_conversion(void);
+
 static void adc_trigger(struct avr_irq_t *irq, uint32_t value, void *param) {
     (void)irq;
     (void)param;
+    burst_conversion();
     unsigned src = (value >> 19) & 0x1FFF; /* avr_adc_mux_t: kind:3 gain:8 diff:8 src:13 */
     const row_t *r = row_at(chip_s());
     for (int k = 0; k < N_CH; k++) {
@@ -259,11 +270,21 @@ static avr_cycle_count_t busy_cycles, counted_cycles;
 static struct {
     avr_cycle_count_t cycle;
     double mono, chip;
+    /* the ADC burst: conversions started while the test point is high */
+    avr_cycle_count_t conv_first, conv_last;
+    double conv_sum; /* of start cycles minus `cycle`, for the mean */
+    unsigned conv_n;
+    unsigned early_bytes; /* frame bytes out before the latest conversion started */
 } ticks[TICKS_KEPT];
 static unsigned ticks_head, ticks_n;
+static uint32_t test_point_high;
+static unsigned frame_bytes; /* bytes of the frame now going out */
+static avr_cycle_count_t micros_origin; /* the Arduino core's init() starts timer 0 */
+static int micros_started;
 static unsigned long frames_out, bytes_dropped;
 static unsigned long lat_n;
 static double lat_sum_us, lat_max_us, lat_min_us = 1e9;
+static double mid_sum_us, mid_max_us, mid_min_us = 1e9, span_sum_us;
 #define WARMUP_S 1.0 /* the IMU starting up is not the steady state */
 
 static double byte_time_us(void) {
@@ -286,8 +307,33 @@ static void test_point(struct avr_irq_t *irq, uint32_t value, void *param) {
         ticks[k].cycle = avr->cycle;
         ticks[k].chip = chip_s();
         ticks[k].mono = mono_s();
+        ticks[k].conv_n = 0;
+        ticks[k].conv_sum = 0;
+        ticks[k].early_bytes = 0;
     }
     last = value;
+    test_point_high = value;
+}
+
+/* TCCR0B written: the first non-zero write starts timer 0, micros()'s clock. */
+static void timer0_started(struct avr_t *a, avr_io_addr_t addr, uint8_t v, void *param) {
+    (void)addr;
+    (void)param;
+    if (v && !micros_started) {
+        micros_started = 1;
+        micros_origin = a->cycle;
+    }
+}
+
+/* A conversion starts: it belongs to the newest tick's burst while the test point is high. */
+static void burst_conversion(void) {
+    if (!test_point_high || !ticks_n) return;
+    unsigned k = (ticks_head + ticks_n - 1) % TICKS_KEPT;
+    if (!ticks[k].conv_n) ticks[k].conv_first = avr->cycle;
+    ticks[k].conv_last = avr->cycle;
+    ticks[k].early_bytes = frame_bytes;
+    ticks[k].conv_sum += (double)(avr->cycle - ticks[k].cycle);
+    ticks[k].conv_n++;
 }
 
 static uint8_t out_buf[64];
@@ -313,22 +359,34 @@ static void uart_out(struct avr_irq_t *irq, uint32_t value, void *param) {
             out_len = 0;
         }
     }
+    frame_bytes = b ? frame_bytes + 1 : 0;
     if (b != 0 || !ticks_n) return; /* not a delimiter, or the one sent at reset */
-    avr_cycle_count_t tick_cycle = ticks[ticks_head].cycle;
-    double tick_mono = ticks[ticks_head].mono, tick_chip = ticks[ticks_head].chip;
+    unsigned h = ticks_head;
+    avr_cycle_count_t tick_cycle = ticks[h].cycle;
+    double tick_mono = ticks[h].mono, tick_chip = ticks[h].chip;
+    /* no conversion seen (a firmware that does not mark its burst): the tick stands in */
+    double mid_cycle = (double)tick_cycle + (ticks[h].conv_n ? ticks[h].conv_sum / ticks[h].conv_n : 0.0);
+    double span_us = ticks[h].conv_n ? (double)(ticks[h].conv_last - ticks[h].conv_first) * 1e6 / F_CPU : 0.0;
+    unsigned conv_n = ticks[h].conv_n, early = conv_n ? ticks[h].early_bytes : 0;
     ticks_head = (ticks_head + 1) % TICKS_KEPT;
     ticks_n--;
     double us = (double)(avr->cycle - tick_cycle) * 1e6 / F_CPU + byte_time_us();
+    double mid_us = ((double)avr->cycle - mid_cycle) * 1e6 / F_CPU + byte_time_us();
     frames_out++;
     if (chip_s() >= WARMUP_S) {
         lat_n++;
         lat_sum_us += us;
         if (us > lat_max_us) lat_max_us = us;
         if (us < lat_min_us) lat_min_us = us;
+        mid_sum_us += mid_us;
+        if (mid_us > mid_max_us) mid_max_us = mid_us;
+        if (mid_us < mid_min_us) mid_min_us = mid_us;
+        span_sum_us += span_us;
     }
     if (timing)
-        fprintf(timing, "%lu %.7f %.7f %.1f %.7f\n", frames_out, tick_mono,
-                mono_s() + byte_time_us() * 1e-6, us, tick_chip);
+        fprintf(timing, "%lu %.7f %.7f %.1f %.7f %.1f %.7f %.1f %u %.1f %u\n", frames_out, tick_mono,
+                mono_s() + byte_time_us() * 1e-6, us, tick_chip, mid_us, mid_cycle / F_CPU,
+                span_us, conv_n, (mid_cycle - (double)micros_origin) * 1e6 / F_CPU, early);
 }
 
 static void on_signal(int sig) {
@@ -413,6 +471,7 @@ int main(int argc, char **argv) {
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), uart_out, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_OUT_TRIGGER), adc_trigger, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 0), test_point, NULL);
+    avr_register_io_write(avr, 0x45 /* TCCR0B */, timer0_started, NULL); /* beside the timer's own */
 
     static const char *twi_names[2] = {"8>bno055.out", "32<bno055.in"};
     bno_irq = avr_alloc_irq(&avr->irq_pool, 0, 2, twi_names);
@@ -450,11 +509,13 @@ int main(int argc, char **argv) {
         if (opt_seconds >= 0 && chip_s() >= opt_seconds) break;
     }
     double behind = (mono_s() - wall0) - chip_s() / opt_speed;
-    if (!lat_n) lat_min_us = 0; /* nothing measured after the warm-up */
+    if (!lat_n) lat_min_us = mid_min_us = 0; /* nothing measured after the warm-up */
     printf("figures: chip_s %.3f frames %lu sample_to_last_byte_us mean %.1f min %.1f max %.1f "
+           "burst_middle_to_last_byte_us mean %.1f min %.1f max %.1f burst_span_us %.1f "
            "cpu_busy %.4f behind_wall_s %.3f bytes_dropped %lu state %d\n",
            chip_s(), frames_out, lat_n ? lat_sum_us / lat_n : 0.0,
-           lat_min_us, lat_max_us,
+           lat_min_us, lat_max_us, lat_n ? mid_sum_us / lat_n : 0.0, mid_min_us, mid_max_us,
+           lat_n ? span_sum_us / lat_n : 0.0,
            counted_cycles ? (double)busy_cycles / counted_cycles : 0.0, behind, bytes_dropped, state);
     if (timing) fclose(timing);
     return state == cpu_Crashed ? 1 : 0;
