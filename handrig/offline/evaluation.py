@@ -59,6 +59,9 @@ class Errors:
     overall: float
     ri_clamped: float | None = None
     le_clamped: float | None = None
+    ri_folds: tuple[float, ...] = ()
+    le_folds: tuple[float, ...] = ()
+    """Each fold's own right/left RMS (the spread of the pooled figure), when known."""
 
     def to_json(self) -> dict[str, object]:
         return {
@@ -165,6 +168,10 @@ class Split:
     description: str
     folds: tuple[tuple[Mask, Mask], ...]
     offset_deg: float = 0.0
+    mirrored: bool = False
+    """Test on the other hand: the held-out frames mirrored (``hand.mirror_pose``: the
+    left hand's curves read as the right's and back), the maps fit on the frames as they
+    are."""
 
 
 def group_rms(err: Errors, side: str = "ri") -> dict[str, float]:
@@ -253,6 +260,7 @@ def out_of_regime(
     Maps are fit once per (method, training set) and shared between splits.
     """
     y = np.asarray(curves, dtype=np.float64)
+    y_other = hand.mirror_pose(y)
     cache: dict[tuple[str, bytes], LinearMap] = {}
     out: dict[str, dict[str, Errors]] = {}
     for sp in splits:
@@ -260,24 +268,31 @@ def out_of_regime(
         draws = OFFSET_DRAWS if sp.offset_deg else 1
         offsets = [rng.choice([-1.0, 1.0], size=(draws, len(controls))) * sp.offset_deg
                    for _ in sp.folds]
+        source = y_other if sp.mirrored else y
         res: dict[str, Errors] = {}
         for method in methods:
-            preds, truth, clamped = [], [], []
+            preds, truth, clamped, folds = [], [], [], []
             for (train, test), offs in zip(sp.folds, offsets, strict=True):
                 key = (method, np.packbits(train).tobytes())
                 m = cache.get(key)
                 if m is None:
                     m = fit_map(y[train], controls, method, groups=groups[train])
                     cache[key] = m
+                fold_p, fold_t = [], []
                 for off in offs:
-                    seen = y[test].copy()
+                    seen = source[test].copy()
                     seen[:, m.control_indices] += off
-                    preds.append(predict(m, seen, limits))
-                    truth.append(y[test])
+                    fold_p.append(predict(m, seen, limits))
+                    fold_t.append(source[test])
                     clamped.append(np.array(clamped_fractions(m, seen, limits)) * len(seen))
+                folds.append(rms_errors(np.concatenate(fold_p), np.concatenate(fold_t)))
+                preds += fold_p
+                truth += fold_t
             err = rms_errors(np.concatenate(preds), np.concatenate(truth))
             ri_c, le_c = np.sum(clamped, axis=0) / sum(len(t) for t in truth)
-            res[method] = replace(err, ri_clamped=float(ri_c), le_clamped=float(le_c))
+            res[method] = replace(err, ri_clamped=float(ri_c), le_clamped=float(le_c),
+                                  ri_folds=tuple(f.ri for f in folds),
+                                  le_folds=tuple(f.le for f in folds))
         out[sp.name] = res
     return out
 
