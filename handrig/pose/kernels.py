@@ -216,6 +216,19 @@ def glove_controls(
 
 
 @njit(cache=True, nogil=True)
+def hinge_features(controls: Any, knots: Any, out: Any) -> None:  # pragma: no cover
+    """A piecewise-linear map's features of one frame: ``out[:k] = controls`` and
+    ``out[k + i] = max(0, controls[i] - knots[i])`` for the ``h`` knots (a non-finite
+    control stays non-finite in both halves)."""
+    k = controls.shape[0]
+    for i in range(k):
+        out[i] = controls[i]
+    for i in range(knots.shape[0]):
+        v = controls[i] - knots[i]
+        out[k + i] = 0.0 if v <= 0.0 else v
+
+
+@njit(cache=True, nogil=True)
 def expand_frame(
     controls: Any, gains_t: Any, bias: Any, low: Any, high: Any, train_low: Any,
     train_high: Any, out: Any, outside_counts: Any,
@@ -297,6 +310,7 @@ def warm_up() -> None:
                   0.5, f - 1.0, f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
     expand_frame(f, np.zeros((2, 2)), f, f - 1.0, f + 1.0, f - 1.0, f + 1.0, np.zeros(2),
                  np.zeros(2, np.int64))
+    hinge_features(f, f, np.zeros(4))
     robot_servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]),
                         0.0, np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, f - 2.0,
                         f + 2.0, 0.5, 0.5, f - 1.0, f + 1.0, np.zeros(2),
