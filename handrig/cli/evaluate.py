@@ -26,7 +26,7 @@ from handrig.offline.evaluation import (
     rms_errors,
     write_error_figure,
 )
-from handrig.offline.fitting import CONTROL_NOISE_DEG, METHODS
+from handrig.offline.fitting import CONTROL_NOISE_DEG, METHODS, PIECEWISE_NOISE_DEG
 from handrig.offline.validation import (
     GAP_S,
     best_methods,
@@ -42,7 +42,10 @@ LABELS = {"ridge": "least squares on all controls, ridge penalty",
           "paper": "the paper's single-controller map (4.2)",
           "mean": "constant mean",
           "robust": f"shrunk toward the paper map for controls off by {CONTROL_NOISE_DEG:g} deg,"
-                    " per-curve CV vs mean"}
+                    " per-curve CV vs mean",
+          "piecewise": "piecewise-linear (each control's slope may change at its training"
+                       f" median), shrunk toward the mean pose for controls off by"
+                       f" {PIECEWISE_NOISE_DEG:g} deg"}
 
 
 def register(sub: Any) -> None:
@@ -50,7 +53,8 @@ def register(sub: Any) -> None:
         "evaluate", help="RMS error of a map against a BVH's own curves; methods side by side",
         description="1) the map's RMS reconstruction error per curve, per hand and overall"
         " (degrees) against the file's own curves; 2) each method (the constant mean, the"
-        " paper's single-controller map, ridge, robust) with the map's controls, fitted"
+        " paper's single-controller map, ridge, robust, piecewise) with the map's controls,"
+        " fitted"
         " without and tested on held-out data, split by split: leave one clip out (the"
         " reference file's gesture clips, else --folds contiguous blocks), train on some"
         " kinds of gesture and test on another, the calm frames of each held-out clip"

@@ -148,7 +148,7 @@ OFFSET_DEG = 2.0
 OFFSET_SEED = 0
 OFFSET_DRAWS = 8
 """Sign patterns of the offset per held-out fold (pooled), so the figure is not one draw's."""
-REGIME_METHODS: tuple[str, ...] = ("mean", "paper", "ridge", "robust")
+REGIME_METHODS: tuple[str, ...] = ("mean", "paper", "ridge", "robust", "piecewise")
 CURVE_GROUPS: dict[str, tuple[str, ...]] = {
     "thumb": ("ThumbCMCx", "ThumbCMCy", "ThumbCMCz", "ThumbMCPz", "ThumbIPz"),
     "MCP": tuple(f"{f}MCP{a}" for f in ("Index", "Middle", "Ring", "Pinky") for a in "xyz"),
@@ -301,8 +301,8 @@ def regime_table(results: dict[str, dict[str, Errors]], splits: Sequence[Split])
     """The results as aligned text lines: split, method, each hand and its curve groups."""
     groups = tuple(CURVE_GROUPS)
     cols = " ".join(f"{g:>7}" for g in groups) + f" {'clamp%':>6}"
-    lines = [f"  {'':<12} {'':<7} {'right hand':^39}   {'left hand':^39}",
-             f"  {'split':<12} {'method':<7} {'all':>7} {cols}   {'all':>7} {cols}"]
+    lines = [f"  {'':<12} {'':<9} {'right hand':^39}   {'left hand':^39}",
+             f"  {'split':<12} {'method':<9} {'all':>7} {cols}   {'all':>7} {cols}"]
     for sp in splits:
         for method, err in results[sp.name].items():
             cells = []
@@ -312,7 +312,7 @@ def regime_table(results: dict[str, dict[str, Errors]], splits: Sequence[Split])
                 pct = "-" if clamped is None else f"{100 * clamped:.2f}"
                 cells.append(f"{total:>7.2f} " + " ".join(f"{g[k]:>7.2f}" for k in groups)
                              + f" {pct:>6}")
-            lines.append(f"  {sp.name:<12} {method:<7} {cells[0]}   {cells[1]}")
+            lines.append(f"  {sp.name:<12} {method:<9} {cells[0]}   {cells[1]}")
     return lines
 
 

@@ -113,7 +113,7 @@ def validation_table(results: dict[str, dict[str, Errors]], splits: Sequence[Spl
     (sd, worst fold), its curve groups and clamp%, then the left hand's pooled RMS."""
     groups = tuple(CURVE_GROUPS)
     head = " ".join(f"{g:>7}" for g in groups)
-    lines = [f"  {'split':<15} {'method':<7} {'right':>6} {'+-sd':>5} {'worst':>6} {head}"
+    lines = [f"  {'split':<15} {'method':<9} {'right':>6} {'+-sd':>5} {'worst':>6} {head}"
              f" {'clamp%':>6}   {'left':>6} {'+-sd':>5}"]
     for sp in splits:
         for method, err in results[sp.name].items():
@@ -121,7 +121,7 @@ def validation_table(results: dict[str, dict[str, Errors]], splits: Sequence[Spl
             le_sd, _ = spread(err.le_folds)
             g = group_rms(err, "ri")
             pct = "-" if err.ri_clamped is None else f"{100 * err.ri_clamped:.2f}"
-            lines.append(f"  {sp.name:<15} {method:<7} {err.ri:>6.2f} {sd:>5.2f} {worst:>6.2f} "
+            lines.append(f"  {sp.name:<15} {method:<9} {err.ri:>6.2f} {sd:>5.2f} {worst:>6.2f} "
                          + " ".join(f"{g[k]:>7.2f}" for k in groups)
                          + f" {pct:>6}   {err.le:>6.2f} {le_sd:>5.2f}")
     return lines
