@@ -33,6 +33,14 @@ def _inputs(pl: PosePipeline) -> np.ndarray:
     return np.ascontiguousarray(means + rng.normal(0.0, 10.0, size=(256, len(means))))
 
 
+def _features(pl: PosePipeline, knots: np.ndarray) -> np.ndarray:
+    """The inputs as the kernels read them: the controls, then (a piecewise-linear map)
+    their hinges at the knots (what the pipeline call computes first)."""
+    x = _inputs(pl)
+    h = len(knots)
+    return np.ascontiguousarray(np.hstack([x, np.maximum(x[:, :h] - knots, 0.0)]))
+
+
 def _pipeline_step(pl: PosePipeline) -> Callable[[int], object]:
     inputs = _inputs(pl)
     return lambda i: pl.servo_targets(inputs[i & 255], -60.0, 20.0, 0.005)
@@ -44,7 +52,7 @@ def _without_the_step(pl: PosePipeline) -> Callable[[int], object]:
     robot = pl.robot_path
     assert robot is not None
     path, tables = robot.human, robot.human.sag
-    inputs = _inputs(pl)
+    inputs = _features(pl, path.knots)
     u = len(robot.curves)
     targets, raw = np.zeros(u), np.zeros(u)
 
@@ -62,7 +70,7 @@ def _with_the_step(pl: PosePipeline) -> Callable[[int], object]:
     robot = pl.robot_path
     assert robot is not None
     path, tables = robot.human, robot.human.sag
-    inputs = _inputs(pl)
+    inputs = _features(pl, path.knots)
     human = np.zeros(len(robot.curves))
     n = len(pl.servo_joints)
     targets, raw = np.zeros(n), np.zeros(n)
