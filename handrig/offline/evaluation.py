@@ -19,6 +19,11 @@ and pool the held-out errors.
   off, or a rest pose of the controls that the capture never held. The truth is the
   capture's own curves.
 
+The blocked splits that hold out whole stretches of time with a gap, and the other hand,
+are built in :mod:`handrig.offline.validation` and run through the same
+:func:`out_of_regime` (a :class:`Split` may test the mirrored frames; each result keeps
+every fold's own RMS, the spread of the pooled figure).
+
 Beside each RMS error, the fraction of the hand's predicted values that the joint limits
 clamped (``clamp%``: the map asked for a pose outside the joints; what a run counts as
 pose clamps).
@@ -257,7 +262,9 @@ def out_of_regime(
     """``{split: {method: Errors}}``: held-out errors pooled over each split's folds.
 
     The ``robust`` method's own cross-validation uses ``groups`` of the training frames.
-    Maps are fit once per (method, training set) and shared between splits.
+    Maps are fit once per (method, training set) and shared between splits. A
+    ``mirrored`` split tests ``hand.mirror_pose`` of the held-out frames (the other hand);
+    each :class:`Errors` keeps its folds' own RMS (``ri_folds``, ``le_folds``).
     """
     y = np.asarray(curves, dtype=np.float64)
     y_other = hand.mirror_pose(y)
