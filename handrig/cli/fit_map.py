@@ -28,8 +28,8 @@ def register(sub: Any) -> None:
                    f" {','.join(maps.DEFAULT_RIGHT_CONTROLS)})")
     p.add_argument("--out", required=True, help="map TOML file to write")
     p.add_argument("--method", choices=fitting.METHODS, default=fitting.DEFAULT_METHOD,
-                   help=f"fitting method (default {fitting.DEFAULT_METHOD}: the lowest error"
-                   " of all methods in handrig evaluate's blocked validation)")
+                   help=f"fitting method (default {fitting.DEFAULT_METHOD}: the one chosen by"
+                   " handrig evaluate's blocked validation)")
     p.add_argument("--alpha", type=nonnegative_float, default=fitting.RIDGE_ALPHA,
                    help=f"ridge penalty for ridge/huber (default {fitting.RIDGE_ALPHA:g})")
     p.add_argument("--noise", type=nonnegative_float, default=None,

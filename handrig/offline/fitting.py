@@ -14,13 +14,11 @@ Methods:
   atypical frames do not pull the gains.
 * ``piecewise`` (the default) — a piecewise-linear map: each control ``c`` also enters as
   its hinge ``max(0, c - knot)`` at its training median (the slope on a control may change
-  once, halfway through its range: a finger's MCP follows its PIP one way when bent and
-  another when stretched), every gain fit at once under the same control-noise assumption
-  as ``robust`` (controls off by ``piecewise_noise_deg``, 1.5 deg; a control off by ``e``
-  moves its hinge by at most ``e``, so the penalty ``noise^2 * |g|^2`` covers both halves),
-  shrunk toward zero, that is toward the mean pose. Chosen by the blocked validation
-  (:mod:`handrig.offline.validation`): lower than every other method on unseen stretches
-  of time (all frames and calm ones), with controls off by 2 deg, and on the other hand.
+  once, halfway through its training data), every gain fit at once under the same
+  control-noise assumption as ``robust`` (controls off by ``piecewise_noise_deg``; a
+  control off by ``e`` moves its hinge by at most ``e``, so the penalty
+  ``noise^2 * |g|^2`` covers both halves), shrunk toward zero, that is toward the mean
+  pose. Chosen by the blocked validation (:mod:`handrig.offline.validation`).
 * ``robust`` — for each curve, the least-squares map of all controls under
   the assumption that every control is off by about ``control_noise_deg`` (1 deg) from
   what the training capture showed (a calibration offset, a rest pose the capture did
@@ -62,13 +60,13 @@ FloatArray = NDArray[np.float64]
 Method = Literal["piecewise", "robust", "paper", "ridge", "huber", "mean"]
 METHODS: tuple[str, ...] = ("piecewise", "robust", "paper", "ridge", "huber", "mean")
 DEFAULT_METHOD: Method = "piecewise"
-"""The lowest right-hand error of every method in the blocked validation, on all frames
-and calm ones, with the controls off, and on the other hand (``handrig evaluate`` prints
-the comparison; docs/measurements.md, issue 42)."""
+"""In the blocked validation the lowest right-hand error of the methods on calm frames,
+with the controls off and on the other hand, and tied with ridge on all frames
+(``handrig evaluate`` prints the comparison; docs/measurements.md, issue 42)."""
 PIECEWISE_NOISE_DEG = 1.5
 """How far (deg, per control) the ``piecewise`` fit assumes live controls can sit from
-where the training capture had them. Chosen on the blocked validation (1.0-2.0 all
-within 0.05 deg on unseen blocks; 1.5 lowest on the other hand)."""
+where the training capture had them. Chosen on the blocked validation among 1.0, 1.5 and
+2.0 (docs/measurements.md, issue 42)."""
 CONTROL_NOISE_DEG = 0.8
 """How far (deg, per control) the ``robust`` fit assumes live controls can sit from where
 the training capture had them for the same hand shape. With the clipped output range
