@@ -33,14 +33,6 @@ def _inputs(pl: PosePipeline) -> np.ndarray:
     return np.ascontiguousarray(means + rng.normal(0.0, 10.0, size=(256, len(means))))
 
 
-def _features(pl: PosePipeline, knots: np.ndarray) -> np.ndarray:
-    """The inputs as the kernels read them: the controls, then (a piecewise-linear map)
-    their hinges at the knots (what the pipeline call computes first)."""
-    x = _inputs(pl)
-    h = len(knots)
-    return np.ascontiguousarray(np.hstack([x, np.maximum(x[:, :h] - knots, 0.0)]))
-
-
 def _pipeline_step(pl: PosePipeline) -> Callable[[int], object]:
     inputs = _inputs(pl)
     return lambda i: pl.servo_targets(inputs[i & 255], -60.0, 20.0, 0.005)
@@ -52,13 +44,13 @@ def _without_the_step(pl: PosePipeline) -> Callable[[int], object]:
     robot = pl.robot_path
     assert robot is not None
     path, tables = robot.human, robot.human.sag
-    inputs = _features(pl, path.knots)
+    inputs = _inputs(pl)
     u = len(robot.curves)
     targets, raw = np.zeros(u), np.zeros(u)
 
     def step(i: int) -> object:
         return kernels.servo_targets(
-            inputs[i & 255], path.a, path.b, tables.inclination_axis_deg,
+            inputs[i & 255], path.knots, path.a, path.b, tables.inclination_axis_deg,
             tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
             path.sag_slot, float(path.sag_gain), path.map_low, path.map_high, -60.0, 20.0,
             robot.human_low, robot.human_high, targets, 3.6, False, raw)
@@ -70,14 +62,14 @@ def _with_the_step(pl: PosePipeline) -> Callable[[int], object]:
     robot = pl.robot_path
     assert robot is not None
     path, tables = robot.human, robot.human.sag
-    inputs = _features(pl, path.knots)
+    inputs = _inputs(pl)
     human = np.zeros(len(robot.curves))
     n = len(pl.servo_joints)
     targets, raw = np.zeros(n), np.zeros(n)
 
     def step(i: int) -> object:
         return kernels.robot_servo_targets(
-            inputs[i & 255], path.a, path.b, tables.inclination_axis_deg,
+            inputs[i & 255], path.knots, path.a, path.b, tables.inclination_axis_deg,
             tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
             path.sag_slot, float(path.sag_gain), path.map_low, path.map_high, -60.0, 20.0,
             robot.human_low, robot.human_high, human, robot.gain_start, robot.gain_curve,
