@@ -45,12 +45,13 @@ def _without_the_step(pl: PosePipeline) -> Callable[[int], object]:
     assert robot is not None
     path, tables = robot.human, robot.human.sag
     inputs = _inputs(pl)
+    features = np.zeros(inputs.shape[1] + len(path.knots))
     u = len(robot.curves)
     targets, raw = np.zeros(u), np.zeros(u)
 
     def step(i: int) -> object:
         return kernels.servo_targets(
-            inputs[i & 255], path.knots, path.a, path.b, tables.inclination_axis_deg,
+            inputs[i & 255], path.knots, features, path.a, path.b, tables.inclination_axis_deg,
             tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
             path.sag_slot, float(path.sag_gain), path.map_low, path.map_high, -60.0, 20.0,
             robot.human_low, robot.human_high, targets, 3.6, False, raw)
@@ -63,13 +64,14 @@ def _with_the_step(pl: PosePipeline) -> Callable[[int], object]:
     assert robot is not None
     path, tables = robot.human, robot.human.sag
     inputs = _inputs(pl)
+    features = np.zeros(inputs.shape[1] + len(path.knots))
     human = np.zeros(len(robot.curves))
     n = len(pl.servo_joints)
     targets, raw = np.zeros(n), np.zeros(n)
 
     def step(i: int) -> object:
         return kernels.robot_servo_targets(
-            inputs[i & 255], path.knots, path.a, path.b, tables.inclination_axis_deg,
+            inputs[i & 255], path.knots, features, path.a, path.b, tables.inclination_axis_deg,
             tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
             path.sag_slot, float(path.sag_gain), path.map_low, path.map_high, -60.0, 20.0,
             robot.human_low, robot.human_high, human, robot.gain_start, robot.gain_curve,

@@ -71,24 +71,9 @@ def _hold_clamp_slew(k: int, v: float, low: Any, high: Any, targets: Any, first:
 
 
 @njit(cache=True, nogil=True)
-def _affine(controls: Any, knots: Any, a: Any, b: Any, k: int) -> float:  # pragma: no cover
-    """``b[k]`` plus column k of ``a`` times the features: the controls, then (one per
-    knot) ``max(0, controls[m] - knots[m])``; a non-finite control stays non-finite."""
-    v = b[k]
-    nc = controls.shape[0]
-    for m in range(nc):
-        v += controls[m] * a[m, k]
-    for m in range(knots.shape[0]):
-        d = controls[m] - knots[m]
-        if not d <= 0.0:
-            v += d * a[nc + m, k]
-    return v
-
-
-@njit(cache=True, nogil=True)
 def servo_targets(
-    controls: Any, knots: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float,
-    cells: Any,
+    controls: Any, knots: Any, features: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any,
+    rot0: float, cells: Any,
     slot: Any, gain: float, map_low: Any, map_high: Any, inclination: float,
     rotation: float, low: Any, high: Any, targets: Any, limit: float, first: bool, raw: Any,
 ) -> int:  # pragma: no cover - compiled
@@ -97,7 +82,7 @@ def servo_targets(
     ``[low, high]`` (``map_low``/``map_high``: the map's output range, -inf/inf for none;
     a non-finite value stays non-finite). The features are the controls, then a
     piecewise-linear map's hinges ``max(0, controls[:h] - knots)`` (``knots`` (h,), empty
-    for a linear map).
+    for a linear map), written into ``features`` (k + h,) first (:func:`hinge_features`).
 
     ``cells`` (n_inc-1, n_rot-1, 4, n_dof): each grid cell's four corner offsets
     (:class:`handrig.pose.sag.SagGrid`); ``slot[k] >= n_dof`` means no sag for servo k;
@@ -111,9 +96,15 @@ def servo_targets(
     use_sag = cells.shape[0] > 0
     i, j, w0, w1, w2, w3 = _sag_weights(use_sag, inc_axis, rot_axis, rot0, inclination,
                                         rotation)
+    x = controls
+    if knots.shape[0] > 0:
+        hinge_features(controls, knots, features)
+        x = features
     held = 0
     for k in range(n):
-        v = _affine(controls, knots, a, b, k)
+        v = b[k]
+        for m in range(x.shape[0]):
+            v += x[m] * a[m, k]
         if math.isfinite(v):  # a non-finite value stays so: the step holds the target
             v = min(max(v, map_low[k]), map_high[k])
         s = slot[k]
@@ -126,8 +117,8 @@ def servo_targets(
 
 @njit(cache=True, nogil=True)
 def robot_servo_targets(
-    controls: Any, knots: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float,
-    cells: Any,
+    controls: Any, knots: Any, features: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any,
+    rot0: float, cells: Any,
     slot: Any, gain: float, map_low: Any, map_high: Any, inclination: float,
     rotation: float, human_low: Any,
     human_high: Any, human: Any, g_start: Any, g_curve: Any, g_gain: Any, offset: Any,
@@ -138,7 +129,7 @@ def robot_servo_targets(
 
     ``human`` (u,) becomes ``clip(features @ a + b, map_low, map_high) + gain *
     sag[slot]`` (the ``u`` curves the retarget reads, as in :func:`servo_targets`, with its
-    features and ``knots``), each
+    features, ``knots`` and ``features``), each
     clamped to
     ``[human_low, human_high]``; a non-finite curve stays non-finite. Then servo k's
     target is ``offset[k] + sum of g_gain[e] * human[g_curve[e]]`` over the entries
@@ -151,8 +142,14 @@ def robot_servo_targets(
     use_sag = cells.shape[0] > 0
     i, j, w0, w1, w2, w3 = _sag_weights(use_sag, inc_axis, rot_axis, rot0, inclination,
                                         rotation)
+    x = controls
+    if knots.shape[0] > 0:
+        hinge_features(controls, knots, features)
+        x = features
     for c in range(human.shape[0]):
-        v = _affine(controls, knots, a, b, c)
+        v = b[c]
+        for m in range(x.shape[0]):
+            v += x[m] * a[m, c]
         if math.isfinite(v):  # a non-finite value stays so: the step holds the target
             v = min(max(v, map_low[c]), map_high[c])
         s = slot[c]
@@ -321,13 +318,14 @@ def forearm_angles(quat: Any, scalar_first: bool, up_sign: float, mount_t: Any,
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel with the types the loop uses."""
     f = np.zeros(2)
-    servo_targets(f, f, np.zeros((4, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]), 0.0,
+    servo_targets(f, f, np.zeros(4), np.zeros((4, 2)), f, np.array([0.0, 1.0]),
+                  np.array([0.0, 1.0]), 0.0,
                   np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, f - 2.0, f + 2.0, 0.5,
                   0.5, f - 1.0, f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
     expand_frame(f, np.zeros((2, 2)), f, f - 1.0, f + 1.0, f - 1.0, f + 1.0, np.zeros(2),
                  np.zeros(2, np.int64))
     hinge_features(f, f, np.zeros(4))
-    robot_servo_targets(f, np.zeros(0), np.zeros((2, 2)), f, np.array([0.0, 1.0]),
+    robot_servo_targets(f, np.zeros(0), np.zeros(2), np.zeros((2, 2)), f, np.array([0.0, 1.0]),
                         np.array([0.0, 1.0]),
                         0.0, np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, f - 2.0,
                         f + 2.0, 0.5, 0.5, f - 1.0, f + 1.0, np.zeros(2),

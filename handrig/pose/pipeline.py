@@ -107,7 +107,8 @@ class ServoPath:
     map_high: FloatArray  # (n,)
     knots: FloatArray = field(default_factory=lambda: np.zeros(0))
     """(h,) a piecewise-linear map's knots: then ``a`` is over the features (the k
-    controls, then ``max(0, controls[:h] - knots)``), which the kernels form as they go."""
+    controls, then ``max(0, controls[:h] - knots)``), which the servo step's kernel
+    writes into a scratch buffer first."""
 
 
 class RetargetLike(Protocol):
@@ -284,6 +285,8 @@ class PosePipeline:
         self._clamped_pose = np.zeros(POSE_SIZE)
         self._raw_targets = np.zeros(n)
         self._step = np.zeros(n)
+        _, _, knots = self.expander.map.feature_gains()  # the servo step's scratch
+        self._features = np.zeros(len(self.expander.controls) + len(knots))
 
     def _build_robot_path(self, rt: RetargetLike) -> RobotPath:
         """The retarget rows in servo order over the curves they read (a curve is read
@@ -430,7 +433,7 @@ class PosePipeline:
         controls = np.ascontiguousarray(controls_deg, dtype=np.float64)
         if robot is not None:
             self.rejected += kernels.robot_servo_targets(
-                controls, path.knots, path.a, path.b,
+                controls, path.knots, self._features, path.a, path.b,
                 tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
                 tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
                 path.map_low, path.map_high,
@@ -442,7 +445,7 @@ class PosePipeline:
             self._has_targets = True
             return self.targets
         self.rejected += kernels.servo_targets(
-            controls, path.knots, path.a, path.b,
+            controls, path.knots, self._features, path.a, path.b,
             tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
             tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
             path.map_low, path.map_high,
