@@ -3,8 +3,11 @@ retarget step, and the same LEAP curves without the step."""
 
 from __future__ import annotations
 
+import dataclasses
+import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -110,11 +113,29 @@ def main() -> None:
     for label, step in rows:
         med, p99 = _time(step)
         print(f"servo targets, {label}: median {med:.2f} us, p99 {p99:.2f} us")
+    if human.expander.map.piecewise:
+        _hinges_side_by_side(human)
     step = _pipeline_step(human)
     for gap_s in GAPS_S:
         med, again = _after_a_gap(step, gap_s)
         print(f"servo targets, human rig, after the thread spun {gap_s * 1e3:g} ms on the "
               f"clock: median {med:.2f} us (called again at once: {again:.2f} us)")
+
+
+def _hinges_side_by_side(pl: PosePipeline, rounds: int = 5) -> None:
+    """The human rig's step with the shipped piecewise-linear map and with the same map
+    without its hinges (linear), alternated in one process: what the hinges cost."""
+    linear = dataclasses.replace(pl.expander.map, knots_deg=None, hinge_gains=None)
+    with tempfile.TemporaryDirectory() as d:
+        lin = app.build_parts(map_file=linear.save(Path(d) / "linear.toml")).pipeline
+    steps = {"piecewise": _pipeline_step(pl), "linear": _pipeline_step(lin)}
+    meds: dict[str, list[float]] = {k: [] for k in steps}
+    for _ in range(rounds):
+        for name, step in steps.items():
+            meds[name].append(_time(step, FRAMES // 4)[0])
+    print(f"servo targets, human rig, the shipped map with and without its hinges, {rounds}"
+          " rounds alternated: " + ", ".join(
+              f"{k} median {np.median(v):.2f} us (min {min(v):.2f})" for k, v in meds.items()))
 
 
 GAPS_S = (0.0, 0.0001, 0.001, 0.004)  # 4 ms: about the gap between two 200 Hz frames
