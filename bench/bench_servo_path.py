@@ -113,13 +113,13 @@ def main() -> None:
     for label, step in rows:
         med, p99 = _time(step)
         print(f"servo targets, {label}: median {med:.2f} us, p99 {p99:.2f} us")
-    if human.expander.map.piecewise:
-        _hinges_side_by_side(human)
     step = _pipeline_step(human)
     for gap_s in GAPS_S:
         med, again = _after_a_gap(step, gap_s)
         print(f"servo targets, human rig, after the thread spun {gap_s * 1e3:g} ms on the "
               f"clock: median {med:.2f} us (called again at once: {again:.2f} us)")
+    if human.expander.map.piecewise:  # last: a base without the row still pairs line by line
+        _hinges_side_by_side(human)
 
 
 def _hinges_side_by_side(pl: PosePipeline, rounds: int = 5) -> None:
