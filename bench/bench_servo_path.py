@@ -3,8 +3,11 @@ retarget step, and the same LEAP curves without the step."""
 
 from __future__ import annotations
 
+import dataclasses
+import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -45,12 +48,13 @@ def _without_the_step(pl: PosePipeline) -> Callable[[int], object]:
     assert robot is not None
     path, tables = robot.human, robot.human.sag
     inputs = _inputs(pl)
+    features = np.zeros(inputs.shape[1] + len(path.knots))
     u = len(robot.curves)
     targets, raw = np.zeros(u), np.zeros(u)
 
     def step(i: int) -> object:
         return kernels.servo_targets(
-            inputs[i & 255], path.a, path.b, tables.inclination_axis_deg,
+            inputs[i & 255], path.knots, features, path.a, path.b, tables.inclination_axis_deg,
             tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
             path.sag_slot, float(path.sag_gain), path.map_low, path.map_high, -60.0, 20.0,
             robot.human_low, robot.human_high, targets, 3.6, False, raw)
@@ -63,13 +67,14 @@ def _with_the_step(pl: PosePipeline) -> Callable[[int], object]:
     assert robot is not None
     path, tables = robot.human, robot.human.sag
     inputs = _inputs(pl)
+    features = np.zeros(inputs.shape[1] + len(path.knots))
     human = np.zeros(len(robot.curves))
     n = len(pl.servo_joints)
     targets, raw = np.zeros(n), np.zeros(n)
 
     def step(i: int) -> object:
         return kernels.robot_servo_targets(
-            inputs[i & 255], path.a, path.b, tables.inclination_axis_deg,
+            inputs[i & 255], path.knots, features, path.a, path.b, tables.inclination_axis_deg,
             tables.rotation_axis_deg, tables.rotation0_deg, tables.cell_offsets_deg,
             path.sag_slot, float(path.sag_gain), path.map_low, path.map_high, -60.0, 20.0,
             robot.human_low, robot.human_high, human, robot.gain_start, robot.gain_curve,
@@ -113,6 +118,24 @@ def main() -> None:
         med, again = _after_a_gap(step, gap_s)
         print(f"servo targets, human rig, after the thread spun {gap_s * 1e3:g} ms on the "
               f"clock: median {med:.2f} us (called again at once: {again:.2f} us)")
+    if human.expander.map.piecewise:  # last: a base without the row still pairs line by line
+        _hinges_side_by_side(human)
+
+
+def _hinges_side_by_side(pl: PosePipeline, rounds: int = 5) -> None:
+    """The human rig's step with the shipped piecewise-linear map and with the same map
+    without its hinges (linear), alternated in one process: what the hinges cost."""
+    linear = dataclasses.replace(pl.expander.map, knots_deg=None, hinge_gains=None)
+    with tempfile.TemporaryDirectory() as d:
+        lin = app.build_parts(map_file=linear.save(Path(d) / "linear.toml")).pipeline
+    steps = {"piecewise": _pipeline_step(pl), "linear": _pipeline_step(lin)}
+    meds: dict[str, list[float]] = {k: [] for k in steps}
+    for _ in range(rounds):
+        for name, step in steps.items():
+            meds[name].append(_time(step, FRAMES // 4)[0])
+    print(f"servo targets, human rig, the shipped map with and without its hinges, {rounds}"
+          " rounds alternated: " + ", ".join(
+              f"{k} median {np.median(v):.2f} us (min {min(v):.2f})" for k, v in meds.items()))
 
 
 GAPS_S = (0.0, 0.0001, 0.001, 0.004)  # 4 ms: about the gap between two 200 Hz frames

@@ -9,13 +9,14 @@ from typing import Any
 
 from handrig import hand
 from handrig.cli import _mapio
-from handrig.cli._numbers import positive_int
+from handrig.cli._numbers import nonnegative_float, positive_int
 from handrig.errors import DataError
 from handrig.offline.evaluation import (
     REGIME_METHODS,
     Errors,
     Split,
     block_splits,
+    calm_frames,
     clamped_fractions,
     group_rms,
     out_of_regime,
@@ -25,7 +26,14 @@ from handrig.offline.evaluation import (
     rms_errors,
     write_error_figure,
 )
-from handrig.offline.fitting import CONTROL_NOISE_DEG, METHODS
+from handrig.offline.fitting import CONTROL_NOISE_DEG, METHODS, PIECEWISE_NOISE_DEG
+from handrig.offline.validation import (
+    GAP_S,
+    best_methods,
+    blocked_splits,
+    validation_json,
+    validation_table,
+)
 from handrig.pose.expand import DEFAULT_MAP
 from handrig.pose.maps import LinearMap
 
@@ -34,7 +42,10 @@ LABELS = {"ridge": "least squares on all controls, ridge penalty",
           "paper": "the paper's single-controller map (4.2)",
           "mean": "constant mean",
           "robust": f"shrunk toward the paper map for controls off by {CONTROL_NOISE_DEG:g} deg,"
-                    " per-curve CV vs mean"}
+                    " per-curve CV vs mean",
+          "piecewise": "piecewise-linear (each control's slope may change at its training"
+                       f" median), shrunk toward the mean pose for controls off by"
+                       f" {PIECEWISE_NOISE_DEG:g} deg"}
 
 
 def register(sub: Any) -> None:
@@ -42,18 +53,26 @@ def register(sub: Any) -> None:
         "evaluate", help="RMS error of a map against a BVH's own curves; methods side by side",
         description="1) the map's RMS reconstruction error per curve, per hand and overall"
         " (degrees) against the file's own curves; 2) each method (the constant mean, the"
-        " paper's single-controller map, ridge, robust) with the map's controls, fitted"
+        " paper's single-controller map, ridge, robust, piecewise) with the map's controls,"
+        " fitted"
         " without and tested on held-out data, split by split: leave one clip out (the"
         " reference file's gesture clips, else --folds contiguous blocks), train on some"
         " kinds of gesture and test on another, the calm frames of each held-out clip"
         " (fit with and without calm frames), and held-out clips with every control off"
-        " by 2 deg.",
+        " by 2 deg; 3) the validation that predicts unseen takes: --folds blocks of time"
+        " held out with --gap-s seconds on each side that neither train nor test (all"
+        " frames, the calm ones, controls off by 2 deg) and the other hand (fit on one hand,"
+        " tested mirrored on the other), each figure with its spread across the blocks.",
     )
     p.add_argument("file", metavar="FILE.bvh")
     p.add_argument("--map", default=str(DEFAULT_MAP), help="map TOML (default: shipped map)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--folds", type=positive_int, default=5,
-                   help="held-out blocks for files without known clips (default 5)")
+                   help="held-out blocks of time for the blocked validation, and for the"
+                   " leave-one-out splits of files without known clips (default 5)")
+    p.add_argument("--gap-s", type=nonnegative_float, default=GAP_S,
+                   help="seconds on each side of a held-out block that neither train nor"
+                   f" test (default {GAP_S:g})")
     p.add_argument("--no-compare", action="store_true", help="skip the held-out comparison")
     p.add_argument("--methods", default=",".join(REGIME_METHODS),
                    help=f"methods compared (default {','.join(REGIME_METHODS)};"
@@ -84,7 +103,9 @@ def run(args: argparse.Namespace) -> int:
             m.names, outside, strict=True) if f > 0},
     }
     res: dict[str, dict[str, Errors]] = {}
+    val: dict[str, dict[str, Errors]] = {}
     splits: list[Split] = []
+    val_splits: list[Split] = []
     if not args.no_compare:
         methods = tuple(x.strip() for x in args.methods.split(",") if x.strip())
         bad = [x for x in methods if x not in METHODS]
@@ -98,6 +119,11 @@ def run(args: argparse.Namespace) -> int:
             splits, groups = block_splits(m.curves, m.fps, args.folds)
             how = f"leave-one-block-out over {args.folds} contiguous blocks"
         res = out_of_regime(m.curves, lm.controls, splits, groups, methods)
+        calm = calm_frames(m.curves, m.fps, groups)
+        val_splits = blocked_splits(m.n_frames, m.fps, calm, args.folds, args.gap_s)
+        val = out_of_regime(m.curves, lm.controls, val_splits, groups, methods)
+        result["validation"] = validation_json(val, val_splits)
+        result["validation_best"] = best_methods(val)
         result["held_out"] = {"scheme": how, "methods": {
             k: v.to_json() for k, v in res["clips"].items()}}
         result["out_of_regime"] = {sp.name: {
@@ -137,6 +163,14 @@ def run(args: argparse.Namespace) -> int:
         print("\n".join(regime_table(res, splits)))
         print("  clamp% = the hand's predicted values the joint limits clamped")
         print("  methods: " + "; ".join(f"{k} = {LABELS[k]}" for k in res["clips"]))
+        print(f"validation that predicts unseen takes: {args.folds} blocks of time held out,"
+              f" {args.gap_s:g} s on each side in neither training nor test (RMS deg; the"
+              " right hand's spread across the blocks: sd and worst block):")
+        for sp in val_splits:
+            print(f"  {sp.name}: {sp.description}")
+        print("\n".join(validation_table(val, val_splits)))
+        best = result["validation_best"]
+        print("  lowest right-hand RMS: " + ", ".join(f"{k} {v}" for k, v in best.items()))
         if args.figure:
             print(f"figure: {result['figure']}")
     return 0

@@ -12,7 +12,7 @@ from handrig.cli import _mapio
 from handrig.cli._numbers import nonnegative_float
 from handrig.errors import DataError
 from handrig.offline import evaluation as evaluation_mod
-from handrig.offline import fitting, mocap
+from handrig.offline import fitting, mocap, validation
 from handrig.pose import maps
 
 
@@ -28,17 +28,18 @@ def register(sub: Any) -> None:
                    f" {','.join(maps.DEFAULT_RIGHT_CONTROLS)})")
     p.add_argument("--out", required=True, help="map TOML file to write")
     p.add_argument("--method", choices=fitting.METHODS, default=fitting.DEFAULT_METHOD,
-                   help=f"fitting method (default {fitting.DEFAULT_METHOD}: close to ridge on"
-                   " unseen gestures, not hurt when the controls are off)")
+                   help=f"fitting method (default {fitting.DEFAULT_METHOD}: the one chosen by"
+                   " handrig evaluate's blocked validation)")
     p.add_argument("--alpha", type=nonnegative_float, default=fitting.RIDGE_ALPHA,
                    help=f"ridge penalty for ridge/huber (default {fitting.RIDGE_ALPHA:g})")
-    p.add_argument("--noise", type=nonnegative_float, default=fitting.CONTROL_NOISE_DEG,
-                   help="robust: how far (deg) live controls may sit from the training data"
-                   f" (default {fitting.CONTROL_NOISE_DEG:g})")
+    p.add_argument("--noise", type=nonnegative_float, default=None,
+                   help="robust and piecewise: how far (deg) live controls may sit from the"
+                   f" training data (default {fitting.CONTROL_NOISE_DEG:g} for robust,"
+                   f" {fitting.PIECEWISE_NOISE_DEG:g} for piecewise)")
     p.add_argument("--evaluate", action="store_true",
-                   help="also measure the held-out errors (handrig evaluate's splits) of this"
-                   " method, mean, paper and ridge on the training data and record them in"
-                   " the map")
+                   help="also measure the held-out errors (handrig evaluate's splits and its"
+                   " blocked validation) of this method, mean, paper, ridge and robust on the"
+                   " training data and record them in the map")
     p.add_argument("--description", default="", help="free text stored in the map")
     _mapio.add_input_args(p)
     p.set_defaults(func=run)
@@ -73,14 +74,24 @@ def run(args: argparse.Namespace) -> int:
             splits = evaluation_mod.block_splits(curves, fps or 0.0, fitting.DEFAULT_GROUPS)[0]
             if len(args.files) > 1:
                 print("note: held-out figures over contiguous blocks of the concatenated files")
-        methods = tuple(dict.fromkeys((args.method, "mean", "paper", "ridge")))
+        methods = tuple(dict.fromkeys((args.method, "mean", "paper", "ridge", "robust")))
         res = evaluation_mod.out_of_regime(curves, controls, splits, groups, methods)
         for sp in splits:
             cells = "; ".join(f"{k} {v.ri:.2f} right, {v.le:.2f} left"
                               for k, v in res[sp.name].items())
             evaluation.append(f"{sp.name} ({sp.description}): {cells}")
+        calm = evaluation_mod.calm_frames(curves, fps or 0.0, groups)
+        blocked = validation.blocked_splits(len(curves), fps or 0.0, calm)
+        res = evaluation_mod.out_of_regime(curves, controls, blocked, groups, methods)
+        for sp in blocked:
+            cells = "; ".join(f"{k} {v.ri:.2f} (sd {validation.spread(v.ri_folds)[0]:.2f})"
+                              f" right, {v.le:.2f} left" for k, v in res[sp.name].items())
+            evaluation.append(f"{sp.name} ({sp.description}): {cells}")
     lm = fitting.fit_map(
-        curves, controls, args.method, alpha=args.alpha, control_noise_deg=args.noise,
+        curves, controls, args.method, alpha=args.alpha,
+        control_noise_deg=fitting.CONTROL_NOISE_DEG if args.noise is None else args.noise,
+        piecewise_noise_deg=(fitting.PIECEWISE_NOISE_DEG if args.noise is None
+                             else args.noise),
         groups=groups, groups_name=(
             "the gesture clips of the README" if reference
             else f"{fitting.DEFAULT_GROUPS} contiguous blocks per file"),

@@ -19,6 +19,11 @@ and pool the held-out errors.
   off, or a rest pose of the controls that the capture never held. The truth is the
   capture's own curves.
 
+The blocked splits that hold out whole stretches of time with a gap, and the other hand,
+are built in :mod:`handrig.offline.validation` and run through the same
+:func:`out_of_regime` (a :class:`Split` may test the mirrored frames; each result keeps
+every fold's own RMS, the spread of the pooled figure).
+
 Beside each RMS error, the fraction of the hand's predicted values that the joint limits
 clamped (``clamp%``: the map asked for a pose outside the joints; what a run counts as
 pose clamps).
@@ -59,6 +64,9 @@ class Errors:
     overall: float
     ri_clamped: float | None = None
     le_clamped: float | None = None
+    ri_folds: tuple[float, ...] = ()
+    le_folds: tuple[float, ...] = ()
+    """Each fold's own right/left RMS (the spread of the pooled figure), when known."""
 
     def to_json(self) -> dict[str, object]:
         return {
@@ -145,7 +153,7 @@ OFFSET_DEG = 2.0
 OFFSET_SEED = 0
 OFFSET_DRAWS = 8
 """Sign patterns of the offset per held-out fold (pooled), so the figure is not one draw's."""
-REGIME_METHODS: tuple[str, ...] = ("mean", "paper", "ridge", "robust")
+REGIME_METHODS: tuple[str, ...] = ("mean", "paper", "ridge", "robust", "piecewise")
 CURVE_GROUPS: dict[str, tuple[str, ...]] = {
     "thumb": ("ThumbCMCx", "ThumbCMCy", "ThumbCMCz", "ThumbMCPz", "ThumbIPz"),
     "MCP": tuple(f"{f}MCP{a}" for f in ("Index", "Middle", "Ring", "Pinky") for a in "xyz"),
@@ -165,6 +173,10 @@ class Split:
     description: str
     folds: tuple[tuple[Mask, Mask], ...]
     offset_deg: float = 0.0
+    mirrored: bool = False
+    """Test on the other hand: the held-out frames mirrored (``hand.mirror_pose``: the
+    left hand's curves read as the right's and back), the maps fit on the frames as they
+    are."""
 
 
 def group_rms(err: Errors, side: str = "ri") -> dict[str, float]:
@@ -250,9 +262,12 @@ def out_of_regime(
     """``{split: {method: Errors}}``: held-out errors pooled over each split's folds.
 
     The ``robust`` method's own cross-validation uses ``groups`` of the training frames.
-    Maps are fit once per (method, training set) and shared between splits.
+    Maps are fit once per (method, training set) and shared between splits. A
+    ``mirrored`` split tests ``hand.mirror_pose`` of the held-out frames (the other hand);
+    each :class:`Errors` keeps its folds' own RMS (``ri_folds``, ``le_folds``).
     """
     y = np.asarray(curves, dtype=np.float64)
+    y_other = hand.mirror_pose(y)
     cache: dict[tuple[str, bytes], LinearMap] = {}
     out: dict[str, dict[str, Errors]] = {}
     for sp in splits:
@@ -260,24 +275,31 @@ def out_of_regime(
         draws = OFFSET_DRAWS if sp.offset_deg else 1
         offsets = [rng.choice([-1.0, 1.0], size=(draws, len(controls))) * sp.offset_deg
                    for _ in sp.folds]
+        source = y_other if sp.mirrored else y
         res: dict[str, Errors] = {}
         for method in methods:
-            preds, truth, clamped = [], [], []
+            preds, truth, clamped, folds = [], [], [], []
             for (train, test), offs in zip(sp.folds, offsets, strict=True):
                 key = (method, np.packbits(train).tobytes())
                 m = cache.get(key)
                 if m is None:
                     m = fit_map(y[train], controls, method, groups=groups[train])
                     cache[key] = m
+                fold_p, fold_t = [], []
                 for off in offs:
-                    seen = y[test].copy()
+                    seen = source[test].copy()
                     seen[:, m.control_indices] += off
-                    preds.append(predict(m, seen, limits))
-                    truth.append(y[test])
+                    fold_p.append(predict(m, seen, limits))
+                    fold_t.append(source[test])
                     clamped.append(np.array(clamped_fractions(m, seen, limits)) * len(seen))
+                folds.append(rms_errors(np.concatenate(fold_p), np.concatenate(fold_t)))
+                preds += fold_p
+                truth += fold_t
             err = rms_errors(np.concatenate(preds), np.concatenate(truth))
             ri_c, le_c = np.sum(clamped, axis=0) / sum(len(t) for t in truth)
-            res[method] = replace(err, ri_clamped=float(ri_c), le_clamped=float(le_c))
+            res[method] = replace(err, ri_clamped=float(ri_c), le_clamped=float(le_c),
+                                  ri_folds=tuple(f.ri for f in folds),
+                                  le_folds=tuple(f.le for f in folds))
         out[sp.name] = res
     return out
 
@@ -286,8 +308,8 @@ def regime_table(results: dict[str, dict[str, Errors]], splits: Sequence[Split])
     """The results as aligned text lines: split, method, each hand and its curve groups."""
     groups = tuple(CURVE_GROUPS)
     cols = " ".join(f"{g:>7}" for g in groups) + f" {'clamp%':>6}"
-    lines = [f"  {'':<12} {'':<7} {'right hand':^39}   {'left hand':^39}",
-             f"  {'split':<12} {'method':<7} {'all':>7} {cols}   {'all':>7} {cols}"]
+    lines = [f"  {'':<12} {'':<9} {'right hand':^39}   {'left hand':^39}",
+             f"  {'split':<12} {'method':<9} {'all':>7} {cols}   {'all':>7} {cols}"]
     for sp in splits:
         for method, err in results[sp.name].items():
             cells = []
@@ -297,7 +319,7 @@ def regime_table(results: dict[str, dict[str, Errors]], splits: Sequence[Split])
                 pct = "-" if clamped is None else f"{100 * clamped:.2f}"
                 cells.append(f"{total:>7.2f} " + " ".join(f"{g[k]:>7.2f}" for k in groups)
                              + f" {pct:>6}")
-            lines.append(f"  {sp.name:<12} {method:<7} {cells[0]}   {cells[1]}")
+            lines.append(f"  {sp.name:<12} {method:<9} {cells[0]}   {cells[1]}")
     return lines
 
 

@@ -4,8 +4,9 @@
 curve to its joint limits and to the map's output range of that curve
 (:meth:`LinearMap.output_range_deg`, a clipped-linear map); one frame is one compiled
 loop (:func:`handrig.pose.kernels.expand_frame`, the training-range count included) on
-preallocated buffers, many frames are numpy calls (``bench/bench_expand.py`` measures
-both).
+preallocated buffers (a piecewise-linear map's features first:
+:meth:`LinearMap.feature_gains`, :func:`handrig.pose.kernels.hinge_features`), many frames
+are numpy calls (``bench/bench_expand.py`` measures both).
 
 A map records the range each control covered in training; the expander counts the
 calls whose controls leave it (by more than ``margin_deg``), per control too, so a run
@@ -99,12 +100,14 @@ class Expander:
         high = np.maximum(np.minimum(bounds[:, 1], clip[:, 1]), low)
         self.low_deg: FloatArray = np.ascontiguousarray(low)
         self.high_deg: FloatArray = np.ascontiguousarray(high)
-        # pose = curve_means + gains @ (c - control_means) = bias + c @ gains.T
-        self._gains_t: FloatArray = np.ascontiguousarray(map.gains.T, dtype=np.float64)
-        self._bias: FloatArray = np.ascontiguousarray(
-            map.curve_means_deg - map.gains @ map.control_means_deg, dtype=np.float64
-        )
+        # pose = curve_means + gains @ (c - control_means) = bias + f @ gains_f.T, where the
+        # features f are the controls (and, piecewise-linear, their hinges at the knots)
+        gains_f, bias, knots = map.feature_gains()
+        self._gains_t: FloatArray = np.ascontiguousarray(gains_f.T, dtype=np.float64)
+        self._bias: FloatArray = np.ascontiguousarray(bias, dtype=np.float64)
+        self._knots: FloatArray = np.ascontiguousarray(knots, dtype=np.float64)
         self._k = len(self.controls)
+        self._features: FloatArray = np.zeros(self._k + len(knots))
         self._out: FloatArray = np.zeros(len(self.curve_names))
         # Training range counters: preallocated, updated with out= calls per frame.
         self.range_margin_deg = float(range_margin_deg)
@@ -115,7 +118,12 @@ class Expander:
         self.train_high_deg: FloatArray = np.ascontiguousarray(rng[:, 1] + self.range_margin_deg)
         self._below = np.zeros(self._k, dtype=bool)
         self._above = np.zeros(self._k, dtype=bool)
-        self._outside_counts = np.zeros(self._k, dtype=np.int64)
+        # one count per feature (a hinge feature is never outside: its range is open)
+        h = len(knots)
+        self._feature_low: FloatArray = np.concatenate([self.train_low_deg, np.full(h, -np.inf)])
+        self._feature_high: FloatArray = np.concatenate([self.train_high_deg,
+                                                         np.full(h, np.inf)])
+        self._outside_counts = np.zeros(self._k + h, dtype=np.int64)
         self.frames = 0
         self.outside_frames = 0
         self._range_t: FloatArray = np.ascontiguousarray(np.hstack([np.eye(self._k),
@@ -150,8 +158,11 @@ class Expander:
         if c.dtype != np.float64 or not c.flags.c_contiguous:
             c = np.ascontiguousarray(c, dtype=np.float64)
         self.frames += 1
+        if self._knots.shape[0]:
+            pose_kernels.hinge_features(c, self._knots, self._features)
+            c = self._features
         if pose_kernels.expand_frame(c, self._gains_t, self._bias, self.low_deg, self.high_deg,
-                                     self.train_low_deg, self.train_high_deg, out,
+                                     self._feature_low, self._feature_high, out,
                                      self._outside_counts):
             self.outside_frames += 1
         return out
@@ -177,7 +188,7 @@ class Expander:
         np.less(c, self.train_low_deg, out=self._below)
         np.greater(c, self.train_high_deg, out=self._above)
         np.logical_or(self._below, self._above, out=self._below)
-        np.add(self._outside_counts, self._below, out=self._outside_counts)
+        np.add(self._outside_counts[:self._k], self._below, out=self._outside_counts[:self._k])
 
     def expand_many(self, controls_deg: FloatArray, out: FloatArray | None = None) -> FloatArray:
         """Many frames: (n, k) -> (n, 50), clamped; ``out`` (n, 50) is reused if given."""
@@ -189,13 +200,16 @@ class Expander:
             )
         if out is None:
             out = np.empty((c.shape[0], len(self.curve_names)))
-        np.matmul(c, self._gains_t, out=out)
+        f = c
+        if self._knots.shape[0]:
+            f = np.hstack([c, np.maximum(c - self._knots, 0.0)])
+        np.matmul(f, self._gains_t, out=out)
         out += self._bias
         np.clip(out, self.low_deg, self.high_deg, out=out)
         outside = (c < self.train_low_deg) | (c > self.train_high_deg)
         self.frames += c.shape[0]
         self.outside_frames += int(outside.any(axis=1).sum())
-        self._outside_counts += outside.sum(axis=0)
+        self._outside_counts[:self._k] += outside.sum(axis=0)
         return out
 
     def training_range(self) -> TrainingRangeReport:
@@ -203,7 +217,7 @@ class Expander:
         return TrainingRangeReport(
             known=self._range_known, frames=self.frames, outside_frames=self.outside_frames,
             outside_by_control={c: int(n) for c, n in zip(
-                self.controls, self._outside_counts, strict=True)},
+                self.controls, self._outside_counts[:self._k], strict=True)},
             margin_deg=self.range_margin_deg,
         )
 

@@ -72,14 +72,17 @@ def _hold_clamp_slew(k: int, v: float, low: Any, high: Any, targets: Any, first:
 
 @njit(cache=True, nogil=True)
 def servo_targets(
-    controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
+    controls: Any, knots: Any, features: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any,
+    rot0: float, cells: Any,
     slot: Any, gain: float, map_low: Any, map_high: Any, inclination: float,
     rotation: float, low: Any, high: Any, targets: Any, limit: float, first: bool, raw: Any,
 ) -> int:  # pragma: no cover - compiled
     """The servo targets in place: ``targets`` (n,) becomes the slew-limited step toward
-    ``clip(controls @ a + b, map_low, map_high) + gain * sag[slot]``, clamped to
+    ``clip(features @ a + b, map_low, map_high) + gain * sag[slot]``, clamped to
     ``[low, high]`` (``map_low``/``map_high``: the map's output range, -inf/inf for none;
-    a non-finite value stays non-finite).
+    a non-finite value stays non-finite). The features are the controls, then a
+    piecewise-linear map's hinges ``max(0, controls[:h] - knots)`` (``knots`` (h,), empty
+    for a linear map), written into ``features`` (k + h,) first (:func:`hinge_features`).
 
     ``cells`` (n_inc-1, n_rot-1, 4, n_dof): each grid cell's four corner offsets
     (:class:`handrig.pose.sag.SagGrid`); ``slot[k] >= n_dof`` means no sag for servo k;
@@ -93,11 +96,15 @@ def servo_targets(
     use_sag = cells.shape[0] > 0
     i, j, w0, w1, w2, w3 = _sag_weights(use_sag, inc_axis, rot_axis, rot0, inclination,
                                         rotation)
+    x = controls
+    if knots.shape[0] > 0:
+        hinge_features(controls, knots, features)
+        x = features
     held = 0
     for k in range(n):
         v = b[k]
-        for m in range(controls.shape[0]):
-            v += controls[m] * a[m, k]
+        for m in range(x.shape[0]):
+            v += x[m] * a[m, k]
         if math.isfinite(v):  # a non-finite value stays so: the step holds the target
             v = min(max(v, map_low[k]), map_high[k])
         s = slot[k]
@@ -110,7 +117,8 @@ def servo_targets(
 
 @njit(cache=True, nogil=True)
 def robot_servo_targets(
-    controls: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any, rot0: float, cells: Any,
+    controls: Any, knots: Any, features: Any, a: Any, b: Any, inc_axis: Any, rot_axis: Any,
+    rot0: float, cells: Any,
     slot: Any, gain: float, map_low: Any, map_high: Any, inclination: float,
     rotation: float, human_low: Any,
     human_high: Any, human: Any, g_start: Any, g_curve: Any, g_gain: Any, offset: Any,
@@ -119,8 +127,9 @@ def robot_servo_targets(
     """A robot hand's servo targets in place: the human curves it reads, then the
     retarget step, then the slew limit.
 
-    ``human`` (u,) becomes ``clip(controls @ a + b, map_low, map_high) + gain *
-    sag[slot]`` (the ``u`` curves the retarget reads, as in :func:`servo_targets`), each
+    ``human`` (u,) becomes ``clip(features @ a + b, map_low, map_high) + gain *
+    sag[slot]`` (the ``u`` curves the retarget reads, as in :func:`servo_targets`, with its
+    features, ``knots`` and ``features``), each
     clamped to
     ``[human_low, human_high]``; a non-finite curve stays non-finite. Then servo k's
     target is ``offset[k] + sum of g_gain[e] * human[g_curve[e]]`` over the entries
@@ -133,10 +142,14 @@ def robot_servo_targets(
     use_sag = cells.shape[0] > 0
     i, j, w0, w1, w2, w3 = _sag_weights(use_sag, inc_axis, rot_axis, rot0, inclination,
                                         rotation)
+    x = controls
+    if knots.shape[0] > 0:
+        hinge_features(controls, knots, features)
+        x = features
     for c in range(human.shape[0]):
         v = b[c]
-        for m in range(controls.shape[0]):
-            v += controls[m] * a[m, c]
+        for m in range(x.shape[0]):
+            v += x[m] * a[m, c]
         if math.isfinite(v):  # a non-finite value stays so: the step holds the target
             v = min(max(v, map_low[c]), map_high[c])
         s = slot[c]
@@ -216,6 +229,19 @@ def glove_controls(
 
 
 @njit(cache=True, nogil=True)
+def hinge_features(controls: Any, knots: Any, out: Any) -> None:  # pragma: no cover
+    """A piecewise-linear map's features of one frame: ``out[:k] = controls`` and
+    ``out[k + i] = max(0, controls[i] - knots[i])`` for the ``h`` knots (a non-finite
+    control stays non-finite in both halves)."""
+    k = controls.shape[0]
+    for i in range(k):
+        out[i] = controls[i]
+    for i in range(knots.shape[0]):
+        v = controls[i] - knots[i]
+        out[k + i] = 0.0 if v <= 0.0 else v
+
+
+@njit(cache=True, nogil=True)
 def expand_frame(
     controls: Any, gains_t: Any, bias: Any, low: Any, high: Any, train_low: Any,
     train_high: Any, out: Any, outside_counts: Any,
@@ -292,12 +318,15 @@ def forearm_angles(quat: Any, scalar_first: bool, up_sign: float, mount_t: Any,
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel with the types the loop uses."""
     f = np.zeros(2)
-    servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]), 0.0,
+    servo_targets(f, f, np.zeros(4), np.zeros((4, 2)), f, np.array([0.0, 1.0]),
+                  np.array([0.0, 1.0]), 0.0,
                   np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, f - 2.0, f + 2.0, 0.5,
                   0.5, f - 1.0, f + 1.0, np.zeros(2), 1.0, False, np.zeros(2))
     expand_frame(f, np.zeros((2, 2)), f, f - 1.0, f + 1.0, f - 1.0, f + 1.0, np.zeros(2),
                  np.zeros(2, np.int64))
-    robot_servo_targets(f, np.zeros((2, 2)), f, np.array([0.0, 1.0]), np.array([0.0, 1.0]),
+    hinge_features(f, f, np.zeros(4))
+    robot_servo_targets(f, np.zeros(0), np.zeros(2), np.zeros((2, 2)), f, np.array([0.0, 1.0]),
+                        np.array([0.0, 1.0]),
                         0.0, np.zeros((1, 1, 4, 2)), np.zeros(2, np.int64), 1.0, f - 2.0,
                         f + 2.0, 0.5, 0.5, f - 1.0, f + 1.0, np.zeros(2),
                         np.arange(3, dtype=np.int64),

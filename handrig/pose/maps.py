@@ -5,12 +5,16 @@ Every map has the same readable form, per curve::
     curve = mean_deg + sum over controls c of gains[c] * (c - control_mean_deg[c])
 
 so a person can open the TOML file and see which curve follows which control and how
-much (degrees per degree). A control curve maps to itself (gain 1). A curve may also
-carry ``range_deg = [low, high]``, the range it covered in training: the map's output
-for that curve is clipped to it (a clipped-linear map: the hand never takes a shape
-beyond what the capture showed, however far the controls extrapolate), before passive
-sag and the joint limits. The maps are fit
-offline from mocap (:mod:`handrig.offline.fitting`, where the methods are described).
+much (degrees per degree). A control curve maps to itself (gain 1). A piecewise-linear
+map also records one knot per control (``knots_deg``) and per curve ``hinge_gains``: above
+its knot a control's slope changes by its hinge gain, so each curve gets the term
+``hinge_gains[c] * (max(0, c - knot[c]) - max(0, control_mean_deg[c] - knot[c]))``
+(zero at the controls' means, so ``mean_deg`` stays the curve at the controls' means).
+A curve may also carry ``range_deg = [low, high]``, the range it covered in training:
+the map's output for that curve is clipped to it (a clipped-linear map: the hand never
+takes a shape beyond what the capture showed, however far the controls extrapolate),
+before passive sag and the joint limits. The maps are fit offline from mocap
+(:mod:`handrig.offline.fitting`, where the methods are described).
 
 A map records the range each control covered in training (``control_range_deg``) so the
 runtime can count how often the live controls leave it, and loading refuses implausible
@@ -78,11 +82,23 @@ class LinearMap:
     """How it was fit (method settings, cross-validation groups)."""
     evaluation: tuple[str, ...] = ()
     """Held-out figures measured when it was fit (``handrig fit-map --evaluate``)."""
+    knots_deg: FloatArray | None = field(default=None, compare=False)
+    """(k,) a piecewise-linear map's knot per control (None: a linear map)."""
+    hinge_gains: FloatArray | None = field(default=None, compare=False)
+    """(50, k) the change of each curve's slope above each control's knot."""
 
     def __post_init__(self) -> None:
         k = len(self.controls)
         if self.gains.shape != (len(hand.CURVE_NAMES), k):
             raise DataError(f"gains must be (50, {k}), got {self.gains.shape}")
+        if (self.knots_deg is None) != (self.hinge_gains is None):
+            raise DataError("a piecewise-linear map needs both knots_deg and hinge_gains")
+        if self.knots_deg is not None and self.hinge_gains is not None:
+            if self.knots_deg.shape != (k,) or self.hinge_gains.shape != (50, k):
+                raise DataError(f"knots_deg must be ({k},) and hinge_gains (50, {k}), got"
+                                f" {self.knots_deg.shape} and {self.hinge_gains.shape}")
+            if not (np.isfinite(self.knots_deg).all() and np.isfinite(self.hinge_gains).all()):
+                raise DataError("map knots_deg or hinge_gains contain NaN or inf")
         if self.control_means_deg.shape != (k,) or self.curve_means_deg.shape != (50,):
             raise DataError("control_means_deg must be (k,) and curve_means_deg (50,)")
         if self.control_range_deg is not None and self.control_range_deg.shape != (k, 2):
@@ -101,11 +117,34 @@ class LinearMap:
     def control_indices(self) -> NDArray[np.intp]:
         return np.array([hand.curve_index(c) for c in self.controls], dtype=np.intp)
 
+    @property
+    def piecewise(self) -> bool:
+        """Whether the map has hinge terms (a piecewise-linear map)."""
+        return self.knots_deg is not None
+
+    def feature_gains(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The map as one affine map of its features: ``curves = bias + gains_f @ f`` with
+        ``f = (controls, max(0, controls - knots))`` (the hinge half only for a
+        piecewise-linear map). Returns ``gains_f`` (50, k + h), ``bias`` (50,) and the
+        knots (h,), h = k or 0."""
+        if self.knots_deg is None or self.hinge_gains is None:
+            bias: FloatArray = self.curve_means_deg - self.gains @ self.control_means_deg
+            return self.gains.copy(), bias, np.zeros(0)
+        at_means = np.maximum(self.control_means_deg - self.knots_deg, 0.0)
+        bias = (self.curve_means_deg - self.gains @ self.control_means_deg
+                - self.hinge_gains @ at_means)
+        return (np.hstack([self.gains, self.hinge_gains]), bias,
+                np.asarray(self.knots_deg, dtype=np.float64).copy())
+
     def predict(self, controls_deg: FloatArray) -> FloatArray:
         """(n, k) control values -> (n, 50) curves, clipped to :meth:`output_range_deg`
         but not to the joint limits (see :class:`Expander`)."""
         x = np.asarray(controls_deg, dtype=np.float64)
         out: FloatArray = self.curve_means_deg + (x - self.control_means_deg) @ self.gains.T
+        if self.knots_deg is not None and self.hinge_gains is not None:
+            out += (np.maximum(x - self.knots_deg, 0.0)
+                    - np.maximum(self.control_means_deg - self.knots_deg, 0.0)
+                    ) @ self.hinge_gains.T
         if self.curve_range_deg is not None:
             np.clip(out, self.curve_range_deg[:, 0], self.curve_range_deg[:, 1], out=out)
         return out
@@ -125,6 +164,9 @@ class LinearMap:
             "#   curve = mean_deg + sum over controls c of gains[c] * (c - control_means_deg[c])",
             "# gains are degrees of the curve per degree of the control; a curve without",
             "# gains is held at its mean. Written by `handrig fit-map`.",
+            *(["# Piecewise-linear: above knots_deg[c] the slope on c changes by",
+               "# hinge_gains[c], adding hinge_gains[c] * (max(0, c - knots_deg[c])",
+               "#   - max(0, control_means_deg[c] - knots_deg[c]))."] if self.piecewise else []),
             f"format = {q(FORMAT)}",
             "version = 1",
             f"method = {q(self.method)}",
@@ -141,6 +183,9 @@ class LinearMap:
             rng = ", ".join(f"[{_num(lo)}, {_num(hi)}]" for lo, hi in self.control_range_deg)
             lines.append("# lowest and highest value of each control in the training data")
             lines.append(f"control_range_deg = [{rng}]")
+        if self.knots_deg is not None:
+            lines.append("# piecewise-linear: where each control's slope changes")
+            lines.append(f"knots_deg = [{', '.join(_num(v) for v in self.knots_deg)}]")
         if self.fitting:
             lines.append(f"fitting = {q(self.fitting)}")
         if self.evaluation:
@@ -157,6 +202,12 @@ class LinearMap:
             lines.append(f"[curves.{name}]")
             lines.append(f"mean_deg = {_num(self.curve_means_deg[i])}")
             lines.append(f"gains = {{ {g} }}" if g else "gains = {}")
+            if self.hinge_gains is not None:
+                hg = ", ".join(f"{c} = {_num(self.hinge_gains[i, j], 5)}"
+                               for j, c in enumerate(self.controls)
+                               if abs(self.hinge_gains[i, j]) >= 5e-6)
+                if hg:
+                    lines.append(f"hinge_gains = {{ {hg} }}")
             if self.curve_range_deg is not None and np.isfinite(self.curve_range_deg[i]).all():
                 lo, hi = self.curve_range_deg[i]
                 lines.append(f"range_deg = [{_num(lo)}, {_num(hi)}]")
@@ -190,11 +241,14 @@ class LinearMap:
         means = np.zeros(50)
         fit = np.full(50, np.nan)
         crange = np.tile([-np.inf, np.inf], (50, 1))
+        hinge = np.zeros((50, k))
         for i, name in enumerate(hand.CURVE_NAMES):
             entry = mf.curves[name]
             means[i] = entry.mean_deg
             for c, g in entry.gains.items():
                 gains[i, mf.controls.index(c)] = g
+            for c, g in entry.hinge_gains.items():
+                hinge[i, mf.controls.index(c)] = g
             if entry.fit_rms_deg is not None:
                 fit[i] = entry.fit_rms_deg
             if entry.range_deg is not None:
@@ -209,6 +263,9 @@ class LinearMap:
                 fit_rms_deg=None if np.isnan(fit).any() else fit, control_range_deg=rng,
                 curve_range_deg=crange if np.isfinite(crange).any() else None,
                 fitting=mf.fitting, evaluation=mf.evaluation,
+                knots_deg=None if mf.knots_deg is None else np.array(mf.knots_deg,
+                                                                     dtype=np.float64),
+                hinge_gains=None if mf.knots_deg is None else hinge,
             )
         except DataError as exc:
             raise ConfigError(str(exc), file=str(path)) from None
@@ -221,24 +278,31 @@ class LinearMap:
         (``sum |gain| * range``); None without a recorded range."""
         if self.control_range_deg is None:
             return None
-        out: FloatArray = np.abs(self.gains) @ (self.control_range_deg[:, 1]
-                                                - self.control_range_deg[:, 0])
+        lo, hi = self.control_range_deg[:, 0], self.control_range_deg[:, 1]
+        out: FloatArray = np.abs(self.gains) @ (hi - lo)
+        if self.knots_deg is not None and self.hinge_gains is not None:
+            out = out + np.abs(self.hinge_gains) @ (np.maximum(hi - self.knots_deg, 0.0)
+                                                    - np.maximum(lo - self.knots_deg, 0.0))
         return out
 
     def check_plausible(self, source: str = "<map>") -> list[str]:
         """Raise ConfigError (naming ``source`` and the key) for an implausible map;
         return warnings for doubtful values (``load`` issues them as :class:`MapWarning`)."""
         idx = set(int(i) for i in self.control_indices)
-        for i, name in enumerate(hand.CURVE_NAMES):
-            j = int(np.argmax(np.abs(self.gains[i])))
-            g = float(self.gains[i, j])
-            if i not in idx and abs(g) > MAX_GAIN:
-                raise ConfigError(
-                    "gain is implausible: no curve moves that many degrees per degree of a"
-                    " control (refit the map with handrig fit-map)",
-                    file=source, key=f"curves.{name}.gains.{self.controls[j]}", value=g,
-                    allowed=f"|gain| <= {MAX_GAIN:g}",
-                )
+        tables = [("gains", self.gains)]
+        if self.hinge_gains is not None:
+            tables.append(("hinge_gains", self.hinge_gains))
+        for key, table in tables:
+            for i, name in enumerate(hand.CURVE_NAMES):
+                j = int(np.argmax(np.abs(table[i])))
+                g = float(table[i, j])
+                if i not in idx and abs(g) > MAX_GAIN:
+                    raise ConfigError(
+                        "gain is implausible: no curve moves that many degrees per degree"
+                        " of a control (refit the map with handrig fit-map)",
+                        file=source, key=f"curves.{name}.{key}.{self.controls[j]}", value=g,
+                        allowed=f"|gain| <= {MAX_GAIN:g}",
+                    )
         if self.control_range_deg is not None:
             for j, c in enumerate(self.controls):
                 lo, hi = self.control_range_deg[j]
@@ -302,6 +366,7 @@ def _num(v: float, decimals: int = 4) -> str:
 class _CurveEntry:
     mean_deg: float
     gains: dict[str, float] = field(default_factory=dict)
+    hinge_gains: dict[str, float] = field(default_factory=dict)
     fit_rms_deg: float | None = None
     range_deg: tuple[float, float] | None = None
 
@@ -323,6 +388,7 @@ class _MapFile:
     control_range_deg: tuple[tuple[float, float], ...] | None = None
     fitting: str = ""
     evaluation: tuple[str, ...] = ()
+    knots_deg: tuple[float, ...] | None = None
 
     def check(self) -> None:
         if not self.controls:
@@ -352,6 +418,18 @@ class _MapFile:
                         "gain on a name that is not a control", key=f"curves.{name}.gains.{c}",
                         allowed=", ".join(self.controls),
                     )
+            for c in entry.hinge_gains:
+                if c not in self.controls:
+                    raise ConfigError(
+                        "hinge gain on a name that is not a control",
+                        key=f"curves.{name}.hinge_gains.{c}", allowed=", ".join(self.controls))
+                if self.knots_deg is None:
+                    raise ConfigError(
+                        "a hinge gain needs the map's knots_deg (one knot per control)",
+                        key=f"curves.{name}.hinge_gains.{c}", allowed="knots_deg = [...]")
+        if self.knots_deg is not None and len(self.knots_deg) != len(self.controls):
+            raise ConfigError(f"needs one knot per control ({len(self.controls)})",
+                              key="knots_deg", value=list(self.knots_deg))
         if self.control_range_deg is not None:
             if len(self.control_range_deg) != len(self.controls):
                 raise ConfigError(

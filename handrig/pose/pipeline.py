@@ -23,7 +23,7 @@ This module imports no device code (no serial, dynamixel_sdk or mujoco).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
 import numpy as np
@@ -62,6 +62,9 @@ class MapLike(Protocol):
     def control_means_deg(self) -> FloatArray: ...  # (k,)
 
     def output_range_deg(self) -> FloatArray: ...  # (50, 2)
+
+    def feature_gains(self) -> tuple[FloatArray, FloatArray, FloatArray]: ...
+    # (50, k + h) gains on the features (controls, then hinges at the h knots), bias, knots
 
 
 class ExpanderLike(Protocol):
@@ -102,6 +105,10 @@ class ServoPath:
     sag: SagTables
     map_low: FloatArray  # (n,) the map's output range, before sag (-inf/inf: none)
     map_high: FloatArray  # (n,)
+    knots: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """(h,) a piecewise-linear map's knots: then ``a`` is over the features (the k
+    controls, then ``max(0, controls[:h] - knots)``), which the servo step's kernel
+    writes into a scratch buffer first."""
 
 
 class RetargetLike(Protocol):
@@ -278,6 +285,8 @@ class PosePipeline:
         self._clamped_pose = np.zeros(POSE_SIZE)
         self._raw_targets = np.zeros(n)
         self._step = np.zeros(n)
+        _, _, knots = self.expander.map.feature_gains()  # the servo step's scratch
+        self._features = np.zeros(len(self.expander.controls) + len(knots))
 
     def _build_robot_path(self, rt: RetargetLike) -> RobotPath:
         """The retarget rows in servo order over the curves they read (a curve is read
@@ -290,7 +299,7 @@ class PosePipeline:
         human = self._build_servo_path([POSE_NAMES[c] for c in curves])
         if self.sag_gain == 0.0:
             human = ServoPath(human.a, human.b, human.sag_slot, 0.0, SagTables.empty(),
-                              human.map_low, human.map_high)
+                              human.map_low, human.map_high, human.knots)
         offset = np.asarray(rt.offset_deg, dtype=np.float64)[self._robot_rows].copy()
         gain = np.ascontiguousarray(full[:, curves])
         rows, cols = np.nonzero(gain)  # row-major order
@@ -310,9 +319,7 @@ class PosePipeline:
         sag brings it back: the end result is inside the limits either way.
         """
         m = self.expander.map
-        gains = np.asarray(m.gains, dtype=np.float64)
-        bias = np.asarray(m.curve_means_deg, dtype=np.float64) - gains @ np.asarray(
-            m.control_means_deg, dtype=np.float64)
+        gains, bias, knots = m.feature_gains()
         n, k = len(joints), gains.shape[1]
         a = np.zeros((k, n))
         b = np.zeros(n)
@@ -354,7 +361,7 @@ class PosePipeline:
         grid = self._grids.get(live)
         tables = grid.kernel_tables() if grid is not None else SagTables.empty()
         return ServoPath(np.ascontiguousarray(a), b, slot, self.sag_gain, tables, map_low,
-                         map_high)
+                         map_high, np.ascontiguousarray(knots, dtype=np.float64))
 
     # -- pieces ---------------------------------------------------------------------------
     def _add_sag(self, pose: FloatArray, h: str, inclination_deg: float,
@@ -423,9 +430,10 @@ class PosePipeline:
             inclination_deg = SagGrid.checked_inclination(inclination_deg, rotation_deg)
         first = not self._has_targets
         robot = self.robot_path
+        controls = np.ascontiguousarray(controls_deg, dtype=np.float64)
         if robot is not None:
             self.rejected += kernels.robot_servo_targets(
-                np.ascontiguousarray(controls_deg, dtype=np.float64), path.a, path.b,
+                controls, path.knots, self._features, path.a, path.b,
                 tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
                 tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
                 path.map_low, path.map_high,
@@ -437,7 +445,7 @@ class PosePipeline:
             self._has_targets = True
             return self.targets
         self.rejected += kernels.servo_targets(
-            np.ascontiguousarray(controls_deg, dtype=np.float64), path.a, path.b,
+            controls, path.knots, self._features, path.a, path.b,
             tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
             tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
             path.map_low, path.map_high,

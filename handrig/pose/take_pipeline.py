@@ -53,6 +53,10 @@ class PoseMap:
     def output_range_deg(self) -> FloatArray:
         return np.tile([-np.inf, np.inf], (_CURVES, 1))
 
+    def feature_gains(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return (self._gains.copy(), self._curve_means - self._gains @ self._control_means,
+                np.zeros(0))
+
 
 class PoseExpander:
     """The ExpanderLike of a take: the controls are the full pose's 54 values."""

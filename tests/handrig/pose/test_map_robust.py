@@ -189,16 +189,17 @@ def test_out_of_regime_splits_methods_and_figure(tmp_path: Path) -> None:
     assert len(full[0].folds) == 15 and len(full[1].folds) == 3 and labels.max() == 14
 
 
-def test_shipped_maps_are_robust_and_say_how_they_were_fit() -> None:
+def test_shipped_maps_are_piecewise_and_say_how_they_were_fit() -> None:
     for path, k in ((DEFAULT_MAP, 5), (DEFAULT_TWO_GLOVE_MAP, 10)):
         with warnings.catch_warnings():
             warnings.simplefilter("error", MapWarning)
             m = LinearMap.load(path)
-        assert m.method == "robust" and len(m.controls) == k
+        assert m.method == "piecewise" and len(m.controls) == k and m.piecewise
         assert m.control_range_deg is not None and m.frames == 1063
-        assert "15 groups (the gesture clips of the README)" in m.fitting
+        assert "hinge at its training median" in m.fitting
         assert [e.split(" ")[0] for e in m.evaluation] == [
-            "clips", "kinds", "calm", "calm-unseen", "offset"]
+            "clips", "kinds", "calm", "calm-unseen", "offset", "blocked", "blocked-calm",
+            "blocked-offset", "other-hand"]
 
 
 def test_robust_never_hurts_when_the_controls_are_off() -> None:
@@ -256,7 +257,7 @@ def test_fit_map_on_two_files_groups_each_files_blocks(
         p.write_text(format_bvh(Bvh(b.joints, b.frame_time_s, b.motion[a:z])))
         files.append(str(p))
     out = tmp_path / "m.toml"
-    assert main(["fit-map", *files, "--out", str(out), "--evaluate"]) == 0
+    assert main(["fit-map", *files, "--out", str(out), "--evaluate", "--method", "robust"]) == 0
     m = LinearMap.load(out)
     assert m.method == "robust" and m.frames == 700
     assert "10 groups (5 contiguous blocks per file)" in m.fitting

@@ -138,7 +138,7 @@ def test_shipped_default_maps() -> None:
     two = Expander.from_file(DEFAULT_TWO_GLOVE_MAP)
     assert len(two.controls) == 10 and two.controls[5:] == tuple(
         hand.mirror_name(c) for c in DEFAULT_RIGHT_CONTROLS)
-    assert LinearMap.load(DEFAULT_MAP).method == "robust"
+    assert LinearMap.load(DEFAULT_MAP).method == "piecewise"
 
 
 def test_ridge_beats_the_paper_on_unseen_gestures() -> None:
@@ -200,7 +200,7 @@ def test_evaluate_compares_methods_on_held_out_blocks(
     assert obj["in_sample"] is False
     assert "4 contiguous blocks" in obj["held_out"]["scheme"]
     meth = obj["held_out"]["methods"]
-    assert set(meth) == {"robust", "ridge", "paper", "mean"}
+    assert set(meth) == {"robust", "ridge", "paper", "mean", "piecewise"}
     assert set(obj["out_of_regime"]) == {"clips", "calm", "calm-unseen", "offset"}
     assert meth["ridge"]["ri_rms_deg"] < meth["mean"]["ri_rms_deg"]
     assert main(["evaluate", str(p), "--folds", "1"]) == 2

@@ -13,10 +13,11 @@ from handrig.pose.sag import SagGrid
 
 
 class NumpyServoStep:
-    """:meth:`PosePipeline.servo_targets` in plain numpy: ``clip(controls @ a + b,
+    """:meth:`PosePipeline.servo_targets` in plain numpy: ``clip(features @ a + b,
     map_low, map_high) + gain * offsets[slot]`` (offsets looked up with
     :meth:`SagGrid.offsets`, not the kernel's tables), a non-finite target holds the
-    previous one, clamp, slew limit."""
+    previous one, clamp, slew limit. The features are the controls, then (a
+    piecewise-linear map) ``max(0, controls - knots)``."""
 
     def __init__(self, path: ServoPath, sag: SagGrid | None, low: np.ndarray,
                  high: np.ndarray, slew_deg_s: float) -> None:
@@ -29,7 +30,9 @@ class NumpyServoStep:
     def __call__(self, controls: np.ndarray, inc: float, rot: float, dt: float) -> np.ndarray:
         path = self.path
         with np.errstate(invalid="ignore"):  # inf - inf: a NaN the step must hold
-            raw = controls @ path.a + path.b
+            h = len(path.knots)  # a piecewise-linear map: the controls' hinges follow them
+            features = np.concatenate([controls, np.maximum(controls[:h] - path.knots, 0.0)])
+            raw = features @ path.a + path.b
             raw = np.where(np.isfinite(raw), np.clip(raw, path.map_low, path.map_high), raw)
             if self.sag is not None:
                 offsets = np.append(self.sag.offsets(inc, rot), 0.0)  # slot 23: no sag

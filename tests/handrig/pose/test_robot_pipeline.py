@@ -107,7 +107,8 @@ def test_kernel_holds_the_previous_target_without_nan_leaking() -> None:
     start, curve = np.array([0, 1, 2, 4]), np.array([0, 1, 0, 1])
     gain = np.array([1.0, 1.0, 0.5, 0.5])
     held = kernels.robot_servo_targets(
-        np.array([0.0, 4.0]), a, np.array([np.inf, 0.0]), np.zeros(2), np.zeros(2), 0.0,
+        np.array([0.0, 4.0]), np.zeros(0), np.zeros(2), a, np.array([np.inf, 0.0]), np.zeros(2),
+        np.zeros(2), 0.0,
         np.zeros((0, 1, 4, 1)),
         np.zeros(2, np.int64), 0.0, f - np.inf, f + np.inf, 0.0, 0.0, f - 100.0, f + 100.0,
         human, start, curve, gain,
