@@ -98,12 +98,15 @@ class CsvTake(TakeFormat):
         if nl < 0 or not first.startswith("t_s,"):
             raise DataError(f"{p}: no header row 't_s,<curve names>': not a handrig"
                             " performance CSV, or cut before its first frame; nothing to keep")
-        width = len(first.split(","))
+        try:
+            width = len(check_header(first.rstrip("\r"), p))
+        except DataError as exc:
+            raise DataError(f"{exc}: the header is damaged; nothing to keep") from None
 
         def good(line: bytes) -> bool:
             return all_numbers(line.split(b","), width)
 
-        return FrameLayout(nl + 1, good)
+        return FrameLayout(nl + 1, good, width=width, times="rising")
 
 
 def check_header(line: str, p: Path) -> list[str]:
