@@ -96,6 +96,7 @@ class SilenceWatch:
         self.read_outages = 0  # times a read's servos went past warn_s together
         self.host_late_episodes = 0  # warnings given while the host was late
         self._said_outage = False
+        self._said_all_quiet = False
         self._said_host = False
         self.silent_by = np.zeros(n, np.int64)  # per servo: silences warned about
         self.held_by = np.zeros(n, np.int64)
@@ -206,6 +207,18 @@ class SilenceWatch:
         every servo) are the read's trouble, said once; the others are named."""
         everyone = len(warned) == self.n or bool((self.tier > ANSWERING).all())
         whole = self._quiet_together[warned]
+        if everyone and whole.all() and (self._host_late() or self.bus.emulated):
+            # every servo, reads unanswered whole, the host late or an emulator: the
+            # host's or the emulator's, said once; on a real bus that kept time it is
+            # named (the power supply, the adapter)
+            self._outage[warned] = True
+            self.read_outages += 1
+            if not self._said_all_quiet:
+                self._said_all_quiet = True
+                what, why = self.describe(warned, seconds)
+                self._say(f"{what}; {why}; every servo is held until it answers (said once;"
+                          " the summary counts such reads)")
+            return
         if whole.sum() >= 2 and not everyone:
             self._outage[warned[whole]] = True
             self.read_outages += 1

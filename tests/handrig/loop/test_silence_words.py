@@ -100,3 +100,23 @@ def test_the_hosts_lateness_is_said_once_in_a_line_of_its_own() -> None:
     assert not any("host was late" in e for e in said if e.startswith("no valid reply")), said
     assert _named_silent(said) == {"servo 3 (riThumbCMCz)", "servo 5 (riThumbIPz)"}, said
     assert watch.counts()["host_late"] == 2
+
+
+def test_every_read_unanswered_for_a_moment_on_an_emulator_is_said_once() -> None:
+    bus, watch, peer = _watch()
+    said = _run(bus, watch, 20)
+    k = 20
+    for _ in range(3):  # the emulator starved: nobody answers for 0.16 s, three times
+        until = bus.clock.now() + 0.16
+        for servo in peer.servos:
+            servo.silent_until = until
+        said += _run(bus, watch, 20, start=k)
+        k += 20
+    quiet = [e for e in said if "no valid reply" in e or "answer" in e]
+    # the first part to go past warn_s, then every servo: each said once, as the
+    # emulator's; the two later times are counted, not said
+    assert len(quiet) == 2 and all("said once" in e for e in quiet), said
+    assert "the emulator is not keeping up" in quiet[1], said
+    counts = watch.counts()
+    assert counts["servos"] == {} and counts["reads_unanswered_whole"] >= 3, counts
+    assert watch.silences == 0 and not watch.holding.any()
