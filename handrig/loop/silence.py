@@ -42,6 +42,7 @@ GAP_WARM_UP = 16  # gaps between reads learnt before any is judged late
 EVENTS_KEPT = 64
 ADMIT_RETRY_S = 1.0  # a servo left out that answers but was not admitted: asked again
 ANSWERING, WARNED, HELD, ACTED = 0, 1, 2, 3  # tiers of a silent servo
+MISSED_MIN = 3  # reads in a row that asked a servo and got nothing, before it is silent
 
 
 class SilenceWatch:
@@ -151,10 +152,12 @@ class SilenceWatch:
         since_ref = now - self._t_ref if np.isfinite(self._t_ref) else 0.0
         silent_s = np.minimum(np.asarray(state.age_s, dtype=np.float64)
                               + (now - state.timestamp_s), since_ref)
-        # a servo is silent when it has not been heard for warn_s and the last read that
-        # asked it got nothing from it (one the host did not ask for a while, because it
-        # stalled or read the other parts, is not)
-        silent = (silent_s > cfg.warn_s) & (missed > 0)
+        # a servo is silent when it has not been heard for warn_s and the last MISSED_MIN
+        # reads that asked it got nothing from it: one the host did not ask for a while
+        # (it stalled, or read the other parts) is not, nor one a silent servo before it
+        # in a Fast Sync Read's chain cut off (the bus moves that one to the chain's end
+        # after SILENT_AFTER reads)
+        silent = (silent_s > cfg.warn_s) & (missed >= MISSED_MIN)
         if self._left_out is None:  # after connect: the servos left out are known
             self._left_out = np.zeros(self.n, bool)
             self._left_out[list(self.bus.left_out)] = True
