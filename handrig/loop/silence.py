@@ -210,10 +210,10 @@ class SilenceWatch:
         every servo) are the read's trouble, said once; the others are named."""
         everyone = len(warned) == self.n or bool((self.tier > ANSWERING).all())
         whole = self._quiet_together[warned]
-        if everyone and whole.all() and (self._host_late() or self.bus.emulated):
-            # every servo, reads unanswered whole, the host late or an emulator: the
-            # host's or the emulator's, said once; on a real bus that kept time it is
-            # named (the power supply, the adapter)
+        if everyone and whole.all():
+            # every servo, reads unanswered whole: the host's, the emulator's or the
+            # bus's (its power, the adapter), said once with the cause; later times are
+            # counted. Still quiet at action_s, it is named and acted on.
             self._outage[warned] = True
             self.read_outages += 1
             if not self._said_all_quiet:
