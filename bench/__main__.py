@@ -24,6 +24,7 @@ import bench
 
 # only when named: long, or (bench_view) driving headless chromium pages
 LONG = frozenset({"bench_soak", "bench_arrival", "bench_skips", "bench_view", "bench_view_exit",
+                  "bench_inputs", "bench_one_silent",
                   "bench_wedge"})
 HELP = ("-h", "--help")
 

@@ -7,6 +7,16 @@ Messages say what failed, where, how many attempts were made and what to do.
 
 from __future__ import annotations
 
+_SHOWN_CHARS = 80
+
+
+def _shown(value: object) -> str:
+    """``value``'s repr, cut to a line (a value read from a file may be any size)."""
+    text = repr(value)
+    if len(text) <= _SHOWN_CHARS:
+        return text
+    return f"{text[:_SHOWN_CHARS - 20]}... ({len(text)} characters)"
+
 
 class HandrigError(Exception):
     """Root of every error handrig raises on purpose."""
@@ -36,12 +46,12 @@ class ConfigError(HandrigError):
         if self.file is None and self.key is not None and self.key.startswith("-"):
             text = self.key  # a command-line flag: named as typed
             if self.value is not None:
-                text += f" {self.value!r}"
+                text += f" {_shown(self.value)}"
             text += f": {self.detail}"
         elif self.key is not None:
             text = f"{where}: key '{self.key}'"
             if self.value is not None:
-                text += f" = {self.value!r}"
+                text += f" = {_shown(self.value)}"
             text += f": {self.detail}"
         else:
             text = f"{where}: {self.detail}"

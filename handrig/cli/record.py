@@ -25,11 +25,16 @@ def register(sub: Any) -> None:
     actions = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     r: argparse.ArgumentParser = actions.add_parser(
         "repair",
-        help="keep every whole frame of a take cut short (crash, kill, power cut)",
-        description="A take is written to TAKE.partial while the show runs and renamed to"
-        " TAKE when the run ends. After a crash, repair TAKE.partial (or TAKE): everything"
-        " after the last whole frame is cut, a BVH header gets the frame count, and"
-        " TAKE.partial becomes TAKE (unless TAKE exists). Safe to run on a whole file.",
+        help="check every frame of a take and keep the whole ones (crash, kill, power cut,"
+        " damage)",
+        description="A take (a performance, CSV or BVH, or a glove take) is written to"
+        " TAKE.partial while the show runs and renamed to TAKE when the run ends. After a"
+        " crash, repair TAKE.partial (or TAKE): every frame is checked (its values are"
+        " numbers, as many as the header says, its time comes after the last), an"
+        " unfinished last line is cut, and a damaged line stops the take there: the whole"
+        " frames before it are kept and the rest is moved to TAKE.damaged. A BVH header"
+        " gets the frame count, and TAKE.partial becomes TAKE (unless TAKE exists). Safe"
+        " to run on a whole file.",
     )
     r.add_argument("file", nargs="+", help="TAKE.partial, TAKE.csv or TAKE.bvh")
     r.add_argument("--json", action="store_true", help="print what was done as JSON")
@@ -74,9 +79,13 @@ def register(sub: Any) -> None:
 def run_repair(args: argparse.Namespace) -> int:
     done = [repair(f) for f in args.file]
     if args.json:
-        print(json.dumps([{"path": str(d.path), "frames": d.frames,
+        print(json.dumps([{"path": str(d.path), "kind": d.kind, "frames": d.frames,
                            "bytes_dropped": d.bytes_dropped,
-                           "declared_frames": d.declared_frames} for d in done]))
+                           "declared_frames": d.declared_frames,
+                           "damage": None if d.damage is None else {
+                               "line": d.damage.line, "byte": d.damage.byte,
+                               "what": d.damage.what, "moved_to": str(d.damage.moved_to),
+                               "bytes_moved": d.damage.bytes_moved}} for d in done]))
     else:
         for d in done:
             print(d.describe())

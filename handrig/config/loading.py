@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+from handrig.config.bounded import MAX_CONFIG_BYTES, read_text
 from handrig.config.paths import CONFIG_DIR, REPO_ROOT, config_file
 from handrig.errors import ConfigError
 from handrig.hand import ALL_JOINT_NAMES, anatomical_limits_deg, is_joint_name
@@ -40,12 +41,7 @@ are :mod:`handrig.config.paths`' and are named here too, beside the loaders that
 def load_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; a missing or malformed file is a ConfigError naming it."""
     p = Path(path)
-    try:
-        text = p.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise ConfigError("file not found", file=str(p)) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read: {exc}", file=str(p)) from None
+    text = read_text(p, MAX_CONFIG_BYTES, "a handrig TOML file", ConfigError)
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

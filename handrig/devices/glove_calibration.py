@@ -33,8 +33,10 @@
     closed_deg = 15.0          # ... and in a fist
 
 Each channel maps linearly from ``raw_open -> open_deg`` to ``raw_closed ->
-closed_deg`` and is clamped to that degree range. Several entries may read the
-same raw channel (one OpenGloves thumb value can drive CMC flexion and
+closed_deg`` and is clamped to that degree range. With ``format = "frames"`` each
+raw channel the glove sends is read by exactly one entry: the indices are 0..n-1,
+each once (a duplicated or missing index is refused). With OpenGloves several
+entries may read the same letter (one thumb value can drive CMC flexion and
 abduction).
 """
 
@@ -237,6 +239,29 @@ class GloveConfig:
                 raise ConfigError(f"curve already driven by channels[{seen[ch.curve]}]",
                                   key=f"channels[{i}].curve", value=ch.curve)
             seen[ch.curve] = i
+        if self.glove.format == "frames":
+            self._check_indices()
+
+    def _check_indices(self) -> None:
+        """Frames: raw channels 0..n-1, each read by one entry (a duplicate is a copy-paste
+        slip that leaves a sensor unread; a gap, a sensor nobody reads)."""
+        first: dict[int, int] = {}
+        for i, ch in enumerate(self.channels):
+            if ch.index in first:
+                raise ConfigError(
+                    f"raw channel {ch.index} already read by channels[{first[ch.index]}] "
+                    f"({self.channels[first[ch.index]].curve})", key=f"channels[{i}].index",
+                    value=ch.index, allowed=f"each index once, 0..{len(self.channels) - 1}")
+            first[ch.index] = i
+        missing = sorted(set(range(max(first) + 1)) - set(first))
+        if missing:
+            last = first[max(first)]
+            raise ConfigError(
+                f"raw channel {missing[0]} is read by no [[channels]] entry (indices "
+                f"{', '.join(str(k) for k in sorted(first))})", key=f"channels[{last}].index",
+                value=self.channels[last].index,
+                allowed=f"indices 0..{len(self.channels) - 1}, each once: add the entry for "
+                f"channel {missing[0]} or renumber")
 
     @property
     def curves(self) -> tuple[str, ...]:

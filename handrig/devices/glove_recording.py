@@ -21,12 +21,15 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from handrig.config import bounded
+from handrig.config.bounded import excerpt
 from handrig.errors import DataError
 
 MAGIC = "# handrig glove recording 1"
@@ -132,75 +135,105 @@ def write_glove_recording(path: str | Path, rec: GloveRecording) -> None:
             w.writerow(row)
 
 
+MAX_META_LINES = 1000
+"""``# key: value`` lines a recording may carry (a handful are written)."""
+
+
 def read_glove_recording(path: str | Path) -> GloveRecording:
-    """Read a glove recording; any problem is a DataError naming the file and line."""
+    """Read a glove recording one line at a time (a line over
+    :data:`~handrig.config.bounded.MAX_LINE_BYTES` or bytes that are not text are refused
+    where they are); any problem is a DataError naming the file and line."""
     p = Path(path)
     try:
-        lines = p.read_text(encoding="utf-8").splitlines()
+        with p.open("rb") as f:
+            return _read(p, bounded.lines(f, p, "a glove recording"))
     except FileNotFoundError:
         raise DataError(f"{p}: glove recording not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"{p}: cannot read glove recording: {exc}") from None
-    if not lines or lines[0].strip() != MAGIC:
+    except OSError as exc:
+        raise DataError(f"{p}: cannot read glove recording: {exc.strerror}") from None
+
+
+def _read(p: Path, lines: Iterator[tuple[int, str]]) -> GloveRecording:
+    first = next(lines, (1, ""))[1]
+    if first.strip() != MAGIC:
         hint = ""
-        if lines and lines[0].startswith("t_s,"):
+        if first.startswith("t_s,"):
             hint = ("; it is a performance take (`handrig run --record`): play it onto the"
                     f" servos with `handrig play {p} --bus PORT` (or sim)")
         raise DataError(f"{p}:1: not a glove recording (the first line must be {MAGIC!r})"
                         f"{hint}; `handrig record glove TAKE.csv` or `handrig run"
                         " --record-glove TAKE.csv` make one")
     meta: dict[str, str] = {}
-    lineno = 1
-    while lineno < len(lines) and lines[lineno].startswith("#"):
-        key, sep, value = lines[lineno][1:].partition(":")
+    lineno, line = 0, None
+    for lineno, line in lines:
+        if not line.startswith("#"):
+            break
+        if len(meta) >= MAX_META_LINES:
+            raise DataError(f"{p}:{lineno}: more than {MAX_META_LINES} '# key: value' lines:"
+                            " not a glove recording")
+        key, sep, value = line[1:].partition(":")
         if sep:
             meta[key.strip()] = value.strip()
-        lineno += 1
-    if lineno >= len(lines):
+    else:
+        line = None
+    if line is None:
         raise DataError(f"{p}: no header line (t_s,...,buttons)")
-    header = [h.strip() for h in next(csv.reader([lines[lineno]]))]
+    header = [h.strip() for h in next(csv.reader([line]))]
     if len(header) < 2 or header[0] != "t_s" or header[-1] != "buttons":
-        raise DataError(f"{p}:{lineno + 1}: header must start with t_s and end with buttons,"
-                        f" got {','.join(header)}")
+        raise DataError(f"{p}:{lineno}: header must start with t_s and end with buttons,"
+                        f" got {excerpt(','.join(header))}")
     has_quat = tuple(header[-5:-1]) == QUAT_COLUMNS
     names = tuple(header[1:-5] if has_quat else header[1:-1])
-    rows = list(csv.reader(lines[lineno + 1:]))
-    n = sum(1 for r in rows if r)
-    t = np.empty(n)
-    raw = np.empty((n, len(names)))
-    quat = np.full((n, 4), np.nan) if has_quat else None
-    buttons = np.zeros(n, dtype=np.int64)
-    i = 0
-    for j, row in enumerate(rows):
-        if not row:
-            continue
-        where = f"{p}:{lineno + 2 + j}"
+    times: list[float] = []
+    raws: list[list[float]] = []
+    quats: list[list[float]] = []
+    buttons_list: list[int] = []
+    rows = ((n, row) for n, ln in lines if ln.strip() for row in csv.reader([ln]))
+    row_at = next(rows, None)
+    while row_at is not None:
+        n, row = row_at
+        try:
+            row_at = next(rows, None)
+            ends = row_at is None
+        except DataError:
+            row_at, ends = None, False
+        where = f"{p}:{n}"
         if len(row) != len(header):
-            cut = (" (the last line: the take is cut short; delete that line to keep the"
-                   " rest)" if j == len(rows) - 1 else "")
+            cut = (" (the last line: the take is cut short; `handrig record repair` keeps"
+                   " the frames before it)" if ends else "")
             raise DataError(f"{where}: {len(row)} columns, the header has {len(header)}{cut}")
         try:
-            t[i] = float(row[0])
-            raw[i] = [float(v) for v in row[1:1 + len(names)]]
-            if quat is not None:
+            t = _number(row[0], "t_s")
+            raws.append([_number(v, names[k]) for k, v in enumerate(row[1:1 + len(names)])])
+            if has_quat:
                 cells = row[-5:-1]
                 if all(c.strip() for c in cells):
-                    quat[i] = [float(c) for c in cells]
+                    quats.append([_number(c, q) for c, q in zip(cells, QUAT_COLUMNS,
+                                                                 strict=True)])
                 elif any(c.strip() for c in cells):
                     raise ValueError("quaternion cells must be all filled or all empty")
-            buttons[i] = int(row[-1])
+                else:
+                    quats.append([math.nan] * 4)
+            try:
+                buttons_list.append(int(row[-1]))
+            except ValueError:
+                raise ValueError(f"buttons {excerpt(row[-1])} is not an integer") from None
         except ValueError as exc:
             raise DataError(f"{where}: {exc}") from None
-        if i and not t[i] > t[i - 1]:
-            raise DataError(f"{where}: t_s {t[i]:g} does not come after {t[i - 1]:g}: the"
+        if times and not t > times[-1]:
+            raise DataError(f"{where}: t_s {t:g} does not come after {times[-1]:g}: the"
                             " times must increase")
-        i += 1
+        times.append(t)
+    t_s = np.array(times, dtype=np.float64)
+    raw = np.array(raws, dtype=np.float64).reshape(len(times), len(names))
+    quat = np.array(quats, dtype=np.float64).reshape(len(times), 4) if has_quat else None
+    buttons = np.array(buttons_list, dtype=np.int64)
     try:
         rate = float(meta.get("rate_hz", "0") or 0)
     except ValueError:
-        raise DataError(f"{p}: rate_hz {meta['rate_hz']!r} is not a number") from None
+        raise DataError(f"{p}: rate_hz {excerpt(meta['rate_hz'])} is not a number") from None
     try:
-        return GloveRecording(t, raw, buttons, names, quat, rate, meta)
+        return GloveRecording(t_s, raw, buttons, names, quat, rate, meta)
     except DataError as exc:
         raise DataError(f"{p}: {exc}") from None
 
@@ -229,3 +262,11 @@ def sweep_recording(
     names = tuple(f"ch{i}" for i in range(n_channels))
     return GloveRecording(t, np.rint(raw), np.zeros(n, dtype=np.int64), names, quat, rate_hz,
                           {"source": "sweep_recording"})
+
+
+def _number(text: str, column: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"column {excerpt(column, 24)}: {excerpt(text.strip(), 24)} is not"
+                         " a number") from None

@@ -303,6 +303,7 @@ class Rig:
             stats.servo_recoveries = watch.recoveries
             stats.servo_recovery_reads_max = watch.recovery_reads_max
             stats.servos_admitted = watch.admitted
+            stats.silence_counts = watch.counts()
             heat = self.cycle.heat
             stats.heat_warnings, stats.heat_reliefs = heat.warnings, heat.reliefs
             stats.heat_actions = heat.actions

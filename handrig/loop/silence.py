@@ -18,6 +18,13 @@ as a servo that answers again; refused, it is asked again after ``ADMIT_RETRY_S`
 What is said names what was seen: which servos, for how long, whether the host
 itself was late (the gaps between reads) and whether every servo went quiet at
 once; hardware advice is given only when the host kept time and the others answer.
+One silent servo costs that servo only, in words too: a read that asked several
+servos and got no answer at all, while other reads answer, is the read's trouble
+(the host, the emulator, the adapter), not each servo's: its servos are held as any
+silent servo is (a goal held is safe), but they are not counted or named as silent
+servos, and it is said once in the run, as is a host that made reads late; later
+ones are counted (:meth:`SilenceWatch.counts`, the run's summary). Only when such a
+read stays unanswered until ``action_s`` is it named and acted on.
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ GAP_WARM_UP = 16  # gaps between reads learnt before any is judged late
 EVENTS_KEPT = 64
 ADMIT_RETRY_S = 1.0  # a servo left out that answers but was not admitted: asked again
 ANSWERING, WARNED, HELD, ACTED = 0, 1, 2, 3  # tiers of a silent servo
+MISSED_MIN = 3  # reads in a row that asked a servo and got nothing, before it is silent
 
 
 class SilenceWatch:
@@ -84,6 +92,16 @@ class SilenceWatch:
         # servos whose last read asked 2+ servos and had no answer at all (a read part
         # that went quiet as a whole, not each servo's cable)
         self._quiet_together = np.zeros(n, bool)
+        self._outage = np.zeros(n, bool)  # silent because their reads went unanswered whole
+        self._missed = np.zeros(n, np.int64)  # reads since each servo was last heard
+        self.read_outages = 0  # times a read's servos went past warn_s together
+        self.host_late_episodes = 0  # warnings given while the host was late
+        self._said_outage = False
+        self._said_all_quiet = False
+        self._said_host = False
+        self.silent_by = np.zeros(n, np.int64)  # per servo: silences warned about
+        self.held_by = np.zeros(n, np.int64)
+        self.acted_by = np.zeros(n, np.int64)
 
     # ------------------------------------------------------------------ host timing
     def note_read(self, now: float, late: bool = False) -> None:
@@ -120,15 +138,26 @@ class SilenceWatch:
         DeviceTimeoutError when the action is ``"stop"``."""
         cfg = self.config
         self._note_reboots(state)
+        missed = self._missed
         if state.sent:
             asked = (np.ones(self.n, bool) if state.asked is None
                      else np.asarray(state.asked, dtype=bool))
-            together = asked.sum() >= 2 and not bool(state.answered.any())
+            answered = np.asarray(state.answered, dtype=bool)
+            together = asked.sum() >= 2 and not bool(answered.any())
             self._quiet_together[asked] = together
+            missed[asked & answered] = 0
+            missed[asked & ~answered] += 1
+        else:  # the read could not be sent: nobody was heard
+            missed += 1
         since_ref = now - self._t_ref if np.isfinite(self._t_ref) else 0.0
         silent_s = np.minimum(np.asarray(state.age_s, dtype=np.float64)
                               + (now - state.timestamp_s), since_ref)
-        silent = silent_s > cfg.warn_s
+        # a servo is silent when it has not been heard for warn_s and the last MISSED_MIN
+        # reads that asked it got nothing from it: one the host did not ask for a while
+        # (it stalled, or read the other parts) is not, nor one a silent servo before it
+        # in a Fast Sync Read's chain cut off (the bus moves that one to the chain's end
+        # after SILENT_AFTER reads)
+        silent = (silent_s > cfg.warn_s) & (missed >= MISSED_MIN)
         if self._left_out is None:  # after connect: the servos left out are known
             self._left_out = np.zeros(self.n, bool)
             self._left_out[list(self.bus.left_out)] = True
@@ -137,6 +166,10 @@ class SilenceWatch:
             silent &= ~self._left_out
         self.waiting = bool(self._left_out.any())
         self._reads[silent] += 1
+        alone = self._outage & silent & ~self._quiet_together
+        if alone.any():  # its read answers now, it does not: its own silence, named
+            self._outage[alone] = False
+            self.tier[alone] = ANSWERING
         back = np.flatnonzero((self.tier > ANSWERING) & ~silent)
         if back.size:
             self._recover(back)
@@ -154,20 +187,102 @@ class SilenceWatch:
         self.tier[rising] = new[rising]
         warned = rising[old < WARNED]
         if warned.size:
-            what, why = self.describe(warned, float(silent_s[warned].max()))
-            self.silences += int(warned.size)
-            self._say(f"{what}; {why}")
+            self._warn(warned, float(silent_s[warned].max()))
         newly_held = rising[(old < HELD) & (new[rising] >= HELD)]
         if newly_held.size:
             self.holding[newly_held] = True
             self.releasing[newly_held] = False
             self.steering = True
-            self.held += int(newly_held.size)
-            self._say(f"holding {self._names(newly_held)} at the last goal sent "
-                      "(goals still go out; no reply is needed for them)")
+            own = newly_held[~self._outage[newly_held]]
+            self.held_by[own] += 1
+            self.held += int(own.size)
+            if own.size:
+                self._say(f"holding {self._names(own)} at the last goal sent "
+                          "(goals still go out; no reply is needed for them)")
         acting = rising[(old < ACTED) & (new[rising] >= ACTED)]
         if acting.size:
+            self._outage[acting] = False  # unanswered this long: named, whatever the cause
+            self.acted_by[acting] += 1
             self._act(acting, float(silent_s[acting].max()))
+
+    def _warn(self, warned: np.ndarray, seconds: float) -> None:
+        """Servos just past ``warn_s``: those whose reads went unanswered as a whole (not
+        every servo) are the read's trouble, said once; the others are named."""
+        everyone = len(warned) == self.n or bool((self.tier > ANSWERING).all())
+        whole = self._quiet_together[warned]
+        if everyone and whole.all():
+            # every servo, reads unanswered whole: the host's, the emulator's or the
+            # bus's (its power, the adapter), said once with the cause; later times are
+            # counted. Still quiet at action_s, it is named and acted on.
+            self._outage[warned] = True
+            self.read_outages += 1
+            if not self._said_all_quiet:
+                self._said_all_quiet = True
+                what, why = self.describe(warned, seconds)
+                self._say(f"{what}; {why}; every servo is held until it answers (said once;"
+                          " the summary counts such reads)")
+            return
+        if whole.sum() >= 2 and not everyone:
+            self._outage[warned[whole]] = True
+            self.read_outages += 1
+            own = warned[~whole]
+            if own.size:
+                self._name_silent(own, seconds, everyone)
+            if not self._said_outage:
+                self._said_outage = True
+                cause = ("the emulator was not keeping up (a loaded machine)"
+                         if self.bus.emulated else
+                         "the host or the USB adapter was late, or the bus's power dipped")
+                group = warned[whole]
+                self._say(f"a read of {len(group)} servos ({self._names(group)}) went "
+                          f"unanswered as a whole for {seconds:.2f} s while other reads "
+                          f"answer: {cause}, not these servos; they are held until it "
+                          "answers (said once; the summary counts such reads)")
+            self._say_host_late()
+            return
+        self._name_silent(warned, seconds, everyone)
+
+    def _name_silent(self, warned: np.ndarray, seconds: float, everyone: bool) -> None:
+        self._outage[warned] = False
+        what, why = self.describe(warned, seconds)
+        self.silences += int(warned.size)
+        self.silent_by[warned] += 1
+        self._say(f"{what}; {why}")
+        if not everyone:
+            self._say_host_late()
+
+    def _host_late(self) -> bool:
+        late = self.late_s >= HOST_LATE_S or self._late_reads > 0
+        return late and self._last_read_s - self._late_at <= self.config.action_s
+
+    def _late_text(self) -> str:
+        return (f"the host was late by {self.late_s * 1e3:.0f} ms"
+                + (f" ({self._late_reads} reads came after their deadline)"
+                   if self._late_reads else ""))
+
+    def _say_host_late(self) -> None:
+        """The host made reads late while servos went quiet: said once in the run, in a
+        line of its own (not in each servo's); later times are counted."""
+        if not self._host_late():
+            return
+        self.host_late_episodes += 1
+        if not self._said_host:
+            self._said_host = True
+            self._say(f"{self._late_text()} while servos went quiet: the host, not the bus, "
+                      "made those reads late (give the loop a CPU of its own, see [loop] "
+                      "realtime_priority and pin_cpu; said once, the summary counts it)")
+
+    def counts(self) -> dict[str, object]:
+        """What happened to whom, for the run's summary: each servo's silences, holds
+        and actions (the servos it happened to), and the reads unanswered as a whole and
+        the host's late episodes (nobody's cable)."""
+        who = {}
+        for i in np.flatnonzero(self.silent_by + self.held_by + self.acted_by).tolist():
+            who[self.bus.describe(i)] = {"silent": int(self.silent_by[i]),
+                                         "held": int(self.held_by[i]),
+                                         "acted": int(self.acted_by[i])}
+        return {"servos": who, "reads_unanswered_whole": self.read_outages,
+                "host_late": self.host_late_episodes}
 
     def _act(self, indices: np.ndarray, seconds: float) -> None:
         what, why = self.describe(indices, seconds)
@@ -182,7 +297,9 @@ class SilenceWatch:
         else:
             rest = ("stays held, the others continue" if len(indices) < self.n
                     else "stay held")
-            self._say(f"{what}: {self._names(indices)} {rest} ([silence] action)")
+            whole = len(indices) >= 2 and bool(self._quiet_together[indices].all())
+            self._say(f"{what}: {self._names(indices)} {rest} ([silence] action)"
+                      + (f"; {why}" if whole else ""))
 
     def rebooted(self, state: ServoState) -> bool:
         """Whether the bus rebooted (or found restarted) a servo since the last look: then
@@ -232,13 +349,16 @@ class SilenceWatch:
             self._say(text)
 
     def _recover(self, back: np.ndarray) -> None:
-        reads = self._reads[back]
-        self.recoveries += int(back.size)
-        self.recovery_reads_max = max(self.recovery_reads_max, int(reads.max()))
-        held = bool(self.holding[back].any())
-        who = f"{self._names(back)} answer{'s' if back.size in (1, self.n) else ''}"
-        self._say(f"{who} again after {int(reads.max())} silent reads"
-                  + (": releasing to the goals at the slew limit" if held else ""))
+        own = back[~self._outage[back]]
+        self.recoveries += int(own.size)
+        if own.size:  # a read unanswered as a whole that answers again: not said
+            self.recovery_reads_max = max(self.recovery_reads_max,
+                                          int(self._reads[own].max()))
+            held = bool(self.holding[own].any())
+            who = f"{self._names(own)} answer{'s' if own.size in (1, self.n) else ''}"
+            self._say(f"{who} again after {int(self._reads[own].max())} silent reads"
+                      + (": releasing to the goals at the slew limit" if held else ""))
+        self._outage[back] = False
         self.releasing[back] |= self.holding[back]
         self.holding[back] = False
         self.tier[back] = ANSWERING
@@ -251,11 +371,8 @@ class SilenceWatch:
         everyone = len(indices) == self.n or bool((self.tier > ANSWERING).all())
         who = "any servo" if everyone else self._names(indices)
         what = f"no valid reply from {who} for {seconds:.2f} s"
-        late = self.late_s >= HOST_LATE_S or self._late_reads > 0
-        late = late and self._last_read_s - self._late_at <= self.config.action_s
-        late_text = (f"the host was late by {self.late_s * 1e3:.0f} ms"
-                     + (f" ({self._late_reads} reads came after their deadline)"
-                        if self._late_reads else ""))
+        late = self._host_late()
+        late_text = self._late_text()
         emulated = self.bus.emulated
         if everyone and late:
             why = (f"{late_text} and every servo went quiet at once: the host "
@@ -274,10 +391,7 @@ class SilenceWatch:
             why = (f"all {k} went quiet at once, every servo one read asks, while the other "
                    f"servos answer: a read unanswered as a whole, not {k} cables; "
                    + ("the emulator is not keeping up (a loaded machine)" if emulated
-                      else "check the bus's power supply and the USB adapter")
-                   + (f"; {late_text}" if late else ""))
-        elif late:
-            why = f"{late_text}; the other servos answer: check its cable, power and ID"
+                      else "check the bus's power supply and the USB adapter"))
         else:
             why = "the other servos answer: check its cable, power and ID"
         return what, why

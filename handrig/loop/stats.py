@@ -200,6 +200,8 @@ class RunStats:
     servo_recoveries: int = 0  # silent servos that answered again
     servo_recovery_reads_max: int = 0  # the longest silence that ended, in reads
     servos_admitted: int = 0  # servos left out at connect, admitted when they answered
+    silence_counts: dict[str, object] = field(default_factory=dict)
+    """What happened to whom (:meth:`handrig.loop.silence.SilenceWatch.counts`)."""
     estop: bool = False
     stop_reason: str = ""
     events: Ring[str] = field(default_factory=lambda: Ring(KEPT_EVENTS))

@@ -13,6 +13,8 @@ Errors are :class:`~handrig.errors.DataError` naming the file and the line or fr
 from __future__ import annotations
 
 import io
+import itertools
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
@@ -20,6 +22,8 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from handrig.config import bounded
+from handrig.config.bounded import excerpt
 from handrig.errors import DataError
 
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
@@ -101,7 +105,7 @@ class _Tokens:
         tok = self.next(repr(word))
         if tok != word:
             self.pos -= 1
-            raise self.fail(f"expected {word!r}, found {tok!r}")
+            raise self.fail(f"expected {word!r}, found {excerpt(tok)}")
 
     def number(self, what: str) -> float:
         tok = self.next(what)
@@ -109,7 +113,7 @@ class _Tokens:
             return float(tok)
         except ValueError:
             self.pos -= 1
-            raise self.fail(f"expected a number for {what}, found {tok!r}") from None
+            raise self.fail(f"expected a number for {what}, found {excerpt(tok)}") from None
 
     def peek(self) -> str | None:
         return self.items[self.pos][0] if self.pos < len(self.items) else None
@@ -127,14 +131,15 @@ def _parse_joint(
         count_tok = toks.next("channel count")
         if not (count_tok.isascii() and count_tok.isdigit()):
             toks.pos -= 1
-            raise toks.fail(f"expected a channel count, found {count_tok!r}")
+            raise toks.fail(f"expected a channel count, found {excerpt(count_tok)}")
         chans = []
         for _ in range(int(count_tok)):
             ch = toks.next("a channel name")
             if ch not in CHANNEL_NAMES:
                 toks.pos -= 1
                 raise toks.fail(
-                    f"unknown channel {ch!r} of joint {name!r} (known: {', '.join(CHANNEL_NAMES)})"
+                    f"unknown channel {excerpt(ch)} of joint {excerpt(name)} (known: "
+                    f"{', '.join(CHANNEL_NAMES)})"
                 )
             chans.append(ch)
         channels = tuple(chans)
@@ -156,20 +161,44 @@ def _parse_joint(
             toks.expect("}")
         else:
             toks.pos -= 1
-            raise toks.fail(f"expected '}}', JOINT or End Site in joint {name!r}, found {tok!r}")
+            raise toks.fail(f"expected '}}', JOINT or End Site in joint {excerpt(name)}, found "
+                            f"{excerpt(tok)}")
 
 
 def parse_bvh(text: str, source: str = "<string>") -> Bvh:
     """Parse BVH ``text``; ``source`` names the file in error messages."""
-    lines = text.splitlines()
-    motion_line = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
-    if motion_line is None:
+    return _parse_lines(enumerate(text.splitlines(), start=1), source)
+
+
+MAX_HIERARCHY_BYTES = 1 << 20
+"""A HIERARCHY block is a few kilobytes (60 joints: about 10 kB)."""
+_BLOCK_FRAMES = 2048
+
+
+def _parse_lines(lines: Iterator[tuple[int, str]], source: str) -> Bvh:
+    """Parse numbered lines (a file's, read one at a time: the hierarchy and one block
+    of frames at a time are held as text)."""
+    head: list[str] = []
+    size = 0
+    for _, ln in lines:
+        if ln.strip() == "MOTION":
+            break
+        head.append(ln)
+        size += len(ln) + 1
+        if size > MAX_HIERARCHY_BYTES:
+            raise DataError(f"{source}: no MOTION block in the first {MAX_HIERARCHY_BYTES}"
+                            " bytes: not a BVH file")
+    else:
         raise DataError(f"{source}: no MOTION block: not a BVH file, or the file is cut short")
-    joints, n_channels = parse_hierarchy(lines[:motion_line], source)
-    header = [(n, ln.strip()) for n, ln in enumerate(lines[motion_line + 1:], motion_line + 2)]
-    n_frames, frame_time_s, first_data = _motion_header(header, source)
-    data_lines = [ln for ln in lines[first_data:] if ln.strip()]
-    motion = _motion_matrix(data_lines, n_frames, n_channels, first_data, source)
+    joints, n_channels = parse_hierarchy(head, source)
+    header: list[tuple[int, str]] = []
+    for n, ln in lines:
+        if ln.strip():
+            header.append((n, ln.strip()))
+            if len(header) == 2:
+                break
+    n_frames, frame_time_s, _ = _motion_header(header, source)
+    motion = _motion_matrix(lines, n_frames, n_channels, source)
     return Bvh(tuple(joints), frame_time_s, motion, source)
 
 
@@ -216,53 +245,80 @@ def _motion_header(header: list[tuple[int, str]], source: str) -> tuple[int, flo
 
 
 def _motion_matrix(
-    data_lines: list[str], n_frames: int, n_channels: int, first_line: int, source: str
+    lines: Iterator[tuple[int, str]], n_frames: int, n_channels: int, source: str
 ) -> NDArray[np.float64]:
+    blocks: list[NDArray[np.float64]] = []
+    done = 0  # frames parsed
+    chunk: list[str] = []
+    for item in itertools.chain(lines, [(0, "")]):
+        if item[0]:
+            if item[1].strip():
+                chunk.append(item[1])
+            if len(chunk) < _BLOCK_FRAMES:
+                continue
+        if not chunk:
+            continue
+        ends = item[0] == 0
+        flat = _numbers(chunk, done, source, ends)
+        if flat.size != len(chunk) * n_channels or done + len(chunk) > n_frames:
+            counts = [len(ln.split()) for ln in chunk]
+            bad = next((k for k, c in enumerate(counts) if c != n_channels), len(counts))
+            if done + bad >= n_frames:
+                raise DataError(
+                    f"{source}: MOTION frame {n_frames} (0-based) is more than the header"
+                    f" declares ({n_frames} frames of {n_channels} channels)")
+            if not ends or bad < len(counts) - 1:
+                raise DataError(
+                    f"{source}: MOTION frame {done + bad} (0-based) has {counts[bad]} values,"
+                    f" expected {n_channels}")
+            raise DataError(
+                f"{source}: MOTION is truncated at frame {done + bad} (0-based): the header"
+                f" declares {n_frames} frames of {n_channels} channels; frame {done + bad} has"
+                f" {counts[bad]} values and {done + len(chunk)} frame lines are present."
+                f" Re-export the file, or {UNFINISHED_HINT}")
+        blocks.append(flat.reshape(len(chunk), n_channels))
+        done += len(chunk)
+        chunk = []
+    if done < n_frames:
+        raise DataError(
+            f"{source}: MOTION is truncated at frame {done} (0-based): the header declares"
+            f" {n_frames} frames of {n_channels} channels; frame {done} has 0 values"
+            f" and {done} frame lines are present. Re-export the file, or {UNFINISHED_HINT}")
+    if not blocks:
+        return np.zeros((0, n_channels))
+    return np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
+
+
+def _numbers(chunk: list[str], first: int, source: str, ends: bool) -> NDArray[np.float64]:
+    """The numbers of frame lines ``chunk`` (frame ``first`` onwards)."""
     try:
-        flat = np.array(" ".join(data_lines).split(), dtype=np.float64)
+        return np.array(" ".join(chunk).split(), dtype=np.float64)
     except ValueError:
-        for k, ln in enumerate(data_lines):
+        for k, ln in enumerate(chunk):
             for tok in ln.split():
                 try:
                     float(tok)
                 except ValueError:
                     last = (f" (the last frame: the file is cut; {UNFINISHED_HINT})"
-                            if k == len(data_lines) - 1 else "")
-                    shown = repr(tok) if len(tok) <= 24 else repr(tok[:24]) + "..."
+                            if ends and k == len(chunk) - 1 else "")
                     raise DataError(
-                        f"{source}: MOTION frame {k}: {shown} is not a number{last}"
-                    ) from None
+                        f"{source}: MOTION frame {first + k}: {excerpt(tok, 24)} is not a"
+                        f" number{last}") from None
         raise
-    expected = n_frames * n_channels
-    if flat.size != expected:
-        counts = [len(ln.split()) for ln in data_lines]
-        bad = next((k for k, c in enumerate(counts) if c != n_channels), len(counts))
-        if flat.size < expected:
-            got = counts[bad] if bad < len(counts) else 0
-            raise DataError(
-                f"{source}: MOTION is truncated at frame {bad} (0-based): the header declares"
-                f" {n_frames} frames of {n_channels} channels; frame {bad} has {got} values"
-                f" and {len(data_lines)} frame lines are present. Re-export the file, or"
-                f" {UNFINISHED_HINT}"
-            )
-        raise DataError(
-            f"{source}: MOTION frame {bad} (0-based) has {counts[bad] if bad < len(counts) else 0}"
-            f" values, expected {n_channels}; the header declares {n_frames} frames but there is"
-            " more data than that"
-        )
-    return flat.reshape(n_frames, n_channels)
 
 
 def read_bvh(path: str | Path) -> Bvh:
-    """Read and parse the BVH file at ``path``."""
+    """Read and parse the BVH file at ``path``, one line at a time (a line over
+    :data:`~handrig.config.bounded.MAX_LINE_BYTES`, or bytes that are not text, are
+    refused where they are)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8", errors="replace")
+        with p.open("rb") as f:
+            return _parse_lines(bounded.lines(f, p, "a BVH file"), str(p))
     except FileNotFoundError:
         raise DataError(f"{p}: file not found") from None
     except OSError as exc:
-        raise DataError(f"{p}: cannot read: {exc}") from None
-    return parse_bvh(text, str(p))
+        raise DataError(f"{p}: cannot read: {exc.strerror}") from None
 
 
 def format_bvh(bvh: Bvh, decimals: int = 5) -> str:

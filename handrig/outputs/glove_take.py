@@ -75,14 +75,18 @@ class GloveTake(Output):
             raise DataError(f"{self.path}: cannot create the glove take ({exc.strerror});"
                             " check that the directory exists and is writable") from None
         self._samples: deque[GloveSample] = deque()
-        self._pending: list[bytes] = []
+        self._pending: list[tuple[bytes, float]] = []  # (row, its t_s); a row is a frame
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._stop = False
         self._width = -1  # raw channels per row, from the first frame
         self._t0 = math.nan
         self._t_last = -math.inf
+        self._t_written = 0.0  # the last frame on disk
+        self.frames_formatted = 0
+        """Frames turned into rows (written, or lost when the disk filled)."""
         self.frames_written = 0
+        """Frames on disk: a whole row each, synced (with ``sync``); the take holds these."""
         self.frames_dropped = 0
         self.bytes_written = 0
         self.error = ""
@@ -115,12 +119,12 @@ class GloveTake(Output):
             self.frames_dropped += len(samples)
             samples.clear()
             return
-        lines: list[bytes] = []
+        lines: list[tuple[bytes, float]] = []
         while samples:
             s = samples.popleft()
             line = self._row(s)
             if line is not None:
-                lines.append(line)
+                lines.append((line, self._t_last))
         if lines:
             with self._lock:
                 self._pending.extend(lines)
@@ -141,7 +145,7 @@ class GloveTake(Output):
         quat = ",,," if q is None or not np.all(np.isfinite(q)) else (
             f"{q[0]:.6f},{q[1]:.6f},{q[2]:.6f},{q[3]:.6f}")
         values = ",".join(f"{v:.10g}" for v in raw.tolist())
-        self.frames_written += 1
+        self.frames_formatted += 1
         return head + f"{t:.6f},{values},{quat},{int(s.buttons)}\n".encode("ascii")
 
     def _header(self) -> bytes:
@@ -163,9 +167,12 @@ class GloveTake(Output):
     def _write_pending(self) -> None:
         with self._lock:
             batch, self._pending = self._pending, []
-        if not batch or self.error:
+        if not batch:
             return
-        data = b"".join(batch)
+        if self.error:
+            self.frames_dropped += sum(1 for line, t in batch if not math.isnan(t))
+            return
+        data = b"".join(line for line, _ in batch)
         try:
             view = memoryview(data)
             while view:
@@ -173,17 +180,39 @@ class GloveTake(Output):
                 view = view[n:]
             if self.sync:
                 datasync(self._fd)
-            self.bytes_written += len(data)
         except OSError as exc:
-            self.error = f"the glove take stopped: {exc.strerror or exc}"
-            if self.log is not None:
-                self.log(f"{self.path}: {self.error}")
+            self._failed(exc, sum(1 for line, t in batch if not math.isnan(t)))
+            return
+        self.bytes_written += len(data)
+        frames = [t for _, t in batch if not math.isnan(t)]
+        self.frames_written += len(frames)
+        if frames:
+            self._t_written = frames[-1]
+
+    def _failed(self, exc: OSError, lost: int) -> None:
+        """A write failed (a full disk, a file size limit): stop, and cut the file back to
+        what was written before this batch, whole rows only, so the take and the counts
+        agree."""
+        with self._lock:
+            lost += sum(1 for _, t in self._pending if not math.isnan(t))
+            self._pending = []
+        self.frames_dropped += lost
+        try:
+            os.ftruncate(self._fd, self.bytes_written)
+            cut = ""
+        except OSError as cut_exc:
+            cut = (f"; cutting it back failed ({cut_exc.strerror}): `handrig record repair"
+                   f" {self._tmp}` keeps its whole frames")
+        self.error = (f"the glove take stopped: {exc.strerror or exc}; it keeps its first"
+                      f" {self.frames_written} frames{cut}")
+        if self.log is not None:
+            self.log(f"{self.path}: {self.error}")
 
     # -- the end ---------------------------------------------------------------------------
     @property
     def duration_s(self) -> float:
-        """From the first frame's arrival to the last's (0 before two frames)."""
-        return max(0.0, self._t_last) if self.frames_written > 1 else 0.0
+        """From the first frame's arrival to the last's on disk (0 before two frames)."""
+        return max(0.0, self._t_written) if self.frames_written > 1 else 0.0
 
     def status(self) -> OutputStatus:
         return OutputStatus(kind="glove take", name="csv", path=str(self.path),
@@ -203,12 +232,16 @@ class GloveTake(Output):
         self._stop = True
         self._wake.set()
         self._thread.join()
-        if self.frames_written == 0 and not self.error:  # no frame: still a readable file
+        if self.frames_formatted == 0 and not self.error:  # no frame: still a readable file
             self._width = 0
             with self._lock:
-                self._pending.insert(0, self._header())
+                self._pending.insert(0, (self._header(), math.nan))
         self._write_pending()
         os.close(self._fd)
+        if self.bytes_written == 0 and self.error:  # not even the header: nothing to keep
+            os.unlink(self._tmp)
+            self.error += f"; nothing was recorded, {self.path} is not made"
+            return self.describe()
         if self.path.exists():
             self.error = self.error or (f"{self.path} appeared during the run; the take is"
                                         f" left as {self._tmp}")

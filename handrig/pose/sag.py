@@ -41,11 +41,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from handrig.config.bounded import check_size, excerpt
 from handrig.config.loading import CONFIG_DIR
 from handrig.errors import DataError
 from handrig.hand import DOF_NAMES, Hand, dof_limits_deg
 
 SAG_GRID = CONFIG_DIR / "sag_grid.npz"
+MAX_GRID_BYTES = 256 << 20
+"""A baked grid is about 2.6 MB unpacked (a finer bake: tens of MB); a file or its
+arrays over this are refused."""
 _AXIS_TOL_DEG = 1e-6
 _POLE_TOL_DEG = 1e-3
 _LIMIT_TOL_DEG = 1.0  # slack for the solver's equilibria at a joint's end stop
@@ -171,6 +175,13 @@ class SagGrid:
         p = Path(path) if path is not None else default_grid_path()
         fix = f"re-bake it with `handrig bake --out {p}` or restore the shipped file"
         try:
+            if p.is_file():
+                check_size(p, MAX_GRID_BYTES, "a .npz sag grid")
+            with zipfile.ZipFile(p) as archive:  # what the arrays take once unpacked
+                unpacked = sum(i.file_size for i in archive.infolist())
+            if unpacked > MAX_GRID_BYTES:
+                raise DataError(f"{p}: its arrays take {unpacked / 1e6:.0f} MB unpacked, and"
+                                f" a sag grid at most {MAX_GRID_BYTES / 1e6:.0f} MB; {fix}")
             with np.load(p, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
         except FileNotFoundError:
@@ -183,7 +194,8 @@ class SagGrid:
             # a cut file (EOFError, BadZipFile), flipped bits (zlib.error, a CRC-32 check
             # in zipfile), an array header numpy cannot parse (ValueError)
             raise DataError(f"{p}: not a readable .npz sag grid, the file is damaged"
-                            f" ({type(exc).__name__}: {exc}); {fix}") from None
+                            f" ({type(exc).__name__}: {excerpt(str(exc), 80)}); {fix}"
+                            ) from None
         missing = [k for k in ("inclination_deg", "rotation_deg", "dofs_deg", "rest_deg",
                                "dof_names") if k not in data]
         if missing:

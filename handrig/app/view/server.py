@@ -52,6 +52,8 @@ SEND_BUFFER_BYTES = 32 * 1024
 # At close, how long browsers have to answer the close; then their sockets are cut (a
 # browser that stopped reading, or whose network is gone, must not hold the run's exit).
 CLOSE_GRACE_S = 1.0
+# The Host names a view without a token answers to, besides the address it is bound to.
+_LOOPBACK_NAMES = frozenset({"127.0.0.1", "localhost", "::1"})
 
 
 class RigControls(Protocol):
@@ -212,6 +214,17 @@ class ViewServer:
                 with contextlib.suppress(asyncio.TimeoutError):
                     await asyncio.wait_for(server.wait_closed(), CLOSE_GRACE_S)
 
+    def _host_served(self, request: Request) -> bool:
+        """Whether the request names this view in its Host: a loopback name or the bound
+        address. A page of another site whose name was made to point at this machine (DNS
+        rebinding) names its own site, and is refused unless it holds the token."""
+        host = str(request.headers.get("Host", "")).strip().lower()
+        if host.startswith("["):
+            name = host[1:host.find("]")] if "]" in host else host
+        else:
+            name = host.rpartition(":")[0] if ":" in host else host
+        return name in _LOOPBACK_NAMES or name == self.host.lower()
+
     def _authorised(self, path: str) -> bool:
         if self.token is None:
             return True
@@ -230,6 +243,12 @@ class ViewServer:
 
     def _http(self, connection: ServerConnection, request: Request) -> Response | None:
         path = urlsplit(request.path).path
+        if self.token is None and not self._host_served(request):
+            # with a token in use, any name (this machine's on the network) is fine for
+            # whoever holds it: the page and its socket check it below
+            return connection.respond(HTTPStatus.FORBIDDEN,
+                                      "this view answers to 127.0.0.1, localhost and [::1] "
+                                      "only: open the URL exactly as printed\n")
         if path == "/ws":
             if not self._authorised(request.path):
                 return connection.respond(HTTPStatus.FORBIDDEN, "token missing or wrong\n")

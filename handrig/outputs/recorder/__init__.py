@@ -8,7 +8,9 @@
   ``<path>.partial`` while the show runs and renames it at :meth:`Recorder.close`;
 * :mod:`~handrig.outputs.recorder.loading`: :func:`load_performance`;
 * :mod:`~handrig.outputs.recorder.repair`: :func:`repair` makes a take cut short by a
-  crash or a power cut readable (every whole frame kept, the BVH frame count set);
+  crash or a power cut readable and finds damage (every frame checked, the whole ones
+  before any damage kept, the rest moved to ``<take>.damaged``, the BVH frame count
+  set), glove takes too;
 * :mod:`~handrig.outputs.recorder.playback`: :class:`Playback` at the recorded times.
 """
 

@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig import hand
+from handrig.config.bounded import excerpt
 from handrig.errors import DataError
 from handrig.offline.bvh import BvhJoint, format_hierarchy, parse_hierarchy, read_bvh
 from handrig.offline.mocap import Profile, load_profile
@@ -194,7 +195,16 @@ class BvhTake(TakeFormat):
                 not lines[m + 2].startswith("Frame Time:")):
             raise DataError(f"{p}: MOTION is not followed by 'Frames:' and 'Frame Time:'"
                             " lines: the header is cut or damaged; nothing to keep")
-        _, n_channels = parse_hierarchy(lines[:m], str(p))
+        try:
+            joints, n_channels = parse_hierarchy(lines[:m], str(p))
+        except DataError as exc:
+            raise DataError(f"{exc}: the header is damaged; nothing to keep") from None
+        names = {j.name for j in joints}
+        missing = sorted({j for j, *_ in bvh_table(load_profile(BVH_PROFILE))[:50]
+                          if j not in names})
+        if missing:
+            raise DataError(f"{p}: joint {excerpt(missing[0])} not found in the hierarchy:"
+                            " the header is damaged, or not a handrig take; nothing to keep")
         frames_line_at = sum(len(ln) + 1 for ln in lines[: m + 1])
         field = lines[m + 1].split(":", 1)[1]
         value_at = frames_line_at + len(lines[m + 1]) - len(field)
@@ -211,7 +221,8 @@ class BvhTake(TakeFormat):
         def good(line: bytes) -> bool:
             return all_numbers(line.split(), n_channels)
 
-        return FrameLayout(data_start, good, value_at, len(field.rstrip("\r")), declared)
+        return FrameLayout(data_start, good, value_at, len(field.rstrip("\r")), declared,
+                           width=n_channels, sep=None)
 
 
 def frames_value(n: int) -> str:

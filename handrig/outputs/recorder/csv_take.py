@@ -8,6 +8,8 @@ were, evenly or not, and a stretch with no frames is a gap between two rows.
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Iterator
 from pathlib import Path
 from typing import ClassVar
 
@@ -15,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig import hand
+from handrig.config import bounded
 from handrig.errors import DataError
 from handrig.offline.bvh import UNFINISHED_HINT
 from handrig.outputs.recorder.formats import (
@@ -24,7 +27,6 @@ from handrig.outputs.recorder.formats import (
     Performance,
     TakeFormat,
     all_numbers,
-    check_finite,
     csv_header,
 )
 from handrig.outputs.vmc import WRIST_NAMES
@@ -55,49 +57,33 @@ class CsvTake(TakeFormat):
 
     @classmethod
     def load(cls, p: Path) -> Performance:
+        what = "a handrig performance CSV"
         try:
-            text = p.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise DataError(f"{p}: cannot read the recording: {exc}") from None
-        lines = text.splitlines()
-        if not lines:
-            raise DataError(f"{p}: empty file: expected a header row 't_s,<curve names>'")
-        header = [h.strip() for h in lines[0].split(",")]
-        if header[0] != "t_s":
-            raise DataError(f"{p}: line 1: the first column must be 't_s', found"
-                            f" {header[0]!r}; not a handrig performance CSV")
-        unknown = [h for h in header[1:] if h not in hand.CURVE_NAMES and h not in WRIST_NAMES]
-        if unknown:
-            raise DataError(f"{p}: line 1: unknown column {unknown[0]!r} (columns are t_s,"
-                            f" the 50 curve names and optionally {WRIST_NAMES})")
-        missing = [n for n in hand.CURVE_NAMES if n not in header]
-        if missing:
-            raise DataError(f"{p}: line 1: {len(missing)} curve column(s) missing,"
-                            f" first {missing[0]!r}")
-        if len(set(header)) != len(header):
-            dup = next(h for h in header if header.count(h) > 1)
-            raise DataError(f"{p}: line 1: column {dup!r} appears twice")
-        wrist_cols = [n for n in WRIST_NAMES if n in header]
-        if wrist_cols and len(wrist_cols) != len(WRIST_NAMES):
-            raise DataError(f"{p}: line 1: wrist columns must be all of {WRIST_NAMES} or"
-                            f" none; found {wrist_cols}")
-        rows = [(n, ln) for n, ln in enumerate(lines[1:], start=2) if ln.strip()]
-        if not rows:
+            with p.open("rb") as f:
+                lines = bounded.lines(f, p, what)
+                first = next(lines, None)
+                if first is None:
+                    raise DataError(f"{p}: empty file: expected a header row"
+                                    " 't_s,<curve names>'")
+                header = check_header(first[1], p)
+                width = len(header)
+                blocks, line_no = _read_rows(lines, p, width)
+        except OSError as exc:
+            raise DataError(f"{p}: cannot read the recording: {exc.strerror}") from None
+        if not blocks:
             raise DataError(f"{p}: no frames after the header")
-        width = len(header)
-        try:
-            data = np.array([ln.split(",") for _, ln in rows], dtype=np.float64)
-            if data.ndim != 2 or data.shape[1] != width:
-                raise ValueError
-        except ValueError:
-            _raise_bad_row(p, rows, width)
-            raise
-        check_finite(data, p, "line", rows[0][0])
+        wrist_cols = [n for n in WRIST_NAMES if n in header]
+        data = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
+        at = np.concatenate(line_no)
+        bad = ~np.isfinite(data)
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            raise DataError(f"{p}: line {at[r]}: value {data[r, c]} is not finite")
         t_s = data[:, 0]
         back = np.flatnonzero(np.diff(t_s) < 0)
         if back.size:
             k = int(back[0]) + 1
-            raise DataError(f"{p}: line {rows[k][0]}: time goes backwards"
+            raise DataError(f"{p}: line {at[k]}: time goes backwards"
                             f" ({t_s[k - 1]} -> {t_s[k]} s)")
         order = [header.index(n) for n in hand.CURVE_NAMES]
         poses = np.ascontiguousarray(data[:, order])
@@ -112,28 +98,90 @@ class CsvTake(TakeFormat):
         if nl < 0 or not first.startswith("t_s,"):
             raise DataError(f"{p}: no header row 't_s,<curve names>': not a handrig"
                             " performance CSV, or cut before its first frame; nothing to keep")
-        width = len(first.split(","))
+        try:
+            width = len(check_header(first.rstrip("\r"), p))
+        except DataError as exc:
+            raise DataError(f"{exc}: the header is damaged; nothing to keep") from None
 
         def good(line: bytes) -> bool:
             return all_numbers(line.split(b","), width)
 
-        return FrameLayout(nl + 1, good)
+        return FrameLayout(nl + 1, good, width=width, times="rising")
 
 
-def _raise_bad_row(p: Path, rows: list[tuple[int, str]], width: int) -> None:
+def check_header(line: str, p: Path) -> list[str]:
+    """The column names of a performance CSV's first line; DataError naming what is wrong
+    (quoting at most a short excerpt)."""
+    header = [h.strip() for h in line.split(",")]
+    if header[0] != "t_s":
+        raise DataError(f"{p}: line 1: the first column must be 't_s', found"
+                        f" {bounded.excerpt(header[0])}; not a handrig performance CSV")
+    unknown = [h for h in header[1:] if h not in hand.CURVE_NAMES and h not in WRIST_NAMES]
+    if unknown:
+        raise DataError(f"{p}: line 1: unknown column {bounded.excerpt(unknown[0])} (columns"
+                        f" are t_s, the 50 curve names and optionally {WRIST_NAMES})")
+    missing = [n for n in hand.CURVE_NAMES if n not in header]
+    if missing:
+        raise DataError(f"{p}: line 1: {len(missing)} curve column(s) missing,"
+                        f" first {missing[0]!r}")
+    if len(set(header)) != len(header):
+        dup = next(h for h in header if header.count(h) > 1)
+        raise DataError(f"{p}: line 1: column {dup!r} appears twice")
+    wrist_cols = [n for n in WRIST_NAMES if n in header]
+    if wrist_cols and len(wrist_cols) != len(WRIST_NAMES):
+        raise DataError(f"{p}: line 1: wrist columns must be all of {WRIST_NAMES} or"
+                        f" none; found {wrist_cols}")
+    return header
+
+
+_BLOCK_ROWS = 4096
+
+
+def _read_rows(lines: Iterator[tuple[int, str]], p: Path, width: int
+               ) -> tuple[list[NDArray[np.float64]], list[NDArray[np.int64]]]:
+    """The frames after the header as arrays of up to :data:`_BLOCK_ROWS` rows (the text
+    of one block at a time in memory), and their line numbers."""
+    blocks: list[NDArray[np.float64]] = []
+    numbers: list[NDArray[np.int64]] = []
+    chunk: list[tuple[int, str]] = []
+    for item in itertools.chain(lines, [(0, "")]):
+        if item[0] and item[1].strip():
+            chunk.append(item)
+            if len(chunk) < _BLOCK_ROWS:
+                continue
+        if not chunk:
+            continue
+        try:
+            block = np.array([ln.split(",") for _, ln in chunk], dtype=np.float64)
+            if block.ndim != 2 or block.shape[1] != width:
+                raise ValueError
+        except ValueError:
+            try:  # whether the bad row is the last one: a cut file
+                last = next((n for n, ln in lines if ln.strip()), None) is None
+            except DataError:
+                last = False
+            _raise_bad_row(p, chunk, width, last)
+            raise
+        blocks.append(block)
+        numbers.append(np.array([n for n, _ in chunk], dtype=np.int64))
+        chunk = []
+    return blocks, numbers
+
+
+def _raise_bad_row(p: Path, rows: list[tuple[int, str]], width: int,
+                   ends_the_file: bool) -> None:
     for n, ln in rows:
         fields = ln.split(",")
         if len(fields) != width:
             last = (f" (the last line: the file is truncated; {UNFINISHED_HINT})"
-                    if n == rows[-1][0] else "")
+                    if ends_the_file and n == rows[-1][0] else "")
             raise DataError(f"{p}: line {n}: {len(fields)} values, expected {width}{last}")
         for col, tok in enumerate(fields):
             try:
                 float(tok)
             except ValueError:
-                shown = tok.strip()
-                shown = repr(shown) if len(shown) <= 24 else repr(shown[:24]) + "..."
+                shown = bounded.excerpt(tok.strip(), 24)
                 last = (f" (the last line: the file is cut; {UNFINISHED_HINT})"
-                        if n == rows[-1][0] else "")
+                        if ends_the_file and n == rows[-1][0] else "")
                 raise DataError(f"{p}: line {n}, column {col + 1}: {shown} is not"
                                 f" a number{last}") from None

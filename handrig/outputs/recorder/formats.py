@@ -66,14 +66,22 @@ def csv_header(with_wrist: bool) -> tuple[str, ...]:
 @dataclass(frozen=True)
 class FrameLayout:
     """Where a file's frames are, for :func:`~handrig.outputs.recorder.repair.repair`:
-    the first data byte, a test for a whole frame line, and (BVH) the offset and width
-    of the header's frame count and the count it holds."""
+    the first data byte, a test for a whole frame line, (BVH) the offset and width of
+    the header's frame count and the count it holds, and how a line is laid out."""
 
     data_start: int
     good: Callable[[bytes], bool]
     count_at: int = -1
     count_width: int = 0
     declared: int | None = None
+    width: int = 0
+    """Values in a frame line."""
+    sep: bytes | None = b","
+    """What separates them (None: white space)."""
+    times: Literal["", "rising", "strictly rising"] = ""
+    """The first value is the frame's time: it never goes back ("rising", a performance
+    CSV, whose rows may share a time) or always goes forward (a glove take); "": no time
+    in the line (BVH)."""
 
 
 class TakeFormat(ABC):

@@ -107,7 +107,8 @@ def test_a_full_disk_stops_the_glove_take_and_what_follows_is_counted_dropped(
     for k in range(2, 6):
         take.tap(sample(k * 0.01, k))
     take(0.05, np.zeros(54))
-    # nothing more is claimed as written: the frames after the stop are dropped, counted
-    assert take.frames_written == written and take.frames_dropped == 4
+    # nothing is claimed as written: the frame whose write failed and those after the
+    # stop are dropped, counted
+    assert take.frames_written == written == 0 and take.frames_dropped == 5
     line = take.close()
-    assert "stopped" in line and "4 dropped" in line
+    assert "stopped" in line and "5 dropped" in line
