@@ -27,14 +27,15 @@ def test_the_rig_holds_the_published_servos() -> None:
     assert isinstance(rig, RobotRigConfig) and rig.robot is not None
     assert [s.id for s in sorted(rig.servos, key=lambda s: s.id)] == list(range(1, 18))
     by_id = {s.id: s for s in rig.servos}
-    assert by_id[1].joint == "right_wrist" and by_id[1].model == "XC430-W150"
+    # the wrist is the XC430 orca_core knows (1080), not one its scan rejects (issue 38)
+    assert by_id[1].joint == "right_wrist" and by_id[1].model == "XC430-T240BB"
     assert {s.model for s in rig.servos if s.id != 1} == {"XC330-T288"}
     assert rig.bus.baud == 1_000_000
     wrist = resolve_servo_settings(rig.servo_settings, 1)
     finger = resolve_servo_settings(rig.servo_settings, 3)
     assert (wrist.operating_mode, finger.operating_mode) == (4, 5)
     assert finger.current_limit_ma == 300
-    assert wrist.current_limit_units("XC430-W150") is None  # no current sensing
+    assert wrist.current_limit_units("XC430-T240BB") is None  # no current sensing
     # orca_core's map: index MCP on 3, ring MCP on 7 reversed
     assert by_id[3].joint == "right_i-mcp" and by_id[7].direction == -1
     rt = robot_retarget(rig)
@@ -65,7 +66,7 @@ def test_a_plain_sdk_client_sees_the_orca_servos() -> None:
         try:
             found, result = ph.broadcastPing(port)
             assert result == COMM_SUCCESS and sorted(found) == list(range(1, 18))
-            assert found[1][0] == 1070 and {found[i][0] for i in range(2, 18)} == {1220}
+            assert found[1][0] == 1080 and {found[i][0] for i in range(2, 18)} == {1220}
             err = ph.write2ByteTxRx(port, 1, Reg.CURRENT_LIMIT, 300)[1]
             assert err & 0x7F == ErrorCode.ACCESS  # the XC430 has no Current Limit
             assert ph.write2ByteTxRx(port, 2, Reg.CURRENT_LIMIT, 300) == (COMM_SUCCESS, 0)
