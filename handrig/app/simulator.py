@@ -48,6 +48,14 @@ def baker() -> ModuleType:
     return bake
 
 
+def retarget_fitter() -> ModuleType:
+    """``sim.retarget_fit``: fits a robot's retarget table through its MJCF kinematics
+    and grades one (fist closure, pinch gaps, fingertip error; ``handrig retarget``)."""
+    from sim import retarget_fit
+
+    return retarget_fit
+
+
 def demo_recording() -> Path:
     """The glove recording ``handrig demo`` streams (``config/recordings/demo_glove.csv``)."""
     from sim.demo_recording import DEMO_RECORDING

@@ -94,11 +94,15 @@ def test_demo_robot_tracks_within_3_degrees_and_ends_with_torque_off(
     assert summary["tracking_rms_deg"] <= 3.0, summary["tracking_rms_deg"]
 
 
-@pytest.mark.parametrize("rig, joint", [("orca", "right_i-mcp"), ("leap", "if_mcp")])
-def test_retarget_check_reports_the_index_mcp_covering_60_percent(rig: str, joint: str) -> None:
+@pytest.mark.parametrize("rig", ["orca", "leap"])
+def test_retarget_check_reports_fists_and_pinches_through_the_model(rig: str) -> None:
+    # issue 38: the shipped tables close the robot's fist at the human's and bring its
+    # tips together at the human's pinches (issue 28 asked that the demo cover 60 % of
+    # the index MCP's range; the fitted tables follow the human's kinematics instead)
     out = subprocess.run(
         [sys.executable, "-m", "handrig.cli", "retarget", "check", "--rig", rig,
          "--no-capture", "--json"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
-    joints = {j["joint"]: j for j in json.loads(out.stdout)["joints"]}
-    assert joints[joint]["demo_cover_frac"] >= 0.6
+    report = json.loads(out.stdout)
+    assert min(report["fist_closure"].values()) >= 0.9
+    assert max(report["pinch_gap_mm"].values()) <= 10.0
