@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -58,6 +59,12 @@ def register(sub: Any) -> None:
                    help="skip the reference capture (faster)")
     c.add_argument("--no-model", action="store_true",
                    help="skip the figures through the robot's model (fist, pinch, tips)")
+    c.add_argument("--render", default=None, metavar="FILE.png",
+                   help="draw the robot at the human's open hand, fist and pinches "
+                   "(MUJOCO_GL=egl offscreen)")
+    c.add_argument("--view", default=None, metavar="D,AZ,EL",
+                   help="--render's camera: distance m, azimuth and elevation deg "
+                   "(default: the rig's render_view)")
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(func=run_check)
     f: argparse.ArgumentParser = actions.add_parser(
@@ -136,10 +143,17 @@ def run_check(args: argparse.Namespace) -> int:
     demo = _demo_poses(args.recording, base, map_path, glove_path)
     checks = check_joints(rt, bounds[:, 0], bounds[:, 1], capture, demo)
     grasp: dict[str, Any] | None = None
-    if model and not args.no_model:
+    if args.render and not model:
+        raise ConfigError("--render draws the rig's robot model: give --rig, not --table",
+                          key="--render", value=args.render)
+    if model and (not args.no_model or args.render):
         from handrig.app.simulator import retarget_fitter
 
-        grasp = retarget_fitter().GraspModel(rt, model, capture).grade(rt).as_json()
+        gm = retarget_fitter().GraspModel(rt, model, capture)
+        if not args.no_model:
+            grasp = gm.grade(rt).as_json()
+        if args.render:
+            _render_grasps(rt, gm, model, args)
     if args.json:
         print(json.dumps(_as_json(rt, checks, len(demo)) | (grasp or {})))
         return 0
@@ -150,6 +164,32 @@ def run_check(args: argparse.Namespace) -> int:
         print()
         _print_grasp(grasp)
     return 0
+
+
+def _render_grasps(rt: Retarget, gm: Any, model: str, args: argparse.Namespace) -> None:
+    """The robot at the human's open hand, fist and middle pinches, one tile each."""
+    from handrig.app.robots import load_rig, render_view
+    from handrig.app.simulator import render_strip
+
+    poses = [np.zeros(len(hand.CURVE_NAMES)), gm.fist]
+    labels = ["human open hand", "human fist"]
+    for finger in ("Index", "Middle"):
+        mine = [p for p in gm.pinches if p.finger == finger]
+        if mine:
+            poses.append(mine[len(mine) // 2].pose_deg)
+            labels.append(f"human thumb-{finger.lower()} pinch")
+    frames = list(rt.apply_many(np.array(poses)))
+    view = render_view(load_rig(args.rig))
+    if args.view:
+        try:
+            d, az, el = (float(v) for v in args.view.split(","))
+        except ValueError:
+            raise ConfigError("not a camera view", key="--view", value=args.view,
+                              allowed="distance,azimuth,elevation, e.g. 0.3,0,-20") from None
+        view = (d, az, el)
+    out = render_strip(frames, rt.joint_names, args.render, model=model, view=view,
+                       labels=labels)
+    print(f"wrote {out}", file=sys.stderr)
 
 
 def _print_grasp(g: dict[str, Any], before: dict[str, Any] | None = None) -> None:

@@ -50,3 +50,30 @@ def test_fit_writes_only_where_told(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert not dry.exists() and "nothing written" in capsys.readouterr().out
     assert main(["retarget", "fit", "--rig", str(CONFIG_DIR / "rig.toml")]) == 2
     assert "not a robot rig" in capsys.readouterr().err
+
+
+def test_check_renders_the_robot_at_the_human_grasps(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import os
+    import subprocess
+    import sys
+
+    out = tmp_path / "grasps.png"
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    run = subprocess.run(
+        [sys.executable, "-m", "handrig.cli", "retarget", "check", "--rig", "orca",
+         "--no-capture", "--no-model", "--render", str(out), "--view", "0.3,0,-20"],
+        capture_output=True, text=True, timeout=300, env=env)
+    if run.returncode != 0 and "render" in run.stderr.lower() and not out.exists():
+        pytest.skip(run.stderr.strip().splitlines()[-1])
+    assert run.returncode == 0, run.stderr[-2000:]
+    from matplotlib.image import imread
+
+    # open hand, fist and two pinches: four tiles in rows of three
+    assert imread(out).shape[:2] == (2 * 240, 3 * 320)
+    table = tmp_path / "t.toml"
+    table.write_text(load_retarget(CONFIG_DIR / "rigs" / "leap_retarget.toml") and
+                     (CONFIG_DIR / "rigs" / "leap_retarget.toml").read_text())
+    assert main(["retarget", "check", "--table", str(table), "--no-capture",
+                 "--render", str(tmp_path / "no.png")]) == 2
+    assert "--render draws the rig's robot model" in capsys.readouterr().err
