@@ -22,12 +22,14 @@ follow the human's:
 
 Residuals are millimetres, each group weighted by :data:`WEIGHTS` over the square
 root of its size (so a group's weight does not grow with its frame count); bounded
-least squares (``scipy.optimize.least_squares``, trust region reflective) over:
+least squares (``scipy.optimize.least_squares``, trust region reflective) over
 each joint's gains on the sources the table already gives it (the sign kept, the
-magnitude in :data:`GAIN_BOUNDS`), its offset (within its range), and for thumb
-joints gains on all five thumb curves (:data:`THUMB_CROSS_GAIN`): a linear map of the
-thumb, which per-joint gains cannot make pinch. Joints without sources (ORCA's wrist)
-are left as they are. The clip is applied while fitting: what the robot does.
+magnitude in :data:`GAIN_BOUNDS`) and its offset (within its range). No new sources
+are added: a thumb joint that also read the other thumb curves pinched no better
+(LEAP 3.9 / 4.6 mm against 2.6 / 4.2 without) and moved against the glove channel it
+follows (LEAP's thumb base fell with the thumb's abduction channel). Joints without
+sources (ORCA's wrist) are left as they are. The clip is applied while fitting: what
+the robot does.
 
 :func:`grade` gives the figures ``handrig retarget check`` prints: fist closure per
 finger, pinch gaps, and the fingertip error over the whole reference capture.
@@ -36,7 +38,7 @@ finger, pinch gaps, and the fingertip error over the whole reference capture.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,16 +56,15 @@ FloatArray = NDArray[np.float64]
 
 CLOSURE_GOAL = 0.95  # fitted for; the check's target is 0.9
 GAIN_BOUNDS = (0.2, 4.0)  # |gain| of a joint's own sources, degrees per degree
-THUMB_CROSS_GAIN = 2.0  # |gain| of a thumb joint on the other thumb curves
 CAPTURE_STEP = 7  # every 7th reference frame (152 of 1063) in the fit
 WEIGHTS = {"capture": 1.0, "fist": 1.0, "pinch": 10.0, "closure": 1000.0, "thumb": 0.3,
            "gain": 3.0}
 """Per group: mm of residual per mm (closure: mm per unit of closure short of the goal;
 thumb: a factor on the thumb tip's position terms, whose base sits elsewhere on each
 robot's palm than on the human's, so its pinches count more than its place; gain: mm
-per degree-per-degree a gain strays from 1 on its own source and 0 on another thumb
-curve, so a gain the tips hardly see, such as a side-to-side joint's, stays near a
-degree for a degree instead of wandering to a bound and amplifying the glove's noise)."""
+per degree-per-degree a gain strays from 1 on its source, so a gain the tips hardly
+see, such as a side-to-side joint's, stays near a degree for a degree instead of
+wandering to a bound and amplifying the glove's noise)."""
 PINCH_STAGES = (0.1, 0.3, 1.0)
 """The pinch weight rises over three fits, each from the last one's answer: first the
 tips and the fist, then the pinches pulled in (one fit at the full weight stalls in a
@@ -190,35 +191,38 @@ class FitResult:
 
 
 def _free_entries(rt: Retarget) -> tuple[list[tuple[int, int]], FloatArray, FloatArray]:
-    """(row, column) gains the fit moves, and their bounds."""
-    thumb_cols = [hand.curve_index(f"riThumb{j}{a}") for j, a in hand.THUMB_JOINTS]
-    chains = digit_chains(rt)
-    thumb_rows = {rt.index(j) for j in chains.get("Thumb", [])}
+    """(row, column) gains the fit moves (each joint's own sources), and their bounds
+    (the sign kept)."""
     entries: list[tuple[int, int]] = []
     lo: list[float] = []
     hi: list[float] = []
+    a, b = GAIN_BOUNDS
     for k in range(len(rt.joint_names)):
-        own = [int(c) for c in np.nonzero(rt.gain[k])[0]]
-        cols = sorted(set(own) | (set(thumb_cols) if k in thumb_rows else set()))
-        for c in cols:
+        for c in np.nonzero(rt.gain[k])[0]:
             g = rt.gain[k, c]
-            entries.append((k, c))
-            if c in own:
-                a, b = GAIN_BOUNDS
-                lo.append(a if g > 0 else -b)
-                hi.append(b if g > 0 else -a)
-            else:
-                lo.append(-THUMB_CROSS_GAIN)
-                hi.append(THUMB_CROSS_GAIN)
+            entries.append((k, int(c)))
+            lo.append(a if g > 0 else -b)
+            hi.append(b if g > 0 else -a)
     return entries, np.array(lo), np.array(hi)
 
 
 def fit_retarget(rt: Retarget, model_path: str | Path, capture_deg: FloatArray,
                  *, progress: Callable[[str], None] | None = None,
-                 max_evaluations: int = 60) -> FitResult:
-    """Fit ``rt``'s gains and offsets (see the module docstring); ranges are kept."""
+                 max_evaluations: int = 60, hold: Sequence[str] = ()) -> FitResult:
+    """Fit ``rt``'s gains and offsets (see the module docstring); ranges are kept.
+
+    ``hold``: robot joints kept as they are. With every thumb joint held the pinch
+    terms are left out (they could only bend the fingers toward a thumb that does not
+    follow)."""
+    for name in hold:
+        rt.index(name)  # a KeyError naming the known joints
+    held = {rt.index(name) for name in hold}
     gm = GraspModel(rt, model_path, capture_deg)
     entries, g_lo, g_hi = _free_entries(rt)
+    free = [i for i, (k, _) in enumerate(entries) if k not in held]
+    entries = [entries[i] for i in free]
+    g_lo, g_hi = g_lo[free], g_hi[free]
+    thumb_held = {rt.index(j) for j in gm.chains["Thumb"]} <= held
     rows = sorted({k for k, _ in entries})
     rr = np.array([k for k, _ in entries])
     cc = np.array([c for _, c in entries])
@@ -261,11 +265,15 @@ def fit_retarget(rt: Retarget, model_path: str | Path, capture_deg: FloatArray,
     if progress:
         progress(f"fitting {len(x0)} gains and offsets over {len(poses)} poses")
     x, nfev, message = x0, 0, ""
-    for stage in PINCH_STAGES:
+    for stage in (1.0,) if thumb_held else PINCH_STAGES:
+        pinch_w = 0.0 if thumb_held else stage * w["pinch"]
         sol = least_squares(residual, x, bounds=(lo, hi), diff_step=1e-3,
-                            max_nfev=max_evaluations, kwargs={"pinch_w": stage * w["pinch"]})
+                            max_nfev=max_evaluations, kwargs={"pinch_w": pinch_w})
         x, nfev, message = sol.x, nfev + int(sol.nfev), str(sol.message)
     fitted = dataclasses.replace(_rounded(table(x)), table=rt.table)
+    keep = sorted(held)
+    fitted.gain[keep] = rt.gain[keep]  # held rows exactly as they were, not rounded
+    fitted.offset_deg[keep] = rt.offset_deg[keep]
     return FitResult(fitted, before, gm.grade(fitted), nfev, message)
 
 

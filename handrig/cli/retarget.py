@@ -78,6 +78,9 @@ def register(sub: Any) -> None:
                    help="where to write the table (default: the rig's own table)")
     f.add_argument("--dry-run", action="store_true",
                    help="fit and print the figures, write nothing")
+    f.add_argument("--hold", default="", metavar="JOINT,...",
+                   help="robot joints to keep as the table has them (all the thumb's: "
+                   "no pinch terms)")
     f.add_argument("--max-evaluations", type=int, default=60, metavar="N",
                    help="solver evaluations per stage (default 60)")
     f.add_argument("--json", action="store_true", help="print one JSON object")
@@ -232,11 +235,20 @@ def run_fit(args: argparse.Namespace) -> int:
     rt = robot_retarget(rig)
     fitter = retarget_fitter()
     say = (lambda msg: None) if args.json else print
+    hold = [j for j in args.hold.split(",") if j]
+    for j in hold:
+        if j not in rt.joint_names:
+            raise ConfigError("no such joint in the retarget table", key="--hold", value=j,
+                              allowed=", ".join(rt.joint_names))
     result = fitter.fit_retarget(rt, rig.robot.model, load_reference().curves,
-                                 progress=say, max_evaluations=args.max_evaluations)
+                                 progress=say, max_evaluations=args.max_evaluations,
+                                 hold=hold)
     if not args.dry_run:
         header = FIT_HEADER.format(rig=args.rig, name=rig.robot.name or args.rig,
-                                   model=Path(rig.robot.model).name)
+                                   model=Path(rig.robot.model).name,
+                                   hold=" --hold " + ",".join(hold) if hold else "")
+        if hold:
+            header += HOLD_NOTE.format(joints=", ".join(hold))
         out.write_text(table_text(result.retarget, header))
         load_retarget(out)  # what was written loads back
     if args.json:
@@ -250,6 +262,9 @@ def run_fit(args: argparse.Namespace) -> int:
     return 0
 
 
+HOLD_NOTE = """
+Held as they were (not fitted): {joints}.
+"""
 FIST_TARGET = 0.9
 PINCH_TARGET_MM = 10.0
 FIT_HEADER = """\
@@ -258,14 +273,14 @@ handrig retarget table: the 50 human curves -> the joints of the {name}.
 Human curves: vocabulary convention (degrees, flexion positive, abduction positive
 toward the thumb). Robot joints: the MJCF joint angle of {model} in degrees.
 
-Fitted by `handrig retarget fit --rig {rig}` through the robot's model (MuJoCo
+Fitted by `handrig retarget fit --rig {rig}{hold}` through the robot's model (MuJoCo
 kinematics, sim/retarget_fit.py): the robot's fingertips follow the human hand
 model's over the reference capture (each tip relative to its digit's base on the
 palm, scaled by the digits' lengths), the thumb tip meets the index and middle tips
 at the hand model's pinches, and each finger closes to 0.95 of its flexion range at
-the human fist. Thumb joints take all five thumb curves (a linear map of the thumb:
-per-joint gains cannot pinch). `handrig retarget check --rig {rig}` prints the
-figures; re-run the fit after changing the model or the ranges.
+the human fist. Each joint keeps its sources and the signs of their gains.
+`handrig retarget check --rig {rig}` prints the figures; re-run the fit after changing
+the model or the ranges.
 """
 
 

@@ -88,6 +88,16 @@ def test_the_shipped_tables_close_fists_and_pinch(graded: tuple[str, GraspModel,
     for finger, closure in g["fist_closure"].items():
         assert closure >= 0.9, (name, finger, closure)
     assert set(g["pinch_gap_mm"]) == {"thumb_index", "thumb_middle"}
+    if name == "leap":
+        # LEAP's thumb is held at its hand-set rows (see their notes): no pinch yet
+        rt, _ = _rig("leap")
+        hand_set = {"th_cmc": {"riThumbCMCy": 1.5}, "th_axl": {"riThumbCMCx": 1.5},
+                    "th_mcp": {"riThumbCMCz": 1.2, "riThumbMCPz": 1.2},
+                    "th_ipl": {"riThumbIPz": 1.5}}
+        for joint, sources in hand_set.items():
+            row = rt.gain[rt.index(joint)]
+            assert {hand.CURVE_NAMES[c]: row[c] for c in np.flatnonzero(row)} == sources
+        return
     for pair, gap in g["pinch_gap_mm"].items():
         assert gap <= 10.0, (name, pair, gap)
     err = g["tip_error_mm"]
@@ -121,6 +131,9 @@ def test_a_fit_from_a_spoilt_table_pinches_again_and_writes_a_table_that_loads(
     assert np.array_equal(fitted.low_deg, rt.low_deg)  # ranges are the model's, kept
     assert np.array_equal(fitted.high_deg, rt.high_deg)
     assert fitted.gain[rt.index("right_wrist")].sum() == 0.0  # no sources: left alone
+    # each joint keeps its sources and their signs: no thumb joint starts reading another
+    # thumb curve (which moved LEAP's thumb base against its own glove channel)
+    assert np.array_equal(np.sign(fitted.gain), np.sign(spoilt.gain))
     p = tmp_path / "orca_fit.toml"
     p.write_text(table_text(fitted, "a header\nof two lines"))
     back = load_retarget(p)
@@ -128,3 +141,17 @@ def test_a_fit_from_a_spoilt_table_pinches_again_and_writes_a_table_that_loads(
     assert np.array_equal(back.gain, fitted.gain)
     assert np.array_equal(back.offset_deg, fitted.offset_deg)
     assert p.read_text().startswith("# a header\n# of two lines\n")
+
+
+def test_held_joints_stay_and_a_held_thumb_drops_the_pinch_terms(capture: np.ndarray) -> None:
+    rt, model = _rig("orca")
+    spoilt = dataclasses.replace(rt, gain=rt.gain * 0.5, table=rt.table)
+    thumb = ["right_t-cmc", "right_t-abd", "right_t-mcp", "right_t-pip"]
+    res = fit_retarget(spoilt, model, capture[::20], max_evaluations=2, hold=thumb)
+    for joint in thumb:
+        k = rt.index(joint)
+        assert np.array_equal(res.retarget.gain[k], spoilt.gain[k])
+        assert res.retarget.offset_deg[k] == spoilt.offset_deg[k]
+    assert not np.array_equal(res.retarget.gain, spoilt.gain)  # the fingers were fitted
+    with pytest.raises(KeyError, match="right_t-cmc"):
+        fit_retarget(spoilt, model, capture[::20], max_evaluations=1, hold=["t-cmc"])
