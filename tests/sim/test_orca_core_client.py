@@ -75,10 +75,33 @@ def orca_bus() -> Iterator[str]:
         assert proc.stdout is not None
         first = proc.stdout.readline()
         assert first.startswith("port: /dev/"), first
-        yield first.split()[1]
+        path = first.split()[1]
+        _wait_until_answering(path)
+        yield path
     finally:
         proc.kill()
         proc.wait()
+
+
+def _wait_until_answering(path: str, timeout_s: float = 10.0) -> None:
+    """Until every servo answers a ping (a just-started emulator, on a loaded machine,
+    can miss the first packets while its physics catches up)."""
+    import time
+
+    from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+    port = PortHandler(path)
+    assert port.openPort() and port.setBaudRate(1_000_000)
+    ph = PacketHandler(2.0)
+    deadline = time.monotonic() + timeout_s
+    try:
+        while True:
+            found, result = ph.broadcastPing(port)
+            if result == COMM_SUCCESS and sorted(found) == list(range(1, 18)):
+                return
+            assert time.monotonic() < deadline, f"the emulated ORCA answers only {found}"
+    finally:
+        port.closePort()
 
 
 @NEEDS_ORCA_CORE
