@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean render-deps browser-deps
+.PHONY: demo test lint bench clean render-deps browser-deps orca-core
 
 # Re-install only when pyproject.toml is newer than the last install.
 $(STAMP): pyproject.toml
@@ -36,7 +36,18 @@ bench: $(STAMP)
 	$(BIN)/python -m bench
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) $(ORCA_VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+
+# orca_core, the ORCA hand's own driver (PyPI, MIT), in a venv of its own: it pins
+# dynamixel-sdk < 4 where handrig needs >= 4.1. tests/sim/test_orca_core_client.py runs
+# its scan, calibration and init against `handrig sim-bus --rig orca` (skipped without it).
+ORCA_VENV := .venv-orca
+ORCA_CORE ?= orca_core==0.12.0
+orca-core: $(ORCA_VENV)/.installed
+$(ORCA_VENV)/.installed:
+	@test -x $(ORCA_VENV)/bin/python || $(PYTHON) -m venv $(ORCA_VENV)
+	@$(ORCA_VENV)/bin/python -m pip install --quiet '$(ORCA_CORE)'
+	@touch $@
 
 # Offscreen rendering (handrig demo --render) needs EGL or OSMesa; Debian packages.
 render-deps:

@@ -268,10 +268,12 @@ def _x330(name: str, number: int, *, torque: float, amps: float, rpm: float, vol
 
 def _x430(name: str, number: int, *, torque: float, amps: float, rpm: float,
           voltage: tuple[int, int, int, int], current_limit: int | None, velocity_limit: int,
-          moving_threshold: int, gains: tuple[int, int, int, int, int]) -> ModelInfo:
+          moving_threshold: int, gains: tuple[int, int, int, int, int],
+          page: str = "") -> ModelInfo:
     """An X430 model (XM430, XC430): baud index 0-7 (7 is 4.5 Mbps), Drive Mode 0-5,
     Protocol Type 1-2, velocity limit up to 1023, Temperature Limit 80, no PWM Slope.
-    ``current_limit`` None: no current sensing (XC430: 126 is Present Load, 0.1 %)."""
+    ``current_limit`` None: no current sensing (XC430: 126 is Present Load, 0.1 %).
+    ``page``: the e-manual page's name when it is not the model's in lower case."""
     max_v, min_v, v_lo, v_hi = voltage
     ranges: dict[Reg, tuple[int, int]] = {
         Reg.BAUD_RATE: (0, 7), Reg.DRIVE_MODE: (0, 5), Reg.PROTOCOL_TYPE: (1, 2),
@@ -300,7 +302,7 @@ def _x430(name: str, number: int, *, torque: float, amps: float, rpm: float,
         defaults[Reg.CURRENT_LIMIT] = current_limit
         unit, modes = 2.69, (0, 1, 3, 4, 5, 16)
     return ModelInfo(name, number, 46, torque, amps, rpm, unit, 120, _table(ranges, drop),
-                     defaults, modes, _EMANUAL.format(name.lower()))
+                     defaults, modes, _EMANUAL.format(page or name.lower()))
 
 
 # Control tables and datasheet figures from each model's e-manual page (ModelInfo.emanual);
@@ -324,6 +326,11 @@ MODELS: dict[str, ModelInfo] = {m.name: m for m in (
     _x430("XC430-W150", 1070, torque=1.6, amps=1.4, rpm=106.0, voltage=(160, 60, 60, 160),
           current_limit=None, velocity_limit=460, moving_threshold=20,
           gains=(1920, 100, 0, 0, 460)),
+    # ORCA's wrist (orca_core knows it as 1080, "XC430-T240BB-T"): the XC430-W240's
+    # motor and table with ball bearings; the e-manual page is xc430-t240bb
+    _x430("XC430-T240BB", 1080, torque=1.9, amps=1.4, rpm=70.0, voltage=(160, 60, 60, 160),
+          current_limit=None, velocity_limit=306, moving_threshold=10,
+          gains=(1920, 100, 0, 0, 700), page="xc430-t240bb"),
 )}
 MODEL_BY_NUMBER: dict[int, ModelInfo] = {m.model_number: m for m in MODELS.values()}
 

@@ -65,7 +65,7 @@ class ThermalSpec:
 _X330_MM = (20.0, 34.0, 26.0)
 _X430_MM = (28.5, 46.5, 34.0)
 # Per model (e-manual Specifications of each; XL330 and XC330 list 17 mA standby,
-# XC430-W150 46 mA, XM430-W350 40 mA).
+# XC430-W150 and XC430-T240BB 46 mA, XM430-W350 40 mA).
 THERMAL: dict[str, ThermalSpec] = {
     "XL330-M288": ThermalSpec(_X330_MM, 18.0, 0.017),
     "XL330-M077": ThermalSpec(_X330_MM, 18.0, 0.017),
@@ -73,6 +73,7 @@ THERMAL: dict[str, ThermalSpec] = {
     "XC330-T288": ThermalSpec(_X330_MM, 23.0, 0.017),
     "XM430-W350": ThermalSpec(_X430_MM, 82.0, 0.040),
     "XC430-W150": ThermalSpec(_X430_MM, 65.0, 0.046),
+    "XC430-T240BB": ThermalSpec(_X430_MM, 65.0, 0.046),
 }
 
 

@@ -80,6 +80,7 @@ def render_strip(
     size: tuple[int, int] = (320, 240),
     model: str | Path | None = None,
     view: tuple[float, float, float] | None = None,
+    labels: Sequence[str] | None = None,
 ) -> Path:
     """Pose the puppet hand at each of ``frames_deg`` and save the tiles as one PNG.
 
@@ -89,11 +90,15 @@ def render_strip(
     time, written on its tile. ``model``: an MJCF file to draw instead of the puppet
     hand (a robot rig's ``[robot].model``). ``view``: the camera's distance (m),
     azimuth and elevation (degrees) around the hand, instead of the default.
+    ``labels``: what each drawn tile says instead of its time (one per tile).
     """
     _renderer_backend()
     if not frames_deg:
         raise RenderUnavailable("nothing to render: no frames were captured")
-    labels = tile_labels(len(frames_deg), times_s)
+    tiles = tile_labels(len(frames_deg), times_s)
+    if labels is not None and len(labels) != len(tiles):
+        raise RenderUnavailable(f"{len(labels)} labels for {len(tiles)} tiles")
+    labels = list(labels) if labels is not None else tiles
     try:
         import mujoco
     except Exception as exc:  # a GL backend without its library fails at import

@@ -71,6 +71,7 @@ COMPUTE_ONLY = (
     "handrig/app/test_demo_render.py", "handrig/cli/test_sag_commands.py",
     "handrig/cli/test_cli_startup.py", "handrig/app/view/test_view_advice.py",
     "handrig/devices/test_glove_channel_indices.py", "handrig/test_bounded_inputs.py",
+    "sim/test_retarget_fit.py", "handrig/cli/test_retarget_fit_command.py",
 )
 TESTS = Path(__file__).resolve().parent
 

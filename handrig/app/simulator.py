@@ -48,6 +48,14 @@ def baker() -> ModuleType:
     return bake
 
 
+def retarget_fitter() -> ModuleType:
+    """``sim.retarget_fit``: fits a robot's retarget table through its MJCF kinematics
+    and grades one (fist closure, pinch gaps, fingertip error; ``handrig retarget``)."""
+    from sim import retarget_fit
+
+    return retarget_fit
+
+
 def demo_recording() -> Path:
     """The glove recording ``handrig demo`` streams (``config/recordings/demo_glove.csv``)."""
     from sim.demo_recording import DEMO_RECORDING
@@ -58,14 +66,16 @@ def demo_recording() -> Path:
 def render_strip(frames_deg: Sequence[np.ndarray], joint_names: Sequence[str],
                  out: str | Path, *, model: str | Path | None = None,
                  times_s: Sequence[float] | None = None,
-                 view: tuple[float, float, float] | None = None) -> Path:
+                 view: tuple[float, float, float] | None = None,
+                 labels: Sequence[str] | None = None) -> Path:
     """An image strip of the simulated hand at these servo positions, or of the robot
     ``model`` (an MJCF file) when given, each tile labelled with its frame's time from
-    ``times_s`` (needs EGL or OSMesa); HandrigError when it cannot render.
-    :func:`tiles_drawn` says how many tiles it holds."""
+    ``times_s`` or with ``labels`` (needs EGL or OSMesa); HandrigError when it cannot
+    render. :func:`tiles_drawn` says how many tiles it holds."""
     from sim.render import render_strip as render
 
-    return Path(render(frames_deg, joint_names, out, model=model, times_s=times_s, view=view))
+    return Path(render(frames_deg, joint_names, out, model=model, times_s=times_s, view=view,
+                       labels=labels))
 
 
 def tiles_drawn(n_frames: int) -> int:

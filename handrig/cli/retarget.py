@@ -1,19 +1,29 @@
-"""``handrig retarget check``: a robot hand's retarget table against its inputs.
+"""``handrig retarget check`` and ``fit``: a robot hand's retarget table.
 
-Prints the table (each robot joint's source curves with their gains, the offset
-and the robot's range), then for each joint the range its sources reach: over the
-human joint limits, over the shipped reference capture, and over the demo glove
+``check`` prints the table (each robot joint's source curves with their gains, the
+offset and the robot's range), then for each joint the range its sources reach: over
+the human joint limits, over the shipped reference capture, and over the demo glove
 recording expanded through the map, as the demo feeds it. Joints whose inputs
 reach past the robot's range are flagged, and the share of demo frames clipped at
-each robot limit is given.
+each robot limit is given. Then, through the robot's MJCF model (MuJoCo): the fist
+closure per finger (the share of its flexion range reached at the human fist; target
+>= 0.9), the thumb-finger tip gaps at the human's pinches (target <= 10 mm) and the
+fingertip error over the reference capture (median, p95, mm, the human's carried
+onto the robot and scaled to it).
+
+``fit`` fits the table's gains and offsets through the robot's model so that its
+fingertips follow the human's (positions relative to the palm, pinches, the fist;
+see sim/retarget_fit.py) and writes the table (the rig's own unless --out); the
+realtime step stays the same linear map.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,6 +31,9 @@ from handrig import hand
 from handrig.config.loading import CONFIG_DIR, load_joint_limits
 from handrig.errors import ConfigError
 from handrig.pose.retarget import JointCheck, Retarget, check_joints, load_retarget
+
+if TYPE_CHECKING:
+    from handrig.app.robots import RobotRigConfig
 
 DEFAULT_RIG = "leap"
 DEMO_RECORDING = CONFIG_DIR / "recordings" / "demo_glove.csv"
@@ -44,8 +57,34 @@ def register(sub: Any) -> None:
                    help="glove recording for the limit counts (default: the demo's)")
     c.add_argument("--no-capture", action="store_true",
                    help="skip the reference capture (faster)")
+    c.add_argument("--no-model", action="store_true",
+                   help="skip the figures through the robot's model (fist, pinch, tips)")
+    c.add_argument("--render", default=None, metavar="FILE.png",
+                   help="draw the robot at the human's open hand, fist and pinches "
+                   "(MUJOCO_GL=egl offscreen)")
+    c.add_argument("--view", default=None, metavar="D,AZ,EL",
+                   help="--render's camera: distance m, azimuth and elevation deg "
+                   "(default: the rig's render_view)")
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(func=run_check)
+    f: argparse.ArgumentParser = actions.add_parser(
+        "fit", help="fit the table through the robot's model (fingertips, pinches, fist) "
+        "and write it", description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    f.add_argument("--rig", default=DEFAULT_RIG,
+                   help=f"robot rig preset or file (default {DEFAULT_RIG!r})")
+    f.add_argument("--out", default=None, metavar="FILE.toml",
+                   help="where to write the table (default: the rig's own table)")
+    f.add_argument("--dry-run", action="store_true",
+                   help="fit and print the figures, write nothing")
+    f.add_argument("--hold", default="", metavar="JOINT,...",
+                   help="robot joints to keep as the table has them (all the thumb's: "
+                   "no pinch terms)")
+    f.add_argument("--max-evaluations", type=int, default=60, metavar="N",
+                   help="solver evaluations per stage (default 60)")
+    f.add_argument("--json", action="store_true", help="print one JSON object")
+    f.set_defaults(func=run_fit)
 
     def usage(args: argparse.Namespace) -> int:
         p.print_help()
@@ -54,19 +93,28 @@ def register(sub: Any) -> None:
     p.set_defaults(func=usage)
 
 
-def _rig_parts(args: argparse.Namespace) -> tuple[Retarget, Path, str, str]:
-    """The retarget table, the rig's folder, its map and glove settings."""
-    from handrig.app.robots import RobotRigConfig, load_rig, rig_path, robot_retarget
+def _robot_rig(name: str) -> RobotRigConfig:
+    from handrig.app.robots import RobotRigConfig, load_rig, rig_path
+
+    rig = load_rig(name)
+    if not isinstance(rig, RobotRigConfig) or rig.robot is None:
+        raise ConfigError("not a robot rig: it has no [robot] table with a retarget table",
+                          file=str(rig_path(name)),
+                          allowed="a robot rig such as 'leap', or --table FILE")
+    return rig
+
+
+def _rig_parts(args: argparse.Namespace) -> tuple[Retarget, Path, str, str, str]:
+    """The retarget table, the rig's folder, its map and glove settings, its model
+    (empty with --table)."""
+    from handrig.app.robots import rig_path, robot_retarget
 
     if args.table is not None:
-        return load_retarget(args.table), Path(args.table).resolve().parent, "", ""
-    rig = load_rig(args.rig)
-    if not isinstance(rig, RobotRigConfig):
-        raise ConfigError("not a robot rig: it has no [robot] table with a retarget table",
-                          file=str(rig_path(args.rig)),
-                          allowed="a robot rig such as 'leap', or --table FILE")
+        return load_retarget(args.table), Path(args.table).resolve().parent, "", "", ""
+    rig = _robot_rig(args.rig)
+    assert rig.robot is not None  # _robot_rig checked it
     base = rig_path(args.rig).resolve().parent
-    return robot_retarget(rig), base, rig.loop.map, rig.loop.glove
+    return robot_retarget(rig), base, rig.loop.map, rig.loop.glove, rig.robot.model
 
 
 def _demo_poses(recording: str, base: Path, map_path: str, glove_path: str) -> np.ndarray:
@@ -87,7 +135,7 @@ def _demo_poses(recording: str, base: Path, map_path: str, glove_path: str) -> n
 
 
 def run_check(args: argparse.Namespace) -> int:
-    rt, base, map_path, glove_path = _rig_parts(args)
+    rt, base, map_path, glove_path, model = _rig_parts(args)
     limits = load_joint_limits()
     bounds = np.array([limits.of(n) for n in hand.CURVE_NAMES], dtype=np.float64)
     capture = None
@@ -97,13 +145,143 @@ def run_check(args: argparse.Namespace) -> int:
         capture = load_reference().curves
     demo = _demo_poses(args.recording, base, map_path, glove_path)
     checks = check_joints(rt, bounds[:, 0], bounds[:, 1], capture, demo)
+    grasp: dict[str, Any] | None = None
+    if args.render and not model:
+        raise ConfigError("--render draws the rig's robot model: give --rig, not --table",
+                          key="--render", value=args.render)
+    if model and (not args.no_model or args.render):
+        from handrig.app.simulator import retarget_fitter
+
+        gm = retarget_fitter().GraspModel(rt, model, capture)
+        if not args.no_model:
+            grasp = gm.grade(rt).as_json()
+        if args.render:
+            _render_grasps(rt, gm, model, args)
     if args.json:
-        print(json.dumps(_as_json(rt, checks, len(demo))))
+        print(json.dumps(_as_json(rt, checks, len(demo)) | (grasp or {})))
         return 0
     _print_table(rt)
     print()
     _print_checks(checks, len(demo), capture is not None)
+    if grasp is not None:
+        print()
+        _print_grasp(grasp)
     return 0
+
+
+def _render_grasps(rt: Retarget, gm: Any, model: str, args: argparse.Namespace) -> None:
+    """The robot at the human's open hand, fist and middle pinches, one tile each."""
+    from handrig.app.robots import load_rig, render_view
+    from handrig.app.simulator import render_strip
+
+    poses = [np.zeros(len(hand.CURVE_NAMES)), gm.fist]
+    labels = ["human open hand", "human fist"]
+    for finger in ("Index", "Middle"):
+        mine = [p for p in gm.pinches if p.finger == finger]
+        if mine:
+            poses.append(mine[len(mine) // 2].pose_deg)
+            labels.append(f"human thumb-{finger.lower()} pinch")
+    frames = list(rt.apply_many(np.array(poses)))
+    view = render_view(load_rig(args.rig))
+    if args.view:
+        try:
+            d, az, el = (float(v) for v in args.view.split(","))
+        except ValueError:
+            raise ConfigError("not a camera view", key="--view", value=args.view,
+                              allowed="distance,azimuth,elevation, e.g. 0.3,0,-20") from None
+        view = (d, az, el)
+    out = render_strip(frames, rt.joint_names, args.render, model=model, view=view,
+                       labels=labels)
+    print(f"wrote {out}", file=sys.stderr)
+
+
+def _print_grasp(g: dict[str, Any], before: dict[str, Any] | None = None) -> None:
+    def was(path: tuple[str, str], fmt: str) -> str:
+        if before is None:
+            return ""
+        return f" (was {format(before[path[0]][path[1]], fmt)})"
+
+    print("through the robot's model (MuJoCo): the human fist, pinches and capture")
+    for finger, c in g["fist_closure"].items():
+        mark = "ok" if c >= FIST_TARGET else f"below {FIST_TARGET:g}"
+        print(f"  fist closure {finger:<7} {c:5.2f}{was(('fist_closure', finger), '.2f')}  "
+              f"{mark}")
+    for pair, gap in g["pinch_gap_mm"].items():
+        mark = "ok" if gap <= PINCH_TARGET_MM else f"above {PINCH_TARGET_MM:g} mm"
+        print(f"  pinch gap {pair:<13} {gap:6.1f} mm{was(('pinch_gap_mm', pair), '.1f')}  "
+              f"{mark}")
+    e = g["tip_error_mm"]
+    if not e:
+        print("  fingertip error over the capture: - (no capture: --no-capture)")
+        return
+    print(f"  fingertip error over the capture: median {e['median']:.1f} mm"
+          f"{was(('tip_error_mm', 'median'), '.1f')}, p95 {e['p95']:.1f} mm"
+          f"{was(('tip_error_mm', 'p95'), '.1f')}; by digit (median): "
+          + ", ".join(f"{k[:-7]} {v:.1f}" for k, v in e.items() if k.endswith("_median")))
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    from handrig.app.robots import robot_retarget
+    from handrig.app.simulator import retarget_fitter
+    from handrig.offline.mocap import load_reference
+    from handrig.pose.retarget import table_text
+
+    rig = _robot_rig(args.rig)
+    assert rig.robot is not None  # _robot_rig checked it
+    if args.max_evaluations < 1:
+        raise ConfigError("must be at least 1", key="--max-evaluations",
+                          value=args.max_evaluations, allowed="1 or more (default 60)")
+    out = Path(args.out) if args.out else Path(rig.robot.retarget)
+    rt = robot_retarget(rig)
+    fitter = retarget_fitter()
+    say = (lambda msg: None) if args.json else print
+    hold = [j for j in args.hold.split(",") if j]
+    for j in hold:
+        if j not in rt.joint_names:
+            raise ConfigError("no such joint in the retarget table", key="--hold", value=j,
+                              allowed=", ".join(rt.joint_names))
+    result = fitter.fit_retarget(rt, rig.robot.model, load_reference().curves,
+                                 progress=say, max_evaluations=args.max_evaluations,
+                                 hold=hold)
+    if not args.dry_run:
+        header = FIT_HEADER.format(rig=args.rig, name=rig.robot.name or args.rig,
+                                   model=Path(rig.robot.model).name,
+                                   hold=" --hold " + ",".join(hold) if hold else "")
+        if hold:
+            header += HOLD_NOTE.format(joints=", ".join(hold))
+        out.write_text(table_text(result.retarget, header))
+        load_retarget(out)  # what was written loads back
+    if args.json:
+        print(json.dumps({"before": result.before.as_json(), "after": result.after.as_json(),
+                          "evaluations": result.iterations, "solver": result.message,
+                          "written": None if args.dry_run else str(out)}))
+        return 0
+    print(f"solver: {result.message} ({result.iterations} evaluations)")
+    _print_grasp(result.after.as_json(), result.before.as_json())
+    print("nothing written (--dry-run)" if args.dry_run else f"wrote {out}")
+    return 0
+
+
+HOLD_NOTE = """
+Held as they were (not fitted): {joints}.
+"""
+FIST_TARGET = 0.9
+PINCH_TARGET_MM = 10.0
+FIT_HEADER = """\
+handrig retarget table: the 50 human curves -> the joints of the {name}.
+  robot_deg = offset_deg + sum over sources of gain * curve_deg, clipped to range_deg
+Human curves: vocabulary convention (degrees, flexion positive, abduction positive
+toward the thumb). Robot joints: the MJCF joint angle of {model} in degrees.
+
+Fitted by `handrig retarget fit --rig {rig}{hold}` through the robot's model (MuJoCo
+kinematics, sim/retarget_fit.py): the robot's fingertips follow the human hand
+model's over the reference capture (each tip relative to its digit's base on the
+palm, scaled by the digits' lengths), the thumb tip meets the index and middle tips
+at the hand model's pinches, and each finger closes to 0.95 of its flexion range at
+the human fist. Each joint keeps its sources and the signs of their gains.
+`handrig retarget check --rig {rig}` prints the figures; re-run the fit after changing
+the model or the ranges.
+"""
 
 
 def _sources(rt: Retarget, k: int) -> str:

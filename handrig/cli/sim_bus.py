@@ -40,7 +40,7 @@ def register(sub: Any) -> None:
                    "(default config/rig.toml): which ID drives which joint")
     p.add_argument("--model", default=None, metavar="NAME",
                    help="servo model for every servo (XL330-M288, XL330-M077, XC330-M288, "
-                   "XC330-T288, XM430-W350, XC430-W150; "
+                   "XC330-T288, XM430-W350, XC430-W150, XC430-T240BB; "
                    "default: the rig's)")
     p.add_argument("--servo-baud", default="", metavar="ID:BAUD,...",
                    help="servos at a baud other than the rig's, e.g. '1:57600,2:115200,"

@@ -34,8 +34,9 @@ MODEL_NUMBERS: dict[str, int] = {"XL330-M288": 1200, "XC330-T288": 1220, "XM430-
 MODEL_NUMBERS["XC330-M288"] = 1240  # the LEAP hand's servo
 MODEL_NUMBERS["XL330-M077"] = 1190
 MODEL_NUMBERS["XC430-W150"] = 1070  # no current sensing (e-manual): no current limit
+MODEL_NUMBERS["XC430-T240BB"] = 1080  # ORCA's wrist; no current sensing either
 ServoModel = Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288", "XL330-M077",
-                     "XC430-W150"]
+                     "XC430-W150", "XC430-T240BB"]
 # Baud rates the X series and dynamixel-sdk both accept.
 BAUD_RATES: tuple[int, ...] = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000)
 
@@ -233,7 +234,7 @@ HeatAction = Literal["continue", "relax", "stop"]
 # above it (e-manual control tables: X330 70, X430 80).
 TEMPERATURE_LIMIT_C: dict[str, int] = {
     "XL330-M288": 70, "XL330-M077": 70, "XC330-M288": 70, "XC330-T288": 70,
-    "XM430-W350": 80, "XC430-W150": 80,
+    "XM430-W350": 80, "XC430-W150": 80, "XC430-T240BB": 80,
 }
 HEAT_HYSTERESIS_C = 3.0  # a tier ends once the servo is this far below it
 
@@ -284,7 +285,7 @@ OPERATING_MODES: dict[str, int] = {
 }
 # Current Limit (38) maximum per model, mA: XL330-M288 1750 x 1 mA, XC330-T288 910 x 1 mA,
 # XC330-M288 2352 x 1 mA, XM430-W350 1193 x 2.69 mA (ROBOTIS e-manual control tables).
-# XL330-M077 1750 x 1 mA. Models absent here (XC430-W150) have no Current Limit.
+# XL330-M077 1750 x 1 mA. Models absent here (the XC430s) have no Current Limit.
 CURRENT_LIMIT_MAX_MA: dict[str, float] = {
     "XL330-M288": 1750.0, "XC330-T288": 910.0, "XC330-M288": 2352.0, "XM430-W350": 1193 * 2.69,
     "XL330-M077": 1750.0,

@@ -265,3 +265,31 @@ def check_joints(
             low_frac, high_frac,
         ))
     return out
+
+
+def table_text(rt: Retarget, header: str, description: str = "") -> str:
+    """``rt`` as a retarget table file (TOML): ``header`` as comment lines, then one
+    ``[joints.<name>]`` table per row with its sources (curve order), offset, range and
+    the note of the table it came from. Loading the text gives ``rt`` back."""
+    notes = rt.table.joints if rt.table is not None else {}
+    desc = description or (rt.table.description if rt.table is not None else "")
+    lines = [f"# {ln}".rstrip() for ln in header.splitlines()]
+    lines += ['format = "handrig-retarget"', "version = 1"]
+    if desc:
+        lines.append(f"description = {_toml_string(desc)}")
+    for k, name in enumerate(rt.joint_names):
+        sources = ", ".join(f"{hand.CURVE_NAMES[c]} = {rt.gain[k, c]:g}"
+                            for c in np.nonzero(rt.gain[k])[0])
+        key = name if name.replace("_", "").isalnum() else _toml_string(name)
+        lines += ["", f"[joints.{key}]",
+                  f"sources = {{ {sources} }}" if sources else "sources = {}",
+                  f"offset_deg = {float(rt.offset_deg[k]) + 0.0:g}",
+                  f"range_deg = [{float(rt.low_deg[k]):g}, {float(rt.high_deg[k]):g}]"]
+        note = notes[name].note if name in notes else ""
+        if note:
+            lines.append(f"note = {_toml_string(note)}")
+    return "\n".join(lines) + "\n"
+
+
+def _toml_string(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'

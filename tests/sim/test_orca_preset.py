@@ -27,14 +27,15 @@ def test_the_rig_holds_the_published_servos() -> None:
     assert isinstance(rig, RobotRigConfig) and rig.robot is not None
     assert [s.id for s in sorted(rig.servos, key=lambda s: s.id)] == list(range(1, 18))
     by_id = {s.id: s for s in rig.servos}
-    assert by_id[1].joint == "right_wrist" and by_id[1].model == "XC430-W150"
+    # the wrist is the XC430 orca_core knows (1080), not one its scan rejects (issue 38)
+    assert by_id[1].joint == "right_wrist" and by_id[1].model == "XC430-T240BB"
     assert {s.model for s in rig.servos if s.id != 1} == {"XC330-T288"}
     assert rig.bus.baud == 1_000_000
     wrist = resolve_servo_settings(rig.servo_settings, 1)
     finger = resolve_servo_settings(rig.servo_settings, 3)
     assert (wrist.operating_mode, finger.operating_mode) == (4, 5)
     assert finger.current_limit_ma == 300
-    assert wrist.current_limit_units("XC430-W150") is None  # no current sensing
+    assert wrist.current_limit_units("XC430-T240BB") is None  # no current sensing
     # orca_core's map: index MCP on 3, ring MCP on 7 reversed
     assert by_id[3].joint == "right_i-mcp" and by_id[7].direction == -1
     rt = robot_retarget(rig)
@@ -65,7 +66,7 @@ def test_a_plain_sdk_client_sees_the_orca_servos() -> None:
         try:
             found, result = ph.broadcastPing(port)
             assert result == COMM_SUCCESS and sorted(found) == list(range(1, 18))
-            assert found[1][0] == 1070 and {found[i][0] for i in range(2, 18)} == {1220}
+            assert found[1][0] == 1080 and {found[i][0] for i in range(2, 18)} == {1220}
             err = ph.write2ByteTxRx(port, 1, Reg.CURRENT_LIMIT, 300)[1]
             assert err & 0x7F == ErrorCode.ACCESS  # the XC430 has no Current Limit
             assert ph.write2ByteTxRx(port, 2, Reg.CURRENT_LIMIT, 300) == (COMM_SUCCESS, 0)
@@ -93,11 +94,16 @@ def test_demo_robot_tracks_within_3_degrees_and_ends_with_torque_off(
     assert summary["tracking_rms_deg"] <= 3.0, summary["tracking_rms_deg"]
 
 
-@pytest.mark.parametrize("rig, joint", [("orca", "right_i-mcp"), ("leap", "if_mcp")])
-def test_retarget_check_reports_the_index_mcp_covering_60_percent(rig: str, joint: str) -> None:
+@pytest.mark.parametrize("rig", ["orca", "leap"])
+def test_retarget_check_reports_fists_and_pinches_through_the_model(rig: str) -> None:
+    # issue 38: the shipped tables close the robot's fist at the human's and ORCA's bring
+    # its tips together at the human's pinches (issue 28 asked that the demo cover 60 % of
+    # the index MCP's range; the fitted tables follow the human's kinematics instead)
     out = subprocess.run(
         [sys.executable, "-m", "handrig.cli", "retarget", "check", "--rig", rig,
          "--no-capture", "--json"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
-    joints = {j["joint"]: j for j in json.loads(out.stdout)["joints"]}
-    assert joints[joint]["demo_cover_frac"] >= 0.6
+    report = json.loads(out.stdout)
+    assert min(report["fist_closure"].values()) >= 0.9
+    if rig == "orca":  # LEAP's thumb is held at its hand-set rows (their notes say why)
+        assert max(report["pinch_gap_mm"].values()) <= 10.0

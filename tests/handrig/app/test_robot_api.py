@@ -47,7 +47,9 @@ def test_goals_follow_the_curves_within_limits_and_slew() -> None:
         i = names.index("right_i-mcp")
         start = robot.command({})  # the flat hand
         want = robot.targets_deg({"riIndexMCPy": 30.0})
-        assert want[i] > start[i] + 40.0  # the table's gain: the robot moves more
+        # the table's gain moves the joint with the curve (issue 38's fit: about 0.9 deg
+        # per deg on ORCA's index MCP, where the hand-set table had 2.25)
+        assert want[i] > start[i] + 20.0
         first = robot.command({"riIndexMCPy": 30.0})
         step = robot.rig.loop.slew_deg_s * 0.5  # generous: one call's time
         assert abs(first[i] - start[i]) <= step

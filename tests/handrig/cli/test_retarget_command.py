@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -32,18 +33,21 @@ def test_prints_the_table_the_ranges_and_a_summary(capsys: pytest.CaptureFixture
     assert lines[0].startswith("retarget table: 16 robot joints")
     table = {ln.split()[0]: ln for ln in lines[2:18]}
     assert list(table) == LEAP_JOINTS
-    assert "+1.62 riPinkyMCPy" in table["rf_mcp"] and "little finger" in table["rf_mcp"]
-    assert "-1 riIndexMCPx" in table["if_rot"]
-    assert "+1.2 riThumbCMCz +1.2 riThumbMCPz" in table["th_mcp"]
+    assert re.search(r"  \+[\d.]+ riPinkyMCPy  #", table["rf_mcp"])
+    assert "little finger" in table["rf_mcp"]
+    assert re.search(r"  -[\d.]+ riIndexMCPx", table["if_rot"])
+    assert "riThumbCMCz" in table["th_mcp"] and "riThumbMCPz" in table["th_mcp"]
     assert "at low" in out and "at high" in out and "covers" in out
     checks = {ln.split()[0]: ln for ln in lines if ln.split() and ln.split()[0] in table
               and "%" in ln}
     assert set(checks) == set(LEAP_JOINTS)
-    # the table maps the glove's range onto the robot's: the demo's index MCP covers
-    # at least 60 % of LEAP's range (issue 28)
-    assert int(checks["if_mcp"].split("%")[2].split()[-1]) >= 60
+    # the demo's share of each robot range is printed; since issue 38 the table follows
+    # the human's fingertips, not the demo's range (tests/sim/test_retarget_fit.py)
+    assert 0 < int(checks["if_mcp"].split("%")[2].split()[-1]) <= 100
     assert checks["if_rot"].endswith("ok")
-    assert "robot joints get inputs past their range from the demo: " in lines[-1]
+    # the summary ends the joint checks (the figures through the robot's model follow)
+    assert any("robot joints get inputs past their range from the demo: " in ln
+               for ln in lines)
 
 
 def test_json_counts_how_often_the_demo_hits_each_limit(leap_json: dict) -> None:
@@ -58,8 +62,8 @@ def test_json_counts_how_often_the_demo_hits_each_limit(leap_json: dict) -> None
         assert (j["demo_high_frac"] > 0) == (d_hi > high), j["joint"]
         assert ("demo" in j["flags"]) == (d_lo < low or d_hi > high)
         assert j["capture_deg"] is not None
-    assert joints["if_mcp"]["demo_cover_frac"] >= 0.6
-    assert joints["rf_mcp"]["sources"] == {"riPinkyMCPy": 1.62}
+    assert 0.0 < joints["if_mcp"]["demo_cover_frac"] <= 1.0
+    assert set(joints["rf_mcp"]["sources"]) == {"riPinkyMCPy"}
 
 
 def test_a_table_file_and_a_human_rig(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
