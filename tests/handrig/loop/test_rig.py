@@ -6,9 +6,8 @@ ServoBus); the pipeline, map, sag grid and calibration are the real shipped ones
 
 from __future__ import annotations
 
-import contextlib
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -16,86 +15,12 @@ import pytest
 from handrig.app.factory import build_parts
 from handrig.clock import FakeClock
 from handrig.config.rig import SilenceConfig
-from handrig.devices.glove import GloveSample, GloveSource, GloveStats
-from handrig.devices.servo.bus import BusStats, ServoBus, ServoState
+from handrig.devices.glove import GloveSample
+from handrig.devices.servo.bus import ServoState
 from handrig.errors import DeviceError
 from handrig.loop.rig import Mode, Rig
-
-
-class ScriptedGlove(GloveSource):
-    """Emits one sample per call while ``raw_at(t)`` returns counts; None = silence."""
-
-    def __init__(self, clock: FakeClock, raw_at: Callable[[float], np.ndarray | None],
-                 estop_at: float | None = None) -> None:
-        super().__init__()
-        self.clock = clock
-        self.raw_at = raw_at
-        self.estop_at = estop_at
-        self.n = 0
-
-    def latest(self) -> GloveSample | None:
-        t = self.clock.now()
-        raw = self.raw_at(t)
-        if raw is None:
-            return None
-        self.n += 1
-        estop = self.estop_at is not None and t >= self.estop_at
-        quat = np.array([0.0, 0.0, 0.0, 1.0])  # palm down, forearm horizontal
-        return GloveSample(np.asarray(raw, float), quat, int(estop), estop, self.n, 0,
-                           t, self.n)
-
-    def stats(self) -> GloveStats:
-        return GloveStats(frames_ok=self.n)
-
-
-class RecordingBus(ServoBus):
-    """Remembers every goal vector; present position follows the goal one read late."""
-
-    def __init__(self, names: tuple[str, ...], clock: FakeClock,
-                 write_cost_s: float = 0.0, fail_after: int | None = None) -> None:
-        self._names = names
-        self.clock = clock
-        self.write_cost_s = write_cost_s
-        self.fail_after = fail_after
-        self.goals: list[np.ndarray] = []
-        self._stats = BusStats(len(names))
-        self.torque_on = False
-
-    @property
-    def joint_names(self) -> tuple[str, ...]:
-        return self._names
-
-    @property
-    def stats(self) -> BusStats:
-        return self._stats
-
-    def connect(self) -> None:
-        pass
-
-    def close(self) -> None:
-        self.torque_on = False
-
-    @contextlib.contextmanager
-    def torque(self) -> Iterator[ServoBus]:  # type: ignore[override]
-        self.torque_on = True
-        try:
-            yield self
-        finally:
-            self.torque_on = False
-
-    def write_goals_deg(self, goals_deg: np.ndarray) -> int:
-        if self.fail_after is not None and len(self.goals) >= self.fail_after:
-            raise DeviceError("servo port /dev/ttyUSB0 went away (test)")
-        self.goals.append(np.array(goals_deg))
-        self.clock.advance(self.write_cost_s)
-        return 0
-
-    def read_state(self, deadline_s: float | None = None) -> ServoState:
-        n = len(self._names)
-        pos = self.goals[-1] if self.goals else np.zeros(n)
-        z = np.zeros(n)
-        return ServoState(pos.copy(), z, z, z, np.zeros(n, np.uint8), np.zeros(n, np.uint8),
-                          np.zeros(n, bool), z, self.clock.now(), self._stats.copy())
+from tests.helpers.fakes import FakeBus, ScriptedGlove
+from tests.helpers.loop import MID, make_rig, relaxed_targets, rig_on
 
 
 @pytest.fixture(scope="module")
@@ -103,28 +28,11 @@ def parts_factory():
     return lambda: build_parts()
 
 
-def make_rig(parts, glove, bus, clock, **kw):
-    kw.setdefault("loop_mode", "fixed")  # the tests here set the glove-triggered mode
-    kw.setdefault("catch_up", False)  # and catching up where they mean it
-    return Rig(glove, bus, parts.pipeline, clock, controls_from_raw=parts.controls,
-               orientation=parts.orientation, rate_hz=200.0, read_every=4,
-               glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None, **kw)
-
-
-MID = np.array([2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
-
-
-def relaxed_targets(parts, inclination=0.0, rotation=0.0):
-    pl = parts.pipeline
-    relaxed = np.clip(pl.relaxed_pose(inclination, rotation), pl.pose_low, pl.pose_high)
-    return np.clip(relaxed[pl.servo_index], pl.servo_low, pl.servo_high)
-
-
 def test_loop_holds_its_rate_and_measures_latency(parts_factory):
     parts = parts_factory()
     clock = FakeClock(100.0)
     glove = ScriptedGlove(clock, lambda t: MID)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock,
                        write_cost_s=50e-6)
     rig = make_rig(parts, glove, bus, clock)
     stats = rig.run(frames=400)
@@ -144,7 +52,7 @@ def test_never_a_goal_outside_the_servo_limits(parts_factory):
     rng = np.random.default_rng(1)
     wild = lambda t: rng.choice([0.0, 4095.0, 1e9, -1e9, np.nan], size=5)  # noqa: E731
     glove = ScriptedGlove(clock, wild)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     make_rig(parts, glove, bus, clock).run(frames=300)
     goals = np.array(bus.goals)
     assert len(goals) > 300
@@ -159,7 +67,7 @@ def test_glove_silence_eases_to_relaxed_then_resumes(parts_factory):
     clock = FakeClock()
     fist = np.array([2800.0, 1300.0, 3000.0, 3200.0, 3200.0])
     glove = ScriptedGlove(clock, lambda t: None if 0.5 <= t < 2.0 else fist)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     events: list[str] = []
     rig = make_rig(parts, glove, bus, clock)
     rig.log = events.append
@@ -183,7 +91,7 @@ def test_estop_relaxes_then_ends_the_run(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
     glove = ScriptedGlove(clock, lambda t: MID, estop_at=0.3)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, glove, bus, clock)
     stats = rig.run(frames=10_000)
     assert stats.estop and stats.stop_reason == "e-stop"
@@ -198,7 +106,7 @@ def test_stop_request_relaxes_and_a_second_one_stops_at_once(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
     glove = ScriptedGlove(clock, lambda t: MID)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, glove, bus, clock)
     calls = {"n": 0}
 
@@ -212,7 +120,7 @@ def test_stop_request_relaxes_and_a_second_one_stops_at_once(parts_factory):
     assert 100 <= stats.frames <= 125  # 20 frames, then 0.5 s of easing at 200 Hz
 
     clock2 = FakeClock()
-    bus2 = RecordingBus(bus.joint_names, clock2)
+    bus2 = FakeBus(bus.joint_names, clock2)
     rig2 = make_rig(build_parts(), ScriptedGlove(clock2, lambda t: MID), bus2, clock2)
     def twice(t_s: float, pose: np.ndarray) -> None:
         if len(bus2.goals) == 10:
@@ -225,7 +133,7 @@ def test_stop_request_relaxes_and_a_second_one_stops_at_once(parts_factory):
 def test_overruns_are_counted_with_their_size(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock,
                        write_cost_s=0.012)  # longer than two 5 ms periods
     rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)
     stats = rig.run(frames=50)
@@ -236,7 +144,7 @@ def test_overruns_are_counted_with_their_size(parts_factory):
 def test_lost_servo_port_stops_with_the_message(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock, fail_after=30)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock, fail_after=30)
     rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)
     with pytest.raises(DeviceError, match="went away"):
         rig.run(frames=100)
@@ -246,7 +154,7 @@ def test_lost_servo_port_stops_with_the_message(parts_factory):
 def _silent_glove_rig_held_mid_range(parts):
     """A rig whose glove never sends, its servos seeded at mid-range: (rig, bus, start)."""
     clock = FakeClock()
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     start = 0.5 * (parts.pipeline.servo_low + parts.pipeline.servo_high)
     parts.pipeline.seed(start)
     return make_rig(parts, ScriptedGlove(clock, lambda t: None), bus, clock), bus, start
@@ -281,7 +189,7 @@ def test_the_loop_refuses_to_start_blind(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
 
-    class BlindBus(RecordingBus):
+    class BlindBus(FakeBus):
         def read_state(self, deadline_s=None):
             state = super().read_state(deadline_s)
             state.stale[:] = True
@@ -328,10 +236,9 @@ def test_the_live_control_path_sees_one_sample_per_glove_frame(parts_factory):
         return parts.controls(raw, t_s, out)
 
     glove = ScriptedGlove(clock, lambda t: MID)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
-    rig = Rig(glove, bus, parts.pipeline, clock, controls_from_raw=controls,
-              orientation=parts.orientation, rate_hz=200.0, log=lambda s: None,
-              loop_mode="fixed")
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = rig_on(parts, glove, bus, clock, controls_from_raw=controls, rate_hz=200.0,
+                 mode="fixed")
     stats = rig.run(frames=50)
     assert len(seen) == stats.glove_samples
 
@@ -341,7 +248,7 @@ def test_a_stop_arriving_mid_cycle_never_puts_a_hole_in_the_outputs(parts_factor
     clock = FakeClock()
     fist = np.array([2800.0, 1300.0, 3000.0, 3200.0, 3200.0])
 
-    class SignalledBus(RecordingBus):
+    class SignalledBus(FakeBus):
         rig: Rig | None = None
 
         def write_goals_deg(self, goals_deg):
@@ -365,7 +272,7 @@ def test_after_an_overrun_reads_get_a_deadline_in_the_future(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
 
-    class StallingBus(RecordingBus):
+    class StallingBus(FakeBus):
         def __init__(self, *a, **k):
             super().__init__(*a, **k)
             self.margins: list[float] = []
@@ -411,7 +318,7 @@ def test_a_1_hz_glove_does_not_make_the_puppet_twitch(parts_factory):
     the puppet eases to relaxed and stays there, never pulled back for one frame."""
     parts = parts_factory()
     clock = FakeClock()
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, SlowGlove(clock, lambda t: FIST, 1.0), bus, clock)
     stats = rig.run(duration_s=6.0)
     goals = np.array(bus.goals)
@@ -428,7 +335,7 @@ def test_resuming_needs_good_frames_in_a_row_then_eases_back(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
     glove = ScriptedGlove(clock, lambda t: None if 0.5 <= t < 2.0 else FIST)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     events: list[str] = []
     rig = make_rig(parts, glove, bus, clock, resume_frames=3, resume_time_s=0.3)
     rig.log = events.append
@@ -454,7 +361,7 @@ def test_resume_frames_1_follows_the_first_frame_back(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
     glove = ScriptedGlove(clock, lambda t: None if 0.5 <= t < 2.0 else FIST)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, glove, bus, clock, resume_frames=1)
     rig.run(frames=500)
     goals = np.array(bus.goals)
@@ -484,7 +391,7 @@ def test_the_trigger_is_a_part_that_can_be_swapped(parts_factory):
 
     parts = parts_factory()
     clock = FakeClock()
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     trigger = EveryOtherSlot(clock)
     rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock, trigger=trigger)
     stats = rig.run(frames=100)
@@ -495,7 +402,7 @@ def test_the_trigger_is_a_part_that_can_be_swapped(parts_factory):
 def test_a_long_run_keeps_its_statistics_fixed_size(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock,
                        write_cost_s=40e-6)
     bus.goals = _Last()  # type: ignore[assignment]  # the fake bus itself must not grow
     rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock)
@@ -516,7 +423,7 @@ class _Last(list):
 def test_the_profile_times_each_stage_outside_the_loop_code(parts_factory):
     parts = parts_factory()
     clock = FakeClock()
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock,
                        write_cost_s=70e-6)
     rig = make_rig(parts, ScriptedGlove(clock, lambda t: MID), bus, clock, profile=True)
     stats = rig.run(frames=100)
@@ -540,7 +447,7 @@ class EventfulGlove(ScriptedGlove):
         return out
 
 
-class SilentServosBus(RecordingBus):
+class SilentServosBus(FakeBus):
     """Servo 7 gives no valid reading between two times (the bus reports it stale, with
     the age of its last reading); the loop's [silence] tiers decide what that means."""
 
@@ -589,7 +496,7 @@ def test_keys_from_another_thread_relax_resume_and_e_stop_without_easing(parts_f
     parts = parts_factory()
     clock = FakeClock()
     glove = ScriptedGlove(clock, lambda t: MID)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, glove, bus, clock)
     modes: list[Mode] = []
 
@@ -615,7 +522,7 @@ def test_housekeeping_runs_midway_between_state_reads_with_a_deadline(parts_fact
     parts = parts_factory()
     clock = FakeClock()
 
-    class KeepingBus(RecordingBus):
+    class KeepingBus(FakeBus):
         def __init__(self, *args):
             super().__init__(*args)
             self.calls: list[tuple[int, float, float]] = []  # (writes so far, now, deadline)
@@ -652,7 +559,7 @@ def test_the_glove_triggered_loop_writes_each_frame_once_as_it_comes(parts_facto
     parts = parts_factory()
     clock = FakeClock(100.0)
     glove = _replay(rate_hz, 2.0, clock)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock,
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock,
                        write_cost_s=50e-6)
     rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=40.0,
                    ceiling_hz=1000.0)
@@ -670,7 +577,7 @@ def test_the_glove_triggered_loop_keeps_the_floor_and_relaxes_and_resumes(parts_
     parts = parts_factory()
     clock = FakeClock(0.0)
     glove = _replay(200.0, 3.0, clock, gap=(0.5, 1.5))  # a second of silence
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=100.0,
                    ceiling_hz=1000.0)
     stats = rig.run(duration_s=2.5)
@@ -679,7 +586,7 @@ def test_the_glove_triggered_loop_keeps_the_floor_and_relaxes_and_resumes(parts_
     assert stats.period.max <= 0.010 + 1e-9  # never quieter than the floor
 
 
-class WiredBus(RecordingBus):
+class WiredBus(FakeBus):
     """A bus that says its baud rate and a read's wire time (Fast Sync Read, 4 bytes)."""
 
     baud = 1_000_000
@@ -736,7 +643,7 @@ def test_a_read_the_bus_found_no_room_for_stays_due_and_is_not_counted(parts_fac
     parts = parts_factory()
     clock = FakeClock()
 
-    class CrampedBus(RecordingBus):
+    class CrampedBus(FakeBus):
         """Skips every read asked with less than 10 ms to go (the way DynamixelBus does
         when the wire or a line it must let go quiet leaves no room)."""
 
@@ -769,7 +676,7 @@ def test_reads_of_parts_take_the_parts_in_turn_and_track_only_the_servos_asked(
     parts = parts_factory()
     clock = FakeClock()
 
-    class PartBus(RecordingBus):
+    class PartBus(FakeBus):
         def __init__(self, *a, **k):
             super().__init__(*a, **k)
             self.parts: list[tuple[int, int]] = []
@@ -816,7 +723,7 @@ def test_a_loop_held_up_writes_the_frames_it_was_late_for_then_the_newest(parts_
     glove = SerialGlove(os.ttyname(slave), "frames", clock=clock, reader="poll", channels=5)
     os.close(slave)
 
-    class HeldUpBus(RecordingBus):
+    class HeldUpBus(FakeBus):
         def write_goals_deg(self, goals_deg: np.ndarray) -> int:
             self.goals.append(np.array(goals_deg))
             if len(self.goals) % 25 == 0:
@@ -849,11 +756,10 @@ def test_a_loop_held_up_writes_the_frames_it_was_late_for_then_the_newest(parts_
             raw = (1500 + 5 * k, 2100, 2000, 2100, 2100)
             os.write(master, encode_frame(GloveFrame(k, k * 10_000, raw, (0.0, 0.0, 0.0, 1.0))))
 
-    rig = Rig(glove, bus, parts.pipeline, clock, controls_from_raw=controls_from_raw,
-              orientation=parts.orientation, read_every=4, glove_timeout_s=0.25,
-              relax_time_s=0.05, log=lambda s: None, loop_mode="glove", floor_hz=20.0,
-              ceiling_hz=1000.0, catch_up=True,
-              outputs=[lambda t_s, pose: output_at.append((t_s, float(pose[0])))])
+    rig = rig_on(parts, glove, bus, clock, controls_from_raw=controls_from_raw,
+                 read_every=4, glove_timeout_s=0.25, relax_time_s=0.05, mode="glove",
+                 floor_hz=20.0, ceiling_hz=1000.0, catch_up=True,
+                 outputs=[lambda t_s, pose: output_at.append((t_s, float(pose[0])))])
     with glove:
         writer = threading.Thread(target=stream)
         writer.start()
@@ -890,7 +796,7 @@ def test_a_replay_the_loop_falls_behind_on_still_has_every_sample_written(parts_
     clock = FakeClock(100.0)
     glove = _replay(200.0, 2.0, clock)
 
-    class SlowAtTimesBus(RecordingBus):
+    class SlowAtTimesBus(FakeBus):
         def write_goals_deg(self, goals_deg: np.ndarray) -> int:
             self.goals.append(np.array(goals_deg))
             clock.advance(0.012 if len(self.goals) % 40 == 0 else 50e-6)  # 2 samples due
