@@ -14,11 +14,13 @@ import re
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from hypothesis import settings
+
+from tests.helpers.emulator import SimBusProcess, start_sim_bus
 
 # No per-example deadline: a property test checks what the code computes, not how
 # fast; on a loaded 2-core CI machine one example took 0.9 s against the default
@@ -81,6 +83,19 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if rel.startswith(COMPUTE_ONLY):
             item.add_marker(pytest.mark.compute_only)
 
+
+
+@pytest.fixture
+def sim_bus(request: pytest.FixtureRequest) -> Iterator[SimBusProcess]:
+    """The bus emulator in a process of its own (:mod:`tests.helpers.emulator`), with the
+    flags of the test's ``@pytest.mark.sim_bus(...)`` (none: the MuJoCo puppet, the
+    realtime priority it asks for, no wire timing); ``stderr=subprocess.PIPE`` in the
+    marker's keywords keeps what it says for the test to read."""
+    marker = request.node.get_closest_marker("sim_bus")
+    flags = tuple(marker.args) if marker else ()
+    stderr = marker.kwargs.get("stderr", subprocess.DEVNULL) if marker else subprocess.DEVNULL
+    with start_sim_bus(*flags, stderr=stderr) as bus:
+        yield bus
 
 
 @pytest.fixture(scope="session")
