@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.bench_rig import (
+from bench.rig_steps import (
     INDEX_CHANNEL,
     _glove_file,
     emulator,
