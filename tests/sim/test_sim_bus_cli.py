@@ -60,8 +60,24 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: SimBusProcess) -> None:
         for i, g in goals.items():
             assert sw.addParam(i, g.to_bytes(4, "little", signed=True))
         assert sw.txPacket() == COMM_SUCCESS
-        time.sleep(0.8)  # well beyond the servos' travel time at their speed limit
+        # the wrist carries the whole hand on one XL330 and droops (P-only servo);
+        # every finger joint settles within 2 deg of its goal
+        tol = {s.id: 12.0 if "Wrist" in s.joint else 2.0 for s in rig.servos}
 
+        def there(present: dict[int, int]) -> bool:
+            return all(abs(s.ticks_to_deg(present[s.id]) - s.ticks_to_deg(goals[s.id]))
+                       < tol[s.id] for s in rig.servos)
+
+        # until every joint is there (a few tenths of a second at the servos' speed
+        # limit), then 0.1 s more to settle; at most 5 s
+        deadline = time.monotonic() + 5.0
+        while True:
+            assert fsr.fastSyncRead() == COMM_SUCCESS
+            fast = {i: _signed32(fsr.getData(i, ADDR_PRESENT, 4)) for i in ids}
+            if there(fast) or time.monotonic() > deadline:
+                break
+            time.sleep(0.02)
+        time.sleep(0.1)
         assert fsr.fastSyncRead() == COMM_SUCCESS
         fast = {i: _signed32(fsr.getData(i, ADDR_PRESENT, 4)) for i in ids}
         assert fsr.txRxPacket() == COMM_SUCCESS
@@ -75,10 +91,7 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: SimBusProcess) -> None:
         for s in rig.servos:
             want_deg = s.ticks_to_deg(goals[s.id])
             got_deg = s.ticks_to_deg(fast[s.id])
-            # the wrist carries the whole hand on one XL330 and droops (P-only servo);
-            # every finger joint settles within 2 deg of its goal
-            tol = 12.0 if "Wrist" in s.joint else 2.0
-            assert abs(got_deg - want_deg) < tol, (s.joint, want_deg, got_deg)
+            assert abs(got_deg - want_deg) < tol[s.id], (s.joint, want_deg, got_deg)
             # the joint moved there: it started at least 5 deg away
             assert abs(s.ticks_to_deg(start[s.id]) - want_deg) > 5.0, s.joint
             for other in (plain, bulk):

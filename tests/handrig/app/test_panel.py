@@ -8,7 +8,7 @@ import io
 import os
 import termios
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -140,6 +140,13 @@ def test_heat_tiers_colour_the_temperatures_and_name_the_warm_servos() -> None:
     assert "\x1b[33m 35" not in styled and "\x1b[1;31m 35" not in styled
 
 
+def wait_for(condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
+    """Until ``condition()`` holds (checked every 10 ms), at most ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
 def test_live_panel_without_a_terminal_prints_plain_lines_after_the_header_once() -> None:
     out = io.StringIO()
     console = Console(file=out, width=200)
@@ -147,7 +154,7 @@ def test_live_panel_without_a_terminal_prints_plain_lines_after_the_header_once(
     snaps = iter([show_snapshot(elapsed_s=float(i)) for i in range(100)])
     with LivePanel(lambda: next(snaps), console=console, header=["bus: 20 servos"],
                    plain_every_s=0.05):
-        time.sleep(0.3)
+        wait_for(lambda: len(out.getvalue().splitlines()) >= 3)
     lines = out.getvalue().splitlines()
     assert lines[0] == "bus: 20 servos" and lines.count("bus: 20 servos") == 1
     assert len(lines) >= 3 and all(" | glove " in line for line in lines[1:])
@@ -159,7 +166,7 @@ def test_live_panel_on_a_terminal_draws_below_the_header() -> None:
     panel = LivePanel(show_snapshot, refresh_hz=20.0, console=console,
                       header=["servo bus /dev/ttyUSB0: 20 servos commissioned"])
     with panel:
-        time.sleep(0.3)
+        wait_for(lambda: "RELAXING" in out.getvalue())
         panel.log("a line above the panel")
     text = out.getvalue()
     assert text.count("20 servos commissioned") == 1
