@@ -106,7 +106,7 @@ class FakeBus(ServoBus):
         self.torque_on = False
 
     @contextlib.contextmanager
-    def torque(self) -> Iterator[ServoBus]:  # type: ignore[override]
+    def torque(self) -> Iterator[ServoBus]:
         self.torque_on = True
         try:
             yield self
