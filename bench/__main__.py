@@ -22,10 +22,11 @@ from types import ModuleType
 
 import bench
 
-# only when named: long, or (bench_view) driving headless chromium pages
+# only when named: long, or (bench_view) driving headless chromium pages, or (bench_rig_hands)
+# run by bench_rig already
 LONG = frozenset({"bench_soak", "bench_arrival", "bench_skips", "bench_view", "bench_view_exit",
                   "bench_inputs", "bench_one_silent",
-                  "bench_wedge"})
+                  "bench_wedge", "bench_rig_hands"})
 HELP = ("-h", "--help")
 
 

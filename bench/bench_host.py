@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from bench import bench_rig
+from bench import rig_steps
 from handrig.realtime import pinned_loop, realtime_priority
 
 NAP_S = 0.001
@@ -64,10 +64,10 @@ def counts_per_min(values: np.ndarray, seconds: float) -> list[float]:
 def main() -> None:
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 10.0))
     with pinned_loop() as cpu, realtime_priority() as fifo:
-        before = bench_rig.cpu_times()
+        before = rig_steps.cpu_times()
         late = naps(seconds)
         gaps = spin_gaps(seconds)
-        steal = bench_rig.steal_percent(before, bench_rig.cpu_times())
+        steal = rig_steps.steal_percent(before, rig_steps.cpu_times())
     heads = " | ".join(f"> {th * 1e3:g} ms" for th in THRESHOLDS_S)
     print(f"loop CPU {cpu}, SCHED_FIFO {'yes' if fifo else 'no'}, {seconds:g} s each; "
           f"steal {steal} %")

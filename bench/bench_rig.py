@@ -33,74 +33,32 @@ current figures).
 
 from __future__ import annotations
 
-import bisect
-import contextlib
 import datetime
 import os
 import re
 import tempfile
-from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from handrig.app.factory import build_parts, port_process
+from bench.bench_rig_hands import HANDS_HEADER, hands_rows, parse_hands_cases, run_hands_case
+from bench.rig_steps import (
+    INDEX_CHANNEL,
+    ROOT,
+    STEP_S,
+    _glove_file,
+    cpu_times,
+    emulator,
+    outside_latencies,
+    steal_percent,
+    step_recording,
+)
+from handrig.app.factory import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.config.loading import CONFIG_DIR
-from handrig.devices.glove_recording import GloveRecording, write_glove_recording
-
-STEP_S = 0.25  # the index channel steps this often (the goals settle well within it)
-INDEX_CHANNEL = 3  # riIndexMCPy in config/glove.toml
-RAW_LOW, RAW_HIGH = 1800.0, 2200.0  # the step: about 18 deg of index MCP flexion
-SETTLE_WINDOW_S = 0.05  # how far after a step its first moving write is looked for
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def step_recording(channels: int = 5) -> GloveRecording:
-    """A looping 2 * STEP_S recording at 1 kHz: constant channels, the index stepping."""
-    t = np.arange(0.0, 2 * STEP_S, 0.001)
-    raw = np.full((len(t), channels), 2000.0)
-    raw[:, INDEX_CHANNEL] = np.where(t < STEP_S, RAW_LOW, RAW_HIGH)
-    quat = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
-    return GloveRecording(t_s=t, raw=raw, buttons=np.zeros(len(t), dtype=np.int64),
-                          channel_names=tuple(f"ch{k}" for k in range(channels)),
-                          quat_xyzw=quat, rate_hz=1000.0)
-
-
-def outside_latencies(sends: Sequence[tuple[float, int]], values: np.ndarray,
-                      writes: Sequence[tuple[float, tuple[int, ...]]]) -> list[float]:
-    """Send time of each frame that carries a step (``values[index]`` differs from the
-    previous frame's) to the receipt of the first write whose goals differ from the
-    settled goals before it. ``sends``: (time, sample index); ``writes``: (time, goal
-    ticks), both sorted by time. Steps whose goals had not settled (the two writes
-    before the step differ) are left out."""
-    times = [t for t, _ in writes]
-    out: list[float] = []
-    previous = None
-    for t_send, index in sends:
-        v = values[index]
-        if previous is not None and v != previous:
-            j = bisect.bisect_right(times, t_send)
-            if j >= 2 and writes[j - 1][1] == writes[j - 2][1]:
-                settled = writes[j - 1][1]
-                for k in range(j, len(writes)):
-                    t_k, goals = writes[k]
-                    if t_k - t_send > SETTLE_WINDOW_S:
-                        break
-                    if goals != settled:
-                        out.append(t_k - t_send)
-                        break
-        previous = v
-    return out
-
-
-@contextlib.contextmanager
-def emulator(argv: list[str], what: str) -> Iterator[str]:
-    """``python -m bench.latency_emulators ARGV`` (off the loop's CPU); yields its port."""
-    with port_process(argv, what, module="bench.latency_emulators", cwd=ROOT) as (_, port):
-        yield port
+from handrig.devices.glove_recording import write_glove_recording
 
 
 def _rig_file(folder: Path, mode: str, rate_hz: float, baud: int,
@@ -118,35 +76,11 @@ def _rig_file(folder: Path, mode: str, rate_hz: float, baud: int,
     return path
 
 
-def _glove_file(folder: Path) -> Path:
-    text = (CONFIG_DIR / "glove.toml").read_text(encoding="utf-8")
-    text = re.sub(r"(?ms)(^\[filter\].*?^enabled = )true", r"\1false", text, count=1)
-    path = folder / "glove_unfiltered.toml"
-    path.write_text(text, encoding="utf-8")
-    return path
-
-
 @dataclass
 class Case:
     mode: str
     glove_hz: float
     baud: int
-
-
-def cpu_times() -> tuple[int, int]:
-    """(all, steal) jiffies of every CPU so far (``/proc/stat``; (0, 0) elsewhere)."""
-    try:
-        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]
-    except OSError:
-        return 0, 0
-    ticks = [int(v) for v in fields]
-    return sum(ticks[:8]), ticks[7] if len(ticks) > 7 else 0
-
-
-def steal_percent(before: tuple[int, int], after: tuple[int, int]) -> float | None:
-    """The share of CPU time the hypervisor gave to other guests between two samples."""
-    total = after[0] - before[0]
-    return round(100.0 * (after[1] - before[1]) / total, 1) if total > 0 else None
 
 
 def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
@@ -227,21 +161,6 @@ def parse_cases(text: str) -> list[Case]:
     return cases
 
 
-def parse_hands_cases(text: str) -> list[Any]:
-    """The two-hand cases ``hands/1`` and ``hands/2`` in ``text`` (empty: both)."""
-    from bench.bench_rig_hands import CASES
-
-    if not text.strip():
-        return list(CASES)
-    wanted = [item.strip() for item in text.split(",") if item.strip().startswith("hands/")]
-    by_name = {f"hands/{c.buses}": c for c in CASES}
-    unknown = [w for w in wanted if w not in by_name]
-    if unknown:
-        raise SystemExit(f"HANDRIG_BENCH_CASES: {unknown[0]!r} is not hands/1 (one bus) or "
-                         "hands/2 (two buses)")
-    return [by_name[w] for w in wanted]
-
-
 def main() -> None:
     quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 10.0 if quick else 60.0))
@@ -267,8 +186,6 @@ def main() -> None:
             rows.append(r)
             print(_row(r), flush=True)
         if hands_cases:
-            from bench.bench_rig_hands import HANDS_HEADER, hands_rows, run_hands_case
-
             print(f"\ntwo hands: two gloves at 200 Hz, 40 emulated servos with wire timing, "
                   f"{seconds:g} s per case", flush=True)
             print(HANDS_HEADER, flush=True)

@@ -23,7 +23,9 @@ for each hand, no frame lost.
 from __future__ import annotations
 
 import contextlib
+import os
 import re
+import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.bench_rig import (
+from bench.rig_steps import (
     INDEX_CHANNEL,
     STEP_S,
     _glove_file,
@@ -183,3 +185,35 @@ def hands_rows(r: dict[str, Any]) -> list[str]:
             f"{s.get('overruns')} | {s.get('writes_per_s')} | {s.get('reads_per_s')} | "
             f"{r.get('steal_pct')} |{err}")
     return rows
+
+
+def parse_hands_cases(text: str) -> list[Any]:
+    """The two-hand cases ``hands/1`` and ``hands/2`` in ``text`` (empty: both)."""
+    if not text.strip():
+        return list(CASES)
+    wanted = [item.strip() for item in text.split(",") if item.strip().startswith("hands/")]
+    by_name = {f"hands/{c.buses}": c for c in CASES}
+    unknown = [w for w in wanted if w not in by_name]
+    if unknown:
+        raise SystemExit(f"HANDRIG_BENCH_CASES: {unknown[0]!r} is not hands/1 (one bus) or "
+                         "hands/2 (two buses)")
+    return [by_name[w] for w in wanted]
+
+
+def main() -> None:
+    """The two-hand cases alone (``python -m bench rig_hands``; ``python -m bench rig``
+    runs them after the one-hand cases): ``HANDRIG_BENCH_SECONDS`` each (default 60 s;
+    ``HANDRIG_BENCH_QUICK=1``: 10 s), ``HANDRIG_BENCH_CASES`` ``hands/1``, ``hands/2``."""
+    quick = bool(os.environ.get("HANDRIG_BENCH_QUICK"))
+    seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", 10.0 if quick else 60.0))
+    print(f"two hands: two gloves at {GLOVE_HZ:g} Hz, 40 emulated servos with wire timing, "
+          f"{seconds:g} s per case", flush=True)
+    print(HANDS_HEADER, flush=True)
+    with tempfile.TemporaryDirectory(prefix="bench_rig_hands_") as tmp:
+        for case in parse_hands_cases(os.environ.get("HANDRIG_BENCH_CASES", "")):
+            for line in hands_rows(run_hands_case(case, seconds, Path(tmp))):
+                print(line, flush=True)
+
+
+if __name__ == "__main__":
+    main()

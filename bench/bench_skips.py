@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from bench import bench_rig
+from bench import bench_rig, rig_steps
 from handrig.loop import cycle as cycle_module
 
 RATE_HZ = 500.0
@@ -80,10 +80,10 @@ def main() -> None:
     cycle_module.Cycle._after_write = after_write  # type: ignore[method-assign]
     try:
         with tempfile.TemporaryDirectory(prefix="bench_skips_") as tmp:
-            before = bench_rig.cpu_times()
+            before = rig_steps.cpu_times()
             result = bench_rig.run_step_case(bench_rig.Case("glove", RATE_HZ, BAUD),
                                              seconds, Path(tmp))
-            steal = bench_rig.steal_percent(before, bench_rig.cpu_times())
+            steal = rig_steps.steal_percent(before, rig_steps.cpu_times())
     finally:
         cycle_module.Cycle._after_write = original  # type: ignore[method-assign]
     s = result["summary"]

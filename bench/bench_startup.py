@@ -38,8 +38,8 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from bench.bench_rig import cpu_times, steal_percent
 from bench.compare import base_worktree, resolve_commit
+from bench.rig_steps import cpu_times, steal_percent
 
 ROOT = Path(__file__).resolve().parent.parent
 GOAL_POSITION = 116  # X-series control table: Goal Position (4 bytes)

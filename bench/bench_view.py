@@ -66,11 +66,11 @@ from typing import Any
 
 import numpy as np
 
-from bench.bench_rig import (
+from bench.bench_rig import _rig_file
+from bench.rig_steps import (
     INDEX_CHANNEL,
     ROOT,
     _glove_file,
-    _rig_file,
     cpu_times,
     emulator,
     outside_latencies,

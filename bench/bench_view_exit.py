@@ -35,8 +35,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from bench.bench_rig import cpu_times, steal_percent
 from bench.compare import base_worktree, resolve_commit
+from bench.rig_steps import cpu_times, steal_percent
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORDING = "config/recordings/demo_glove.csv"

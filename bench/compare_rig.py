@@ -81,7 +81,8 @@ def main() -> int:
         child(root, rig_path, mode, float(hz), int(baud), float(seconds))
         return 0
     sys.path.insert(0, str(HERE))
-    from bench.bench_rig import _rig_file, cpu_times, steal_percent
+    from bench.bench_rig import _rig_file
+    from bench.rig_steps import cpu_times, steal_percent
 
     p = argparse.ArgumentParser(prog="python bench/compare_rig.py")
     p.add_argument("old")

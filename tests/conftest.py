@@ -14,11 +14,13 @@ import re
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from hypothesis import settings
+
+from tests.helpers.emulator import SimBusProcess, start_sim_bus
 
 # No per-example deadline: a property test checks what the code computes, not how
 # fast; on a loaded 2-core CI machine one example took 0.9 s against the default
@@ -72,6 +74,7 @@ COMPUTE_ONLY = (
     "handrig/cli/test_cli_startup.py", "handrig/app/view/test_view_advice.py",
     "handrig/devices/test_glove_channel_indices.py", "handrig/test_bounded_inputs.py",
     "sim/test_retarget_fit.py", "handrig/cli/test_retarget_fit_command.py",
+    "handrig/loop/test_rig_settings.py",
 )
 TESTS = Path(__file__).resolve().parent
 
@@ -83,6 +86,19 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if rel.startswith(COMPUTE_ONLY):
             item.add_marker(pytest.mark.compute_only)
 
+
+
+@pytest.fixture
+def sim_bus(request: pytest.FixtureRequest) -> Iterator[SimBusProcess]:
+    """The bus emulator in a process of its own (:mod:`tests.helpers.emulator`), with the
+    flags of the test's ``@pytest.mark.sim_bus(...)`` (none: the MuJoCo puppet, the
+    realtime priority it asks for, no wire timing); ``stderr=subprocess.PIPE`` in the
+    marker's keywords keeps what it says for the test to read."""
+    marker = request.node.get_closest_marker("sim_bus")
+    flags = tuple(marker.args) if marker else ()
+    stderr = marker.kwargs.get("stderr", subprocess.DEVNULL) if marker else subprocess.DEVNULL
+    with start_sim_bus(*flags, stderr=stderr) as bus:
+        yield bus
 
 
 @pytest.fixture(scope="session")

@@ -1,7 +1,9 @@
 """The folders show the layers: imports point one way, and nothing imports itself round.
 
 Read from the source (every ``import``, at module level or inside a function), so
-a lazy import cannot hide a dependency. The order is docs/architecture.md's.
+a lazy import cannot hide a dependency. The order is docs/architecture.md's. The
+circles are looked for in the whole tree: handrig, sim, firmware_protocol, bench and
+the tests; and no file there (a test file included) is over 600 lines.
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("handrig", "sim", "firmware_protocol")
+TREE = (*PACKAGES, "bench", "tests")  # where circles are looked for
+MAX_LINES = 600
 
 # handrig's layers, lowest first; a module may import its own layer or lower ones.
 LAYERS = ("core", "config", "pose", "offline", "devices", "outputs", "loop", "app", "cli")
@@ -37,8 +41,8 @@ def layer_of(module: str) -> str:
     return parts[1]
 
 
-def all_modules() -> dict[str, Path]:
-    return {module_name(p): p for pkg in PACKAGES for p in sorted((ROOT / pkg).rglob("*.py"))}
+def all_modules(packages: tuple[str, ...] = PACKAGES) -> dict[str, Path]:
+    return {module_name(p): p for pkg in packages for p in sorted((ROOT / pkg).rglob("*.py"))}
 
 
 def imports_of(path: Path, name: str, known: set[str]) -> set[str]:
@@ -69,7 +73,9 @@ def imports_of(path: Path, name: str, known: set[str]) -> set[str]:
 
 
 MODULES = all_modules()
-GRAPH = {m: imports_of(p, m, set(MODULES)) for m, p in MODULES.items()}
+TREE_MODULES = all_modules(TREE)
+TREE_GRAPH = {m: imports_of(p, m, set(TREE_MODULES)) for m, p in TREE_MODULES.items()}
+GRAPH = {m: {d for d in TREE_GRAPH[m] if d in MODULES} for m in MODULES}
 
 
 def test_every_handrig_module_sits_in_a_layer() -> None:
@@ -138,17 +144,47 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
-def test_no_import_circle() -> None:
+def circles_in(graph: dict[str, set[str]]) -> list[list[str]]:
     # a package's __init__ that imports its own submodules is not a circle of design
-    graph: dict[str, set[str]] = defaultdict(set)
-    for m, deps in GRAPH.items():
-        graph[m] = {d for d in deps if not m.startswith(d + ".")}
-    found = cycles(graph)
+    own: dict[str, set[str]] = defaultdict(set)
+    for m, deps in graph.items():
+        own[m] = {d for d in deps if not m.startswith(d + ".")}
+    return cycles(own)
+
+
+def test_no_import_circle() -> None:
+    found = circles_in(TREE_GRAPH)
     assert not found, "import circles:\n" + "\n".join(" <-> ".join(c) for c in found)
 
 
-@pytest.mark.parametrize("pkg", PACKAGES)
+def test_the_circle_check_finds_a_circle() -> None:
+    graph = {"bench.a": {"bench.b"}, "bench.b": {"bench.c"}, "bench.c": {"bench.a"},
+             "bench": {"bench.a"}, "bench.d": {"bench.a"}}
+    assert circles_in(graph) == [["bench.a", "bench.b", "bench.c"]]
+
+
+def test_nothing_below_imports_bench_or_the_tests() -> None:
+    wrong = [f"{m} imports {d}" for m, deps in TREE_GRAPH.items()
+             if m.split(".")[0] in PACKAGES for d in deps
+             if d.split(".")[0] in ("bench", "tests")]
+    assert not wrong, "\n".join(sorted(wrong))
+
+
+@pytest.mark.xfail(strict=False, reason="i35-session moves these")
+def test_sim_imports_nothing_from_app_or_cli() -> None:
+    wrong = [f"{m} imports {d}" for m, deps in GRAPH.items() if m.split(".")[0] == "sim"
+             for d in deps if layer_of(d) in ("app", "cli") if d.startswith("handrig")]
+    assert not wrong, "sim/ reaches up into handrig's app or cli:\n" + "\n".join(sorted(wrong))
+
+
+@pytest.mark.parametrize("pkg", (*PACKAGES, "bench"))
 def test_no_module_over_600_lines(pkg: str) -> None:
-    big = {m: n for m, p in MODULES.items() if m.split(".")[0] == pkg
-           and (n := len(p.read_text().splitlines())) > 600}
-    assert not big, f"modules over 600 lines: {big}"
+    big = {m: n for m, p in TREE_MODULES.items() if m.split(".")[0] == pkg
+           and (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not big, f"modules over {MAX_LINES} lines: {big}"
+
+
+def test_no_test_file_over_600_lines() -> None:
+    big = {p.relative_to(ROOT).as_posix(): n for p in sorted((ROOT / "tests").rglob("*.py"))
+           if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not big, (f"test files over {MAX_LINES} lines (split them by topic): {big}")

@@ -5,5 +5,9 @@ relaxing, resuming, stopping), ``cycle`` (one glove sample to one Sync Write and
 what follows it), ``easing`` (to the relaxed pose and back to the glove),
 ``stats`` (fixed-size figures),
 ``profile`` (per-stage timing, for the benchmark), ``ports`` (what the loop needs
-from the glove, the bus and the control path).
+from the glove, the bus and the control path), ``settings`` (what a loop is built
+from, as data: :class:`~handrig.loop.settings.LoopParts` and
+:class:`~handrig.loop.settings.RigSettings`), ``telemetry`` (the typed snapshot
+readers get, built from the cycle's typed
+:class:`~handrig.loop.telemetry.CycleView`).
 """

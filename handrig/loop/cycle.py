@@ -21,30 +21,28 @@ part of it, from the cycle's start to the same point.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
-from handrig.clock import Clock
-from handrig.config.rig import HeatConfig, SilenceConfig
 from handrig.errors import DeviceError
 from handrig.loop.easing import Easing
 from handrig.loop.heat import HeatWatch
 from handrig.loop.modes import Mode, ModeMachine
 from handrig.loop.ports import (
-    ControlsFromRaw,
     FloatArray,
     GloveSample,
-    GloveSource,
-    OrientationLike,
     ServoBus,
     ServoState,
 )
+from handrig.loop.settings import LoopParts, RigSettings
 from handrig.loop.silence import SilenceWatch
 from handrig.loop.stats import RunStats
-from handrig.loop.trigger import READ_MARGIN_S, FixedRateTrigger, GloveTrigger, Tick, Trigger
-from handrig.pose.pipeline import POSE_SIZE, PosePipeline
+from handrig.loop.telemetry import CycleView
+from handrig.loop.trigger import READ_MARGIN_S, GloveTrigger, Tick, Trigger
+from handrig.pose.pipeline import POSE_SIZE
 
 __all__ = ["READ_MARGIN_S", "Cycle"]
 READ_SMOOTHING = 0.2  # weight of the newest read's duration in the expected read time
@@ -52,39 +50,26 @@ SKIP_GROWTH = 1.25  # a read the bus skipped: the next one needs this much more 
 
 
 class Cycle:
-    """The work of one tick, on the parts it is given (nothing here opens a device).
+    """The work of one tick, on the parts it is given (nothing here opens a device),
+    at the ``trigger``'s ticks, with the ``settings``' read schedule, easing times and
+    silence and heat tiers; ``machine`` says what the puppet does, ``stats`` counts.
 
     ``latest``, ``controls_from_raw``, ``orientation``, ``targets`` and ``write`` are
     the stage callables, attributes so that a profile can wrap them
     (:class:`handrig.loop.profile.StageProfile`).
     """
 
-    def __init__(
-        self,
-        glove: GloveSource,
-        bus: ServoBus,
-        pipeline: PosePipeline,
-        clock: Clock,
-        machine: ModeMachine,
-        stats: RunStats,
-        *,
-        controls_from_raw: ControlsFromRaw,
-        orientation: OrientationLike,
-        period_s: float,
-        read_every: int,
-        relax_time_s: float,
-        resume_time_s: float,
-        outputs: Sequence[Callable[[float, FloatArray], None]] = (),
-        trigger: Trigger | None = None,
-        read_parts: int = 1,
-        silence: SilenceConfig | None = None,
-        heat: HeatConfig | None = None,
-    ) -> None:
+    def __init__(self, parts: LoopParts, settings: RigSettings, machine: ModeMachine,
+                 stats: RunStats, trigger: Trigger, *,
+                 outputs: Sequence[Callable[[float, FloatArray], None]] = ()) -> None:
+        glove, bus, pipeline, clock = parts.glove, parts.bus, parts.pipeline, parts.clock
+        loop = settings.loop
+        period_s = trigger.period_s
         self.bus = bus
         # each read asks one part of the servos in turn (1: every servo at once)
-        self.read_parts = max(1, min(int(read_parts), len(pipeline.servo_joints)))
+        self.read_parts = max(1, min(settings.read_parts, len(pipeline.servo_joints)))
         self._part = 0
-        self.trigger: Trigger = trigger or FixedRateTrigger(clock, 1.0 / period_s)
+        self.trigger: Trigger = trigger
         self.read_s = 0.0  # expected duration of a present-state read (moving average)
         self._reads_due = 0  # cycles since the last read
         self.read_wire_s = self._wire_floor(
@@ -94,15 +79,15 @@ class Cycle:
         self.machine = machine
         self.stats = stats
         self.period_s = period_s
-        self.read_every = max(1, int(read_every))
+        self.read_every = settings.read_every
         self.outputs = tuple(outputs)
         # a glove trigger pumps the port itself: the cycle then takes the newest sample
         # without reading the port again
         self.glove = glove
         self.latest: Callable[[], GloveSample | None] = (
             glove.take if isinstance(self.trigger, GloveTrigger) else glove.latest)
-        self.controls_from_raw: Callable[..., Any] = controls_from_raw
-        self.orientation: Callable[[GloveSample], tuple[float, float]] = orientation
+        self.controls_from_raw: Callable[..., Any] = parts.controls_from_raw
+        self.orientation: Callable[[GloveSample], tuple[float, float]] = parts.orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
         # port events of the glove, silence events of the bus: into the run's events
@@ -113,17 +98,17 @@ class Cycle:
         self.housekeeping: Callable[[float], bool] = bus.housekeeping
         self._housekeeping_slot = self.read_every // 2 if self.read_every > 1 else -1
         n = len(pipeline.servo_joints)
-        self.relax = Easing(n, POSE_SIZE, relax_time_s)
-        self.resume = Easing(n, POSE_SIZE, resume_time_s)
+        self.relax = Easing(n, POSE_SIZE, loop.relax_time_s)
+        self.resume = Easing(n, POSE_SIZE, loop.resume_time_s)
         self.controls = np.zeros(len(pipeline.expander.controls))
         self.angles: tuple[float, float] = (0.0, 0.0)  # forearm (inclination, rotation)
         self.sent = np.zeros(n)  # the goals last written
         self._step = np.zeros(n)
         self._slew_deg_s = pipeline.slew_deg_s
         # the [silence] tiers for servos that stop answering: decided here, from the reads
-        self.silence = SilenceWatch(bus, silence or SilenceConfig(), pipeline.slew_deg_s)
+        self.silence = SilenceWatch(bus, settings.silence, pipeline.slew_deg_s)
         # the [heat] tiers for servos that warm up: decided here, from the temperatures read
-        self.heat = HeatWatch(bus, heat or HeatConfig())
+        self.heat = HeatWatch(bus, settings.heat)
         self.sample: GloveSample | None = None  # the newest glove sample
         self.last_state: ServoState | None = None  # the newest ServoState read back
         self.t0_s = 0.0
@@ -136,6 +121,15 @@ class Cycle:
     def last_pose(self) -> FloatArray | None:
         """The full pose last output (None before the first)."""
         return self._pose
+
+    def view(self) -> CycleView:
+        """What the cycle holds now, for a telemetry snapshot (the live arrays: the
+        snapshot copies them on the loop's thread)."""
+        sample = self.sample
+        return CycleView(
+            controls=self.controls, raw=None if sample is None else sample.raw,
+            angles_deg=self.angles, pose=self._pose, goals_deg=self.sent, state=self.last_state,
+            frame_s=math.nan if sample is None else sample.host_time_s)
 
     def seed(self) -> None:
         """Start from where the servos are: the goals the bus holds them at, else a read.

@@ -1,9 +1,11 @@
 """The live rig: the realtime loop from glove to servos, with its safety behaviour.
 
-``Rig(glove, bus, pipeline, clock, ...)`` runs cycles on the injected
-:class:`~handrig.clock.Clock`: at ``rate_hz`` (``loop_mode="fixed"``), or one per
-glove frame as it arrives, between ``floor_hz`` and ``ceiling_hz``
-(``loop_mode="glove"``). Each cycle it takes the newest glove sample without
+``Rig(parts, settings)`` runs cycles on the parts it is given
+(:class:`~handrig.loop.settings.LoopParts`: the glove, the bus, the pipeline, the
+injected :class:`~handrig.clock.Clock`) with the settings of
+:class:`~handrig.loop.settings.RigSettings`: at ``rate_hz`` (``[loop] mode =
+"fixed"``), or one per glove frame as it arrives, between ``floor_hz`` and
+``ceiling_hz`` (``mode = "glove"``). Each cycle it takes the newest glove sample without
 blocking, turns it into servo targets through the
 :class:`~handrig.pose.pipeline.PosePipeline`, hands one Sync Write to the bus, and
 every ``read_every`` cycles reads the servos' present state back.
@@ -36,13 +38,13 @@ Safety (what a puppeteer relies on during a show):
 from __future__ import annotations
 
 import gc
-import math
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, Literal
+from dataclasses import replace
+from typing import Any
 
 from handrig.clock import Clock
-from handrig.config.rig import BusConfig, HeatConfig, LoopConfig, RigConfig, SilenceConfig
+from handrig.config.rig import RigConfig
 from handrig.errors import DeviceError
 from handrig.loop.cycle import Cycle
 from handrig.loop.modes import Mode, ModeMachine
@@ -54,32 +56,29 @@ from handrig.loop.ports import (
     ServoBus,
 )
 from handrig.loop.profile import StageProfile
+from handrig.loop.settings import LoopParts, RigSettings
 from handrig.loop.stats import RunStats
 from handrig.loop.telemetry import SnapshotBuilder, Telemetry
 from handrig.loop.trigger import FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pose.pipeline import PosePipeline
 
-__all__ = ["ControlsFromRaw", "GloveSource", "Mode", "OrientationLike", "Rig", "RunStats",
-           "ServoBus"]
+__all__ = ["ControlsFromRaw", "GloveSource", "LoopParts", "Mode", "OrientationLike", "Rig",
+           "RigSettings", "RunStats", "ServoBus"]
 
-_LOOP = LoopConfig()  # the defaults live in the config dataclasses
-_BUS = BusConfig()
 WIRE_SHARE = 0.9  # goal writes may fill at most this share of the wire
 PUBLISH_ROOM_S = 0.001  # a telemetry snapshot (~0.2 ms) is built only with this much room
 
 
 class Rig:
-    """The realtime loop. Dependencies are passed in; nothing here opens a device.
+    """The realtime loop. Dependencies are passed in (``parts``); nothing here opens a
+    device. ``settings`` default to the config's (:class:`RigSettings`);
+    :meth:`from_config` builds a rig from a rig file's settings.
 
-    ``trigger``: what starts each cycle (default: by ``loop_mode``, a
+    ``trigger``: what starts each cycle (default: by ``settings.loop.mode``, a
     :class:`FixedRateTrigger` at ``rate_hz`` or a :class:`GloveTrigger` between
     ``floor_hz`` and ``ceiling_hz``; either stamps the glove's frames as they arrive).
-    ``profile``: time the critical path's stages (:attr:`stage_profile`).
-    ``ease_in``: the first frame eases the servos in from where they are over
-    ``resume_time_s`` (a take played onto the rig) instead of the slew limit alone.
-    The defaults are the config's (:class:`~handrig.config.rig.LoopConfig`,
-    :class:`~handrig.config.rig.BusConfig`); :meth:`from_config` builds a rig from a
-    rig file's settings.
+    ``outputs`` are called after each write with (seconds since the start, the full
+    pose); ``log`` gets the run's events as lines.
     """
 
     @classmethod
@@ -93,91 +92,66 @@ class Rig:
         """The loop with the rig file's rates and safety timings (``[loop]``, ``[bus]``).
         In loop mode "glove" the ceiling is also held below the rate at which goal Sync
         Writes fill the wire (``0.9 / wire time``), so writes never queue on the bus."""
+        settings = RigSettings.from_config(config, ease_in=ease_in, profile=profile)
         loop = config.loop
         write_s = bus.write_wire_s()
-        ceiling_hz = loop.ceiling_hz
         if write_s > 0.0:
             ceiling_hz = max(loop.floor_hz, min(loop.ceiling_hz, WIRE_SHARE / write_s))
-        return cls(
-            glove, bus, pipeline, clock, controls_from_raw=controls_from_raw,
-            orientation=orientation, rate_hz=loop.rate_hz, read_every=config.bus.read_every,
-            glove_timeout_s=loop.glove_timeout_s, relax_time_s=loop.relax_time_s,
-            resume_frames=loop.resume_frames, resume_time_s=loop.resume_time_s,
-            outputs=outputs, log=log, profile=profile, loop_mode=loop.mode,
-            floor_hz=loop.floor_hz, ceiling_hz=ceiling_hz, catch_up=loop.catch_up,
-            read_parts=config.bus.read_parts, silence=config.silence, heat=config.heat,
-            ease_in=ease_in, raw_channels=raw_channels)
+            settings = replace(settings, loop=replace(loop, ceiling_hz=ceiling_hz))
+        parts = LoopParts(glove, bus, pipeline, clock, controls_from_raw=controls_from_raw,
+                          orientation=orientation,
+                          raw_channels=tuple(int(i) for i in raw_channels))
+        return cls(parts, settings, outputs=outputs, log=log)
 
     def __init__(
         self,
-        glove: GloveSource,
-        bus: ServoBus,
-        pipeline: PosePipeline,
-        clock: Clock,
+        parts: LoopParts,
+        settings: RigSettings | None = None,
         *,
-        controls_from_raw: ControlsFromRaw,
-        orientation: OrientationLike,
-        rate_hz: float = _LOOP.rate_hz,
-        read_every: int = _BUS.read_every,
-        glove_timeout_s: float = _LOOP.glove_timeout_s,
-        relax_time_s: float = _LOOP.relax_time_s,
-        resume_frames: int = _LOOP.resume_frames,
-        resume_time_s: float = _LOOP.resume_time_s,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         log: Callable[[str], None] = print,
-        profile: bool = False,
         trigger: Trigger | None = None,
-        loop_mode: Literal["fixed", "glove"] = _LOOP.mode,
-        floor_hz: float = _LOOP.floor_hz,
-        ceiling_hz: float = _LOOP.ceiling_hz,
-        catch_up: bool = _LOOP.catch_up,
-        read_parts: int = _BUS.read_parts,
-        silence: SilenceConfig | None = None,
-        heat: HeatConfig | None = None,
-        ease_in: bool = False,
-        raw_channels: Sequence[int] = (),
     ) -> None:
+        settings = settings if settings is not None else RigSettings()
+        self.parts = parts
+        self.settings = settings
+        glove, clock, loop = parts.glove, parts.clock, settings.loop
         self.glove = glove
-        self.bus = bus
-        self.pipeline = pipeline
+        self.bus = parts.bus
+        self.pipeline = parts.pipeline
         self.clock = clock
         if trigger is None:
-            if loop_mode == "glove":
-                trigger = GloveTrigger(clock, glove, floor_hz=floor_hz, ceiling_hz=ceiling_hz,
-                                       catch_up=catch_up)
-            elif loop_mode == "fixed":
-                trigger = FixedRateTrigger(clock, rate_hz, glove=glove)
+            if loop.mode == "glove":
+                trigger = GloveTrigger(clock, glove, floor_hz=loop.floor_hz,
+                                       ceiling_hz=loop.ceiling_hz, catch_up=loop.catch_up)
+            elif loop.mode == "fixed":
+                trigger = FixedRateTrigger(clock, loop.rate_hz, glove=glove)
             else:
-                raise ValueError(f"loop_mode {loop_mode!r} unknown: use 'fixed' or 'glove'")
+                raise ValueError(f"loop mode {loop.mode!r} unknown: use 'fixed' or 'glove'")
         self.trigger = trigger
         self.period_s = self.trigger.period_s
-        self.glove_timeout_s = glove_timeout_s
-        self.relax_time_s = relax_time_s
+        self.glove_timeout_s = loop.glove_timeout_s
+        self.relax_time_s = loop.relax_time_s
         self.log = log
         self.stats = RunStats(loop_mode="glove" if isinstance(self.trigger, GloveTrigger)
                               else "fixed")
         self.started_at = 0.0
         self._prepared = False  # prepare() ran: garbage collected, start-up heap frozen
         self.machine = ModeMachine(
-            glove_timeout_s=glove_timeout_s, relax_time_s=relax_time_s,
-            resume_frames=resume_frames, resume_time_s=resume_time_s, event=self._event,
-            stats=self.stats, ease_in=ease_in,
+            glove_timeout_s=loop.glove_timeout_s, relax_time_s=loop.relax_time_s,
+            resume_frames=loop.resume_frames, resume_time_s=loop.resume_time_s,
+            event=self._event, stats=self.stats, ease_in=settings.ease_in,
         )
-        self.cycle = Cycle(
-            glove, bus, pipeline, clock, self.machine, self.stats,
-            controls_from_raw=controls_from_raw, orientation=orientation,
-            period_s=self.period_s, read_every=read_every, relax_time_s=relax_time_s,
-            resume_time_s=resume_time_s, outputs=outputs, trigger=self.trigger,
-            read_parts=read_parts, silence=silence, heat=heat,
-        )
+        self.cycle = Cycle(parts, settings, self.machine, self.stats, self.trigger,
+                           outputs=outputs)
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
         self.telemetry = Telemetry()
         """The newest :class:`~handrig.loop.telemetry.LoopSnapshot`, for any thread."""
         self._snapshot = SnapshotBuilder(
-            glove, bus, pipeline, self.machine, self.stats, lambda: self.started_at,
-            self._view, lambda: self.cycle.outputs, raw_channels=raw_channels)
-        self.stage_profile = StageProfile(clock) if profile else None
+            parts, self.machine, self.stats, lambda: self.started_at, self.cycle.view,
+            lambda: self.cycle.outputs)
+        self.stage_profile = StageProfile(clock) if settings.profile else None
         if self.stage_profile is not None:
             self.stage_profile.wrap(self.cycle)
 
@@ -224,12 +198,6 @@ class Rig:
         """End the run at the next cycle without easing: the caller's torque context then
         turns torque off at once. Safe from another thread or a signal handler."""
         self.machine.request_estop(reason)
-
-    def _view(self) -> tuple[Any, ...]:
-        c = self.cycle
-        sample = c.sample
-        return (c.controls, None if sample is None else sample.raw, c.angles, c.last_pose,
-                c.sent, c.last_state, math.nan if sample is None else sample.host_time_s)
 
     # -- the loop ------------------------------------------------------------------------------
     def _event(self, text: str) -> None:

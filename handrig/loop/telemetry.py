@@ -10,7 +10,7 @@ one), without a lock and without touching the loop's live arrays.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,9 +19,11 @@ import numpy as np
 from handrig.devices.glove.source import GloveSource
 from handrig.devices.servo.bus import ServoBus, ServoState
 from handrig.loop.modes import Mode, ModeMachine
+from handrig.loop.ports import FloatArray
+from handrig.loop.settings import LoopParts
 from handrig.loop.stats import RunStats
 from handrig.outputs.base import Output, OutputStatus
-from handrig.pose.pipeline import POSE_NAMES, PosePipeline
+from handrig.pose.pipeline import POSE_NAMES
 
 PUBLISH_EVERY_S = 1.0 / 30.0  # a snapshot at most this often (30 a second)
 RATE_WINDOW_S = 1.0  # the loop rate is taken over about this long
@@ -86,6 +88,27 @@ class LoopSnapshot:
     outputs: tuple[OutputStatus, ...] = ()
 
 
+@dataclass(frozen=True, slots=True)
+class CycleView:
+    """What the cycle holds at one moment, for a snapshot (the live arrays: the
+    snapshot copies them into tuples on the loop's thread).
+
+    ``controls``: the controls of the newest sample; ``raw``: its raw channels (None
+    before a sample); ``angles_deg``: the forearm's (inclination, rotation); ``pose``:
+    the full pose last output (None before one); ``goals_deg``: the goals last
+    written; ``state``: the newest reading (None before one); ``frame_s``: the
+    newest glove frame's arrival on the loop's clock (NaN before one).
+    """
+
+    controls: FloatArray
+    raw: FloatArray | None
+    angles_deg: tuple[float, float]
+    pose: FloatArray | None
+    goals_deg: FloatArray
+    state: ServoState | None
+    frame_s: float
+
+
 def _opt(values: np.ndarray | None, n: int) -> tuple[float | None, ...]:
     if values is None:
         return (None,) * n
@@ -128,27 +151,24 @@ class Telemetry:
 class SnapshotBuilder:
     """Builds :class:`LoopSnapshot` from the loop's parts (on the loop's thread).
 
-    ``view`` gives what the cycle holds: ``(controls, raw, angles, pose, goals,
-    state, frame_s)`` (the newest arrays, copied into tuples here; ``frame_s`` the
-    newest glove frame's arrival, NaN before one). The glove counts as connected
-    while its newest frame is at most the glove timeout old and it reports no failure.
+    ``view`` gives what the cycle holds (:class:`CycleView`). The glove counts as
+    connected while its newest frame is at most the glove timeout old and it reports
+    no failure.
     """
 
-    def __init__(self, glove: GloveSource, bus: ServoBus, pipeline: PosePipeline,
-                 machine: ModeMachine, stats: RunStats, started_s: Callable[[], float],
-                 view: Callable[[], tuple[Any, ...]],
-                 outputs: Callable[[], tuple[object, ...]],
-                 raw_channels: Sequence[int] = ()) -> None:
-        self.glove: GloveSource | None = glove
-        self.bus: ServoBus | None = bus
-        self.pipeline = pipeline
+    def __init__(self, parts: LoopParts, machine: ModeMachine, stats: RunStats,
+                 started_s: Callable[[], float], view: Callable[[], CycleView],
+                 outputs: Callable[[], tuple[object, ...]]) -> None:
+        self.glove: GloveSource | None = parts.glove
+        self.bus: ServoBus | None = parts.bus
+        pipeline = self.pipeline = parts.pipeline
         self.machine = machine
         self.stats = stats
         self.started_s = started_s
         self.view = view
         self.outputs = outputs
         self.control_names = tuple(pipeline.expander.controls)
-        self.raw_channels = tuple(int(i) for i in raw_channels)
+        self.raw_channels = tuple(int(i) for i in parts.raw_channels)
         """The raw channel driving each control, in control order (the glove file's
         ``[[channels]] index``; -1: none): the snapshot's ``raw`` is those channels'
         counts, beside their controls (NaN for none). Empty: ``raw`` is the glove's
@@ -189,15 +209,15 @@ class SnapshotBuilder:
             q = np.percentile(np.asarray(recent, dtype=np.float64), [50, 99]) * 1e6
             p50, p99 = float(q[0]), float(q[1])
         mode, reason = self._mode()
-        controls, raw, angles, pose, goals, state, frame_s = self.view()
+        view = self.view()
         n = len(self.servo_joints)
         glove_fields = self._glove()
-        fresh = now - float(frame_s) <= self.machine.glove_timeout_s  # False for NaN
+        fresh = now - float(view.frame_s) <= self.machine.glove_timeout_s  # False for NaN
         glove_fields["glove_connected"] = fresh and not glove_fields.get("glove_failure")
-        bus_fields = self._bus(state, now, n)
-        pose_t = (tuple(np.asarray(pose, dtype=np.float64).tolist()) if pose is not None
-                  else (math.nan,) * len(POSE_NAMES))
-        inc, rot = angles if isinstance(angles, tuple) else (0.0, 0.0)
+        bus_fields = self._bus(view.state, now, n)
+        pose_t = (tuple(np.asarray(view.pose, dtype=np.float64).tolist())
+                  if view.pose is not None else (math.nan,) * len(POSE_NAMES))
+        inc, rot = view.angles_deg
         started = self.started_s()
         return LoopSnapshot(
             t_s=now, seq=seq, mode=mode, mode_reason=reason,
@@ -207,18 +227,18 @@ class SnapshotBuilder:
             cycles=stats.frames, overruns=stats.overruns,
             elapsed_s=now - started if stats.frames else 0.0,
             events=tuple(stats.events[-3:]),
-            controls=tuple(np.asarray(controls, dtype=np.float64).tolist()),
-            raw=self._raw(raw),
+            controls=tuple(np.asarray(view.controls, dtype=np.float64).tolist()),
+            raw=self._raw(view.raw),
             control_names=self.control_names,
             inclination_deg=float(inc), rotation_deg=float(rot),
             pose_deg=pose_t, curve_names=POSE_NAMES,
             servo_ids=self.servo_ids, servo_joints=self.servo_joints,
-            goals_deg=tuple(np.asarray(goals, dtype=np.float64).tolist()),
+            goals_deg=tuple(np.asarray(view.goals_deg, dtype=np.float64).tolist()),
             outputs=tuple(o.status() for o in self.outputs() if isinstance(o, Output)),
             **glove_fields, **bus_fields,
         )
 
-    def _raw(self, raw: Any) -> tuple[float, ...]:
+    def _raw(self, raw: FloatArray | None) -> tuple[float, ...]:
         if raw is None:
             return ()
         counts = np.asarray(raw, dtype=np.float64)
@@ -239,7 +259,7 @@ class SnapshotBuilder:
             "glove_last_frame_age_s": g.time_since_last_good_s, "glove_failure": g.failure,
         }
 
-    def _bus(self, state: object, now: float, n: int) -> dict[str, Any]:
+    def _bus(self, state: ServoState | None, now: float, n: int) -> dict[str, Any]:
         out: dict[str, Any] = {}
         bus = self.bus
         if bus is not None:
@@ -248,7 +268,7 @@ class SnapshotBuilder:
                        bus_timeouts=b.timeouts,
                        bus_errors=b.crc_errors + b.malformed + b.status_errors,
                        bus_left_out=len(bus.left_out), bus_admitted=b.admissions)
-        if not isinstance(state, ServoState):
+        if state is None:
             out.update(positions_deg=(None,) * n, temperatures_c=(None,) * n,
                        currents_ma=(None,) * n, hardware_errors=(0,) * n,
                        stale=(False,) * n, reading_ages_s=(math.inf,) * n)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.bench_rig import outside_latencies, step_recording
+from bench.rig_steps import outside_latencies, step_recording
 
 
 def test_a_step_is_matched_to_the_first_write_that_moved() -> None:
@@ -44,7 +44,7 @@ def test_each_case_gets_a_rig_file_that_loads_with_its_mode_rate_and_baud(
 
 
 def test_the_steal_share_is_the_hypervisors_part_of_all_cpu_time() -> None:
-    from bench.bench_rig import cpu_times, steal_percent
+    from bench.rig_steps import cpu_times, steal_percent
 
     assert steal_percent((1000, 10), (2000, 60)) == 5.0
     assert steal_percent((1000, 10), (1000, 10)) is None

@@ -10,18 +10,20 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from sim.demo_recording import DEMO_RECORDING
+from tests.helpers.emulator import SimBusProcess
 
 CLI = [sys.executable, "-m", "handrig.cli"]
 
 
-def test_a_second_run_on_a_busy_bus_port_is_refused_as_busy(tmp_path: Path) -> None:
-    sim = subprocess.Popen([*CLI, "sim-bus", "--no-realtime"], stdout=subprocess.PIPE,
-                           stderr=subprocess.DEVNULL, text=True, start_new_session=True)
+@pytest.mark.sim_bus("--no-realtime")
+def test_a_second_run_on_a_busy_bus_port_is_refused_as_busy(sim_bus: SimBusProcess,
+                                                            tmp_path: Path) -> None:
+    port = sim_bus.port
     first: subprocess.Popen[str] | None = None
     try:
-        assert sim.stdout is not None
-        port = sim.stdout.readline().split()[1]
         err = tmp_path / "first.txt"
         with open(err, "w") as f:
             first = subprocess.Popen(
@@ -46,7 +48,6 @@ def test_a_second_run_on_a_busy_bus_port_is_refused_as_busy(tmp_path: Path) -> N
         summary = json.loads(out.strip().splitlines()[-1])
         assert first.returncode == 0 and summary["torque_off"] is True, summary.get("error")
     finally:
-        for proc in (first, sim):
-            if proc is not None and proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        if first is not None and first.poll() is None:
+            first.kill()
+            first.wait()

@@ -8,37 +8,16 @@ from __future__ import annotations
 
 import json
 import re
-import signal
 import subprocess
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 from handrig.config.paths import CONFIG_DIR
 from sim.demo_recording import DEMO_RECORDING
+from tests.helpers.emulator import start_sim_bus
 
 CLI = [sys.executable, "-m", "handrig.cli"]
 WRIST = "servo 19 (riWristFlexion)"
-
-
-@contextmanager
-def sim_bus(faults: str) -> Iterator[str]:
-    proc = subprocess.Popen([*CLI, "sim-bus", "--no-realtime", "--faults", faults],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                            start_new_session=True)
-    try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first.startswith("port: /dev/"), first
-        yield first.split()[1]
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 def run(port: str, tmp_path: Path, heat_action: str) -> dict:
@@ -56,7 +35,8 @@ def run(port: str, tmp_path: Path, heat_action: str) -> dict:
 
 
 def test_a_hot_wrist_is_warned_and_capped_by_name_and_the_show_goes_on(tmp_path: Path) -> None:
-    with sim_bus("hot=19@62") as port:
+    with start_sim_bus("--no-realtime", "--faults", "hot=19@62") as bus:
+        port = bus.port
         summary = run(port, tmp_path, "relax")
     assert summary["stop_reason"] == "2 s done" and summary["torque_off"] is True
     heat = summary["heat"]
@@ -70,7 +50,8 @@ def test_a_hot_wrist_is_warned_and_capped_by_name_and_the_show_goes_on(tmp_path:
 
 def test_past_action_c_with_stop_the_run_ends_naming_it_with_torque_off(
         tmp_path: Path) -> None:
-    with sim_bus("hot=19@66") as port:
+    with start_sim_bus("--no-realtime", "--faults", "hot=19@66") as bus:
+        port = bus.port
         summary = run(port, tmp_path, "stop")
     assert summary["stop_reason"].startswith("device error")
     assert f"{WRIST} is at 66 C ([heat] action_c 65 C)" in summary["stop_reason"]

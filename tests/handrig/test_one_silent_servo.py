@@ -9,11 +9,9 @@ from __future__ import annotations
 import json
 import os
 import re
-import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -21,30 +19,10 @@ import pytest
 from firmware_protocol import dynamixel as dx
 from handrig.config.paths import CONFIG_DIR
 from sim.demo_recording import DEMO_RECORDING
+from tests.helpers.emulator import SimBusProcess
 
 CLI = [sys.executable, "-m", "handrig.cli"]
 SILENT = "servo 7 (riIndexMCPy)"
-
-
-@pytest.fixture
-def sim_bus() -> Iterator[str]:
-    # kinematic servos (no MuJoCo puppet): what is tested is the bus, and a loaded
-    # machine starves a lighter emulator less
-    proc = subprocess.Popen([*CLI, "sim-bus", "--no-realtime", "--no-puppet"],
-                            stdout=subprocess.PIPE,
-                            stderr=subprocess.DEVNULL, text=True, start_new_session=True)
-    try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first.startswith("port: /dev/"), first
-        yield first.split()[1]
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 def _run_silencing_servo_7(port: str, tmp_path: Path, action: str) -> tuple[dict, str]:
@@ -88,8 +66,11 @@ def _servos_named(text: str) -> set[str]:
     return set(re.findall(r"servo \d+ \(\w+\)", text))
 
 
-def test_one_silent_servo_is_the_only_one_held(sim_bus: str, tmp_path: Path) -> None:
-    summary, err = _run_silencing_servo_7(sim_bus, tmp_path, "continue")
+# kinematic servos (no MuJoCo puppet): what is tested is the bus, and a loaded
+# machine starves a lighter emulator less
+@pytest.mark.sim_bus("--no-realtime", "--no-puppet")
+def test_one_silent_servo_is_the_only_one_held(sim_bus: SimBusProcess, tmp_path: Path) -> None:
+    summary, err = _run_silencing_servo_7(sim_bus.port, tmp_path, "continue")
     assert summary["stop_reason"] == "4 s done"
     said = [e for e in summary["events"] if "no valid reply" in e or "holding" in e]
     # servo 7: warned about, held, then the action, which names it alone (the others
@@ -124,9 +105,10 @@ def test_one_silent_servo_is_the_only_one_held(sim_bus: str, tmp_path: Path) -> 
     assert sum(SILENT in line for line in err.splitlines() if "no valid reply" in line) == 2
 
 
-def test_with_action_stop_the_run_ends_naming_the_one_servo(sim_bus: str,
+@pytest.mark.sim_bus("--no-realtime", "--no-puppet")
+def test_with_action_stop_the_run_ends_naming_the_one_servo(sim_bus: SimBusProcess,
                                                            tmp_path: Path) -> None:
-    summary, _ = _run_silencing_servo_7(sim_bus, tmp_path, "stop")
+    summary, _ = _run_silencing_servo_7(sim_bus.port, tmp_path, "stop")
     assert summary["stop_reason"].startswith("device error")
     assert f"no valid reply from {SILENT}" in summary["stop_reason"]
     reply_part = summary["stop_reason"].split("no valid reply from")[1].split(";")[0]

@@ -16,7 +16,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -24,6 +23,7 @@ from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
 from handrig.config.rig import load_rig_config
 from sim.demo_recording import DEMO_RECORDING
+from tests.helpers.emulator import SimBusProcess
 
 CLI = [sys.executable, "-m", "handrig.cli"]
 BUS_WATCHDOG = 98
@@ -31,22 +31,7 @@ TRIPPED = 0xFF
 # From the stall to the exit: no answer for ANSWER_STALL_S (0.5 s), the torque-off
 # broadcast (nothing can be read back), the summary and the process ending.
 EXIT_WITHIN_S = 1.0
-
-
-@pytest.fixture
-def sim_bus() -> Iterator[tuple[subprocess.Popen[str], str]]:
-    proc = subprocess.Popen([*CLI, "sim-bus", "--no-realtime"], stdout=subprocess.PIPE,
-                            stderr=subprocess.DEVNULL, text=True, start_new_session=True)
-    try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first.startswith("port: /dev/"), first
-        yield proc, first.split()[1]
-    finally:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGCONT)
-            proc.kill()
-            proc.wait()
+pytestmark = pytest.mark.sim_bus("--no-realtime")
 
 
 def _start_rig(port: str, tmp_path: Path) -> tuple[subprocess.Popen[str], Path]:
@@ -83,8 +68,8 @@ def _summary(proc: subprocess.Popen[str]) -> dict[str, object]:
 
 
 def test_a_wedged_adapter_ends_the_run_within_seconds_naming_the_port(
-        sim_bus: tuple[subprocess.Popen[str], str], tmp_path: Path) -> None:
-    sim, port = sim_bus
+        sim_bus: SimBusProcess, tmp_path: Path) -> None:
+    sim, port = sim_bus.proc, sim_bus.port
     rig_proc, _ = _start_rig(port, tmp_path)
     os.kill(sim.pid, signal.SIGSTOP)
     stalled = time.monotonic()
@@ -115,8 +100,8 @@ def test_a_wedged_adapter_ends_the_run_within_seconds_naming_the_port(
 
 
 def test_a_sigterm_during_the_stall_ends_the_run_promptly(
-        sim_bus: tuple[subprocess.Popen[str], str], tmp_path: Path) -> None:
-    sim, port = sim_bus
+        sim_bus: SimBusProcess, tmp_path: Path) -> None:
+    sim, port = sim_bus.proc, sim_bus.port
     rig_proc, err = _start_rig(port, tmp_path)
     os.kill(sim.pid, signal.SIGSTOP)
     stalled = time.monotonic()

@@ -12,9 +12,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -23,6 +21,7 @@ from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 from handrig.errors import ConfigError
 from sim.dxl_bus import SimBus
 from sim.dxl_servo import EmulatedServo
+from tests.helpers.emulator import SimBusProcess
 
 ADDR_BAUD = 8
 
@@ -63,28 +62,11 @@ def test_an_unknown_baud_is_refused() -> None:
         EmulatedServo(1, baud=250_000)
 
 
-@pytest.fixture
-def sim_bus_at_three_bauds() -> Iterator[tuple[subprocess.Popen[str], str]]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "handrig.cli", "sim-bus", "--no-puppet", "--ids", "1,2,3,40",
-         "--servo-baud", "1:57600,2:115200,3:1000000,40:57600"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
-    try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first.startswith("port: /dev/"), (first, proc.stderr and proc.stderr.read())
-        yield proc, first.split()[1]
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-
-
-def test_sim_bus_servo_baud_flag(
-    sim_bus_at_three_bauds: tuple[subprocess.Popen[str], str],
-) -> None:
-    proc, path = sim_bus_at_three_bauds
+@pytest.mark.sim_bus("--no-puppet", "--ids", "1,2,3,40",
+                     "--servo-baud", "1:57600,2:115200,3:1000000,40:57600",
+                     stderr=subprocess.PIPE)
+def test_sim_bus_servo_baud_flag(sim_bus: SimBusProcess) -> None:
+    proc, path = sim_bus.proc, sim_bus.port
     assert proc.stdout is not None
     assert "baud 57600, 115200, 1000000" in proc.stdout.readline()  # the "servos:" line
     assert _ping_all(path, 57_600) == [1, 40]

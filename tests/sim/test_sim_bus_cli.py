@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import signal
 import subprocess
-import sys
 import time
-from collections.abc import Iterator
 
 import pytest
 from dynamixel_sdk import (
@@ -20,6 +18,7 @@ from dynamixel_sdk import (
 )
 
 from handrig.config.rig import MODEL_NUMBERS, load_rig_config
+from tests.helpers.emulator import SimBusProcess, start_sim_bus
 
 ADDR_TORQUE, ADDR_GOAL, ADDR_PRESENT, ADDR_RDT = 64, 116, 132, 9
 
@@ -28,25 +27,9 @@ def _signed32(v: int) -> int:
     return v - (1 << 32) if v >= 1 << 31 else v
 
 
-@pytest.fixture
-def sim_bus() -> Iterator[tuple[subprocess.Popen[str], str]]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "handrig.cli", "sim-bus", "--wire-timing"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
-    try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first.startswith("port: /dev/"), first
-        yield proc, first.split()[1]
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-
-
-def test_plain_sdk_client_drives_the_puppet(sim_bus: tuple[subprocess.Popen[str], str]) -> None:
-    proc, path = sim_bus
+@pytest.mark.sim_bus("--wire-timing", stderr=subprocess.PIPE)
+def test_plain_sdk_client_drives_the_puppet(sim_bus: SimBusProcess) -> None:
+    proc, path = sim_bus.proc, sim_bus.port
     rig = load_rig_config()
     ids = [s.id for s in rig.servos]
     number = {s.id: MODEL_NUMBERS[s.model] for s in rig.servos}  # XL330s, XM430 wrist
@@ -77,8 +60,24 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: tuple[subprocess.Popen[str]
         for i, g in goals.items():
             assert sw.addParam(i, g.to_bytes(4, "little", signed=True))
         assert sw.txPacket() == COMM_SUCCESS
-        time.sleep(0.8)  # well beyond the servos' travel time at their speed limit
+        # the wrist carries the whole hand on one XL330 and droops (P-only servo);
+        # every finger joint settles within 2 deg of its goal
+        tol = {s.id: 12.0 if "Wrist" in s.joint else 2.0 for s in rig.servos}
 
+        def there(present: dict[int, int]) -> bool:
+            return all(abs(s.ticks_to_deg(present[s.id]) - s.ticks_to_deg(goals[s.id]))
+                       < tol[s.id] for s in rig.servos)
+
+        # until every joint is there (a few tenths of a second at the servos' speed
+        # limit), then 0.1 s more to settle; at most 5 s
+        deadline = time.monotonic() + 5.0
+        while True:
+            assert fsr.fastSyncRead() == COMM_SUCCESS
+            fast = {i: _signed32(fsr.getData(i, ADDR_PRESENT, 4)) for i in ids}
+            if there(fast) or time.monotonic() > deadline:
+                break
+            time.sleep(0.02)
+        time.sleep(0.1)
         assert fsr.fastSyncRead() == COMM_SUCCESS
         fast = {i: _signed32(fsr.getData(i, ADDR_PRESENT, 4)) for i in ids}
         assert fsr.txRxPacket() == COMM_SUCCESS
@@ -92,10 +91,7 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: tuple[subprocess.Popen[str]
         for s in rig.servos:
             want_deg = s.ticks_to_deg(goals[s.id])
             got_deg = s.ticks_to_deg(fast[s.id])
-            # the wrist carries the whole hand on one XL330 and droops (P-only servo);
-            # every finger joint settles within 2 deg of its goal
-            tol = 12.0 if "Wrist" in s.joint else 2.0
-            assert abs(got_deg - want_deg) < tol, (s.joint, want_deg, got_deg)
+            assert abs(got_deg - want_deg) < tol[s.id], (s.joint, want_deg, got_deg)
             # the joint moved there: it started at least 5 deg away
             assert abs(s.ticks_to_deg(start[s.id]) - want_deg) > 5.0, s.joint
             for other in (plain, bulk):
@@ -113,16 +109,10 @@ def test_faults_viewer_without_display_and_summary() -> None:
     import os
 
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "handrig.cli", "sim-bus", "--ids", "1-3", "--no-puppet",
-         "--faults", "missing=2,drop=1,seed=1", "--viewer", "--no-realtime"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-    )
-    try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first.startswith("port: /dev/"), first
-        port = PortHandler(first.split()[1])
+    with start_sim_bus("--ids", "1-3", "--no-puppet", "--faults", "missing=2,drop=1,seed=1",
+                       "--viewer", "--no-realtime", stderr=subprocess.PIPE, env=env) as bus:
+        proc = bus.proc
+        port = PortHandler(bus.port)
         assert port.openPort()
         ph = PacketHandler(2.0)
         for i in (1, 2, 3):
@@ -130,9 +120,6 @@ def test_faults_viewer_without_display_and_summary() -> None:
         port.closePort()
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
     assert proc.returncode == 0, err
     assert "viewer: unavailable (no display" in err
     assert "dropped 2" in out and "missing 1" in out

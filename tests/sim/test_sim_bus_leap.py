@@ -4,28 +4,25 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 import time
 
 import pytest
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
+from tests.helpers.emulator import SimBusProcess
+
 pytest.importorskip("mujoco")
 ADDR_TORQUE, ADDR_GOAL, ADDR_PRESENT = 64, 116, 132
 
 
-def test_sim_bus_serves_the_leap_hand() -> None:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "handrig.cli", "sim-bus", "--rig", "leap", "--no-realtime"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+@pytest.mark.sim_bus("--rig", "leap", "--no-realtime", stderr=subprocess.PIPE)
+def test_sim_bus_serves_the_leap_hand(sim_bus: SimBusProcess) -> None:
+    proc = sim_bus.proc
+    assert proc.stdout is not None
+    second = proc.stdout.readline()
+    assert "servos: 16 (XC330-M288)" in second and "puppet drives 16" in second
+    port = PortHandler(sim_bus.port)
     try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first.startswith("port: /dev/"), first + (proc.stderr.read() if proc.stderr
-                                                         else "")
-        second = proc.stdout.readline()
-        assert "servos: 16 (XC330-M288)" in second and "puppet drives 16" in second
-        port = PortHandler(first.removeprefix("port: ").strip())
         assert port.openPort() and port.setBaudRate(4_000_000)
         ph = PacketHandler(2.0)
         for sid in range(16):
@@ -48,7 +45,5 @@ def test_sim_bus_serves_the_leap_hand() -> None:
             time.sleep(0.05)
         assert abs(present - 2560) < 40, present
         ph.write1ByteTxRx(port, 1, ADDR_TORQUE, 0)
-        port.closePort()
     finally:
-        proc.terminate()
-        proc.wait(timeout=10)
+        port.closePort()

@@ -8,7 +8,7 @@ import io
 import os
 import termios
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -30,8 +30,8 @@ from handrig.app.rig_snapshot import RigSnapshot
 from handrig.clock import FakeClock
 from handrig.config.rig import load_rig_config
 from handrig.devices.glove import GloveSample, GloveSource, GloveStats
-from handrig.devices.servo.bus import BusStats, ServoBus, ServoState
-from handrig.loop.rig import Rig
+from tests.helpers.fakes import FakeBus
+from tests.helpers.loop import make_rig
 
 
 def show_snapshot(**kw: object) -> PanelSnapshot:
@@ -140,6 +140,13 @@ def test_heat_tiers_colour_the_temperatures_and_name_the_warm_servos() -> None:
     assert "\x1b[33m 35" not in styled and "\x1b[1;31m 35" not in styled
 
 
+def wait_for(condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
+    """Until ``condition()`` holds (checked every 10 ms), at most ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
 def test_live_panel_without_a_terminal_prints_plain_lines_after_the_header_once() -> None:
     out = io.StringIO()
     console = Console(file=out, width=200)
@@ -147,7 +154,7 @@ def test_live_panel_without_a_terminal_prints_plain_lines_after_the_header_once(
     snaps = iter([show_snapshot(elapsed_s=float(i)) for i in range(100)])
     with LivePanel(lambda: next(snaps), console=console, header=["bus: 20 servos"],
                    plain_every_s=0.05):
-        time.sleep(0.3)
+        wait_for(lambda: len(out.getvalue().splitlines()) >= 3)
     lines = out.getvalue().splitlines()
     assert lines[0] == "bus: 20 servos" and lines.count("bus: 20 servos") == 1
     assert len(lines) >= 3 and all(" | glove " in line for line in lines[1:])
@@ -159,7 +166,7 @@ def test_live_panel_on_a_terminal_draws_below_the_header() -> None:
     panel = LivePanel(show_snapshot, refresh_hz=20.0, console=console,
                       header=["servo bus /dev/ttyUSB0: 20 servos commissioned"])
     with panel:
-        time.sleep(0.3)
+        wait_for(lambda: "RELAXING" in out.getvalue())
         panel.log("a line above the panel")
     text = out.getvalue()
     assert text.count("20 servos commissioned") == 1
@@ -199,65 +206,18 @@ class SteadyGlove(GloveSource):
                           time_since_last_good_s=0.004)
 
 
-class WarmBus(ServoBus):
+def warm_bus(names: tuple[str, ...], clock: FakeClock) -> FakeBus:
     """Servos 2 and 5 stale; temperatures and currents reported."""
-
-    def __init__(self, names: tuple[str, ...], clock: FakeClock) -> None:
-        self._names = names
-        self.clock = clock
-        self._stats = BusStats(len(names), writes=0, timeouts=4)
-        self.port = "/dev/ttyUSB9"
-
-    @property
-    def joint_names(self) -> tuple[str, ...]:
-        return self._names
-
-    @property
-    def ids(self) -> tuple[int, ...]:
-        return tuple(range(1, len(self._names) + 1))
-
-    @property
-    def last_goals_deg(self) -> np.ndarray:
-        return np.zeros(len(self._names))  # where torque-on holds the servos
-
-    @property
-    def stats(self) -> BusStats:
-        return self._stats
-
-    def connect(self) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-    @contextlib.contextmanager
-    def torque(self) -> Iterator[ServoBus]:  # type: ignore[override]
-        yield self
-
-    def write_goals_deg(self, goals_deg: np.ndarray) -> int:
-        self._stats.writes += 1
-        return 0
-
-    def read_state(self, deadline_s: float | None = None) -> ServoState:
-        self._stats.reads += 1
-        n = len(self._names)
-        stale = np.zeros(n, bool)
-        stale[[1, 4]] = True
-        age = np.where(stale, 0.05, 0.0)
-        hw = np.zeros(n, np.uint8)
-        hw[6] = 0x04
-        return ServoState(np.full(n, 3.0), np.zeros(n), np.full(n, -120.0),
-                          np.full(n, 41.0), np.zeros(n, np.uint8), hw, stale, age,
-                          self.clock.now(), self._stats.copy())
+    return FakeBus(names, clock, position_deg=3.0, temperature_c=41.0, current_ma=-120.0,
+                   hardware_errors={6: 0x04}, stale=(1, 4), stale_age_s=0.05,
+                   held_deg=0.0, timeouts=4, port="/dev/ttyUSB9")
 
 
 def test_rig_snapshot_reads_a_running_rig() -> None:
     parts = build_parts()
     clock = FakeClock()
-    bus = WarmBus(tuple(parts.pipeline.servo_joints), clock)
-    rig = Rig(SteadyGlove(clock), bus, parts.pipeline, clock, controls_from_raw=parts.controls,
-              orientation=parts.orientation, rate_hz=200.0, read_every=4,
-              glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None, loop_mode="fixed")
+    bus = warm_bus(tuple(parts.pipeline.servo_joints), clock)
+    rig = make_rig(parts, SteadyGlove(clock), bus, clock)
     snapshot = RigSnapshot(rig, glove_source="/dev/ttyACM0", temperature_limit_c={1: 45.0},
                            keys=True)
     rig.run(frames=100)

@@ -17,7 +17,7 @@ from handrig.devices.servo import DynamixelBus
 from handrig.errors import ServoFault
 from handrig.loop.heat import CHECK_EVERY_S, HeatWatch
 from handrig.loop.silence import SilenceWatch
-from tests.handrig.devices.servo.test_servo_parts import make_bus, small_rig
+from tests.helpers.servos import make_bus, small_rig
 
 FULL_PWM = 885  # PWM Limit's initial value on every X-series model
 

@@ -22,7 +22,8 @@ from handrig.config.rig import SilenceConfig
 from handrig.devices.servo.bus import BusStats, ServoBus, ServoState
 from handrig.errors import DeviceError, DeviceTimeoutError
 from handrig.loop.rig import Rig
-from tests.handrig.loop.test_rig import MID, ScriptedGlove, relaxed_targets
+from tests.helpers.fakes import ScriptedGlove
+from tests.helpers.loop import MID, make_rig, relaxed_targets
 
 
 class ToyBus(ServoBus):
@@ -115,10 +116,7 @@ def toy(parts, clock: FakeClock, **kw: float) -> ToyBus:
 
 
 def rig_on(parts, glove, bus: ToyBus, clock: FakeClock, **kw) -> Rig:
-    return Rig(glove, bus, parts.pipeline, clock, controls_from_raw=parts.controls,
-               orientation=parts.orientation, rate_hz=200.0, read_every=4,
-               glove_timeout_s=0.25, relax_time_s=0.5, log=lambda s: None,
-               loop_mode="fixed", **kw)
+    return make_rig(parts, glove, bus, clock, **kw)
 
 
 def seeded(bus: ToyBus, parts) -> None:

@@ -15,7 +15,7 @@ from handrig.config.rig import SilenceConfig
 from handrig.devices.servo import DynamixelBus, FaultPolicy
 from handrig.errors import DeviceTimeoutError
 from handrig.loop.silence import SilenceWatch
-from tests.handrig.devices.servo.test_servo_parts import make_bus, small_rig
+from tests.helpers.servos import make_bus, small_rig
 
 RATE_HZ = 200.0  # the step a released servo takes is the slew limit over one write
 

@@ -18,7 +18,8 @@ from handrig.loop.telemetry import LoopSnapshot, Telemetry
 from handrig.outputs.base import Output, OutputStatus
 from handrig.outputs.recorder import Recorder
 from handrig.pose.pipeline import POSE_NAMES
-from tests.handrig.loop.test_rig import MID, RecordingBus, ScriptedGlove, make_rig
+from tests.helpers.fakes import FakeBus, ScriptedGlove
+from tests.helpers.loop import MID, make_rig
 
 
 class CountingOutput(Output):
@@ -60,7 +61,7 @@ def test_a_run_publishes_what_the_loop_did(tmp_path: Path) -> None:
     clock = FakeClock(10.0)
     glove = ScriptedGlove(clock, lambda t: MID)
     joints = tuple(s.joint for s in parts.rig_config.servos)
-    bus = RecordingBus(joints, clock, write_cost_s=50e-6)
+    bus = FakeBus(joints, clock, write_cost_s=50e-6)
     counter = CountingOutput()
     rec = Recorder(tmp_path / "take.csv", rate_hz=200.0, sync=False)
     rig = make_rig(parts, glove, bus, clock, outputs=[counter, rec])
@@ -123,7 +124,7 @@ def test_each_control_is_shown_with_its_own_channels_count() -> None:
     clock = FakeClock(10.0)
     raw = np.arange(1000.0, 1000.0 + 100 * n, 100.0)  # each input's own count
     glove = ScriptedGlove(clock, lambda t: raw)
-    bus = RecordingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    bus = FakeBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, glove, bus, clock, raw_channels=channels)
     rig.run(frames=20)
     last = rig.telemetry.latest()

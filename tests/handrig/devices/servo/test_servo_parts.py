@@ -7,7 +7,6 @@ time on a FakeClock. What the servos got is read from the emulated servos.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import signal
 
@@ -15,36 +14,14 @@ import numpy as np
 import pytest
 
 from firmware_protocol import dynamixel as dx
-from handrig.clock import FakeClock
-from handrig.config.rig import RigConfig, load_rig_config
-from handrig.devices.servo import DynamixelBus, FaultPolicy
+from handrig.config.rig import RigConfig
+from handrig.devices.servo import FaultPolicy
 from handrig.devices.servo.transport import Transport
 from handrig.devices.servo.wire import WireBudget, cycle_bytes, read_bytes, wire_time_s
 from handrig.errors import SafetyStop, ServoFault
 from sim.dxl_bus import FaultSpec
-from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
-
-RIG = load_rig_config()
-BAUD = 1_000_000
-
-
-def small_rig(n: int = 6) -> RigConfig:
-    return dataclasses.replace(RIG, servos=RIG.servos[:n])
-
-
-def make_bus(
-    rig: RigConfig | None = None, faults: FaultSpec | None = None, connect: bool = True,
-    peer: PeerBus | None = None, **kw: object,
-) -> tuple[DynamixelBus, EmulatorTransport, PeerBus]:
-    rig = rig or small_rig()
-    clock = FakeClock(100.0)
-    peer = peer or PeerBus(rig, faults)
-    transport = EmulatorTransport(peer, clock, BAUD)
-    bus = DynamixelBus("fake:emulator", rig, baud=BAUD, clock=clock, transport=transport,
-                       **kw)  # type: ignore[arg-type]
-    if connect:
-        bus.connect()
-    return bus, transport, peer
+from tests.handrig.devices.servo.servo_fakes import PeerBus
+from tests.helpers.servos import BAUD, make_bus, small_rig
 
 
 def ticks(rig: RigConfig, goals: np.ndarray) -> list[int]:
