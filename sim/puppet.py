@@ -2,7 +2,7 @@
 
 Each calibrated servo of the rig (``config/rig.toml``) drives one joint of the
 hand from :mod:`sim.hand_model` through a MuJoCo ``position`` actuator made to
-behave like an X-series servo. A robot rig (:mod:`handrig.app.robots`, e.g.
+behave like an X-series servo. A robot rig (:mod:`handrig.pose.robot_rig`, e.g.
 ``config/rigs/leap.toml``) drives the joints of its own MJCF model instead
 (``[robot].model``): each servo's joint is found by name, and the model's own
 position actuator on that joint (or one added) is rewired the same way.
@@ -49,10 +49,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_protocol.dynamixel import MODELS, TICKS_PER_TURN, HardwareError, Reg
-from handrig.app.robots import RobotRigConfig
 from handrig.config.rig import RigConfig, ServoCalibration
 from handrig.errors import ConfigError, HandrigError
 from handrig.hand import DOF_NAMES, Hand
+from handrig.pose.robot_rig import RobotRigConfig
 from sim.dxl_servo import EmulatedServo
 from sim.hand_model import (
     REFERENCE_HAND_LENGTH_M,

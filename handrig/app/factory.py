@@ -24,7 +24,6 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from firmware_protocol.glove import FLAG_IMU_ABSENT
-from handrig.app import robots as robotrig
 from handrig.app.port_processes import (  # noqa: F401 (stop_process: named here as before)
     SIM_BUS,
     StartedEmulators,
@@ -34,8 +33,8 @@ from handrig.app.port_processes import (  # noqa: F401 (stop_process: named here
 )
 from handrig.clock import Clock
 from handrig.config.loading import CONFIG_DIR, load_joint_limits
-from handrig.config.paths import config_file
 from handrig.config.rig import RigConfig
+from handrig.config.rig_files import rig_file_path
 from handrig.devices.glove import GloveSample, GloveSource, GloveStats, ReplayGlove, SerialGlove
 from handrig.devices.glove_calibration import (
     GloveConfig,
@@ -51,6 +50,7 @@ from handrig.loop.ports import ControlsFromRaw, OrientationLike
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
 from handrig.outputs.base import Output
+from handrig.pose import robot_rig as robotrig
 from handrig.pose.expand import Expander
 from handrig.pose.orientation import ForearmOrientation
 from handrig.pose.pipeline import PosePipeline
@@ -137,7 +137,7 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
     the rig's effective sag gain (off unless ``[robot].sag`` is true). ``map_file`` and
     ``grid_file`` (a show file's) stand in for the rig file's ``[loop] map`` and
     ``sag_grid``."""
-    rig_path = robotrig.rig_path(rig_file) if rig_file else config_file("rig.toml")
+    rig_path = rig_file_path(rig_file)
     rig = robotrig.load_rig(rig_path)
     retarget = (robotrig.robot_retarget(rig) if isinstance(rig, robotrig.RobotRigConfig)
                 else None)

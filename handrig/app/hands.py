@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from handrig.app import robots as robotrig
 from handrig.app.factory import (
     ForearmAngles,
     RigParts,
@@ -28,10 +27,9 @@ from handrig.app.factory import (
     control_channels,
     glove_spec,
 )
-from handrig.app.robots import is_two_hand
 from handrig.config.loading import load_joint_limits
-from handrig.config.paths import config_file
 from handrig.config.rig import HAND_NAMES, RigConfig, hand_of_joint, hand_rig
+from handrig.config.rig_files import rig_file_path
 from handrig.devices.glove import GloveSample
 from handrig.devices.glove_calibration import (
     GloveConfig,
@@ -42,8 +40,10 @@ from handrig.devices.glove_calibration import (
 from handrig.errors import ConfigError
 from handrig.hand import mirror_name
 from handrig.loop.ports import FloatArray
+from handrig.pose import robot_rig as robotrig
 from handrig.pose.expand import DEFAULT_TWO_GLOVE_MAP, Expander
 from handrig.pose.pipeline import PosePipeline
+from handrig.pose.robot_rig import is_two_hand
 from handrig.pose.sag import SagGrid, default_grid_path
 
 GLOVE_FLAGS = {"ri": "--glove", "le": "--glove-left"}
@@ -179,7 +179,7 @@ def build_two_hand_parts(rig_file: str | Path | None = None,
     (``glove_file`` for the right; ``left_glove_file``, else ``[gloves] left_config``,
     else the right's for the left), the two-glove map and the sag grid (``map_file``,
     ``grid_file``: a show file's, instead of the rig file's)."""
-    rig_path = robotrig.rig_path(rig_file) if rig_file else config_file("rig.toml")
+    rig_path = rig_file_path(rig_file)
     rig = robotrig.load_rig(rig_path)
     if not is_two_hand(rig):
         raise ConfigError("a glove per hand needs a rig with servos for both hands",

@@ -31,11 +31,12 @@ import numpy as np
 
 from handrig import hand
 from handrig.app.factory import build_parts, servo_bus
-from handrig.app.robots import RobotRigConfig, rig_path, robot_retarget
 from handrig.app.session import torque_is_off
 from handrig.clock import Clock, MonotonicClock
+from handrig.config.rig_files import rig_file_path
 from handrig.devices.servo.dynamixel import DynamixelBus
 from handrig.errors import ConfigError, HandrigError
+from handrig.pose.robot_rig import RobotRigConfig, robot_retarget
 
 READ_BUDGET_S = 0.1
 """How long a read the caller asked for (:meth:`RobotHand.present_deg`, the reading
@@ -62,7 +63,7 @@ class RobotHand:
         config = self._parts.rig_config
         if not isinstance(config, RobotRigConfig) or config.robot is None:
             raise ConfigError("not a robot rig: it has no [robot] table",
-                              file=str(rig_path(rig)),
+                              file=str(rig_file_path(rig)),
                               allowed="a robot hand preset ('leap', 'orca') or rig file")
         self.rig = config
         self._retarget = robot_retarget(config)

@@ -24,7 +24,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from handrig.app import robots
 from handrig.config.loading import CONFIG_DIR
 from handrig.config.paths import (
     config_file,
@@ -34,9 +33,10 @@ from handrig.config.paths import (
     user_data,
 )
 from handrig.config.rig import RigConfig
+from handrig.config.rig_files import resolve_rig_file
+from handrig.pose import robot_rig as robots
 from handrig.pose.sag import SAG_GRID
 
-RIGS_DIR = robots.RIGS_DIR
 DEFAULT_MAP = CONFIG_DIR / "maps" / "default.toml"
 
 
@@ -50,18 +50,10 @@ class Source:
 
 
 def rig_file(rig: str | Path | None) -> Source:
-    """The rig file ``--rig`` names (a preset or a path), else the default one."""
-    if rig:
-        path = robots.rig_path(rig)
-        if path.parent.resolve() == RIGS_DIR.resolve() and "/" not in str(rig) \
-                and not str(rig).endswith(".toml"):
-            return Source("rig", path, f"preset {rig!r}, --rig")
-        return Source("rig", path, "--rig")
-    path = config_file("rig.toml")
-    if is_installed(path):
-        return Source("rig", path, "shipped default; no rig.toml of yours at "
-                      f"{user_config('rig.toml')}")
-    return Source("rig", path, "your rig.toml, written by `handrig calibrate servos`")
+    """The rig file ``--rig`` names (a preset or a path), else the default one
+    (:func:`handrig.config.rig_files.resolve_rig_file`)."""
+    found = resolve_rig_file(rig)
+    return Source("rig", found.path, found.why)
 
 
 def _from_loop(rig_path: Path, value: str) -> Path:

@@ -67,7 +67,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from handrig.app import simulator
-    from handrig.app.robots import find_rig
+    from handrig.pose.robot_rig import find_rig
 
     recording = args.recording or str(simulator.demo_recording())
     check_gl_backend("the demo's simulated puppet")
@@ -91,11 +91,11 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
     from handrig.app import simulator
     from handrig.app.factory import build_parts, robot_model
     from handrig.app.hands import build_two_hand_parts, is_two_hand
-    from handrig.app.robots import render_view
     from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
     from handrig.app.sources import Source, format_sources, run_sources
     from handrig.app.two_hands import run_two_hands
     from handrig.app.view import view_session
+    from handrig.pose.robot_rig import render_view
 
     def log(text: str) -> None:
         if not args.json:
@@ -159,7 +159,7 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
 def _sim_bus_hands(rig: RigConfig) -> list[str | None]:
     """The ``--hand`` of each simulated bus the session opens for ``rig`` (None: the
     whole rig): a two-hand rig on two buses has one per hand."""
-    from handrig.app.robots import is_two_hand
+    from handrig.pose.robot_rig import is_two_hand
 
     if is_two_hand(rig) and rig.left_bus is not None:
         return ["ri", "le"]

@@ -56,16 +56,17 @@ def register(sub: Any) -> None:
 
 def _rig_parts(args: argparse.Namespace) -> tuple[Retarget, Path, str, str]:
     """The retarget table, the rig's folder, its map and glove settings."""
-    from handrig.app.robots import RobotRigConfig, load_rig, rig_path, robot_retarget
+    from handrig.config.rig_files import rig_file_path
+    from handrig.pose.robot_rig import RobotRigConfig, load_rig, robot_retarget
 
     if args.table is not None:
         return load_retarget(args.table), Path(args.table).resolve().parent, "", ""
     rig = load_rig(args.rig)
     if not isinstance(rig, RobotRigConfig):
         raise ConfigError("not a robot rig: it has no [robot] table with a retarget table",
-                          file=str(rig_path(args.rig)),
+                          file=str(rig_file_path(args.rig)),
                           allowed="a robot rig such as 'leap', or --table FILE")
-    base = rig_path(args.rig).resolve().parent
+    base = rig_file_path(args.rig).resolve().parent
     return robot_retarget(rig), base, rig.loop.map, rig.loop.glove
 
 

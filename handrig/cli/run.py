@@ -116,7 +116,7 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
     process imports the run's modules and builds the map's kernels, so that the
     emulator's start-up (MuJoCo puppet, pty) overlaps them; the session takes it
     (by its arguments) where it would start one. A rig with a left bus: none started."""
-    from handrig.app.robots import find_rig
+    from handrig.pose.robot_rig import find_rig
 
     rig_file, rig = find_rig(args.rig)
     if rig.left_bus is None and (args.bus or rig.bus.port) == "sim":

@@ -526,7 +526,7 @@ class RigConfig:
     @property
     def effective_sag_gain(self) -> float:
         """The sag gain the pipeline uses ([loop].sag_gain; a robot rig turns it off
-        unless its ``[robot].sag`` is true, see :mod:`handrig.app.robots`)."""
+        unless its ``[robot].sag`` is true, see :mod:`handrig.pose.robot_rig`)."""
         return self.loop.sag_gain
 
     def servo_settings_for(self, servo_id: int) -> ResolvedServoSettings:

@@ -9,8 +9,8 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from firmware_protocol.dynamixel import MODELS, Reg
-from handrig.app.robots import RobotRigConfig, load_rig
 from handrig.config.loading import REPO_ROOT
+from handrig.pose.robot_rig import RobotRigConfig, load_rig
 from sim.dxl_bus import servos_from_rig
 from sim.dxl_servo import EmulatedServo
 from sim.puppet import Puppet, kv_from_d_gain

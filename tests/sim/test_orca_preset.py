@@ -14,8 +14,8 @@ import pytest
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
 from firmware_protocol.dynamixel import ErrorCode, Reg
-from handrig.app.robots import RobotRigConfig, load_rig, robot_retarget
 from handrig.config.rig import resolve_servo_settings
+from handrig.pose.robot_rig import RobotRigConfig, load_rig, robot_retarget
 from sim.dxl_bus import SimBus
 
 ROOT = Path(__file__).resolve().parents[2]

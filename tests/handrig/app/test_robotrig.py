@@ -8,19 +8,19 @@ from pathlib import Path
 
 import pytest
 
-from handrig.app.robots import (
-    RIGS_DIR,
+from handrig.config.loading import REPO_ROOT, build
+from handrig.config.rig import RigConfig, ServoSettings, load_rig_config
+from handrig.config.rig_files import RIGS_DIR
+from handrig.config.rig_files import rig_file_path as rig_path
+from handrig.errors import ConfigError
+from handrig.pose.mjcf import read_joints
+from handrig.pose.robot_rig import (
     RobotRigConfig,
     load_rig,
     load_robot_rig,
     render_view,
-    rig_path,
     robot_retarget,
 )
-from handrig.config.loading import REPO_ROOT, build
-from handrig.config.rig import RigConfig, ServoSettings, load_rig_config
-from handrig.errors import ConfigError
-from handrig.pose.mjcf import read_joints
 
 LEAP_RIG = RIGS_DIR / "leap.toml"
 LEAP_MODEL = REPO_ROOT / "data" / "robots" / "leap_hand" / "right_hand.xml"

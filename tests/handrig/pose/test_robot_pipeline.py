@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from handrig.app import factory as app
-from handrig.app.robots import RobotRigConfig, robot_retarget
 from handrig.errors import ConfigError
 from handrig.pose import kernels
 from handrig.pose.pipeline import PosePipeline
 from handrig.pose.retarget import retarget
+from handrig.pose.robot_rig import RobotRigConfig, robot_retarget
 
 
 @pytest.fixture(scope="module")
