@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from handrig.app import factory as app
-from handrig.app.session import torque_is_off
+from handrig.app.session_exit import torque_is_off
 from handrig.clock import MonotonicClock
 from handrig.errors import HandrigError
 from handrig.realtime import pinned_loop, realtime_priority

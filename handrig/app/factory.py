@@ -12,7 +12,6 @@ come through :mod:`handrig.app.simulator`.
 from __future__ import annotations
 
 import contextlib
-import math
 import subprocess
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -24,18 +23,12 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from firmware_protocol.glove import FLAG_IMU_ABSENT
-from handrig.app.port_processes import (  # noqa: F401 (stop_process: named here as before)
-    SIM_BUS,
-    StartedEmulators,
-    port_process,
-    sim_bus_argv,
-    stop_process,
-)
+from handrig.app.port_processes import SIM_BUS, StartedEmulators, port_process, sim_bus_argv
 from handrig.clock import Clock
 from handrig.config.loading import CONFIG_DIR, load_joint_limits
 from handrig.config.rig import RigConfig
 from handrig.config.rig_files import rig_file_path
-from handrig.devices.glove import GloveSample, GloveSource, GloveStats, ReplayGlove, SerialGlove
+from handrig.devices.glove import GloveSample, GloveSource, ReplayGlove, SerialGlove
 from handrig.devices.glove_calibration import (
     GloveConfig,
     GloveControls,
@@ -44,12 +37,11 @@ from handrig.devices.glove_calibration import (
 )
 from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
+from handrig.devices.servo.bus import ServoBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
 from handrig.errors import ConfigError
 from handrig.loop.ports import ControlsFromRaw, OrientationLike
 from handrig.loop.rig import Rig
-from handrig.loop.stats import RunStats
-from handrig.outputs.base import Output
 from handrig.pose import robot_rig as robotrig
 from handrig.pose.expand import Expander
 from handrig.pose.orientation import ForearmOrientation
@@ -91,6 +83,7 @@ class RigParts:
     orientation: OrientationLike  # the glove's ForearmAngles (a take played: fixed)
     glove_file: Path | None = None  # where glove_config was read from
     hand: str | None = None  # one hand's servos of a two-hand rig ("ri", "le"); None: all
+    map_file: Path | None = None  # where the expander's map was read from
 
 
 class ForearmAngles:
@@ -147,9 +140,10 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
         base, loop.glove, default_glove_path(), rig_file=rig_path, key="loop.glove")
     glove_cfg = load_glove_config(glove_path)
     limits = load_joint_limits()
-    expander = Expander.from_file(Path(map_file) if map_file else _resolve(
+    map_path = Path(map_file) if map_file else _resolve(
         base, loop.map, CONFIG_DIR / "maps" / "default.toml", rig_file=rig_path,
-        key="loop.map"), limits)
+        key="loop.map")
+    expander = Expander.from_file(map_path, limits)
     sag = SagGrid.load(Path(grid_file) if grid_file else _resolve(
         base, loop.sag_grid, default_grid_path(), rig_file=rig_path, key="loop.sag_grid"))
     pipeline = PosePipeline(
@@ -161,7 +155,7 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
     )
     controls = GloveControls.from_config(glove_cfg, expander.controls)
     return RigParts(rig, rig_path, glove_cfg, expander, sag, pipeline, controls,
-                    ForearmAngles(glove_cfg), glove_path)
+                    ForearmAngles(glove_cfg), glove_path, map_file=map_path)
 
 
 def robot_model(rig: RigConfig) -> str | None:
@@ -275,7 +269,7 @@ class OpenedBus:
     """A servo bus the factory opened (not yet connected): the driver, its port, and the
     emulator process behind it when the bus is simulated."""
 
-    bus: DynamixelBus
+    bus: ServoBus
     port: str
     emulator: subprocess.Popen[str] | None = None
 
@@ -382,151 +376,3 @@ def control_channels(glove_cfg: GloveConfig, controls: Sequence[str],
     by_curve = {ch.curve: ch.raw_index() for ch in glove_cfg.channels}
     return tuple(by_curve.get(n, -1) for n in (controls if glove_names is None
                                                 else glove_names))
-
-
-FAULT_WORDS: dict[str, str] = {
-    "timeouts": "read timeouts",
-    "retries": "read retries",
-    "crc_errors": "replies with a bad CRC",
-    "malformed": "malformed replies",
-    "status_errors": "readings refused by a servo",
-    "fallbacks": "fallbacks to plain Sync Read",
-    "watchdog_trips": "Bus Watchdog trips",
-    "watchdog_gaps": "writes close to the Bus Watchdog",
-    "late_replies": "late replies dropped",
-    "partial_replies": "Fast Sync Read replies cut short",
-    "chain_ends": "reads asking silent servos last",
-    "skipped_reads": "reads skipped (no room on the wire)",
-    "stale_readings": "stale servo readings",
-    "hardware_errors": "servo hardware errors",
-    "reboots": "servo reboots",
-}
-"""Bus counters that are faults, as the summary names them (in this order)."""
-
-TOP_CLAMPED = 3  # joints named in the summary's clamp line
-
-
-def bus_faults(bus: dict[str, Any]) -> dict[str, int]:
-    """The non-zero fault counters of a summary's ``bus`` figures, named in words."""
-    return {FAULT_WORDS[k]: int(bus[k]) for k in FAULT_WORDS if bus.get(k)}
-
-
-def clamped_joints(pipeline: PosePipeline, top: int = TOP_CLAMPED) -> list[dict[str, Any]]:
-    """The servo joints whose targets were clamped most often (most first, none at 0)."""
-    counts = np.asarray(pipeline.servo_clamps_by_servo, dtype=np.int64)
-    joints = tuple(pipeline.servo_joints)
-    order: list[int] = np.argsort(-counts, kind="stable")[:top].tolist() if counts.size else []
-    return [{"joint": joints[i], "clamps": int(counts[i])} for i in order if counts[i] > 0]
-
-
-def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, Any]:
-    """What a run sent besides the servos: ``vmc`` (target, bundles, rate, errors) and
-    ``recording`` (path, format, frames, duration, bytes), None when off."""
-    out: dict[str, Any] = {"vmc": None, "recording": None}
-    for o in outs:
-        if not isinstance(o, Output):
-            continue
-        st = o.status()
-        if st.kind == "vmc":
-            sent = st.frames_written
-            out["vmc"] = {"target": st.address, "bundles_sent": sent,
-                          "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
-                          "errors": st.errors, "last_error": st.last_error}
-        elif st.kind == "recorder":
-            out["recording"] = {
-                "path": st.path, "format": st.name, "frames": st.frames_written,
-                "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-                "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
-        elif st.kind == "glove take":
-            out["glove_take"] = {
-                "path": st.path, "frames": st.frames_written,
-                "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-                "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
-    return out
-
-
-def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None,
-                 torque_off: bool | None,
-                 *, outputs: dict[str, Any] | None = None,
-                 clamped: list[dict[str, Any]] | None = None, ease_s: float = 0.0
-                 ) -> dict[str, Any]:
-    """The run's figures as one JSON-able object (the keys ``handrig demo --json`` promises).
-
-    ``outputs``: :func:`outputs_summary`; ``clamped``: :func:`clamped_joints`;
-    ``ease_s``: how long the run eased to the relaxed pose at its end (included in
-    ``frames`` and ``duration_s``; 0 when it ended at once)."""
-    s = stats
-
-    def num(x: float, nd: int = 3) -> float | None:
-        return None if x is None or not math.isfinite(x) else round(float(x), nd)
-    out: dict[str, Any] = {
-        "frames": s.frames,
-        "duration_s": num(s.duration_s),
-        "rate_hz": num(s.rate_hz, 2),
-        "jitter_us": num(s.jitter_us, 1),
-        "latency_us": {"p50": num(s.latency_us(50), 1), "p99": num(s.latency_us(99), 1),
-                       "max": num(s.latency_us(100), 1), "samples": s.latency.count},
-        "loop_mode": s.loop_mode,
-        "compute_us": {"p50": num(s.compute_us(50), 1), "p99": num(s.compute_us(99), 1),
-                       "max": num(s.compute_us(100), 1)},
-        "writes_per_s": num(s.rate_hz, 2),
-        "reads_per_s": num(s.reads / s.duration_s if s.duration_s > 0 else math.nan, 2),
-        "writes_delayed_by_reads": s.writes_delayed,
-        "cycles_without_frame": s.cycles_without_frame,
-        "frames_skipped": s.frames_skipped,
-        "frames_in_bursts": s.frames_in_bursts,
-        "frames_in_host_stalls": s.frames_in_host_stalls,
-        "frames_caught_up": s.frames_caught_up,
-        "ceiling_waits": s.ceiling_waits,
-        "cpu_per_cycle_us": num(s.cpu_per_cycle_us, 1),
-        "overruns": s.overruns,
-        "overrun_max_us": num(s.overrun_max_s * 1e6, 1),
-        "missed_cycles": s.missed_cycles,
-        "limit_clamps": s.servo_clamps,
-        "pose_clamps": s.clamps,
-        "nonfinite_targets": s.nonfinite,
-        "bus_clamps": s.bus_clamps,
-        "slew_limited": s.slewed,
-        "tracking_rms_deg": num(s.tracking_rms_deg),
-        "tracking_max_deg": num(s.tracking_max_deg),
-        "reads": s.reads,
-        "stale_reads": s.stale_reads,
-        "relax_events": s.relax_events,
-        "silence": {"silences": s.servo_silences, "held": s.servos_held,
-                    "recoveries": s.servo_recoveries, "admitted": s.servos_admitted},
-        "heat": {"warnings": s.heat_warnings, "reliefs": s.heat_reliefs,
-                 "actions": s.heat_actions, "hottest": s.hottest,
-                 "max_c": [num(t, 1) for t in s.max_temperature_c]},
-        "resumes": s.resumes,
-        "estop": s.estop,
-        "stop_reason": s.stop_reason,
-        "events": list(s.events),
-        "events_total": s.events.total,
-        "torque_off": torque_off,
-        "ease_s": num(ease_s),
-        "clamped_joints": list(clamped or []),
-        "outputs": outputs if outputs is not None else {"vmc": None, "recording": None},
-        "faults": {},
-    }
-    if glove_stats is not None:
-        out["glove"] = {
-            "frames_ok": glove_stats.frames_ok, "crc_errors": glove_stats.crc_errors,
-            "decode_errors": glove_stats.decode_errors, "resyncs": glove_stats.resyncs,
-            "seq_gaps": glove_stats.seq_gaps, "frames_used": s.glove_samples,
-            "channel_errors": glove_stats.channel_errors,
-            "disconnects": glove_stats.disconnects,
-            "reconnects": glove_stats.reconnects,
-            "last_outage_s": num(glove_stats.last_outage_s),
-        }
-    if bus_stats is not None:
-        bus: dict[str, Any] = {}
-        for k, v in vars(bus_stats).items():
-            if k.startswith("_") or k == "n_servos":
-                continue
-            if isinstance(v, np.ndarray):
-                bus[k] = int(v.sum())
-            elif isinstance(v, int | float):
-                bus[k] = v
-        out["bus"] = bus
-        out["faults"] = bus_faults(bus)
-    return out

@@ -1,4 +1,9 @@
-"""A two-hand rig's parts: a glove per hand, each hand its own loop ("side").
+"""A session's hands: one (the whole rig, one glove) or a glove per hand, each its own loop.
+
+:func:`build_session_parts` is what every run builds: :class:`SessionParts`, a tuple of
+hands, each a :class:`~handrig.app.factory.RigParts`; one hand is N = 1 (the whole
+rig on one glove). Which hands share a bus is data from the rig file
+(:attr:`SessionParts.buses`: one bus for all unless ``[left_bus]``).
 
 A rig whose ``[[servos]]`` drive joints of both hands, run with a glove per hand
 (``--glove`` and ``--glove-left``, or ``[gloves]`` in the rig file), is two sides
@@ -15,6 +20,7 @@ pipeline where this forearm is (its sag in the full pose the outputs get).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +30,7 @@ from handrig.app.factory import (
     ForearmAngles,
     RigParts,
     _resolve,
+    build_parts,
     control_channels,
     glove_spec,
 )
@@ -40,6 +47,7 @@ from handrig.devices.glove_calibration import (
 from handrig.errors import ConfigError
 from handrig.hand import mirror_name
 from handrig.loop.ports import FloatArray
+from handrig.loop.rig import Rig
 from handrig.pose import robot_rig as robotrig
 from handrig.pose.expand import DEFAULT_TWO_GLOVE_MAP, Expander
 from handrig.pose.pipeline import PosePipeline
@@ -97,25 +105,79 @@ class SideOrientation:
 
 
 @dataclass
-class TwoHandParts:
-    """The device-free parts of a two-hand run: a side per hand (``"ri"``, ``"le"``),
-    each a :class:`RigParts` with ``hand`` set, and the whole rig."""
+class SessionParts:
+    """The device-free parts of a session: its hands (a :class:`RigParts` each, in
+    order: the right hand first; one hand: the whole rig, ``hand`` None), the whole
+    rig, and the map they read (``shared``: both gloves' controls, with a glove per
+    hand)."""
 
     rig_config: RigConfig
     rig_file: Path
-    sides: dict[str, RigParts]
-    shared: SharedControls
+    hands: tuple[RigParts, ...]
     map_file: Path
+    shared: SharedControls | None = None
+
+    @classmethod
+    def one(cls, parts: RigParts) -> SessionParts:
+        """One hand: the whole rig on one glove."""
+        return cls(parts.rig_config, parts.rig_file, (parts,), parts.map_file or Path())
 
     @property
-    def two_buses(self) -> bool:
-        return self.rig_config.left_bus is not None
+    def buses(self) -> tuple[tuple[int, ...], ...]:
+        """Which hands (indices into :attr:`hands`) share which bus, as the rig file
+        says: one bus for every hand, unless ``[left_bus]`` gives each hand its own."""
+        if len(self.hands) > 1 and self.rig_config.left_bus is not None:
+            return tuple((i,) for i in range(len(self.hands)))
+        return (tuple(range(len(self.hands))),)
+
+    def key(self, i: int) -> str:
+        """Hand ``i``'s key: ``"ri"``, ``"le"``, or ``""`` for the whole rig."""
+        return self.hands[i].hand or ""
+
+    def name(self, i: int) -> str:
+        """Hand ``i`` for a person: ``"right"``, ``"left"``, ``""`` for the whole rig."""
+        return HAND_NAMES.get(self.key(i), "")
+
+
+class AllHands:
+    """The show's controls acting on every hand at once (the keys, the view's buttons,
+    a signal): relax/resume, stop (each eases down), e-stop. Safe from any thread, as
+    each rig's are."""
+
+    def __init__(self, rigs: Sequence[Rig]) -> None:
+        self.rigs = rigs  # filled once the loops are built
+        self.estop_reason = ""  # set before any rig is e-stopped
+
+    def toggle_relax(self) -> None:
+        for rig in self.rigs:
+            rig.toggle_relax()
+
+    def request_stop(self, reason: str = "stop requested") -> None:
+        for rig in self.rigs:
+            rig.request_stop(reason)
+
+    def estop(self, reason: str = "e-stop key") -> None:
+        self.estop_reason = reason
+        for rig in self.rigs:
+            rig.estop(reason)
 
 
 def glove_specs(rig: RigConfig, right: str | None, left: str | None
                 ) -> tuple[str | None, str | None]:
     """The gloves of a run: ``--glove``/``--glove-left`` over the rig file's ``[gloves]``."""
     return (right or rig.gloves.right or None, left or rig.gloves.left or None)
+
+
+def check_gloves(parts: SessionParts, specs: tuple[str | None, ...]) -> tuple[str, ...]:
+    """Each hand's glove spec checked (:func:`handrig.app.factory.glove_spec`; a second
+    glove not the first's port): ConfigError naming the hand's flag. Nothing is
+    opened."""
+    if len(parts.hands) == 1:
+        side = parts.hands[0]
+        return (glove_spec(specs[0], side.glove_config, side.glove_file),)
+    ri, le = parts.hands
+    return check_two_gloves(specs[0] or "", specs[1] or "", ri.glove_config, le.glove_config,
+                            ri.glove_file, le.glove_file)
 
 
 def check_two_gloves(right: str, left: str, cfg_right: GloveConfig, cfg_left: GloveConfig,
@@ -162,23 +224,32 @@ def _glove_names(cal_curves: tuple[str, ...], wanted: list[str]) -> list[str]:
 
 def side_control_channels(side: RigParts) -> tuple[int, ...]:
     """The raw channel of the side's glove driving each control of its loop (both hands'
-    controls, in the map's order; -1 for the other hand's), for its telemetry."""
+    controls, in the map's order; -1 for the other hand's), for its telemetry; the whole
+    rig on one glove: its channel for each control."""
     controls = side.pipeline.expander.controls
+    if side.hand is None:
+        return control_channels(side.glove_config, controls)
     cal = tuple(c.curve for c in side.glove_config.channels)
     own = [c for c in controls if hand_of_joint(c) == side.hand]
     names = dict(zip(own, _glove_names(cal, own), strict=True))
     return control_channels(side.glove_config, controls, [names.get(c, "") for c in controls])
 
 
-def build_two_hand_parts(rig_file: str | Path | None = None,
-                         glove_file: str | Path | None = None,
-                         left_glove_file: str | Path | None = None, *,
-                         map_file: str | Path | None = None,
-                         grid_file: str | Path | None = None) -> TwoHandParts:
-    """The rig file (or preset) cut into its two hands, each with its glove file
-    (``glove_file`` for the right; ``left_glove_file``, else ``[gloves] left_config``,
-    else the right's for the left), the two-glove map and the sag grid (``map_file``,
-    ``grid_file``: a show file's, instead of the rig file's)."""
+def build_session_parts(rig_file: str | Path | None = None,
+                        glove_file: str | Path | None = None,
+                        left_glove_file: str | Path | None = None, *,
+                        glove_per_hand: bool = False,
+                        map_file: str | Path | None = None,
+                        grid_file: str | Path | None = None) -> SessionParts:
+    """The hands of a session on the rig file (or preset): the whole rig on one glove
+    (:func:`handrig.app.factory.build_parts`), or with ``glove_per_hand`` the rig cut
+    into its two hands, each with its glove file (``glove_file`` for the right;
+    ``left_glove_file``, else ``[gloves] left_config``, else the right's for the
+    left), the two-glove map and the sag grid (``map_file``, ``grid_file``: a show
+    file's, instead of the rig file's)."""
+    if not glove_per_hand:
+        one = build_parts(rig_file, glove_file, map_file=map_file, grid_file=grid_file)
+        return SessionParts.one(one)
     rig_path = rig_file_path(rig_file)
     rig = robotrig.load_rig(rig_path)
     if not is_two_hand(rig):
@@ -228,7 +299,7 @@ def build_two_hand_parts(rig_file: str | Path | None = None,
         orientations[h] = orientation
         sides[h] = RigParts(side, rig_path, cfg, expander, sag, pipeline,
                             SideControls(glove_controls, shared, slots[h]), orientation,
-                            gpath, hand=h)
+                            gpath, hand=h, map_file=map_file)
     orientations["ri"].other = sides["le"].pipeline
     orientations["le"].other = sides["ri"].pipeline
-    return TwoHandParts(rig, rig_path, sides, shared, map_file)
+    return SessionParts(rig, rig_path, (sides["ri"], sides["le"]), map_file, shared)

@@ -31,10 +31,10 @@ import numpy as np
 
 from handrig import hand
 from handrig.app.factory import build_parts, servo_bus
-from handrig.app.session import torque_is_off
+from handrig.app.session_exit import torque_is_off
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig_files import rig_file_path
-from handrig.devices.servo.dynamixel import DynamixelBus
+from handrig.devices.servo.bus import ServoBus
 from handrig.errors import ConfigError, HandrigError
 from handrig.pose.robot_rig import RobotRigConfig, robot_retarget
 
@@ -77,7 +77,7 @@ class RobotHand:
         self._clock = clock or MonotonicClock()
         self._log = log
         self._stack: contextlib.ExitStack | None = None
-        self._bus: DynamixelBus | None = None
+        self._bus: ServoBus | None = None
         self._last_deg: np.ndarray | None = None
         self._last_t = 0.0
         self.torque_off_confirmed: bool | None = None
@@ -120,7 +120,7 @@ class RobotHand:
         if stack is not None:
             stack.close()
 
-    def _confirm_torque_off(self, bus: DynamixelBus) -> None:
+    def _confirm_torque_off(self, bus: ServoBus) -> None:
         self.torque_off_confirmed = torque_is_off(bus)
 
     # ---------------------------------------------------------------- driving
@@ -167,7 +167,7 @@ class RobotHand:
 
     # ---------------------------------------------------------------- helpers
 
-    def _open_bus(self) -> DynamixelBus:
+    def _open_bus(self) -> ServoBus:
         if self._bus is None:
             raise HandrigError("the robot hand is not open: use it in a `with RobotHand(...)` "
                                "block")

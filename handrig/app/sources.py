@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from handrig.app.hands import SessionParts
 from handrig.config.loading import CONFIG_DIR
 from handrig.config.paths import (
     config_file,
@@ -110,6 +111,22 @@ def run_sources(rig: str | Path | None = None, glove: str | Path | None = None,
         out.append(Source("robot model", Path(cfg.robot.model), f"[robot] of {first.path.name}"))
         out.append(Source("retarget", Path(cfg.robot.retarget),
                           f"[robot] of {first.path.name}"))
+    return out
+
+
+def session_sources(parts: SessionParts, sources: Sequence[Source]) -> list[Source]:
+    """``sources`` (:func:`run_sources`) for a session's hands: with a glove per hand,
+    the map they read (the two-glove map unless ``[loop] map`` or the show names one)
+    and each further hand's glove file."""
+    if len(parts.hands) == 1:
+        return list(sources)
+    out = [Source("map", parts.map_file, "a glove per hand: the two-glove map unless "
+                  "[loop] map or the show names one") if s.role == "map" else s
+           for s in sources]
+    for i, side in enumerate(parts.hands[1:], start=1):
+        out.append(Source(f"{parts.name(i)} glove", side.glove_file or Path(),
+                          "--glove-left-config, [gloves] left_config, else the right "
+                          "glove's"))
     return out
 
 

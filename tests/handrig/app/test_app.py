@@ -65,7 +65,7 @@ def test_the_glove_reader_is_told_how_many_raw_channels_the_calibration_reads() 
 
 
 def test_the_summary_carries_the_glove_port_counters() -> None:
-    from handrig.app.factory import summary_dict
+    from handrig.app.summary import summary_dict
     from handrig.devices.glove import GloveStats
     from handrig.loop.stats import RunStats
 

@@ -12,7 +12,7 @@ import pytest
 
 from handrig.app import factory as app
 from handrig.app import simulator
-from handrig.app.session import torque_is_off
+from handrig.app.session_exit import torque_is_off
 from handrig.clock import MonotonicClock
 from handrig.loop.modes import Mode
 from handrig.loop.stats import RunStats

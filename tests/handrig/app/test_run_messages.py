@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from handrig.app import factory as app
+from handrig.app import summary as run_summary
 from handrig.app.factory import build_parts
-from handrig.app.session import format_summary
+from handrig.app.summary import format_summary
 from handrig.config.loading import CONFIG_DIR
 from handrig.devices.servo.bus import BusStats
 from handrig.errors import ConfigError
@@ -35,7 +36,7 @@ def _summary(**kw: object) -> dict:
     stats = RunStats(frames=2200, duration_s=11.0)
     bus = BusStats(20, reads=500, timeouts=19)
     bus.stale_readings[:] = 19
-    return app.summary_dict(stats, bus, None, True, **kw)  # type: ignore[arg-type]
+    return run_summary.summary_dict(stats, bus, None, True, **kw)  # type: ignore[arg-type]
 
 
 # -- the summary ----------------------------------------------------------------------
@@ -46,7 +47,7 @@ def test_faults_are_words_and_counts_not_a_dict() -> None:
     line = next(x for x in text.splitlines() if x.startswith("faults"))
     assert line == "faults            19 read timeouts, 380 stale servo readings"
     assert "{" not in text
-    clean = format_summary(app.summary_dict(RunStats(), BusStats(20), None, True))
+    clean = format_summary(run_summary.summary_dict(RunStats(), BusStats(20), None, True))
     assert "faults            none" in clean
 
 
@@ -68,7 +69,7 @@ def test_clamps_say_what_they_mean_and_which_joints(parts: app.RigParts) -> None
     try:
         counts[:] = 0
         counts[3], counts[7], counts[1], counts[0] = 50, 900, 20, 5
-        clamped = app.clamped_joints(pipeline)
+        clamped = run_summary.clamped_joints(pipeline)
     finally:
         counts[:] = saved
     joints = pipeline.servo_joints
@@ -97,7 +98,7 @@ def test_outputs_are_listed() -> None:
                                 frames_written=2200, bytes_written=123_456,
                                 duration_s=2200 / 200.0)
 
-    outputs = app.outputs_summary([Sender(), Rec()], duration_s=10.0)
+    outputs = run_summary.outputs_summary([Sender(), Rec()], duration_s=10.0)
     assert outputs["vmc"]["target"] == "127.0.0.1:39539" and outputs["vmc"]["rate_hz"] == 60.0
     assert outputs["recording"]["duration_s"] == 11.0
     text = format_summary(_summary(outputs=outputs))
@@ -188,7 +189,7 @@ def test_run_reads_the_users_calibrated_glove_file(tmp_path: Path,
 
 
 def test_clamp_advice_names_the_cause_it_can_tell() -> None:
-    from handrig.app.session import clamp_advice
+    from handrig.app.summary import clamp_advice
     from handrig.pose.expand import TrainingRangeReport
 
     ctrl = ("riIndexMCPy", "riPinkyMCPy")
