@@ -64,7 +64,7 @@ class ToyBus(ServoBus):
         self.connected = False
 
     @contextlib.contextmanager
-    def torque(self) -> Iterator[ServoBus]:  # type: ignore[override]
+    def torque(self, *, handle_signals: bool = True) -> Iterator[ServoBus]:  # type: ignore[override]
         if not self.connected:
             raise DeviceError("toy bus: not connected")
         self.torque_on = True
