@@ -36,7 +36,7 @@ from bench.bench_rig import (
     outside_latencies,
     step_recording,
 )
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.config.loading import CONFIG_DIR
 from handrig.devices.glove_recording import write_glove_recording

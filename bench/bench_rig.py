@@ -46,7 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from handrig.app.factory import build_parts, port_process
+from handrig.app.factory import port_process
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.config.loading import CONFIG_DIR
 from handrig.devices.glove_recording import GloveRecording, write_glove_recording

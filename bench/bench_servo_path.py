@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.pose import kernels
 from handrig.pose.pipeline import PosePipeline
 
@@ -77,7 +77,7 @@ def _with_the_step(pl: PosePipeline) -> Callable[[int], object]:
     return step
 
 
-def _leap_with_sag(parts: app.RigParts) -> PosePipeline:
+def _leap_with_sag(parts: app_parts.RigParts) -> PosePipeline:
     rig, old = parts.rig_config, parts.pipeline
     return PosePipeline(
         parts.expander, parts.sag, old.servo_joints,
@@ -88,8 +88,8 @@ def _leap_with_sag(parts: app.RigParts) -> PosePipeline:
 
 
 def main() -> None:
-    human = app.build_parts().pipeline
-    parts = app.build_parts("leap")
+    human = app_parts.build_parts().pipeline
+    parts = app_parts.build_parts("leap")
     leap = parts.pipeline
     assert leap.robot_path is not None
     u = len(leap.robot_path.curves)

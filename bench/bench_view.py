@@ -77,7 +77,8 @@ from bench.bench_rig import (
     steal_percent,
     step_recording,
 )
-from handrig.app.factory import build_parts, port_process
+from handrig.app.factory import port_process
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.app.view.process import ViewProcess
 from handrig.devices.glove_recording import write_glove_recording

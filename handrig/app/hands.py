@@ -1,7 +1,7 @@
 """A session's hands: one (the whole rig, one glove) or a glove per hand, each its own loop.
 
 :func:`build_session_parts` is what every run builds: :class:`SessionParts`, a tuple of
-hands, each a :class:`~handrig.app.factory.RigParts`; one hand is N = 1 (the whole
+hands, each a :class:`~handrig.app.parts.RigParts`; one hand is N = 1 (the whole
 rig on one glove). Which hands share a bus is data from the rig file
 (:attr:`SessionParts.buses`: one bus for all unless ``[left_bus]``).
 
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handrig.app.factory import (
+from handrig.app.parts import (
     ForearmAngles,
     RigParts,
     _resolve,
@@ -169,7 +169,7 @@ def glove_specs(rig: RigConfig, right: str | None, left: str | None
 
 
 def check_gloves(parts: SessionParts, specs: tuple[str | None, ...]) -> tuple[str, ...]:
-    """Each hand's glove spec checked (:func:`handrig.app.factory.glove_spec`; a second
+    """Each hand's glove spec checked (:func:`handrig.app.parts.glove_spec`; a second
     glove not the first's port): ConfigError naming the hand's flag. Nothing is
     opened."""
     if len(parts.hands) == 1:
@@ -183,7 +183,7 @@ def check_gloves(parts: SessionParts, specs: tuple[str | None, ...]) -> tuple[st
 def check_two_gloves(right: str, left: str, cfg_right: GloveConfig, cfg_left: GloveConfig,
                      right_file: Path | None = None, left_file: Path | None = None
                      ) -> tuple[str, str]:
-    """Both gloves' specs checked (:func:`handrig.app.factory.glove_spec`, the message
+    """Both gloves' specs checked (:func:`handrig.app.parts.glove_spec`, the message
     naming ``--glove-left`` for the left), and not the same port twice: ConfigError
     naming both flags. (One recording may be replayed for both hands.) Nothing is
     opened."""
@@ -242,7 +242,7 @@ def build_session_parts(rig_file: str | Path | None = None,
                         map_file: str | Path | None = None,
                         grid_file: str | Path | None = None) -> SessionParts:
     """The hands of a session on the rig file (or preset): the whole rig on one glove
-    (:func:`handrig.app.factory.build_parts`), or with ``glove_per_hand`` the rig cut
+    (:func:`handrig.app.parts.build_parts`), or with ``glove_per_hand`` the rig cut
     into its two hands, each with its glove file (``glove_file`` for the right;
     ``left_glove_file``, else ``[gloves] left_config``, else the right's for the
     left), the two-glove map and the sag grid (``map_file``, ``grid_file``: a show

@@ -30,7 +30,8 @@ from types import TracebackType
 import numpy as np
 
 from handrig import hand
-from handrig.app.factory import build_parts, servo_bus
+from handrig.app.factory import servo_bus
+from handrig.app.parts import build_parts
 from handrig.app.session_exit import torque_is_off
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig_files import rig_file_path

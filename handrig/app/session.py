@@ -39,9 +39,11 @@ from typing import Any
 import numpy as np
 
 from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.app import takes
-from handrig.app.factory import OpenedBus, RigParts
+from handrig.app.factory import OpenedBus
 from handrig.app.hands import AllHands, SessionParts, check_gloves, side_control_channels
+from handrig.app.parts import RigParts
 from handrig.app.session_exit import (
     READBACK_BUDGET_S,
     ExitSignals,
@@ -186,7 +188,7 @@ class _Session:
         try:
             # the checks that need no hardware, before a bus is opened and commissioned
             specs = self._check_gloves()
-            app.check_outputs(self.opts.vmc, self.opts.record)
+            app_parts.check_outputs(self.opts.vmc, self.opts.record)
             self._check_glove_takes()
             with contextlib.ExitStack() as stack:
                 self._open_buses(stack)

@@ -1,6 +1,6 @@
 """Which files a run uses, and why: the rig, glove, map, sag grid and joint limits.
 
-The same choices :func:`handrig.app.factory.build_parts` makes, written out so that
+The same choices :func:`handrig.app.parts.build_parts` makes, written out so that
 ``run``, ``demo``, ``calibrate`` and ``config show`` can print them before they
 start:
 

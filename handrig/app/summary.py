@@ -56,28 +56,14 @@ def clamped_joints(pipeline: PosePipeline, top: int = TOP_CLAMPED) -> list[dict[
 
 
 def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, Any]:
-    """What a run sent besides the servos: ``vmc`` (target, bundles, rate, errors) and
-    ``recording`` (path, format, frames, duration, bytes), None when off."""
+    """What a run sent besides the servos, each output's part under its own key
+    (:meth:`handrig.outputs.base.Output.summary`: ``vmc``, ``recording``,
+    ``glove_take``, ...); ``vmc`` and ``recording`` None when off."""
     out: dict[str, Any] = {"vmc": None, "recording": None}
     for o in outs:
-        if not isinstance(o, Output):
-            continue
-        st = o.status()
-        if st.kind == "vmc":
-            sent = st.frames_written
-            out["vmc"] = {"target": st.address, "bundles_sent": sent,
-                          "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
-                          "errors": st.errors, "last_error": st.last_error}
-        elif st.kind == "recorder":
-            out["recording"] = {
-                "path": st.path, "format": st.name, "frames": st.frames_written,
-                "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-                "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
-        elif st.kind == "glove take":
-            out["glove_take"] = {
-                "path": st.path, "frames": st.frames_written,
-                "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-                "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
+        if isinstance(o, Output):
+            key, figures = o.summary(duration_s)
+            out[key] = figures
     return out
 
 

@@ -89,8 +89,8 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
          glove: PortProcess) -> int:
     from handrig.app import simulator
-    from handrig.app.factory import robot_model
     from handrig.app.hands import build_session_parts, is_two_hand
+    from handrig.app.parts import robot_model
     from handrig.app.session import LiveOptions, failed, print_result, run_live
     from handrig.app.session_exit import ExitSignals
     from handrig.app.sources import Source, format_sources, run_sources

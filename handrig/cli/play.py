@@ -9,7 +9,7 @@ import json
 import sys
 from typing import Any
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from handrig.app.factory import ForearmAngles
+from handrig.app.parts import ForearmAngles
 from handrig.devices.glove import GloveSample
 from handrig.devices.glove_calibration import ImuSettings, load_glove_config
 from handrig.pose.orientation import ForearmOrientation

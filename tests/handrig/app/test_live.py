@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.devices.glove_recording import read_glove_recording
 from sim.demo_recording import DEMO_RECORDING

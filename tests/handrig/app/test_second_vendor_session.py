@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from handrig.app.factory import OpenedBus, RigParts, build_parts
+from handrig.app.factory import OpenedBus
+from handrig.app.parts import RigParts, build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.clock import Clock, FakeClock
 from handrig.config.rig import LoopConfig, SilenceConfig

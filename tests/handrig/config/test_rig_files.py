@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.sources import rig_file, run_sources
 from handrig.config.paths import installed_config, user_config
 from handrig.config.rig_files import RIGS_DIR, resolve_rig_file

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.clock import FakeClock
 from handrig.config.rig import SilenceConfig
 from handrig.devices.servo.bus import BusStats, ServoBus, ServoState

@@ -54,7 +54,7 @@ def test_publication_is_rate_limited_and_numbered() -> None:
 
 
 def test_a_run_publishes_what_the_loop_did(tmp_path: Path) -> None:
-    from handrig.app.factory import build_parts
+    from handrig.app.parts import build_parts
 
     parts = build_parts()
     clock = FakeClock(10.0)
@@ -107,7 +107,7 @@ def test_a_run_publishes_what_the_loop_did(tmp_path: Path) -> None:
 def test_each_control_is_shown_with_its_own_channels_count() -> None:
     """A glove wired in another order than the map's controls (the glove file's
     ``[[channels]] index``): each control's raw count is its own channel's."""
-    from handrig.app.factory import build_parts, control_channels
+    from handrig.app.parts import build_parts, control_channels
 
     parts = build_parts()
     controls = parts.pipeline.expander.controls

@@ -24,7 +24,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from handrig.app import simulator
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.view import ModelScene, build_server, is_loopback, parse_view_address
 from handrig.errors import ConfigError
 
