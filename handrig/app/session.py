@@ -166,7 +166,7 @@ class _Session:
         self.bus_stats: list[Any] = [None] * n  # each hand's bus's counters (shared: the same)
         self.bus_of: list[int] = [-1] * n  # each hand's bus (an index into self.opened)
         self.opened: list[OpenedBus] = []
-        self.torque_off: list[bool | None] = []  # per bus, read back
+        self.torque_off: dict[int, bool | None] = {}  # per bus (index), read back
         self.unconfirmed: list[list[str]] = [[] for _ in range(n)]  # torque-off not read
         self.left_out: list[list[str]] = [[] for _ in range(n)]  # silent at start-up
         self.admitted: list[list[str]] = [[] for _ in range(n)]  # of those, answered later
@@ -464,7 +464,7 @@ class _Session:
     def _bus_figures(self, b: int) -> None:
         bus = self.opened[b].bus
         off, unconfirmed = bus.confirm_torque_off(READBACK_BUDGET_S)
-        self.torque_off.append(off)
+        self.torque_off[b] = off
         at_start = self._left_at_start[b]
         stats = bus.stats
         for i in self.parts.buses[b]:
@@ -480,8 +480,7 @@ class _Session:
 
     # -- the summary --------------------------------------------------------------------
     def _hand_torque_off(self, i: int) -> bool | None:
-        b = self.bus_of[i]
-        return self.torque_off[b] if 0 <= b < len(self.torque_off) else None
+        return self.torque_off.get(self.bus_of[i])
 
     def _hand_summary(self, i: int) -> dict[str, Any]:
         """Hand ``i``'s figures: the same keys for every hand."""
@@ -509,7 +508,7 @@ class _Session:
         parts = self.parts
         hands = [self._hand_summary(i) for i in range(self.n)]
         summary = dict(hands[0])
-        offs = self.torque_off
+        offs = list(self.torque_off.values())
         summary["torque_off"] = (None if not offs or len(offs) < len(self.opened)
                                  else False if False in offs
                                  else None if None in offs else True)
