@@ -36,6 +36,7 @@ from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.bus import ServoBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
+from handrig.devices.servo.models import check_rig
 from handrig.loop.rig import Rig
 
 FloatArray = NDArray[np.float64]
@@ -114,6 +115,7 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
     for these arguments (:func:`~handrig.app.port_processes.sim_bus_argv`), and stops it
     after the bus is closed."""
     rig_cfg = parts.rig_config
+    check_rig(rig_cfg, str(parts.rig_file))  # the servos it names, at bauds they take
     bus_spec = spec or rig_cfg.bus.port
     with contextlib.ExitStack() as stack:
         proc: subprocess.Popen[str] | None = None

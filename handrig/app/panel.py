@@ -31,7 +31,7 @@ from rich.text import Text
 
 from firmware_protocol.dynamixel import HardwareError
 from handrig.app.keys import SHOW_KEYS
-from handrig.config.rig import TEMPERATURE_LIMIT_C
+from handrig.devices.servo.models import temperature_limit_c
 
 WIDTH = 80
 HEIGHT = 24
@@ -471,8 +471,7 @@ class LivePanel:
 def heat_colours(rig_cfg: Any) -> dict[str, Any]:
     """The panel's temperature colours for a rig (RigSnapshot's keywords): each servo's
     Temperature Limit by its model, and the rig's [heat] warn and act tiers."""
-    return {"temperature_limit_c": {s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
-                                    for s in rig_cfg.servos},
+    return {"temperature_limit_c": {s.id: temperature_limit_c(s) for s in rig_cfg.servos},
             "heat_c": (rig_cfg.heat.warn_c, rig_cfg.heat.act_c)}
 
 
