@@ -7,8 +7,6 @@ import ast
 import re
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -40,14 +38,6 @@ VENDOR_BRANCH = {
     # its wire timing what a read may carry
     "handrig/app/factory.py",
 }
-NOT_YET_MOVED = {
-    # the panel draws the servos' hardware error bits as the vendor's letters (from the
-    # emulator's table): issue 35's session half moved the model table, bauds and the
-    # models' limits down to devices/servo/models.py but not these;
-    # test_the_vendor_words_left_... below fails (strictly) once they move, so this
-    # list is then emptied
-    "handrig/app/panel.py",
-}
 
 
 def _vendor_lines(skip: set[str]) -> list[str]:
@@ -66,11 +56,5 @@ def _vendor_lines(skip: set[str]) -> list[str]:
 def test_no_vendor_or_servo_model_is_named_above_the_driver() -> None:
     """A second vendor needs a package under devices/ and one branch in the factory:
     nothing else above ``handrig/devices/servo/`` names the vendor or a servo model."""
-    found = _vendor_lines(VENDOR_BRANCH | NOT_YET_MOVED)
+    found = _vendor_lines(VENDOR_BRANCH)
     assert not found, "vendor words above the driver:\n" + "\n".join(found)
-
-
-@pytest.mark.xfail(strict=True, reason="the panel's fault letters are still above the "
-                   "driver (NOT_YET_MOVED)")
-def test_the_vendor_words_left_above_the_driver_are_gone() -> None:
-    assert not _vendor_lines(VENDOR_BRANCH)
