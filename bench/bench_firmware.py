@@ -43,7 +43,7 @@ import numpy as np
 
 from bench.firmware_variants import FOREARM_XYZW, base_source, noise_table
 from bench.rig_steps import INDEX_CHANNEL, emulator, outside_latencies, step_recording
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.config.loading import CONFIG_DIR
 from handrig.devices.glove_recording import write_glove_recording

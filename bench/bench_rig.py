@@ -55,7 +55,7 @@ from bench.rig_steps import (
     steal_percent,
     step_recording,
 )
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.config.loading import CONFIG_DIR
 from handrig.devices.glove_recording import write_glove_recording

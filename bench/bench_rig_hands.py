@@ -43,9 +43,8 @@ from bench.rig_steps import (
     steal_percent,
     step_recording,
 )
-from handrig.app.hands import build_two_hand_parts
-from handrig.app.session import LiveOptions
-from handrig.app.two_hands import run_two_hands
+from handrig.app.hands import build_session_parts
+from handrig.app.session import LiveOptions, run_live
 from handrig.config.loading import CONFIG_DIR
 from handrig.devices.glove_recording import GloveRecording, write_glove_recording
 
@@ -132,7 +131,7 @@ def _buses(case: HandsCase, rig: Path, folder: Path) -> Iterator[dict[str, tuple
 def run_hands_case(case: HandsCase, seconds: float, folder: Path) -> dict[str, Any]:
     rig = _rig_file(folder, case)
     glove_cfg = _glove_file(folder)
-    parts = build_two_hand_parts(rig, glove_cfg, glove_cfg)
+    parts = build_session_parts(rig, glove_cfg, glove_cfg, glove_per_hand=True)
     rec = step_recording()
     recs = {"ri": rec, "le": _shifted(rec, STEP_S / 2)}
     paths = {}
@@ -145,11 +144,11 @@ def run_hands_case(case: HandsCase, seconds: float, folder: Path) -> dict[str, A
             ["glove", str(paths[h]), "--rate", f"{GLOVE_HZ:g}", "--log", str(glove_logs[h])],
             f"the {name} glove emulator")) for h, name in HANDS}
         before = cpu_times()
-        result = run_two_hands(parts, LiveOptions(
+        result = run_live(parts, LiveOptions(
             glove=ports["ri"], glove_left=ports["le"], bus=buses["ri"][0],
             bus_left=buses["le"][0], duration_s=seconds, log=lambda s: None))
         steal = steal_percent(before, cpu_times())
-    n_right = len(parts.sides["ri"].rig_config.servos)
+    n_right = len(parts.hands[0].rig_config.servos)
     hands = {}
     for h, name in HANDS:
         columns = (slice(0, n_right) if h == "ri" else slice(n_right, None)) \

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.pose import kernels
 from handrig.pose.pipeline import PosePipeline
 
@@ -82,7 +82,7 @@ def _with_the_step(pl: PosePipeline) -> Callable[[int], object]:
     return step
 
 
-def _leap_with_sag(parts: app.RigParts) -> PosePipeline:
+def _leap_with_sag(parts: app_parts.RigParts) -> PosePipeline:
     rig, old = parts.rig_config, parts.pipeline
     return PosePipeline(
         parts.expander, parts.sag, old.servo_joints,
@@ -93,8 +93,8 @@ def _leap_with_sag(parts: app.RigParts) -> PosePipeline:
 
 
 def main() -> None:
-    human = app.build_parts().pipeline
-    parts = app.build_parts("leap")
+    human = app_parts.build_parts().pipeline
+    parts = app_parts.build_parts("leap")
     leap = parts.pipeline
     assert leap.robot_path is not None
     u = len(leap.robot_path.curves)
@@ -127,7 +127,7 @@ def _hinges_side_by_side(pl: PosePipeline, rounds: int = 5) -> None:
     without its hinges (linear), alternated in one process: what the hinges cost."""
     linear = dataclasses.replace(pl.expander.map, knots_deg=None, hinge_gains=None)
     with tempfile.TemporaryDirectory() as d:
-        lin = app.build_parts(map_file=linear.save(Path(d) / "linear.toml")).pipeline
+        lin = app_parts.build_parts(map_file=linear.save(Path(d) / "linear.toml")).pipeline
     steps = {"piecewise": _pipeline_step(pl), "linear": _pipeline_step(lin)}
     meds: dict[str, list[float]] = {k: [] for k in steps}
     for _ in range(rounds):

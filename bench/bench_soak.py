@@ -45,7 +45,8 @@ from typing import Any
 import numpy as np
 
 from handrig.app import factory as app
-from handrig.app.session import torque_is_off
+from handrig.app import parts as app_parts
+from handrig.app.session_exit import torque_is_off
 from handrig.clock import MonotonicClock
 from handrig.errors import HandrigError
 from handrig.realtime import pinned_loop, realtime_priority
@@ -286,7 +287,7 @@ def soak(seconds: float, stall_every_s: float, seed: int, record: str,
     """One soak run; returns its figures (what :func:`report` prints). ``mute``:
     ``ID@FROM-UNTIL``, a servo that does not answer for that window."""
     clock = MonotonicClock()
-    parts = app.build_parts()
+    parts = app_parts.build_parts()
     rig_cfg = parts.rig_config
     overload_id = rig_cfg.servos[len(rig_cfg.servos) // 2].id
     faults = f"{BUS_FAULTS},overload={overload_id}@{seconds * 0.4:.1f},seed={seed}"

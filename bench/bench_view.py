@@ -77,7 +77,8 @@ from bench.rig_steps import (
     steal_percent,
     step_recording,
 )
-from handrig.app.factory import build_parts, port_process
+from handrig.app.factory import port_process
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.app.view.process import ViewProcess
 from handrig.devices.glove_recording import write_glove_recording
@@ -353,7 +354,7 @@ def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
             ["bus", "--rig", str(rig_path), "--log", str(bus_log)], "the bus emulator"))
         glove_port, out["glove_fifo"] = stack.enter_context(glove_emulator(
             ["glove", str(rec_path), "--rate", f"{RATE_HZ:g}", "--log", str(glove_log)]))
-        on_rig = None
+        on_hands = None
         pages_cpu: Callable[[], float] = lambda: 0.0  # noqa: E731
         drawn: Callable[[], float] = lambda: 0.0  # noqa: E731
         if with_view:
@@ -363,13 +364,13 @@ def run_round(case: str, seconds: float, folder: Path, rec_path: Path,
                          confined=case == "chromium-confined",
                          off_cpu=case == "chromium-offcpu",
                          full=case == "chromium-full"))
-            on_rig = server.attach_rig
+            on_hands = server.attach_hands
         cpu0, pages0, drawn0 = process_cpu_s(), pages_cpu(), drawn()
         child0 = pid_cpu_s(server.pid) if server else 0.0
         ticks0 = cpu_times()
         t0 = time.monotonic()
         result = run_live(parts, LiveOptions(glove=glove_port, bus=bus_port, duration_s=seconds,
-                                             log=lambda s: None, on_rig=on_rig))
+                                             log=lambda s: None, on_hands=on_hands))
         wall = time.monotonic() - t0
         out["steal_pct"] = steal_percent(ticks0, cpu_times())
         out["cpu_pct"] = 100.0 * (process_cpu_s() - cpu0) / wall

@@ -28,13 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from handrig.cli.calibrate_glove import STEPS
-from handrig.devices.glove_calibration import GloveConfig
+from handrig.devices.glove_calibration import CALIBRATION_STEPS, GloveConfig
 from handrig.devices.glove_recording import GloveRecording
 from handrig.errors import DataError
 from handrig.pose.imu_mount import IMU_STEPS, imu_quaternion
 
-POSE_NAMES: tuple[str, ...] = tuple(name for name, _ in STEPS)
+POSE_NAMES: tuple[str, ...] = tuple(name for name, _ in CALIBRATION_STEPS)
 """The poses in the order ``handrig calibrate glove`` asks for them."""
 IMU_POSE_NAMES: tuple[str, ...] = tuple(name for name, _ in IMU_STEPS)
 """The two forearm poses that follow when the glove has an IMU."""

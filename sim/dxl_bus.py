@@ -34,10 +34,10 @@ from firmware_protocol.dynamixel import (
     find_frame,
     parse_instruction,
 )
-from handrig.app.robots import load_rig
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import RigConfig
 from handrig.errors import ConfigError
+from handrig.pose.robot_rig import load_rig
 from sim.dxl_dispatch import BusStats, Dispatcher, _Reply
 from sim.dxl_faults import FaultSpec
 from sim.dxl_line import BITS_PER_BYTE, SPIN_S, PtyLine, tighten_timer_slack, try_realtime

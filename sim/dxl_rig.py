@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from typing import cast
 
 from firmware_protocol.dynamixel import MODELS
-from handrig.config.rig import RigConfig, ServoModel
+from handrig.config.rig import RigConfig
+from handrig.devices.servo.models import DEFAULT_MODEL, servo_model
 from handrig.errors import ConfigError
 from sim.dxl_servo import EmulatedServo
 
@@ -21,9 +21,8 @@ def with_model(config: RigConfig, model: str) -> RigConfig:
     if model not in MODELS:
         raise ConfigError("unknown servo model", key="model", value=model,
                           allowed=", ".join(MODELS))
-    name = cast(ServoModel, model)
     return dataclasses.replace(config, servos=tuple(
-        dataclasses.replace(s, model=name) for s in config.servos))
+        dataclasses.replace(s, model=model) for s in config.servos))
 
 
 GOAL_POSITION_ADDRESS = 116  # Goal Position (REFERENCE.md section 2)
@@ -58,7 +57,7 @@ def servos_from_rig(
         cal = calibrated.get(servo_id)
         out.append(EmulatedServo(
             servo_id,
-            model or (cal.model if cal else "XL330-M288"),
+            model or (servo_model(cal) if cal else DEFAULT_MODEL),
             baud=bauds.get(servo_id, config.bus.baud),
             start_ticks=float(cal.zero_ticks) if cal else 2048.0,
         ))

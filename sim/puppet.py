@@ -2,7 +2,7 @@
 
 Each calibrated servo of the rig (``config/rig.toml``) drives one joint of the
 hand from :mod:`sim.hand_model` through a MuJoCo ``position`` actuator made to
-behave like an X-series servo. A robot rig (:mod:`handrig.app.robots`, e.g.
+behave like an X-series servo. A robot rig (:mod:`handrig.pose.robot_rig`, e.g.
 ``config/rigs/leap.toml``) drives the joints of its own MJCF model instead
 (``[robot].model``): each servo's joint is found by name, and the model's own
 position actuator on that joint (or one added) is rewired the same way.
@@ -49,10 +49,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_protocol.dynamixel import MODELS, TICKS_PER_TURN, HardwareError, Reg
-from handrig.app.robots import RobotRigConfig
 from handrig.config.rig import RigConfig, ServoCalibration
+from handrig.devices.servo.models import servo_model
 from handrig.errors import ConfigError, HandrigError
 from handrig.hand import DOF_NAMES, Hand
+from handrig.pose.robot_rig import RobotRigConfig
 from sim.dxl_servo import EmulatedServo
 from sim.hand_model import (
     REFERENCE_HAND_LENGTH_M,
@@ -126,7 +127,7 @@ class _HandSim:
             passive = _fallback_passive()
         actuated = {}
         for c in cals:
-            info = MODELS[c.model]
+            info = MODELS[servo_model(c)]
             kp = kp_from_p_gain(info.position_p_gain, info.stall_torque_nm) * c.gear_ratio**2
             armature = ARMATURE_KGM2 * c.gear_ratio**2
             actuated[c.joint] = ActuatorParams(
@@ -151,7 +152,7 @@ class _HandSim:
         self.channels: list[_Channel] = []
         for c in cals:
             jnt = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, c.joint)
-            info = MODELS[c.model]
+            info = MODELS[servo_model(c)]
             self.channels.append(_Channel(
                 c.id, c, actuator_of[c.joint], int(self.model.jnt_qposadr[jnt]),
                 info.stall_torque_nm, info.stall_torque_nm / info.stall_current_a))

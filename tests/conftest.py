@@ -75,6 +75,7 @@ COMPUTE_ONLY = (
     "handrig/devices/test_glove_channel_indices.py", "handrig/test_bounded_inputs.py",
     "sim/test_retarget_fit.py", "handrig/cli/test_retarget_fit_command.py",
     "handrig/loop/test_rig_settings.py",
+    "test_boundaries.py", "handrig/app/test_second_vendor_session.py",
 )
 TESTS = Path(__file__).resolve().parent
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_protocol.glove import FLAG_IMU_ABSENT, FLAG_SENSOR_RAIL
-from handrig.app.factory import ForearmAngles
+from handrig.app.parts import ForearmAngles
 from handrig.devices.glove import GloveSample, GloveStats
 from handrig.devices.glove_calibration import GloveCalibration, GloveConfig
 from handrig.devices.glove_status import channel_label, pinned_channels, status_names

@@ -18,7 +18,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from handrig.app import factory
+from handrig.app import factory, parts
 from handrig.app.takes import check_glove_take_path, open_glove_take
 from handrig.clock import MonotonicClock
 from handrig.devices.glove_calibration import load_glove_config
@@ -36,7 +36,7 @@ def record_glove_take(out: str, *, glove: str | None = None,
     check_glove_take_path(out, "OUT")
     cfg_path = Path(glove_file) if glove_file else None
     cfg = load_glove_config(cfg_path)
-    spec = factory.glove_spec(glove, cfg, cfg_path)
+    spec = parts.glove_spec(glove, cfg, cfg_path)
     clock = MonotonicClock()
     stopped_by = [""]
 

@@ -1,4 +1,9 @@
-"""A two-hand rig's parts: a glove per hand, each hand its own loop ("side").
+"""A session's hands: one (the whole rig, one glove) or a glove per hand, each its own loop.
+
+:func:`build_session_parts` is what every run builds: :class:`SessionParts`, a tuple of
+hands, each a :class:`~handrig.app.parts.RigParts`; one hand is N = 1 (the whole
+rig on one glove). Which hands share a bus is data from the rig file
+(:attr:`SessionParts.buses`: one bus for all unless ``[left_bus]``).
 
 A rig whose ``[[servos]]`` drive joints of both hands, run with a glove per hand
 (``--glove`` and ``--glove-left``, or ``[gloves]`` in the rig file), is two sides
@@ -15,23 +20,23 @@ pipeline where this forearm is (its sag in the full pose the outputs get).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from handrig.app import robots as robotrig
-from handrig.app.factory import (
+from handrig.app.parts import (
     ForearmAngles,
     RigParts,
     _resolve,
+    build_parts,
     control_channels,
     glove_spec,
 )
-from handrig.app.robots import is_two_hand
 from handrig.config.loading import load_joint_limits
-from handrig.config.paths import config_file
 from handrig.config.rig import HAND_NAMES, RigConfig, hand_of_joint, hand_rig
+from handrig.config.rig_files import rig_file_path
 from handrig.devices.glove import GloveSample
 from handrig.devices.glove_calibration import (
     GloveConfig,
@@ -42,8 +47,11 @@ from handrig.devices.glove_calibration import (
 from handrig.errors import ConfigError
 from handrig.hand import mirror_name
 from handrig.loop.ports import FloatArray
+from handrig.loop.rig import Rig
+from handrig.pose import robot_rig as robotrig
 from handrig.pose.expand import DEFAULT_TWO_GLOVE_MAP, Expander
 from handrig.pose.pipeline import PosePipeline
+from handrig.pose.robot_rig import is_two_hand
 from handrig.pose.sag import SagGrid, default_grid_path
 
 GLOVE_FLAGS = {"ri": "--glove", "le": "--glove-left"}
@@ -97,19 +105,61 @@ class SideOrientation:
 
 
 @dataclass
-class TwoHandParts:
-    """The device-free parts of a two-hand run: a side per hand (``"ri"``, ``"le"``),
-    each a :class:`RigParts` with ``hand`` set, and the whole rig."""
+class SessionParts:
+    """The device-free parts of a session: its hands (a :class:`RigParts` each, in
+    order: the right hand first; one hand: the whole rig, ``hand`` None), the whole
+    rig, and the map they read (``shared``: both gloves' controls, with a glove per
+    hand)."""
 
     rig_config: RigConfig
     rig_file: Path
-    sides: dict[str, RigParts]
-    shared: SharedControls
+    hands: tuple[RigParts, ...]
     map_file: Path
+    shared: SharedControls | None = None
+
+    @classmethod
+    def one(cls, parts: RigParts) -> SessionParts:
+        """One hand: the whole rig on one glove."""
+        return cls(parts.rig_config, parts.rig_file, (parts,), parts.map_file or Path())
 
     @property
-    def two_buses(self) -> bool:
-        return self.rig_config.left_bus is not None
+    def buses(self) -> tuple[tuple[int, ...], ...]:
+        """Which hands (indices into :attr:`hands`) share which bus, as the rig file
+        says: one bus for every hand, unless ``[left_bus]`` gives each hand its own."""
+        if len(self.hands) > 1 and self.rig_config.left_bus is not None:
+            return tuple((i,) for i in range(len(self.hands)))
+        return (tuple(range(len(self.hands))),)
+
+    def key(self, i: int) -> str:
+        """Hand ``i``'s key: ``"ri"``, ``"le"``, or ``""`` for the whole rig."""
+        return self.hands[i].hand or ""
+
+    def name(self, i: int) -> str:
+        """Hand ``i`` for a person: ``"right"``, ``"left"``, ``""`` for the whole rig."""
+        return HAND_NAMES.get(self.key(i), "")
+
+
+class AllHands:
+    """The show's controls acting on every hand at once (the keys, the view's buttons,
+    a signal): relax/resume, stop (each eases down), e-stop. Safe from any thread, as
+    each rig's are."""
+
+    def __init__(self, rigs: Sequence[Rig]) -> None:
+        self.rigs = rigs  # filled once the loops are built
+        self.estop_reason = ""  # set before any rig is e-stopped
+
+    def toggle_relax(self) -> None:
+        for rig in self.rigs:
+            rig.toggle_relax()
+
+    def request_stop(self, reason: str = "stop requested") -> None:
+        for rig in self.rigs:
+            rig.request_stop(reason)
+
+    def estop(self, reason: str = "e-stop key") -> None:
+        self.estop_reason = reason
+        for rig in self.rigs:
+            rig.estop(reason)
 
 
 def glove_specs(rig: RigConfig, right: str | None, left: str | None
@@ -118,10 +168,22 @@ def glove_specs(rig: RigConfig, right: str | None, left: str | None
     return (right or rig.gloves.right or None, left or rig.gloves.left or None)
 
 
+def check_gloves(parts: SessionParts, specs: tuple[str | None, ...]) -> tuple[str, ...]:
+    """Each hand's glove spec checked (:func:`handrig.app.parts.glove_spec`; a second
+    glove not the first's port): ConfigError naming the hand's flag. Nothing is
+    opened."""
+    if len(parts.hands) == 1:
+        side = parts.hands[0]
+        return (glove_spec(specs[0], side.glove_config, side.glove_file),)
+    ri, le = parts.hands
+    return check_two_gloves(specs[0] or "", specs[1] or "", ri.glove_config, le.glove_config,
+                            ri.glove_file, le.glove_file)
+
+
 def check_two_gloves(right: str, left: str, cfg_right: GloveConfig, cfg_left: GloveConfig,
                      right_file: Path | None = None, left_file: Path | None = None
                      ) -> tuple[str, str]:
-    """Both gloves' specs checked (:func:`handrig.app.factory.glove_spec`, the message
+    """Both gloves' specs checked (:func:`handrig.app.parts.glove_spec`, the message
     naming ``--glove-left`` for the left), and not the same port twice: ConfigError
     naming both flags. (One recording may be replayed for both hands.) Nothing is
     opened."""
@@ -162,24 +224,33 @@ def _glove_names(cal_curves: tuple[str, ...], wanted: list[str]) -> list[str]:
 
 def side_control_channels(side: RigParts) -> tuple[int, ...]:
     """The raw channel of the side's glove driving each control of its loop (both hands'
-    controls, in the map's order; -1 for the other hand's), for its telemetry."""
+    controls, in the map's order; -1 for the other hand's), for its telemetry; the whole
+    rig on one glove: its channel for each control."""
     controls = side.pipeline.expander.controls
+    if side.hand is None:
+        return control_channels(side.glove_config, controls)
     cal = tuple(c.curve for c in side.glove_config.channels)
     own = [c for c in controls if hand_of_joint(c) == side.hand]
     names = dict(zip(own, _glove_names(cal, own), strict=True))
     return control_channels(side.glove_config, controls, [names.get(c, "") for c in controls])
 
 
-def build_two_hand_parts(rig_file: str | Path | None = None,
-                         glove_file: str | Path | None = None,
-                         left_glove_file: str | Path | None = None, *,
-                         map_file: str | Path | None = None,
-                         grid_file: str | Path | None = None) -> TwoHandParts:
-    """The rig file (or preset) cut into its two hands, each with its glove file
-    (``glove_file`` for the right; ``left_glove_file``, else ``[gloves] left_config``,
-    else the right's for the left), the two-glove map and the sag grid (``map_file``,
-    ``grid_file``: a show file's, instead of the rig file's)."""
-    rig_path = robotrig.rig_path(rig_file) if rig_file else config_file("rig.toml")
+def build_session_parts(rig_file: str | Path | None = None,
+                        glove_file: str | Path | None = None,
+                        left_glove_file: str | Path | None = None, *,
+                        glove_per_hand: bool = False,
+                        map_file: str | Path | None = None,
+                        grid_file: str | Path | None = None) -> SessionParts:
+    """The hands of a session on the rig file (or preset): the whole rig on one glove
+    (:func:`handrig.app.parts.build_parts`), or with ``glove_per_hand`` the rig cut
+    into its two hands, each with its glove file (``glove_file`` for the right;
+    ``left_glove_file``, else ``[gloves] left_config``, else the right's for the
+    left), the two-glove map and the sag grid (``map_file``, ``grid_file``: a show
+    file's, instead of the rig file's)."""
+    if not glove_per_hand:
+        one = build_parts(rig_file, glove_file, map_file=map_file, grid_file=grid_file)
+        return SessionParts.one(one)
+    rig_path = rig_file_path(rig_file)
     rig = robotrig.load_rig(rig_path)
     if not is_two_hand(rig):
         raise ConfigError("a glove per hand needs a rig with servos for both hands",
@@ -228,7 +299,7 @@ def build_two_hand_parts(rig_file: str | Path | None = None,
         orientations[h] = orientation
         sides[h] = RigParts(side, rig_path, cfg, expander, sag, pipeline,
                             SideControls(glove_controls, shared, slots[h]), orientation,
-                            gpath, hand=h)
+                            gpath, hand=h, map_file=map_file)
     orientations["ri"].other = sides["le"].pipeline
     orientations["le"].other = sides["ri"].pipeline
-    return TwoHandParts(rig, rig_path, sides, shared, map_file)
+    return SessionParts(rig, rig_path, (sides["ri"], sides["le"]), map_file, shared)

@@ -29,23 +29,15 @@ from rich.console import Console, Group
 from rich.live import Live
 from rich.text import Text
 
-from firmware_protocol.dynamixel import HardwareError
 from handrig.app.keys import SHOW_KEYS
-from handrig.config.rig import TEMPERATURE_LIMIT_C
+from handrig.devices.servo.models import temperature_limit_c
+from handrig.devices.servo.registers import HARDWARE_ERROR_LETTERS
 
 WIDTH = 80
 HEIGHT = 24
 SERVO_COLUMNS = 2
 NAN = math.nan
 
-HARDWARE_ERROR_LETTERS: tuple[tuple[int, str], ...] = (
-    (HardwareError.INPUT_VOLTAGE, "V"),
-    (HardwareError.OVERHEATING, "H"),
-    (HardwareError.MOTOR_ENCODER, "E"),
-    (HardwareError.ELECTRICAL_SHOCK, "S"),
-    (HardwareError.OVERLOAD, "L"),
-)
-"""Hardware Error Status bits as the panel's letters (the legend is on the panel)."""
 
 MODE_STYLES = {"running": "bold green", "waiting": "bold cyan", "relaxing": "bold yellow",
                "resuming": "bold cyan", "stopping": "bold red", "e-stop": "bold white on red",
@@ -471,8 +463,7 @@ class LivePanel:
 def heat_colours(rig_cfg: Any) -> dict[str, Any]:
     """The panel's temperature colours for a rig (RigSnapshot's keywords): each servo's
     Temperature Limit by its model, and the rig's [heat] warn and act tiers."""
-    return {"temperature_limit_c": {s.id: TEMPERATURE_LIMIT_C.get(s.model, math.nan)
-                                    for s in rig_cfg.servos},
+    return {"temperature_limit_c": {s.id: temperature_limit_c(s) for s in rig_cfg.servos},
             "heat_c": (rig_cfg.heat.warn_c, rig_cfg.heat.act_c)}
 
 

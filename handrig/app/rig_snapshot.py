@@ -138,14 +138,13 @@ class RigSnapshot:
                        glove_path, glove_frames)
 
 
-
 HAND_LABELS = {"ri": "right", "le": "left"}
 
 
 class HandsSnapshot:
-    """The panel of a two-hand run: a line per hand (its mode, glove and latency), the
-    servos of both, the first hand's bus and outputs (the second's bus when it has its
-    own is named in its line), the events of both. ``sides``: hand -> the hand's
+    """The panel of a session's hands: with several, a line per hand (its mode, glove
+    and latency), the servos of all, the first hand's bus and outputs, the events of
+    all; with one, that hand's panel as it is. ``sides``: hand -> the hand's
     :class:`RigSnapshot`, right first."""
 
     def __init__(self, sides: Mapping[str, RigSnapshot], *, keys: bool = False,
@@ -157,6 +156,8 @@ class HandsSnapshot:
     def __call__(self) -> PanelSnapshot:
         snaps = {h: side() for h, side in self.sides.items()}
         first = next(iter(snaps.values()))
+        if len(snaps) == 1:
+            return first
         modes = {s.mode for s in snaps.values()}
         mode = first.mode if len(modes) == 1 else "/".join(s.mode for s in snaps.values())
         reasons = [f"{HAND_LABELS.get(h, h)}: {s.reason}" for h, s in snaps.items()

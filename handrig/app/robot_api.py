@@ -30,12 +30,14 @@ from types import TracebackType
 import numpy as np
 
 from handrig import hand
-from handrig.app.factory import build_parts, servo_bus
-from handrig.app.robots import RobotRigConfig, rig_path, robot_retarget
-from handrig.app.session import torque_is_off
+from handrig.app.factory import servo_bus
+from handrig.app.parts import build_parts
+from handrig.app.session_exit import torque_is_off
 from handrig.clock import Clock, MonotonicClock
-from handrig.devices.servo.dynamixel import DynamixelBus
+from handrig.config.rig_files import rig_file_path
+from handrig.devices.servo.bus import ServoBus
 from handrig.errors import ConfigError, HandrigError
+from handrig.pose.robot_rig import RobotRigConfig, robot_retarget
 
 READ_BUDGET_S = 0.1
 """How long a read the caller asked for (:meth:`RobotHand.present_deg`, the reading
@@ -62,7 +64,7 @@ class RobotHand:
         config = self._parts.rig_config
         if not isinstance(config, RobotRigConfig) or config.robot is None:
             raise ConfigError("not a robot rig: it has no [robot] table",
-                              file=str(rig_path(rig)),
+                              file=str(rig_file_path(rig)),
                               allowed="a robot hand preset ('leap', 'orca') or rig file")
         self.rig = config
         self._retarget = robot_retarget(config)
@@ -76,7 +78,7 @@ class RobotHand:
         self._clock = clock or MonotonicClock()
         self._log = log
         self._stack: contextlib.ExitStack | None = None
-        self._bus: DynamixelBus | None = None
+        self._bus: ServoBus | None = None
         self._last_deg: np.ndarray | None = None
         self._last_t = 0.0
         self.torque_off_confirmed: bool | None = None
@@ -119,7 +121,7 @@ class RobotHand:
         if stack is not None:
             stack.close()
 
-    def _confirm_torque_off(self, bus: DynamixelBus) -> None:
+    def _confirm_torque_off(self, bus: ServoBus) -> None:
         self.torque_off_confirmed = torque_is_off(bus)
 
     # ---------------------------------------------------------------- driving
@@ -166,7 +168,7 @@ class RobotHand:
 
     # ---------------------------------------------------------------- helpers
 
-    def _open_bus(self) -> DynamixelBus:
+    def _open_bus(self) -> ServoBus:
         if self._bus is None:
             raise HandrigError("the robot hand is not open: use it in a `with RobotHand(...)` "
                                "block")

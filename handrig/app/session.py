@@ -1,57 +1,90 @@
-"""One live session: devices opened, torque on, the loop run, torque off, figures out.
+"""One live session for any number of hands: devices opened, torque on, the loops run,
+torque off, figures out.
 
-Shared by ``handrig run`` and ``handrig demo``. The factory (:mod:`handrig.app.factory`)
-opens the glove, the servo bus (with its emulator for ``"sim"``) and the outputs
-and builds the rig; this module commissions the servos, runs the rig inside the
-bus's torque context, and checks afterwards, by reading every servo's Torque
-Enable, that torque is off. A session always returns its summary, with the error
-in it when there was one.
+Shared by ``handrig run``, ``demo`` and ``play``. The factory (:mod:`handrig.app.factory`)
+opens the gloves, the servo buses (with their emulators for ``"sim"``) and the outputs;
+:mod:`handrig.app.hands` says what the hands are (:class:`SessionParts`: one hand, the
+whole rig on one glove, is N = 1; or a glove per hand). Each hand is its own
+:class:`~handrig.loop.rig.Rig` on a :class:`~handrig.devices.servo.bus.ServoBus`: the
+first in the caller's thread, the others each in a thread of its own. Hands share a
+bus (through :class:`~handrig.devices.servo.shared.SharedBus`, one writer at a time)
+or have one each, as the rig file says (``[left_bus]``). The session speaks to the
+buses through the ``ServoBus`` contract only: connect, torque, the servos left out,
+what connect did, and at the end the torque read back (``confirm_torque_off``). A
+session always returns its summary, with the error in it when there was one.
 
-Every way a user ends a run is handled alike (:class:`ExitSignals`): Ctrl-C
-(SIGINT), SIGTERM, SIGHUP (the terminal or the SSH session closed) and SIGQUIT.
-Before the rig is ready a signal unwinds (devices closed, emulators stopped,
-torque never on). While it runs, the first signal eases to the relaxed pose and
-stops, a second stops at the next cycle, a third raises at once (torque still
-goes off on the way out). During torque-off and shutdown signals are counted and
-ignored. The emulators run in sessions of their own, so a Ctrl-C reaches the rig
-alone and they are stopped after torque is off.
+What is per hand: a glove lost, garbled or silent relaxes that hand only and it
+resumes on its own; a servo's silence acts on its hand. What is for every hand: the
+keys (space relaxes, q stops, e is the e-stop), a signal
+(:class:`~handrig.app.session_exit.ExitSignals`), a glove's e-stop button (the other
+hands ease and stop too), a loop's failure (the others stop at once), torque (on for
+every servo before any loop starts, off for every servo on every way out), the
+outputs (VMC and the recording are fed by the first hand's loop, which sends the full
+pose). The summary is the first hand's figures, with a part per hand when there are
+several, each of the same shape. The emulators run in sessions of their own, so a
+Ctrl-C reaches the rig alone and they are stopped after torque is off.
 """
 
 from __future__ import annotations
 
 import contextlib
-import gc
-import signal
+import dataclasses
 import sys
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from types import FrameType, TracebackType
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.app import takes
-from handrig.app.factory import RigParts
+from handrig.app.factory import OpenedBus
+from handrig.app.hands import AllHands, SessionParts, check_gloves, side_control_channels
+from handrig.app.parts import RigParts
+from handrig.app.session_exit import (
+    READBACK_BUDGET_S,
+    ExitSignals,
+    is_terminal,
+    never_raises,
+)
+from handrig.app.summary import (
+    clamp_advice,
+    clamped_joints,
+    format_hands_summary,
+    format_summary,
+    outputs_summary,
+    summary_dict,
+)
 from handrig.clock import Clock, MonotonicClock
+from handrig.config.rig import hand_of_joint
 from handrig.devices.glove import GloveSource
-from handrig.devices.servo import DynamixelBus
-from handrig.devices.servo.registers import Reg
-from handrig.errors import DeviceError, HandrigError, SafetyStop
+from handrig.devices.servo.bus import ServoBus
+from handrig.devices.servo.shared import SharedBus
+from handrig.errors import ConfigError, DeviceError, HandrigError
+from handrig.loop.modes import Mode
+from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
 from handrig.realtime import pinned_loop, realtime_priority
 
-EXIT_SIGNALS: tuple[signal.Signals, ...] = tuple(
-    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
-    if hasattr(signal, name))
+SWITCH_INTERVAL_S = 0.0005
+"""The interpreter's thread switch interval while several loops run: a loop woken by
+its glove waits at most this long for another loop to hand over the interpreter
+(Python's default, 5 ms, is a whole glove period)."""
+NUMBER_WORDS = {1: "one", 2: "two"}
+
+BusOpener = Callable[..., contextlib.AbstractContextManager[OpenedBus]]
+"""How a session opens a bus: :func:`handrig.app.factory.servo_bus`'s signature (the
+spec, the hand's parts, the clock, and its keywords)."""
 
 
 @dataclass
 class LiveOptions:
     glove: str | None = None  # PORT, opengloves:PORT, replay:FILE (None: glove.toml)
-    glove_left: str | None = None  # a two-hand rig's left glove (handrig.app.two_hands)
-    bus_left: str | None = None  # a two-hand rig's left bus, with [left_bus] (None: its port)
+    glove_left: str | None = None  # with a glove per hand: the left hand's glove
+    bus_left: str | None = None  # a rig with [left_bus]: the left hand's bus (None: its port)
     show: str = ""  # the show file's name, for the panel (handrig run --show)
     recorded: str = ""  # the recording an emulated glove on ``glove`` streams (handrig demo)
     bus: str | None = None  # PORT or "sim" (None: rig.toml)
@@ -63,7 +96,7 @@ class LiveOptions:
     record: str | None = None
     record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
-    record_glove_left: str | None = None  # a two-hand run's left glove take
+    record_glove_left: str | None = None  # with a glove per hand: the left glove's take
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
     # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
     # show never starts with a jump (run, demo, play); False: straight to the first goal
@@ -78,18 +111,27 @@ class LiveOptions:
     verbose: bool = False  # log every commissioning step
     profile: bool = False  # time the critical path's stages (bench_rig)
     log: Callable[[str], None] = field(default=lambda text: print(text, file=sys.stderr))
-    on_rig: Callable[[Any], None] | None = None  # given the rig once built (the --view)
-    # a two-hand run (app/two_hands.py) instead: both hands' rigs by hand and the
-    # controls that act on both, as the keys do (the --view)
-    on_hands: Callable[[Mapping[str, Any], Any], None] | None = None
+    # given the hands' loops once built, by hand key ("ri", "le"; "" for the whole rig
+    # on one glove), and the controls that act on every hand as the keys do (the --view)
+    on_hands: Callable[[Mapping[str, Rig], AllHands], None] | None = None
+
+    def gloves(self) -> tuple[str | None, str | None]:
+        """Each hand's glove spec, right first."""
+        return self.glove, self.glove_left
+
+    def glove_takes(self) -> tuple[tuple[str, str | None], tuple[str, str | None]]:
+        """Each hand's glove take asked for: (its flag, its path or None)."""
+        return ("--record-glove", self.record_glove), ("--record-glove-left",
+                                                        self.record_glove_left)
 
 
 @dataclass
 class LiveResult:
-    """``summary``: the figures (:func:`handrig.app.factory.summary_dict`, plus ``error`` when the
-    session ended with one); ``started``: whether the rig got as far as torque-on;
-    ``snapshots``: present positions kept every ``snapshot_every`` frames, taken at
-    ``snapshot_times_s`` (seconds since the loop started)."""
+    """``summary``: the figures (:func:`handrig.app.summary.summary_dict`, plus ``error``
+    when the session ended with one); ``started``: whether the rig got as far as
+    torque-on; ``snapshots``: present positions (every hand's, in hand order) kept every
+    ``snapshot_every`` frames, taken at ``snapshot_times_s`` (seconds since the loop
+    started)."""
 
     summary: dict[str, Any]
     snapshots: list[np.ndarray]
@@ -100,463 +142,418 @@ class LiveResult:
     snapshot_times_s: list[float] = field(default_factory=list)  # of each snapshot
 
 
-READBACK_BUDGET_S = 1.5  # reading Torque Enable back at exit: a silent servo costs 0.4 s
-
-
-def torque_is_off(bus: DynamixelBus) -> bool | None:
-    """Read Torque Enable back from every servo: True if all are off, None if unreadable."""
-    return torque_readback(bus)[0]
-
-
-def torque_readback(bus: DynamixelBus) -> tuple[bool | None, list[str]]:
-    """Torque Enable read back from every servo given torque: (True if every one reads
-    0, False if one reads 1, None if one could not be read; the servos not confirmed
-    off, each named with why). A port that stopped draining is not asked at all, and
-    the reads stop at ``READBACK_BUDGET_S`` (the servos not asked are named). A servo
-    left out at start-up is asked too, its silence no failure."""
-    left_out = set(bus.left_out)
-    given = [i for i in range(bus.n_servos) if i not in left_out]
-    if bus.port_stalled:
-        return None, [f"{bus.describe(i)}: not read back (servo port {bus.port} stopped "
-                      "draining)" for i in given]
-    unconfirmed: list[str] = []
-    on = unread = False
-    end = bus.clock.now() + READBACK_BUDGET_S
-    for i in range(bus.n_servos):
-        if bus.clock.now() >= end:
-            if i not in left_out:
-                unread = True
-                unconfirmed.append(f"{bus.describe(i)}: not read back (the "
-                                   f"{READBACK_BUDGET_S:g} s went on the servos before)")
-            continue
-        try:
-            value = bus.read_register(i, Reg.TORQUE_ENABLE)
-        except HandrigError as exc:
-            if i not in left_out:
-                unread = True
-                unconfirmed.append(f"{bus.describe(i)}: not read back ({exc})")
-            continue
-        if value != 0:
-            on = True
-            unconfirmed.append(f"{bus.describe(i)}: torque still on")
-    return (False if on else None if unread else True), unconfirmed
-
-
-class ExitSignals:
-    """SIGINT, SIGTERM, SIGHUP and SIGQUIT, handled alike for one session (main thread
-    only; elsewhere nothing is installed). See the module docstring for what each
-    phase does with them: :meth:`arm` when the rig can be asked to stop, :meth:`disarm`
-    when the loop is over."""
-
-    def __init__(self) -> None:
-        self.received = 0
-        self.last = ""
-        self._stop: Callable[[str], None] | None = None
-        self._ignoring = False
-        self._while_armed = 0
-        self._saved: dict[int, Any] = {}
-
-    def __enter__(self) -> ExitSignals:
-        if threading.current_thread() is threading.main_thread():
-            for sig in EXIT_SIGNALS:
-                self._saved[sig] = signal.signal(sig, self._handler)
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        for sig, old in self._saved.items():
-            signal.signal(sig, old)
-        self._saved.clear()
-
-    def arm(self, stop: Callable[[str], None]) -> None:
-        """From now on a signal calls ``stop(reason)`` (twice at most), then raises."""
-        self._stop = stop
-
-    def disarm(self) -> None:
-        """The loop is over: torque-off and shutdown must finish; signals are ignored."""
-        self._stop = None
-        self._ignoring = True
-
-    def _handler(self, signum: int, frame: FrameType | None) -> None:
-        name = signal.Signals(signum).name
-        self.received += 1
-        self.last = name
-        if self._ignoring:
-            return
-        if self._stop is None:
-            raise SafetyStop(f"{name} received before the rig started: stopped, torque was off")
-        self._while_armed += 1
-        if self._while_armed <= 2:
-            self._stop(f"{name} received")
-            return
-        raise SafetyStop(f"{name} received again: stopping the servos with torque off")
-
-
-def _is_terminal(stream: Any) -> bool:
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, OSError, ValueError):
-        return False
-
-
-def _never_raises(log: Callable[[str], None]) -> Callable[[str], None]:
-    """``log`` that drops a line it cannot write (the terminal closed: SIGHUP)."""
-    def safe(text: str) -> None:
-        with contextlib.suppress(OSError, ValueError):
-            log(text)
-    return safe
-
-
-def run_live(parts: RigParts, opts: LiveOptions, clock: Clock | None = None) -> LiveResult:
-    """Run the rig once with ``parts`` and ``opts``; returns the summary, also when the
-    session failed (``result.error``)."""
+def run_live(parts: RigParts | SessionParts, opts: LiveOptions, clock: Clock | None = None,
+             *, open_bus: BusOpener | None = None) -> LiveResult:
+    """Run the session once with ``parts`` (a :class:`RigParts`: one hand) and ``opts``;
+    returns the summary, also when the session failed (``result.error``). ``open_bus``:
+    where the buses come from (default :func:`handrig.app.factory.servo_bus`)."""
+    hands = parts if isinstance(parts, SessionParts) else SessionParts.one(parts)
     with ExitSignals() as signals:
-        return _Session(parts, opts, clock or MonotonicClock(), signals).run()
+        return _Session(hands, opts, clock or MonotonicClock(), signals,
+                        open_bus or app.servo_bus).run()
 
 
 class _Session:
-    def __init__(self, parts: RigParts, opts: LiveOptions, clock: Clock,
-                 signals: ExitSignals) -> None:
+    def __init__(self, parts: SessionParts, opts: LiveOptions, clock: Clock,
+                 signals: ExitSignals, open_bus: BusOpener) -> None:
         self.parts, self.opts, self.clock, self.signals = parts, opts, clock, signals
-        self.log = _never_raises(opts.log)
-        self.stats = RunStats()
-        self.bus_stats: Any = None
-        self.glove_stats: Any = None
-        self.torque_off: bool | None = None
-        self.torque_unconfirmed: list[str] = []  # servos whose torque-off was not read back
-        self.stages: dict[str, dict[str, float]] | None = None
+        self.open_bus = open_bus
+        self.log = never_raises(opts.log)
+        n = self.n = len(parts.hands)
+        self.rigs: list[Rig] = []
+        self.stats = [RunStats() for _ in range(n)]
+        self.glove_stats: list[Any] = [None] * n
+        self.bus_stats: list[Any] = [None] * n  # each hand's bus's counters (shared: the same)
+        self.bus_of: list[int] = [-1] * n  # each hand's bus (an index into self.opened)
+        self.opened: list[OpenedBus] = []
+        self.torque_off: dict[int, bool | None] = {}  # per bus (index), read back
+        self.unconfirmed: list[list[str]] = [[] for _ in range(n)]  # torque-off not read
+        self.left_out: list[list[str]] = [[] for _ in range(n)]  # silent at start-up
+        self.admitted: list[list[str]] = [[] for _ in range(n)]  # of those, answered later
+        self._left_at_start: list[tuple[int, ...]] = []  # per bus
+        self.stages: list[dict[str, dict[str, float]] | None] = [None] * n
+        self.outputs: list[list[Any]] = [[] for _ in range(n)]  # each hand's loop's
         self.snapshots: list[np.ndarray] = []
         self.snapshot_times_s: list[float] = []
-        self.outputs: list[Any] = []  # the VMC sender and recorder (closed by the end)
-        self.ease_s = 0.0  # the easing to relaxed that ended the run
-        self.left_out: list[str] = []  # servos that did not answer at start-up, left out
-        self._left_at_start: tuple[int, ...] = ()
-        self.admitted: list[str] = []  # of those, the ones admitted when they answered
+        self.ease_s = [0.0] * n  # the easing to relaxed that ended each hand's run
+        self.errors: dict[int, BaseException] = {}
         self.panel: Any = None  # the LivePanel while it is up
         self.started = False
+        self.all = AllHands(self.rigs)
+        self.specs: tuple[str, ...] = ()  # each hand's glove, checked
 
+    # -- the session --------------------------------------------------------------------
     def run(self) -> LiveResult:
         error: HandrigError | None = None
-        opened: app.OpenedBus | None = None
         try:
-            # the checks that need no hardware, before the bus is opened and commissioned
-            if self.opts.take is None:
-                app.glove_spec(self.opts.glove, self.parts.glove_config, self.parts.glove_file)
-            app.check_outputs(self.opts.vmc, self.opts.record)
-            if self.opts.record_glove:
-                takes.check_glove_take_path(self.opts.record_glove, record=self.opts.record)
+            # the checks that need no hardware, before a bus is opened and commissioned
+            specs = self._check_gloves()
+            app_parts.check_outputs(self.opts.vmc, self.opts.record)
+            self._check_glove_takes()
             with contextlib.ExitStack() as stack:
-                opened = stack.enter_context(app.servo_bus(
-                    self.opts.bus, self.parts, self.clock, wire_timing=self.opts.wire_timing,
-                    viewer=self.opts.viewer, faults=self.opts.sim_faults, log=self.log,
-                    started=self.opts.started))
-                error = self._devices_open(stack, opened.bus)
+                self._open_buses(stack)
+                error = self._devices_open(stack, specs)
         except HandrigError as exc:
             error = error or exc
         except OSError as exc:  # a device call the driver did not wrap: still a summary
             error = error or DeviceError(f"{type(exc).__name__}: {exc}")
-        outputs = app.outputs_summary(self.outputs, self.stats.duration_s)
-        summary = app.summary_dict(self.stats, self.bus_stats, self.glove_stats,
-                                   self.torque_off, outputs=outputs,
-                                   clamped=app.clamped_joints(self.parts.pipeline),
-                                   ease_s=self.ease_s)
-        glove = self.opts.glove or ""
-        recorded = self.opts.recorded or (
-            glove.removeprefix("replay:") if glove.startswith("replay:") else "")
-        summary["clamp_advice"] = clamp_advice(summary, recorded, self.parts.expander.controls,
-                                               self.parts.expander.training_range())
-        if self.stages:
-            summary["stages_us"] = self.stages
-        if self.signals.received:
-            summary["signals"] = self.signals.received
-        if self.opts.show:
-            summary["show"] = self.opts.show
-        if self.left_out:
-            summary["servos_left_out"] = self.left_out
-        if self.admitted:
-            summary["servos_admitted"] = self.admitted
-        if self.torque_unconfirmed:
-            summary["torque_off_unconfirmed"] = self.torque_unconfirmed
-        if error is not None:
-            summary["error"] = str(error)
-        return LiveResult(summary, self.snapshots,
-                          tuple(s.joint for s in self.parts.rig_config.servos),
-                          opened.emulator_output() if opened is not None else "",
-                          error, self.started, self.snapshot_times_s)
+        return self._result(error)
 
-    def _devices_open(self, stack: contextlib.ExitStack, bus: DynamixelBus
-                      ) -> HandrigError | None:
-        """With the bus open: the glove, commissioning, the outputs, the rig, the run.
-        Returns the error the run ended with (torque is off by then)."""
+    def _check_gloves(self) -> tuple[str, ...]:
+        if self.opts.take is None:
+            return check_gloves(self.parts, self.opts.gloves()[:self.n])
+        if self.n > 1:
+            raise ConfigError("a take is played as one glove", key="take",
+                              allowed="a rig on one glove")
+        return (self.opts.glove or "",)
+
+    def _glove_takes(self) -> dict[int, tuple[str, str]]:
+        """hand -> (flag, path) of the glove takes asked for."""
+        return {i: (flag, path) for i, (flag, path) in enumerate(self.opts.glove_takes())
+                if path and i < self.n}
+
+    def _check_glove_takes(self) -> None:
+        """Before any bus opens: each take a new .csv, not the performance's, not another
+        hand's (ConfigError naming the flag)."""
+        seen: dict[Path, str] = {}
+        for flag, path in self._glove_takes().values():
+            takes.check_glove_take_path(path, flag, record=self.opts.record)
+            where = Path(path).resolve()
+            if where in seen:
+                raise ConfigError(f"the same file as {seen[where]}", key=flag, value=path,
+                                  allowed="a file of its own: a glove take per hand")
+            seen[where] = flag
+
+    def _open_buses(self, stack: contextlib.ExitStack) -> None:
+        """The buses, opened (not yet connected), as the rig file groups the hands."""
+        opts, parts = self.opts, self.parts
+        specs = (opts.bus, opts.bus_left)
+        for b, group in enumerate(parts.buses):
+            if len(group) == 1:
+                on, spec = parts.hands[group[0]], specs[group[0]]
+            else:  # the whole rig's servos on one bus
+                on = dataclasses.replace(parts.hands[0], rig_config=parts.rig_config,
+                                         hand=None)
+                spec = opts.bus
+            log = self._prefixed(group[0]) if len(parts.buses) > 1 else self.log
+            self.opened.append(stack.enter_context(self.open_bus(
+                spec, on, self.clock, wire_timing=opts.wire_timing, viewer=opts.viewer,
+                faults=opts.sim_faults, log=log, started=opts.started)))
+            for i in group:
+                self.bus_of[i] = b
+
+    def _prefixed(self, i: int) -> Callable[[str], None]:
+        name = self.parts.name(i)
+        return lambda text: self.log(f"{name} hand: {text}")
+
+    def _mine(self, i: int, bus: ServoBus) -> list[int]:
+        """The servos (bus indices) of hand ``i`` on its bus."""
+        key = self.parts.key(i)
+        shared = len(self.parts.buses[self.bus_of[i]]) > 1
+        return [k for k, j in enumerate(bus.joint_names)
+                if not shared or hand_of_joint(j) == key]
+
+    def _connect(self, stack: contextlib.ExitStack) -> tuple[list[ServoBus], list[str]]:
+        """Every bus connected (commissioned); each hand's bus (a shared bus cut into its
+        hands' parts), and the header lines."""
         opts, parts, log = self.opts, self.parts, self.log
-        glove = (opts.take(self.clock) if opts.take is not None else
-                 app.open_glove(opts.glove, parts.glove_config, self.clock, parts.glove_file))
-        stack.enter_context(glove)
-        stack.callback(self._glove_figures, glove)
-        bus.connect()
-        stack.callback(self._bus_figures, bus)  # after torque-off, before the bus closes
-        left_out = self._left_at_start = bus.left_out
-        self.left_out = [bus.describe(i) for i in left_out]
-        header = [f"servo bus {bus.port}: {len(parts.rig_config.servos) - len(left_out)} "
-                  f"servos commissioned ({len(bus.commissioning)} settings checked or "
-                  "changed)"]
-        if left_out and not opts.verbose:  # said once (verbose: the commissioning note)
-            log(f"{', '.join(self.left_out)} did not answer at start-up: the run goes on "
-                "without it ([silence] action continue); it gets no goal and no torque "
-                "until it answers and is commissioned")
-        if opts.verbose:
-            header[:0] = bus.commissioning
+        header: list[str] = []
+        hand_buses: list[ServoBus | None] = [None] * self.n
+        for b, opened in enumerate(self.opened):
+            bus = opened.bus
+            bus.connect()
+            stack.callback(self._bus_figures, b)  # after torque-off, before the bus closes
+            left_out = bus.left_out
+            self._left_at_start.append(left_out)
+            group = parts.buses[b]
+            for i in group:
+                mine = set(self._mine(i, bus))
+                self.left_out[i] = [bus.describe(k) for k in left_out if k in mine]
+            if left_out and not opts.verbose:  # said once (verbose: the commissioning note)
+                log(f"{', '.join(bus.describe(k) for k in left_out)} did not answer at "
+                    "start-up: the run goes on without it ([silence] action continue); it "
+                    "gets no goal and no torque until it answers and is commissioned")
+            if opts.verbose:
+                header += bus.connect_notes
+            header.append(f"servo bus {bus.port}: {bus.n_servos - len(left_out)} servos "
+                          f"commissioned ({len(bus.connect_notes)} settings checked or "
+                          "changed)")
+            if len(group) == 1:
+                hand_buses[group[0]] = bus
+                continue
+            shared = SharedBus(bus, self.clock)
+            for i in group:
+                hand_buses[i] = shared.part(self._mine(i, bus))
+        if self.n > 1:
+            gloves = ", ".join(f"{parts.name(i)} glove {spec}"
+                               for i, spec in enumerate(self.specs))
+            first = self.opened[0].bus
+            header.append(f"{NUMBER_WORDS.get(self.n, str(self.n))} hands: {gloves}; map "
+                          f"{parts.map_file.name}; "
+                          + ("a bus each, a writer each" if len(self.opened) > 1
+                             else f"one bus at {first.baud} baud, shared"))
+        buses = [b for b in hand_buses if b is not None]
+        if len(buses) != self.n:
+            raise DeviceError("a hand has no bus: the rig file's buses and hands disagree")
+        return buses, header
+
+    def _devices_open(self, stack: contextlib.ExitStack, specs: tuple[str, ...]
+                      ) -> HandrigError | None:
+        """With the buses open: the gloves, commissioning, the outputs, the loops, the
+        run. Returns the error the run ended with (torque is off by then)."""
+        opts, parts, log = self.opts, self.parts, self.log
+        self.specs = specs
+        gloves = []
+        for i, side in enumerate(parts.hands):
+            glove = (opts.take(self.clock) if opts.take is not None else
+                     app.open_glove(specs[i], side.glove_config, self.clock, side.glove_file))
+            stack.enter_context(glove)
+            stack.callback(self._glove_figures, i, glove)
+            gloves.append(glove)
+        buses, header = self._connect(stack)
         if not opts.panel:
             for line in header:
                 log(line)
-        outputs = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
-                              record=opts.record, log=log,
-                              glove_rate_hz=parts.glove_config.glove.rate_hz,
-                              record_rate_hz=opts.record_rate_hz)
-        if opts.record_glove:
-            take = takes.open_glove_take(opts.record_glove, glove, parts.glove_config,
-                                         source=opts.glove or glove.name, log=log,
+        first = parts.hands[0]
+        self.outputs[0] = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
+                                      record=opts.record, log=log,
+                                      glove_rate_hz=first.glove_config.glove.rate_hz,
+                                      record_rate_hz=opts.record_rate_hz)
+        for i, (_, path) in self._glove_takes().items():
+            take = takes.open_glove_take(path, gloves[i], parts.hands[i].glove_config,
+                                         source=opts.gloves()[i] or gloves[i].name, log=log,
                                          from_first_output=True)
-            stack.callback(lambda: log(f"glove take: {take.close()}"))
-            outputs.append(take)
-        rig = app.build_rig(parts, glove, bus, self.clock, outputs=outputs, log=self._rig_log,
-                            profile=opts.profile, ease_in=opts.ease_in)
-        self.outputs = list(outputs)
-        self.stats = rig.stats
-        if opts.on_rig is not None:
-            opts.on_rig(rig)
-        if opts.snapshot_every > 0:
-            rig.outputs = (*rig.outputs, self._snapshots(rig, opts.snapshot_every))
-        rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
-        stack.callback(gc.unfreeze)  # also when torque-on fails and the loop never runs
-        loop = parts.rig_config.loop
-        self.signals.arm(rig.request_stop)
+            what = " ".join(w for w in (parts.name(i), "glove take") if w)
+            stack.callback(_close_take, take, what, log)
+            self.outputs[i].append(take)
+        for i, side in enumerate(parts.hands):
+            rig = Rig.from_config(
+                side.rig_config, gloves[i], buses[i], side.pipeline, self.clock,
+                controls_from_raw=side.controls, orientation=side.orientation,
+                outputs=self.outputs[i], log=self._hand_log(i), profile=opts.profile,
+                ease_in=opts.ease_in, raw_channels=side_control_channels(side))
+            self.rigs.append(rig)
+            self.stats[i] = rig.stats
+        if opts.on_hands is not None:
+            opts.on_hands({parts.key(i): rig for i, rig in enumerate(self.rigs)}, self.all)
+        if opts.snapshot_every > 0:  # on the first hand's loop: every hand's positions
+            first_rig = self.rigs[0]
+            first_rig.outputs = (*first_rig.outputs, self._snapshots(opts.snapshot_every))
+        for rig in self.rigs:
+            rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
+        stack.callback(_unfreeze)  # also when torque-on fails and the loop never runs
+        if opts.panel:  # loaded now: an import under torque delays the first goals
+            import handrig.app.keys
+            import handrig.app.panel
+            import handrig.app.rig_snapshot  # noqa: F401
+        self.signals.arm(self.all.request_stop)
+        return self._under_torque(header)
+
+    def _under_torque(self, header: list[str]) -> HandrigError | None:
+        """Torque on for every bus, the loops run, torque off on every way out."""
+        old_switch = sys.getswitchinterval()
         try:
-            # the Rig starts from bus.last_goals_deg: where torque-on holds every servo
-            with bus.torque(handle_signals=False):
+            # each Rig starts from its bus's last_goals_deg: where torque-on holds it
+            with contextlib.ExitStack() as torque:
+                for opened in self.opened:
+                    torque.enter_context(opened.bus.torque(handle_signals=False))
                 self.started = True
                 try:
-                    with (self._console(rig, header) if opts.panel else contextlib.nullcontext(),
-                          pinned_loop(loop.pin_cpu, self._rig_log),
-                          realtime_priority(loop.realtime_priority, self._rig_log)):
-                        rig.run(frames=opts.frames, duration_s=opts.duration_s,
-                                done_reason=opts.done_reason)
-                    self.ease_s = 0.0 if rig.machine.stop_now else rig.relax_time_s
+                    with self._console(header) if self.opts.panel else contextlib.nullcontext():
+                        if self.n > 1:
+                            sys.setswitchinterval(SWITCH_INTERVAL_S)
+                        self._run_hands()
                 finally:
+                    sys.setswitchinterval(old_switch)
                     self.signals.disarm()  # from here on: torque off, then shut down
         except HandrigError as exc:
             return exc
         finally:
             self.signals.disarm()
-            if rig.stage_profile is not None:
-                self.stages = rig.stage_profile.summary_us()
+            for i, rig in enumerate(self.rigs):
+                if rig.stage_profile is not None:
+                    self.stages[i] = rig.stage_profile.summary_us()
+        for i in range(self.n):
+            failure = self.errors.get(i)
+            if failure is not None:
+                if isinstance(failure, HandrigError):
+                    return failure
+                raise failure
         return None
 
-    def _rig_log(self, text: str) -> None:
-        """The rig's lines: above the panel while it is up on a terminal, else to the
-        session's log."""
-        panel = self.panel
-        if panel is not None:
-            with contextlib.suppress(OSError, ValueError):
-                panel.log(text)
-        else:
-            self.log(text)
+    def _run_hands(self) -> None:
+        """The first hand's loop in this thread, every other in a thread of its own."""
+        others = [threading.Thread(target=self._run_hand, args=(i,),
+                                   name=f"handrig-{self.parts.name(i)}-hand", daemon=True)
+                  for i in range(1, self.n)]
+        for thread in others:
+            thread.start()
+        try:
+            self._run_hand(0)
+        finally:
+            for thread in others:
+                while thread.is_alive():
+                    thread.join(timeout=0.1)
+
+    def _run_hand(self, i: int) -> None:
+        opts, rig = self.opts, self.rigs[i]
+        others = [r for k, r in enumerate(self.rigs) if k != i]
+        loop = self.parts.rig_config.loop
+        name = self.parts.name(i)
+        log = self._hand_log(i)
+        try:
+            with (pinned_loop(loop.pin_cpu, log),
+                  realtime_priority(loop.realtime_priority, log)):
+                rig.run(frames=opts.frames, duration_s=opts.duration_s,
+                        done_reason=opts.done_reason)
+            self.ease_s[i] = 0.0 if rig.machine.stop_now else rig.relax_time_s
+        except BaseException as exc:  # handed to the session; the other hands stop at once
+            self.errors[i] = exc
+            for other in others:
+                other.estop(f"the {name} hand's loop stopped: {exc}")
+            return
+        for other in others:
+            if rig.machine.estop:
+                if not self.all.estop_reason:  # else all were e-stopped: each its reason
+                    other.estop(f"the {name} hand's e-stop")
+            elif other.machine.stop_requests == 0 and other.mode is not Mode.STOPPING:
+                # asked once only: a second request would cut the other hand's ease short
+                other.request_stop(f"the {name} hand stopped: {rig.machine.stop_reason}")
+
+    def _hand_log(self, i: int) -> Callable[[str], None]:
+        """A hand's loop's lines (named by hand when there are several): above the panel
+        while it is up on a terminal, else to the session's log."""
+        prefix = f"{self.parts.name(i)} hand: " if self.n > 1 else ""
+
+        def log(text: str) -> None:
+            panel = self.panel
+            if panel is not None:
+                with contextlib.suppress(OSError, ValueError):
+                    panel.log(prefix + text)
+            else:
+                self.log(prefix + text)
+        return log
 
     @contextlib.contextmanager
-    def _console(self, rig: Any, header: list[str]) -> Iterator[None]:
+    def _console(self, header: list[str]) -> Iterator[None]:
         """The show console: the panel (on a terminal, else plain lines) and, when stdin
-        is a terminal, the show keys."""
+        is a terminal, the show keys, acting on every hand."""
         from handrig.app.keys import KeyReader
         from handrig.app.panel import heat_colours, show_panel
-        from handrig.app.rig_snapshot import RigSnapshot
+        from handrig.app.rig_snapshot import HandsSnapshot, RigSnapshot
 
         keys: KeyReader | None = None
-        if self.opts.keys and _is_terminal(sys.stdin):
+        if self.opts.keys and is_terminal(sys.stdin):
             keys = KeyReader.for_show(
-                sys.stdin.fileno(), toggle_relax=rig.toggle_relax,
-                stop=lambda: rig.request_stop("q pressed"), estop=rig.estop,
-                on_error=lambda exc: self._rig_log(f"key failed: {exc}"))
-        snapshot = RigSnapshot(rig, glove_source=self.opts.glove or "", keys=keys is not None,
-                               show=self.opts.show, **heat_colours(self.parts.rig_config))
+                sys.stdin.fileno(), toggle_relax=self.all.toggle_relax,
+                stop=lambda: self.all.request_stop("q pressed"), estop=self.all.estop,
+                on_error=lambda exc: self._hand_log(0)(f"key failed: {exc}"))
+        sources = self.opts.gloves()
+        snapshot = HandsSnapshot(
+            {self.parts.key(i): RigSnapshot(
+                rig, glove_source=sources[i] or "", keys=keys is not None,
+                show=self.opts.show, **heat_colours(self.parts.hands[i].rig_config))
+             for i, rig in enumerate(self.rigs)},
+            keys=keys is not None, show=self.opts.show)
         with show_panel(snapshot, header, keys, self.log, self._set_panel):
             yield
 
     def _set_panel(self, panel: Any) -> None:
         self.panel = panel
 
-    def _bus_figures(self, bus: DynamixelBus) -> None:
-        self.torque_off, self.torque_unconfirmed = torque_readback(bus)
-        self.admitted = [bus.describe(i) for i in self._left_at_start
-                         if i not in bus.left_out]
-        self.bus_stats = bus.stats
+    def _bus_figures(self, b: int) -> None:
+        bus = self.opened[b].bus
+        off, unconfirmed = bus.confirm_torque_off(READBACK_BUDGET_S)
+        self.torque_off[b] = off
+        at_start = self._left_at_start[b]
+        stats = bus.stats
+        for i in self.parts.buses[b]:
+            mine = self._mine(i, bus)
+            names = tuple(f"{bus.describe(k)}:" for k in mine)
+            self.bus_stats[i] = stats
+            self.unconfirmed[i] = [u for u in unconfirmed if u.startswith(names)]
+            self.admitted[i] = [bus.describe(k) for k in at_start
+                                if k not in bus.left_out and k in mine]
 
-    def _glove_figures(self, glove: Any) -> None:
-        self.glove_stats = glove.stats()
+    def _glove_figures(self, i: int, glove: Any) -> None:
+        self.glove_stats[i] = glove.stats()
 
-    def _snapshots(self, rig: Any, every: int) -> Callable[[float, np.ndarray], None]:
+    # -- the summary --------------------------------------------------------------------
+    def _hand_torque_off(self, i: int) -> bool | None:
+        return self.torque_off.get(self.bus_of[i])
+
+    def _hand_summary(self, i: int) -> dict[str, Any]:
+        """Hand ``i``'s figures: the same keys for every hand."""
+        side, opts = self.parts.hands[i], self.opts
+        stats = self.stats[i]
+        s = summary_dict(stats, self.bus_stats[i], self.glove_stats[i],
+                         self._hand_torque_off(i),
+                         outputs=outputs_summary(self.outputs[i], stats.duration_s),
+                         clamped=clamped_joints(side.pipeline), ease_s=self.ease_s[i])
+        glove = opts.gloves()[i] or ""
+        recorded = opts.recorded or (
+            glove.removeprefix("replay:") if glove.startswith("replay:") else "")
+        s["clamp_advice"] = clamp_advice(s, recorded, tuple(side.expander.controls),
+                                         side.expander.training_range())
+        s["glove_source"] = glove
+        for key, value in (("stages_us", self.stages[i]),
+                           ("servos_left_out", self.left_out[i]),
+                           ("servos_admitted", self.admitted[i]),
+                           ("torque_off_unconfirmed", self.unconfirmed[i])):
+            if value:
+                s[key] = value
+        return s
+
+    def _result(self, error: HandrigError | None) -> LiveResult:
+        parts = self.parts
+        hands = [self._hand_summary(i) for i in range(self.n)]
+        summary = dict(hands[0])
+        offs = list(self.torque_off.values())
+        summary["torque_off"] = (None if not offs or len(offs) < len(self.opened)
+                                 else False if False in offs
+                                 else None if None in offs else True)
+        if self.n > 1:
+            summary["hands"] = {parts.name(i): s for i, s in enumerate(hands)}
+            summary["buses"] = NUMBER_WORDS.get(len(parts.buses), str(len(parts.buses)))
+        if self.opts.show:
+            summary["show"] = self.opts.show
+        if self.signals.received:
+            summary["signals"] = self.signals.received
+        if error is not None:
+            summary["error"] = str(error)
+        joints = tuple(s.joint for side in parts.hands for s in side.rig_config.servos)
+        return LiveResult(summary, self.snapshots, joints,
+                          "".join(o.emulator_output() for o in self.opened), error,
+                          self.started, self.snapshot_times_s)
+
+    def _snapshots(self, every: int) -> Callable[[float, np.ndarray], None]:
+        """An output for the first hand's loop: every ``every`` frames, every hand's
+        present positions (in hand order, the order of the result's joint names)."""
         counter = [0]
 
         def snap(t_s: float, pose: np.ndarray) -> None:
             counter[0] += 1
-            state = rig.last_state
-            if counter[0] % every == 0 and state is not None:
-                self.snapshots.append(np.array(state.positions_deg))
+            states = [rig.last_state for rig in self.rigs]
+            if counter[0] % every == 0 and all(st is not None for st in states):
+                self.snapshots.append(np.concatenate(
+                    [np.asarray(st.positions_deg) for st in states if st is not None]))
                 self.snapshot_times_s.append(float(t_s))
         return snap
 
 
-def _counts(items: dict[str, int]) -> str:
-    return ", ".join(f"{n} {what}" for what, n in items.items()) if items else "none"
+def _close_take(take: Any, what: str, log: Callable[[str], None]) -> None:
+    log(f"{what}: {take.close()}")
 
 
-def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
-    vmc, rec = outputs.get("vmc"), outputs.get("recording")
-    glove_take = outputs.get("glove_take")
-    if vmc:
-        rate = f", {vmc['rate_hz']} Hz" if vmc.get("rate_hz") is not None else ""
-        errors = f", {vmc['errors']} send errors" if vmc.get("errors") else ""
-        vmc_text = f"VMC to {vmc['target']}: {vmc['bundles_sent']} bundles{rate}{errors}"
-    else:
-        vmc_text = "VMC off"
-    if rec:
-        duration = f"{rec['duration_s']:.1f} s" if rec.get("duration_s") is not None else "-"
-        dropped = (f", {rec['frames_dropped']} frames dropped (disk too slow)"
-                   if rec.get("frames_dropped") else "")
-        if rec.get("stopped_reason"):
-            dropped = f", {rec['frames_dropped']} frames not recorded: {rec['stopped_reason']}"
-        rec_text = (f"recording {rec['path']}: {rec['frames']} frames, {duration}, "
-                    f"{rec['bytes']} bytes{dropped}")
-    else:
-        rec_text = "recording off"
-    lines = [f"outputs           {vmc_text}", f"                  {rec_text}"]
-    if glove_take:
-        stopped = f" ({glove_take['stopped_reason']})" if glove_take.get("stopped_reason") else ""
-        lines.append(f"                  glove take {glove_take['path']}: {glove_take['frames']}"
-                     f" frames, {glove_take['duration_s']:.1f} s{stopped}")
-    return lines
+def _unfreeze() -> None:
+    import gc
+
+    gc.unfreeze()
 
 
-CLAMP_RANGE_FRACTION = 0.05
-"""Controls outside the map's training range in more than this fraction of frames: the
-map is a likely cause of clamps."""
-
-
-def clamp_advice(summary: dict[str, Any], recording: str, controls: tuple[str, ...],
-                 training: Any) -> str:
-    """The likely causes of the run's clamps that it can tell: a recorded performance
-    (``recording``: the file a replayed or emulated glove streamed), a glove past its
-    calibration (a control curve's own servo clamped), a map outside its training range
-    (``training``: :meth:`handrig.pose.expand.Expander.training_range`)."""
-    if not summary.get("limit_clamps"):
-        return "no clamps"
-    causes = []
-    past = [c["joint"] for c in summary.get("clamped_joints") or [] if c["joint"] in controls]
-    at = f" ({', '.join(past)}: a control asked past its joint)" if past else ""
-    if recording:
-        causes.append(f"a recorded performance ({recording}): the clamps come from the"
-                      f" recording{at} and the map, not from a glove on a hand")
-    elif past:
-        causes.append(f"a glove past its calibration{at}: recalibrate the glove")
-    if training.known and training.outside_fraction > CLAMP_RANGE_FRACTION:
-        causes.append(f"a map outside its training range (controls beyond it in"
-                      f" {training.outside_fraction:.0%} of frames; refit the map on motion"
-                      " like this, or check the glove calibration)")
-    if not causes:
-        causes.append("the map asks for poses past the joints inside its training range"
-                      " (check it with handrig evaluate)")
-    return "likely: " + "; ".join(causes)
-
-
-def format_summary(summary: dict[str, Any]) -> str:
-    """The human-readable summary of a run (the same figures as ``--json``)."""
-    lat = summary["latency_us"]
-    comp = summary.get("compute_us") or {}
-    glove = summary.get("glove", {})
-    ease_s = summary.get("ease_s") or 0.0
-    ease = (f"; includes the {ease_s:g} s ease to the relaxed pose at the end" if ease_s
-            else "; ended at once, no ease")
-    clamped = summary.get("clamped_joints") or []
-    most = (", most at " + ", ".join(f"{c['joint']} ({c['clamps']})" for c in clamped)
-            if clamped else "")
-    lines = [
-        *([f"show              {summary['show']}"] if summary.get("show") else []),
-        f"frames            {summary['frames']} in {summary['duration_s']} s "
-        f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us){ease}",
-        f"latency           p50 {lat['p50']} us, p99 {lat['p99']} us, max {lat['max']} us "
-        "(glove frame's arrival -> Sync Write handed to the OS)",
-        f"                  of which compute p50 {comp.get('p50')} us, p99 {comp.get('p99')} us "
-        f"(cycle start -> Sync Write; loop {summary.get('loop_mode', 'fixed')})",
-        *([f"servos left out   {', '.join(summary['servos_left_out'])} (did not answer at "
-            "start-up: no goal, no torque until commissioned)"]
-          if summary.get("servos_left_out") else []),
-        *([f"  admitted        {', '.join(summary['servos_admitted'])} (answered later: "
-            "commissioned, eased in from where it was)"]
-          if summary.get("servos_admitted") else []),
-        f"frame losses      {summary.get('frames_skipped', 0)} skipped by the loop, "
-        f"{summary.get('frames_in_host_stalls', 0)} left waiting by host stalls (the host "
-        "read nothing for 3 frame periods or more: not the glove), "
-        f"{summary.get('frames_in_bursts', 0)} lost in the glove's own bursts (caught up: "
-        f"{summary.get('frames_caught_up', 0)} written just before a newer one)",
-        f"overruns          {summary['overruns']} (max {summary['overrun_max_us']} us late, "
-        f"{summary['missed_cycles']} cycles missed)",
-        f"limit clamps      {summary['limit_clamps']} servo targets held at a joint or servo "
-        f"limit{most}",
-        *([] if not (summary["limit_clamps"] or summary.get("clamped_joints")
-                     or summary.get("clamp_advice", "no clamps") != "no clamps") else [
-            "                  (the pose asked past the limit: normal at a full fist or spread"
-            + (f"; high all the time: {summary['clamp_advice']})" if "clamp_advice" in summary
-               else ")")]),
-        f"                  {summary['pose_clamps']} values of the full two-hand pose clamped, "
-        f"{summary['bus_clamps']} goals clamped by the driver, {summary['slew_limited']} "
-        f"slew-limited, {summary['nonfinite_targets']} non-finite targets held",
-        f"glove             {glove.get('frames_ok', '-')} frames ok, "
-        f"{glove.get('crc_errors', 0)} CRC errors, {glove.get('decode_errors', 0)} other "
-        f"errors, {glove.get('resyncs', 0)} resyncs, used {glove.get('frames_used', '-')}",
-        f"faults            {_counts(summary.get('faults', {}))}",
-        f"tracking          rms {summary['tracking_rms_deg']} deg, max "
-        f"{summary['tracking_max_deg']} deg (present vs goal, {summary['reads']} reads, "
-        f"{summary['stale_reads']} with stale servos)",
-        *_outputs_lines(summary.get("outputs") or {}),
-        *_heat_lines(summary.get("heat") or {}),
-        f"safety            {summary['relax_events']} relax events, "
-        f"{summary.get('resumes', 0)} resumes, e-stop "
-        f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
-        f"torque off        {summary['torque_off']}",
-        *([f"  not confirmed   {'; '.join(summary['torque_off_unconfirmed'])}"]
-          if summary.get("torque_off_unconfirmed") else []),
-    ]
-    if "error" in summary:
-        lines.append(f"error             {summary['error']}")
-    return "\n".join(lines)
-
-
-def format_hands_summary(summary: dict[str, Any]) -> str:
-    """The summary of a two-hand run: a part per hand, then torque and the error."""
-    lines = [*([f"show              {summary['show']}"] if summary.get("show") else [])]
-    for name, part in summary["hands"].items():
-        part = {k: v for k, v in part.items() if k != "show"}
-        lines.append(f"--- {name} hand ({part.get('glove_source') or 'glove'}) ---")
-        lines += [line for line in format_summary(part).splitlines()
-                  if not line.startswith(("torque off", "error"))]
-    lines.append(f"torque off        {summary['torque_off']} (every servo of both hands)")
-    if "error" in summary:
-        lines.append(f"error             {summary['error']}")
-    return "\n".join(lines)
-
-
-def _heat_lines(heat: dict[str, Any]) -> list[str]:
-    """The ``heat`` line: the hottest servo read and what the [heat] tiers did."""
-    if not heat:
-        return []
-    hottest = heat.get("hottest") or "no temperature read"
-    return [f"heat              hottest {hottest}; {heat.get('warnings', 0)} warnings, "
-            f"{heat.get('reliefs', 0)} effort caps, {heat.get('actions', 0)} actions "
-            "([heat] tiers)"]
-
-
-def failed(error: HandrigError, parts: RigParts | None = None) -> LiveResult:
+def failed(error: HandrigError, parts: RigParts | SessionParts | None = None) -> LiveResult:
     """The result of a session that could not begin (a config, an emulator, a port)."""
-    summary = app.summary_dict(RunStats(), None, None, None)
+    summary = summary_dict(RunStats(), None, None, None)
     summary["error"] = str(error)
     joints = tuple(s.joint for s in parts.rig_config.servos) if parts is not None else ()
     return LiveResult(summary, [], joints, error=error)

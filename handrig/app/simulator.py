@@ -97,7 +97,7 @@ def servo_bus(
     realtime: bool = True,
     bauds: Mapping[int, int] | None = None,
 ) -> tuple[SimBus, Puppet | None]:
-    """Emulated Dynamixel servos on a pty (not started), and the MuJoCo puppet they
+    """The emulated servos (sim/dxl_bus.py) on a pty (not started), and the MuJoCo puppet they
     drive (None with ``puppet=False``: the servos move kinematically). ``model``:
     every servo of that model (the rig's servos too: :func:`with_model`); ``faults``:
     a fault spec as ``handrig sim-bus --faults`` takes it; ``bauds``: servo ID -> baud

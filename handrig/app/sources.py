@@ -1,6 +1,6 @@
 """Which files a run uses, and why: the rig, glove, map, sag grid and joint limits.
 
-The same choices :func:`handrig.app.factory.build_parts` makes, written out so that
+The same choices :func:`handrig.app.parts.build_parts` makes, written out so that
 ``run``, ``demo``, ``calibrate`` and ``config show`` can print them before they
 start:
 
@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from handrig.app import robots
+from handrig.app.hands import SessionParts
 from handrig.config.loading import CONFIG_DIR
 from handrig.config.paths import (
     config_file,
@@ -34,9 +34,10 @@ from handrig.config.paths import (
     user_data,
 )
 from handrig.config.rig import RigConfig
+from handrig.config.rig_files import resolve_rig_file
+from handrig.pose import robot_rig as robots
 from handrig.pose.sag import SAG_GRID
 
-RIGS_DIR = robots.RIGS_DIR
 DEFAULT_MAP = CONFIG_DIR / "maps" / "default.toml"
 
 
@@ -50,18 +51,10 @@ class Source:
 
 
 def rig_file(rig: str | Path | None) -> Source:
-    """The rig file ``--rig`` names (a preset or a path), else the default one."""
-    if rig:
-        path = robots.rig_path(rig)
-        if path.parent.resolve() == RIGS_DIR.resolve() and "/" not in str(rig) \
-                and not str(rig).endswith(".toml"):
-            return Source("rig", path, f"preset {rig!r}, --rig")
-        return Source("rig", path, "--rig")
-    path = config_file("rig.toml")
-    if is_installed(path):
-        return Source("rig", path, "shipped default; no rig.toml of yours at "
-                      f"{user_config('rig.toml')}")
-    return Source("rig", path, "your rig.toml, written by `handrig calibrate servos`")
+    """The rig file ``--rig`` names (a preset or a path), else the default one
+    (:func:`handrig.config.rig_files.resolve_rig_file`)."""
+    found = resolve_rig_file(rig)
+    return Source("rig", found.path, found.why)
 
 
 def _from_loop(rig_path: Path, value: str) -> Path:
@@ -118,6 +111,22 @@ def run_sources(rig: str | Path | None = None, glove: str | Path | None = None,
         out.append(Source("robot model", Path(cfg.robot.model), f"[robot] of {first.path.name}"))
         out.append(Source("retarget", Path(cfg.robot.retarget),
                           f"[robot] of {first.path.name}"))
+    return out
+
+
+def session_sources(parts: SessionParts, sources: Sequence[Source]) -> list[Source]:
+    """``sources`` (:func:`run_sources`) for a session's hands: with a glove per hand,
+    the map they read (the two-glove map unless ``[loop] map`` or the show names one)
+    and each further hand's glove file."""
+    if len(parts.hands) == 1:
+        return list(sources)
+    out = [Source("map", parts.map_file, "a glove per hand: the two-glove map unless "
+                  "[loop] map or the show names one") if s.role == "map" else s
+           for s in sources]
+    for i, side in enumerate(parts.hands[1:], start=1):
+        out.append(Source(f"{parts.name(i)} glove", side.glove_file or Path(),
+                          "--glove-left-config, [gloves] left_config, else the right "
+                          "glove's"))
     return out
 
 

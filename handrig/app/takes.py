@@ -25,7 +25,7 @@ from typing import Literal
 import numpy as np
 
 from firmware_protocol.opengloves import CHANNEL_KEYS
-from handrig.app.factory import RigParts
+from handrig.app.parts import RigParts
 from handrig.clock import Clock
 from handrig.config.loading import load_joint_limits
 from handrig.devices.glove import GloveSample, GloveSource, ReplayGlove

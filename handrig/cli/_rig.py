@@ -10,17 +10,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 from typing import TextIO
 
-from handrig.app.sources import RIGS_DIR, Source, format_sources, rig_file
+from handrig.app.sources import Source, format_sources
 from handrig.config.paths import CONFIG_HOME_HELP
-
-
-def presets() -> list[str]:
-    """The shipped rig presets' names."""
-    return sorted(p.stem for p in RIGS_DIR.glob("*.toml") if not p.stem.endswith("_retarget"))
-
+from handrig.config.rig_files import presets
 
 RIG_HELP = ("rig preset ({presets}) or rig file (default: rig.toml in "
             f"{CONFIG_HOME_HELP} when there is one, else the shipped config/rig.toml)")
@@ -33,11 +27,6 @@ def add_rig_argument(p: argparse.ArgumentParser, *, old_name: bool = True,
                    help=help_text or RIG_HELP.format(presets=", ".join(presets())))
     if old_name:
         p.add_argument("--config", dest="rig", default=None, help=argparse.SUPPRESS)
-
-
-def rig_path(rig: str | Path | None) -> Path:
-    """The rig file ``--rig`` names, else the default one (as :func:`rig_file`)."""
-    return rig_file(rig).path
 
 
 def print_sources(sources: list[Source], *, stream: TextIO | None = None) -> None:

@@ -27,7 +27,8 @@ from typing import Any
 import numpy as np
 
 from handrig.cli._numbers import positive_float, positive_int
-from handrig.config.rig import BAUD_RATES, RigConfig, load_rig_config
+from handrig.config.rig import RigConfig, load_rig_config
+from handrig.devices.servo.models import BAUD_RATES
 from handrig.devices.servo.wire import goal_write_bytes, read_bytes
 from handrig.errors import ConfigError, DeviceError
 from handrig.realtime import helper_env, pinned_loop

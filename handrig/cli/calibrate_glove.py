@@ -43,7 +43,6 @@ from typing import Any
 import numpy as np
 from tomlkit.toml_document import TOMLDocument
 
-from handrig.app.robots import load_rig
 from handrig.app.sources import Source, format_sources, glove_file, rig_file
 from handrig.cli._numbers import nonnegative_float, positive_float
 from handrig.cli._ports import by_id_for, is_transient
@@ -52,16 +51,15 @@ from handrig.clock import Clock, MonotonicClock
 from handrig.config.paths import CONFIG_HOME_HELP, output_for, user_config
 from handrig.config.toml_edit import edit, undo, write_with_backup
 from handrig.devices.glove import GloveSource, SerialGlove
-from handrig.devices.glove_calibration import GloveConfig, load_glove_config
+from handrig.devices.glove_calibration import (
+    CALIBRATION_STEPS,
+    GloveConfig,
+    load_glove_config,
+)
 from handrig.errors import DataError, DeviceError, HandrigError
 from handrig.pose.imu_mount import IMU_STEPS, mount_from_poses, mount_xyzw, up_in_imu
+from handrig.pose.robot_rig import load_rig
 
-STEPS: tuple[tuple[str, str], ...] = (
-    ("open", "Open hand: fingers straight and together, thumb relaxed beside the index."),
-    ("fist", "Fist: close every finger, thumb wrapped over the middle finger."),
-    ("thumb-oppose", "Thumb to little finger: touch the two tips together."),
-    ("thumb-spread", "Thumb spread: move the thumb as far from the index as is comfortable."),
-)
 DEFAULT_SETTLE_S = 1.0
 DEFAULT_HOLD_S = 2.0
 MIN_SPAN_FRACTION = 0.02
@@ -213,9 +211,9 @@ def run(args: argparse.Namespace) -> int:
                         reconnect_s=0)
     medians: dict[str, np.ndarray] = {}
     quats: dict[str, list[np.ndarray]] = {}
-    print(f"calibrating the glove on {port} ({fmt}); {len(STEPS)} poses", flush=True)
+    print(f"calibrating the glove on {port} ({fmt}); {len(CALIBRATION_STEPS)} poses", flush=True)
     with glove:
-        steps = list(STEPS)
+        steps = list(CALIBRATION_STEPS)
         n = 0
         while n < len(steps):
             name, text = steps[n]
@@ -226,15 +224,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"      recording {args.hold:g} s ...", flush=True)
             quats[name] = []
             rows = record_step(glove, clock, args.settle, args.hold, port, quats[name])
-            if name in dict(STEPS):
+            if name in dict(CALIBRATION_STEPS):
                 medians[name] = np.median(rows, axis=0)
             print(f"      {len(rows)} samples", flush=True)
-            if n == len(STEPS) and not args.no_imu and any(quats.values()):
+            if n == len(CALIBRATION_STEPS) and not args.no_imu and any(quats.values()):
                 steps += IMU_STEPS
                 print(f"the glove sends an IMU orientation: {len(IMU_STEPS)} more poses "
                       "measure how the IMU sits on the forearm", flush=True)
     new_cfg, report = derive(cfg, medians, full_scale)
-    if len(steps) > len(STEPS):
+    if len(steps) > len(CALIBRATION_STEPS):
         mount = mount_from_poses(*(up_in_imu(np.array(quats[name])) for name, _ in IMU_STEPS))
         new_cfg = dataclasses.replace(
             new_cfg, imu=dataclasses.replace(new_cfg.imu, mount_xyzw=mount_xyzw(mount)))

@@ -48,7 +48,6 @@ from pathlib import Path
 from typing import Any
 
 from handrig.app.factory import port_process
-from handrig.app.robots import load_rig
 from handrig.app.sources import Source, format_sources, rig_file
 from handrig.cli._display import check_gl_backend
 from handrig.cli._rig import add_rig_argument
@@ -74,6 +73,7 @@ from handrig.config.toml_edit import (
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.registers import Reg
 from handrig.errors import ConfigError, HandrigError
+from handrig.pose.robot_rig import load_rig
 
 
 def register(sub: Any) -> None:

@@ -15,11 +15,11 @@ import json
 from pathlib import Path
 from typing import Any
 
-from handrig.app.robots import load_rig
 from handrig.app.sources import Source, format_sources, run_sources
 from handrig.cli._rig import add_rig_argument
 from handrig.config.loading import load_toml
 from handrig.devices.glove_calibration import load_glove_config
+from handrig.pose.robot_rig import load_rig
 
 DEFAULT = "default"
 

@@ -67,7 +67,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from handrig.app import simulator
-    from handrig.app.robots import find_rig
+    from handrig.pose.robot_rig import find_rig
 
     recording = args.recording or str(simulator.demo_recording())
     check_gl_backend("the demo's simulated puppet")
@@ -89,21 +89,22 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
          glove: PortProcess) -> int:
     from handrig.app import simulator
-    from handrig.app.factory import build_parts, robot_model
-    from handrig.app.hands import build_two_hand_parts, is_two_hand
-    from handrig.app.robots import render_view
-    from handrig.app.session import ExitSignals, LiveOptions, failed, print_result, run_live
+    from handrig.app.hands import build_session_parts, is_two_hand
+    from handrig.app.parts import robot_model
+    from handrig.app.session import LiveOptions, failed, print_result, run_live
+    from handrig.app.session_exit import ExitSignals
     from handrig.app.sources import Source, format_sources, run_sources
-    from handrig.app.two_hands import run_two_hands
     from handrig.app.view import view_session
+    from handrig.pose.robot_rig import find_rig, render_view
 
     def log(text: str) -> None:
         if not args.json:
             with contextlib.suppress(OSError, ValueError):  # the terminal may be gone
                 print(text, flush=True)
 
-    parts = build_parts(args.rig)
-    two = build_two_hand_parts(args.rig) if is_two_hand(parts.rig_config) else None
+    _, rig_cfg = find_rig(args.rig)
+    parts = build_session_parts(args.rig, glove_per_hand=is_two_hand(rig_cfg))
+    per_hand = len(parts.hands) > 1
     log(format_sources([*run_sources(args.rig, rig_cfg=parts.rig_config), Source(
         "recording", Path(recording), "--recording" if args.recording else
         "shipped demo: raw glove counts, calibrated with the glove file above")]))
@@ -116,7 +117,7 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
                 glove_port = gloves.enter_context(glove).port()
                 log(f"glove emulator streaming on {glove_port}")
                 left_port = None
-                if two is not None:
+                if per_hand:
                     left = simulator.recording_from(recording, args.left_offset,
                                                     gloves.enter_context(
                                                         tempfile.TemporaryDirectory()))
@@ -127,15 +128,13 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
                         f"{args.left_offset:g} s)")
                 opts = LiveOptions(glove=glove_port, recorded=recording, bus="sim",
                                    frames=args.frames, glove_left=left_port,
-                                   bus_left="sim" if two is not None else None,
+                                   bus_left="sim" if per_hand else None,
                                    sim_faults=args.faults, wire_timing=WIRE_TIMING,
                                    started=started, log=log, panel=not args.json,
-                                   on_rig=view.attach_rig if view is not None else None,
                                    on_hands=view.attach_hands if view is not None else None,
                                    snapshot_every=max(1, args.frames // 6) if args.render else 0)
                 signals.disarm()  # the session handles its own; after it: shut down, print
-                result = (run_two_hands(two, opts) if two is not None
-                          else run_live(parts, opts))
+                result = run_live(parts, opts)
         except HandrigError as exc:
             result = failed(exc, parts)
     if result.error is not None and not result.started and not args.json:
@@ -159,7 +158,7 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
 def _sim_bus_hands(rig: RigConfig) -> list[str | None]:
     """The ``--hand`` of each simulated bus the session opens for ``rig`` (None: the
     whole rig): a two-hand rig on two buses has one per hand."""
-    from handrig.app.robots import is_two_hand
+    from handrig.pose.robot_rig import is_two_hand
 
     if is_two_hand(rig) and rig.left_bus is not None:
         return ["ri", "le"]

@@ -9,7 +9,7 @@ import json
 import sys
 from typing import Any
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
@@ -109,7 +109,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
             bus=args.bus,
             duration_s=None if args.loop else round(take.duration_s + one_frame, 3),
             wire_timing=not args.no_wire_timing, vmc=args.vmc, panel=not args.json,
-            verbose=not args.json, on_rig=view.attach_rig if view is not None else None,
+            verbose=not args.json, on_hands=view.attach_hands if view is not None else None,
             done_reason=f"the take played ({take.duration_s:.2f} s)")
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

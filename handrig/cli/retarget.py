@@ -33,7 +33,7 @@ from handrig.errors import ConfigError
 from handrig.pose.retarget import JointCheck, Retarget, check_joints, load_retarget
 
 if TYPE_CHECKING:
-    from handrig.app.robots import RobotRigConfig
+    from handrig.pose.robot_rig import RobotRigConfig
 
 DEFAULT_RIG = "leap"
 DEMO_RECORDING = CONFIG_DIR / "recordings" / "demo_glove.csv"
@@ -94,12 +94,13 @@ def register(sub: Any) -> None:
 
 
 def _robot_rig(name: str) -> RobotRigConfig:
-    from handrig.app.robots import RobotRigConfig, load_rig, rig_path
+    from handrig.config.rig_files import rig_file_path
+    from handrig.pose.robot_rig import RobotRigConfig, load_rig
 
     rig = load_rig(name)
     if not isinstance(rig, RobotRigConfig) or rig.robot is None:
         raise ConfigError("not a robot rig: it has no [robot] table with a retarget table",
-                          file=str(rig_path(name)),
+                          file=str(rig_file_path(name)),
                           allowed="a robot rig such as 'leap', or --table FILE")
     return rig
 
@@ -107,13 +108,14 @@ def _robot_rig(name: str) -> RobotRigConfig:
 def _rig_parts(args: argparse.Namespace) -> tuple[Retarget, Path, str, str, str]:
     """The retarget table, the rig's folder, its map and glove settings, its model
     (empty with --table)."""
-    from handrig.app.robots import rig_path, robot_retarget
+    from handrig.config.rig_files import rig_file_path
+    from handrig.pose.robot_rig import robot_retarget
 
     if args.table is not None:
         return load_retarget(args.table), Path(args.table).resolve().parent, "", "", ""
     rig = _robot_rig(args.rig)
     assert rig.robot is not None  # _robot_rig checked it
-    base = rig_path(args.rig).resolve().parent
+    base = rig_file_path(args.rig).resolve().parent
     return robot_retarget(rig), base, rig.loop.map, rig.loop.glove, rig.robot.model
 
 
@@ -171,8 +173,8 @@ def run_check(args: argparse.Namespace) -> int:
 
 def _render_grasps(rt: Retarget, gm: Any, model: str, args: argparse.Namespace) -> None:
     """The robot at the human's open hand, fist and middle pinches, one tile each."""
-    from handrig.app.robots import load_rig, render_view
     from handrig.app.simulator import render_strip
+    from handrig.pose.robot_rig import load_rig, render_view
 
     poses = [np.zeros(len(hand.CURVE_NAMES)), gm.fist]
     labels = ["human open hand", "human fist"]
@@ -221,10 +223,10 @@ def _print_grasp(g: dict[str, Any], before: dict[str, Any] | None = None) -> Non
 
 
 def run_fit(args: argparse.Namespace) -> int:
-    from handrig.app.robots import robot_retarget
     from handrig.app.simulator import retarget_fitter
     from handrig.offline.mocap import load_reference
     from handrig.pose.retarget import table_text
+    from handrig.pose.robot_rig import robot_retarget
 
     rig = _robot_rig(args.rig)
     assert rig.robot is not None  # _robot_rig checked it

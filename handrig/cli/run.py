@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from handrig.app.port_processes import SIM_BUS, StartedEmulators, sim_bus_argv
@@ -16,7 +15,7 @@ from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
 
 if TYPE_CHECKING:
-    from handrig.app.hands import TwoHandParts
+    from handrig.app.hands import SessionParts
 
 
 def register(sub: Any) -> None:
@@ -116,7 +115,7 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
     process imports the run's modules and builds the map's kernels, so that the
     emulator's start-up (MuJoCo puppet, pty) overlaps them; the session takes it
     (by its arguments) where it would start one. A rig with a left bus: none started."""
-    from handrig.app.robots import find_rig
+    from handrig.pose.robot_rig import find_rig
 
     rig_file, rig = find_rig(args.rig)
     if rig.left_bus is None and (args.bus or rig.bus.port) == "sim":
@@ -125,36 +124,21 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
 
 
 def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulators) -> int:
-    from handrig.app.factory import build_parts
-    from handrig.app.hands import build_two_hand_parts, glove_specs
+    from handrig.app.hands import build_session_parts, glove_specs
     from handrig.app.session import LiveOptions, failed, print_result, run_live
-    from handrig.app.sources import Source, run_sources
-    from handrig.app.two_hands import run_two_hands
+    from handrig.app.sources import run_sources, session_sources
     from handrig.app.view import view_session
+    from handrig.pose.robot_rig import find_rig
 
-    two: TwoHandParts | None = None
     try:
         files = ({"map_file": show.show.map or None, "grid_file": show.show.grid or None}
                  if show is not None else {})
-        parts = build_parts(args.rig, args.glove_config, **files)
-        rig = parts.rig_config
+        _, rig = find_rig(args.rig)
         right, left = glove_specs(rig, args.glove, args.glove_left)
-        if left is not None or rig.left_bus is not None:
-            if left is None:
-                raise ConfigError(
-                    "this rig has the left hand's servos on a bus of their own: it needs a "
-                    "glove per hand", key="--glove-left", file=None,
-                    allowed="--glove-left PORT (or [gloves] left in the rig file)")
-            two = build_two_hand_parts(args.rig, args.glove_config, args.glove_left_config,
-                                       **files)
-        elif args.record_glove_left is not None:
-            raise ConfigError("a left glove take needs a glove per hand",
-                              key="--record-glove-left", value=args.record_glove_left,
-                              allowed="--glove-left PORT, or --record-glove for one glove")
-        elif args.bus_left is not None:
-            raise ConfigError("a left bus needs a rig with [left_bus] and a glove per hand",
-                              key="--bus-left", value=args.bus_left,
-                              allowed="--rig puppet_two_buses --glove-left PORT")
+        _check_hand_flags(args, rig.left_bus is not None, left)
+        parts: SessionParts = build_session_parts(
+            args.rig, args.glove_config, args.glove_left_config,
+            glove_per_hand=left is not None, **files)
         if "sim" in ((args.bus or rig.bus.port),
                      args.bus_left or (rig.left_bus.port if rig.left_bus else "")):
             check_gl_backend("--bus sim")
@@ -165,15 +149,8 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
     if not args.json:
         if show is not None:
             _stderr(f"show: {show.title} ({show.path})")
-        sources = run_sources(args.rig, args.glove_config, parts.rig_config)
-        if two is not None:  # a glove per hand: the two-glove map, the left glove's file
-            sources = [Source("map", two.map_file, "a glove per hand: the two-glove map "
-                              "unless [loop] map or the show names one")
-                       if s.role == "map" else s for s in sources]
-            sources.append(Source("left glove", two.sides["le"].glove_file or Path(),
-                                  "--glove-left-config, [gloves] left_config, else the "
-                                  "right glove's"))
-        print_sources(sources)
+        print_sources(session_sources(
+            parts, run_sources(args.rig, args.glove_config, parts.rig_config)))
     with view_session(args.view, parts.rig_config, _stderr) as view:
         opts = LiveOptions(
             glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,
@@ -183,13 +160,29 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             panel=not args.json,
             verbose=not args.json, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
-            on_rig=view.attach_rig if view is not None else None,
             on_hands=view.attach_hands if view is not None else None, started=started,
         )
-        result = run_two_hands(two, opts) if two is not None else run_live(parts, opts)
+        result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
         raise result.error
     return print_result(result, as_json=args.json)
+
+
+def _check_hand_flags(args: argparse.Namespace, left_bus: bool, left: str | None) -> None:
+    """The flags of a glove per hand against the rig: ConfigError naming the flag."""
+    if left is None and left_bus:
+        raise ConfigError(
+            "this rig has the left hand's servos on a bus of their own: it needs a "
+            "glove per hand", key="--glove-left", file=None,
+            allowed="--glove-left PORT (or [gloves] left in the rig file)")
+    if left is None and args.record_glove_left is not None:
+        raise ConfigError("a left glove take needs a glove per hand",
+                          key="--record-glove-left", value=args.record_glove_left,
+                          allowed="--glove-left PORT, or --record-glove for one glove")
+    if left is None and args.bus_left is not None:
+        raise ConfigError("a left bus needs a rig with [left_bus] and a glove per hand",
+                          key="--bus-left", value=args.bus_left,
+                          allowed="--rig puppet_two_buses --glove-left PORT")
 
 
 def _stderr(text: str) -> None:

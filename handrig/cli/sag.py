@@ -33,8 +33,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not -90.0 <= args.inclination <= 90.0:
         raise DataError(f"--inclination {args.inclination}: must be within -90..90 degrees")
-    from handrig.app.robots import load_rig
     from handrig.app.sources import grid_file, rig_file
+    from handrig.pose.robot_rig import load_rig
 
     path = args.grid
     if path is None:

@@ -22,14 +22,15 @@ from pathlib import Path
 from typing import Any
 
 from handrig.app.factory import port_process
-from handrig.app.robots import load_rig
 from handrig.app.sources import format_sources, rig_file
 from handrig.cli._numbers import whole_int
 from handrig.cli._ports import by_id_for
 from handrig.cli._rig import add_rig_argument
-from handrig.config.rig import BAUD_RATES, RigConfig
+from handrig.config.rig import RigConfig
 from handrig.devices.servo import bringup
+from handrig.devices.servo.models import BAUD_RATES
 from handrig.errors import ConfigError
+from handrig.pose.robot_rig import load_rig
 
 
 def _baud(text: str) -> int:

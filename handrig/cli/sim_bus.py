@@ -16,10 +16,10 @@ import time
 from types import FrameType
 from typing import Any, TextIO
 
-from handrig.app.robots import load_rig
 from handrig.cli._numbers import whole_int
 from handrig.config.rig import hand_rig
 from handrig.errors import ConfigError, HandrigError
+from handrig.pose.robot_rig import load_rig
 
 REPORT_EVERY_S = 10.0
 

@@ -150,9 +150,9 @@ def _say_sent(sent: int, dropped: int) -> None:
 
 def _run_calibration(args: argparse.Namespace) -> int:
     from handrig.app import simulator
-    from handrig.cli.calibrate_glove import DEFAULT_HOLD_S, DEFAULT_SETTLE_S, STEPS
+    from handrig.cli.calibrate_glove import DEFAULT_HOLD_S, DEFAULT_SETTLE_S
     from handrig.config.paths import config_file
-    from handrig.devices.glove_calibration import load_glove_config
+    from handrig.devices.glove_calibration import CALIBRATION_STEPS, load_glove_config
     from handrig.pose.imu_mount import IMU_STEPS, askew_mount
 
     motion = simulator.calibration_motion()
@@ -169,7 +169,7 @@ def _run_calibration(args: argparse.Namespace) -> int:
     n_raw = 5 if args.format == "opengloves" else 0
     sensors = ScriptedSensors.from_config(cfg, n_raw=n_raw, travel=args.travel,
                                           full_scale=full_scale)
-    texts = dict(STEPS + IMU_STEPS)
+    texts = dict(CALIBRATION_STEPS + IMU_STEPS)
     pose_s = args.pose_s if args.pose_s is not None else DEFAULT_SETTLE_S + DEFAULT_HOLD_S + 2
     common: dict[str, Any] = {"transition_s": args.transition_s, "rate_hz": rate,
                               "noise_counts": args.noise, "imu_mount": mount}

@@ -29,16 +29,6 @@ TICKS_PER_DEG = TICKS_PER_TURN / 360.0
 POSITION_TICKS_MIN = 0
 POSITION_TICKS_MAX = 4095
 
-# Model numbers of the X-series servos we know (REFERENCE.md section 2).
-MODEL_NUMBERS: dict[str, int] = {"XL330-M288": 1200, "XC330-T288": 1220, "XM430-W350": 1020}
-MODEL_NUMBERS["XC330-M288"] = 1240  # the LEAP hand's servo
-MODEL_NUMBERS["XL330-M077"] = 1190
-MODEL_NUMBERS["XC430-W150"] = 1070  # no current sensing (e-manual): no current limit
-MODEL_NUMBERS["XC430-T240BB"] = 1080  # ORCA's wrist; no current sensing either
-ServoModel = Literal["XL330-M288", "XC330-T288", "XM430-W350", "XC330-M288", "XL330-M077",
-                     "XC430-W150", "XC430-T240BB"]
-# Baud rates the X series and dynamixel-sdk both accept.
-BAUD_RATES: tuple[int, ...] = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000)
 
 
 @dataclass(frozen=True)
@@ -47,7 +37,7 @@ class ServoCalibration:
 
     id: int
     joint: str
-    model: ServoModel = "XL330-M288"
+    model: str = ""  # the servo's model as its driver names it (empty: the driver's default)
     zero_ticks: int = 2048
     direction: Literal[1, -1] = 1
     gear_ratio: float = 1.0
@@ -112,11 +102,9 @@ class BusConfig:
     watchdog_ms: int = 100  # Bus Watchdog (units of 20 ms on the wire); 0 disables
 
     def check(self) -> None:
-        if self.baud not in BAUD_RATES:
-            raise ConfigError(
-                "unsupported baud rate", key="baud", value=self.baud,
-                allowed=", ".join(str(b) for b in BAUD_RATES),
-            )
+        if self.baud <= 0:  # which bauds the servos take is their driver's to check
+            raise ConfigError("not a baud rate", key="baud", value=self.baud,
+                              allowed="a positive number of bits per second")
         if self.read_every < 1:
             raise ConfigError("must be at least 1", key="read_every", value=self.read_every)
         if not 1 <= self.read_parts <= 8:
@@ -230,12 +218,6 @@ class SilenceConfig:
 
 
 HeatAction = Literal["continue", "relax", "stop"]
-# Temperature Limit (31) initial value per model, deg C: the servo turns its torque off
-# above it (e-manual control tables: X330 70, X430 80).
-TEMPERATURE_LIMIT_C: dict[str, int] = {
-    "XL330-M288": 70, "XL330-M077": 70, "XC330-M288": 70, "XC330-T288": 70,
-    "XM430-W350": 80, "XC430-W150": 80, "XC430-T240BB": 80,
-}
 HEAT_HYSTERESIS_C = 3.0  # a tier ends once the servo is this far below it
 
 
@@ -283,17 +265,6 @@ class HeatConfig:
 OPERATING_MODES: dict[str, int] = {
     "position": 3, "extended_position": 4, "current_based_position": 5,
 }
-# Current Limit (38) maximum per model, mA: XL330-M288 1750 x 1 mA, XC330-T288 910 x 1 mA,
-# XC330-M288 2352 x 1 mA, XM430-W350 1193 x 2.69 mA (ROBOTIS e-manual control tables).
-# XL330-M077 1750 x 1 mA. Models absent here (the XC430s) have no Current Limit.
-CURRENT_LIMIT_MAX_MA: dict[str, float] = {
-    "XL330-M288": 1750.0, "XC330-T288": 910.0, "XC330-M288": 2352.0, "XM430-W350": 1193 * 2.69,
-    "XL330-M077": 1750.0,
-}
-CURRENT_UNIT_MA: dict[str, float] = {
-    "XL330-M288": 1.0, "XC330-T288": 1.0, "XC330-M288": 1.0, "XM430-W350": 2.69,
-    "XL330-M077": 1.0,
-}
 GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
 RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
 RETURN_DELAY_MAX_US = 254 * RETURN_DELAY_UNIT_US
@@ -305,10 +276,10 @@ def _check_gain(value: int | None, key: str) -> None:
 
 
 def _check_current(value: int | None, key: str) -> None:
-    if value is not None and not 1 <= value <= max(CURRENT_LIMIT_MAX_MA.values()):
+    # each model's own maximum is its driver's to check (devices/servo/models.py)
+    if value is not None and value < 1:
         raise ConfigError("current limit out of range", key=key, value=value,
-                          allowed=f"1..{max(CURRENT_LIMIT_MAX_MA.values()):.0f} mA "
-                          "(and at most the servo model's own maximum)")
+                          allowed="1 mA or more (and at most the servo model's own maximum)")
 
 
 @dataclass(frozen=True)
@@ -389,13 +360,6 @@ class ResolvedServoSettings:
     position_d_gain: int | None
     return_delay_us: int
 
-    def current_limit_units(self, model: str) -> int | None:
-        """Current Limit / Goal Current in the register's units for servo ``model``
-        (None: none set, or a model without current sensing)."""
-        if self.current_limit_ma is None or model not in CURRENT_UNIT_MA:
-            return None
-        return round(self.current_limit_ma / CURRENT_UNIT_MA[model])
-
 
 def resolve_servo_settings(settings: ServoSettings, servo_id: int) -> ResolvedServoSettings:
     """``[servo_settings]`` for one servo, with its group's values where it has one."""
@@ -414,7 +378,8 @@ def resolve_servo_settings(settings: ServoSettings, servo_id: int) -> ResolvedSe
 
 
 def check_servo_settings(rig: RigConfig) -> None:
-    """Groups name servos of the rig; current limits fit each servo's model."""
+    """Groups name servos of the rig (each model's limits are its driver's to check:
+    :func:`handrig.devices.servo.models.check_rig`)."""
     ids = {s.id: s for s in rig.servos}
     for g, group in enumerate(rig.servo_settings.groups):
         for servo_id in group.ids:
@@ -422,20 +387,6 @@ def check_servo_settings(rig: RigConfig) -> None:
                 raise ConfigError("no servo with this ID in [[servos]]",
                                   key=f"servo_settings.groups[{g}].ids", value=servo_id,
                                   allowed=", ".join(str(i) for i in sorted(ids)))
-    for s in rig.servos:
-        resolved = resolve_servo_settings(rig.servo_settings, s.id)
-        if s.model not in CURRENT_LIMIT_MAX_MA:  # no current sensing: nothing to check
-            if resolved.operating_mode == OPERATING_MODES["current_based_position"]:
-                raise ConfigError(f"servo {s.id} ({s.model}) has no current-based position "
-                                  "mode", key="servo_settings.operating_mode",
-                                  allowed="a group with operating_mode = \"position\" or "
-                                  "\"extended_position\" for it")
-            continue
-        top = CURRENT_LIMIT_MAX_MA[s.model]
-        if resolved.current_limit_ma is not None and resolved.current_limit_ma > top:
-            raise ConfigError(f"current limit above the {s.model}'s maximum for servo {s.id}",
-                              key="servo_settings.current_limit_ma",
-                              value=resolved.current_limit_ma, allowed=f"1..{top:.0f} mA")
 
 
 @dataclass(frozen=True)
@@ -504,13 +455,6 @@ class RigConfig:
                 )
             seen_ids[s.id] = i
             seen_joints[s.joint] = i
-            limit = TEMPERATURE_LIMIT_C.get(s.model)
-            if limit is not None and self.heat.action_c >= limit:
-                raise ConfigError(
-                    f"[heat] action_c is not below servo {s.id}'s ({s.model}) Temperature "
-                    f"Limit of {limit} C, where it turns its torque off by itself",
-                    key="heat.action_c", value=self.heat.action_c,
-                    allowed=f"below {limit} C")
         if self.left_bus is not None and not any(s.joint.startswith("le")
                                                  for s in self.servos):
             raise ConfigError("[left_bus] is given but no servo drives a left-hand joint",
@@ -527,7 +471,7 @@ class RigConfig:
     @property
     def effective_sag_gain(self) -> float:
         """The sag gain the pipeline uses ([loop].sag_gain; a robot rig turns it off
-        unless its ``[robot].sag`` is true, see :mod:`handrig.app.robots`)."""
+        unless its ``[robot].sag`` is true, see :mod:`handrig.pose.robot_rig`)."""
         return self.loop.sag_gain
 
     def servo_settings_for(self, servo_id: int) -> ResolvedServoSettings:

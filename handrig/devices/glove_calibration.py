@@ -71,6 +71,16 @@ OPENGLOVES_KEYS: dict[str, int] = {
 """OpenGloves key (``A``, ``(AB)`` or ``AB``, ``F``, ``G``, ``P``) -> raw channel index."""
 
 
+# The poses `handrig calibrate glove` asks for, in order (name, what to do); the
+# calibration emulator (sim/calibration_motion.py) performs the same ones.
+CALIBRATION_STEPS: tuple[tuple[str, str], ...] = (
+    ("open", "Open hand: fingers straight and together, thumb relaxed beside the index."),
+    ("fist", "Fist: close every finger, thumb wrapped over the middle finger."),
+    ("thumb-oppose", "Thumb to little finger: touch the two tips together."),
+    ("thumb-spread", "Thumb spread: move the thumb as far from the index as is comfortable."),
+)
+
+
 @dataclass(frozen=True)
 class ChannelCalibration:
     """One raw channel -> one control curve (see the module docstring)."""

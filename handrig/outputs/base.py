@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,3 +55,12 @@ class Output(ABC):
     def close(self) -> object:
         """Finish (flush, close the file or socket). Idempotent."""
         return None
+
+    def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
+        """This output's part of the run summary: (its key, its figures, JSON-able).
+        ``duration_s``: how long the run lasted. Default: the status under its kind."""
+        st = self.status()
+        return st.kind, {"name": st.name, "path": st.path, "address": st.address,
+                         "frames": st.frames_written, "bytes": st.bytes_written,
+                         "frames_dropped": st.frames_dropped, "errors": st.errors,
+                         "stopped_reason": st.stopped_reason}

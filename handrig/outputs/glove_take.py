@@ -26,6 +26,7 @@ import threading
 from collections import deque
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -220,6 +221,14 @@ class GloveTake(Output):
                             bytes_written=self.bytes_written,
                             frames_dropped=self.frames_dropped, stopped_reason=self.error,
                             duration_s=self.duration_s)
+
+    def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
+        """``glove_take``: the take's path, frames, time span, bytes, why it stopped."""
+        st = self.status()
+        return "glove_take", {
+            "path": st.path, "frames": st.frames_written,
+            "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
+            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
 
     def close(self) -> str:
         """Write what is left, close the file and name it ``path`` (a file that appeared

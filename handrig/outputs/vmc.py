@@ -52,6 +52,7 @@ from __future__ import annotations
 import socket
 import struct
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -366,6 +367,14 @@ class VmcSender(Output):
             kind="vmc", name="VMC", address=f"{self.address[0]}:{self.address[1]}",
             frames_written=self.bundles_sent, bytes_written=self.bytes_sent,
             errors=self.errors, last_error=self.last_error)
+
+    def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
+        """``vmc``: the target, bundles sent, their rate over the run, send errors."""
+        st = self.status()
+        sent = st.frames_written
+        return "vmc", {"target": st.address, "bundles_sent": sent,
+                       "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
+                       "errors": st.errors, "last_error": st.last_error}
 
     def close(self) -> None:
         """Close the socket; further sends count as errors."""

@@ -17,7 +17,7 @@ step computes the human curves the retarget table reads, clamps them to their jo
 limits, then ``robot = clip(offset + G @ human50, robot range and servo limits)``
 (:class:`RobotPath`), in the same one compiled call; outputs still get the human pose.
 
-This module imports no device code (no serial, dynamixel_sdk or mujoco).
+This module imports no device code (no serial port, no servo SDK, no mujoco).
 """
 
 from __future__ import annotations

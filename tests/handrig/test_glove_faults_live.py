@@ -8,7 +8,7 @@ import time
 import tty
 
 from firmware_protocol.glove import GloveFrame, encode_frame
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 
 

@@ -21,7 +21,7 @@ import tty
 from pathlib import Path
 
 from firmware_protocol.glove import GloveFrame, encode_frame
-from handrig.app.session import format_summary
+from handrig.app.summary import format_summary
 from handrig.config.rig import load_rig_config
 from sim.dxl_bus import SimBus
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from firmware_protocol.dynamixel import HardwareError
 from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.clock import MonotonicClock
 from handrig.config.rig import load_rig_config
 from handrig.devices.glove_recording import read_glove_recording
@@ -65,7 +66,7 @@ def test_a_hardware_error_and_its_reboot_are_events_in_json(tmp_path: Path) -> N
 def test_an_overload_there_when_the_loop_starts_is_an_event_of_the_run() -> None:
     """Commissioned and torque on, then servo 3 overloads before the loop's first cycle:
     its first read finds it, and it is in the run's events (not in the log alone)."""
-    parts = app.build_parts()
+    parts = app_parts.build_parts()
     clock = MonotonicClock()
     log: list[str] = []
     rec = read_glove_recording(DEMO_RECORDING)

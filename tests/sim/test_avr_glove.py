@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig.app.factory import ForearmAngles, build_parts
+from handrig.app.parts import ForearmAngles, build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.cli import main
 from handrig.clock import MonotonicClock

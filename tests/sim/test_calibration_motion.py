@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from handrig.cli.calibrate_glove import STEPS, derive
+from handrig.cli.calibrate_glove import derive
 from handrig.config.paths import installed_config
-from handrig.devices.glove_calibration import load_glove_config
+from handrig.devices.glove_calibration import CALIBRATION_STEPS, load_glove_config
 from handrig.errors import DataError
 from sim.calibration_motion import (
     POSE_NAMES,
@@ -23,7 +23,7 @@ from sim.calibration_motion import (
 def test_every_sensor_closes_fully_in_exactly_one_pose(name: str) -> None:
     cfg = load_glove_config(installed_config(name))
     sensors = ScriptedSensors.from_config(cfg, n_raw=5)
-    assert tuple(n for n, _ in STEPS) == POSE_NAMES
+    assert tuple(n for n, _ in CALIBRATION_STEPS) == POSE_NAMES
     for k, curve in enumerate(sensors.curves):
         if not curve:
             continue

@@ -9,8 +9,9 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from firmware_protocol.dynamixel import MODELS, Reg
-from handrig.app.robots import RobotRigConfig, load_rig
 from handrig.config.loading import REPO_ROOT
+from handrig.devices.servo.models import current_limit_units
+from handrig.pose.robot_rig import RobotRigConfig, load_rig
 from sim.dxl_bus import servos_from_rig
 from sim.dxl_servo import EmulatedServo
 from sim.puppet import Puppet, kv_from_d_gain
@@ -30,9 +31,9 @@ def _commission(rig: RobotRigConfig, servos: dict[int, EmulatedServo]) -> None:
         assert st.current_limit_ma is not None and st.position_p_gain is not None
         assert st.position_d_gain is not None
         _w(s, Reg.OPERATING_MODE, st.operating_mode, 1)
-        _w(s, Reg.CURRENT_LIMIT, st.current_limit_units(cal.model) or 0, 2)
+        _w(s, Reg.CURRENT_LIMIT, current_limit_units(st.current_limit_ma, cal.model) or 0, 2)
         _w(s, Reg.RETURN_DELAY_TIME, st.return_delay_us // 2, 1)
-        _w(s, Reg.GOAL_CURRENT, st.current_limit_units(cal.model) or 0, 2)
+        _w(s, Reg.GOAL_CURRENT, current_limit_units(st.current_limit_ma, cal.model) or 0, 2)
         _w(s, Reg.POSITION_P_GAIN, st.position_p_gain, 2)
         _w(s, Reg.POSITION_D_GAIN, st.position_d_gain, 2)
         _w(s, Reg.TORQUE_ENABLE, 1, 1)

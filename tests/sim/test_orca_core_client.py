@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from handrig.app.robots import RobotRigConfig, load_rig, robot_retarget
+from handrig.pose.robot_rig import RobotRigConfig, load_rig, robot_retarget
 
 ROOT = Path(__file__).resolve().parents[2]
 ORCA_PYTHON = ROOT / ".venv-orca" / "bin" / "python"

@@ -14,8 +14,9 @@ import pytest
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
 from firmware_protocol.dynamixel import ErrorCode, Reg
-from handrig.app.robots import RobotRigConfig, load_rig, robot_retarget
 from handrig.config.rig import resolve_servo_settings
+from handrig.devices.servo.models import current_limit_units
+from handrig.pose.robot_rig import RobotRigConfig, load_rig, robot_retarget
 from sim.dxl_bus import SimBus
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,7 +36,7 @@ def test_the_rig_holds_the_published_servos() -> None:
     finger = resolve_servo_settings(rig.servo_settings, 3)
     assert (wrist.operating_mode, finger.operating_mode) == (4, 5)
     assert finger.current_limit_ma == 300
-    assert wrist.current_limit_units("XC430-T240BB") is None  # no current sensing
+    assert current_limit_units(wrist.current_limit_ma, "XC430-T240BB") is None  # no sensing
     # orca_core's map: index MCP on 3, ring MCP on 7 reversed
     assert by_id[3].joint == "right_i-mcp" and by_id[7].direction == -1
     rt = robot_retarget(rig)

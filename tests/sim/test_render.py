@@ -38,7 +38,7 @@ except RenderUnavailable as exc:
     print(json.dumps({"unavailable": str(exc)}))
     sys.exit(0)
 # rendering works here: the LEAP preset as the demo draws it must draw too (any error fails)
-from handrig.app.robots import load_rig
+from handrig.pose.robot_rig import load_rig
 leap = load_rig("leap")
 frames = [np.array([s.min_deg + k * (s.max_deg - s.min_deg) for s in leap.servos])
           for k in (0.2, 0.5)]

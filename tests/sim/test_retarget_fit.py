@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from handrig import hand
-from handrig.app.robots import RobotRigConfig, load_rig, robot_retarget
 from handrig.offline.mocap import load_reference
 from handrig.pose.retarget import Retarget, load_retarget, table_text
+from handrig.pose.robot_rig import RobotRigConfig, load_rig, robot_retarget
 from sim.grasp_poses import PINCH_TOUCH_MM, fist_pose, pinch_poses
 from sim.hand_kinematics import HumanTips
 from sim.retarget_fit import GraspModel, digit_chains, fit_retarget

@@ -17,7 +17,8 @@ from dynamixel_sdk import (
     PortHandler,
 )
 
-from handrig.config.rig import MODEL_NUMBERS, load_rig_config
+from handrig.config.rig import load_rig_config
+from handrig.devices.servo.models import MODEL_NUMBERS, servo_model
 from tests.helpers.emulator import SimBusProcess, start_sim_bus
 
 ADDR_TORQUE, ADDR_GOAL, ADDR_PRESENT, ADDR_RDT = 64, 116, 132, 9
@@ -32,7 +33,7 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: SimBusProcess) -> None:
     proc, path = sim_bus.proc, sim_bus.port
     rig = load_rig_config()
     ids = [s.id for s in rig.servos]
-    number = {s.id: MODEL_NUMBERS[s.model] for s in rig.servos}  # XL330s, XM430 wrist
+    number = {s.id: MODEL_NUMBERS[servo_model(s)] for s in rig.servos}  # XL330s, XM430 wrist
     port = PortHandler(path)
     assert port.openPort() and port.setBaudRate(1_000_000)
     ph = PacketHandler(2.0)

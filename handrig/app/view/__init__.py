@@ -63,9 +63,8 @@ def build_server(address: str, rig_config: RigConfig, *, rate_hz: float = 30.0,
 def view_session(address: str | None, rig_config: RigConfig, log: Callable[[str], None]
                  ) -> Iterator[ViewProcess | None]:
     """Serve the view for the block when ``address`` is given, in a process of its own
-    (:class:`handrig.app.view.process.ViewProcess`), and yield it: the run hands it the
-    rig (``attach_rig``, a one-hand run's ``LiveOptions.on_rig``) or both hands' rigs
-    (``attach_hands``, a two-hand run's ``on_hands``); yields None without
+    (:class:`handrig.app.view.process.ViewProcess`), and yield it: the session hands it
+    its loops by hand (``attach_hands``, ``LiveOptions.on_hands``); yields None without
     ``--view``. The server closes when the block ends, however it ends."""
     if address is None:
         yield None

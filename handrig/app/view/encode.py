@@ -72,56 +72,43 @@ class FrameEncoder:
         }, separators=(",", ":"))
 
     def frame(self, snap: LoopSnapshot | HandsSnapshot) -> str:
-        """One snapshot as the page's frame message (both hands' for a two-hand run)."""
-        if isinstance(snap, HandsSnapshot):
-            return self._hands_frame(snap)
-        source, angles, ghost = _angles(snap)
-        msg: dict[str, Any] = {
-            "type": "frame", "seq": int(snap.seq), "t_s": _num(snap.t_s, 3),
-            **_hand_fields(snap, tuple(snap.control_names)),
-            "outputs": [_plain(o) for o in snap.outputs],
-            "source": source,
-            "bodies": {h: s.pose(angles) for h, s in self.models.items()},
-            "ghost": ({h: s.pose(ghost) for h, s in self.models.items()}
-                      if ghost is not None else None),
-            "skeleton": {h: s.skeleton(_pose(snap)) for h, s in self.skeletons.items()
-                         if any(n.startswith(h) for n in snap.curve_names)},
-        }
-        return json.dumps(msg, separators=(",", ":"))
-
-    def _hands_frame(self, snaps: HandsSnapshot) -> str:
-        """A two-hand run's frame: a part per hand (its loop's figures, its glove's
-        controls, its servos) in ``hands``; each hand of the model posed from its own
-        loop's snapshot, each skeleton from its own hand's pipeline."""
+        """One snapshot as the page's frame message: a part per hand in ``hands`` (its
+        loop's figures, its glove's controls, its servos), whatever the number of hands
+        (a bare :class:`LoopSnapshot` is one loop driving the whole rig). Each model is
+        posed from the loop that drives it, each skeleton from its own hand's pose."""
+        hands_snap = snap if isinstance(snap, HandsSnapshot) else HandsSnapshot({"": snap})
         hands: list[dict[str, Any]] = []
         bodies: dict[str, Any] = {}
         ghosts: dict[str, Any] = {}
-        for h, snap in snaps.hands.items():
-            source, angles, ghost = _angles(snap)
-            own = tuple(n for n in snap.control_names if n.startswith(h))
-            hands.append({"hand": h, "label": HAND_NAMES.get(h, h), "source": source,
-                          **_hand_fields(snap, own)})
-            model = self.models.get(h)
-            if model is not None:
-                bodies[h] = model.pose(angles)
-                if ghost is not None:
-                    ghosts[h] = model.pose(ghost)
-        first = next(iter(snaps.hands.values()))
+        skeleton: dict[str, Any] = {}
+        for key, one in hands_snap.hands.items():
+            source, angles, ghost = _angles(one)
+            own = tuple(n for n in one.control_names if not key or n.startswith(key))
+            hands.append({"hand": key, "label": HAND_NAMES.get(key, ""), "source": source,
+                          **_hand_fields(one, own)})
+            for h, model in self.models.items():
+                if key in ("", h):
+                    bodies[h] = model.pose(angles)
+                    if ghost is not None:
+                        ghosts[h] = model.pose(ghost)
+            for h, human in self.skeletons.items():
+                if key in ("", h) and any(n.startswith(h) for n in one.curve_names):
+                    skeleton[h] = human.skeleton(_pose(one))
+        first = next(iter(hands_snap.hands.values()))
         msg: dict[str, Any] = {
-            "type": "frame", "seq": int(snaps.seq), "t_s": _num(first.t_s, 3),
+            "type": "frame", "seq": int(hands_snap.seq), "t_s": _num(first.t_s, 3),
             "hands": hands,
-            "outputs": [_plain(o) for snap in snaps.hands.values() for o in snap.outputs],
-            "bodies": bodies, "ghost": ghosts or None,
-            "skeleton": {h: s.skeleton(_pose(snaps.hands[h])) for h, s in self.skeletons.items()
-                         if h in snaps.hands},
+            "outputs": [_plain(o) for one in hands_snap.hands.values() for o in one.outputs],
+            "bodies": bodies, "ghost": ghosts or None, "skeleton": skeleton,
         }
         return json.dumps(msg, separators=(",", ":"))
 
 
 @dataclass(frozen=True)
 class HandsSnapshot:
-    """The snapshots of a two-hand run's loops, by hand (``"ri"``, ``"le"``), taken
-    together by the view's feeder. ``seq`` changes whenever either hand's does."""
+    """The snapshots of a session's loops, by hand (``"ri"``, ``"le"``; ``""`` for one
+    loop driving the whole rig), taken together by the view's feeder. ``seq`` changes
+    whenever any hand's does."""
 
     hands: Mapping[str, LoopSnapshot]
 

@@ -158,23 +158,19 @@ class ViewProcess:
                                             name="handrig-view-feeder", daemon=True)
             self._feeder.start()
 
-    def attach_rig(self, rig: Any) -> None:
-        """:meth:`attach` for a :class:`handrig.loop.rig.Rig`."""
-        self.attach(rig.telemetry.latest, rig)
-
     def attach_hands(self, rigs: Mapping[str, Any], controls: RigControls) -> None:
-        """:meth:`attach` for a two-hand run: ``rigs`` by hand (``"ri"``, ``"le"``), each
-        loop's snapshot read by the same feeder (a :class:`HandsSnapshot` once every
-        hand has published one); the buttons call ``controls``, which act on both hands
-        as the keys do."""
+        """:meth:`attach` for a session's loops: ``rigs`` by hand (``"ri"``, ``"le"``;
+        ``""`` for one loop driving the whole rig), each loop's snapshot read by the same
+        feeder (a :class:`HandsSnapshot` once every hand has published one); the buttons
+        call ``controls``, which act on every hand as the keys do."""
         latest = {h: rig.telemetry.latest for h, rig in rigs.items()}
 
-        def both() -> HandsSnapshot | None:
+        def every() -> HandsSnapshot | None:
             snaps = {h: read() for h, read in latest.items()}
             if any(s is None for s in snaps.values()):
                 return None
             return HandsSnapshot(snaps)
-        self.attach(both, controls)
+        self.attach(every, controls)
 
     def feeder_priority(self) -> int:
         """The feeder's SCHED_FIFO priority: one below the loop's (0: normal, when the

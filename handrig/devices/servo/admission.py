@@ -20,13 +20,13 @@ import contextlib
 
 import numpy as np
 
-from handrig.config.rig import MODEL_NUMBERS
 from handrig.devices.servo.bus import BusStats
 from handrig.devices.servo.codec import INST_PING, build_instruction
 from handrig.devices.servo.commissioning import Commissioner
 from handrig.devices.servo.faults import FaultHandler
 from handrig.devices.servo.goals import GoalWriter
 from handrig.devices.servo.link import Link
+from handrig.devices.servo.models import MODEL_NAMES, servo_model
 from handrig.devices.servo.registers import Reg
 from handrig.devices.servo.roster import Roster
 from handrig.devices.servo.torque import TORQUE_ON_SLACK_DEG
@@ -61,9 +61,8 @@ class Admission:
             return None, f"{who} answered a read but not a ping {r.where()}: still left out"
         model = status.params[0] | status.params[1] << 8
         if model != r.expected_models[index]:
-            names = {v: k for k, v in MODEL_NUMBERS.items()}
-            return None, (f"{who} answers as model {model} ({names.get(model, 'unknown')}), "
-                          f"the rig says {r.rig.servos[index].model}: left out for the run "
+            return None, (f"{who} answers as model {model} ({MODEL_NAMES.get(model, 'unknown')}), "
+                          f"the rig says {servo_model(r.rig.servos[index])}: left out for the run "
                           "(fix config/rig.toml or the servo)")
         self.commissioner.models[sid] = model
         self.commissioner.firmware[sid] = status.params[2]

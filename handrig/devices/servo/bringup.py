@@ -24,12 +24,12 @@ from dataclasses import dataclass, field
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 from dynamixel_sdk.robotis_def import COMM_RX_CORRUPT, COMM_RX_TIMEOUT
 
-from handrig.config.rig import BAUD_RATES, MODEL_NUMBERS, RigConfig
+from handrig.config.rig import RigConfig
+from handrig.devices.servo.models import BAUD_RATES, MODEL_NAMES, servo_model
 from handrig.devices.servo.registers import Reg, describe_hardware_error
 from handrig.errors import DeviceError
 
 PROTOCOL = 2.0
-MODEL_NAMES: dict[int, str] = {number: name for name, number in MODEL_NUMBERS.items()}
 # Input voltage range per model, volts (e-manual, "Specifications").
 VOLTAGE_RANGE_V: dict[str, tuple[float, float]] = {
     "XL330-M288": (3.7, 6.0),
@@ -369,10 +369,10 @@ def check(port: str, rig: RigConfig, *, baud: int | None = None) -> tuple[list[F
                 "check its cable and power; `handrig servos scan` finds it at another baud "
                 "or ID, then `handrig servos set-baud`/`set-id`"))
             continue
-        if got.model != cal.model:
+        if got.model != servo_model(cal):
             findings.append(Finding(
                 servo_id, "model", f"servo {servo_id} ({cal.joint}) is a {got.model}, the "
-                f"rig file says {cal.model}",
+                f"rig file says {servo_model(cal)}",
                 "fit the servo the rig file names, or correct `model` in its [[servos]]"))
         if got.operating_mode is not None and got.operating_mode != mode:
             findings.append(Finding(

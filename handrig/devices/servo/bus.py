@@ -205,8 +205,10 @@ class ServoBus(ABC):
         """Torque off if still on, close the port. Safe to call twice."""
 
     @abstractmethod
-    def torque(self) -> AbstractContextManager[ServoBus]:
-        """Context manager: torque on inside, off on every way out."""
+    def torque(self, *, handle_signals: bool = True) -> AbstractContextManager[ServoBus]:
+        """Context manager: torque on inside, off on every way out. ``handle_signals``:
+        the bus may catch the exit signals itself while torque is on (a session that
+        handles them, :class:`handrig.app.session_exit.ExitSignals`, passes False)."""
 
     @abstractmethod
     def write_goals_deg(self, goals_deg: np.ndarray) -> int:
@@ -215,11 +217,14 @@ class ServoBus(ABC):
 
     @abstractmethod
     def read_state(self, deadline_s: float | None = None,
-                   part: tuple[int, int] | None = None) -> ServoState:
+                   part: tuple[int, int] | None = None, *, patient: bool = False
+                   ) -> ServoState:
         """Read present state by ``deadline_s`` (clock time; None: the bus's own
         budget). ``part=(i, m)``: ask only the servos at rig indices ``i, i + m, ...``
         (``ServoState.asked``). Servos without a valid reply are marked stale with
-        their age; a read the bus declined says so (``ServoState.sent``)."""
+        their age; a read the bus declined says so (``ServoState.sent``).
+        ``patient``: a caller that waits for the answer (not the realtime loop), so the
+        bus may retry up to ``deadline_s`` rather than keep to the loop's budget."""
 
     # -- hooks: what a bus may say beyond the contract (defaults: nothing to say) ----------
     @property
@@ -284,6 +289,28 @@ class ServoBus(ABC):
         the cap is in place; False if this bus cannot cap a servo (the default) or the
         servo did not take it (the bus says why in its events)."""
         return False
+
+    @property
+    def torque_enabled(self) -> bool:
+        """Whether torque is on now, as the bus knows it (a fault may have turned it
+        off). Default: a bus that cannot tell says False."""
+        return False
+
+    @property
+    def connect_notes(self) -> tuple[str, ...]:
+        """What :meth:`connect` found and did, one line each (settings checked or
+        changed, servos left out), for the run's header (default: nothing to say)."""
+        return ()
+
+    def confirm_torque_off(self, budget_s: float) -> tuple[bool | None, list[str]]:
+        """After the run, torque read back from every servo that was given it, within
+        ``budget_s``: (True if every one is off, False if one is still on, None if one
+        could not be read; the servos not confirmed off, each named with why). A servo
+        left out at connect is asked too, its silence no failure. Default: this bus
+        cannot read torque back, so nothing is confirmed."""
+        left_out = set(self.left_out)
+        return None, [f"{self.describe(i)}: not read back (this bus cannot read torque)"
+                      for i in range(self.n_servos) if i not in left_out]
 
     def describe(self, index: int) -> str:
         """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""

@@ -16,12 +16,13 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from handrig.clock import Clock
-from handrig.config.rig import MODEL_NUMBERS, RETURN_DELAY_UNIT_US, RigConfig
+from handrig.config.rig import RETURN_DELAY_UNIT_US, RigConfig
 from handrig.devices.servo.bus import ServoState
 from handrig.devices.servo.codec import INST_PING, INST_WRITE, build_instruction, u16
 from handrig.devices.servo.fast_read import FastSyncRead
 from handrig.devices.servo.faults import FaultHandler
 from handrig.devices.servo.link import COMMAND_ATTEMPTS, COMMAND_TIMEOUT_S, Link
+from handrig.devices.servo.models import MODEL_NAMES, current_limit_units, servo_model
 from handrig.devices.servo.readings import ReadPlan
 from handrig.devices.servo.registers import (
     OPERATING_MODE_CURRENT_BASED_POSITION,
@@ -51,7 +52,7 @@ def servo_settings(rig: RigConfig, index: int) -> tuple[tuple[Reg, int, str], ..
         (Reg.OPERATING_MODE, s.operating_mode,
          MODE_NAMES.get(s.operating_mode, f"mode {s.operating_mode}")),
     ]
-    current = s.current_limit_units(servo.model)
+    current = current_limit_units(s.current_limit_ma, servo_model(servo))
     if current is not None:
         out.append((Reg.CURRENT_LIMIT, current, f"current limit {s.current_limit_ma} mA"))
         out.append((Reg.GOAL_CURRENT, current, f"goal current {s.current_limit_ma} mA"))
@@ -118,10 +119,9 @@ class Commissioner:
             self.firmware[sid] = status.params[2]
             want = r.expected_models[i]
             if model != want:
-                names = {v: k for k, v in MODEL_NUMBERS.items()}
                 problems.append(
-                    f"{r.describe(i)} is model {model} ({names.get(model, 'unknown')}), "
-                    f"the rig says {r.rig.servos[i].model} ({want}): fix config/rig.toml "
+                    f"{r.describe(i)} is model {model} ({MODEL_NAMES.get(model, 'unknown')}), "
+                    f"the rig says {servo_model(r.rig.servos[i])} ({want}): fix config/rig.toml "
                     "or the servo")
         if problems and self.missing_ok and len(problems) == missing < r.n:
             r.absent[absent] = True

@@ -459,6 +459,42 @@ class DynamixelBus(ServoBus):
             f"cannot {purpose}: no valid present position from {', '.join(bad)} "
             f"{self.roster.where()} in {COMMAND_ATTEMPTS} reads")
 
+    @property
+    def connect_notes(self) -> tuple[str, ...]:
+        """What :meth:`connect` found and did (commissioning), one line each."""
+        return tuple(self.commissioning)
+
+    def confirm_torque_off(self, budget_s: float) -> tuple[bool | None, list[str]]:
+        """Torque Enable read back from every servo given torque (the contract's
+        :meth:`ServoBus.confirm_torque_off`). A port that stopped draining is not asked
+        at all, and the reads stop at ``budget_s`` (the servos not asked are named)."""
+        left_out = set(self.left_out)
+        given = [i for i in range(self.n_servos) if i not in left_out]
+        if self.port_stalled:
+            return None, [f"{self.describe(i)}: not read back (servo port {self.port} "
+                          "stopped draining)" for i in given]
+        unconfirmed: list[str] = []
+        on = unread = False
+        end = self.clock.now() + budget_s
+        for i in range(self.n_servos):
+            if self.clock.now() >= end:
+                if i not in left_out:
+                    unread = True
+                    unconfirmed.append(f"{self.describe(i)}: not read back (the "
+                                       f"{budget_s:g} s went on the servos before)")
+                continue
+            try:
+                value = self.read_register(i, Reg.TORQUE_ENABLE)
+            except HandrigError as exc:
+                if i not in left_out:
+                    unread = True
+                    unconfirmed.append(f"{self.describe(i)}: not read back ({exc})")
+                continue
+            if value != 0:
+                on = True
+                unconfirmed.append(f"{self.describe(i)}: torque still on")
+        return (False if on else None if unread else True), unconfirmed
+
     # ------------------------------------------------------------------ torque
     def torque(
         self, *, handle_signals: bool = True, on_signal: Callable[[str], None] | None = None

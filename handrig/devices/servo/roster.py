@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from handrig.config.rig import MODEL_NUMBERS, POSITION_TICKS_MAX, TICKS_PER_DEG, RigConfig
+from handrig.config.rig import POSITION_TICKS_MAX, TICKS_PER_DEG, RigConfig
+from handrig.devices.servo.models import MODEL_NUMBERS, check_rig, servo_model
 from handrig.devices.servo.registers import CURRENT_MA_PER_UNIT, VELOCITY_DPS_PER_UNIT
 from handrig.errors import DeviceError
 
@@ -20,6 +21,7 @@ class Roster:
     def __init__(self, rig: RigConfig, port: str, baud: int) -> None:
         if not rig.servos:
             raise DeviceError("the rig config lists no servos: add [[servos]] to config/rig.toml")
+        check_rig(rig)  # the servos it names are ones this driver knows, at bauds they take
         servos = rig.servos
         self.rig = rig
         self.port = port
@@ -32,7 +34,7 @@ class Roster:
         self.min_deg = np.array([s.min_deg for s in servos], np.float64)
         self.max_deg = np.array([s.max_deg for s in servos], np.float64)
         self.hold_deg = np.clip(0.0, self.min_deg, self.max_deg)
-        self.expected_models = tuple(MODEL_NUMBERS[s.model] for s in servos)
+        self.expected_models = tuple(MODEL_NUMBERS[servo_model(s)] for s in servos)
         ticks_per_deg = np.array(
             [s.direction * s.gear_ratio * TICKS_PER_DEG for s in servos], np.float64)
         # the codec kernels' scale rows: zero ticks, ticks per joint degree, joint deg/s

@@ -140,7 +140,7 @@ class BusPart(ServoBus):
     def close(self) -> None:
         """Nothing: the shared bus's owner closes it (torque off on the way)."""
 
-    def torque(self) -> AbstractContextManager[ServoBus]:
+    def torque(self, *, handle_signals: bool = True) -> AbstractContextManager[ServoBus]:
         """Nothing to switch: the part's loop runs inside the whole bus's torque context,
         which turns torque off for every servo on every way out."""
         return self._held()
@@ -155,7 +155,8 @@ class BusPart(ServoBus):
         return clamps
 
     def read_state(self, deadline_s: float | None = None,
-                   part: tuple[int, int] | None = None) -> ServoState:
+                   part: tuple[int, int] | None = None, *, patient: bool = False
+                   ) -> ServoState:
         shared = self.shared
         if shared.reader is not self:
             return self._newest_read()

@@ -9,6 +9,7 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -191,6 +192,15 @@ class Recorder(Output):
             frames_dropped=self.frames_dropped, errors=int(self.error is not None),
             last_error=error, stopped_reason=self.stopped_reason,
             duration_s=self.duration_s)
+
+    def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
+        """``recording``: the take's path, format, frames, performance time, bytes,
+        frames dropped and why it stopped early (if it did)."""
+        st = self.status()
+        return "recording", {
+            "path": st.path, "format": st.name, "frames": st.frames_written,
+            "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
+            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
 
     def _writer(self) -> None:
         while True:

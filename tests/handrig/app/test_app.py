@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from handrig.app.factory import ForearmAngles
+from handrig.app.parts import ForearmAngles
 from handrig.devices.glove import GloveSample
 from handrig.devices.glove_calibration import ImuSettings, load_glove_config
 from handrig.pose.orientation import ForearmOrientation
@@ -65,7 +65,7 @@ def test_the_glove_reader_is_told_how_many_raw_channels_the_calibration_reads() 
 
 
 def test_the_summary_carries_the_glove_port_counters() -> None:
-    from handrig.app.factory import summary_dict
+    from handrig.app.summary import summary_dict
     from handrig.devices.glove import GloveStats
     from handrig.loop.stats import RunStats
 

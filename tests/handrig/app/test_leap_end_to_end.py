@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.app import simulator
-from handrig.app.session import torque_is_off
+from handrig.app.session_exit import torque_is_off
 from handrig.clock import MonotonicClock
 from handrig.loop.modes import Mode
 from handrig.loop.stats import RunStats
@@ -34,7 +35,7 @@ class Run:
     torque_off: bool | None
 
 
-def _run(parts: app.RigParts) -> Run:
+def _run(parts: app_parts.RigParts) -> Run:
     rig_cfg = parts.rig_config
     clock = MonotonicClock()
     controls: list[np.ndarray] = []
@@ -76,7 +77,7 @@ def _run(parts: app.RigParts) -> Run:
                float(behind[-1]) if behind else 0.0, off)
 
 
-def _followed(run: Run, parts: app.RigParts) -> dict[str, float]:
+def _followed(run: Run, parts: app_parts.RigParts) -> dict[str, float]:
     """Per joint, how well each read's present position follows its glove channel: the
     correlation with the channel as it was at the read's own time (not at whichever later
     cycle handed the outputs that read)."""
@@ -92,7 +93,7 @@ def _followed(run: Run, parts: app.RigParts) -> dict[str, float]:
 
 
 def test_index_and_thumb_follow_their_glove_channels_and_torque_ends_off() -> None:
-    parts = app.build_parts("leap")
+    parts = app_parts.build_parts("leap")
     rig_cfg = parts.rig_config
     assert rig_cfg.bus.baud == 4_000_000
     run = _run(parts)

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
 from handrig.devices.glove_recording import read_glove_recording
 from sim.demo_recording import DEMO_RECORDING
@@ -223,7 +223,7 @@ def test_json_prints_the_summary_with_the_error_when_a_run_fails(tmp_path) -> No
 
 
 def test_exit_signals_unwind_before_the_rig_stop_it_twice_then_raise_then_ignore() -> None:
-    from handrig.app.session import EXIT_SIGNALS, ExitSignals
+    from handrig.app.session_exit import EXIT_SIGNALS, ExitSignals
     from handrig.errors import SafetyStop
 
     before = {s: signal.getsignal(s) for s in EXIT_SIGNALS}

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from handrig.app.factory import build_parts
 from handrig.app.keys import KeyReader
 from handrig.app.panel import (
     BusHealth,
@@ -26,6 +25,7 @@ from handrig.app.panel import (
     plain_line,
     render,
 )
+from handrig.app.parts import build_parts
 from handrig.app.rig_snapshot import RigSnapshot
 from handrig.clock import FakeClock
 from handrig.config.rig import load_rig_config

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.app.port_processes import (
     SIM_BUS,
     PortProcess,
@@ -26,7 +27,7 @@ RIG = ROOT / "config" / "rig.toml"
 
 
 def test_servo_bus_takes_the_emulator_started_for_it() -> None:
-    parts = app.build_parts(RIG)
+    parts = app_parts.build_parts(RIG)
     argv = sim_bus_argv(parts.rig_file, parts.hand, wire_timing=False)
     with StartedEmulators() as started:
         other = started.start(sim_bus_argv(parts.rig_file, "ri", wire_timing=False), SIM_BUS)

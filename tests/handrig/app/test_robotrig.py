@@ -8,19 +8,20 @@ from pathlib import Path
 
 import pytest
 
-from handrig.app.robots import (
-    RIGS_DIR,
+from handrig.config.loading import REPO_ROOT, build
+from handrig.config.rig import RigConfig, ServoSettings, load_rig_config
+from handrig.config.rig_files import RIGS_DIR
+from handrig.config.rig_files import rig_file_path as rig_path
+from handrig.devices.servo.models import check_rig, current_limit_units
+from handrig.errors import ConfigError
+from handrig.pose.mjcf import read_joints
+from handrig.pose.robot_rig import (
     RobotRigConfig,
     load_rig,
     load_robot_rig,
     render_view,
-    rig_path,
     robot_retarget,
 )
-from handrig.config.loading import REPO_ROOT, build
-from handrig.config.rig import RigConfig, ServoSettings, load_rig_config
-from handrig.errors import ConfigError
-from handrig.pose.mjcf import read_joints
 
 LEAP_RIG = RIGS_DIR / "leap.toml"
 LEAP_MODEL = REPO_ROOT / "data" / "robots" / "leap_hand" / "right_hand.xml"
@@ -48,7 +49,8 @@ def test_leap_servo_settings_are_the_leap_api_values() -> None:
     for s in rig.servos:
         st = rig.servo_settings_for(s.id)
         assert st.operating_mode == 5  # current-based position
-        assert st.current_limit_ma == 350 and st.current_limit_units(s.model) == 350
+        assert st.current_limit_ma == 350
+        assert current_limit_units(st.current_limit_ma, s.model) == 350
         assert st.return_delay_us == 0
         side = s.joint.endswith("_rot")
         assert (st.position_p_gain, st.position_d_gain) == ((450, 150) if side else (600, 200))
@@ -120,8 +122,6 @@ def test_a_copy_of_the_preset_loads_with_paths_relative_to_it(tmp_path: Path) ->
     ("max_deg = 127.7", "max_deg = 140.0",
      r"servos\[1\].max_deg.*140.0.*exceeds the model's range of if_mcp"),
     ("ids = [0, 4, 8]", "ids = [0, 4, 16]", r"servo_settings.groups\[0\].ids.*= 16.*no servo"),
-    ("current_limit_ma = 350", "current_limit_ma = 2400",
-     r"current_limit_ma.*2400.*above the XC330-M288's maximum"),
     ("return_delay_us = 0", "return_delay_us = 3", r"return_delay_us.*= 3.*steps of 2"),
     ('operating_mode = "current_based_position"', 'operating_mode = "current"',
      r"operating_mode.*'current'.*current_based_position"),
@@ -137,6 +137,17 @@ def test_bad_robot_rigs_name_file_key_value(tmp_path: Path, old: str, new: str,
     p = _write_rig(tmp_path, new, old)
     with pytest.raises(ConfigError, match=match):
         load_rig(p)
+
+
+def test_a_current_limit_above_the_models_is_refused_by_the_drivers_check(
+        tmp_path: Path) -> None:
+    """A rig file names its servos' models as strings; what each model takes is the
+    driver's table (devices/servo/models.py), checked before the bus opens."""
+    p = _write_rig(tmp_path, "current_limit_ma = 2400", "current_limit_ma = 350")
+    rig = load_rig(p)
+    with pytest.raises(ConfigError, match=r"current_limit_ma.*2400.*above the XC330-M288's "
+                       "maximum"):
+        check_rig(rig, str(p))
 
 
 def test_retarget_table_must_cover_every_servo_and_stay_within_the_model(tmp_path: Path) -> None:

@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig.app import factory as app
-from handrig.app.factory import build_parts
-from handrig.app.session import format_summary
+from handrig.app import parts as app_parts
+from handrig.app import summary as run_summary
+from handrig.app.parts import build_parts
+from handrig.app.summary import format_summary
 from handrig.config.loading import CONFIG_DIR
 from handrig.devices.servo.bus import BusStats
 from handrig.errors import ConfigError
@@ -27,7 +28,7 @@ CHECKOUT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")
-def parts() -> app.RigParts:
+def parts() -> app_parts.RigParts:
     return build_parts()
 
 
@@ -35,7 +36,7 @@ def _summary(**kw: object) -> dict:
     stats = RunStats(frames=2200, duration_s=11.0)
     bus = BusStats(20, reads=500, timeouts=19)
     bus.stale_readings[:] = 19
-    return app.summary_dict(stats, bus, None, True, **kw)  # type: ignore[arg-type]
+    return run_summary.summary_dict(stats, bus, None, True, **kw)  # type: ignore[arg-type]
 
 
 # -- the summary ----------------------------------------------------------------------
@@ -46,7 +47,7 @@ def test_faults_are_words_and_counts_not_a_dict() -> None:
     line = next(x for x in text.splitlines() if x.startswith("faults"))
     assert line == "faults            19 read timeouts, 380 stale servo readings"
     assert "{" not in text
-    clean = format_summary(app.summary_dict(RunStats(), BusStats(20), None, True))
+    clean = format_summary(run_summary.summary_dict(RunStats(), BusStats(20), None, True))
     assert "faults            none" in clean
 
 
@@ -61,14 +62,14 @@ def test_the_ease_is_stated_and_json_carries_the_same() -> None:
     assert back["outputs"] == {"vmc": None, "recording": None}
 
 
-def test_clamps_say_what_they_mean_and_which_joints(parts: app.RigParts) -> None:
+def test_clamps_say_what_they_mean_and_which_joints(parts: app_parts.RigParts) -> None:
     pipeline = parts.pipeline
     counts = pipeline.servo_clamps_by_servo
     saved = counts.copy()
     try:
         counts[:] = 0
         counts[3], counts[7], counts[1], counts[0] = 50, 900, 20, 5
-        clamped = app.clamped_joints(pipeline)
+        clamped = run_summary.clamped_joints(pipeline)
     finally:
         counts[:] = saved
     joints = pipeline.servo_joints
@@ -79,25 +80,38 @@ def test_clamps_say_what_they_mean_and_which_joints(parts: app.RigParts) -> None
     assert "normal at a full fist or spread" in text
 
 
-def test_outputs_are_listed() -> None:
-    class Sender(Output):  # the fakes subclass the Output ABC: only status() is read
+def test_outputs_are_listed(tmp_path: Path) -> None:
+    """Each real output says its own part of the summary (Output.summary); the counts
+    are set through status(), as if the run had sent them."""
+    from handrig.outputs.recorder import Recorder
+    from handrig.outputs.vmc import VmcSender
+
+    class Sender(VmcSender):
+        def status(self) -> OutputStatus:
+            return dataclasses.replace(super().status(), frames_written=600)
+
+    class Rec(Recorder):
+        def status(self) -> OutputStatus:
+            return dataclasses.replace(super().status(), frames_written=2200,
+                                       bytes_written=123_456, duration_s=2200 / 200.0)
+
+    class Other(Output):  # an output of a kind the summary does not know: its status
         def __call__(self, t_s: float, pose_deg: np.ndarray) -> None:
             pass
 
         def status(self) -> OutputStatus:
-            return OutputStatus(kind="vmc", name="VMC", address="127.0.0.1:39539",
-                                frames_written=600)
+            return OutputStatus(kind="osc", name="OSC", address="10.0.0.2:9000",
+                                frames_written=5)
 
-    class Rec(Output):
-        def __call__(self, t_s: float, pose_deg: np.ndarray) -> None:
-            pass
-
-        def status(self) -> OutputStatus:
-            return OutputStatus(kind="recorder", name="bvh", path="take.bvh",
-                                frames_written=2200, bytes_written=123_456,
-                                duration_s=2200 / 200.0)
-
-    outputs = app.outputs_summary([Sender(), Rec()], duration_s=10.0)
+    sender, rec = Sender("127.0.0.1", 39539), Rec(tmp_path / "take.bvh", log=lambda s: None)
+    try:
+        outputs = run_summary.outputs_summary([sender, rec, Other()], duration_s=10.0)
+    finally:
+        sender.close()
+        rec.close()
+    assert outputs["osc"]["address"] == "10.0.0.2:9000" and outputs["osc"]["frames"] == 5
+    assert outputs["recording"]["path"] == str(tmp_path / "take.bvh")
+    outputs["recording"]["path"] = "take.bvh"
     assert outputs["vmc"]["target"] == "127.0.0.1:39539" and outputs["vmc"]["rate_hz"] == 60.0
     assert outputs["recording"]["duration_s"] == 11.0
     text = format_summary(_summary(outputs=outputs))
@@ -109,26 +123,27 @@ def test_outputs_are_listed() -> None:
 # -- messages --------------------------------------------------------------------------
 
 
-def test_a_recording_given_as_a_port_suggests_replay(parts: app.RigParts, tmp_path: Path) -> None:
+def test_a_recording_given_as_a_port_suggests_replay(parts: app_parts.RigParts,
+                                                     tmp_path: Path) -> None:
     csv = tmp_path / "take.csv"
     csv.write_text("# handrig glove recording 1\n")
     for spec in (str(csv), "missing.csv"):
         with pytest.raises(ConfigError) as err:
-            app.glove_spec(spec, parts.glove_config)
+            app_parts.glove_spec(spec, parts.glove_config)
         text = str(err.value)
         assert text.startswith(f"--glove {spec!r}: a file, not a serial port")
         assert f"--glove replay:{spec}" in text and "<config>" not in text
     with pytest.raises(ConfigError, match=r"--glove 'replay:nope.csv': glove recording not found"):
-        app.glove_spec("replay:nope.csv", parts.glove_config)
+        app_parts.glove_spec("replay:nope.csv", parts.glove_config)
     with pytest.raises(ConfigError, match=r"--glove '/dev/ttyNOPE9': no such port"):
-        app.glove_spec("/dev/ttyNOPE9", parts.glove_config)
+        app_parts.glove_spec("/dev/ttyNOPE9", parts.glove_config)
 
 
-def test_a_missing_glove_port_names_the_glove_file_and_key(parts: app.RigParts) -> None:
+def test_a_missing_glove_port_names_the_glove_file_and_key(parts: app_parts.RigParts) -> None:
     cfg = parts.glove_config
     no_port = dataclasses.replace(cfg, glove=dataclasses.replace(cfg.glove, port=""))
     with pytest.raises(ConfigError) as err:
-        app.glove_spec(None, no_port, Path("/home/me/glove.toml"))
+        app_parts.glove_spec(None, no_port, Path("/home/me/glove.toml"))
     text = str(err.value)
     assert text.startswith("/home/me/glove.toml: key 'glove.port': no glove port given")
     assert "--glove PORT (or replay:FILE.csv)" in text
@@ -136,14 +151,14 @@ def test_a_missing_glove_port_names_the_glove_file_and_key(parts: app.RigParts) 
 
 def test_vmc_needs_a_port_and_record_a_known_suffix() -> None:
     with pytest.raises(ConfigError) as err:
-        app.check_outputs("localhost", None)
+        app_parts.check_outputs("localhost", None)
     assert str(err.value).startswith("--vmc 'localhost': no port given")
     assert "localhost:39539" in str(err.value)
     with pytest.raises(ConfigError, match=r"^--vmc 'localhost:http': not a UDP destination"):
-        app.check_outputs("localhost:http", None)
+        app_parts.check_outputs("localhost:http", None)
     with pytest.raises(ConfigError, match=r"^--record 'take.txt': unknown recording suffix '.txt'"):
-        app.check_outputs(None, "take.txt")
-    app.check_outputs("localhost:39539", "take.BVH")
+        app_parts.check_outputs(None, "take.txt")
+    app_parts.check_outputs("localhost:39539", "take.BVH")
 
 
 def test_a_missing_map_names_the_key_and_that_it_is_relative_to_the_rig_file(
@@ -188,7 +203,7 @@ def test_run_reads_the_users_calibrated_glove_file(tmp_path: Path,
 
 
 def test_clamp_advice_names_the_cause_it_can_tell() -> None:
-    from handrig.app.session import clamp_advice
+    from handrig.app.summary import clamp_advice
     from handrig.pose.expand import TrainingRangeReport
 
     ctrl = ("riIndexMCPy", "riPinkyMCPy")

@@ -12,9 +12,9 @@ import time
 import numpy as np
 import pytest
 
-from handrig.app.hands import build_two_hand_parts, check_two_gloves
-from handrig.app.session import LiveOptions, format_hands_summary
-from handrig.app.two_hands import run_two_hands
+from handrig.app.hands import build_session_parts, check_two_gloves
+from handrig.app.session import LiveOptions, run_live
+from handrig.app.summary import format_hands_summary
 from handrig.cli import main
 from handrig.devices.glove_recording import read_glove_recording
 from handrig.errors import ConfigError
@@ -28,7 +28,7 @@ def recording():
 
 
 def _run(rig: str, recording, frames: int, *, left_pause_s: float = 0.0, **opts):
-    parts = build_two_hand_parts(rig)
+    parts = build_session_parts(rig, glove_per_hand=True)
     lines: list[str] = []
     with (GloveEmulator(recording, "frames", rate_hz=200.0) as right,
           GloveEmulator(recording, "frames", rate_hz=200.0) as left):
@@ -46,7 +46,7 @@ def _run(rig: str, recording, frames: int, *, left_pause_s: float = 0.0, **opts)
                 scripts.append(threading.Thread(target=quiet_left, args=(rigs["ri"],)))
                 scripts[0].start()
 
-        result = run_two_hands(parts, LiveOptions(
+        result = run_live(parts, LiveOptions(
             glove=right.port_path, glove_left=left.port_path, bus="sim", bus_left="sim",
             frames=frames, log=lines.append, on_hands=on_hands, **opts))
         for script in scripts:
@@ -104,12 +104,12 @@ def test_the_two_hand_demo_on_two_buses_each_hand_its_own_bus():
 
 
 def test_the_same_glove_port_for_both_hands_is_refused_naming_both_flags(recording, capsys):
-    parts = build_two_hand_parts("puppet_two_hands")
+    parts = build_session_parts("puppet_two_hands", glove_per_hand=True)
     with GloveEmulator(recording, "frames", rate_hz=200.0) as glove:
         port = glove.port_path
         with pytest.raises(ConfigError) as err:
-            check_two_gloves(port, port, parts.sides["ri"].glove_config,
-                             parts.sides["le"].glove_config)
+            check_two_gloves(port, port, parts.hands[0].glove_config,
+                             parts.hands[1].glove_config)
         assert "--glove-left" in str(err.value) and "--glove " in str(err.value)
         # the command: refused before any bus opens (no emulator started, nothing sent)
         status = main(["run", "--rig", "puppet_two_hands", "--glove", port,
@@ -121,8 +121,8 @@ def test_the_same_glove_port_for_both_hands_is_refused_naming_both_flags(recordi
     assert "servo bus" not in err_text and "commissioned" not in err_text
     # one recording replayed for both hands is no port: allowed
     take = f"replay:{DEMO_RECORDING}"
-    assert check_two_gloves(take, take, parts.sides["ri"].glove_config,
-                            parts.sides["le"].glove_config) == (take, take)
+    assert check_two_gloves(take, take, parts.hands[0].glove_config,
+                            parts.hands[1].glove_config) == (take, take)
 
 
 @pytest.mark.parametrize(("argv", "says"), [
@@ -141,8 +141,8 @@ def test_two_hand_flags_on_the_wrong_rig_are_refused_before_any_bus(argv, says, 
 
 
 def test_each_hand_follows_its_own_glove_and_forearm():
-    parts = build_two_hand_parts("puppet_two_hands")
-    ri, le = parts.sides["ri"], parts.sides["le"]
+    parts = build_session_parts("puppet_two_hands", glove_per_hand=True)
+    ri, le = parts.hands
     assert all(j.startswith("ri") for j in ri.pipeline.servo_joints)
     assert all(j.startswith("le") for j in le.pipeline.servo_joints)
     controls = parts.shared.values.copy()

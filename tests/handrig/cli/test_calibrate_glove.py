@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from handrig.cli import calibrate_glove
-from handrig.cli.calibrate_glove import STEPS, derive
-from handrig.devices.glove_calibration import load_glove_config
+from handrig.cli.calibrate_glove import derive
+from handrig.devices.glove_calibration import CALIBRATION_STEPS, load_glove_config
 from handrig.devices.glove_recording import GloveRecording
 from handrig.errors import DataError, HandrigError
 from sim.glove_emulator import GloveEmulator
@@ -41,8 +41,8 @@ POSES = {  # raw counts per step; channel 1 (thumb CMC abduction) reads lower wh
 def posed_recording(poses: dict[str, list[int]], rate_hz: float = 200.0) -> GloveRecording:
     step_s = SETTLE_S + HOLD_S
     n_step = round(step_s * rate_hz)
-    rows = [poses[name] for name, _ in STEPS for _ in range(n_step)]
-    rows += [poses[STEPS[-1][0]]] * n_step  # hold the last pose a little longer
+    rows = [poses[name] for name, _ in CALIBRATION_STEPS for _ in range(n_step)]
+    rows += [poses[CALIBRATION_STEPS[-1][0]]] * n_step  # hold the last pose a little longer
     n = len(rows)
     return GloveRecording(np.arange(n) / rate_hz, np.array(rows, dtype=float),
                           np.zeros(n, dtype=np.int64), tuple(f"ch{i}" for i in range(5)),

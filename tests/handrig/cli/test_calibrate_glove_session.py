@@ -17,9 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from handrig.cli.calibrate_glove import STEPS
 from handrig.config.paths import installed_config
-from handrig.devices.glove_calibration import load_glove_config
+from handrig.devices.glove_calibration import CALIBRATION_STEPS, load_glove_config
 from sim.calibration_motion import ScriptedSensors
 
 CHECKOUT = Path(__file__).resolve().parents[3]
@@ -140,8 +139,8 @@ def test_calibrate_glove_against_the_scripted_glove_in_a_terminal(tmp_path: Path
         session = PtySession([*cli, "calibrate", "glove", "--glove", port, "--settle", "0.3",
                               "--hold", "0.6"], env)
         session.expect(r"calibrating the glove on")
-        for n, (name, text) in enumerate(STEPS, 1):
-            m = session.expect(rf"\[{n}/{len(STEPS)}\] (.+)\n")
+        for n, (name, text) in enumerate(CALIBRATION_STEPS, 1):
+            m = session.expect(rf"\[{n}/{len(CALIBRATION_STEPS)}\] (.+)\n")
             assert m.group(1) == text
             session.expect(r"press Enter when ready")
             glove.say(name)  # make the pose the prompt asks for ...

@@ -246,8 +246,7 @@ def test_direction_check_jogging_asks_whether_the_joint_flexed_and_flips_on_no()
 
 
 def test_no_clamps_means_no_clamp_advice_in_the_summary() -> None:
-    from handrig.app.factory import summary_dict
-    from handrig.app.session import format_summary
+    from handrig.app.summary import format_summary, summary_dict
     from handrig.devices.servo.bus import BusStats
     from handrig.loop.stats import RunStats
 

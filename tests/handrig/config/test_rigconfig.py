@@ -2,6 +2,7 @@ import pytest
 
 from handrig.config.loading import build
 from handrig.config.rig import RigConfig, ServoCalibration, load_rig_config
+from handrig.devices.servo.models import check_rig
 from handrig.errors import ConfigError
 
 
@@ -35,8 +36,11 @@ def test_bad_servo_entries_are_named():
                                       "min_deg": 50, "max_deg": 10}]})
     with pytest.raises(ConfigError, match=r"servos\[0\].joint.*unknown joint"):
         build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIP"}]})
-    with pytest.raises(ConfigError, match=r"bus.baud.*allowed"):
-        build(RigConfig, {"bus": {"baud": 4_500_000}})
+    one = [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0}]
+    with pytest.raises(ConfigError, match=r"bus.baud.*allowed"):  # which bauds: the driver's
+        check_rig(build(RigConfig, {"servos": one, "bus": {"baud": 4_500_000}}))
+    with pytest.raises(ConfigError, match=r"bus.baud.*positive"):
+        build(RigConfig, {"bus": {"baud": 0}})
     with pytest.raises(ConfigError, match="outside the servo's range"):
         build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0,
                                       "gear_ratio": 10.0}]})
@@ -70,12 +74,17 @@ def test_heat_tiers_are_read_and_bounded_with_messages():
         build(RigConfig, {"servos": servos, "heat": {"relief_pwm_pct": 5.0}})
     with pytest.raises(ConfigError, match=r"heat\.action.*'continue', 'relax', 'stop'"):
         build(RigConfig, {"servos": servos, "heat": {"action": "panic"}})
-    # the action comes before the servo's own Temperature Limit: 70 C on an XL330 ...
+    # the action comes before the servo's own Temperature Limit (the driver checks the
+    # rig against its models): 70 C on an XL330 (the default model) ...
     with pytest.raises(ConfigError, match=r"servo 1's \(XL330-M288\) Temperature Limit of 70"):
-        build(RigConfig, {"servos": servos, "heat": {"action_c": 72.0}})
+        check_rig(build(RigConfig, {"servos": servos, "heat": {"action_c": 72.0}}))
     # ... 80 C on an XM430
     xm = [{**servos[0], "model": "XM430-W350"}]
-    assert build(RigConfig, {"servos": xm, "heat": {"action_c": 75.0}}).heat.action_c == 75.0
+    rig = build(RigConfig, {"servos": xm, "heat": {"action_c": 75.0}})
+    check_rig(rig)
+    assert rig.heat.action_c == 75.0
+    with pytest.raises(ConfigError, match=r"servos\[0\]\.model.*XL330-M288"):
+        check_rig(build(RigConfig, {"servos": [{**servos[0], "model": "AX-12A"}]}))
 
 
 def test_loop_mode_and_its_rates_are_checked():

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.clock import MonotonicClock
 from handrig.devices.glove_recording import read_glove_recording
 from sim.demo_recording import DEMO_RECORDING
@@ -30,7 +31,7 @@ def _point(link: Path, target: str) -> None:
 @pytest.mark.parametrize("mode", ["glove", "fixed"])
 def test_a_glove_unplugged_and_plugged_back_is_reopened_and_the_puppet_resumes(
         tmp_path: Path, mode: str) -> None:
-    parts = app.build_parts()
+    parts = app_parts.build_parts()
     loop = dataclasses.replace(parts.rig_config.loop, mode=mode)  # type: ignore[arg-type]
     parts = dataclasses.replace(parts, rig_config=dataclasses.replace(parts.rig_config,
                                                                       loop=loop))

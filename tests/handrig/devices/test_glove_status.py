@@ -15,7 +15,7 @@ from firmware_protocol.glove import (
     encode_frame,
     pack_payload,
 )
-from handrig.app.factory import ForearmAngles
+from handrig.app.parts import ForearmAngles
 from handrig.clock import FakeClock
 from handrig.devices.glove import GloveSample, SerialGlove
 from handrig.devices.glove_calibration import load_glove_config

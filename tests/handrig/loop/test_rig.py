@@ -13,7 +13,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.clock import FakeClock
 from handrig.config.rig import SilenceConfig
 from handrig.devices.glove import GloveSample

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.clock import FakeClock
 from handrig.config.rig import SilenceConfig
 from handrig.devices.servo.bus import BusStats, ServoBus, ServoState
@@ -65,7 +65,7 @@ class ToyBus(ServoBus):
         self.connected = False
 
     @contextlib.contextmanager
-    def torque(self) -> Iterator[ServoBus]:  # type: ignore[override]
+    def torque(self, *, handle_signals: bool = True) -> Iterator[ServoBus]:  # type: ignore[override]
         if not self.connected:
             raise DeviceError("toy bus: not connected")
         self.torque_on = True

@@ -55,7 +55,7 @@ def test_publication_is_rate_limited_and_numbered() -> None:
 
 
 def test_a_run_publishes_what_the_loop_did(tmp_path: Path) -> None:
-    from handrig.app.factory import build_parts
+    from handrig.app.parts import build_parts
 
     parts = build_parts()
     clock = FakeClock(10.0)
@@ -108,7 +108,7 @@ def test_a_run_publishes_what_the_loop_did(tmp_path: Path) -> None:
 def test_each_control_is_shown_with_its_own_channels_count() -> None:
     """A glove wired in another order than the map's controls (the glove file's
     ``[[channels]] index``): each control's raw count is its own channel's."""
-    from handrig.app.factory import build_parts, control_channels
+    from handrig.app.parts import build_parts, control_channels
 
     parts = build_parts()
     controls = parts.pipeline.expander.controls
@@ -146,13 +146,13 @@ def test_each_control_is_shown_with_its_own_channels_count() -> None:
 def test_two_hands_each_loop_shows_its_own_gloves_channels(tmp_path: Path) -> None:
     """In a two-hand rig each loop's controls are both hands'; its glove drives its
     own hand's only (a left glove may be calibrated with the right's curve names)."""
-    from handrig.app.hands import build_two_hand_parts, side_control_channels
+    from handrig.app.hands import build_session_parts, side_control_channels
     from handrig.config.loading import CONFIG_DIR
 
     text = (CONFIG_DIR / "glove.toml").read_text()
     left = tmp_path / "left_glove.toml"  # the right glove's file, its inputs reversed
     left.write_text(re.sub(r"(?m)^index = (\d)", lambda m: f"index = {4 - int(m[1])}", text))
-    two = build_two_hand_parts("puppet_two_hands", left_glove_file=left)
-    right, lefts = (side_control_channels(two.sides[h]) for h in ("ri", "le"))
+    two = build_session_parts("puppet_two_hands", left_glove_file=left, glove_per_hand=True)
+    right, lefts = (side_control_channels(side) for side in two.hands)
     assert right == (0, 1, 2, 3, 4, -1, -1, -1, -1, -1)
     assert lefts == (-1, -1, -1, -1, -1, 4, 3, 2, 1, 0)

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from handrig.app import factory as app
+from handrig.app import parts as app_parts
 from handrig.clock import MonotonicClock
 from handrig.devices.glove_recording import read_glove_recording
 from handrig.outputs.recorder import Recorder, load_performance
@@ -40,7 +41,7 @@ def _record_a_run(glove_hz: float, folder: Path
     (s, its clock), the times the loop handed its outputs with each frame (s from the
     run's start), the clock times at which the outputs were called (s, the same origin),
     the CSV and BVH takes, and what the rig logged."""
-    parts = app.build_parts()
+    parts = app_parts.build_parts()
     clock = MonotonicClock()
     events: list[str] = []
     csv_path, bvh_path = folder / f"take{glove_hz:g}.csv", folder / f"take{glove_hz:g}.bvh"

@@ -329,9 +329,10 @@ def test_a_run_records_bvh_at_the_glove_rate_or_the_rate_asked_for(tmp_path: Pat
     import dataclasses
 
     from handrig.app import factory as app
+    from handrig.app import parts as app_parts
     from handrig.clock import MonotonicClock
 
-    rig_cfg = app.build_parts().rig_config
+    rig_cfg = app_parts.build_parts().rig_config
     fixed = dataclasses.replace(rig_cfg, loop=dataclasses.replace(rig_cfg.loop, mode="fixed"))
     cases = [(rig_cfg, None, 100.0), (rig_cfg, 60.0, 60.0), (fixed, None, rig_cfg.loop.rate_hz)]
     for i, (cfg, asked, expected) in enumerate(cases):

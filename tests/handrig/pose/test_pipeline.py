@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.pose.pipeline import ServoPath
 from handrig.pose.sag import SagGrid
 

@@ -8,17 +8,17 @@ import dataclasses
 import numpy as np
 import pytest
 
-from handrig.app import factory as app
-from handrig.app.robots import RobotRigConfig, robot_retarget
+from handrig.app import parts as app_parts
 from handrig.errors import ConfigError
 from handrig.pose import kernels
 from handrig.pose.pipeline import PosePipeline
 from handrig.pose.retarget import retarget
+from handrig.pose.robot_rig import RobotRigConfig, robot_retarget
 
 
 @pytest.fixture(scope="module")
-def leap() -> app.RigParts:
-    return app.build_parts("leap")
+def leap() -> app_parts.RigParts:
+    return app_parts.build_parts("leap")
 
 
 def _reference(pl: PosePipeline, controls: np.ndarray, incl: float, rot: float) -> np.ndarray:
@@ -33,7 +33,7 @@ def _reference(pl: PosePipeline, controls: np.ndarray, incl: float, rot: float) 
     return out
 
 
-def _fresh(parts: app.RigParts, **kw: object) -> PosePipeline:
+def _fresh(parts: app_parts.RigParts, **kw: object) -> PosePipeline:
     rig = parts.rig_config
     assert isinstance(rig, RobotRigConfig)
     args: dict[str, object] = dict(
@@ -46,7 +46,7 @@ def _fresh(parts: app.RigParts, **kw: object) -> PosePipeline:
                         **args)  # type: ignore[arg-type]
 
 
-def test_leap_pipeline_drives_the_robot_joints_in_bus_order(leap: app.RigParts) -> None:
+def test_leap_pipeline_drives_the_robot_joints_in_bus_order(leap: app_parts.RigParts) -> None:
     pl = leap.pipeline
     assert pl.retarget is not None and pl.robot_path is not None
     assert pl.servo_joints == tuple(s.joint for s in leap.rig_config.servos)
@@ -56,7 +56,7 @@ def test_leap_pipeline_drives_the_robot_joints_in_bus_order(leap: app.RigParts) 
     assert len(pl.robot_path.curves) < 50
 
 
-def test_first_step_matches_the_numpy_reference(leap: app.RigParts) -> None:
+def test_first_step_matches_the_numpy_reference(leap: app_parts.RigParts) -> None:
     rng = np.random.default_rng(3)
     for _ in range(50):
         pl = _fresh(leap)
@@ -67,7 +67,7 @@ def test_first_step_matches_the_numpy_reference(leap: app.RigParts) -> None:
         assert np.all(got >= pl.servo_low) and np.all(got <= pl.servo_high)
 
 
-def test_sag_can_be_switched_on(leap: app.RigParts) -> None:
+def test_sag_can_be_switched_on(leap: app_parts.RigParts) -> None:
     rig = leap.rig_config
     assert isinstance(rig, RobotRigConfig) and rig.robot is not None
     on = dataclasses.replace(rig, robot=dataclasses.replace(rig.robot, sag=True))
@@ -81,7 +81,7 @@ def test_sag_can_be_switched_on(leap: app.RigParts) -> None:
     assert not np.allclose(a, b)  # the forearm level, palm sideways: the fingers sag
 
 
-def test_slew_limit_and_held_non_finite_target(leap: app.RigParts) -> None:
+def test_slew_limit_and_held_non_finite_target(leap: app_parts.RigParts) -> None:
     pl = _fresh(leap)
     c = leap.expander.control_means_deg.copy()
     first = pl.servo_targets(c, -90.0, 0.0, 0.005).copy()
@@ -118,7 +118,7 @@ def test_kernel_holds_the_previous_target_without_nan_leaking() -> None:
     np.testing.assert_array_equal(targets, [1.0, 5.0, 3.0])
 
 
-def test_relaxed_targets_and_account_use_the_retarget(leap: app.RigParts) -> None:
+def test_relaxed_targets_and_account_use_the_retarget(leap: app_parts.RigParts) -> None:
     pl = _fresh(leap)
     relaxed = pl.relaxed_targets(-90.0, 0.0).copy()
     pose = np.clip(pl.relaxed, pl.pose_low, pl.pose_high)
@@ -136,7 +136,7 @@ def test_relaxed_targets_and_account_use_the_retarget(leap: app.RigParts) -> Non
     assert pl.servo_clamps == int(np.count_nonzero(outside)) > 0
 
 
-def test_a_servo_joint_without_a_table_row_is_refused(leap: app.RigParts) -> None:
+def test_a_servo_joint_without_a_table_row_is_refused(leap: app_parts.RigParts) -> None:
     rig = leap.rig_config
     assert isinstance(rig, RobotRigConfig)
     with pytest.raises(ConfigError, match="no row for servo joint 'nope'"):
@@ -144,6 +144,6 @@ def test_a_servo_joint_without_a_table_row_is_refused(leap: app.RigParts) -> Non
 
 
 def test_the_human_rig_builds_as_before() -> None:
-    parts = app.build_parts()
+    parts = app_parts.build_parts()
     assert parts.pipeline.retarget is None and parts.pipeline.robot_path is None
     assert parts.pipeline.sag_gain == parts.rig_config.loop.sag_gain

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.takes import PlayTake, play_parts
 from handrig.devices.glove_recording import GloveRecording
 from handrig.pose.pipeline import POSE_NAMES, POSE_SIZE

@@ -388,11 +388,16 @@ function cells(row, values) {
   values.forEach((v, i) => { if (row.cells[i].textContent !== v) row.cells[i].textContent = v; });
 }
 
+// A hand's name before its figures when the run has several ("right running · left
+// relaxing"); nothing when one loop drives the whole rig.
+function named(f, h, text) {
+  return f.hands.length > 1 ? `${h.label} ${text}` : text;
+}
+
 function drawMode(f) {
-  // a two-hand run: each hand's mode ("right running · left relaxing") and why
-  const mode = f.hands ? f.hands.map((h) => `${h.label} ${h.mode}`).join(' · ') : f.mode;
+  const mode = f.hands.map((h) => named(f, h, h.mode)).join(' · ');
   if ($('mode').textContent !== mode) $('mode').textContent = mode;
-  const why = f.hands ? f.hands.filter((h) => h.mode_reason).map((h) => `${h.label}: ${h.mode_reason}`).join('; ') : f.mode_reason;
+  const why = f.hands.filter((h) => h.mode_reason).map((h) => (f.hands.length > 1 ? `${h.label}: ${h.mode_reason}` : h.mode_reason)).join('; ');
   const reason = why ? `(${why})` : '';
   if ($('reason').textContent !== reason) $('reason').textContent = reason;
 }
@@ -423,32 +428,52 @@ function flushTables() {
 
 const SOURCES = { positions: 'the servos\' present positions', goals: 'the goals (no readings)', pose: 'the pipeline\'s pose (no readings)' };
 
-// A two-hand run's table: a heading row per hand, then its rows. ``groups``: per hand
-// {title, bad, rows: [{values, className, errCell}]}.
+// A table with a heading row per hand (none when the run has one), then its rows.
+// ``groups``: per hand {title, bad, rows: [{values, className, errCell}]}.
 function groupRows(tbody, groups, width) {
-  const all = rows(tbody, groups.reduce((n, g) => n + 1 + g.rows.length, 0));
+  const titled = groups.length > 1;
+  const all = rows(tbody, groups.reduce((n, g) => n + (titled ? 1 : 0) + g.rows.length, 0));
   let i = 0;
   for (const g of groups) {
+    if (!titled) { i = fillRows(all, i, g.rows); continue; }
     const head = all[i++];
     while (head.cells.length > 1) head.deleteCell(-1);
     cells(head, [g.title]);
     head.cells[0].colSpan = width;
     head.className = g.bad ? 'hand bad' : 'hand';
-    for (const r of g.rows) {
-      const row = all[i++];
-      if (row.cells.length && row.cells[0].colSpan !== 1) row.cells[0].colSpan = 1;
-      cells(row, r.values);
-      row.className = r.className || '';
-      if (r.errCell !== undefined) row.cells[r.errCell.at].className = r.errCell.bad ? 'err' : '';
-    }
+    i = fillRows(all, i, g.rows);
   }
 }
 
-// A row of the loop's table with a cell per hand (and a heading row naming them).
+function fillRows(all, i, groupRowsList) {
+  for (const r of groupRowsList) {
+    const row = all[i++];
+    if (row.cells.length && row.cells[0].colSpan !== 1) row.cells[0].colSpan = 1;
+    cells(row, r.values);
+    row.className = r.className || '';
+    if (r.errCell !== undefined) row.cells[r.errCell.at].className = r.errCell.bad ? 'err' : '';
+  }
+  return i;
+}
+
+// A row of the loop's table with a cell per hand (and a heading row naming them when
+// there are several).
 function handCells(id, values) {
   const row = $(id).parentElement;
+  while (row.cells.length > values.length + 1) row.deleteCell(-1);
   while (row.cells.length < values.length + 1) row.insertCell();
   values.forEach((v, i) => { if (row.cells[i + 1].textContent !== v) row.cells[i + 1].textContent = v; });
+}
+
+// The loop table's heading row: the hands' names when there are several, none for one
+// (redrawn when a page reconnects to a run with another number of hands).
+function loopHeads(hands) {
+  const labels = hands.length > 1 ? ['', ...hands.map((h) => h.label)] : [];
+  const table = $('loop');
+  if ((table.dataset.heads || '') === labels.join('|')) return;
+  table.dataset.heads = labels.join('|');
+  if (table.tHead) table.deleteTHead();
+  if (labels.length) table.createTHead().insertRow().replaceChildren(...labels.map((label) => { const th = document.createElement('th'); th.textContent = label; return th; }));
 }
 
 function servoRow(s, i) {
@@ -458,22 +483,23 @@ function servoRow(s, i) {
   className: s.stale[i] ? 'stale' : '', errCell: { at: 5, bad: Boolean(err) } };
 }
 
-function drawHandsTables(f) {
+// The tables, one code path for any number of hands: a column (loop) or a group of
+// rows (glove, servos) per hand.
+function drawTables(f) {
   const hands = f.hands;
   const sources = [...new Set(hands.map((h) => h.source))];
   $('source').textContent = sources.length === 1 ? SOURCES[sources[0]]
     : hands.map((h) => `${h.label}: ${SOURCES[h.source]}`).join('; ');
-  const head = $('loop').tHead || $('loop').createTHead();
-  if (!head.rows.length) head.insertRow().replaceChildren(...['', ...hands.map((h) => h.label)].map((label) => { const th = document.createElement('th'); th.textContent = label; return th; }));
+  loopHeads(hands);
   handCells('rate', hands.map((h) => fmt(h.rate_hz, ' Hz')));
   handCells('latency', hands.map((h) => `${fmt(h.latency_p50_us, ' µs', 0)} / ${fmt(h.latency_p99_us, ' µs', 0)}`));
   handCells('lost', hands.map((h) => String(h.frames_lost)));
   handCells('cycles', hands.map((h) => `${h.cycles} / ${h.overruns}`));
   const lost = hands.filter((h) => !h.glove.connected).map((h) => h.label);
-  $('glovelink').textContent = lost.length ? `(${lost.join(' and ')} not connected)` : '';
+  $('glovelink').textContent = lost.length ? `(${hands.length > 1 ? `${lost.join(' and ')} ` : ''}not connected)` : '';
   $('glovelink').className = lost.length ? 'bad' : '';
-  $('incl').textContent = hands.map((h) => `${h.label} ${fmt(h.glove.inclination_deg, '°')}`).join(', ');
-  $('rot').textContent = hands.map((h) => `${h.label} ${fmt(h.glove.rotation_deg, '°')}`).join(', ');
+  $('incl').textContent = hands.map((h) => named(f, h, fmt(h.glove.inclination_deg, '°'))).join(', ');
+  $('rot').textContent = hands.map((h) => named(f, h, fmt(h.glove.rotation_deg, '°'))).join(', ');
   groupRows($('glove').tBodies[0], hands.map((h) => ({
     title: `${h.label} glove${h.glove.connected ? '' : ' (not connected)'}`, bad: !h.glove.connected,
     rows: h.glove.names.map((n, i) => ({ values: [n, fmt(h.glove.controls[i], '', 3), fmt(h.glove.raw[i], '', 0)] })),
@@ -492,39 +518,6 @@ function drawOutputs(f) {
     outs.dataset.text = JSON.stringify(text);
     outs.replaceChildren(...(text.length ? text : ['none']).map((t) => { const li = document.createElement('li'); li.textContent = t; return li; }));
   }
-}
-
-// The tables are laid out for one hand or two when the first frame comes; a page that
-// reconnects (on the same port) to a run with the other number of loops starts afresh.
-let tablesKind = null;
-
-function drawTables(f) {
-  const kind = f.hands ? 'hands' : 'one';
-  if (tablesKind !== null && kind !== tablesKind) { location.reload(); return; }
-  tablesKind = kind;
-  if (f.hands) { drawHandsTables(f); return; }
-  $('source').textContent = SOURCES[f.source];
-  $('rate').textContent = fmt(f.rate_hz, ' Hz');
-  $('latency').textContent = `${fmt(f.latency_p50_us, ' µs', 0)} / ${fmt(f.latency_p99_us, ' µs', 0)}`;
-  $('lost').textContent = String(f.frames_lost);
-  $('cycles').textContent = `${f.cycles} / ${f.overruns}`;
-  const g = f.glove;
-  $('glovelink').textContent = g.connected ? '' : '(not connected)';
-  $('glovelink').className = g.connected ? '' : 'bad';
-  $('incl').textContent = fmt(g.inclination_deg, '°');
-  $('rot').textContent = fmt(g.rotation_deg, '°');
-  const grows = rows($('glove').tBodies[0], g.names.length);
-  g.names.forEach((n, i) => cells(grows[i], [n, fmt(g.controls[i], '', 3), fmt(g.raw[i], '', 0)]));
-  const s = f.servos;
-  const srows = rows($('servos').tBodies[0], s.ids.length);
-  s.ids.forEach((id, i) => {
-    const err = s.errors[i];
-    cells(srows[i], [String(id), s.joints[i], fmt(s.goal_deg[i]), fmt(s.position_deg[i]),
-      fmt(s.temperature_c[i], '', 0), err ? `0x${err.toString(16).padStart(2, '0')}` : '–']);
-    srows[i].className = s.stale[i] ? 'stale' : '';
-    srows[i].cells[5].className = err ? 'err' : '';
-  });
-  drawOutputs(f);
 }
 
 // The bounds of the skeletons as they are now (the skeleton view's camera is aimed once).

@@ -360,7 +360,7 @@ def test_page_without_webgl_says_so_and_its_tables_still_work(tmp_path: Path) ->
     from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.common.by import By
 
-    from handrig.app.factory import build_parts
+    from handrig.app.parts import build_parts
     from handrig.app.view import build_server
     from handrig.loop.telemetry import LoopSnapshot
     from handrig.pose.pipeline import POSE_NAMES

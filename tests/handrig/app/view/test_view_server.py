@@ -24,7 +24,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from handrig.app import simulator
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.view import ModelScene, build_server, is_loopback, parse_view_address
 from handrig.errors import ConfigError
 
@@ -319,14 +319,16 @@ def _snapshot(cfg, *, positions: bool, nan_pose: bool = False):  # type: ignore[
 def test_frame_from_a_snapshot(human_rig) -> None:  # type: ignore[no-untyped-def]
     encoder = build_server("127.0.0.1:0", human_rig).encoder
     read = json.loads(encoder.frame(_snapshot(human_rig, positions=True)))
-    assert read["source"] == "positions" and read["ghost"] is not None
-    assert read["latency_p99_us"] is None  # NaN is not JSON: sent as null
-    assert read["servos"]["errors"][-1] == 0x20 and read["servos"]["position_deg"][0] == -5.0
+    (hand,) = read["hands"]  # one loop driving the whole rig: a frame of one hand
+    assert (hand["hand"], hand["label"]) == ("", "")
+    assert hand["source"] == "positions" and read["ghost"] is not None
+    assert hand["latency_p99_us"] is None  # NaN is not JSON: sent as null
+    assert hand["servos"]["errors"][-1] == 0x20 and hand["servos"]["position_deg"][0] == -5.0
     assert read["outputs"][0]["kind"] == "vmc" and read["outputs"][0]["address"]
     assert set(read["skeleton"]) == {"ri", "le"}  # the pose holds both hands
     assert read["bodies"]["ri"]["pos"] != read["ghost"]["ri"]["pos"]  # 5 degrees apart
     unread = json.loads(encoder.frame(_snapshot(human_rig, positions=False, nan_pose=True)))
-    assert unread["source"] == "goals" and unread["ghost"] is None
+    assert unread["hands"][0]["source"] == "goals" and unread["ghost"] is None
     assert all(len(s) > 0 for s in unread["skeleton"].values())  # at rest, not NaN
     scene = json.loads(encoder.scene())
     assert scene["type"] == "scene" and set(scene["rest"]) == set(scene["models"]) == {"ri"}
@@ -411,8 +413,9 @@ def test_run_view_streams_real_telemetry_and_ends_with_the_run(end: str) -> None
             frames = [json.loads(ws.recv(timeout=30)) for _ in range(5)]
             assert [f["type"] for f in frames] == ["frame"] * 5
             assert frames[-1]["seq"] > frames[0]["seq"]
-            assert frames[-1]["mode"] in ("running", "waiting", "resuming")
-            assert len(frames[-1]["servos"]["ids"]) == 20
+            (hand,) = frames[-1]["hands"]  # one glove: one hand, the whole rig
+            assert hand["mode"] in ("running", "waiting", "resuming")
+            assert len(hand["servos"]["ids"]) == 20
             ws.send("garbage")
             if end == "estop":
                 ws.send(json.dumps({"action": "estop"}))

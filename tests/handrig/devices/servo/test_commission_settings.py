@@ -9,12 +9,12 @@ import dataclasses
 import pytest
 
 from firmware_protocol import dynamixel as dx
-from handrig.app.robots import RobotRigConfig, load_rig
 from handrig.clock import FakeClock
 from handrig.config.rig import RigConfig, ServoSettings, load_rig_config
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.commissioning import servo_settings
 from handrig.errors import DeviceError
+from handrig.pose.robot_rig import RobotRigConfig, load_rig
 from sim.dxl_servo import EmulatedServo
 from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
 

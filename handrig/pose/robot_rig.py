@@ -15,7 +15,8 @@ model within whose range the servo's limits lie, that the retarget table agrees
 with the model, and that every servo's joint has a row in the table. Paths in
 the loaded config are absolute.
 
-Presets live in ``config/rigs/``: ``load_rig("leap")`` is ``config/rigs/leap.toml``.
+Presets live in ``config/rigs/``: ``load_rig("leap")`` is ``config/rigs/leap.toml``
+(:mod:`handrig.config.rig_files` says which file a name means).
 """
 
 from __future__ import annotations
@@ -25,8 +26,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from handrig.config.loading import CONFIG_DIR, load, load_toml
-from handrig.config.paths import config_file
+from handrig.config.loading import load, load_toml
 from handrig.config.rig import (
     POSITION_TICKS_MAX,
     POSITION_TICKS_MIN,
@@ -35,13 +35,12 @@ from handrig.config.rig import (
     hand_of_joint,
     load_rig_config,
 )
+from handrig.config.rig_files import rig_file_path
 from handrig.errors import ConfigError
 from handrig.hand import is_joint_name
 from handrig.pose.mjcf import MjcfJoint, read_joints
 from handrig.pose.retarget import Retarget, load_retarget
 
-RIGS_DIR = CONFIG_DIR / "rigs"
-"""Shipped rig presets (``config/rigs/<name>.toml``)."""
 _JOINT_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 RANGE_TOLERANCE_DEG = 0.05  # servo limits may round the model's range by this much
 
@@ -121,10 +120,10 @@ class RobotRigConfig(RigConfig):
 
 
 def find_rig(name_or_path: str | Path | None) -> tuple[Path, RigConfig]:
-    """The rig file a run loads for ``--rig`` (a preset name or a path; None: the user's
-    ``rig.toml``, else the installed one), as :func:`handrig.app.factory.build_parts`
-    finds it, and its config."""
-    path = rig_path(name_or_path) if name_or_path else config_file("rig.toml")
+    """The rig file a run loads for ``--rig`` (:func:`handrig.config.rig_files.
+    resolve_rig_file`: a preset, a path, else your ``rig.toml``, else the shipped one)
+    and its config."""
+    path = rig_file_path(name_or_path)
     return path, load_rig(path)
 
 
@@ -134,26 +133,11 @@ def is_two_hand(rig: RigConfig) -> bool:
     return hands == {"ri", "le"} and not isinstance(rig, RobotRigConfig)
 
 
-def rig_path(name_or_path: str | Path | None) -> Path:
-    """A preset name (``"leap"`` -> ``config/rigs/leap.toml``) or a path, as a path;
-    None is the default human rig ``config/rig.toml``."""
-    if name_or_path is None:
-        return CONFIG_DIR / "rig.toml"
-    text = str(name_or_path)
-    preset = RIGS_DIR / f"{text}.toml"
-    if "/" not in text and not text.endswith(".toml") and preset.exists():
-        return preset
-    if "/" not in text and not text.endswith(".toml"):
-        known = sorted(p.stem for p in RIGS_DIR.glob("*.toml") if not p.stem.endswith("_retarget"))
-        raise ConfigError(f"no rig preset {text!r}", file=str(preset),
-                          allowed=f"a preset ({', '.join(known)}) or a path to a rig file")
-    return Path(text)
-
-
 def load_rig(name_or_path: str | Path | None = None) -> RigConfig:
-    """Load a rig file or preset: a :class:`RobotRigConfig` when it has ``[robot]``,
-    else the human rig of :func:`handrig.config.rig.load_rig_config`."""
-    path = rig_path(name_or_path)
+    """Load a rig file or preset (None: the default, as :func:`find_rig`): a
+    :class:`RobotRigConfig` when it has ``[robot]``, else the human rig of
+    :func:`handrig.config.rig.load_rig_config`."""
+    path = rig_file_path(name_or_path)
     if "robot" not in load_toml(path):
         return load_rig_config(path)
     return load_robot_rig(path)
