@@ -59,7 +59,9 @@ class MotionModel(Protocol):
 
     def attach(self, servos: Sequence[EmulatedServo], lock: threading.RLock) -> None: ...
 
-    def start(self) -> None: ...
+    def start(self, *, exchanged: bool = False) -> None: ...
+
+    def exchange(self) -> bool: ...
 
     def stop(self) -> None: ...
 
@@ -77,6 +79,8 @@ KINEMATIC_STEP_S = 0.002
 # it back (docs/measurements.md has the hand-over times measured both ways).
 HOUSEKEEPING_SLOT_S = 0.0003
 HOUSEKEEPING_OVERDUE_S = 0.01
+# An idle line (no bytes) is looked at again this often for housekeeping.
+IDLE_WAIT_S = 0.01
 
 
 class SimBus(Dispatcher):
@@ -137,6 +141,7 @@ class SimBus(Dispatcher):
         self.port_path = ""
         self._rng = random.Random(self._faults.seed)
         self._by_id: dict[int, EmulatedServo] = {}
+        self._generation = 0
         self._rebuild_ids()
         self.line = PtyLine()
         self._thread: threading.Thread | None = None
@@ -212,7 +217,7 @@ class SimBus(Dispatcher):
         if self.puppet is not None:
             self.puppet.attach(self.servos, self.lock)
             driven = set(self.puppet.driven_ids)
-            self.puppet.start()
+            self.puppet.start(exchanged=True)
         self._kinematic = [s for s in self.servos if s.id not in driven]
         self._stop.clear()
         self._thread = threading.Thread(target=self._serve, name="dxl-sim-bus", daemon=True)
@@ -273,9 +278,11 @@ class SimBus(Dispatcher):
         last_rx = 0.0
         line = self.line
         clock = self.clock
+        # the physics waits for its exchanges (housekeeping): an idle line wakes for them
+        idle_s = KINEMATIC_STEP_S if self.puppet is not None else IDLE_WAIT_S
         try:
             while not self._stop.is_set():
-                chunk, closed = line.wait(0.01)
+                chunk, closed = line.wait(idle_s)
                 # Arrivals are time-stamped before anything else.
                 now = clock.now()
                 if closed:  # the client let the port go: what it left half-sent is noise
@@ -342,6 +349,8 @@ class SimBus(Dispatcher):
             dt = now - self._last_advance
             self._last_advance = now
             with self.lock:
+                if self.puppet is not None:
+                    self.puppet.exchange()
                 for s in self._kinematic:
                     s.advance(dt)
                 for s in self.servos:
@@ -368,10 +377,7 @@ class SimBus(Dispatcher):
             else:
                 self.stats.by_instruction[packet.instruction] += 1
                 replies = self._dispatch(packet.id, packet.instruction, packet.params, t_rx)
-        ready = self.clock.now()
-        overhead = ready - t_rx
-        self.stats.overhead_total_s += overhead
-        self.stats.overhead_max_s = max(self.stats.overhead_max_s, overhead)
+        self.stats.note_overhead(self.clock.now() - t_rx)
         self._send(replies, len(frame), t_rx)
 
     def _send(self, replies: list[_Reply], frame_len: int, t_rx: float) -> None:
@@ -386,12 +392,15 @@ class SimBus(Dispatcher):
             return
         byte_s = BITS_PER_BYTE / self.baud()
         t = max(t_rx, self._bus_free_at) + frame_len * byte_s
+        # housekeeping in the wire time before the first reply (or, with none, while the
+        # packet is still on the wire), never after a reply
+        first_at = t
         if replies:
             first = replies[0]
-            first_at = t + first.return_delay_s + first.fault_delay_s + len(first.data) * byte_s
-            now = self.clock.now()
-            if first_at - now >= HOUSEKEEPING_SLOT_S:
-                self._housekeeping(now)  # in the reply's wire time, not after it
+            first_at += first.return_delay_s + first.fault_delay_s + len(first.data) * byte_s
+        now = self.clock.now()
+        if first_at - now >= HOUSEKEEPING_SLOT_S:
+            self._housekeeping(now)
         for r in replies:
             t += r.return_delay_s + r.fault_delay_s + len(r.data) * byte_s
             if r.data:
