@@ -30,6 +30,7 @@ from typing import Protocol
 from firmware_protocol.dynamixel import (
     ErrorCode,
     HardwareError,
+    InstructionPacket,
     PacketError,
     find_frame,
     parse_instruction,
@@ -39,6 +40,7 @@ from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import RigConfig
 from handrig.errors import ConfigError
 from sim.dxl_dispatch import BusStats, Dispatcher, _Reply
+from sim.dxl_fast import parse_unstuffed
 from sim.dxl_faults import FaultSpec
 from sim.dxl_line import BITS_PER_BYTE, SPIN_S, PtyLine, tighten_timer_slack, try_realtime
 from sim.dxl_rig import GOAL_POSITION_ADDRESS, goal_limits, servos_from_rig, with_model
@@ -59,7 +61,7 @@ class MotionModel(Protocol):
 
     def attach(self, servos: Sequence[EmulatedServo], lock: threading.RLock) -> None: ...
 
-    def start(self, *, exchanged: bool = False) -> None: ...
+    def start(self, *, exchanged: bool = False, realtime: bool = False) -> None: ...
 
     def exchange(self) -> bool: ...
 
@@ -132,6 +134,7 @@ class SimBus(Dispatcher):
         self.realtime = realtime
         self.realtime_granted = False
         self._packet_baud = 0
+        self._line_baud = 0  # the client's baud when the packet being handled was read
         self._faults = faults or FaultSpec()
         self.puppet = puppet
         self.clock = clock or MonotonicClock(spin_s=SPIN_S)
@@ -217,7 +220,7 @@ class SimBus(Dispatcher):
         if self.puppet is not None:
             self.puppet.attach(self.servos, self.lock)
             driven = set(self.puppet.driven_ids)
-            self.puppet.start(exchanged=True)
+            self.puppet.start(exchanged=True, realtime=self.realtime)
         self._kinematic = [s for s in self.servos if s.id not in driven]
         self._stop.clear()
         self._thread = threading.Thread(target=self._serve, name="dxl-sim-bus", daemon=True)
@@ -358,14 +361,16 @@ class SimBus(Dispatcher):
 
     def _handle_frame(self, frame: bytes, t_rx: float) -> None:
         self.stats.packets += 1
+        # bytes fed without a line (:meth:`feed`) reach every servo
+        self._line_baud = self.line.baud() if self.line.fd >= 0 else 0
         if self.check_baud:
-            # bytes fed without a line (:meth:`feed`) reach every servo
-            self._packet_baud = self.line.baud() if self.line.fd >= 0 else 0
+            self._packet_baud = self._line_baud
         with self.lock:
             if not self.wire_timing or t_rx - self._last_advance >= HOUSEKEEPING_OVERDUE_S:
                 self._housekeeping(t_rx)
+            quick = parse_unstuffed(frame)
             try:
-                packet = parse_instruction(frame)
+                packet = InstructionPacket(*quick) if quick else parse_instruction(frame)
             except PacketError as exc:
                 replies: list[_Reply] = []
                 if exc.kind == "crc":
@@ -390,7 +395,7 @@ class SimBus(Dispatcher):
                     self._emit(r.data)
                     self.stats.replies += 1
             return
-        byte_s = BITS_PER_BYTE / self.baud()
+        byte_s = BITS_PER_BYTE / (self._line_baud or self.baud())
         t = max(t_rx, self._bus_free_at) + frame_len * byte_s
         # housekeeping in the wire time before the first reply (or, with none, while the
         # packet is still on the wire), never after a reply

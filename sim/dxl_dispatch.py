@@ -218,11 +218,13 @@ class Dispatcher:
             return True
         return False
 
-    def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"") -> _Reply:
-        """One status packet, with faults applied."""
+    def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"",
+               from_id: int | None = None) -> _Reply:
+        """One status packet, with faults applied; from the servo's ID, or ``from_id``:
+        the ID a packet that changed it (ID write, Factory Reset) addressed."""
         if self._faults.mute and self._muted(servo.id, self.clock.now()):
             return _Reply(b"", servo.return_delay_s)
-        packet = build_status(servo.id, error, data)
+        packet = build_status(servo.id if from_id is None else from_id, error, data)
         extra = 0.0
         if self.faults.any_reply_fault:
             packet, extra = self._apply_faults(
@@ -292,17 +294,19 @@ class Dispatcher:
                     err = servo.reg_write(address, params[2:])
                 if address <= 7 < address + len(params) - 2:
                     self._rebuild_ids()
-                return [self._reply(servo, err)] if level >= 2 else []
+                # a servo answers from the ID it was addressed by, then takes a new one
+                return [self._reply(servo, err, from_id=target)] if level >= 2 else []
             if inst == Instruction.ACTION:
                 err = servo.action()
                 self._rebuild_ids()
-                return [self._reply(servo, err)] if level >= 2 else []
+                return [self._reply(servo, err, from_id=target)] if level >= 2 else []
             if inst == Instruction.REBOOT:
                 err = servo.reboot(now)
                 return [self._reply(servo, err)] if level >= 2 else []
             if inst == Instruction.FACTORY_RESET:
                 option = params[0] if len(params) == 1 else 0
-                reply = [self._reply(servo, servo.factory_reset(option, now))] if level >= 2 else []
+                err = servo.factory_reset(option, now)
+                reply = [self._reply(servo, err, from_id=target)] if level >= 2 else []
                 self._rebuild_ids()
                 return reply
             if inst == Instruction.CLEAR:

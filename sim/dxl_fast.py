@@ -77,6 +77,27 @@ def _goals_outside(body: np.ndarray, stride: int, low: np.ndarray, high: np.ndar
     return outside
 
 
+@njit(types.uint16(_READONLY_BYTES, types.Array(types.uint16, 1, "C")), cache=True, nogil=True)
+def _crc16(data: np.ndarray, table: np.ndarray) -> int:
+    crc = 0
+    for i in range(data.shape[0]):
+        crc = ((crc << 8) & 0xFFFF) ^ table[((crc >> 8) ^ data[i]) & 0xFF]
+    return crc
+
+
+def parse_unstuffed(frame: bytes) -> tuple[int, int, bytes] | None:
+    """(ID, instruction, parameters) of a framed instruction packet whose CRC is right
+    and that holds no stuffing (as the SDK sends them); None for anything else, which
+    :func:`firmware_protocol.dynamixel.parse_instruction` then judges."""
+    if len(frame) < 10 or frame[5] | frame[6] << 8 != len(frame) - 7 \
+            or not frame.startswith(HEADER) or b"\xff\xff\xfd" in frame[7:-2]:
+        return None
+    crc = _crc16(np.frombuffer(frame, dtype=np.uint8)[:-2], _TABLE)
+    if crc != frame[-2] | frame[-1] << 8:
+        return None
+    return frame[4], frame[7], frame[8:-2]
+
+
 def running_crcs(reply: bytearray, stride: int, count: int) -> None:
     """Fill a fast read reply's running CRCs in place (chunks of equal ``stride``)."""
     _running_crcs(np.frombuffer(reply, dtype=np.uint8), _TABLE, stride, count)

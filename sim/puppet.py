@@ -53,6 +53,7 @@ from handrig.app.robots import RobotRigConfig
 from handrig.config.rig import RigConfig, ServoCalibration
 from handrig.errors import ConfigError, HandrigError
 from handrig.hand import DOF_NAMES, Hand
+from sim.dxl_line import PHYSICS_PRIORITY, try_realtime
 from sim.dxl_servo import EmulatedServo
 from sim.hand_model import (
     REFERENCE_HAND_LENGTH_M,
@@ -414,6 +415,7 @@ class Puppet:
         self._stop = threading.Event()
         self.error: BaseException | None = None
         self._exchanged = False
+        self._realtime = False
         # per hand: a state sample and the simulated seconds it covers, not yet given
         # to the servos (exchanged mode)
         self._pending: dict[Hand, tuple[_State, float]] = {}
@@ -469,15 +471,18 @@ class Puppet:
         self.steps += n
         self.sim_time_s += n * self.timestep_s
 
-    def start(self, *, exchanged: bool = False) -> None:
+    def start(self, *, exchanged: bool = False, realtime: bool = False) -> None:
         """Step the physics in wall time in a thread of its own. ``exchanged``: that
         thread only steps MuJoCo (which lets go of the interpreter while it runs); the
         servos' goals and present state change hands when the bus calls
         :meth:`exchange` from its own thread, in time it waits anyway, so the physics
-        never holds the bus lock or the interpreter while a packet waits."""
+        never holds the bus lock or the interpreter while a packet waits. ``realtime``:
+        SCHED_FIFO below the bus thread (:data:`sim.dxl_line.PHYSICS_PRIORITY`) where
+        allowed, so ordinary work cannot preempt it while it holds the interpreter."""
         if self._thread is not None or not self.hands:
             return
         self._exchanged = exchanged
+        self._realtime = realtime
         self._pending = {}
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="puppet-physics", daemon=True)
@@ -490,6 +495,8 @@ class Puppet:
             self._thread = None
 
     def _run(self) -> None:
+        if self._realtime:
+            try_realtime(PHYSICS_PRIORITY)
         try:
             t0 = time.perf_counter() - self.sim_time_s
             dt = self.timestep_s

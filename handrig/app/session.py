@@ -103,6 +103,13 @@ class LiveResult:
 READBACK_BUDGET_S = 1.5  # reading Torque Enable back at exit: a silent servo costs 0.4 s
 
 
+def _console_modules() -> None:
+    """Import what the show console needs (:meth:`_Session._console`)."""
+    import handrig.app.keys
+    import handrig.app.panel
+    import handrig.app.rig_snapshot  # noqa: F401
+
+
 def torque_is_off(bus: DynamixelBus) -> bool | None:
     """Read Torque Enable back from every servo: True if all are off, None if unreadable."""
     return torque_readback(bus)[0]
@@ -331,6 +338,8 @@ class _Session:
         stack.callback(gc.unfreeze)  # also when torque-on fails and the loop never runs
         loop = parts.rig_config.loop
         self.signals.arm(rig.request_stop)
+        if opts.panel:  # imported before torque: 0.3-0.4 s after it, the bus sat silent
+            _console_modules()  # with the Bus Watchdog armed (a needless re-arm at start)
         try:
             # the Rig starts from bus.last_goals_deg: where torque-on holds every servo
             with bus.torque(handle_signals=False):
