@@ -111,6 +111,8 @@ class _Channel:
     d_gain: int = 0
     saturated_s: float = 0.0
     limits_key: tuple[bytes, bytes, bytes, bytes, bytes, int] | None = None
+    pulled: bytes = b""  # control table 10..115 at the last pull that powered the channel
+    pulled_goal: bytes = b""  # and its Goal Position bytes
     force_limit_nm: float = 0.0
 
 
@@ -217,6 +219,15 @@ class _HandSim:
             if s is None:
                 continue
             mem = s.mem
+            # everything read below lies in 10..119; unchanged since the last pull: the
+            # same result (goals change most often: 116..119, then only the goal)
+            settings = bytes(mem[10:116])
+            if settings == ch.pulled and ch.powered:
+                if mem[116:120] != ch.pulled_goal:
+                    ch.pulled_goal = bytes(mem[116:120])
+                    self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
+                continue
+            ch.pulled, ch.pulled_goal = settings, bytes(mem[116:120])
             on = mem[64] == 1
             if on != ch.powered:
                 self._set_power(ch, on)
