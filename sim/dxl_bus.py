@@ -30,7 +30,6 @@ from typing import Protocol
 from firmware_protocol.dynamixel import (
     ErrorCode,
     HardwareError,
-    InstructionPacket,
     PacketError,
     find_frame,
     parse_instruction,
@@ -40,7 +39,6 @@ from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import RigConfig
 from handrig.errors import ConfigError
 from sim.dxl_dispatch import BusStats, Dispatcher, _Reply
-from sim.dxl_fast import parse_unstuffed
 from sim.dxl_faults import FaultSpec
 from sim.dxl_line import BITS_PER_BYTE, SPIN_S, PtyLine, tighten_timer_slack, try_realtime
 from sim.dxl_rig import GOAL_POSITION_ADDRESS, goal_limits, servos_from_rig, with_model
@@ -72,9 +70,11 @@ class MotionModel(Protocol):
 STALE_PARTIAL_S = 0.1
 # Servos without physics move kinematically; their state is advanced at most this often.
 KINEMATIC_STEP_S = 0.002
-# Housekeeping (kinematic motion, watchdogs, overload; about 10 us per servo) runs
-# in time the bus waits anyway: before a reply's wire instant when at least
-# HOUSEKEEPING_SLOT_S is left, or while the line is idle; on a packet's arrival only
+# Housekeeping (kinematic motion or the puppet's exchange, watchdogs, overload; about
+# 4-10 us per servo) runs in time the bus waits anyway: before a reply's wire instant
+# when at least HOUSEKEEPING_SLOT_S (and 1.5 x what it last took) is left, or while
+# the line is idle (never while a packet without reply is on the wire: the client's
+# next packet would wait behind it, stamped late); on a packet's arrival only
 # once overdue by HOUSEKEEPING_OVERDUE_S (or always without wire timing). Never
 # right after a reply: the pty hands bytes over through a kernel worker that may
 # be queued on this thread's CPU, and a SCHED_FIFO thread that keeps working holds
@@ -153,6 +153,8 @@ class SimBus(Dispatcher):
         self._overload_done = False
         self._bus_free_at = 0.0
         self._last_advance = 0.0
+        self._housekeeping_s = 0.0  # how long the last housekeeping runs took
+        self._last_exchange = 0.0  # when the puppet last exchanged state with the servos
         self._kinematic: list[EmulatedServo] = []
         self._partial_since: float | None = None
         self._feed_buf = bytearray()
@@ -339,7 +341,9 @@ class SimBus(Dispatcher):
             self._handle_frame(bytes(buf[begin:end]), now)
             pos = end
 
-    def _housekeeping(self, now: float) -> None:
+    def _housekeeping(self, now: float, *, exchange: bool = True) -> None:
+        """Faults due, kinematic motion, watchdogs; with ``exchange`` (not in a packet's
+        path unless overdue) the puppet's goals and present state change hands."""
         f = self.faults
         if f.overload and not self._overload_done and now - self._started_at >= f.overload_after_s:
             with self.lock:
@@ -352,12 +356,17 @@ class SimBus(Dispatcher):
             dt = now - self._last_advance
             self._last_advance = now
             with self.lock:
-                if self.puppet is not None:
+                if self.puppet is not None and (
+                        exchange or now - self._last_exchange >= HOUSEKEEPING_OVERDUE_S):
+                    self._last_exchange = now
                     self.puppet.exchange()
                 for s in self._kinematic:
                     s.advance(dt)
                 for s in self.servos:
                     s.check_watchdog(now)
+            took = self.clock.now() - now
+            # its cost as the last runs found it: the longest, forgotten slowly
+            self._housekeeping_s = max(took, 0.9 * self._housekeeping_s + 0.1 * took)
 
     def _handle_frame(self, frame: bytes, t_rx: float) -> None:
         self.stats.packets += 1
@@ -367,10 +376,9 @@ class SimBus(Dispatcher):
             self._packet_baud = self._line_baud
         with self.lock:
             if not self.wire_timing or t_rx - self._last_advance >= HOUSEKEEPING_OVERDUE_S:
-                self._housekeeping(t_rx)
-            quick = parse_unstuffed(frame)
+                self._housekeeping(t_rx, exchange=False)
             try:
-                packet = InstructionPacket(*quick) if quick else parse_instruction(frame)
+                packet = parse_instruction(frame)
             except PacketError as exc:
                 replies: list[_Reply] = []
                 if exc.kind == "crc":
@@ -397,15 +405,14 @@ class SimBus(Dispatcher):
             return
         byte_s = BITS_PER_BYTE / (self._line_baud or self.baud())
         t = max(t_rx, self._bus_free_at) + frame_len * byte_s
-        # housekeeping in the wire time before the first reply (or, with none, while the
-        # packet is still on the wire), never after a reply
-        first_at = t
         if replies:
             first = replies[0]
-            first_at += first.return_delay_s + first.fault_delay_s + len(first.data) * byte_s
-        now = self.clock.now()
-        if first_at - now >= HOUSEKEEPING_SLOT_S:
-            self._housekeeping(now)
+            first_at = t + first.return_delay_s + first.fault_delay_s + len(first.data) * byte_s
+            now = self.clock.now()
+            # in the reply's wire time, not after it; only where it fits, as long as it
+            # last took (a busy machine slows it down): else the reply would leave late
+            if first_at - now >= max(HOUSEKEEPING_SLOT_S, 1.5 * self._housekeeping_s):
+                self._housekeeping(now)
         for r in replies:
             t += r.return_delay_s + r.fault_delay_s + len(r.data) * byte_s
             if r.data:

@@ -18,6 +18,7 @@ on one side still fails a test instead of cancelling out.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -36,8 +37,7 @@ from sim.dxl_servo import READABLE_BYTES, EmulatedServo
 
 _TABLE = np.array(CRC_TABLE, dtype=np.uint16)
 _BYTES = types.Array(types.uint8, 1, "C")
-_READONLY_BYTES = types.Array(types.uint8, 1, "C", readonly=True)
-_INTS = types.Array(types.int64, 1, "C")
+_ID_GOAL = struct.Struct("<Bi")  # a Sync Write item of Goal Position
 # Bytes before the first servo's ERR in a fast read reply: header, ID, LEN, 0x55.
 _REPLY_PREFIX = 8
 
@@ -57,45 +57,6 @@ def _running_crcs(buf: np.ndarray, table: np.ndarray, stride: int, count: int) -
         buf[end + 1] = crc >> 8
         start = end  # the running CRC covers the CRCs before it too
     return crc
-
-
-@njit(types.int64(_READONLY_BYTES, types.int64, _INTS, _INTS), cache=True, nogil=True)
-def _goals_outside(body: np.ndarray, stride: int, low: np.ndarray, high: np.ndarray) -> int:
-    """How many of a Sync Write's 4-byte goals (``ID goal`` chunks of ``stride``
-    bytes) lie outside ``[low, high]`` (per chunk; ``low > high``: no limits)."""
-    outside = 0
-    for k in range(low.shape[0]):
-        if low[k] > high[k]:
-            continue
-        p = k * stride + 1
-        goal = (np.int64(body[p]) | (np.int64(body[p + 1]) << 8)
-                | (np.int64(body[p + 2]) << 16) | (np.int64(body[p + 3]) << 24))
-        if goal >= 1 << 31:
-            goal -= 1 << 32
-        if goal < low[k] or goal > high[k]:
-            outside += 1
-    return outside
-
-
-@njit(types.uint16(_READONLY_BYTES, types.Array(types.uint16, 1, "C")), cache=True, nogil=True)
-def _crc16(data: np.ndarray, table: np.ndarray) -> int:
-    crc = 0
-    for i in range(data.shape[0]):
-        crc = ((crc << 8) & 0xFFFF) ^ table[((crc >> 8) ^ data[i]) & 0xFF]
-    return crc
-
-
-def parse_unstuffed(frame: bytes) -> tuple[int, int, bytes] | None:
-    """(ID, instruction, parameters) of a framed instruction packet whose CRC is right
-    and that holds no stuffing (as the SDK sends them); None for anything else, which
-    :func:`firmware_protocol.dynamixel.parse_instruction` then judges."""
-    if len(frame) < 10 or frame[5] | frame[6] << 8 != len(frame) - 7 \
-            or not frame.startswith(HEADER) or b"\xff\xff\xfd" in frame[7:-2]:
-        return None
-    crc = _crc16(np.frombuffer(frame, dtype=np.uint8)[:-2], _TABLE)
-    if crc != frame[-2] | frame[-1] << 8:
-        return None
-    return frame[4], frame[7], frame[8:-2]
 
 
 def running_crcs(reply: bytearray, stride: int, count: int) -> None:
@@ -120,8 +81,8 @@ class WritePlan:
     """The servos of a Sync Write's ID sequence, and their goal limits as arrays."""
 
     servos: tuple[EmulatedServo, ...]
-    low: np.ndarray
-    high: np.ndarray
+    low: tuple[int, ...]  # per item; low > high: no limits
+    high: tuple[int, ...]
     generation: int
     limits: dict[int, tuple[int, int]]
 
@@ -184,8 +145,8 @@ def write_plan(by_id: dict[int, EmulatedServo], ids: bytes,
             return None
         servos.append(servo)
     no_limits = (1, 0)
-    low = np.array([limits.get(i, no_limits)[0] for i in ids], dtype=np.int64)
-    high = np.array([limits.get(i, no_limits)[1] for i in ids], dtype=np.int64)
+    low = tuple(limits.get(i, no_limits)[0] for i in ids)
+    high = tuple(limits.get(i, no_limits)[1] for i in ids)
     return WritePlan(tuple(servos), low, high, generation, limits)
 
 
@@ -199,4 +160,6 @@ def hear_all(servos: Sequence[EmulatedServo], now: float, baud_index: int) -> bo
 
 def goals_outside(body: bytes, plan: WritePlan) -> int:
     """How many goals of a Sync Write body (``ID goal`` x N) lie outside the plan's limits."""
-    return int(_goals_outside(np.frombuffer(body, dtype=np.uint8), 5, plan.low, plan.high))
+    return sum(1 for (_, goal), low, high in zip(_ID_GOAL.iter_unpack(body), plan.low,
+                                                 plan.high, strict=True)
+               if low <= high and not low <= goal <= high)
