@@ -155,6 +155,7 @@ class SimBus(Dispatcher):
         self._last_advance = 0.0
         self._housekeeping_s = 0.0  # how long the last housekeeping runs took
         self._last_exchange = 0.0  # when the puppet last exchanged state with the servos
+        self._in_packet = False  # housekeeping runs in a packet's path (no slot)
         self._kinematic: list[EmulatedServo] = []
         self._partial_since: float | None = None
         self._feed_buf = bytearray()
@@ -341,9 +342,9 @@ class SimBus(Dispatcher):
             self._handle_frame(bytes(buf[begin:end]), now)
             pos = end
 
-    def _housekeeping(self, now: float, *, exchange: bool = True) -> None:
-        """Faults due, kinematic motion, watchdogs; with ``exchange`` (not in a packet's
-        path unless overdue) the puppet's goals and present state change hands."""
+    def _housekeeping(self, now: float) -> None:
+        """Faults due, kinematic motion, watchdogs, and the puppet's exchange of goals and
+        present state (in a packet's path, ``_in_packet``, only once overdue)."""
         f = self.faults
         if f.overload and not self._overload_done and now - self._started_at >= f.overload_after_s:
             with self.lock:
@@ -357,7 +358,8 @@ class SimBus(Dispatcher):
             self._last_advance = now
             with self.lock:
                 if self.puppet is not None and (
-                        exchange or now - self._last_exchange >= HOUSEKEEPING_OVERDUE_S):
+                        not self._in_packet
+                        or now - self._last_exchange >= HOUSEKEEPING_OVERDUE_S):
                     self._last_exchange = now
                     self.puppet.exchange()
                 for s in self._kinematic:
@@ -376,7 +378,11 @@ class SimBus(Dispatcher):
             self._packet_baud = self._line_baud
         with self.lock:
             if not self.wire_timing or t_rx - self._last_advance >= HOUSEKEEPING_OVERDUE_S:
-                self._housekeeping(t_rx, exchange=False)
+                self._in_packet = True
+                try:
+                    self._housekeeping(t_rx)
+                finally:
+                    self._in_packet = False
             try:
                 packet = parse_instruction(frame)
             except PacketError as exc:
