@@ -72,9 +72,10 @@ STALE_PARTIAL_S = 0.1
 KINEMATIC_STEP_S = 0.002
 # Housekeeping (kinematic motion or the puppet's exchange, watchdogs, overload; about
 # 4-10 us per servo) runs in time the bus waits anyway: before a reply's wire instant
-# when at least HOUSEKEEPING_SLOT_S (and 1.5 x what it last took) is left, or while
-# the line is idle (never while a packet without reply is on the wire: the client's
-# next packet would wait behind it, stamped late); on a packet's arrival only
+# when at least HOUSEKEEPING_SLOT_S is left, or while the line is idle (never while a
+# packet without reply is on the wire: the client's next packet would wait behind it,
+# stamped late; a rule that also asked for the time it last took left it out of the
+# slots on a busy machine: motion every 10 ms); on a packet's arrival only
 # once overdue by HOUSEKEEPING_OVERDUE_S (or always without wire timing). Never
 # right after a reply: the pty hands bytes over through a kernel worker that may
 # be queued on this thread's CPU, and a SCHED_FIFO thread that keeps working holds
@@ -153,7 +154,6 @@ class SimBus(Dispatcher):
         self._overload_done = False
         self._bus_free_at = 0.0
         self._last_advance = 0.0
-        self._housekeeping_s = 0.0  # how long the last housekeeping runs took
         self._last_exchange = 0.0  # when the puppet last exchanged state with the servos
         self._in_packet = False  # housekeeping runs in a packet's path (no slot)
         self._kinematic: list[EmulatedServo] = []
@@ -366,9 +366,6 @@ class SimBus(Dispatcher):
                     s.advance(dt)
                 for s in self.servos:
                     s.check_watchdog(now)
-            took = self.clock.now() - now
-            # its cost as the last runs found it: the longest, forgotten slowly
-            self._housekeeping_s = max(took, 0.9 * self._housekeeping_s + 0.1 * took)
 
     def _handle_frame(self, frame: bytes, t_rx: float) -> None:
         self.stats.packets += 1
@@ -415,10 +412,8 @@ class SimBus(Dispatcher):
             first = replies[0]
             first_at = t + first.return_delay_s + first.fault_delay_s + len(first.data) * byte_s
             now = self.clock.now()
-            # in the reply's wire time, not after it; only where it fits, as long as it
-            # last took (a busy machine slows it down): else the reply would leave late
-            if first_at - now >= max(HOUSEKEEPING_SLOT_S, 1.5 * self._housekeeping_s):
-                self._housekeeping(now)
+            if first_at - now >= HOUSEKEEPING_SLOT_S:
+                self._housekeeping(now)  # in the reply's wire time, not after it
         for r in replies:
             t += r.return_delay_s + r.fault_delay_s + len(r.data) * byte_s
             if r.data:

@@ -9,6 +9,7 @@ at its new ID afterwards.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Iterator
 
@@ -22,6 +23,11 @@ from sim.dxl_servo import REBOOT_S, EmulatedServo
 
 @pytest.fixture
 def sdk() -> Iterator[tuple[SimBus, PortHandler, PacketHandler]]:
+    # the SDK busy-polls for the reply in this interpreter, which the emulator's thread
+    # shares: hand the GIL over every 0.1 ms, not every 5 ms (its ~34 ms timeout at
+    # 1 Mbps is otherwise spent waiting for the interpreter on a loaded machine)
+    interval_s = sys.getswitchinterval()
+    sys.setswitchinterval(1e-4)
     with SimBus([EmulatedServo(1), EmulatedServo(4)]) as bus:
         port = PortHandler(bus.port_path)
         assert port.openPort() and port.setBaudRate(1_000_000)
@@ -29,6 +35,7 @@ def sdk() -> Iterator[tuple[SimBus, PortHandler, PacketHandler]]:
             yield bus, port, PacketHandler(2.0)
         finally:
             port.closePort()
+            sys.setswitchinterval(interval_s)
 
 
 def test_id_write_answers_from_the_old_id_then_the_servo_answers_at_the_new(
