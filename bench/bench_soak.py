@@ -207,8 +207,8 @@ class Watch:
         read: Callable[..., Any] = bus.read_state
 
         def read_state(deadline_s: float | None = None,
-                       part: tuple[int, int] | None = None) -> Any:
-            state = read(deadline_s) if part is None else read(deadline_s, part)
+                       part: tuple[int, int] | None = None, *, patient: bool = False) -> Any:
+            state = read(deadline_s, part, patient=patient)
             temps = state.temperatures_c
             if self.max_temperature_c.shape != temps.shape:
                 self.max_temperature_c = np.full(temps.shape, np.nan)

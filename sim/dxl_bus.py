@@ -59,7 +59,9 @@ class MotionModel(Protocol):
 
     def attach(self, servos: Sequence[EmulatedServo], lock: threading.RLock) -> None: ...
 
-    def start(self) -> None: ...
+    def start(self, *, exchanged: bool = False, realtime: bool = False) -> None: ...
+
+    def exchange(self) -> bool: ...
 
     def stop(self) -> None: ...
 
@@ -68,15 +70,20 @@ class MotionModel(Protocol):
 STALE_PARTIAL_S = 0.1
 # Servos without physics move kinematically; their state is advanced at most this often.
 KINEMATIC_STEP_S = 0.002
-# Housekeeping (kinematic motion, watchdogs, overload; about 10 us per servo) runs
-# in time the bus waits anyway: before a reply's wire instant when at least
-# HOUSEKEEPING_SLOT_S is left, or while the line is idle; on a packet's arrival only
+# Housekeeping (kinematic motion or the puppet's exchange, watchdogs, overload; about
+# 4-10 us per servo) runs in time the bus waits anyway: before a reply's wire instant
+# when at least HOUSEKEEPING_SLOT_S is left, or while the line is idle (never while a
+# packet without reply is on the wire: the client's next packet would wait behind it,
+# stamped late; a rule that also asked for the time it last took left it out of the
+# slots on a busy machine: motion every 10 ms); on a packet's arrival only
 # once overdue by HOUSEKEEPING_OVERDUE_S (or always without wire timing). Never
 # right after a reply: the pty hands bytes over through a kernel worker that may
 # be queued on this thread's CPU, and a SCHED_FIFO thread that keeps working holds
 # it back (docs/measurements.md has the hand-over times measured both ways).
 HOUSEKEEPING_SLOT_S = 0.0003
 HOUSEKEEPING_OVERDUE_S = 0.01
+# An idle line (no bytes) is looked at again this often for housekeeping.
+IDLE_WAIT_S = 0.01
 
 
 class SimBus(Dispatcher):
@@ -128,6 +135,7 @@ class SimBus(Dispatcher):
         self.realtime = realtime
         self.realtime_granted = False
         self._packet_baud = 0
+        self._line_baud = 0  # the client's baud when the packet being handled was read
         self._faults = faults or FaultSpec()
         self.puppet = puppet
         self.clock = clock or MonotonicClock(spin_s=SPIN_S)
@@ -137,6 +145,7 @@ class SimBus(Dispatcher):
         self.port_path = ""
         self._rng = random.Random(self._faults.seed)
         self._by_id: dict[int, EmulatedServo] = {}
+        self._generation = 0
         self._rebuild_ids()
         self.line = PtyLine()
         self._thread: threading.Thread | None = None
@@ -145,6 +154,8 @@ class SimBus(Dispatcher):
         self._overload_done = False
         self._bus_free_at = 0.0
         self._last_advance = 0.0
+        self._last_exchange = 0.0  # when the puppet last exchanged state with the servos
+        self._in_packet = False  # housekeeping runs in a packet's path (no slot)
         self._kinematic: list[EmulatedServo] = []
         self._partial_since: float | None = None
         self._feed_buf = bytearray()
@@ -212,7 +223,7 @@ class SimBus(Dispatcher):
         if self.puppet is not None:
             self.puppet.attach(self.servos, self.lock)
             driven = set(self.puppet.driven_ids)
-            self.puppet.start()
+            self.puppet.start(exchanged=True, realtime=self.realtime)
         self._kinematic = [s for s in self.servos if s.id not in driven]
         self._stop.clear()
         self._thread = threading.Thread(target=self._serve, name="dxl-sim-bus", daemon=True)
@@ -273,9 +284,11 @@ class SimBus(Dispatcher):
         last_rx = 0.0
         line = self.line
         clock = self.clock
+        # the physics waits for its exchanges (housekeeping): an idle line wakes for them
+        idle_s = KINEMATIC_STEP_S if self.puppet is not None else IDLE_WAIT_S
         try:
             while not self._stop.is_set():
-                chunk, closed = line.wait(0.01)
+                chunk, closed = line.wait(idle_s)
                 # Arrivals are time-stamped before anything else.
                 now = clock.now()
                 if closed:  # the client let the port go: what it left half-sent is noise
@@ -330,6 +343,8 @@ class SimBus(Dispatcher):
             pos = end
 
     def _housekeeping(self, now: float) -> None:
+        """Faults due, kinematic motion, watchdogs, and the puppet's exchange of goals and
+        present state (in a packet's path, ``_in_packet``, only once overdue)."""
         f = self.faults
         if f.overload and not self._overload_done and now - self._started_at >= f.overload_after_s:
             with self.lock:
@@ -342,6 +357,11 @@ class SimBus(Dispatcher):
             dt = now - self._last_advance
             self._last_advance = now
             with self.lock:
+                if self.puppet is not None and (
+                        not self._in_packet
+                        or now - self._last_exchange >= HOUSEKEEPING_OVERDUE_S):
+                    self._last_exchange = now
+                    self.puppet.exchange()
                 for s in self._kinematic:
                     s.advance(dt)
                 for s in self.servos:
@@ -349,12 +369,17 @@ class SimBus(Dispatcher):
 
     def _handle_frame(self, frame: bytes, t_rx: float) -> None:
         self.stats.packets += 1
+        # bytes fed without a line (:meth:`feed`) reach every servo
+        self._line_baud = self.line.baud() if self.line.fd >= 0 else 0
         if self.check_baud:
-            # bytes fed without a line (:meth:`feed`) reach every servo
-            self._packet_baud = self.line.baud() if self.line.fd >= 0 else 0
+            self._packet_baud = self._line_baud
         with self.lock:
             if not self.wire_timing or t_rx - self._last_advance >= HOUSEKEEPING_OVERDUE_S:
-                self._housekeeping(t_rx)
+                self._in_packet = True
+                try:
+                    self._housekeeping(t_rx)
+                finally:
+                    self._in_packet = False
             try:
                 packet = parse_instruction(frame)
             except PacketError as exc:
@@ -368,10 +393,7 @@ class SimBus(Dispatcher):
             else:
                 self.stats.by_instruction[packet.instruction] += 1
                 replies = self._dispatch(packet.id, packet.instruction, packet.params, t_rx)
-        ready = self.clock.now()
-        overhead = ready - t_rx
-        self.stats.overhead_total_s += overhead
-        self.stats.overhead_max_s = max(self.stats.overhead_max_s, overhead)
+        self.stats.note_overhead(self.clock.now() - t_rx)
         self._send(replies, len(frame), t_rx)
 
     def _send(self, replies: list[_Reply], frame_len: int, t_rx: float) -> None:
@@ -384,7 +406,7 @@ class SimBus(Dispatcher):
                     self._emit(r.data)
                     self.stats.replies += 1
             return
-        byte_s = BITS_PER_BYTE / self.baud()
+        byte_s = BITS_PER_BYTE / (self._line_baud or self.baud())
         t = max(t_rx, self._bus_free_at) + frame_len * byte_s
         if replies:
             first = replies[0]

@@ -20,11 +20,12 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import NamedTuple, overload
 
 from firmware_protocol.dynamixel import (
     BAUD_BY_INDEX,
     BROADCAST_ID,
+    INDEX_BY_BAUD,
     MAX_PACKET_LEN,
     ErrorCode,
     Instruction,
@@ -37,9 +38,26 @@ from firmware_protocol.dynamixel import (
     split_sync_write,
 )
 from handrig.clock import Clock
+from sim.dxl_fast import (
+    ReadPlan,
+    WritePlan,
+    answer_read,
+    goals_outside,
+    hear_all,
+    read_plan,
+    write_plan,
+)
 from sim.dxl_faults import FaultSpec, apply_faults
 from sim.dxl_rig import GOAL_POSITION_ADDRESS
 from sim.dxl_servo import READABLE_BYTES, EmulatedServo
+
+# Per-packet host overhead is binned by the microsecond up to this many; longer ones
+# go to the last bin (enough for p50/p99 without keeping every sample).
+OVERHEAD_BINS_US = 5000
+
+
+def _overhead_bins() -> list[int]:
+    return [0] * (OVERHEAD_BINS_US + 1)
 
 
 @dataclass
@@ -57,6 +75,36 @@ class BusStats:
     by_instruction: Counter[int] = field(default_factory=Counter)
     goals_decoded: int = 0  # Goal Position values received
     goals_outside: int = 0  # of those, outside the servo's goal_limits
+    overhead_bins: list[int] = field(default_factory=_overhead_bins)
+    """Packets by host overhead, whole microseconds (the last bin: that long or more)."""
+
+    def note_overhead(self, overhead_s: float) -> None:
+        """Count one packet's host time from its last byte read to its reply ready."""
+        self.overhead_total_s += overhead_s
+        if overhead_s > self.overhead_max_s:
+            self.overhead_max_s = overhead_s
+        us = int(overhead_s * 1e6)
+        self.overhead_bins[us if 0 <= us < OVERHEAD_BINS_US else OVERHEAD_BINS_US] += 1
+
+    def overhead_quantile_s(self, q: float) -> float:
+        """The ``q`` quantile (0..1) of the per-packet host overhead, to the microsecond
+        above (0 before any packet)."""
+        total = sum(self.overhead_bins)
+        if not total:
+            return 0.0
+        rank = q * total
+        seen = 0
+        for us, count in enumerate(self.overhead_bins):
+            seen += count
+            if seen >= rank and count:
+                return (us + 1) * 1e-6
+        return (OVERHEAD_BINS_US + 1) * 1e-6
+
+    def overhead_line(self) -> str:
+        """The overhead figures as the closing lines print them."""
+        return (f"host overhead per packet p50 {self.overhead_quantile_s(0.5) * 1e6:.0f} us, "
+                f"p99 {self.overhead_quantile_s(0.99) * 1e6:.0f} us, "
+                f"mean {self.overhead_mean_s * 1e6:.0f} us, max {self.overhead_max_s * 1e6:.0f} us")
 
     @property
     def overhead_mean_s(self) -> float:
@@ -77,6 +125,30 @@ class _Reply(NamedTuple):
     fault_delay_s: float = 0.0
 
 
+class SyncReads(Sequence[tuple[int, int, int]]):
+    """The ``(id, address, length)`` requests of a Fast Sync Read, from its parameters
+    (checked: :class:`PacketError` when too short), listed only when asked for."""
+
+    def __init__(self, params: bytes) -> None:
+        self.address, self.length, self.ids = split_sync_read(params)
+        self.params = params
+        self._items: list[tuple[int, int, int]] | None = None
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    @overload
+    def __getitem__(self, k: int) -> tuple[int, int, int]: ...
+
+    @overload
+    def __getitem__(self, k: slice) -> list[tuple[int, int, int]]: ...
+
+    def __getitem__(self, k: int | slice) -> tuple[int, int, int] | list[tuple[int, int, int]]:
+        if self._items is None:
+            self._items = [(i, self.address, self.length) for i in self.ids]
+        return self._items[k]
+
+
 class Dispatcher:
     """The servos behind the line and what they answer (state owned by the bus)."""
 
@@ -91,6 +163,9 @@ class Dispatcher:
     _rng: random.Random
     _by_id: dict[int, EmulatedServo]
     _packet_baud: int
+    _generation: int
+    _read_plans: dict[bytes, ReadPlan]
+    _write_plans: dict[bytes, WritePlan]
     _overload_done: bool
     _started_at: float
     clock: Clock
@@ -118,6 +193,17 @@ class Dispatcher:
 
     def _rebuild_ids(self) -> None:
         self._by_id = {s.id: s for s in self.servos if s.id not in self.faults.missing}
+        # the quick paths' plans (sim.dxl_fast) name servos by ID: made again on next use
+        self._generation += 1
+        self._read_plans = {}
+        self._write_plans = {}
+
+    def _baud_index(self) -> int:
+        """The Baud Rate item a servo needs to hear this packet; -1: every servo hears
+        it; -2: none does (not an X-series rate)."""
+        if not self.check_baud or not self._packet_baud:
+            return -1
+        return INDEX_BY_BAUD.get(self._packet_baud, -2)
 
     # ------------------------------------------------------------ dispatch
 
@@ -132,11 +218,13 @@ class Dispatcher:
             return True
         return False
 
-    def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"") -> _Reply:
-        """One status packet, with faults applied."""
+    def _reply(self, servo: EmulatedServo, error: int, data: bytes = b"",
+               from_id: int | None = None) -> _Reply:
+        """One status packet, with faults applied; from the servo's ID, or ``from_id``:
+        the ID a packet that changed it (ID write, Factory Reset) addressed."""
         if self._faults.mute and self._muted(servo.id, self.clock.now()):
             return _Reply(b"", servo.return_delay_s)
-        packet = build_status(servo.id, error, data)
+        packet = build_status(servo.id if from_id is None else from_id, error, data)
         extra = 0.0
         if self.faults.any_reply_fault:
             packet, extra = self._apply_faults(
@@ -175,8 +263,9 @@ class Dispatcher:
         self, target: int, inst: int, params: bytes, now: float
     ) -> list[_Reply]:
         if target == BROADCAST_ID:
+            hears = self._baud_index()
             for s in self._by_id.values():
-                if self._hears(s):
+                if hears == -1 or s.mem[8] == hears:
                     s.last_heard = now
             return self._broadcast(inst, params, now)
         servo = self._servo_for(target, now)
@@ -205,17 +294,19 @@ class Dispatcher:
                     err = servo.reg_write(address, params[2:])
                 if address <= 7 < address + len(params) - 2:
                     self._rebuild_ids()
-                return [self._reply(servo, err)] if level >= 2 else []
+                # a servo answers from the ID it was addressed by, then takes a new one
+                return [self._reply(servo, err, from_id=target)] if level >= 2 else []
             if inst == Instruction.ACTION:
                 err = servo.action()
                 self._rebuild_ids()
-                return [self._reply(servo, err)] if level >= 2 else []
+                return [self._reply(servo, err, from_id=target)] if level >= 2 else []
             if inst == Instruction.REBOOT:
                 err = servo.reboot(now)
                 return [self._reply(servo, err)] if level >= 2 else []
             if inst == Instruction.FACTORY_RESET:
                 option = params[0] if len(params) == 1 else 0
-                reply = [self._reply(servo, servo.factory_reset(option, now))] if level >= 2 else []
+                err = servo.factory_reset(option, now)
+                reply = [self._reply(servo, err, from_id=target)] if level >= 2 else []
                 self._rebuild_ids()
                 return reply
             if inst == Instruction.CLEAR:
@@ -239,6 +330,8 @@ class Dispatcher:
     def _broadcast(self, inst: int, params: bytes, now: float) -> list[_Reply]:
         try:
             if inst == Instruction.SYNC_WRITE:
+                if self._quick_goal_write(params, now):
+                    return []
                 address, length, items = split_sync_write(params)
                 if address == GOAL_POSITION_ADDRESS and length == 4:
                     for servo_id, data in items:
@@ -253,8 +346,7 @@ class Dispatcher:
                     self._rebuild_ids()
                 return []
             if inst == Instruction.FAST_SYNC_READ:
-                address, length, ids = split_sync_read(params)
-                return self._fast_read([(i, address, length) for i in ids], now)
+                return self._fast_read(SyncReads(params), now)
             if inst == Instruction.SYNC_READ:
                 address, length, ids = split_sync_read(params)
                 out: list[_Reply] = []
@@ -309,6 +401,55 @@ class Dispatcher:
             return []
         return []  # broadcast instructions get no status, even when wrong
 
+    def _quick_goal_write(self, params: bytes, now: float) -> bool:
+        """A Sync Write of Goal Position to servos that all hear it, done as the general
+        path would do it; False (nothing done) when that path must handle it."""
+        if len(params) < 9 or params[0] != GOAL_POSITION_ADDRESS or params[1] \
+                or params[2] != 4 or params[3] or (len(params) - 4) % 5:
+            return False
+        body = params[4:]
+        ids = body[::5]
+        plan = self._write_plans.get(ids)
+        if plan is None or plan.generation != self._generation \
+                or plan.limits is not self.goal_limits:
+            plan = write_plan(self._by_id, ids, self.goal_limits, self._generation)
+            if plan is None:
+                return False
+            self._write_plans[ids] = plan
+        if not hear_all(plan.servos, now, self._baud_index()):
+            return False
+        stats = self.stats
+        stats.goals_decoded += len(ids)
+        if self.goal_limits:
+            stats.goals_outside += goals_outside(body, plan)
+        if self.on_sync_write is not None:
+            self.on_sync_write(now, GOAL_POSITION_ADDRESS,
+                               [(body[k], body[k + 1 : k + 5]) for k in range(0, len(body), 5)])
+        k = 1
+        for servo in plan.servos:
+            servo.last_heard = now
+            servo.write(GOAL_POSITION_ADDRESS, body[k : k + 4])
+            k += 5
+        return True
+
+    def _quick_fast_read(self, params: bytes, now: float) -> list[_Reply] | None:
+        """The reply to a Fast Sync Read every addressed servo answers normally (no reply
+        fault, no mute switched on); None when the general path must answer it."""
+        f = self._faults
+        if f.mute or f.any_reply_fault or len(params) < 5:
+            return None
+        plan = self._read_plans.get(params)
+        if plan is None or plan.generation != self._generation:
+            address, length = params[0] | params[1] << 8, params[2] | params[3] << 8
+            plan = read_plan(self._by_id, address, length, params[4:], self._generation)
+            if plan is None:
+                return None
+            self._read_plans[params] = plan
+        packet = answer_read(plan, now, self._baud_index())
+        if packet is None:
+            return None
+        return [_Reply(packet, plan.servos[0].return_delay_s)]
+
     def _fast_read(
         self, requests: Sequence[tuple[int, int, int]], now: float
     ) -> list[_Reply]:
@@ -316,6 +457,10 @@ class Dispatcher:
 
         A request the reply cannot carry (a range beyond the control table, a reply
         longer than a packet) gets no reply at all."""
+        if isinstance(requests, SyncReads):
+            quick = self._quick_fast_read(requests.params, now)
+            if quick is not None:
+                return quick
         total = 8 + sum(n + 4 for _, _, n in requests)
         if total > MAX_PACKET_LEN or any(n == 0 or a + n > READABLE_BYTES
                                          for _, a, n in requests):

@@ -30,6 +30,10 @@ BITS_PER_BYTE = 10  # start + 8 data + stop
 SPIN_S = 60e-6
 # SCHED_FIFO priority of the bus thread when ``realtime`` (low: above normal tasks only).
 REALTIME_PRIORITY = 10
+# The physics thread's, below the bus thread's: a thread that shares the bus thread's
+# interpreter must not be preempted by ordinary work while it holds the GIL (the bus
+# thread would wait for it: a priority inversion of milliseconds on a loaded machine).
+PHYSICS_PRIORITY = 5
 # While no client holds the port, the line looks again this often.
 NO_CLIENT_POLL_S = 0.005
 DEFAULT_BAUD = 1_000_000
@@ -40,13 +44,13 @@ def tighten_timer_slack() -> None:
     timer_slack_ns(LOOP_TIMER_SLACK_NS)
 
 
-def try_realtime() -> bool:
+def try_realtime(priority: int = REALTIME_PRIORITY) -> bool:
     """SCHED_FIFO for the calling thread where allowed; False when refused or unsupported.
 
     On a loaded machine a normal thread wakes late from its sleeps, and its replies
     leave late (docs/measurements.md)."""
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (OSError, AttributeError):
         return False
     return True

@@ -80,6 +80,9 @@ CURRENT_BASED_POSITION_MODE = 5
 # Present Current (126, int16), Present Velocity (128, int32), Present Position (132, int32).
 _PRESENT = struct.Struct("<hii")
 _I16, _U16, _I32, _U32 = (struct.Struct(f) for f in ("<h", "<H", "<i", "<I"))
+_GOAL_MIN, _GOAL_MAX = -1_048_575, 1_048_575  # Goal Position's range (e-manual, every model)
+_PRESENT_INPUTS = (Reg.HOMING_OFFSET, Reg.DRIVE_MODE, Reg.GOAL_POSITION, Reg.TORQUE_ENABLE,
+                   Reg.MOVING_THRESHOLD, Reg.PWM_LIMIT, Reg.OPERATING_MODE)
 def _defaults(info: ModelInfo, servo_id: int, baud: int) -> dict[Reg, int]:
     """Initial values: the model's e-manual table, this servo's ID and baud, and the
     supply at the model's recommended voltage."""
@@ -352,14 +355,9 @@ class EmulatedServo:
         the Temperature Limit it reports overheating (torque off)."""
         if dt_s <= 0:
             return
-        volts = self.mem[144] / 10.0
-        resistance = volts / self.info.stall_current_a if volts else 1.0
-        amps = self.motor_current_ma / 1000.0
-        spec = self.thermal
-        power_w = amps * amps * resistance + volts * spec.standby_current_a
-        target = AMBIENT_TEMPERATURE_C + power_w * spec.resistance_k_per_w
-        alpha = 1.0 - math.exp(-dt_s / spec.time_constant_s)  # exact for a constant P
-        self.temperature_c += (target - self.temperature_c) * alpha
+        self.temperature_c = self.thermal.temperature_after(
+            self.temperature_c, self.mem[144] / 10.0, self.motor_current_ma,
+            self.info.stall_current_a, dt_s)
         self.mem[146] = max(0, min(255, round(self.temperature_c)))
         if self.mem[146] > self.mem[31] and not self.mem[70] & HardwareError.OVERHEATING:
             self.inject_hardware_error(HardwareError.OVERHEATING)
@@ -516,18 +514,19 @@ class EmulatedServo:
     def write(self, address: int, data: bytes) -> int:
         """Write ``data`` at ``address``; returns the ERR byte (0 or an error, plus Alert)."""
         self.counters["writes"] += 1
-        # Hot path: Goal Position in position mode, torque on or off.
-        if address == 116 and len(data) == 4 and self.mem[11] == 3 and self.mem[98] != 0xFF:
-            value = int.from_bytes(data, "little", signed=True)
-            mem = self.mem
-            low = int.from_bytes(mem[52:56], "little", signed=True)
-            if low <= value <= int.from_bytes(mem[48:52], "little", signed=True):
-                mem[116:120] = data
+        mem = self.mem
+        # Hot path: Goal Position in a position mode, torque on or off (as the general path)
+        if address == 116 and len(data) == 4 and mem[98] != 0xFF and mem[11] in POSITION_MODES:
+            value = _I32.unpack(data)[0]
+            if (_GOAL_MIN <= value <= _GOAL_MAX) if mem[11] != 3 else \
+                    _I32.unpack_from(mem, 52)[0] <= value <= _I32.unpack_from(mem, 48)[0]:
+                mem[116:120] = data  # present state is current (see below): Moving Status only
                 self._publish_moving_status(_I32.unpack_from(mem, 132)[0],
                                             _U32.unpack_from(mem, 24)[0])
                 return ERROR_ALERT if mem[70] else 0
-            self.counters["errors"] += 1
-            return self.error_byte(ErrorCode.DATA_LIMIT)
+            if mem[11] == 3:  # outside the position limits (mode 4/5: the general path)
+                self.counters["errors"] += 1
+                return self.error_byte(ErrorCode.DATA_LIMIT)
         code = self.check_write(address, data)
         if code:
             self.counters["errors"] += 1
@@ -537,8 +536,9 @@ class EmulatedServo:
         if address <= Reg.TORQUE_ENABLE < end and self.mem[64] and self.mem[70]:
             # A standing hardware error keeps torque off until a reboot.
             self.mem[64] = 0
-        if address <= Reg.HOMING_OFFSET < end or address <= Reg.DRIVE_MODE < end \
-                or address <= Reg.GOAL_POSITION < end or address <= Reg.TORQUE_ENABLE < end:
+        # every item present state is derived from (with the motor's state): a write to
+        # one publishes it again, so present state never waits for the next motion step
+        if any(address <= r < end for r in _PRESENT_INPUTS):
             self._publish_present()
         return self.error_byte()
 

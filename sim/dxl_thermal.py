@@ -7,6 +7,7 @@ assumptions; docs/hardware.md ("Heat") tabulates what they give and why.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from firmware_protocol.dynamixel import MODELS
@@ -55,6 +56,17 @@ class ThermalSpec:
     def resistance_k_per_w(self) -> float:
         """Internal temperature rise per watt dissipated, K/W."""
         return 1.0 / (HEAT_TRANSFER_W_M2K * self.surface_m2) + INTERNAL_K_PER_W
+
+    def temperature_after(self, temperature_c: float, volts: float, current_ma: float,
+                          stall_current_a: float, dt_s: float) -> float:
+        """The temperature ``dt_s`` later at a motor current ``current_ma`` (I^2 R, R from
+        the stall figures) plus the standby draw, cooling toward ambient."""
+        resistance = volts / stall_current_a if volts else 1.0
+        amps = current_ma / 1000.0
+        power_w = amps * amps * resistance + volts * self.standby_current_a
+        target = AMBIENT_TEMPERATURE_C + power_w * self.resistance_k_per_w
+        alpha = 1.0 - math.exp(-dt_s / self.time_constant_s)  # exact for a constant P
+        return temperature_c + (target - temperature_c) * alpha
 
     @property
     def time_constant_s(self) -> float:

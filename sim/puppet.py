@@ -54,6 +54,7 @@ from handrig.devices.servo.models import servo_model
 from handrig.errors import ConfigError, HandrigError
 from handrig.hand import DOF_NAMES, Hand
 from handrig.pose.robot_rig import RobotRigConfig
+from sim.dxl_line import PHYSICS_PRIORITY, try_realtime
 from sim.dxl_servo import EmulatedServo
 from sim.hand_model import (
     REFERENCE_HAND_LENGTH_M,
@@ -93,6 +94,10 @@ def _fallback_passive() -> PassiveParams:
                          {n: 0.005 for n in names})
 
 
+# Motor state per channel: ticks, rpm, mA, actuator force (N m).
+_State = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
 @dataclass
 class _Channel:
     servo_id: int
@@ -107,6 +112,8 @@ class _Channel:
     d_gain: int = 0
     saturated_s: float = 0.0
     limits_key: tuple[bytes, bytes, bytes, bytes, bytes, int] | None = None
+    pulled: bytes = b""  # control table 10..115 at the last pull that powered the channel
+    pulled_goal: bytes = b""  # and its Goal Position bytes
     force_limit_nm: float = 0.0
 
 
@@ -213,6 +220,15 @@ class _HandSim:
             if s is None:
                 continue
             mem = s.mem
+            # everything read below lies in 10..119; unchanged since the last pull: the
+            # same result (goals change most often: 116..119, then only the goal)
+            settings = bytes(mem[10:116])
+            if settings == ch.pulled and ch.powered:
+                if mem[116:120] != ch.pulled_goal:
+                    ch.pulled_goal = bytes(mem[116:120])
+                    self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
+                continue
+            ch.pulled, ch.pulled_goal = settings, bytes(mem[116:120])
             on = mem[64] == 1
             if on != ch.powered:
                 self._set_power(ch, on)
@@ -259,20 +275,30 @@ class _HandSim:
             ctrl[self.act_idx] = np.where(powered, new, cur)
             self.mujoco.mj_step(self.model, self.data)
 
+    def sample(self) -> _State:
+        """The motors' state now (physics lock held): ticks, rpm, mA and actuator force
+        per channel, as new arrays the servos may be given later (:meth:`apply`)."""
+        d = self.data
+        q_deg = np.degrees(d.qpos[self.q_idx])
+        ticks = self.zero_ticks + self.ticks_per_deg * q_deg
+        rpm = self.rpm_per_rad_s * d.qvel[self.q_idx]
+        force = d.actuator_force[self.act_idx]
+        return ticks, rpm, self.ma_per_nm * force, force
+
     def push(self, dt_s: float = 0.0, overload_s: float | None = None) -> None:
         """Write present state to the servos (bus lock held). With ``overload_s``, a
         servo held at its torque limit that long reports an overload error."""
-        d = self.data
+        self.apply(self.sample(), dt_s, overload_s)
+
+    def apply(self, state: _State, dt_s: float, overload_s: float | None) -> None:
+        """Give the servos a :meth:`sample` of the motors' state ``dt_s`` after the last
+        one (bus lock held); ``overload_s`` as :meth:`push`."""
+        ticks, rpm, current_ma, force = state
         # temperature changes over minutes: update it every HEAT_EVERY_S
         self.heat_pending_s += dt_s
         heat_dt_s = 0.0
         if self.heat_pending_s >= HEAT_EVERY_S:
             heat_dt_s, self.heat_pending_s = self.heat_pending_s, 0.0
-        q_deg = np.degrees(d.qpos[self.q_idx])
-        ticks = self.zero_ticks + self.ticks_per_deg * q_deg
-        rpm = self.rpm_per_rad_s * d.qvel[self.q_idx]
-        force = d.actuator_force[self.act_idx]
-        current_ma = self.ma_per_nm * force
         for k, ch in enumerate(self.channels):
             s = ch.servo
             if s is None:
@@ -400,6 +426,11 @@ class Puppet:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self.error: BaseException | None = None
+        self._exchanged = False
+        self._realtime = False
+        # per hand: a state sample and the simulated seconds it covers, not yet given
+        # to the servos (exchanged mode)
+        self._pending: dict[Hand, tuple[_State, float]] = {}
 
     @property
     def driven_ids(self) -> list[int]:
@@ -452,9 +483,19 @@ class Puppet:
         self.steps += n
         self.sim_time_s += n * self.timestep_s
 
-    def start(self) -> None:
+    def start(self, *, exchanged: bool = False, realtime: bool = False) -> None:
+        """Step the physics in wall time in a thread of its own. ``exchanged``: that
+        thread only steps MuJoCo (which lets go of the interpreter while it runs); the
+        servos' goals and present state change hands when the bus calls
+        :meth:`exchange` from its own thread, in time it waits anyway, so the physics
+        never holds the bus lock or the interpreter while a packet waits. ``realtime``:
+        SCHED_FIFO below the bus thread (:data:`sim.dxl_line.PHYSICS_PRIORITY`) where
+        allowed, so ordinary work cannot preempt it while it holds the interpreter."""
         if self._thread is not None or not self.hands:
             return
+        self._exchanged = exchanged
+        self._realtime = realtime
+        self._pending = {}
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="puppet-physics", daemon=True)
         self._thread.start()
@@ -466,6 +507,8 @@ class Puppet:
             self._thread = None
 
     def _run(self) -> None:
+        if self._realtime:
+            try_realtime(PHYSICS_PRIORITY)
         try:
             t0 = time.perf_counter() - self.sim_time_s
             dt = self.timestep_s
@@ -485,10 +528,42 @@ class Puppet:
                     if self.on_behind is not None:
                         self.on_behind(skipped)
                     n = max_batch
-                self.step(n)
+                if self._exchanged:
+                    self._step_physics(n)
+                else:
+                    self.step(n)
         except BaseException as exc:  # reported through .error
             self.error = exc
             raise
+
+    def _step_physics(self, n: int) -> None:
+        """``n`` steps on the goals the last :meth:`exchange` pulled; the state they
+        end in waits for the next one."""
+        with self.physics_lock:
+            for h, sim in self.hands.items():
+                sim.step(n)
+                sample = sim.sample()
+                _, waiting_s = self._pending.get(h, ((), 0.0))
+                self._pending[h] = (sample, waiting_s + n * self.timestep_s)
+        self.steps += n
+        self.sim_time_s += n * self.timestep_s
+
+    def exchange(self) -> bool:
+        """From the bus's thread, bus lock held: give the servos the state the physics
+        reached since the last call and the physics the servos' goals. False (nothing
+        done) while the physics is stepping; the bus tries again later."""
+        if not self.physics_lock.acquire(blocking=False):
+            return False
+        try:
+            pending, self._pending = self._pending, {}
+            for h, sim in self.hands.items():
+                if h in pending:
+                    state, dt_s = pending[h]
+                    sim.apply(state, dt_s, self.overload_s)
+                sim.pull()
+        finally:
+            self.physics_lock.release()
+        return True
 
     def joint_angles_deg(self) -> dict[str, float]:
         """All simulated joint angles, degrees."""

@@ -69,7 +69,7 @@ COMPUTE_ONLY = (
     "handrig/pose/", "handrig/offline/", "handrig/config/", "firmware_protocol/",
     "firmware/", "sim/test_bake.py", "sim/test_bake_plot_state.py", "sim/test_passive.py",
     "sim/test_hand_model.py", "sim/test_render.py", "sim/test_calibration_motion.py",
-    "sim/test_dxl_servo.py", "test_user_home.py", "test_layers.py",
+    "sim/test_dxl_servo.py", "sim/test_dxl_fast_paths.py", "test_user_home.py", "test_layers.py",
     "handrig/app/test_demo_render.py", "handrig/cli/test_sag_commands.py",
     "handrig/cli/test_cli_startup.py", "handrig/app/view/test_view_advice.py",
     "handrig/devices/test_glove_channel_indices.py", "handrig/test_bounded_inputs.py",

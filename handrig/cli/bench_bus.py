@@ -64,7 +64,8 @@ try:
     sys.stdin.read()
 finally:
     s = bus.stats
-    print(f"emulator: {s.packets} packets, overhead mean {s.overhead_mean_s * 1e6:.0f} us, "
+    print(f"emulator: {s.packets} packets, {s.overhead_line()}, "
+          f"puppet {'on' if bus.puppet is not None else 'off'}; "
           f"reply late mean {s.late_mean_s * 1e6:.0f} us max {s.late_max_s * 1e6:.0f} us"
           + (f"; STOPPED: {bus.error!r}" if bus.error is not None else ""), flush=True)
     bus.stop()

@@ -186,8 +186,7 @@ def run(args: argparse.Namespace) -> int:
     st = bus.stats
     faults_seen = ", ".join(f"{k} {v}" for k, v in sorted(bus.fault_counts.items())) or "none"
     _say(f"sim-bus: {st.packets} packets, {st.replies} replies, {st.bad_crc} bad CRC; "
-         f"host overhead mean {st.overhead_mean_s * 1e6:.0f} us, max "
-         f"{st.overhead_max_s * 1e6:.0f} us; replies late by mean {st.late_mean_s * 1e6:.0f} us, "
+         f"{st.overhead_line()}; replies late by mean {st.late_mean_s * 1e6:.0f} us, "
          f"max {st.late_max_s * 1e6:.0f} us; faults: {faults_seen}; goals: "
          f"{st.goals_decoded} decoded, {st.goals_outside} outside the rig's limits")
     return 0

@@ -1,0 +1,165 @@
+"""The emulated bus's two hot packets, answered without the general dispatcher.
+
+A realtime client sends two packets a cycle: a Sync Write of Goal Position and a
+Fast Sync Read. The general path (:class:`sim.dxl_dispatch.Dispatcher`) answers
+them in ~2-3 us of Python per servo; this module answers the common case, where
+every addressed servo is there, awake, hears the packet's baud and no reply fault
+is switched on, with one plan per request made once (which servos, where each
+one's bytes go in the reply) and a compiled loop for the reply's running CRCs.
+Anything else (a servo missing, rebooting, at another baud, a Status Return Level
+of 0, a fault spec with reply faults or mutes) returns ``None`` and the general
+path answers, byte for byte as before: the plans only skip work whose result they
+know.
+
+The CRC loop here is the emulator's own (CRC-16/BUYPASS, table from
+:data:`firmware_protocol.dynamixel.CRC_TABLE`), not the driver's, so a misreading
+on one side still fails a test instead of cancelling out.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, types
+
+from firmware_protocol.dynamixel import (
+    BROADCAST_ID,
+    CRC_TABLE,
+    ERROR_ALERT,
+    HEADER,
+    MAX_PACKET_LEN,
+    STATUS_INSTRUCTION,
+)
+from sim.dxl_servo import READABLE_BYTES, EmulatedServo
+
+_TABLE = np.array(CRC_TABLE, dtype=np.uint16)
+_BYTES = types.Array(types.uint8, 1, "C")
+_ID_GOAL = struct.Struct("<Bi")  # a Sync Write item of Goal Position
+# Bytes before the first servo's ERR in a fast read reply: header, ID, LEN, 0x55.
+_REPLY_PREFIX = 8
+
+
+@njit(types.uint16(_BYTES, types.Array(types.uint16, 1, "C"), types.int64, types.int64),
+      cache=True, nogil=True)
+def _running_crcs(buf: np.ndarray, table: np.ndarray, stride: int, count: int) -> int:
+    """Write the running CRC at the end of each of ``count`` chunks of ``stride``
+    bytes (the last two of each) after the 8-byte prefix; returns the last one."""
+    crc = 0
+    start = 0
+    for k in range(count):
+        end = _REPLY_PREFIX + (k + 1) * stride - 2
+        for i in range(start, end):
+            crc = ((crc << 8) & 0xFFFF) ^ table[((crc >> 8) ^ buf[i]) & 0xFF]
+        buf[end] = crc & 0xFF
+        buf[end + 1] = crc >> 8
+        start = end  # the running CRC covers the CRCs before it too
+    return crc
+
+
+def running_crcs(reply: bytearray, stride: int, count: int) -> None:
+    """Fill a fast read reply's running CRCs in place (chunks of equal ``stride``)."""
+    _running_crcs(np.frombuffer(reply, dtype=np.uint8), _TABLE, stride, count)
+
+
+@dataclass
+class ReadPlan:
+    """A Fast Sync Read request the bus has answered before: its servos in order,
+    the bytes each one reads, and the reply with everything but ERR, data and CRCs."""
+
+    servos: tuple[EmulatedServo, ...]
+    address: int
+    length: int
+    template: bytes
+    generation: int
+
+
+@dataclass
+class WritePlan:
+    """The servos of a Sync Write's ID sequence, and their goal limits as arrays."""
+
+    servos: tuple[EmulatedServo, ...]
+    low: tuple[int, ...]  # per item; low > high: no limits
+    high: tuple[int, ...]
+    generation: int
+    limits: dict[int, tuple[int, int]]
+
+
+def read_plan(by_id: dict[int, EmulatedServo], address: int, length: int,
+              ids: bytes, generation: int) -> ReadPlan | None:
+    """The plan for a Fast Sync Read of ``ids``, or None when the general path must
+    answer (an ID not on the bus, a range the reply cannot carry)."""
+    total = _REPLY_PREFIX + len(ids) * (length + 4)
+    if not ids or length == 0 or address + length > READABLE_BYTES or total > MAX_PACKET_LEN:
+        return None
+    servos = []
+    for i in ids:
+        servo = by_id.get(i)
+        if servo is None:
+            return None
+        servos.append(servo)
+    template = bytearray(total)
+    template[:4] = HEADER
+    template[4] = BROADCAST_ID
+    template[5:7] = (total - 7).to_bytes(2, "little")
+    template[7] = STATUS_INSTRUCTION
+    for k, i in enumerate(ids):
+        template[_REPLY_PREFIX + k * (length + 4) + 1] = i
+    return ReadPlan(tuple(servos), address, length, bytes(template), generation)
+
+
+def answer_read(plan: ReadPlan, now: float, baud_index: int) -> bytes | None:
+    """The reply to the planned Fast Sync Read now, or None when a servo would not
+    answer it normally (rebooting, another baud, Status Return Level 0).
+    ``baud_index``: the packet's Baud Rate item value, -1 when every servo hears it."""
+    servos = plan.servos
+    for s in servos:
+        m = s.mem
+        if s.silent_until > now or (baud_index >= 0 and m[8] != baud_index) or not m[68]:
+            return None
+    reply = bytearray(plan.template)
+    a, n = plan.address, plan.length
+    stride = n + 4
+    pos = _REPLY_PREFIX
+    for s in servos:
+        s.last_heard = now
+        s.counters["reads"] += 1
+        m = s.mem
+        if m[70]:
+            reply[pos] = ERROR_ALERT
+        reply[pos + 2 : pos + 2 + n] = m[a : a + n]
+        pos += stride
+    running_crcs(reply, stride, len(servos))
+    return bytes(reply)
+
+
+def write_plan(by_id: dict[int, EmulatedServo], ids: bytes,
+               limits: dict[int, tuple[int, int]], generation: int) -> WritePlan | None:
+    """The plan for a Sync Write of Goal Position to ``ids`` (None: an ID not on the bus)."""
+    servos = []
+    for i in ids:
+        servo = by_id.get(i)
+        if servo is None:
+            return None
+        servos.append(servo)
+    no_limits = (1, 0)
+    low = tuple(limits.get(i, no_limits)[0] for i in ids)
+    high = tuple(limits.get(i, no_limits)[1] for i in ids)
+    return WritePlan(tuple(servos), low, high, generation, limits)
+
+
+def hear_all(servos: Sequence[EmulatedServo], now: float, baud_index: int) -> bool:
+    """Whether every servo is awake and hears a packet at ``baud_index`` (-1: any)."""
+    for s in servos:
+        if s.silent_until > now or (baud_index >= 0 and s.mem[8] != baud_index):
+            return False
+    return True
+
+
+def goals_outside(body: bytes, plan: WritePlan) -> int:
+    """How many goals of a Sync Write body (``ID goal`` x N) lie outside the plan's limits."""
+    return sum(1 for (_, goal), low, high in zip(_ID_GOAL.iter_unpack(body), plan.low,
+                                                 plan.high, strict=True)
+               if low <= high and not low <= goal <= high)
