@@ -120,7 +120,12 @@ def test_a_toy_vendor_runs_a_whole_session_and_stops_with_torque_off() -> None:
     assert any(e.startswith("no valid reply from servo 7") for e in events), events
     assert any(e.startswith("holding servo 7") for e in events), events
     assert any(e.startswith("servo 7") and "answers again" in e for e in events), events
-    assert summary["silence"] == {"silences": 1, "held": 1, "recoveries": 1, "admitted": 0}
+    silence = summary["silence"]
+    assert {k: silence[k] for k in ("silences", "held", "recoveries", "admitted")} == {
+        "silences": 1, "held": 1, "recoveries": 1, "admitted": 0}
+    # what happened to whom: servo 7 alone, no read unanswered whole
+    assert list(silence["servos"]) == ["servo 7 (riIndexMCPy)"], silence
+    assert silence["reads_unanswered_whole"] == 0, silence
     assert modes == {1.4: "RUNNING", 1.9: "RELAXING", 2.5: "RUNNING"}, modes
     # the summary: the bus's counters and the glove's, the same keys as any hand's
     assert summary["bus"]["writes"] == len(bus.goals) and summary["bus"]["reads"] > 100
