@@ -41,7 +41,7 @@ def rig_on(parts: Any, glove: Any, bus: Any, clock: Any, *,
            trigger: Trigger | None = None, log: Callable[[str], None] = lambda s: None,
            **settings: Any) -> Rig:
     """A :class:`Rig` on ``glove`` and ``bus`` with the app's pipeline, control path and
-    orientation (``parts``: :func:`handrig.app.factory.build_parts`'s), the settings as
+    orientation (``parts``: :func:`handrig.app.parts.build_parts`'s), the settings as
     keywords (:func:`loop_settings`)."""
     loop_parts = LoopParts(glove, bus, parts.pipeline, clock,
                            controls_from_raw=controls_from_raw or parts.controls,

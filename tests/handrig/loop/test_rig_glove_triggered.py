@@ -13,7 +13,7 @@ import threading
 import numpy as np
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.clock import FakeClock
 from tests.helpers.fakes import FakeBus, ScriptedGlove
 from tests.helpers.loop import MID, make_rig, relaxed_targets, rig_on

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.clock import FakeClock
 from handrig.config.rig import HeatConfig, SilenceConfig
 from handrig.loop.rig import WIRE_SHARE, Rig

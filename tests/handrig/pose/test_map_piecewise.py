@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.errors import ConfigError, DataError
 from handrig.pose import kernels
 from handrig.pose.expand import DEFAULT_MAP, Expander

@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from handrig.app.factory import build_parts
+from handrig.app.parts import build_parts
 from handrig.app.view import build_server
 
 
