@@ -271,6 +271,7 @@ class _Session:
             summary["signals"] = self.signals.received
         if self.opts.show:
             summary["show"] = self.opts.show
+        summary["simulated_bus"] = opened is not None and opened.emulator is not None
         if self.left_out:
             summary["servos_left_out"] = self.left_out
         if self.admitted:
@@ -467,6 +468,10 @@ def clamp_advice(summary: dict[str, Any], recording: str, controls: tuple[str, .
     return "likely: " + "; ".join(causes)
 
 
+SIMULATED_LINE = ("bus               SIMULATED (--port sim): emulated servos and a MuJoCo "
+                  "puppet, no hardware was driven")
+
+
 def format_summary(summary: dict[str, Any]) -> str:
     """The human-readable summary of a run (the same figures as ``--json``)."""
     lat = summary["latency_us"]
@@ -479,6 +484,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     most = (", most at " + ", ".join(f"{c['joint']} ({c['clamps']})" for c in clamped)
             if clamped else "")
     lines = [
+        *([SIMULATED_LINE] if summary.get("simulated_bus") else []),
         *([f"show              {summary['show']}"] if summary.get("show") else []),
         f"frames            {summary['frames']} in {summary['duration_s']} s "
         f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us){ease}",
@@ -532,9 +538,10 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 def format_hands_summary(summary: dict[str, Any]) -> str:
     """The summary of a two-hand run: a part per hand, then torque and the error."""
-    lines = [*([f"show              {summary['show']}"] if summary.get("show") else [])]
+    lines = [*([SIMULATED_LINE] if summary.get("simulated_bus") else []),
+             *([f"show              {summary['show']}"] if summary.get("show") else [])]
     for name, part in summary["hands"].items():
-        part = {k: v for k, v in part.items() if k != "show"}
+        part = {k: v for k, v in part.items() if k not in ("show", "simulated_bus")}
         lines.append(f"--- {name} hand ({part.get('glove_source') or 'glove'}) ---")
         lines += [line for line in format_summary(part).splitlines()
                   if not line.startswith(("torque off", "error"))]

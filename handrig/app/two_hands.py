@@ -387,6 +387,7 @@ class _TwoHands:
             s["torque_off"] = torque_off
         summary["hands"] = hands
         summary["buses"] = "two" if parts.two_buses else "one"
+        summary["simulated_bus"] = any(o.emulator is not None for o in self.opened)
         if self.opts.show:
             summary["show"] = self.opts.show
         if self.signals.received:

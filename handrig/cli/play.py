@@ -16,6 +16,7 @@ from handrig.app.takes import load_play_take, play_parts, take_kind
 from handrig.app.view import add_view_flag, view_playback, view_session
 from handrig.cli._display import check_gl_backend
 from handrig.cli._numbers import nonnegative_float, positive_float
+from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.clock import MonotonicClock
 from handrig.errors import ConfigError, DataError, HandrigError
@@ -41,7 +42,7 @@ def register(sub: Any) -> None:
         " VMC4B), no servos needed.",
     )
     p.add_argument("file", help="the take: a performance .csv/.bvh or a glove take .csv")
-    p.add_argument("--bus", default=None, metavar="PORT",
+    p.add_argument("--bus", "--port", dest="bus", default=None, metavar="PORT",
                    help="play onto the servos on PORT, or 'sim' for the MuJoCo loopback")
     add_rig_argument(p)
     p.add_argument("--glove-config", default=None, metavar="FILE",
@@ -98,6 +99,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
             raise
         return print_result(failed(exc), as_json=True)
     if not args.json:
+        say_if_simulated(args.bus)
         print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
         print(f"  take       {take.describe()}" + (", looped" if args.loop else ""),
               flush=True)

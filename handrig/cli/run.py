@@ -11,6 +11,7 @@ from handrig.app.port_processes import SIM_BUS, StartedEmulators, sim_bus_argv
 from handrig.app.view import add_view_flag
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
+from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
@@ -47,8 +48,9 @@ def register(sub: Any) -> None:
     p.add_argument("--glove-left-config", default=None, metavar="FILE",
                    help="the left glove's glove file (default: [gloves] left_config, else "
                    "the right glove's)")
-    p.add_argument("--bus", default=None, metavar="PORT",
-                   help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
+    p.add_argument("--bus", "--port", dest="bus", default=None, metavar="PORT",
+                   help="servo port, or 'sim' for the simulated rig (the MuJoCo loopback); "
+                   "default: the rig file's [bus] port (the shipped rig names none)")
     p.add_argument("--bus-left", default=None, metavar="PORT",
                    help="a rig on two buses ([left_bus]): the left hand's servo port, or "
                    "'sim' (default: [left_bus] port)")
@@ -131,6 +133,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
     from handrig.app.sources import Source, run_sources
     from handrig.app.two_hands import run_two_hands
     from handrig.app.view import view_session
+    from handrig.config.rig import require_port
 
     two: TwoHandParts | None = None
     try:
@@ -155,14 +158,17 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             raise ConfigError("a left bus needs a rig with [left_bus] and a glove per hand",
                               key="--bus-left", value=args.bus_left,
                               allowed="--rig puppet_two_buses --glove-left PORT")
-        if "sim" in ((args.bus or rig.bus.port),
-                     args.bus_left or (rig.left_bus.port if rig.left_bus else "")):
+        bus = require_port(args.bus or rig.bus.port, parts.rig_file)
+        bus_left = (require_port(args.bus_left or rig.left_bus.port, parts.rig_file,
+                                 flag="--bus-left") if rig.left_bus is not None else "")
+        if "sim" in (bus, bus_left):
             check_gl_backend("--bus sim")
     except HandrigError as exc:
         if not args.json:
             raise
         return print_result(failed(exc), as_json=True)
     if not args.json:
+        say_if_simulated(bus) or say_if_simulated(bus_left)
         if show is not None:
             _stderr(f"show: {show.title} ({show.path})")
         sources = run_sources(args.rig, args.glove_config, parts.rig_config)

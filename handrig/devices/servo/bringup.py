@@ -258,6 +258,28 @@ def _answering(sp: ServoPort, servo_id: int, port: str, baud: int) -> int:
     return model
 
 
+def search_order(first: Sequence[int] = ()) -> list[int]:
+    """The bauds to look for a servo at: ``first`` (the rig's), the factory's 57600,
+    then the fast ones, 9600 last (its broadcast ping alone waits seconds)."""
+    order = [*first, FACTORY_BAUD, *sorted((b for b in BAUD_RATES if b > FACTORY_BAUD),
+                                           reverse=True), *BAUD_RATES]
+    return list(dict.fromkeys(b for b in order if b in BAUD_INDEX))
+
+
+def find_baud(port: str, servo_id: int, bauds: Sequence[int]) -> int:
+    """The baud at which a servo answers as ``servo_id``, trying ``bauds`` in order
+    (:func:`search_order`); a DeviceError naming what was tried when none does, or
+    when two servos answer as it (garbled) at a baud."""
+    with open_port(port, bauds[0] if bauds else FACTORY_BAUD) as sp:
+        for baud in bauds:
+            sp.set_baud(baud)
+            if sp.ping(servo_id) is not None:
+                return baud
+    raise DeviceError(f"no servo answers as ID {servo_id} on {port} at any of "
+                      f"{', '.join(map(str, bauds))} bps: check power and the cable "
+                      "(`handrig servos scan` lists what is there)")
+
+
 def set_id(port: str, baud: int, old_id: int, new_id: int) -> list[str]:
     """Give the servo answering as ``old_id`` at ``baud`` the ID ``new_id``. Refuses when
     no servo answers as ``old_id``, when ``new_id`` is taken at this baud, or when two
