@@ -239,16 +239,20 @@ class RobotHand:
                 for i, name in enumerate(self.joint_names)}
 
     def present_deg(self) -> dict[str, float]:
-        """The robot's joint angles as the loop last read them (NaN: no reading yet,
-        or stale). The loop reads the servos every ``[bus] read_every`` cycles."""
+        """The robot's joint angles as the loop last read them (NaN: no reading yet, or
+        none for longer than ``[silence] hold_s``). The loop reads the servos every
+        ``[bus] read_every`` cycles (a part of them each time with ``read_parts``)."""
         loop = self._open_loop()
         loop.check()
         snap = loop.snapshot()
         pos = snap.positions_deg if snap is not None else ()
-        stale = snap.stale if snap is not None else ()
-        return {name: float("nan") if i >= len(pos) or pos[i] is None or
-                (i < len(stale) and stale[i]) else float(pos[i])  # type: ignore[arg-type]
-                for i, name in enumerate(self.joint_names)}
+        ages = snap.reading_ages_s if snap is not None else ()
+        out: dict[str, float] = {}
+        for i, name in enumerate(self.joint_names):
+            value = pos[i] if i < len(pos) and i < len(ages) else None
+            fresh = value is not None and ages[i] <= self.rig.silence.hold_s
+            out[name] = float(value) if fresh and value is not None else math.nan
+        return out
 
     # ---------------------------------------------------------------- helpers
 

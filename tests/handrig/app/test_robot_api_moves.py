@@ -1,0 +1,99 @@
+"""The robot API moves (issue 37): the README's snippet, run as written, prints a value
+near what it asked; input that is not a pose is refused with a ConfigError naming it
+and leaves no joint stuck; a rig without a port asks for one."""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from handrig import hand
+from handrig.app.robot_api import RobotHand
+from handrig.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def readme_snippet() -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    found = [b for b in blocks if "RobotHand(" in b]
+    assert len(found) == 1, "the README has one RobotHand snippet"
+    return found[0]
+
+
+def test_the_readme_snippet_prints_a_value_near_what_it_asked() -> None:
+    snippet = readme_snippet()
+    env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    out = subprocess.run([sys.executable, "-c", snippet], capture_output=True, text=True,
+                         timeout=300, env=env, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.split()
+    present, confirmed = float(lines[0]), lines[-1]
+    asked = re.search(r"move_to\((\{.*?\})", snippet)
+    assert asked is not None
+    with_names = eval(asked.group(1))  # the snippet's own literal dict of curves
+    # what the robot joint is asked (the retarget table, no hardware): the ORCA index MCP
+    from handrig.app.factory import build_parts
+    from handrig.app.robots import robot_retarget
+
+    cfg = build_parts("orca").rig_config
+    table = robot_retarget(cfg)
+    human = np.array([with_names.get(n, 0.0) for n in hand.CURVE_NAMES])
+    want = float(np.asarray(table.apply(human))[table.index("right_i-mcp")])
+    servo = next(s for s in cfg.servos if s.joint == "right_i-mcp")
+    want = min(max(want, servo.min_deg), servo.max_deg)
+    assert abs(want) > 20.0  # a move worth checking
+    assert present == pytest.approx(want, abs=3.0), (present, want, out.stdout)
+    assert confirmed == "True"
+
+
+BAD_POSES: list[tuple[object, str]] = [
+    (None, "not a pose"),
+    ("riIndexMCPy", "not a pose"),
+    ([1.0, 2.0], "expected 50 human curves"),
+    (np.zeros((2, 25)), "expected 50 human curves"),
+    (["x"] * 50, "not a pose"),
+    ({"riIndexMCPy": "forty"}, "riIndexMCPy = .*not a number"),
+    ({"riIndexMCPy": None}, "riIndexMCPy: not a number"),
+    ({"riIndexMCPy": math.inf}, "riIndexMCPy = .*not a finite number"),
+    ({"riIndexPIPy": 1e300}, "riIndexPIPy = .*no joint angle"),
+    ([1e308] * 50, f"^{hand.CURVE_NAMES[0]} = 1e\\+308: .*no joint angle"),
+    ({7: 1.0}, "not a human curve"),
+]
+
+
+def test_input_that_is_not_a_pose_is_refused_and_leaves_no_joint_stuck() -> None:
+    with RobotHand("orca", port="sim") as robot:
+        i = robot.joint_names.index("right_i-mcp")
+        bent = {"riIndexMCPy": 30.0}
+        robot.move_to(bent, seconds=0.1)
+        held = np.array(list(robot.goals_deg().values()))
+        for pose, message in BAD_POSES:
+            with pytest.raises(ConfigError, match=message):
+                robot.command(pose)  # type: ignore[arg-type]
+            with pytest.raises(ConfigError, match=message):
+                robot.move_to(pose, seconds=0.1)  # type: ignore[arg-type]
+        # the loop kept the last good pose: the goals did not move
+        np.testing.assert_allclose(list(robot.goals_deg().values()), held)
+        with pytest.raises(ConfigError, match="seconds"):
+            robot.move_to(bent, seconds=math.nan)
+        # and every joint still follows: back to the flat hand and bent again
+        flat = robot.targets_deg({})
+        present = robot.move_to({}, seconds=0.1)
+        assert present["right_i-mcp"] == pytest.approx(flat[i], abs=3.0)
+        present = robot.move_to(bent, seconds=0.1)
+        assert present["right_i-mcp"] == pytest.approx(robot.targets_deg(bent)[i], abs=3.0)
+    assert robot.torque_off_confirmed is True
+
+
+def test_a_preset_without_a_port_asks_for_one() -> None:
+    with pytest.raises(ConfigError, match=r"no servo port.*port=\"sim\""):
+        RobotHand("leap")
