@@ -500,6 +500,7 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
                  "actions": s.heat_actions, "hottest": s.hottest,
                  "max_c": [num(t, 1) for t in s.max_temperature_c]},
         "resumes": s.resumes,
+        "relax_keys": s.relax_keys,
         "estop": s.estop,
         "stop_reason": s.stop_reason,
         "events": list(s.events),

@@ -272,6 +272,7 @@ class _Session:
         if self.opts.show:
             summary["show"] = self.opts.show
         summary["simulated_bus"] = opened is not None and opened.emulator is not None
+        summary["take_played"] = self.opts.take is not None
         if self.left_out:
             summary["servos_left_out"] = self.left_out
         if self.admitted:
@@ -515,6 +516,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"                  {summary['pose_clamps']} values of the full two-hand pose clamped, "
         f"{summary['bus_clamps']} goals clamped by the driver, {summary['slew_limited']} "
         f"slew-limited, {summary['nonfinite_targets']} non-finite targets held",
+        f"take              {glove.get('frames_ok', '-')} frames played, used "
+        f"{glove.get('frames_used', '-')}" if summary.get("take_played") else
         f"glove             {glove.get('frames_ok', '-')} frames ok, "
         f"{glove.get('crc_errors', 0)} CRC errors, {glove.get('decode_errors', 0)} other "
         f"errors, {glove.get('resyncs', 0)} resyncs, used {glove.get('frames_used', '-')}",
@@ -524,7 +527,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['stale_reads']} with stale servos)",
         *_outputs_lines(summary.get("outputs") or {}),
         *_heat_lines(summary.get("heat") or {}),
-        f"safety            {summary['relax_events']} relax events, "
+        f"safety            {summary['relax_events']} relax events (glove lost or servos "
+        f"silent), {summary.get('relax_keys', 0)} by the relax key, "
         f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
         f"torque off        {summary['torque_off']}",

@@ -11,7 +11,7 @@ from typing import Any
 
 from handrig.app.factory import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
-from handrig.app.sources import run_sources
+from handrig.app.sources import Source, run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
 from handrig.app.view import add_view_flag, view_playback, view_session
 from handrig.cli._display import check_gl_backend
@@ -100,7 +100,15 @@ def run_on_rig(args: argparse.Namespace) -> int:
         return print_result(failed(exc), as_json=True)
     if not args.json:
         say_if_simulated(args.bus)
-        print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
+        sources = run_sources(args.rig, args.glove_config, parts.rig_config)
+        if take.kind == "performance":  # the take is the pose: no glove, map or sag for it
+            relaxed = "only for the relaxed pose (a lost frame, a stop); the take is the pose"
+            sources = [Source(s.role, s.path, f"{relaxed}; {s.why}")
+                       if s.role in ("map", "sag grid") else
+                       Source(s.role, s.path, f"only its forearm angles, for the relaxed "
+                              f"pose's sag; {s.why}") if s.role == "glove" else s
+                       for s in sources]
+        print_sources(sources)
         print(f"  take       {take.describe()}" + (", looped" if args.loop else ""),
               flush=True)
     rec = take.recording

@@ -5,7 +5,8 @@ and the robot's range), then for each joint the range its sources reach: over th
 human joint limits, over the shipped reference capture, and over the demo glove
 recording expanded through the map, as the demo feeds it. Joints whose inputs
 reach past the robot's range are flagged, and the share of demo frames clipped at
-each robot limit is given.
+each robot limit is given. Exit status 1 when a joint is flagged (the capture or
+the demo reaches past its range: the robot sits at a limit there), 0 when none is.
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ def register(sub: Any) -> None:
     )
     actions = p.add_subparsers(dest="action", metavar="ACTION")
     c: argparse.ArgumentParser = actions.add_parser(
-        "check", help="print the table, flag ranges past the robot's, count demo limit hits",
+        "check", help="print the table, flag ranges past the robot's, count demo limit hits "
+        "(exit 1 when a joint is flagged)",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     c.add_argument("--rig", default=DEFAULT_RIG,
@@ -97,13 +99,14 @@ def run_check(args: argparse.Namespace) -> int:
         capture = load_reference().curves
     demo = _demo_poses(args.recording, base, map_path, glove_path)
     checks = check_joints(rt, bounds[:, 0], bounds[:, 1], capture, demo)
+    flagged = any(set(c.flags) & {"capture", "demo"} for c in checks)
     if args.json:
         print(json.dumps(_as_json(rt, checks, len(demo))))
-        return 0
+        return 1 if flagged else 0
     _print_table(rt)
     print()
     _print_checks(checks, len(demo), capture is not None)
-    return 0
+    return 1 if flagged else 0
 
 
 def _sources(rt: Retarget, k: int) -> str:

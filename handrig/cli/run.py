@@ -18,6 +18,7 @@ from handrig.errors import ConfigError, HandrigError
 
 if TYPE_CHECKING:
     from handrig.app.hands import TwoHandParts
+    from handrig.app.sources import Source
 
 
 def register(sub: Any) -> None:
@@ -91,10 +92,31 @@ def _from_show(args: argparse.Namespace) -> ShowFile | None:
             "bus_left": show.buses.left, "vmc": show.outputs.vmc,
             "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
             "view": show.outputs.view}
+    filled = []
     for name, value in fill.items():
         if getattr(args, name) is None and value:
             setattr(args, name, value)
+            filled.append(name)
+    args.from_show = filled
     return show
+
+
+def _show_sources(sources: list[Source], show: ShowFile, filled: list[str]) -> list[Source]:
+    """The files a show named, said to come from it (not from --rig or the rig file)."""
+    from handrig.app.sources import Source
+    why = f"the show's, {show.path}"
+    out = []
+    for s in sources:
+        if s.role == "rig" and "rig" in filled:
+            s = Source("rig", s.path, why)
+        elif s.role == "glove" and "glove_config" in filled:
+            s = Source("glove", s.path, why)
+        elif s.role == "map" and show.show.map:
+            s = Source("map", Path(show.show.map), why)
+        elif s.role == "sag grid" and show.show.grid:
+            s = Source("sag grid", Path(show.show.grid), why)
+        out.append(s)
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -179,6 +201,8 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             sources.append(Source("left glove", two.sides["le"].glove_file or Path(),
                                   "--glove-left-config, [gloves] left_config, else the "
                                   "right glove's"))
+        if show is not None:
+            sources = _show_sources(sources, show, args.from_show)
         print_sources(sources)
     with view_session(args.view, parts.rig_config, _stderr) as view:
         opts = LiveOptions(
