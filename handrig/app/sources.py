@@ -61,7 +61,8 @@ def rig_file(rig: str | Path | None) -> Source:
     if is_installed(path):
         return Source("rig", path, "shipped default; no rig.toml of yours at "
                       f"{user_config('rig.toml')}")
-    return Source("rig", path, "your rig.toml, written by `handrig calibrate servos`")
+    return Source("rig", path, "your rig.toml, written by `handrig setup` or `handrig "
+                  "calibrate servos`")
 
 
 def _from_loop(rig_path: Path, value: str) -> Path:
