@@ -141,8 +141,13 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
     emulator's start-up (MuJoCo puppet, pty) overlaps them; the session takes it
     (by its arguments) where it would start one. A rig with a left bus: none started."""
     from handrig.app.robots import find_rig
+    from handrig.config.rig import require_port
 
     rig_file, rig = find_rig(args.rig)
+    # no port: said before the run's imports and kernels
+    require_port(args.bus or rig.bus.port, rig_file)
+    if rig.left_bus is not None:
+        require_port(args.bus_left or rig.left_bus.port, rig_file, flag="--bus-left")
     if rig.left_bus is None and (args.bus or rig.bus.port) == "sim":
         started.start(sim_bus_argv(rig_file, None, wire_timing=not args.no_wire_timing,
                                    viewer=args.viewer), SIM_BUS)

@@ -127,6 +127,9 @@ def _port(args: argparse.Namespace, rig: RigConfig, rig_path: Path) -> Iterator[
         with port_process(["sim-bus", "--rig", str(rig_path), "--no-puppet"],
                           "the simulated servo bus") as (_, pty):
             yield pty
+        if not args.json:
+            print("SIMULATED: that was the emulated bus (--port sim); no servo of yours "
+                  "was touched", flush=True)
         return
     if not os.path.exists(port):
         raise ConfigError(f"no such port: {port}", key="--port", value=port,

@@ -1,0 +1,39 @@
+"""A command on the simulated bus says so (issue 37): ``--port sim`` runs say SIMULATED
+in their first line and their summary; ``demo --seconds`` counts the run.
+(tests/handrig/cli/test_no_port_given.py: no port, no simulation.)"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from handrig.cli import main
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def test_servos_on_the_simulated_bus_say_so_first_and_last(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["servos", "check", "--port", "sim"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("SIMULATED rig (--port sim)"), lines[:3]
+    assert any(line.startswith("20 servo(s) answered on the SIMULATED bus") for line in lines)
+    assert "(emulated servos: not your hardware)" in lines[-1]
+    assert any(line.startswith("SIMULATED: that was the emulated bus") for line in lines)
+
+
+def test_demo_seconds_counts_the_run_and_says_it_is_simulated() -> None:
+    env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    out = subprocess.run([sys.executable, "-m", "handrig.cli", "demo", "--seconds", "0.5"],
+                         capture_output=True, text=True, timeout=300, env=env, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("SIMULATED rig (--port sim)"), lines[:3]
+    summary = out.stdout[out.stdout.rindex("bus               SIMULATED"):]
+    assert "stopped: 0.5 s done" in summary, summary
+    frames = int(summary.split("frames ")[1].split()[0])
+    assert 100 <= frames <= 400  # 0.5 s and the 1 s ease at 200 Hz, not --frames' 3000
