@@ -48,9 +48,11 @@ from handrig.pose.pipeline import POSE_SIZE
 
 MAX_CURVE_DEG = 360.0
 """A human curve beyond this many degrees either way is no joint angle: refused."""
-SETTLE_S = 0.1
-""":meth:`RobotHand.move_to`: a joint whose reading moved less than
-:data:`SETTLE_DEG` in this long has stopped (at its goal, or held by a contact)."""
+REACHED_DEG = 1.0
+""":meth:`RobotHand.move_to`: a joint read this close to its target is there."""
+SETTLE_S = 0.3
+""":meth:`RobotHand.move_to`: a joint whose fresh readings moved less than
+:data:`SETTLE_DEG` over this long has stopped short (held by a contact)."""
 SETTLE_DEG = 0.3
 Curves = Mapping[str, float] | Sequence[float] | np.ndarray
 
@@ -205,24 +207,27 @@ class RobotHand:
         return self.present_deg()
 
     def _wait_settled(self, loop: RobotLoop, targets: np.ndarray, deadline: float) -> None:
+        """Until every goal is at ``targets`` and every joint is within
+        :data:`REACHED_DEG` of it, or has stopped: two fresh readings of it at least
+        :data:`SETTLE_S` apart moved less than :data:`SETTLE_DEG` (held by a contact)."""
         clock = self._clock
-        last: np.ndarray | None = None
-        last_t = clock.now()
+        n = len(targets)
+        since_pos = np.full(n, math.nan)  # a joint's reading where its stillness began
+        since_t = np.full(n, math.nan)  # ... and when that reading was taken
         while True:
             loop.check()
             snap = loop.snapshot()
             now = clock.now()
-            if snap is not None and len(snap.goals_deg) == len(targets):
-                goals = np.asarray(snap.goals_deg, dtype=np.float64)
-                there = np.abs(goals - targets) <= 1e-6
-                if there.all():
-                    pos = np.array([math.nan if v is None else v for v in snap.positions_deg])
-                    if last is not None and now - last_t >= SETTLE_S:
-                        if np.all(np.abs(pos - last) <= SETTLE_DEG):
-                            return
-                        last = None
-                    if last is None and np.isfinite(pos).all():
-                        last, last_t = pos, now
+            if (snap is not None and len(snap.goals_deg) == n
+                    and np.all(np.abs(np.asarray(snap.goals_deg) - targets) <= 1e-6)):
+                pos = np.array([math.nan if v is None else v for v in snap.positions_deg])
+                read_t = snap.t_s - np.asarray(snap.reading_ages_s, dtype=np.float64)
+                moved = ~(np.abs(pos - since_pos) <= SETTLE_DEG)  # NaN: not begun
+                since_pos = np.where(moved, pos, since_pos)
+                since_t = np.where(moved, read_t, since_t)
+                still = (read_t - since_t >= SETTLE_S) & np.isfinite(pos)
+                if np.all((np.abs(pos - targets) <= REACHED_DEG) | still):
+                    return
             if now > deadline:
                 mode = f"{snap.mode} ({snap.mode_reason})" if snap is not None else "no cycle"
                 raise DeviceTimeoutError(
