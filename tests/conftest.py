@@ -70,7 +70,7 @@ COMPUTE_ONLY = (
     "sim/test_dxl_servo.py", "test_user_home.py", "test_layers.py",
     "handrig/app/test_demo_render.py", "handrig/cli/test_sag_commands.py",
     "handrig/cli/test_cli_startup.py", "handrig/app/view/test_view_advice.py",
-    "handrig/cli/test_no_port_given.py",
+    "handrig/cli/test_first_hour_messages.py",
 )
 TESTS = Path(__file__).resolve().parent
 

@@ -1,6 +1,6 @@
 """A command on the simulated bus says so (issue 37): ``--port sim`` runs say SIMULATED
 in their first line and their summary; ``demo --seconds`` counts the run.
-(tests/handrig/cli/test_no_port_given.py: no port, no simulation.)"""
+(tests/handrig/cli/test_first_hour_messages.py: no port, no simulation.)"""
 
 from __future__ import annotations
 
