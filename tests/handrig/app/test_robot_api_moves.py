@@ -9,6 +9,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -97,3 +98,29 @@ def test_input_that_is_not_a_pose_is_refused_and_leaves_no_joint_stuck() -> None
 def test_a_preset_without_a_port_asks_for_one() -> None:
     with pytest.raises(ConfigError, match=r"no servo port.*port=\"sim\""):
         RobotHand("leap")
+
+
+def test_a_silent_servo_meets_the_rigs_silence_policy_and_the_others_move_on() -> None:
+    """The robot API runs the show's loop: ORCA's [silence] (the defaults: warn, hold,
+    then continue) makes a servo that stops answering NaN in the readings while the
+    other joints keep following their commands."""
+    from handrig.app.robots import rig_path
+    from sim.dxl_bus import SimBus
+    from sim.dxl_faults import FaultSpec
+
+    with SimBus.from_rig(rig_path("orca"), realtime=False) as sim, \
+            RobotHand("orca", port=sim.port_path) as robot:
+        i = robot.joint_names.index("right_i-mcp")
+        robot.move_to({}, seconds=0.0)
+        sim.faults = FaultSpec(missing=frozenset({5}))  # right_m-abd stops answering
+        bent = {"riIndexMCPy": 30.0}
+        present = robot.move_to(bent, seconds=0.2)
+        assert present["right_i-mcp"] == pytest.approx(robot.targets_deg(bent)[i], abs=3.0)
+        assert math.isnan(present["right_m-abd"])  # no reading for longer than hold_s
+        assert robot.torque_on  # "continue": the run goes on
+        sim.faults = FaultSpec()  # it answers again: read again, and torque off reaches it
+        t0 = time.monotonic()
+        while math.isnan(robot.present_deg()["right_m-abd"]):
+            assert time.monotonic() - t0 < 5.0, "servo 5 was never read again"
+            time.sleep(0.02)
+    assert robot.torque_off_confirmed is True
