@@ -1,8 +1,8 @@
 """``handrig setup`` against the byte-level emulator, through the real SDK: the port found
 by unplugging, the rig file written, a box of servos at other IDs and bauds given
-theirs one at a time (one missing when Enter is pressed, one whose ID collides with a
-servo left on the bus), then ``servos check``; and ``set-id`` finding a factory-new
-servo at 57600 without ``--baud``.
+theirs one at a time (one beside a stray servo, one missing when Enter is pressed),
+then ``servos check``; and ``set-id`` finding a factory-new servo at 57600 without
+``--baud``.
 
 The servo adapter is a symlink the test points at an emulated bus (a pty): plugging
 servos in and out is the test pointing it at another bus, as a /dev/serial/by-id/
@@ -101,8 +101,6 @@ def test_setup_finds_the_port_writes_it_and_readies_a_box_of_servos(
         ("unplug the servo adapter", "", unplug),
         (f"the adapter is {bench.adapter}: plug it back in", "", replug),
         ("[1/3] plug in the servo for ID 1", "", None),
-        # nothing new on the bus (servo 1 left chained): found missing, asked again
-        ("[2/3] plug in the servo for ID 2", "", lambda: bench.plug(new1)),
         ("[2/3] plug in the servo for ID 2", "", lambda: bench.plug(new1, new2)),
         # a stray servo with ID 3 left on the bus beside the new one: refused
         ("[3/3] plug in the servo for ID 3", "", lambda: bench.plug(new3, stray)),
@@ -133,7 +131,6 @@ def test_setup_finds_the_port_writes_it_and_readies_a_box_of_servos(
     assert "found a XL330-M288 as ID 1 at 57600 bps" in text
     assert "found a XL330-M288 as ID 4 at 115200 bps" in text
     assert "found a XL330-M288 as ID 9 at 1000000 bps" in text
-    assert "no new servo answers" in text  # the step with nothing new plugged in
     # a second servo on the bus that is not one made ready: refused, nothing written
     assert "2 new servos answer at 1000000 bps (IDs 3, 9): plug in one new servo" in text
     assert stray.id == 3 and stray.mem[8] == 3
@@ -148,13 +145,15 @@ def test_setup_with_a_port_skips_finding_it_and_a_skipped_servo_fails_the_check(
     rig = three_servo_rig(tmp_path)
     out = tmp_path / "rig_out.toml"
     servo = EmulatedServo(1, baud=57600)
-    bench.plug(servo)
-    ask, lines = script([("ID 1", "", None), ("ID 2", "s", None), ("ID 3", "s", None)])
+    bench.plug(EmulatedServo(9, baud=115200))  # not at the bauds looked at: missing
+    ask, lines = script([("ID 1", "", None), ("ID 1", "", lambda: bench.plug(servo)),
+                         ("ID 2", "s", None), ("ID 3", "s", None)])
     args = build_parser().parse_args(["setup", "--rig", str(rig), "--out", str(out),
                                       "--port", str(bench.adapter), "--bauds", "57600"])
     status = run_setup(args, ask=ask, say=lines.append, list_ports=bench.ports)
     text = "\n".join(lines)
     assert status == 1, text  # servos 2 and 3 are missing from the bus
+    assert "no new servo answers at any of 57600 bps" in text  # asked again, then found
     assert "skipped: 2, 3" in text and "missing" in text
     assert servo.id == 1 and servo.mem[8] == 3
     assert load_rig_config(out).bus.port == str(bench.adapter)
