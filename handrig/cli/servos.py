@@ -183,6 +183,9 @@ def run_scan(args: argparse.Namespace) -> int:
         print("no servo answered at any of these bauds: check power (the servos' LEDs "
               "blink once at power-on), the cable and the adapter's TTL/RS-485 setting "
               "(docs/hardware.md)")
+        if set(args.bauds) != set(BAUD_RATES):
+            print("only the bauds of --bauds were looked at: without it, scan tries every "
+                  "baud the X series supports (about 10 s)")
     for baud in result.collisions:
         print(f"at {baud} bps replies were garbled: {bringup.ONE_AT_A_TIME}")
     counts = {b: len(result.ids_at(b)) for b in result.tried if result.ids_at(b)}

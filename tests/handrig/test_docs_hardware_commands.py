@@ -92,11 +92,16 @@ def setup_as_a_newcomer(line: str, adapter: Adapter) -> tuple[int, str]:
     return status, "\n".join(lines)
 
 
-def test_the_hardware_guide_runs_as_written(adapter: Adapter,
-                                            capsys: pytest.CaptureFixture[str],
-                                            monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_hardware_guide_and_the_readme_bring_up_run_as_written(
+        adapter: Adapter, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/hardware.md's blocks in order, then the README's: its ``handrig setup`` is
+    the guide's own line (run once, for both), then its check and calibration."""
     guide = blocks(ROOT / "docs" / "hardware.md")
     assert list(guide) == ["setup", "one servo", "chained"]
+    (readme_setup, readme_check, readme_calibrate) = blocks(ROOT / "README.md")["readme"]
+    # one newcomer's setup serves both: the README's must be the guide's line, as written
+    assert argv(readme_setup, adapter) == argv(guide["setup"][0], adapter), readme_setup
     mine = user_config("rig.toml")
     assert not mine.exists()  # a newcomer: the shipped rig, which names no port
     # before setup: a hardware command stops and names --port
@@ -123,17 +128,10 @@ def test_the_hardware_guide_runs_as_written(adapter: Adapter,
     out = capsys.readouterr().out
     assert "20 servo(s) answered on" in out and "SIMULATED" not in out
 
-
-def test_the_readme_bring_up_runs_as_written(adapter: Adapter,
-                                             capsys: pytest.CaptureFixture[str],
-                                             monkeypatch: pytest.MonkeyPatch) -> None:
-    (setup_line, check_line, calibrate_line) = blocks(ROOT / "README.md")["readme"]
-    adapter.plug()
-    status, said = setup_as_a_newcomer(setup_line, adapter)
-    assert status == 0, said
-    assert main(argv(check_line, adapter)) == 0
+    # the README's bring-up on the same chained rig, from the port setup wrote
+    assert main(argv(readme_check, adapter)) == 0
     assert "the bus matches the rig file" in capsys.readouterr().out
     monkeypatch.setattr("sys.stdin", io.StringIO("q\n"))  # leaves at the first question
-    assert main(argv(calibrate_line, adapter)) == 0
+    assert main(argv(readme_calibrate, adapter)) == 0
     out = capsys.readouterr().out
     assert "calibration stopped: nothing was written" in out and "SIMULATED" not in out

@@ -9,6 +9,7 @@ import io
 import math
 import re
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ import pytest
 from handrig import hand
 from handrig.app.robot_api import RobotHand
 from handrig.errors import ConfigError
+from sim.dxl_bus import SimBus
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -69,32 +71,41 @@ BAD_POSES: list[tuple[object, str]] = [
 ]
 
 
-def test_input_that_is_not_a_pose_is_refused_and_leaves_no_joint_stuck() -> None:
+@pytest.fixture(scope="module")
+def orca() -> Iterator[tuple[SimBus, RobotHand]]:
+    """One ORCA hand on an in-process kinematic emulator, shared by the tests below (its
+    start and its ease to rest on the way out are a second and a half); on the way out,
+    torque off must be read back from every servo."""
     from handrig.app.robots import rig_path
-    from sim.dxl_bus import SimBus
 
-    with SimBus.from_rig(rig_path("orca"), realtime=False) as sim, \
-            RobotHand("orca", port=sim.port_path) as robot:
-        i = robot.joint_names.index("right_i-mcp")
-        bent = {"riIndexMCPy": 30.0}
-        robot.move_to(bent, seconds=0.1)
-        held = np.array(list(robot.goals_deg().values()))
-        for pose, message in BAD_POSES:
-            with pytest.raises(ConfigError, match=message):
-                robot.command(pose)  # type: ignore[arg-type]
-            with pytest.raises(ConfigError, match=message):
-                robot.move_to(pose, seconds=0.1)  # type: ignore[arg-type]
-        # the loop kept the last good pose: the goals did not move
-        np.testing.assert_allclose(list(robot.goals_deg().values()), held)
-        with pytest.raises(ConfigError, match="seconds"):
-            robot.move_to(bent, seconds=math.nan)
-        # and every joint still follows: back to the flat hand and bent again
-        flat = robot.targets_deg({})
-        present = robot.move_to({}, seconds=0.1)
-        assert present["right_i-mcp"] == pytest.approx(flat[i], abs=3.0)
-        present = robot.move_to(bent, seconds=0.1)
-        assert present["right_i-mcp"] == pytest.approx(robot.targets_deg(bent)[i], abs=3.0)
-    assert robot.torque_off_confirmed is True
+    with SimBus.from_rig(rig_path("orca"), realtime=False) as sim:
+        with RobotHand("orca", port=sim.port_path) as robot:
+            yield sim, robot
+        assert robot.torque_off_confirmed is True
+
+
+def test_input_that_is_not_a_pose_is_refused_and_leaves_no_joint_stuck(
+        orca: tuple[SimBus, RobotHand]) -> None:
+    _sim, robot = orca
+    i = robot.joint_names.index("right_i-mcp")
+    bent = {"riIndexMCPy": 30.0}
+    robot.move_to(bent, seconds=0.1)
+    held = np.array(list(robot.goals_deg().values()))
+    for pose, message in BAD_POSES:
+        with pytest.raises(ConfigError, match=message):
+            robot.command(pose)  # type: ignore[arg-type]
+        with pytest.raises(ConfigError, match=message):
+            robot.move_to(pose, seconds=0.1)  # type: ignore[arg-type]
+    # the loop kept the last good pose: the goals did not move
+    np.testing.assert_allclose(list(robot.goals_deg().values()), held)
+    with pytest.raises(ConfigError, match="seconds"):
+        robot.move_to(bent, seconds=math.nan)
+    # and every joint still follows: back to the flat hand and bent again
+    flat = robot.targets_deg({})
+    present = robot.move_to({}, seconds=0.1)
+    assert present["right_i-mcp"] == pytest.approx(flat[i], abs=3.0)
+    present = robot.move_to(bent, seconds=0.1)
+    assert present["right_i-mcp"] == pytest.approx(robot.targets_deg(bent)[i], abs=3.0)
 
 
 def test_a_preset_without_a_port_asks_for_one() -> None:
@@ -102,16 +113,15 @@ def test_a_preset_without_a_port_asks_for_one() -> None:
         RobotHand("leap")
 
 
-def test_a_silent_servo_meets_the_rigs_silence_policy_and_the_others_move_on() -> None:
+def test_a_silent_servo_meets_the_rigs_silence_policy_and_the_others_move_on(
+        orca: tuple[SimBus, RobotHand]) -> None:
     """The robot API runs the show's loop: ORCA's [silence] (the defaults: warn, hold,
     then continue) makes a servo that stops answering NaN in the readings while the
     other joints keep following their commands."""
-    from handrig.app.robots import rig_path
-    from sim.dxl_bus import SimBus
     from sim.dxl_faults import FaultSpec
 
-    with SimBus.from_rig(rig_path("orca"), realtime=False) as sim, \
-            RobotHand("orca", port=sim.port_path) as robot:
+    sim, robot = orca
+    try:
         i = robot.joint_names.index("right_i-mcp")
         robot.move_to({}, seconds=0.0)
         sim.faults = FaultSpec(missing=frozenset({5}))  # right_m-abd stops answering
@@ -125,4 +135,5 @@ def test_a_silent_servo_meets_the_rigs_silence_policy_and_the_others_move_on() -
         while math.isnan(robot.present_deg()["right_m-abd"]):
             assert time.monotonic() - t0 < 5.0, "servo 5 was never read again"
             time.sleep(0.02)
-    assert robot.torque_off_confirmed is True
+    finally:
+        sim.faults = FaultSpec()  # torque off at the fixture's end reaches servo 5
