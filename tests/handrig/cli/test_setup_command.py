@@ -144,16 +144,19 @@ def test_setup_with_a_port_skips_finding_it_and_a_skipped_servo_fails_the_check(
         tmp_path: Path, bench: Bench) -> None:
     rig = three_servo_rig(tmp_path)
     out = tmp_path / "rig_out.toml"
-    servo = EmulatedServo(1, baud=57600)
+    # at the rig's baud already (one broadcast ping there is 0.8 s, at 57600 1.4 s; the
+    # box above moves servos from 57600 and 115200): only its ID is given
+    servo = EmulatedServo(5, baud=1_000_000)
     bench.plug(EmulatedServo(9, baud=115200))  # not at the bauds looked at: missing
     ask, lines = script([("ID 1", "", None), ("ID 1", "", lambda: bench.plug(servo)),
                          ("ID 2", "s", None), ("ID 3", "s", None)])
     args = build_parser().parse_args(["setup", "--rig", str(rig), "--out", str(out),
-                                      "--port", str(bench.adapter), "--bauds", "57600"])
+                                      "--port", str(bench.adapter), "--bauds", "1000000"])
     status = run_setup(args, ask=ask, say=lines.append, list_ports=bench.ports)
     text = "\n".join(lines)
     assert status == 1, text  # servos 2 and 3 are missing from the bus
-    assert "no new servo answers at any of 57600 bps" in text  # asked again, then found
+    assert "no new servo answers at any of 1000000 bps" in text  # asked again, then found
+    assert "found a XL330-M288 as ID 5 at 1000000 bps" in text
     assert "skipped: 2, 3" in text and "missing" in text
     assert servo.id == 1 and servo.mem[8] == 3
     assert load_rig_config(out).bus.port == str(bench.adapter)
