@@ -1,6 +1,7 @@
 """The robot API moves (issue 37): the README's snippet, run as written, prints a value
 near what it asked; input that is not a pose is refused with a ConfigError naming it
-and leaves no joint stuck; a rig without a port asks for one."""
+and leaves no joint stuck. (A rig without a port asks for one:
+tests/handrig/cli/test_first_hour_messages.py, no emulator needed.)"""
 
 from __future__ import annotations
 
@@ -106,11 +107,6 @@ def test_input_that_is_not_a_pose_is_refused_and_leaves_no_joint_stuck(
     assert present["right_i-mcp"] == pytest.approx(flat[i], abs=3.0)
     present = robot.move_to(bent, seconds=0.1)
     assert present["right_i-mcp"] == pytest.approx(robot.targets_deg(bent)[i], abs=3.0)
-
-
-def test_a_preset_without_a_port_asks_for_one() -> None:
-    with pytest.raises(ConfigError, match=r"no servo port.*port=\"sim\""):
-        RobotHand("leap")
 
 
 def test_a_silent_servo_meets_the_rigs_silence_policy_and_the_others_move_on(

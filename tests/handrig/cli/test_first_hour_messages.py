@@ -1,6 +1,7 @@
 """Issue 37's messages, none needing a device (compute_only): nothing touches a
 simulated bus unless asked (the shipped rig names no port; a command without one stops
-naming ``--port PORT`` and ``--port sim``); ``run --show`` says the files came from the
+naming ``--port PORT`` and ``--port sim``; a robot preset without one asks for it;
+``setup`` refuses the simulated port); ``run --show`` says the files came from the
 show; a rig with sag off lists no sag grid; an argument's error names it without a
 file."""
 
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from handrig.app.robot_api import RobotHand
 from handrig.app.sources import run_sources
 from handrig.cli import main
 from handrig.config.paths import installed_config
@@ -35,6 +37,17 @@ def test_the_shipped_rigs_name_no_port_and_commands_ask_for_one(
     assert main(["run", "--rig", "puppet_two_buses", "--glove", f"replay:{DEMO_GLOVE}",
                  "--glove-left", f"replay:{DEMO_GLOVE}", "--port", "sim"]) == 2
     assert "--bus-left: no servo port given" in capsys.readouterr().err
+
+
+def test_a_robot_preset_without_a_port_asks_for_one() -> None:
+    with pytest.raises(ConfigError, match=r"no servo port.*port=\"sim\""):
+        RobotHand("leap")
+
+
+def test_setup_refuses_the_simulated_port(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["setup", "--port", "sim", "--no-servos"]) == 2
+    err = capsys.readouterr().err
+    assert "--port 'sim'" in err and "setup writes your rig file" in err
 
 
 def test_run_show_says_the_rig_and_files_came_from_the_show() -> None:

@@ -2,7 +2,7 @@
 by unplugging, the rig file written, a box of servos at other IDs and bauds given
 theirs one at a time (one beside a stray servo, one missing when Enter is pressed),
 then ``servos check``; and ``set-id`` finding a factory-new servo at 57600 without
-``--baud``.
+``--baud``. (``setup --port sim`` refused: tests/handrig/cli/test_first_hour_messages.py.)
 
 The servo adapter is a symlink the test points at an emulated bus (a pty): plugging
 servos in and out is the test pointing it at another bus, as a /dev/serial/by-id/
@@ -160,13 +160,6 @@ def test_setup_with_a_port_skips_finding_it_and_a_skipped_servo_fails_the_check(
     assert "skipped: 2, 3" in text and "missing" in text
     assert servo.id == 1 and servo.mem[8] == 3
     assert load_rig_config(out).bus.port == str(bench.adapter)
-
-
-def test_setup_refuses_the_simulated_port(tmp_path: Path,
-                                          capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["setup", "--port", "sim", "--no-servos"]) == 2
-    err = capsys.readouterr().err
-    assert "--port 'sim'" in err and "setup writes your rig file" in err
 
 
 def test_set_id_finds_a_factory_new_servo_at_57600_without_baud(
