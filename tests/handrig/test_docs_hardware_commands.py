@@ -95,13 +95,16 @@ def setup_as_a_newcomer(line: str, adapter: Adapter) -> tuple[int, str]:
 def test_the_hardware_guide_and_the_readme_bring_up_run_as_written(
         adapter: Adapter, capsys: pytest.CaptureFixture[str],
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """docs/hardware.md's blocks in order, then the README's: its ``handrig setup`` is
-    the guide's own line (run once, for both), then its check and calibration."""
+    """docs/hardware.md's blocks in order, then the README's: its ``handrig setup`` and
+    ``handrig servos check`` are the guide's own lines (run once, for both), then its
+    calibration."""
     guide = blocks(ROOT / "docs" / "hardware.md")
     assert list(guide) == ["setup", "one servo", "chained"]
     (readme_setup, readme_check, readme_calibrate) = blocks(ROOT / "README.md")["readme"]
-    # one newcomer's setup serves both: the README's must be the guide's line, as written
+    # one newcomer's setup and check serve both: the README's lines must be the guide's,
+    # as written (run once, in the guide's order)
     assert argv(readme_setup, adapter) == argv(guide["setup"][0], adapter), readme_setup
+    assert argv(readme_check, adapter) == argv(guide["chained"][0], adapter), readme_check
     mine = user_config("rig.toml")
     assert not mine.exists()  # a newcomer: the shipped rig, which names no port
     # before setup: a hardware command stops and names --port
@@ -127,10 +130,9 @@ def test_the_hardware_guide_and_the_readme_bring_up_run_as_written(
         assert main(argv(line, adapter)) == 0, line
     out = capsys.readouterr().out
     assert "20 servo(s) answered on" in out and "SIMULATED" not in out
+    assert "the bus matches the rig file" in out
 
-    # the README's bring-up on the same chained rig, from the port setup wrote
-    assert main(argv(readme_check, adapter)) == 0
-    assert "the bus matches the rig file" in capsys.readouterr().out
+    # then the README's calibration on the same chained rig, from the port setup wrote
     monkeypatch.setattr("sys.stdin", io.StringIO("q\n"))  # leaves at the first question
     assert main(argv(readme_calibrate, adapter)) == 0
     out = capsys.readouterr().out
