@@ -177,3 +177,7 @@ def test_set_id_finds_a_factory_new_servo_at_57600_without_baud(
     assert main(["servos", "set-id", "--port", str(bench.adapter), "5", "6"]) == 2
     err = capsys.readouterr().err
     assert "no servo answers as ID 5" in err and "57600" in err and "9600" in err
+    # a scan of some bauds that finds nothing says the others were not looked at
+    assert main(["servos", "scan", "--port", str(bench.adapter), "--bauds", "4000000"]) == 0
+    out = capsys.readouterr().out
+    assert "no servo answered" in out and "without it, scan tries every baud" in out, out
