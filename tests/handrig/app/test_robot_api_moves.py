@@ -122,9 +122,14 @@ def test_a_silent_servo_meets_the_rigs_silence_policy_and_the_others_move_on(
         robot.move_to({}, seconds=0.0)
         sim.faults = FaultSpec(missing=frozenset({5}))  # right_m-abd stops answering
         bent = {"riIndexMCPy": 30.0}
+        silent_since = time.monotonic()
         present = robot.move_to(bent, seconds=0.2)
         assert present["right_i-mcp"] == pytest.approx(robot.targets_deg(bent)[i], abs=3.0)
-        assert math.isnan(present["right_m-abd"])  # no reading for longer than hold_s
+        # no reading for longer than hold_s (0.25 s): NaN; waited on, as move_to can
+        # return before hold_s has passed (seen once on a loaded host)
+        while not math.isnan(robot.present_deg()["right_m-abd"]):
+            assert time.monotonic() - silent_since < 5.0, "servo 5's silence never showed"
+            time.sleep(0.02)
         assert robot.torque_on  # "continue": the run goes on
         sim.faults = FaultSpec()  # it answers again: read again, and torque off reaches it
         t0 = time.monotonic()
