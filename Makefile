@@ -61,7 +61,7 @@ browser-deps:
 # ---- glove firmware (firmware/glove/, firmware/README.md) --------------------------
 # Debian packages: the AVR toolchain, the Arduino AVR core, and simavr for the
 # in-the-loop tests (sim/avr_glove/). Needs root (CI runs as root).
-FIRMWARE_DEBS := gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev gcc make
+FIRMWARE_DEBS := gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev gcc make avrdude
 ARDUINO_AVR ?= /usr/share/arduino/hardware/arduino/avr
 FW_SRC := firmware/glove
 FW_BUILD := build/firmware
@@ -89,7 +89,19 @@ FW_OBJ := $(FW_BUILD)/glove.ino.o $(FW_BUILD)/glove_core.c.o $(FW_BUILD)/board_a
 FW_HEADERS := $(wildcard $(FW_SRC)/*.h)
 SIM_AVR_GLOVE := build/sim/avr_glove
 
-.PHONY: firmware firmware-deps firmware-test sim-avr-glove
+.PHONY: firmware firmware-deps firmware-test sim-avr-glove flash
+
+# Flash the glove through its USB serial port and the Arduino bootloader (STK500v1):
+# make flash PORT=/dev/serial/by-id/usb-1a86_USB_Serial-if00-port0 (or /dev/ttyUSB0).
+# FLASH_BAUD 57600 for a Nano with the old bootloader (most clones), 115200 for an Uno
+# or a Nano with Optiboot. AVRDUDE_FLAGS=-n: avrdude's dry run (writes nothing).
+FLASH_BAUD ?= 57600
+FLASH_PROGRAMMER ?= arduino
+AVRDUDE_FLAGS ?=
+flash: $(FW_BUILD)/glove.hex
+	$(if $(PORT),,$(error make flash needs the glove's port: make flash PORT=/dev/ttyUSB0 (or its /dev/serial/by-id/ name; firmware/README.md)))
+	@command -v avrdude >/dev/null || { echo "avrdude not found: run 'make firmware-deps' (as root)"; exit 1; }
+	avrdude -p $(FW_MCU) -c $(FLASH_PROGRAMMER) -P $(PORT) -b $(FLASH_BAUD) -D $(AVRDUDE_FLAGS) -U flash:w:$<:i
 
 firmware-deps:
 	DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $(FIRMWARE_DEBS)

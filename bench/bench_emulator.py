@@ -31,7 +31,7 @@ import signal, sys, time
 import numpy as np
 from handrig.realtime import apply_cpus_from_env
 apply_cpus_from_env()
-from handrig.app.robots import load_rig
+from handrig.pose.robot_rig import load_rig
 from handrig.cli.bench_bus import bench_rig
 from sim.dxl_bus import SimBus
 which, baud = sys.argv[1], int(sys.argv[2])
@@ -81,9 +81,8 @@ def _figures(proc: subprocess.Popen[str]) -> str:
 
 
 def main() -> None:
-    from handrig.app.robots import load_rig
-
     from handrig.cli.bench_bus import bench_rig, run_ours, run_sdk, wire_limit_hz
+    from handrig.pose.robot_rig import load_rig
     from handrig.realtime import pinned_loop
 
     seconds = float(os.environ.get("HANDRIG_BENCH_SECONDS", "3"))

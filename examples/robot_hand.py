@@ -33,20 +33,19 @@ def human_pose(t_s: float, period_s: float = 2.0) -> dict[str, float]:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--rig", default="leap", help="robot hand preset or rig file")
-    p.add_argument("--port", default="sim", help="'sim' or a serial device")
+    p.add_argument("--port", default="sim", help="'sim' (the emulated hand) or a serial device")
     p.add_argument("--seconds", type=float, default=1.5, help="how long to drive the hand")
     args = p.parse_args()
     with RobotHand(args.rig, port=args.port) as robot:
         print(f"{args.rig}: {len(robot.joint_names)} joints, torque on: {robot.torque_on}")
         start = time.monotonic()
         while (t := time.monotonic() - start) < args.seconds:
+            # the hand's loop runs in the background: command() sets the pose it
+            # follows (at the rig's slew rate) and returns at once
             goals = robot.command(human_pose(t))
-            time.sleep(0.01)  # 100 Hz; the hand's slew limit smooths what you send
-        last = human_pose(t)
-        for _ in range(50):  # hold the last pose half a second: the hand catches up
-            goals = robot.command(last)
-            time.sleep(0.01)
-        present = robot.present_deg()
+            time.sleep(0.01)  # your program's own rate: 100 Hz here
+        # move_to() goes to a pose over the given time and returns when it is there
+        present = robot.move_to(human_pose(t), seconds=0.3)
         k = int(abs(goals).argmax())
         joint = robot.joint_names[k]
         print(f"last goal {joint} {goals[k]:.1f} deg, present {present[joint]:.1f} deg")

@@ -42,19 +42,23 @@ class ConfigError(HandrigError):
         super().__init__(self._format())
 
     def _format(self) -> str:
-        where = self.file or "<config>"
         if self.file is None and self.key is not None and self.key.startswith("-"):
             text = self.key  # a command-line flag: named as typed
             if self.value is not None:
                 text += f" {_shown(self.value)}"
             text += f": {self.detail}"
+        elif self.file is None and self.key is not None:
+            text = self.key  # an argument or a name in a call: no file to name
+            if self.value is not None:
+                text += f" = {self.value!r}"
+            text += f": {self.detail}"
         elif self.key is not None:
-            text = f"{where}: key '{self.key}'"
+            text = f"{self.file}: key '{self.key}'"
             if self.value is not None:
                 text += f" = {_shown(self.value)}"
             text += f": {self.detail}"
         else:
-            text = f"{where}: {self.detail}"
+            text = f"{self.file}: {self.detail}" if self.file else self.detail
         if self.allowed:
             text += f" (allowed: {self.allowed})"
         return text

@@ -17,13 +17,15 @@ from xml.sax.saxutils import escape
 
 OUT = Path(__file__).resolve().parents[1] / "wiring.svg"
 
-# (label, sensor, pin): the order of SPEC.md's channels
+DIVIDER = "5V - sensor - {pin} - resistor - GND"
+# (label, sensor, pin, its wiring): the order of SPEC.md's channels
 SENSORS = (
-    ("ch0 thumb CMC twist", "hall sensor + magnet, or 10k pot", "A0"),
-    ("ch1 thumb CMC abduction", "flex sensor 2.2in + 47k to GND", "A1"),
-    ("ch2 thumb CMC flexion", "flex sensor 2.2in + 47k to GND", "A2"),
-    ("ch3 index MCP flexion", "flex sensor 2.2in + 47k to GND", "A3"),
-    ("ch4 little finger MCP flexion", "flex sensor 2.2in + 47k to GND", "A6"),
+    ("ch0 thumb CMC twist", "hall sensor + magnet, or 10k pot", "A0",
+     "hall: VCC 5V, GND, OUT to A0, no resistor"),
+    ("ch1 thumb CMC abduction", "flex sensor 2.2in + 47k to GND", "A1", DIVIDER),
+    ("ch2 thumb CMC flexion", "flex sensor 2.2in + 47k to GND", "A2", DIVIDER),
+    ("ch3 index MCP flexion", "flex sensor 2.2in + 47k to GND", "A3", DIVIDER),
+    ("ch4 little finger MCP flexion", "flex sensor 2.2in + 47k to GND", "A6", DIVIDER),
 )
 # (pin, what, wire colour): the right-hand side
 RIGHT = (
@@ -51,13 +53,14 @@ def _line(x1: float, y1: float, x2: float, y2: float, colour: str, width: float 
             f'stroke="{colour}" stroke-width="{width}"/>')
 
 
-def _divider(x: float, y: float, label: str, sensor: str, pin: str) -> list[str]:
-    """A sensor from 5V to the pin, a resistor from the pin to GND, drawn small."""
+def _divider(x: float, y: float, label: str, sensor: str, pin: str,
+             wiring: str) -> list[str]:
+    """A sensor's box: what it is and how it is wired to its pin, drawn small."""
     out = [f'<rect x="{x:.0f}" y="{y - 22:.0f}" width="300" height="56" rx="6" '
            'fill="#f7f7f7" stroke="#999"/>',
            _text(x + 8, y - 6, label, 13, weight="bold"),
            _text(x + 8, y + 12, sensor, 12),
-           _text(x + 8, y + 28, f"5V - sensor - {pin} - resistor - GND", 11)]
+           _text(x + 8, y + 28, wiring.format(pin=pin), 11)]
     bx, by = BOARD[0], _pin_y(pin)
     out.append(_line(x + 300, y, bx, by, "#444"))
     return out
@@ -98,9 +101,10 @@ def draw() -> str:
         py = _pin_y(pin)
         parts.append(f'<text x="{x + w - 8}" y="{py + 4:.0f}" font-family="monospace" '
                      f'font-size="13" fill="white" text-anchor="end">{escape(pin)}</text>')
-    for i, (label, sensor, pin) in enumerate(SENSORS):
-        parts += _divider(40, BOARD[1] + 60 + 70 * i, label, sensor, pin)
-    bno = (760, BOARD[1] + 20, 300, 205)
+    for i, (label, sensor, pin, wiring) in enumerate(SENSORS):
+        parts += _divider(40, BOARD[1] + 60 + 70 * i, label, sensor, pin, wiring)
+    # the title sits above the first wire (SDA): the box starts at the board's top
+    bno = (760, BOARD[1], 325, 225)
     parts.append(f'<rect x="{bno[0]}" y="{bno[1]}" width="{bno[2]}" height="{bno[3]}" rx="6" '
                  'fill="#f2f7ee" stroke="#6a6"/>')
     parts.append(_text(bno[0] + 8, bno[1] + 18, "BNO055 breakout (I2C 0x28), on the forearm",

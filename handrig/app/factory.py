@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from handrig.app.parts import RigParts, control_channels, glove_spec
 from handrig.app.port_processes import SIM_BUS, StartedEmulators, port_process, sim_bus_argv
 from handrig.clock import Clock
-from handrig.config.rig import RigConfig
+from handrig.config.rig import SIM_PORT, RigConfig, require_port
 from handrig.devices.glove import GloveSource, ReplayGlove, SerialGlove
 from handrig.devices.glove_calibration import (
     GloveConfig,
@@ -116,10 +116,11 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
     after the bus is closed."""
     rig_cfg = parts.rig_config
     check_rig(rig_cfg, str(parts.rig_file))  # the servos it names, at bauds they take
-    bus_spec = spec or rig_cfg.bus.port
+    bus_spec = require_port(spec or rig_cfg.bus.port, parts.rig_file,
+                            flag="--bus-left" if parts.hand == "le" else "--port")
     with contextlib.ExitStack() as stack:
         proc: subprocess.Popen[str] | None = None
-        if bus_spec == "sim":
+        if bus_spec == SIM_PORT:
             argv = sim_bus_argv(parts.rig_file, parts.hand, wire_timing=wire_timing,
                                 viewer=viewer, faults=faults)
             emulator = started.take(argv) if started is not None else None
@@ -128,7 +129,8 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
             else:
                 stack.enter_context(emulator)
                 proc, port = emulator.proc, emulator.port()
-            log(f"simulated servo bus (MuJoCo puppet) on {port}")
+            log(f"SIMULATED servo bus ({SIM_PORT!r}: the emulated servos and MuJoCo puppet "
+                f"on {port}); no hardware is driven")
         else:
             port = bus_spec
         # No reply poll (spin_s 0): the loop reads the servos once every few cycles, where

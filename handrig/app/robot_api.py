@@ -8,21 +8,28 @@ the robot's joints through the rig's retarget table and drives its servos::
     from handrig.app.robot_api import RobotHand
 
     with RobotHand("leap", port="sim") as robot:      # or port="/dev/ttyUSB0"
-        robot.command({"riIndexMCPy": 45.0, "riIndexPIPy": 60.0})
+        robot.move_to({"riIndexMCPy": 45.0, "riIndexPIPy": 60.0}, seconds=1.0)
         print(robot.present_deg())
 
-The safety is the rig's: goals clipped to the retarget table's ranges and the
-servos' limits, each step limited to the rig's slew rate (``[loop] slew_deg_s``)
-starting from where the hand is, a curve that is not a finite number refused
-with nothing sent, torque switched on only inside the ``with`` block and off when
-it ends (an exception or a signal included), and the driver's own checks
-(models, Bus Watchdog, goal clamp). ``port="sim"`` runs the same driver against
-``handrig sim-bus``, the emulated servos and the robot's MuJoCo model.
+Inside the ``with`` block the show's realtime loop runs in a thread of its own
+(:mod:`handrig.app.robot_loop`): the rig's rate (``[loop] rate_hz``), slew limit
+(``slew_deg_s``), the retarget table's ranges and the servos' limits, the
+``[silence]`` and ``[heat]`` policies, the easings. :meth:`RobotHand.command` sets
+the pose the loop follows and returns at once (stream targets while your program
+does other work); :meth:`RobotHand.move_to` goes to a pose over a given time and
+returns when the hand is there. Input that is not a pose (a wrong shape, text,
+None, a value that is not a finite angle) is refused with a ConfigError naming
+it, and the loop keeps following the last good pose. Torque is on only inside
+the block and goes off when it ends (an exception or a signal included).
+``port="sim"`` runs the same driver against ``handrig sim-bus``, the emulated
+servos and the robot's MuJoCo model.
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
@@ -32,19 +39,23 @@ import numpy as np
 from handrig import hand
 from handrig.app.factory import servo_bus
 from handrig.app.parts import build_parts
+from handrig.app.robot_loop import RobotLoop, robot_loop_parts
 from handrig.app.session_exit import torque_is_off
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig_files import rig_file_path
 from handrig.devices.servo.bus import ServoBus
-from handrig.errors import ConfigError, HandrigError
+from handrig.errors import ConfigError, DeviceTimeoutError, HandrigError
+from handrig.pose.pipeline import POSE_SIZE
 from handrig.pose.robot_rig import RobotRigConfig, robot_retarget
 
-READ_BUDGET_S = 0.1
-"""How long a read the caller asked for (:meth:`RobotHand.present_deg`, the reading
-at the start) may take with its retries. Not the loop's realtime budget (1.5 times
-the reply's wire time): a program waiting for an answer would rather have it a few
-milliseconds late, from a loaded machine or a USB adapter's latency timer, than NaN."""
-
+MAX_CURVE_DEG = 360.0
+"""A human curve beyond this many degrees either way is no joint angle: refused."""
+REACHED_DEG = 1.0
+""":meth:`RobotHand.move_to`: a joint read this close to its target is there."""
+SETTLE_S = 0.3
+""":meth:`RobotHand.move_to`: a joint whose fresh readings moved less than
+:data:`SETTLE_DEG` over this long has stopped short (held by a contact)."""
+SETTLE_DEG = 0.3
 Curves = Mapping[str, float] | Sequence[float] | np.ndarray
 
 
@@ -52,9 +63,10 @@ class RobotHand:
     """A robot-hand preset rig, opened as a context manager.
 
     ``rig``: a preset name (``"leap"``, ``"orca"``) or a robot rig file. ``port``:
-    ``"sim"`` for the emulated bus, a serial device, or None for the rig's own
-    ``[bus] port``. ``clock``: times the slew limit (default: the monotonic clock).
-    ``log``: where progress lines go (default: nowhere).
+    ``"sim"`` for the emulated bus, a serial device, or None for the rig file's
+    ``[bus] port`` (the shipped presets name none: a ConfigError says to pass one).
+    ``clock``: the loop's clock (default: the monotonic clock). ``log``: where
+    progress lines go (default: nowhere).
     """
 
     def __init__(self, rig: str | Path = "leap", port: str | None = None, *,
@@ -66,6 +78,11 @@ class RobotHand:
             raise ConfigError("not a robot rig: it has no [robot] table",
                               file=str(rig_file_path(rig)),
                               allowed="a robot hand preset ('leap', 'orca') or rig file")
+        if not (port or config.bus.port):
+            raise ConfigError("no servo port: the rig file names no [bus] port",
+                              file=str(self._parts.rig_file), key="port", allowed=(
+                                  'RobotHand(..., port="/dev/ttyUSB0") for the adapter, '
+                                  'port="sim" for the simulated hand'))
         self.rig = config
         self._retarget = robot_retarget(config)
         servo_joints = [s.joint for s in config.servos]
@@ -78,9 +95,8 @@ class RobotHand:
         self._clock = clock or MonotonicClock()
         self._log = log
         self._stack: contextlib.ExitStack | None = None
-        self._bus: ServoBus | None = None
-        self._last_deg: np.ndarray | None = None
-        self._last_t = 0.0
+        self._loop: RobotLoop | None = None
+        self._commanded: np.ndarray | None = None  # the last human curves commanded
         self.torque_off_confirmed: bool | None = None
         """After the block: True when every servo read Torque Enable 0 back, None when
         they could not be read."""
@@ -90,36 +106,40 @@ class RobotHand:
     def __enter__(self) -> RobotHand:
         stack = contextlib.ExitStack()
         try:
+            parts = robot_loop_parts(self._parts)
             opened = stack.enter_context(
-                servo_bus(self._port, self._parts, self._clock, log=self._log))
+                servo_bus(self._port, parts, self._clock, log=self._log))
             bus = opened.bus
             bus.connect()
             # runs once torque is off, before the bus closes: read Torque Enable back
             stack.callback(self._confirm_torque_off, bus)
+            loop = RobotLoop(parts, bus, self._clock, log=self._log)
             # SIGTERM, SIGINT, SIGHUP end the block with an exception: torque goes off
-            stack.enter_context(bus.torque(handle_signals=True))
-            state = bus.read_state(self._clock.now() + READ_BUDGET_S, patient=True)
-            if state.stale.any():
-                missing = [self.joint_names[i] for i in np.flatnonzero(state.stale)]
-                raise HandrigError(f"no reading from the servos of {', '.join(missing)}: "
-                                   "the hand is not where it can be ramped from")
+            loop.start(handle_signals=threading.current_thread() is threading.main_thread())
         except BaseException:
             stack.close()
             raise
-        self._stack, self._bus = stack, bus
-        self._last_deg = np.clip(state.positions_deg, self._low, self._high)
-        self._last_t = self._clock.now()
+        self._stack, self._loop, self._commanded = stack, loop, None
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
-        self.close()
+        self._close(ease=exc_type is None)
 
     def close(self) -> None:
-        """Torque off, bus closed, the emulator (``port="sim"``) stopped. Idempotent."""
-        stack, self._stack, self._bus = self._stack, None, None
-        if stack is not None:
-            stack.close()
+        """Ease to the relaxed pose, torque off, bus closed, the emulator (``port="sim"``)
+        stopped. Idempotent."""
+        self._close(ease=True)
+
+    def _close(self, *, ease: bool) -> None:
+        stack, loop = self._stack, self._loop
+        self._stack, self._loop = None, None
+        try:
+            if loop is not None:
+                loop.stop(ease=ease and loop.running)
+        finally:
+            if stack is not None:
+                stack.close()
 
     def _confirm_torque_off(self, bus: ServoBus) -> None:
         self.torque_off_confirmed = torque_is_off(bus)
@@ -133,67 +153,175 @@ class RobotHand:
 
     @property
     def torque_on(self) -> bool:
-        """Whether the hand is open and its torque on."""
-        return self._bus is not None and self._bus.torque_enabled
+        """Whether the hand is open, its loop running and its torque on."""
+        loop = self._loop
+        return loop is not None and loop.running and loop.bus.torque_enabled
 
     def targets_deg(self, curves: Curves) -> np.ndarray:
         """The robot joint angles (bus order, degrees) these human curves ask for,
         clipped to the table's ranges and the servos' limits (no slew, nothing sent)."""
-        human = self._human(curves)
-        robot = self._retarget.apply(human)
-        return np.clip(robot[self._rows], self._low, self._high)
+        return self._targets(self._human(curves))
 
     def command(self, curves: Curves) -> np.ndarray:
-        """Send the robot the pose of these human curves: a mapping of curve names to
-        degrees (curves not named are 0, the flat hand) or all 50 in
-        :data:`handrig.hand.CURVE_NAMES` order. The step from the last goals is limited
-        to the rig's slew rate; returns the goals sent (bus order, degrees)."""
-        bus = self._open_bus()
-        want = self.targets_deg(curves)
-        last = want if self._last_deg is None else self._last_deg
-        now = self._clock.now()
-        # a pause does not earn a jump: at most one cycle's step at the loop's rate
-        dt = min(max(0.0, now - self._last_t), 1.0 / self.rig.loop.rate_hz)
-        step = self.rig.loop.slew_deg_s * dt
-        goals = np.clip(want, last - step, last + step)
-        bus.write_goals_deg(goals)
-        self._last_deg, self._last_t = goals, now
-        return goals
+        """Have the loop follow the pose of these human curves from its next cycle on,
+        and return at once: a mapping of curve names to degrees (curves not named are
+        0, the flat hand) or all 50 in :data:`handrig.hand.CURVE_NAMES` order. The
+        loop moves the servos there at most at the rig's slew rate. Returns the robot
+        joint targets (bus order, degrees, clipped to the limits). Anything that is not
+        a pose is refused with a ConfigError, and the loop keeps the last good one."""
+        loop = self._open_loop()
+        human = self._human(curves)
+        targets = self._targets(human)
+        self._send(loop, human)
+        return targets
+
+    def move_to(self, curves: Curves, seconds: float = 1.0, *,
+                timeout_s: float | None = None) -> dict[str, float]:
+        """Go to the pose of these human curves (as :meth:`command` takes them) along a
+        straight line from the last pose commanded, over ``seconds``, and return when
+        every servo's goal is there and its reading has settled (at the goal, or held
+        by a contact); returns :meth:`present_deg`. The rig's slew limit still applies
+        (a short ``seconds`` for a long way takes longer). A DeviceTimeoutError after
+        ``timeout_s`` (default: ``seconds`` plus the slew-limited time plus 2 s)
+        when the loop does not get there (e.g. relaxing for a silent servo)."""
+        if not (isinstance(seconds, (int, float)) and math.isfinite(seconds)
+                and 0.0 <= seconds <= 3600.0):
+            raise ConfigError("not a duration", key="seconds", value=seconds,
+                              allowed="0..3600 seconds")
+        loop = self._open_loop()
+        human = self._human(curves)
+        targets = self._targets(human)
+        start = self._commanded if self._commanded is not None else human
+        clock, rate_hz = self._clock, self.rig.loop.rate_hz
+        t0 = clock.now()
+        if seconds > 0.0:
+            while (t := clock.now() - t0) < seconds:
+                self._send(loop, start + (human - start) * (t / seconds))
+                clock.sleep_until(clock.now() + 1.0 / rate_hz)
+        self._send(loop, human)
+        snap = loop.snapshot()
+        now_deg = np.array(snap.goals_deg if snap is not None and snap.goals_deg else
+                           targets, dtype=np.float64)
+        slew_s = float(np.nanmax(np.abs(targets - now_deg), initial=0.0)) / \
+            self.rig.loop.slew_deg_s
+        deadline = clock.now() + (timeout_s if timeout_s is not None else slew_s + 2.0)
+        self._wait_settled(loop, targets, deadline)
+        return self.present_deg()
+
+    def _wait_settled(self, loop: RobotLoop, targets: np.ndarray, deadline: float) -> None:
+        """Until every goal is at ``targets`` and every joint is within
+        :data:`REACHED_DEG` of it, or has stopped: two fresh readings of it at least
+        :data:`SETTLE_S` apart moved less than :data:`SETTLE_DEG` (held by a contact)."""
+        clock = self._clock
+        n = len(targets)
+        since_pos = np.full(n, math.nan)  # a joint's reading where its stillness began
+        since_t = np.full(n, math.nan)  # ... and when that reading was taken
+        while True:
+            loop.check()
+            snap = loop.snapshot()
+            now = clock.now()
+            if (snap is not None and len(snap.goals_deg) == n
+                    and np.all(np.abs(np.asarray(snap.goals_deg) - targets) <= 1e-6)):
+                pos = np.array([math.nan if v is None else v for v in snap.positions_deg])
+                read_t = snap.t_s - np.asarray(snap.reading_ages_s, dtype=np.float64)
+                moved = ~(np.abs(pos - since_pos) <= SETTLE_DEG)  # NaN: not begun
+                since_pos = np.where(moved, pos, since_pos)
+                since_t = np.where(moved, read_t, since_t)
+                still = (read_t - since_t >= SETTLE_S) & np.isfinite(pos)
+                if np.all((np.abs(pos - targets) <= REACHED_DEG) | still):
+                    return
+            if now > deadline:
+                mode = f"{snap.mode} ({snap.mode_reason})" if snap is not None else "no cycle"
+                raise DeviceTimeoutError(
+                    "move_to: the hand did not get to the pose in time; the loop is "
+                    f"{mode}: see [silence], [heat] and the servos' readings "
+                    "(present_deg)")
+            clock.sleep_until(now + 0.01)
+
+    def goals_deg(self) -> dict[str, float]:
+        """The goals the loop last sent, by robot joint (NaN before the first)."""
+        snap = self._open_loop().snapshot()
+        goals = snap.goals_deg if snap is not None else ()
+        return {name: float(goals[i]) if i < len(goals) else math.nan
+                for i, name in enumerate(self.joint_names)}
 
     def present_deg(self) -> dict[str, float]:
-        """The robot's joint angles as the servos report them (NaN: no reading)."""
-        state = self._open_bus().read_state(self._clock.now() + READ_BUDGET_S, patient=True)
-        return {name: float("nan") if state.stale[i] else float(state.positions_deg[i])
-                for i, name in enumerate(self.joint_names)}
+        """The robot's joint angles as the loop last read them (NaN: no reading yet, or
+        none for longer than ``[silence] hold_s``). The loop reads the servos every
+        ``[bus] read_every`` cycles (a part of them each time with ``read_parts``)."""
+        loop = self._open_loop()
+        loop.check()
+        snap = loop.snapshot()
+        pos = snap.positions_deg if snap is not None else ()
+        ages = snap.reading_ages_s if snap is not None else ()
+        out: dict[str, float] = {}
+        for i, name in enumerate(self.joint_names):
+            value = pos[i] if i < len(pos) and i < len(ages) else None
+            fresh = value is not None and ages[i] <= self.rig.silence.hold_s
+            out[name] = float(value) if fresh and value is not None else math.nan
+        return out
 
     # ---------------------------------------------------------------- helpers
 
-    def _open_bus(self) -> ServoBus:
-        if self._bus is None:
+    def _open_loop(self) -> RobotLoop:
+        if self._loop is None:
             raise HandrigError("the robot hand is not open: use it in a `with RobotHand(...)` "
                                "block")
-        return self._bus
+        return self._loop
+
+    def _send(self, loop: RobotLoop, human: np.ndarray) -> None:
+        loop.check()
+        pose = np.zeros(POSE_SIZE)
+        pose[:len(human)] = human
+        loop.source.set_pose(pose)
+        self._commanded = human.copy()
+
+    def _targets(self, human: np.ndarray) -> np.ndarray:
+        robot = np.asarray(self._retarget.apply(human), dtype=np.float64)
+        out = robot[self._rows]
+        if not np.isfinite(out).all():
+            k = int(np.flatnonzero(~np.isfinite(out))[0])
+            raise ConfigError("the pose gives a robot joint no finite angle: nothing was "
+                              "sent", key=self.joint_names[k], value=float(out[k]))
+        return np.clip(out, self._low, self._high)
 
     @staticmethod
     def _human(curves: Curves) -> np.ndarray:
         names = hand.CURVE_NAMES
+        allowed = ("a mapping of curve names (handrig.hand.CURVE_NAMES) to degrees, or all "
+                   f"{len(names)} in that order")
         if isinstance(curves, Mapping):
-            unknown = sorted(set(curves) - set(names))
+            unknown = sorted(str(k) for k in set(curves) - set(names))
             if unknown:
                 raise ConfigError("not a human curve", key=unknown[0], allowed=(
                     "names of handrig.hand.CURVE_NAMES, e.g. riIndexMCPy"))
             out = np.zeros(len(names))
             for k, name in enumerate(names):
                 if name in curves:
-                    out[k] = float(curves[name])
+                    value = curves[name]
+                    try:
+                        out[k] = float(value)
+                    except (TypeError, ValueError):
+                        raise ConfigError("not a number: nothing was sent", key=name,
+                                          value=value, allowed="degrees") from None
+        elif isinstance(curves, (str, bytes)) or curves is None:
+            raise ConfigError(f"not a pose: {curves!r}: nothing was sent", allowed=allowed)
         else:
-            out = np.asarray(curves, dtype=np.float64).reshape(-1)
+            try:
+                out = np.asarray(curves, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"not a pose ({exc}): nothing was sent",
+                                  allowed=allowed) from None
             if out.shape != (len(names),):
-                raise ConfigError(f"expected {len(names)} human curves, got {out.size}",
-                                  allowed="an array in handrig.hand.CURVE_NAMES order, or a "
-                                  "mapping of curve names to degrees")
+                raise ConfigError(f"expected {len(names)} human curves, got an array of "
+                                  f"shape {out.shape}: nothing was sent", allowed=allowed)
         bad = np.flatnonzero(~np.isfinite(out))
         if bad.size:
             raise ConfigError("a human curve is not a finite number: nothing was sent",
                               key=names[int(bad[0])], value=float(out[bad[0]]))
+        wild = np.flatnonzero(np.abs(out) > MAX_CURVE_DEG)
+        if wild.size:
+            raise ConfigError("a human curve is no joint angle: nothing was sent",
+                              key=names[int(wild[0])], value=float(out[wild[0]]),
+                              allowed=f"-{MAX_CURVE_DEG:g}..{MAX_CURVE_DEG:g} degrees")
         return out

@@ -496,6 +496,9 @@ class _Session:
         s["clamp_advice"] = clamp_advice(s, recorded, tuple(side.expander.controls),
                                          side.expander.training_range())
         s["glove_source"] = glove
+        s["simulated_bus"] = (self.bus_of[i] >= 0
+                              and self.opened[self.bus_of[i]].emulator is not None)
+        s["take_played"] = opts.take is not None
         for key, value in (("stages_us", self.stages[i]),
                            ("servos_left_out", self.left_out[i]),
                            ("servos_admitted", self.admitted[i]),
@@ -512,6 +515,7 @@ class _Session:
         summary["torque_off"] = (None if not offs or len(offs) < len(self.opened)
                                  else False if False in offs
                                  else None if None in offs else True)
+        summary["simulated_bus"] = any(h["simulated_bus"] for h in hands)
         if self.n > 1:
             summary["hands"] = {parts.name(i): s for i, s in enumerate(hands)}
             summary["buses"] = NUMBER_WORDS.get(len(parts.buses), str(len(parts.buses)))

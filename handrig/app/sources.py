@@ -105,8 +105,10 @@ def run_sources(rig: str | Path | None = None, glove: str | Path | None = None,
     """Every file a run with ``--rig rig`` (and ``--glove-config glove``) reads."""
     first = rig_file(rig)
     cfg = rig_cfg if rig_cfg is not None else robots.load_rig(first.path)
-    out = [first, glove_file(first.path, cfg, glove), map_file(first.path, cfg),
-           grid_file(first.path, cfg), limits_file()]
+    # sag off (a robot rig without [robot] sag, or sag_gain 0): the grid is not used
+    grid = [grid_file(first.path, cfg)] if cfg.effective_sag_gain > 0.0 else []
+    out = [first, glove_file(first.path, cfg, glove), map_file(first.path, cfg), *grid,
+           limits_file()]
     if isinstance(cfg, robots.RobotRigConfig) and cfg.robot is not None:
         out.append(Source("robot model", Path(cfg.robot.model), f"[robot] of {first.path.name}"))
         out.append(Source("retarget", Path(cfg.robot.retarget),

@@ -121,6 +121,7 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
                  "actions": s.heat_actions, "hottest": s.hottest,
                  "max_c": [num(t, 1) for t in s.max_temperature_c]},
         "resumes": s.resumes,
+        "relax_keys": s.relax_keys,
         "estop": s.estop,
         "stop_reason": s.stop_reason,
         "events": list(s.events),
@@ -217,6 +218,10 @@ def clamp_advice(summary: dict[str, Any], recording: str, controls: tuple[str, .
     return "likely: " + "; ".join(causes)
 
 
+SIMULATED_LINE = ("bus               SIMULATED (--port sim): emulated servos and a MuJoCo "
+                  "puppet, no hardware was driven")
+
+
 def format_summary(summary: dict[str, Any]) -> str:
     """The human-readable summary of a run (the same figures as ``--json``)."""
     lat = summary["latency_us"]
@@ -229,6 +234,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     most = (", most at " + ", ".join(f"{c['joint']} ({c['clamps']})" for c in clamped)
             if clamped else "")
     lines = [
+        *([SIMULATED_LINE] if summary.get("simulated_bus") else []),
         *([f"show              {summary['show']}"] if summary.get("show") else []),
         f"frames            {summary['frames']} in {summary['duration_s']} s "
         f"({summary['rate_hz']} Hz, jitter {summary['jitter_us']} us){ease}",
@@ -259,6 +265,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"                  {summary['pose_clamps']} values of the full two-hand pose clamped, "
         f"{summary['bus_clamps']} goals clamped by the driver, {summary['slew_limited']} "
         f"slew-limited, {summary['nonfinite_targets']} non-finite targets held",
+        f"take              {glove.get('frames_ok', '-')} frames played, used "
+        f"{glove.get('frames_used', '-')}" if summary.get("take_played") else
         f"glove             {glove.get('frames_ok', '-')} frames ok, "
         f"{glove.get('crc_errors', 0)} CRC errors, {glove.get('decode_errors', 0)} other "
         f"errors, {glove.get('resyncs', 0)} resyncs, used {glove.get('frames_used', '-')}",
@@ -268,7 +276,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['stale_reads']} with stale servos)",
         *_outputs_lines(summary.get("outputs") or {}),
         *_heat_lines(summary.get("heat") or {}),
-        f"safety            {summary['relax_events']} relax events, "
+        f"safety            {summary['relax_events']} relax events (glove lost or servos "
+        f"silent), {summary.get('relax_keys', 0)} by the relax key, "
         f"{summary.get('resumes', 0)} resumes, e-stop "
         f"{'pressed' if summary['estop'] else 'not pressed'}, stopped: {summary['stop_reason']}",
         f"torque off        {summary['torque_off']}",
@@ -282,9 +291,10 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 def format_hands_summary(summary: dict[str, Any]) -> str:
     """The summary of a two-hand run: a part per hand, then torque and the error."""
-    lines = [*([f"show              {summary['show']}"] if summary.get("show") else [])]
+    lines = [*([SIMULATED_LINE] if summary.get("simulated_bus") else []),
+             *([f"show              {summary['show']}"] if summary.get("show") else [])]
     for name, part in summary["hands"].items():
-        part = {k: v for k, v in part.items() if k != "show"}
+        part = {k: v for k, v in part.items() if k not in ("show", "simulated_bus")}
         lines.append(f"--- {name} hand ({part.get('glove_source') or 'glove'}) ---")
         lines += [line for line in format_summary(part).splitlines()
                   if not line.startswith(("torque off", "error"))]

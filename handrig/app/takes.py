@@ -201,6 +201,13 @@ def play_parts(parts: RigParts, take: PlayTake) -> RigParts:
     and the glove file's fixed forearm as the forearm."""
     if take.kind == "glove":
         return parts
+    return pose_parts(parts)
+
+
+def pose_parts(parts: RigParts) -> RigParts:
+    """The parts a full pose (:data:`POSE_NAMES` order) drives as the loop's controls:
+    a performance played (:func:`play_parts`), or a program's commands
+    (:mod:`handrig.app.robot_loop`)."""
     live = parts.pipeline
     rest = live.expander.expand(np.asarray(live.control_means_deg, dtype=np.float64))
     pipeline = TakePipeline(

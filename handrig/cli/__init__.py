@@ -52,6 +52,8 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...]]] = {
     "run": ("run the live rig: glove -> full hands with sag -> servos", ("run",)),
     "sag": ("look up the passive-sag pose at a forearm orientation", ("sag",)),
     "servos": ("servo bring-up: scan, set-id, set-baud, reboot, check", ("servos",)),
+    "setup": ("from a plugged-in servo adapter to a working rig file: find the port, write "
+              "it, give new servos their IDs and baud", ("setup",)),
     "sim-bus": ("serve emulated Dynamixel X-series servos on a pty (MuJoCo hand loopback)",
                 ("sim_bus",)),
     "sim-glove": ("an emulated glove on a pty: stream a recording, or perform the calibration "

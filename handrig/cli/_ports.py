@@ -32,3 +32,17 @@ def by_id_for(port: str, folder: Path = BY_ID) -> Path | None:
     except OSError:
         return None
     return None
+
+
+SIMULATED_FIRST_LINE = ("SIMULATED rig (--port sim): emulated servos, nothing real is "
+                        "driven; give --port PORT for the hardware")
+"""The first line of every command that runs on the simulated bus."""
+
+
+def say_if_simulated(port: str | None, *, out: bool = True) -> bool:
+    """Print :data:`SIMULATED_FIRST_LINE` when ``port`` is the simulated rig's (``out``
+    False: only tell); returns whether it is."""
+    simulated = port == "sim"
+    if simulated and out:
+        print(SIMULATED_FIRST_LINE, flush=True)
+    return simulated

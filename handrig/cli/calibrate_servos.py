@@ -50,6 +50,7 @@ from typing import Any
 from handrig.app.factory import port_process
 from handrig.app.sources import Source, format_sources, rig_file
 from handrig.cli._display import check_gl_backend
+from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument
 from handrig.cli.calibrate_glove import calibrate_subparsers
 from handrig.clock import Clock, MonotonicClock
@@ -61,6 +62,7 @@ from handrig.config.rig import (
     TICKS_PER_DEG,
     RigConfig,
     ServoCalibration,
+    require_port,
 )
 from handrig.config.toml_edit import (
     BACKUP_DIR,
@@ -83,8 +85,10 @@ def register(sub: Any) -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_rig_argument(p)
-    p.add_argument("--bus", default=None, metavar="PORT",
-                   help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
+    p.add_argument("--port", "--bus", dest="bus", default=None, metavar="PORT",
+                   help="servo port, or 'sim' for the simulated rig (its zeros are the "
+                   "emulator's, not your hardware's); default: the rig file's [bus] port "
+                   "(--bus is the older name)")
     p.add_argument("--ids", default=None, metavar="LIST", help="only these servo IDs, e.g. 1,2,7")
     p.add_argument("--jog", action="store_true", help="torque on and jog each servo to zero")
     p.add_argument("--yes", action="store_true",
@@ -266,7 +270,8 @@ def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog
         ticks, _ = settled_position(bus, index, clock)
         deg = cal.ticks_to_deg(ticks)
         if abs(deg) < DIRECTION_MIN_DEG:
-            say(f"{name}: it reads {deg:+.1f} deg: flex it further")
+            say(f"{name}: it reads {deg:+.1f} deg: flex it further (s skips the check; "
+                "with --jog the servo moves the joint and you say which way it went)")
             continue
         if deg > 0:
             say(f"{name}: reads {deg:+.1f} deg where you flexed it: direction {cal.direction} "
@@ -410,15 +415,19 @@ def run(args: argparse.Namespace) -> int:
                               allowed=", ".join(map(str, ids)))
         ids = wanted
     out = Path(args.out) if args.out else default_out(rig_path)
-    bus_spec = args.bus or rig.bus.port
+    bus_spec = require_port(args.bus or rig.bus.port, rig_path)
+    simulated = say_if_simulated(bus_spec)
     print(format_sources([source, Source("writes to", out, "--out" if args.out else
                                          "default: your own copy, with a dated backup")]),
           flush=True)
-    if bus_spec == "sim":
-        check_gl_backend("--bus sim")
+    if simulated:
+        print(f"  the zeros read here are the EMULATED servos': written to {out} as any "
+              "calibration (`handrig calibrate undo` puts it back); nobody can flex an "
+              "emulated joint: at the direction check press s, or use --jog", flush=True)
+        check_gl_backend("--port sim")
     try:
         with contextlib.ExitStack() as stack:
-            if bus_spec == "sim":
+            if simulated:
                 _, bus_spec = stack.enter_context(
                     port_process(["sim-bus", "--rig", str(rig_path)], "the simulated servo bus"))
             bus = DynamixelBus(bus_spec, calibration_rig(rig))
@@ -453,7 +462,8 @@ def run(args: argparse.Namespace) -> int:
                           value=exc.value, allowed=exc.allowed) from None
     out.parent.mkdir(parents=True, exist_ok=True)
     backup = write_with_backup(out, text)
-    print(f"wrote {len(changes)} servo calibration(s) to {out}")
+    print(f"wrote {len(changes)} servo calibration(s) to {out}"
+          + (" (SIMULATED: the emulator's zeros, not your hardware's)" if simulated else ""))
     print(f"  backup of what was there: {backup} (`handrig calibrate undo` puts it back)")
     relative = [f"{k} = {v!r}" for k in ("map", "sag_grid", "glove")
                 if (v := getattr(rig.loop, k)) and not Path(v).is_absolute()]

@@ -31,6 +31,7 @@ from handrig.app.port_processes import SIM_BUS, PortProcess, StartedEmulators, s
 from handrig.app.view import add_view_flag
 from handrig.cli._display import check_gl_backend, check_renderer
 from handrig.cli._numbers import positive_float, positive_int
+from handrig.cli._ports import SIMULATED_FIRST_LINE
 from handrig.cli._rig import add_rig_argument
 from handrig.errors import HandrigError
 
@@ -47,8 +48,10 @@ def register(sub: Any) -> None:
         description=__doc__,
     )
     add_rig_argument(p)
-    p.add_argument("--frames", type=positive_int, default=DEFAULT_FRAMES, metavar="N",
+    p.add_argument("--frames", type=positive_int, default=None, metavar="N",
                    help=f"loop cycles to run (default {DEFAULT_FRAMES}, 15 s at 200 Hz)")
+    p.add_argument("--seconds", type=positive_float, default=None, metavar="S",
+                   help="run this long instead (with --frames: whichever ends first)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--render", default=None, metavar="FILE.png",
                    help="also write an image strip of the simulated hand")
@@ -102,6 +105,10 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
             with contextlib.suppress(OSError, ValueError):  # the terminal may be gone
                 print(text, flush=True)
 
+    log(SIMULATED_FIRST_LINE)
+    frames = args.frames if args.frames or args.seconds else DEFAULT_FRAMES
+    # the render's snapshots: six over the run (the glove's nominal 200 frames a second)
+    expected = frames or round(args.seconds * args.glove_rate)
     _, rig_cfg = find_rig(args.rig)
     parts = build_session_parts(args.rig, glove_per_hand=is_two_hand(rig_cfg))
     per_hand = len(parts.hands) > 1
@@ -127,12 +134,13 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
                     log(f"left glove emulator streaming on {left_port} ({recording} from "
                         f"{args.left_offset:g} s)")
                 opts = LiveOptions(glove=glove_port, recorded=recording, bus="sim",
-                                   frames=args.frames, glove_left=left_port,
+                                   frames=frames, duration_s=args.seconds,
+                                   glove_left=left_port,
                                    bus_left="sim" if per_hand else None,
                                    sim_faults=args.faults, wire_timing=WIRE_TIMING,
                                    started=started, log=log, panel=not args.json,
                                    on_hands=view.attach_hands if view is not None else None,
-                                   snapshot_every=max(1, args.frames // 6) if args.render else 0)
+                                   snapshot_every=max(1, expected // 6) if args.render else 0)
                 signals.disarm()  # the session handles its own; after it: shut down, print
                 result = run_live(parts, opts)
         except HandrigError as exc:

@@ -11,11 +11,12 @@ from typing import Any
 
 from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
-from handrig.app.sources import run_sources
+from handrig.app.sources import Source, run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
 from handrig.app.view import add_view_flag, view_playback, view_session
 from handrig.cli._display import check_gl_backend
 from handrig.cli._numbers import nonnegative_float, positive_float
+from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.clock import MonotonicClock
 from handrig.errors import ConfigError, DataError, HandrigError
@@ -41,7 +42,7 @@ def register(sub: Any) -> None:
         " VMC4B), no servos needed.",
     )
     p.add_argument("file", help="the take: a performance .csv/.bvh or a glove take .csv")
-    p.add_argument("--bus", default=None, metavar="PORT",
+    p.add_argument("--bus", "--port", dest="bus", default=None, metavar="PORT",
                    help="play onto the servos on PORT, or 'sim' for the MuJoCo loopback")
     add_rig_argument(p)
     p.add_argument("--glove-config", default=None, metavar="FILE",
@@ -98,7 +99,16 @@ def run_on_rig(args: argparse.Namespace) -> int:
             raise
         return print_result(failed(exc), as_json=True)
     if not args.json:
-        print_sources(run_sources(args.rig, args.glove_config, parts.rig_config))
+        say_if_simulated(args.bus)
+        sources = run_sources(args.rig, args.glove_config, parts.rig_config)
+        if take.kind == "performance":  # the take is the pose: no glove, map or sag for it
+            relaxed = "only for the relaxed pose (a lost frame, a stop); the take is the pose"
+            sources = [Source(s.role, s.path, f"{relaxed}; {s.why}")
+                       if s.role in ("map", "sag grid") else
+                       Source(s.role, s.path, f"only its forearm angles, for the relaxed "
+                              f"pose's sag; {s.why}") if s.role == "glove" else s
+                       for s in sources]
+        print_sources(sources)
         print(f"  take       {take.describe()}" + (", looped" if args.loop else ""),
               flush=True)
     rec = take.recording

@@ -9,7 +9,8 @@ each robot limit is given. Then, through the robot's MJCF model (MuJoCo): the fi
 closure per finger (the share of its flexion range reached at the human fist; target
 >= 0.9), the thumb-finger tip gaps at the human's pinches (target <= 10 mm) and the
 fingertip error over the reference capture (median, p95, mm, the human's carried
-onto the robot and scaled to it).
+onto the robot and scaled to it). Exit status 1 when a joint is flagged (the capture
+or the demo reaches past its range: the robot sits at a limit there), 0 when none is.
 
 ``fit`` fits the table's gains and offsets through the robot's model so that its
 fingertips follow the human's (positions relative to the palm, pinches, the fist;
@@ -46,7 +47,8 @@ def register(sub: Any) -> None:
     )
     actions = p.add_subparsers(dest="action", metavar="ACTION")
     c: argparse.ArgumentParser = actions.add_parser(
-        "check", help="print the table, flag ranges past the robot's, count demo limit hits",
+        "check", help="print the table, flag ranges past the robot's, count demo limit hits "
+        "(exit 1 when a joint is flagged)",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     c.add_argument("--rig", default=DEFAULT_RIG,
@@ -147,6 +149,7 @@ def run_check(args: argparse.Namespace) -> int:
         capture = load_reference().curves
     demo = _demo_poses(args.recording, base, map_path, glove_path)
     checks = check_joints(rt, bounds[:, 0], bounds[:, 1], capture, demo)
+    flagged = any(set(c.flags) & {"capture", "demo"} for c in checks)
     grasp: dict[str, Any] | None = None
     if args.render and not model:
         raise ConfigError("--render draws the rig's robot model: give --rig, not --table",
@@ -161,14 +164,14 @@ def run_check(args: argparse.Namespace) -> int:
             _render_grasps(rt, gm, model, args)
     if args.json:
         print(json.dumps(_as_json(rt, checks, len(demo)) | (grasp or {})))
-        return 0
+        return 1 if flagged else 0
     _print_table(rt)
     print()
     _print_checks(checks, len(demo), capture is not None)
     if grasp is not None:
         print()
         _print_grasp(grasp)
-    return 0
+    return 1 if flagged else 0
 
 
 def _render_grasps(rt: Retarget, gm: Any, model: str, args: argparse.Namespace) -> None:

@@ -4,18 +4,21 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from handrig.app.port_processes import SIM_BUS, StartedEmulators, sim_bus_argv
 from handrig.app.view import add_view_flag
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
+from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
 from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
 
 if TYPE_CHECKING:
     from handrig.app.hands import SessionParts
+    from handrig.app.sources import Source
 
 
 def register(sub: Any) -> None:
@@ -46,8 +49,9 @@ def register(sub: Any) -> None:
     p.add_argument("--glove-left-config", default=None, metavar="FILE",
                    help="the left glove's glove file (default: [gloves] left_config, else "
                    "the right glove's)")
-    p.add_argument("--bus", default=None, metavar="PORT",
-                   help="servo port, or 'sim' for the MuJoCo loopback (default: rig file)")
+    p.add_argument("--bus", "--port", dest="bus", default=None, metavar="PORT",
+                   help="servo port, or 'sim' for the simulated rig (the MuJoCo loopback); "
+                   "default: the rig file's [bus] port (the shipped rig names none)")
     p.add_argument("--bus-left", default=None, metavar="PORT",
                    help="a rig on two buses ([left_bus]): the left hand's servo port, or "
                    "'sim' (default: [left_bus] port)")
@@ -88,10 +92,31 @@ def _from_show(args: argparse.Namespace) -> ShowFile | None:
             "bus_left": show.buses.left, "vmc": show.outputs.vmc,
             "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
             "view": show.outputs.view}
+    filled = []
     for name, value in fill.items():
         if getattr(args, name) is None and value:
             setattr(args, name, value)
+            filled.append(name)
+    args.from_show = filled
     return show
+
+
+def _show_sources(sources: list[Source], show: ShowFile, filled: list[str]) -> list[Source]:
+    """The files a show named, said to come from it (not from --rig or the rig file)."""
+    from handrig.app.sources import Source
+    why = f"the show's, {show.path}"
+    out = []
+    for s in sources:
+        if s.role == "rig" and "rig" in filled:
+            s = Source("rig", s.path, why)
+        elif s.role == "glove" and "glove_config" in filled:
+            s = Source("glove", s.path, why)
+        elif s.role == "map" and show.show.map:
+            s = Source("map", Path(show.show.map), why)
+        elif s.role == "sag grid" and show.show.grid:
+            s = Source("sag grid", Path(show.show.grid), why)
+        out.append(s)
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -115,9 +140,14 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
     process imports the run's modules and builds the map's kernels, so that the
     emulator's start-up (MuJoCo puppet, pty) overlaps them; the session takes it
     (by its arguments) where it would start one. A rig with a left bus: none started."""
+    from handrig.config.rig import require_port
     from handrig.pose.robot_rig import find_rig
 
     rig_file, rig = find_rig(args.rig)
+    # no port: said before the run's imports and kernels
+    require_port(args.bus or rig.bus.port, rig_file)
+    if rig.left_bus is not None:
+        require_port(args.bus_left or rig.left_bus.port, rig_file, flag="--bus-left")
     if rig.left_bus is None and (args.bus or rig.bus.port) == "sim":
         started.start(sim_bus_argv(rig_file, None, wire_timing=not args.no_wire_timing,
                                    viewer=args.viewer), SIM_BUS)
@@ -128,6 +158,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
     from handrig.app.session import LiveOptions, failed, print_result, run_live
     from handrig.app.sources import run_sources, session_sources
     from handrig.app.view import view_session
+    from handrig.config.rig import require_port
     from handrig.pose.robot_rig import find_rig
 
     try:
@@ -139,18 +170,24 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
         parts: SessionParts = build_session_parts(
             args.rig, args.glove_config, args.glove_left_config,
             glove_per_hand=left is not None, **files)
-        if "sim" in ((args.bus or rig.bus.port),
-                     args.bus_left or (rig.left_bus.port if rig.left_bus else "")):
+        bus = require_port(args.bus or rig.bus.port, parts.rig_file)
+        bus_left = (require_port(args.bus_left or rig.left_bus.port, parts.rig_file,
+                                 flag="--bus-left") if rig.left_bus is not None else "")
+        if "sim" in (bus, bus_left):
             check_gl_backend("--bus sim")
     except HandrigError as exc:
         if not args.json:
             raise
         return print_result(failed(exc), as_json=True)
     if not args.json:
+        say_if_simulated(bus) or say_if_simulated(bus_left)
         if show is not None:
             _stderr(f"show: {show.title} ({show.path})")
-        print_sources(session_sources(
-            parts, run_sources(args.rig, args.glove_config, parts.rig_config)))
+        sources = session_sources(
+            parts, run_sources(args.rig, args.glove_config, parts.rig_config))
+        if show is not None:
+            sources = _show_sources(sources, show, args.from_show)
+        print_sources(sources)
     with view_session(args.view, parts.rig_config, _stderr) as view:
         opts = LiveOptions(
             glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,

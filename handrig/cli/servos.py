@@ -24,9 +24,9 @@ from typing import Any
 from handrig.app.factory import port_process
 from handrig.app.sources import format_sources, rig_file
 from handrig.cli._numbers import whole_int
-from handrig.cli._ports import by_id_for
+from handrig.cli._ports import by_id_for, say_if_simulated
 from handrig.cli._rig import add_rig_argument
-from handrig.config.rig import RigConfig
+from handrig.config.rig import RigConfig, require_port
 from handrig.devices.servo import bringup
 from handrig.devices.servo.models import BAUD_RATES
 from handrig.errors import ConfigError
@@ -56,6 +56,7 @@ def register(sub: Any) -> None:
     group = p.add_subparsers(dest="servos_what", metavar="WHAT")
 
     def common(q: argparse.ArgumentParser, *, baud: bool = True) -> None:
+        q.set_defaults(json=False)
         add_rig_argument(q)
         q.add_argument("--port", default=None, metavar="PORT",
                        help="serial port, or 'sim' for the emulated bus (default: the rig "
@@ -63,7 +64,8 @@ def register(sub: Any) -> None:
         if baud:
             q.add_argument("--baud", type=_baud, default=None, metavar="BPS",
                            help="the baud the servo answers at now (default: the rig file's "
-                           "[bus] baud; `scan` finds it)")
+                           "[bus] baud; set-id and set-baud look at every baud, the rig's "
+                           "and the factory's 57600 first)")
 
     s = group.add_parser("scan", help="find servos at every baud; list model, firmware, "
                          "mode, voltage, temperature and errors",
@@ -121,11 +123,14 @@ def _usage(parser: argparse.ArgumentParser) -> int:
 
 @contextlib.contextmanager
 def _port(args: argparse.Namespace, rig: RigConfig, rig_path: Path) -> Iterator[str]:
-    port = args.port or rig.bus.port
-    if port == "sim":
+    port = require_port(args.port or rig.bus.port, rig_path)
+    if say_if_simulated(port, out=not args.json):
         with port_process(["sim-bus", "--rig", str(rig_path), "--no-puppet"],
                           "the simulated servo bus") as (_, pty):
             yield pty
+        if not args.json:
+            print("SIMULATED: that was the emulated bus (--port sim); no servo of yours "
+                  "was touched", flush=True)
         return
     if not os.path.exists(port):
         raise ConfigError(f"no such port: {port}", key="--port", value=port,
@@ -179,6 +184,9 @@ def run_scan(args: argparse.Namespace) -> int:
         print("no servo answered at any of these bauds: check power (the servos' LEDs "
               "blink once at power-on), the cable and the adapter's TTL/RS-485 setting "
               "(docs/hardware.md)")
+        if set(args.bauds) != set(BAUD_RATES):
+            print("only the bauds of --bauds were looked at: without it, scan tries every "
+                  "baud the X series supports (about 10 s)")
     for baud in result.collisions:
         print(f"at {baud} bps replies were garbled: {bringup.ONE_AT_A_TIME}")
     counts = {b: len(result.ids_at(b)) for b in result.tried if result.ids_at(b)}
@@ -192,10 +200,20 @@ def _baud_of(args: argparse.Namespace, rig: RigConfig) -> int:
     return int(args.baud or rig.bus.baud)
 
 
+def _found_baud(args: argparse.Namespace, rig: RigConfig, port: str, servo_id: int) -> int:
+    """``--baud``, else the baud servo ``servo_id`` answers at (the rig's first)."""
+    if args.baud:
+        return int(args.baud)
+    baud = bringup.find_baud(port, servo_id, bringup.search_order([rig.bus.baud]))
+    print(f"servo {servo_id} answers at {baud} bps", flush=True)
+    return baud
+
+
 def run_set_id(args: argparse.Namespace) -> int:
     rig, rig_path = _rig(args)
     with _port(args, rig, rig_path) as port:
-        for line in bringup.set_id(port, _baud_of(args, rig), args.old_id, args.new_id):
+        baud = _found_baud(args, rig, port, args.old_id)
+        for line in bringup.set_id(port, baud, args.old_id, args.new_id):
             print(line)
     return 0
 
@@ -203,7 +221,8 @@ def run_set_id(args: argparse.Namespace) -> int:
 def run_set_baud(args: argparse.Namespace) -> int:
     rig, rig_path = _rig(args)
     with _port(args, rig, rig_path) as port:
-        for line in bringup.set_baud(port, _baud_of(args, rig), args.id, args.new_baud):
+        baud = _found_baud(args, rig, port, args.id)
+        for line in bringup.set_baud(port, baud, args.id, args.new_baud):
             print(line)
     if args.new_baud != rig.bus.baud:
         print(f"note: the rig file runs the bus at {rig.bus.baud} bps ([bus] baud in "
@@ -225,19 +244,23 @@ def run_reboot(args: argparse.Namespace) -> int:
 
 def run_check(args: argparse.Namespace) -> int:
     rig, rig_path = _rig(args)
-    if not args.json:
-        print(format_sources([rig_file(args.rig)]), flush=True)
     with _port(args, rig, rig_path) as port:
+        if not args.json:
+            print(format_sources([rig_file(args.rig)]), flush=True)
         found, findings = bringup.check(port, rig, baud=args.baud)
+    simulated = say_if_simulated(args.port or rig.bus.port, out=False)
     if args.json:
-        print(json.dumps({"port": port, "servos": [_as_dict(s) for s in found],
+        print(json.dumps({"port": port, "simulated": simulated,
+                          "servos": [_as_dict(s) for s in found],
                           "findings": [{"id": f.servo_id, "what": f.what, "detail": f.detail,
                                         "fix": f.fix} for f in findings]}))
         return 1 if findings else 0
-    print(f"{len(found)} servo(s) answered on {port} at {args.baud or rig.bus.baud} bps; "
+    where = f"the SIMULATED bus {port} (--port sim)" if simulated else port
+    print(f"{len(found)} servo(s) answered on {where} at {args.baud or rig.bus.baud} bps; "
           f"the rig file has {len(rig.servos)}")
     for f in findings:
         print(f"  {f.what}: {f.detail}\n    -> {f.fix}")
     if not findings:
-        print("  the bus matches the rig file")
+        print("  the bus matches the rig file" + (" (emulated servos: not your hardware)"
+                                                  if simulated else ""))
     return 1 if findings else 0

@@ -1,7 +1,7 @@
 """``handrig sim-glove``: an emulated glove on a pseudo-terminal.
 
 ``handrig sim-glove FILE`` streams a glove recording (CSV, see
-handrig/glove_recording.py) in real time. ``handrig sim-glove --calibration``
+handrig/devices/glove_recording.py) in real time. ``handrig sim-glove --calibration``
 performs the poses ``handrig calibrate glove`` asks for instead (open hand, fist,
 thumb to little finger, thumb spread, with sensor noise; sim/calibration_motion.py),
 so the calibration can be rehearsed and tested without a glove:

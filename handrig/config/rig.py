@@ -93,9 +93,10 @@ class ServoCalibration:
 
 @dataclass(frozen=True)
 class BusConfig:
-    """The serial bus: port path (or ``"sim"``), baud rate, timing."""
+    """The serial bus: port path (or ``"sim"``, the simulated rig), baud rate, timing.
+    An empty port names none: a command that needs one asks for ``--port``."""
 
-    port: str = "sim"
+    port: str = ""
     baud: int = 1_000_000
     read_every: int = 4  # read present state every N cycles (Fast Sync Read)
     read_parts: int = 1  # each read asks 1/N of the servos, in turn (shorter reads)
@@ -115,6 +116,28 @@ class BusConfig:
                 "watchdog out of range", key="watchdog_ms", value=self.watchdog_ms,
                 allowed="0 (off) or 20..2540 ms",
             )
+
+
+SIM_PORT = "sim"
+"""The port name that asks for the simulated rig (the byte-level emulator and MuJoCo)."""
+
+PORT_ADVICE = ("--port PORT (the servo adapter, best by its stable name "
+               "/dev/serial/by-id/usb-FTDI_...: docs/hardware.md), or --port sim for the "
+               "simulated rig; `handrig setup` finds the adapter and writes [bus] port "
+               "into your rig file")
+"""What to do when no servo port is named: the one wording every command gives."""
+
+
+def require_port(port: str | None, rig_file: str | Path | None = None, *,
+                 flag: str = "--port") -> str:
+    """``port`` (a flag's value, else the rig file's ``[bus] port``), or a ConfigError
+    naming ``flag`` and the fix when neither names one: nothing falls back to the
+    simulated rig unasked."""
+    if port:
+        return port
+    where = f"{rig_file} names no [bus] port" if rig_file else "the rig file names no port"
+    raise ConfigError(f"no servo port given ({where})", key=flag,
+                      allowed=PORT_ADVICE.replace("--port", flag))
 
 
 LOOP_RANGES: tuple[tuple[str, float, float, str], ...] = (

@@ -44,7 +44,8 @@ def resolve_rig_file(name_or_path: str | Path | None) -> RigFile:
         if is_installed(path):
             return RigFile(path, "shipped default; no rig.toml of yours at "
                            f"{user_config(RIG_FILE_NAME)}")
-        return RigFile(path, "your rig.toml, written by `handrig calibrate servos`")
+        return RigFile(path, "your rig.toml, written by `handrig setup` or `handrig "
+                       "calibrate servos`")
     text = str(name_or_path)
     if "/" in text or text.endswith(".toml"):
         return RigFile(Path(text), "--rig")

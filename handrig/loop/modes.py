@@ -230,6 +230,7 @@ class ModeMachine:
                        f"{self.resume_time_s:.2f} s once it sends")
             return
         self.held = True
+        self.stats.relax_keys += 1
         if self.mode is Mode.RELAXING:
             self.event(f"{reason}: staying relaxed until it is pressed again")
             return

@@ -189,7 +189,8 @@ class RunStats:
     tracking_n: int = 0
     tracking_max_deg: float = 0.0
     relax_events: int = 0  # times the glove was lost and the puppet eased to relaxed
-    resumes: int = 0  # times the glove came back and the puppet eased back to it
+    resumes: int = 0  # times the puppet eased back to the glove (after a loss or a relax key)
+    relax_keys: int = 0  # times the relax key relaxed the puppet (no glove loss)
     servo_silences: int = 0  # servos past the [silence] warning
     servos_held: int = 0  # servos whose goal was held for silence
     heat_warnings: int = 0  # servos past [heat] warn_c

@@ -29,6 +29,6 @@ def test_the_committed_diagram_is_the_drawn_one_with_the_firmware_pins():
     config = (ROOT / "firmware" / "glove" / "glove_config.h").read_text()
     inputs = re.search(r"#define GLOVE_ADC_INPUTS \{([^}]*)\}", config)
     assert inputs is not None
-    assert [f"A{int(v)}" for v in inputs.group(1).split(",")] == [p for _, _, p in tool.SENSORS]
+    assert [f"A{int(v)}" for v in inputs.group(1).split(",")] == [p for _, _, p, _ in tool.SENSORS]
     assert "#define GLOVE_BUTTON_PIN 2" in config and "#define GLOVE_LED_PIN 13" in config
     assert "#define GLOVE_TEST_POINT_PIN 8" in config and "#define GLOVE_IMU_ADDR 0x28" in config

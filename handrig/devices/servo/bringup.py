@@ -46,6 +46,7 @@ BAUD_INDEX: dict[int, int] = {baud: i for i, baud in enumerate(BAUD_RATES)}
 EEPROM_WRITE_S = 0.05  # time given to an EEPROM write (and a status at the old ID or baud)
 FACTORY_ID, FACTORY_BAUD = 1, 57600
 REBOOT_WAIT_S = 0.5  # a rebooted servo is silent for a moment (ORCA measures about 0.3 s)
+PING_TRIES = 3  # pings of a servo that should answer before it is taken as absent
 DESCRIBE_TRIES = 3  # reads of a found servo's registers, each tried this many times
 ONE_AT_A_TIME = (
     "two or more servos share an ID (new servos all come as ID 1 at 57600): connect one "
@@ -144,6 +145,15 @@ class ServoPort:
         if result == COMM_RX_CORRUPT:
             raise DeviceError(f"garbled reply from ID {servo_id} on {self.port} at "
                               f"{self.baud} bps: {ONE_AT_A_TIME}")
+        return None
+
+    def ping_confirmed(self, servo_id: int, tries: int = PING_TRIES) -> int | None:
+        """:meth:`ping`, asked up to ``tries`` times while nothing answers (one lost or
+        late reply, a loaded host or a USB adapter's latency timer, is not an absence)."""
+        for _ in range(tries):
+            model = self.ping(servo_id)
+            if model is not None:
+                return model
         return None
 
     def read(self, servo_id: int, reg: Reg) -> int:
@@ -251,11 +261,33 @@ def _eeprom_ready(sp: ServoPort, servo_id: int) -> str:
 
 def _answering(sp: ServoPort, servo_id: int, port: str, baud: int) -> int:
     """The model number of the servo answering as ``servo_id``; a DeviceError if none does."""
-    model = sp.ping(servo_id)
+    model = sp.ping_confirmed(servo_id)
     if model is None:
         raise DeviceError(f"no servo answers as ID {servo_id} on {port} at {baud} bps "
                           "(`handrig servos scan` lists what is there)")
     return model
+
+
+def search_order(first: Sequence[int] = ()) -> list[int]:
+    """The bauds to look for a servo at: ``first`` (the rig's), the factory's 57600,
+    then the fast ones, 9600 last (its broadcast ping alone waits seconds)."""
+    order = [*first, FACTORY_BAUD, *sorted((b for b in BAUD_RATES if b > FACTORY_BAUD),
+                                           reverse=True), *BAUD_RATES]
+    return list(dict.fromkeys(b for b in order if b in BAUD_INDEX))
+
+
+def find_baud(port: str, servo_id: int, bauds: Sequence[int]) -> int:
+    """The baud at which a servo answers as ``servo_id``, trying ``bauds`` in order
+    (:func:`search_order`); a DeviceError naming what was tried when none does, or
+    when two servos answer as it (garbled) at a baud."""
+    with open_port(port, bauds[0] if bauds else FACTORY_BAUD) as sp:
+        for baud in bauds:
+            sp.set_baud(baud)
+            if sp.ping_confirmed(servo_id) is not None:
+                return baud
+    raise DeviceError(f"no servo answers as ID {servo_id} on {port} at any of "
+                      f"{', '.join(map(str, bauds))} bps: check power and the cable "
+                      "(`handrig servos scan` lists what is there)")
 
 
 def set_id(port: str, baud: int, old_id: int, new_id: int) -> list[str]:
@@ -269,7 +301,7 @@ def set_id(port: str, baud: int, old_id: int, new_id: int) -> list[str]:
         model = _answering(sp, old_id, port, baud)
         if new_id == old_id:
             return [f"servo {old_id} already has ID {new_id}: nothing to do"]
-        taken = sp.ping(new_id)
+        taken = sp.ping_confirmed(new_id)
         if taken is not None:
             raise DeviceError(
                 f"ID {new_id} is taken on {port} at {baud} bps (a "
@@ -279,7 +311,7 @@ def set_id(port: str, baud: int, old_id: int, new_id: int) -> list[str]:
         if note := _eeprom_ready(sp, old_id):
             notes.append(note)
         sp.write_unconfirmed(old_id, Reg.ID, new_id)
-        if sp.ping(new_id) is None:
+        if sp.ping_confirmed(new_id) is None:
             raise DeviceError(f"wrote ID {new_id} to servo {old_id} but nothing answers as "
                               f"{new_id}: run `handrig servos scan`")
         notes.append(f"servo {old_id} ({MODEL_NAMES.get(model, model)}) is now ID {new_id} "
@@ -299,7 +331,7 @@ def set_baud(port: str, baud: int, servo_id: int, new_baud: int) -> list[str]:
         if new_baud == baud:
             return [f"servo {servo_id} already runs at {baud} bps: nothing to do"]
         sp.set_baud(new_baud)
-        taken = sp.ping(servo_id)
+        taken = sp.ping_confirmed(servo_id)
         sp.set_baud(baud)
         if taken is not None:
             raise DeviceError(
@@ -310,7 +342,7 @@ def set_baud(port: str, baud: int, servo_id: int, new_baud: int) -> list[str]:
             notes.append(note)
         sp.write_unconfirmed(servo_id, Reg.BAUD_RATE, BAUD_INDEX[new_baud])
         sp.set_baud(new_baud)
-        if sp.ping(servo_id) is None:
+        if sp.ping_confirmed(servo_id) is None:
             raise DeviceError(f"wrote baud {new_baud} to servo {servo_id} but it does not "
                               f"answer at {new_baud} bps: run `handrig servos scan`")
         notes.append(f"servo {servo_id} ({MODEL_NAMES.get(model, model)}) now runs at "

@@ -36,8 +36,10 @@ def test_run_on_the_sim_bus_prints_the_files_it_uses_and_why(tmp_path: Path) -> 
                   env_for(tmp_path))
     assert res.returncode == 0, res.stderr
     lines = res.stdout.splitlines()
-    assert lines[0] == "files in use:"  # before anything else the run prints
-    head = "\n".join(lines[:6])
+    # before anything else the run prints: that the bus is simulated, then the files
+    assert lines[0].startswith("SIMULATED rig (--port sim)")
+    assert lines[1] == "files in use:"
+    head = "\n".join(lines[:7])
     assert f"rig           {installed_config('rig.toml')}  (shipped default" in head
     assert f"glove         {mine}  (your calibration, written by `handrig calibrate glove`)" \
         in head

@@ -22,12 +22,12 @@ def leap_json() -> dict:
 
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        assert main(["retarget", "check", "--json"]) == 0
+        assert main(["retarget", "check", "--json"]) == 1  # LEAP has flagged joints
     return json.loads(buf.getvalue())
 
 
 def test_prints_the_table_the_ranges_and_a_summary(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["retarget", "check", "--no-capture"]) == 0
+    assert main(["retarget", "check", "--no-capture"]) == 1  # joints flagged: exit 1
     out = capsys.readouterr().out
     lines = out.splitlines()
     assert lines[0].startswith("retarget table: 16 robot joints")
@@ -70,9 +70,15 @@ def test_a_table_file_and_a_human_rig(tmp_path: Path, capsys: pytest.CaptureFixt
     p = tmp_path / "t.toml"
     p.write_text('format = "handrig-retarget"\nversion = 1\n'
                  '[joints.grip]\nsources = { riIndexMCPy = 2.0 }\nrange_deg = [0.0, 10.0]\n')
-    assert main(["retarget", "check", "--table", str(p), "--no-capture", "--json"]) == 0
+    assert main(["retarget", "check", "--table", str(p), "--no-capture", "--json"]) == 1
     (grip,) = json.loads(capsys.readouterr().out)["joints"]
     assert grip["flags"] == ["demo", "anatomy"] and grip["demo_high_frac"] > 0
+    # a table whose range holds every input flags nothing: exit 0
+    p.write_text('format = "handrig-retarget"\nversion = 1\n'
+                 '[joints.grip]\nsources = { riIndexMCPy = 0.1 }\nrange_deg = [-30.0, 30.0]\n')
+    assert main(["retarget", "check", "--table", str(p), "--no-capture", "--json"]) == 0
+    (grip,) = json.loads(capsys.readouterr().out)["joints"]
+    assert not set(grip["flags"]) & {"demo", "capture"}
     assert main(["retarget", "check", "--rig", str(CONFIG_DIR / "rig.toml")]) == 2
     assert "not a robot rig" in capsys.readouterr().err
     assert main(["retarget"]) == 2
