@@ -8,8 +8,8 @@
 2. (the command writes the port into the person's rig file)
 3. :func:`commission_servos`: a box of new servos, one at a time, as the vendor's
    wizard and LeRobot's motor setup do: plug one in, it is found at whatever ID
-   and baud it has (new X-series servos: ID 1 at 57600 bps), given the rig's next
-   ID and the rig's baud, torque off, next.
+   and baud it has (a factory-new servo: ID 1 at the factory baud the driver knows),
+   given the rig's next ID and the rig's baud, torque off, next.
 
 Every question goes through ``ask`` and every line through ``say``, and the port
 list through ``list_ports``, so a test drives the steps against the emulated bus.
