@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from handrig import hand
+from handrig.cli._numbers import positive_int
 from handrig.config.loading import CONFIG_DIR, load_joint_limits
 from handrig.errors import ConfigError
 from handrig.pose.retarget import JointCheck, Retarget, check_joints, load_retarget
@@ -83,7 +84,7 @@ def register(sub: Any) -> None:
     f.add_argument("--hold", default="", metavar="JOINT,...",
                    help="robot joints to keep as the table has them (all the thumb's: "
                    "no pinch terms)")
-    f.add_argument("--max-evaluations", type=int, default=60, metavar="N",
+    f.add_argument("--max-evaluations", type=positive_int, default=60, metavar="N",
                    help="solver evaluations per stage (default 60)")
     f.add_argument("--json", action="store_true", help="print one JSON object")
     f.set_defaults(func=run_fit)
@@ -233,9 +234,6 @@ def run_fit(args: argparse.Namespace) -> int:
 
     rig = _robot_rig(args.rig)
     assert rig.robot is not None  # _robot_rig checked it
-    if args.max_evaluations < 1:
-        raise ConfigError("must be at least 1", key="--max-evaluations",
-                          value=args.max_evaluations, allowed="1 or more (default 60)")
     out = Path(args.out) if args.out else Path(rig.robot.retarget)
     rt = robot_retarget(rig)
     fitter = retarget_fitter()

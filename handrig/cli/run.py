@@ -144,10 +144,9 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
     from handrig.pose.robot_rig import find_rig
 
     rig_file, rig = find_rig(args.rig)
-    # no port: said before the run's imports and kernels
+    # no port: said before the run's imports and kernels (a left bus's port once the hand
+    # flags are checked: a rig on two buses needs a glove per hand first)
     require_port(args.bus or rig.bus.port, rig_file)
-    if rig.left_bus is not None:
-        require_port(args.bus_left or rig.left_bus.port, rig_file, flag="--bus-left")
     if rig.left_bus is None and (args.bus or rig.bus.port) == "sim":
         started.start(sim_bus_argv(rig_file, None, wire_timing=not args.no_wire_timing,
                                    viewer=args.viewer), SIM_BUS)

@@ -215,8 +215,8 @@ def test_servo_fast_path_equals_the_full_pipeline(parts_factory):
         inc, rot = rng.uniform(-89, 89), rng.uniform(-180, 180)
         pose = pl.full_pose(c, inc, rot).copy()
         expanded = parts.expander.expand(c)
-        unclamped = parts.expander.map.curve_means_deg + parts.expander.map.gains @ (
-            c - parts.expander.map.control_means_deg)
+        gains_f, bias, knots = parts.expander.map.feature_gains()  # hinges included
+        unclamped = bias + gains_f @ np.concatenate([c, np.maximum(c - knots, 0.0)])
         if not np.allclose(expanded, unclamped):
             continue  # the expander clamped a curve before sag: paths may differ there
         fast = pl.servo_targets(c, inc, rot, 1e6).copy()  # a step the slew limit never holds
