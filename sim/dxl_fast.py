@@ -5,14 +5,14 @@ Fast Sync Read. The general path (:class:`sim.dxl_dispatch.Dispatcher`) answers
 them in ~2-3 us of Python per servo; this module answers the common case, where
 every addressed servo is there, awake, hears the packet's baud and no reply fault
 is switched on, with one plan per request made once (which servos, where each
-one's bytes go in the reply) and a compiled loop for the reply's running CRCs.
+one's bytes go in the reply) and the reply's running CRCs two bytes a step.
 Anything else (a servo missing, rebooting, at another baud, a Status Return Level
 of 0, a fault spec with reply faults or mutes) returns ``None`` and the general
 path answers, byte for byte as before: the plans only skip work whose result they
 know.
 
-The CRC loop here is the emulator's own (CRC-16/BUYPASS, table from
-:data:`firmware_protocol.dynamixel.CRC_TABLE`), not the driver's, so a misreading
+The CRC here is the emulator's own (CRC-16/BUYPASS,
+:func:`firmware_protocol.dynamixel.crc16`), not the driver's, so a misreading
 on one side still fails a test instead of cancelling out.
 """
 
@@ -22,46 +22,37 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
-from numba import njit, types
-
 from firmware_protocol.dynamixel import (
     BROADCAST_ID,
-    CRC_TABLE,
     ERROR_ALERT,
     HEADER,
     MAX_PACKET_LEN,
     STATUS_INSTRUCTION,
+    crc16,
 )
 from sim.dxl_servo import READABLE_BYTES, EmulatedServo
 
-_TABLE = np.array(CRC_TABLE, dtype=np.uint16)
-_BYTES = types.Array(types.uint8, 1, "C")
-_ID_GOAL = struct.Struct("<Bi")  # a Sync Write item of Goal Position
 # Bytes before the first servo's ERR in a fast read reply: header, ID, LEN, 0x55.
 _REPLY_PREFIX = 8
+_ID_GOAL = struct.Struct("<Bi")  # a Sync Write item of Goal Position
 
 
-@njit(types.uint16(_BYTES, types.Array(types.uint16, 1, "C"), types.int64, types.int64),
-      cache=True, nogil=True)
-def _running_crcs(buf: np.ndarray, table: np.ndarray, stride: int, count: int) -> int:
-    """Write the running CRC at the end of each of ``count`` chunks of ``stride``
-    bytes (the last two of each) after the 8-byte prefix; returns the last one."""
+def running_crcs(reply: bytearray, stride: int, count: int) -> None:
+    """Fill a fast read reply's running CRCs in place (chunks of equal ``stride``): the
+    running CRC at the end of each of ``count`` chunks (its last two bytes), after the
+    8-byte prefix; each covers the CRCs before it too. The emulator's own CRC
+    (:func:`firmware_protocol.dynamixel.crc16`, two bytes a step): no compiled kernel,
+    so the emulator's process starts without numba (0.5 s a start, hundreds of starts
+    in the test suite)."""
+    view = memoryview(reply)
     crc = 0
     start = 0
     for k in range(count):
         end = _REPLY_PREFIX + (k + 1) * stride - 2
-        for i in range(start, end):
-            crc = ((crc << 8) & 0xFFFF) ^ table[((crc >> 8) ^ buf[i]) & 0xFF]
-        buf[end] = crc & 0xFF
-        buf[end + 1] = crc >> 8
-        start = end  # the running CRC covers the CRCs before it too
-    return crc
-
-
-def running_crcs(reply: bytearray, stride: int, count: int) -> None:
-    """Fill a fast read reply's running CRCs in place (chunks of equal ``stride``)."""
-    _running_crcs(np.frombuffer(reply, dtype=np.uint8), _TABLE, stride, count)
+        crc = crc16(view[start:end], crc)
+        reply[end] = crc & 0xFF
+        reply[end + 1] = crc >> 8
+        start = end
 
 
 @dataclass

@@ -22,8 +22,12 @@ Units: joint degrees (flexion positive, radial positive), degrees per second,
 milliamperes, degrees Celsius, seconds on the bus clock.
 """
 
-from handrig.devices.servo.bus import BusStats, FaultPolicy, ServoBus, ServoState
-from handrig.devices.servo.dynamixel import DynamixelBus, cycle_bytes, wire_time_s
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from handrig.devices.servo.bus import BusStats, FaultPolicy, ServoBus, ServoState
+    from handrig.devices.servo.dynamixel import DynamixelBus, cycle_bytes, wire_time_s
 
 __all__ = [
     "BusStats",
@@ -34,3 +38,18 @@ __all__ = [
     "cycle_bytes",
     "wire_time_s",
 ]
+_MODULE_OF = {"BusStats": "bus", "FaultPolicy": "bus", "ServoBus": "bus", "ServoState": "bus",
+              "DynamixelBus": "dynamixel", "cycle_bytes": "dynamixel",
+              "wire_time_s": "dynamixel"}
+
+
+def __getattr__(name: str) -> Any:
+    """The names above, imported on first use, so that a light module of this package
+    (``models``: the model table the bus emulator reads too) comes without the driver
+    and its compiled kernels (numba: about 0.3 s at every emulator start)."""
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
