@@ -55,6 +55,17 @@ def running_crcs(reply: bytearray, stride: int, count: int) -> None:
         start = end
 
 
+def _servos(by_id: dict[int, EmulatedServo], ids: bytes) -> list[EmulatedServo] | None:
+    """The servos ``ids`` address, in order; None when one is not on the bus."""
+    servos = []
+    for i in ids:
+        servo = by_id.get(i)
+        if servo is None:
+            return None
+        servos.append(servo)
+    return servos
+
+
 @dataclass
 class ReadPlan:
     """A Fast Sync Read request the bus has answered before: its servos in order,
@@ -85,12 +96,9 @@ def read_plan(by_id: dict[int, EmulatedServo], address: int, length: int,
     total = _REPLY_PREFIX + len(ids) * (length + 4)
     if not ids or length == 0 or address + length > READABLE_BYTES or total > MAX_PACKET_LEN:
         return None
-    servos = []
-    for i in ids:
-        servo = by_id.get(i)
-        if servo is None:
-            return None
-        servos.append(servo)
+    servos = _servos(by_id, ids)
+    if servos is None:
+        return None
     template = bytearray(total)
     template[:4] = HEADER
     template[4] = BROADCAST_ID
@@ -129,12 +137,9 @@ def answer_read(plan: ReadPlan, now: float, baud_index: int) -> bytes | None:
 def write_plan(by_id: dict[int, EmulatedServo], ids: bytes,
                limits: dict[int, tuple[int, int]], generation: int) -> WritePlan | None:
     """The plan for a Sync Write of Goal Position to ``ids`` (None: an ID not on the bus)."""
-    servos = []
-    for i in ids:
-        servo = by_id.get(i)
-        if servo is None:
-            return None
-        servos.append(servo)
+    servos = _servos(by_id, ids)
+    if servos is None:
+        return None
     no_limits = (1, 0)
     low = tuple(limits.get(i, no_limits)[0] for i in ids)
     high = tuple(limits.get(i, no_limits)[1] for i in ids)

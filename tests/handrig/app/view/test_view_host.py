@@ -12,31 +12,8 @@ import os
 import socket
 import time
 
-import pytest
-
-from handrig.app.parts import build_parts
 from handrig.app.view import build_server
-
-
-class Controls:
-    """Records what the buttons asked for."""
-
-    def __init__(self) -> None:
-        self.calls: list[str] = []
-
-    def toggle_relax(self) -> None:
-        self.calls.append("relax")
-
-    def request_stop(self, reason: str = "") -> None:
-        self.calls.append("stop")
-
-    def estop(self, reason: str = "") -> None:
-        self.calls.append("estop")
-
-
-@pytest.fixture(scope="module")
-def human_rig():  # type: ignore[no-untyped-def]
-    return build_parts(None).rig_config
+from tests.helpers.view import Controls
 
 
 def _get(port: int, path: str, host: str) -> tuple[int, bytes]:

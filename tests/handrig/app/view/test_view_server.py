@@ -27,27 +27,7 @@ from handrig.app import simulator
 from handrig.app.parts import build_parts
 from handrig.app.view import ModelScene, build_server, is_loopback, parse_view_address
 from handrig.errors import ConfigError
-
-
-class Controls:
-    """Records what the buttons asked for (the rig's three key actions)."""
-
-    def __init__(self) -> None:
-        self.calls: list[str] = []
-
-    def toggle_relax(self) -> None:
-        self.calls.append("relax")
-
-    def request_stop(self, reason: str = "") -> None:
-        self.calls.append("stop")
-
-    def estop(self, reason: str = "") -> None:
-        self.calls.append("estop")
-
-
-@pytest.fixture(scope="module")
-def human_rig():  # type: ignore[no-untyped-def]
-    return build_parts(None).rig_config
+from tests.helpers.view import Controls
 
 
 def test_address_parsing() -> None:
