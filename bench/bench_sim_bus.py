@@ -20,6 +20,7 @@ import numpy as np
 
 from firmware_protocol import dynamixel as dx
 from handrig.config.rig import load_rig_config
+from handrig.devices.servo.positions import deg_to_ticks
 from sim.dxl_bus import SimBus
 from sim.dxl_servo import EmulatedServo
 
@@ -106,7 +107,7 @@ def wire_timed_cycles(seconds: float = 1.5) -> None:
             sw = GroupSyncWrite(port, ph, 116, 4)
             fsr = GroupSyncRead(port, ph, 132, 4)
             for s in rig.servos:
-                sw.addParam(s.id, s.deg_to_ticks(10.0).to_bytes(4, "little"))
+                sw.addParam(s.id, deg_to_ticks(s, 10.0).to_bytes(4, "little"))
                 fsr.addParam(s.id)
             bus.stats.late_total_s = bus.stats.late_max_s = 0.0
             bus.stats.replies = 0

@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 from firmware_protocol.dynamixel import MODELS
 from handrig.config.rig import RigConfig
 from handrig.devices.servo.models import DEFAULT_MODEL, servo_model
+from handrig.devices.servo.positions import check_positions, deg_to_ticks
 from handrig.errors import ConfigError
 from sim.dxl_servo import EmulatedServo
 
@@ -32,7 +33,7 @@ def goal_limits(config: RigConfig) -> dict[int, tuple[int, int]]:
     """Each calibrated servo's ``[min_deg, max_deg]`` as (lowest, highest) goal ticks."""
     out = {}
     for s in config.servos:
-        a, b = s.deg_to_ticks(s.min_deg), s.deg_to_ticks(s.max_deg)
+        a, b = deg_to_ticks(s, s.min_deg), deg_to_ticks(s, s.max_deg)
         out[s.id] = (min(a, b), max(a, b))
     return out
 
@@ -44,6 +45,7 @@ def servos_from_rig(
     """Emulated servos for a rig: its IDs (or ``ids``), its models (or ``model``),
     each starting at its calibrated zero (joint at 0 deg), each at the rig's baud or
     the one ``bauds`` gives its ID (bits per second)."""
+    check_positions(config.servos)  # zeros and limits the emulated servos can hold
     bauds = bauds or {}
     unknown = sorted(set(bauds) - set(ids if ids is not None else
                                       [s.id for s in config.servos]))

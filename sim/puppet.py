@@ -51,6 +51,7 @@ import numpy as np
 from firmware_protocol.dynamixel import MODELS, TICKS_PER_TURN, HardwareError, Reg
 from handrig.config.rig import RigConfig, ServoCalibration
 from handrig.devices.servo.models import servo_model
+from handrig.devices.servo.positions import ticks_to_deg
 from handrig.errors import ConfigError, HandrigError
 from handrig.hand import DOF_NAMES, Hand
 from handrig.pose.robot_rig import RobotRigConfig
@@ -226,7 +227,7 @@ class _HandSim:
             if settings == ch.pulled and ch.powered:
                 if mem[116:120] != ch.pulled_goal:
                     ch.pulled_goal = bytes(mem[116:120])
-                    self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
+                    self.goal_rad[k] = math.radians(ticks_to_deg(ch.cal, s.goal_motor_ticks()))
                 continue
             ch.pulled, ch.pulled_goal = settings, bytes(mem[116:120])
             on = mem[64] == 1
@@ -235,7 +236,7 @@ class _HandSim:
             if not on:
                 continue
             g = ch.cal.gear_ratio
-            self.goal_rad[k] = math.radians(ch.cal.ticks_to_deg(s.goal_motor_ticks()))
+            self.goal_rad[k] = math.radians(ticks_to_deg(ch.cal, s.goal_motor_ticks()))
             self.speed_rad_s[k] = s.speed_limit_ticks_per_s() / TICKS_PER_RAD / g
             # P/D gain, Goal Current, Current Limit, PWM Limit and Goal PWM, Operating
             # Mode: act

@@ -29,6 +29,7 @@ import numpy as np
 from handrig.cli._numbers import positive_float, positive_int
 from handrig.config.rig import RigConfig, load_rig_config
 from handrig.devices.servo.models import BAUD_RATES
+from handrig.devices.servo.positions import deg_to_ticks
 from handrig.devices.servo.wire import goal_write_bytes, read_bytes
 from handrig.errors import ConfigError, DeviceError
 from handrig.realtime import helper_env, pinned_loop
@@ -197,7 +198,7 @@ def run_sdk(port: str, rig: RigConfig, baud: int, seconds: float, fast: bool) ->
         while True:
             g = goals[cycles & 63]
             for sid, cal, deg in zip(ids, cals, g, strict=True):
-                ticks = cal.deg_to_ticks(float(deg))
+                ticks = deg_to_ticks(cal, float(deg))
                 writer.changeParam(sid, [ticks & 0xFF, ticks >> 8 & 0xFF, 0, 0])
             writer.txPacket()
             result = reader.fastSyncRead() if fast else reader.txRxPacket()

@@ -56,14 +56,7 @@ from handrig.cli.calibrate_glove import calibrate_subparsers
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.loading import build
 from handrig.config.paths import is_installed, output_for, user_config, user_config_dir
-from handrig.config.rig import (
-    POSITION_TICKS_MAX,
-    POSITION_TICKS_MIN,
-    TICKS_PER_DEG,
-    RigConfig,
-    ServoCalibration,
-    require_port,
-)
+from handrig.config.rig import RigConfig, ServoCalibration, require_port
 from handrig.config.toml_edit import (
     BACKUP_DIR,
     backups_of,
@@ -73,6 +66,14 @@ from handrig.config.toml_edit import (
     write_with_backup,
 )
 from handrig.devices.servo import DynamixelBus
+from handrig.devices.servo.positions import (
+    POSITION_TICKS_MAX,
+    POSITION_TICKS_MIN,
+    TICKS_PER_DEG,
+    deg_to_ticks,
+    deg_to_ticks_exact,
+    ticks_to_deg,
+)
 from handrig.devices.servo.registers import Reg
 from handrig.errors import ConfigError, HandrigError
 from handrig.pose.robot_rig import load_rig
@@ -180,7 +181,7 @@ class Proposal:
 
 def propose(cal: ServoCalibration, ticks: int, max_shift_deg: float) -> Proposal:
     """What writing ``ticks`` as ``cal``'s zero would mean."""
-    shift = cal.ticks_to_deg(ticks)  # joint degrees from the current zero
+    shift = ticks_to_deg(cal, ticks)  # joint degrees from the current zero
     reasons = []
     if abs(shift) > max_shift_deg:
         reasons.append(
@@ -188,7 +189,7 @@ def propose(cal: ServoCalibration, ticks: int, max_shift_deg: float) -> Proposal
             f"{max_shift_deg:g}: a joint hanging under gravity with torque off, or a horn "
             "mounted a spline off, reads like this")
     new = dataclasses.replace(cal, zero_ticks=ticks)
-    ends = sorted((new.ticks_to_deg(POSITION_TICKS_MIN), new.ticks_to_deg(POSITION_TICKS_MAX)))
+    ends = sorted((ticks_to_deg(new, POSITION_TICKS_MIN), ticks_to_deg(new, POSITION_TICKS_MAX)))
     low, high = max(cal.min_deg, ends[0]), min(cal.max_deg, ends[1])
     limits: tuple[float, float] | None = None
     if low > cal.min_deg or high < cal.max_deg:
@@ -197,7 +198,7 @@ def propose(cal: ServoCalibration, ticks: int, max_shift_deg: float) -> Proposal
             return Proposal(ticks, shift, tuple(reasons), None, impossible=(
                 f"with zero_ticks {ticks} no part of [{cal.min_deg:g}, {cal.max_deg:g}] deg "
                 "lies within the servo's 0..4095 ticks"))
-        a, b = sorted((new.deg_to_ticks_exact(cal.min_deg), new.deg_to_ticks_exact(cal.max_deg)))
+        a, b = sorted((deg_to_ticks_exact(new, cal.min_deg), deg_to_ticks_exact(new, cal.max_deg)))
         reasons.append(
             f"with zero_ticks {ticks} the joint's range [{cal.min_deg:g}, {cal.max_deg:g}] deg "
             f"needs ticks {a:.0f}..{b:.0f}, outside the servo's travel 0..4095: accepting "
@@ -242,7 +243,7 @@ def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog
             say(f"{name}: its range [{cal.min_deg:g}, {cal.max_deg:g}] allows no flexion: "
                 "direction not checked")
             return None
-        bus.write_register(index, Reg.GOAL_POSITION, cal.deg_to_ticks(step))
+        bus.write_register(index, Reg.GOAL_POSITION, deg_to_ticks(cal, step))
         settled_position(bus, index, clock)
         try:
             while True:
@@ -256,7 +257,7 @@ def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog
                 if answer == "q":
                     raise Quit
         finally:
-            bus.write_register(index, Reg.GOAL_POSITION, cal.deg_to_ticks(0.0))
+            bus.write_register(index, Reg.GOAL_POSITION, deg_to_ticks(cal, 0.0))
             settled_position(bus, index, clock)
     while True:
         answer = ask(f"{name}: direction check: flex the joint by hand (bend it the way it "
@@ -268,7 +269,7 @@ def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog
         if answer == "q":
             raise Quit
         ticks, _ = settled_position(bus, index, clock)
-        deg = cal.ticks_to_deg(ticks)
+        deg = ticks_to_deg(cal, ticks)
         if abs(deg) < DIRECTION_MIN_DEG:
             say(f"{name}: it reads {deg:+.1f} deg: flex it further (s skips the check; "
                 "with --jog the servo moves the joint and you say which way it went)")
@@ -314,7 +315,7 @@ def calibrate(
         while accepted is None:
             if reading is None:
                 moving = "" if settled else ", still moving"
-                answer = ask(f"{name}: at {shown} ticks ({cal.ticks_to_deg(shown):+.1f} deg "
+                answer = ask(f"{name}: at {shown} ticks ({ticks_to_deg(cal, shown):+.1f} deg "
                              f"from the current zero {cal.zero_ticks}{moving}); bring it to "
                              f"0 deg [{hint}Enter reads it, s skips, q quits]: ")
             else:

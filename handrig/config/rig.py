@@ -3,14 +3,13 @@
 Shared by the servo driver (degrees -> goal ticks) and the bus emulator (ticks ->
 the simulated joint), so both sides of the loopback use one calibration.
 
-A servo's position in ticks relates to the joint angle in degrees
-(vocabulary convention, flexion positive) by::
-
-    ticks = zero_ticks + direction * deg * gear_ratio * 4096 / 360
-
-``gear_ratio`` is servo turns per joint turn (a tendon or gear reduction); a
-servo never receives a goal outside ``[min_deg, max_deg]`` nor outside the
-servo's own 0..4095 position range.
+A servo's calibration is data here: its zero (``zero_ticks``, the servo's position
+at joint angle 0), ``direction``, ``gear_ratio`` (servo turns per joint turn, a
+tendon or gear reduction) and joint limits in degrees (vocabulary convention,
+flexion positive). What a tick is, which IDs, bauds, gains and return delays a
+servo takes, is its driver's (:mod:`handrig.devices.servo.positions` converts,
+:func:`handrig.devices.servo.models.check_rig` checks a rig against the servos it
+names). A servo never receives a goal outside ``[min_deg, max_deg]``.
 """
 
 from __future__ import annotations
@@ -23,12 +22,6 @@ from typing import Literal
 from handrig.config.loading import CONFIG_DIR, check_joint_name, load
 from handrig.errors import ConfigError
 from handrig.hand import anatomical_limits_deg
-
-TICKS_PER_TURN = 4096
-TICKS_PER_DEG = TICKS_PER_TURN / 360.0
-POSITION_TICKS_MIN = 0
-POSITION_TICKS_MAX = 4095
-
 
 
 @dataclass(frozen=True)
@@ -45,14 +38,10 @@ class ServoCalibration:
     max_deg: float = 90.0
 
     def check(self) -> None:
-        if not 0 <= self.id <= 252:
-            raise ConfigError("servo ID out of range", key="id", value=self.id, allowed="0..252")
+        if self.id < 0:
+            raise ConfigError("servo ID out of range", key="id", value=self.id,
+                              allowed="0 or more (and at most the bus's own maximum)")
         check_joint_name(self.joint, "joint")
-        if not POSITION_TICKS_MIN <= self.zero_ticks <= POSITION_TICKS_MAX:
-            raise ConfigError(
-                "zero outside the position range", key="zero_ticks", value=self.zero_ticks,
-                allowed=f"{POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}",
-            )
         if not 0.1 <= self.gear_ratio <= 20.0:
             raise ConfigError(
                 "implausible gear ratio", key="gear_ratio", value=self.gear_ratio,
@@ -63,32 +52,12 @@ class ServoCalibration:
                 "inverted limit: min_deg must be below max_deg", key="min_deg",
                 value=[self.min_deg, self.max_deg], allowed="min_deg < max_deg",
             )
-        for bound in (self.min_deg, self.max_deg):
-            tick = self.deg_to_ticks_exact(bound)
-            if not POSITION_TICKS_MIN <= tick <= POSITION_TICKS_MAX:
-                raise ConfigError(
-                    f"limit {bound} deg maps to {tick:.0f} ticks, outside the servo's range",
-                    key="min_deg" if bound == self.min_deg else "max_deg", value=bound,
-                    allowed=f"limits whose ticks lie in {POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}",
-                )
         low, high = anatomical_limits_deg(self.joint)
         if self.min_deg < low or self.max_deg > high:
             raise ConfigError(
                 f"servo limits exceed the anatomical range of {self.joint}",
                 key="min_deg", value=[self.min_deg, self.max_deg], allowed=f"[{low}, {high}]",
             )
-
-    def deg_to_ticks_exact(self, deg: float) -> float:
-        return self.zero_ticks + self.direction * deg * self.gear_ratio * TICKS_PER_DEG
-
-    def deg_to_ticks(self, deg: float) -> int:
-        """Goal ticks for a joint angle, clamped to ``[min_deg, max_deg]`` first."""
-        clamped = min(max(deg, self.min_deg), self.max_deg)
-        return round(self.deg_to_ticks_exact(clamped))
-
-    def ticks_to_deg(self, ticks: float) -> float:
-        """Joint angle in degrees for a servo position in ticks (not clamped)."""
-        return (ticks - self.zero_ticks) / (self.direction * self.gear_ratio * TICKS_PER_DEG)
 
 
 @dataclass(frozen=True)
@@ -284,18 +253,17 @@ class HeatConfig:
 
 
 # ------------------------------------------------------------ servo settings
-# Operating Mode (11) values (REFERENCE.md section 2).
-OPERATING_MODES: dict[str, int] = {
-    "position": 3, "extended_position": 4, "current_based_position": 5,
-}
-GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
-RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
-RETURN_DELAY_MAX_US = 254 * RETURN_DELAY_UNIT_US
+OPERATING_MODE_NAMES = ("position", "extended_position", "current_based_position")
+"""The operating modes a rig may ask for (their register values are the driver's)."""
+OperatingMode = Literal["position", "extended_position", "current_based_position"]
+RETURN_DELAY_SANE_US = 10_000  # no servo bus answers this late on purpose
 
 
-def _check_gain(value: int | None, key: str) -> None:
-    if value is not None and not 0 <= value <= GAIN_MAX:
-        raise ConfigError("gain out of range", key=key, value=value, allowed=f"0..{GAIN_MAX}")
+def _check_not_negative(value: int | None, key: str, what: str) -> None:
+    # the servos' own ranges are their driver's to check (devices/servo/models.py)
+    if value is not None and value < 0:
+        raise ConfigError(f"{what} out of range", key=key, value=value,
+                          allowed="0 or more (and within the servo's own range)")
 
 
 def _check_current(value: int | None, key: str) -> None:
@@ -303,6 +271,12 @@ def _check_current(value: int | None, key: str) -> None:
     if value is not None and value < 1:
         raise ConfigError("current limit out of range", key=key, value=value,
                           allowed="1 mA or more (and at most the servo model's own maximum)")
+
+
+def _check_mode(value: str | None) -> None:
+    if value is not None and value not in OPERATING_MODE_NAMES:
+        raise ConfigError("unknown operating mode", key="operating_mode", value=value,
+                          allowed=", ".join(OPERATING_MODE_NAMES))
 
 
 @dataclass(frozen=True)
@@ -314,34 +288,31 @@ class ServoSettingsGroup:
     current_limit_ma: int | None = None
     position_p_gain: int | None = None
     position_d_gain: int | None = None
-    operating_mode: Literal["position", "extended_position", "current_based_position"] | None \
-        = None
+    operating_mode: OperatingMode | None = None
 
     def check(self) -> None:
-        if self.operating_mode is not None and self.operating_mode not in OPERATING_MODES:
-            raise ConfigError("unknown operating mode", key="operating_mode",
-                              value=self.operating_mode, allowed=", ".join(OPERATING_MODES))
+        _check_mode(self.operating_mode)
         if not self.ids:
             raise ConfigError("a group needs at least one servo ID", key="ids")
         _check_current(self.current_limit_ma, "current_limit_ma")
-        _check_gain(self.position_p_gain, "position_p_gain")
-        _check_gain(self.position_d_gain, "position_d_gain")
+        _check_not_negative(self.position_p_gain, "position_p_gain", "gain")
+        _check_not_negative(self.position_d_gain, "position_d_gain", "gain")
 
 
 @dataclass(frozen=True)
 class ServoSettings:
     """What commissioning writes to every servo (``[servo_settings]``).
 
-    ``operating_mode``: ``"position"`` (3, the default), ``"extended_position"`` (4) or
-    ``"current_based_position"`` (5: position control whose torque is capped by the
-    current limit). ``current_limit_ma``: written to Current Limit (38) and Goal
-    Current (102); ``None`` leaves the servo's own. Position P/D Gain (84/80): ``None``
-    leaves the servo's own. ``return_delay_us``: Return Delay Time (9), even, 0..508.
-    ``groups``: per-servo differences.
+    ``operating_mode``: ``"position"`` (the default), ``"extended_position"`` or
+    ``"current_based_position"`` (position control whose torque is capped by the
+    current limit). ``current_limit_ma``: the servo's current limit and goal current;
+    ``None`` leaves the servo's own. Position P/D gains: ``None`` leaves the servo's
+    own. ``return_delay_us``: how long a servo waits before it answers (0 is what a
+    fast loop wants). ``groups``: per-servo differences. Which values a servo takes
+    is its driver's to check (:func:`handrig.devices.servo.models.check_rig`).
     """
 
-    operating_mode: Literal["position", "extended_position", "current_based_position"] = (
-        "position")
+    operating_mode: OperatingMode = "position"
     current_limit_ma: int | None = None
     position_p_gain: int | None = None
     position_d_gain: int | None = None
@@ -349,15 +320,15 @@ class ServoSettings:
     groups: tuple[ServoSettingsGroup, ...] = ()
 
     def check(self) -> None:
+        _check_mode(self.operating_mode)
         _check_current(self.current_limit_ma, "current_limit_ma")
-        _check_gain(self.position_p_gain, "position_p_gain")
-        _check_gain(self.position_d_gain, "position_d_gain")
-        if (not 0 <= self.return_delay_us <= RETURN_DELAY_MAX_US
-                or self.return_delay_us % RETURN_DELAY_UNIT_US):
+        _check_not_negative(self.position_p_gain, "position_p_gain", "gain")
+        _check_not_negative(self.position_d_gain, "position_d_gain", "gain")
+        if not 0 <= self.return_delay_us <= RETURN_DELAY_SANE_US:  # the servo's own: its driver's
             raise ConfigError("return delay out of range", key="return_delay_us",
                               value=self.return_delay_us,
-                              allowed=f"0..{RETURN_DELAY_MAX_US} us in steps of "
-                              f"{RETURN_DELAY_UNIT_US} (0 is what a fast loop wants)")
+                              allowed=f"0..{RETURN_DELAY_SANE_US} us (and what the servo "
+                              "takes; 0 is what a fast loop wants)")
         seen: dict[int, int] = {}
         for g, group in enumerate(self.groups):
             for servo_id in group.ids:
@@ -366,38 +337,12 @@ class ServoSettings:
                                       key=f"groups[{g}].ids", value=servo_id)
                 seen[servo_id] = g
 
-    @property
-    def operating_mode_value(self) -> int:
-        """The Operating Mode (11) register value."""
-        return OPERATING_MODES[self.operating_mode]
-
-
-@dataclass(frozen=True)
-class ResolvedServoSettings:
-    """The settings of one servo, groups applied (what commissioning writes and checks)."""
-
-    servo_id: int
-    operating_mode: int  # Operating Mode (11) value
-    current_limit_ma: int | None
-    position_p_gain: int | None
-    position_d_gain: int | None
-    return_delay_us: int
-
-
-def resolve_servo_settings(settings: ServoSettings, servo_id: int) -> ResolvedServoSettings:
-    """``[servo_settings]`` for one servo, with its group's values where it has one."""
-    current, p_gain, d_gain = (settings.current_limit_ma, settings.position_p_gain,
-                               settings.position_d_gain)
-    mode = settings.operating_mode_value
-    for group in settings.groups:
-        if servo_id in group.ids:
-            if group.operating_mode is not None:
-                mode = OPERATING_MODES[group.operating_mode]
-            current = group.current_limit_ma if group.current_limit_ma is not None else current
-            p_gain = group.position_p_gain if group.position_p_gain is not None else p_gain
-            d_gain = group.position_d_gain if group.position_d_gain is not None else d_gain
-    return ResolvedServoSettings(servo_id, mode, current, p_gain, d_gain,
-                                 settings.return_delay_us)
+    def mode_for(self, servo_id: int) -> OperatingMode:
+        """The operating mode servo ``servo_id`` runs in (its group's, else this table's)."""
+        for group in self.groups:
+            if servo_id in group.ids and group.operating_mode is not None:
+                return group.operating_mode
+        return self.operating_mode
 
 
 def check_servo_settings(rig: RigConfig) -> None:
@@ -496,10 +441,6 @@ class RigConfig:
         """The sag gain the pipeline uses ([loop].sag_gain; a robot rig turns it off
         unless its ``[robot].sag`` is true, see :mod:`handrig.pose.robot_rig`)."""
         return self.loop.sag_gain
-
-    def servo_settings_for(self, servo_id: int) -> ResolvedServoSettings:
-        """What commissioning writes to servo ``servo_id`` ([servo_settings], groups applied)."""
-        return resolve_servo_settings(self.servo_settings, servo_id)
 
 
 HAND_NAMES = {"ri": "right", "le": "left"}

@@ -27,14 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from handrig.config.loading import load, load_toml
-from handrig.config.rig import (
-    POSITION_TICKS_MAX,
-    POSITION_TICKS_MIN,
-    RigConfig,
-    ServoCalibration,
-    hand_of_joint,
-    load_rig_config,
-)
+from handrig.config.rig import RigConfig, ServoCalibration, hand_of_joint, load_rig_config
 from handrig.config.rig_files import rig_file_path
 from handrig.errors import ConfigError
 from handrig.hand import is_joint_name
@@ -72,11 +65,13 @@ class RobotConfig:
 @dataclass(frozen=True)
 class RobotServoCalibration(ServoCalibration):
     """A servo of a robot rig: ``joint`` is a joint of the robot's model, degrees as the
-    model measures them. Same mapping to ticks as :class:`ServoCalibration`."""
+    model measures them. Same calibration as :class:`ServoCalibration` (the driver
+    checks its zero and limits against the servo's position range)."""
 
     def check(self) -> None:
-        if not 0 <= self.id <= 252:
-            raise ConfigError("servo ID out of range", key="id", value=self.id, allowed="0..252")
+        if self.id < 0:
+            raise ConfigError("servo ID out of range", key="id", value=self.id,
+                              allowed="0 or more (and at most the bus's own maximum)")
         if not _JOINT_NAME.match(self.joint):
             raise ConfigError("not a joint name", key="joint", value=self.joint,
                               allowed="a joint of the robot's MJCF model, e.g. if_mcp")
@@ -86,24 +81,12 @@ class RobotServoCalibration(ServoCalibration):
                 allowed="a joint of the robot's model; human curves reach it through "
                 "[robot].retarget",
             )
-        if not POSITION_TICKS_MIN <= self.zero_ticks <= POSITION_TICKS_MAX:
-            raise ConfigError("zero outside the position range", key="zero_ticks",
-                              value=self.zero_ticks,
-                              allowed=f"{POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}")
         if not 0.1 <= self.gear_ratio <= 20.0:
             raise ConfigError("implausible gear ratio", key="gear_ratio", value=self.gear_ratio,
                               allowed="0.1..20 servo turns per joint turn")
         if self.min_deg >= self.max_deg:
             raise ConfigError("inverted limit: min_deg must be below max_deg", key="min_deg",
                               value=[self.min_deg, self.max_deg], allowed="min_deg < max_deg")
-        for key, bound in (("min_deg", self.min_deg), ("max_deg", self.max_deg)):
-            tick = self.deg_to_ticks_exact(bound)
-            if not POSITION_TICKS_MIN <= tick <= POSITION_TICKS_MAX:
-                raise ConfigError(
-                    f"limit {bound} deg maps to {tick:.0f} ticks, outside the servo's range",
-                    key=key, value=bound,
-                    allowed=f"limits whose ticks lie in {POSITION_TICKS_MIN}..{POSITION_TICKS_MAX}",
-                )
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,8 @@ from pathlib import Path
 from typing import Any
 
 from firmware_protocol import dynamixel as dx
-from handrig.config.rig import TICKS_PER_DEG, RigConfig, load_rig_config
+from handrig.config.rig import RigConfig, load_rig_config
+from handrig.devices.servo.positions import TICKS_PER_DEG
 from sim.demo_recording import DEMO_RECORDING
 from sim.dxl_bus import GOAL_POSITION_ADDRESS, SimBus
 from sim.dxl_faults import FaultSpec

@@ -18,6 +18,7 @@ import numpy as np
 
 from firmware_protocol import dynamixel as dx
 from handrig.config.rig import load_rig_config
+from handrig.devices.servo.positions import deg_to_ticks
 from sim.demo_recording import DEMO_RECORDING
 from sim.dxl_bus import SimBus
 
@@ -76,7 +77,7 @@ def test_sigkill_mid_run_the_bus_watchdog_stops_every_servo_within_its_time() ->
         s = servos[0]
         held = s.goal
         cal = rig.servos[0]
-        away = cal.deg_to_ticks(cal.max_deg if held < cal.deg_to_ticks(0.0) else cal.min_deg)
+        away = deg_to_ticks(cal, cal.max_deg if held < deg_to_ticks(cal, 0.0) else cal.min_deg)
         packet = dx.build_instruction(
             dx.BROADCAST_ID, dx.Instruction.SYNC_WRITE,
             dx.sync_write_params(dx.Reg.GOAL_POSITION, 4, [(s.id, away.to_bytes(4, "little",

@@ -10,6 +10,7 @@ import numpy as np
 from handrig.clock import FakeClock
 from handrig.config.rig import RigConfig, load_rig_config
 from handrig.devices.servo import DynamixelBus
+from handrig.devices.servo.positions import deg_to_ticks
 from sim.dxl_bus import FaultSpec, SimBus
 from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
 
@@ -24,8 +25,8 @@ def small_rig(n: int = 6) -> RigConfig:
 
 def tick_limits(rig: RigConfig) -> tuple[np.ndarray, np.ndarray]:
     """Each servo's lowest and highest goal in ticks (a reversed servo's limits swap)."""
-    lo = np.array([min(s.deg_to_ticks(s.min_deg), s.deg_to_ticks(s.max_deg)) for s in rig.servos])
-    hi = np.array([max(s.deg_to_ticks(s.min_deg), s.deg_to_ticks(s.max_deg)) for s in rig.servos])
+    lo = np.array([min(deg_to_ticks(s, s.min_deg), deg_to_ticks(s, s.max_deg)) for s in rig.servos])
+    hi = np.array([max(deg_to_ticks(s, s.min_deg), deg_to_ticks(s, s.max_deg)) for s in rig.servos])
     return lo, hi
 
 

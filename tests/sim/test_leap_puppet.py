@@ -10,7 +10,8 @@ import pytest
 
 from firmware_protocol.dynamixel import MODELS, Reg
 from handrig.config.loading import REPO_ROOT
-from handrig.devices.servo.models import current_limit_units
+from handrig.devices.servo.models import current_limit_units, servo_settings_for
+from handrig.devices.servo.positions import deg_to_ticks, deg_to_ticks_exact, ticks_to_deg
 from handrig.pose.robot_rig import RobotRigConfig, load_rig
 from sim.dxl_bus import servos_from_rig
 from sim.dxl_servo import EmulatedServo
@@ -27,7 +28,7 @@ def _w(s: EmulatedServo, reg: Reg, value: int, size: int) -> None:
 def _commission(rig: RobotRigConfig, servos: dict[int, EmulatedServo]) -> None:
     """What phase-2 commissioning will write: the rig's [servo_settings], then torque."""
     for cal in rig.servos:
-        s, st = servos[cal.id], rig.servo_settings_for(cal.id)
+        s, st = servos[cal.id], servo_settings_for(rig, cal.id)
         assert st.current_limit_ma is not None and st.position_p_gain is not None
         assert st.position_d_gain is not None
         _w(s, Reg.OPERATING_MODE, st.operating_mode, 1)
@@ -96,13 +97,13 @@ def test_joints_follow_their_goals_in_current_based_position_mode() -> None:
     goals = {}
     for cal in rig.servos:
         goals[cal.joint] = cal.min_deg + 0.4 * (cal.max_deg - cal.min_deg)
-        _w(servos[cal.id], Reg.GOAL_POSITION, cal.deg_to_ticks(goals[cal.joint]), 4)
+        _w(servos[cal.id], Reg.GOAL_POSITION, deg_to_ticks(cal, goals[cal.joint]), 4)
     puppet.step(1000)
     angles = puppet.joint_angles_deg()
     assert set(angles) == set(goals)
     for cal in rig.servos:
         assert angles[cal.joint] == pytest.approx(goals[cal.joint], abs=3.0), cal.joint
-        present = cal.ticks_to_deg(servos[cal.id].present)
+        present = ticks_to_deg(cal, servos[cal.id].present)
         assert present == pytest.approx(angles[cal.joint], abs=0.1)
         assert abs(servos[cal.id].get(Reg.PRESENT_CURRENT)) < 350  # not saturated
 
@@ -118,7 +119,7 @@ def test_a_goal_past_the_stop_stalls_the_joint_with_current_at_the_limit(limit_m
     _w(s, Reg.TORQUE_ENABLE, 1, 1)
     _w(s, Reg.GOAL_CURRENT, limit_ma, 2)
     # past the joint's range (127.8 deg): the servo never gets there, the model's stop holds
-    _w(s, Reg.GOAL_POSITION, round(cal.deg_to_ticks_exact(170.0)), 4)
+    _w(s, Reg.GOAL_POSITION, round(deg_to_ticks_exact(cal, 170.0)), 4)
     puppet.step(1500)
     assert 125.0 < puppet.joint_deg("if_mcp") < 135.0
     assert s.get(Reg.PRESENT_CURRENT) == pytest.approx(limit_ma, abs=2)
@@ -130,7 +131,7 @@ def test_a_persistent_stall_becomes_an_overload_when_the_emulator_models_it() ->
     _commission(rig, servos)
     cal = next(c for c in rig.servos if c.joint == "if_pip")
     s = servos[cal.id]
-    _w(s, Reg.GOAL_POSITION, round(cal.deg_to_ticks_exact(150.0)), 4)
+    _w(s, Reg.GOAL_POSITION, round(deg_to_ticks_exact(cal, 150.0)), 4)
     puppet.step(800)
     assert s.hardware_error == 0x20 and not s.torque_enabled
     other = servos[next(c.id for c in rig.servos if c.joint == "mf_pip")]
@@ -178,7 +179,7 @@ def test_the_real_sdk_commissions_and_stalls_the_leap_puppet_over_the_emulated_b
                     assert gw.addParam(i, list(int(v).to_bytes(size, "little")))
                 assert gw.txPacket() == COMM_SUCCESS
 
-            settings = {i: rig.servo_settings_for(i) for i in ids}
+            settings = {i: servo_settings_for(rig, i) for i in ids}
             sync(int(Reg.OPERATING_MODE), 1, {i: s.operating_mode for i, s in settings.items()})
             sync(int(Reg.TORQUE_ENABLE), 1, dict.fromkeys(ids, 1))
             sync(int(Reg.POSITION_P_GAIN), 2, {i: s.position_p_gain or 0
@@ -188,8 +189,8 @@ def test_the_real_sdk_commissions_and_stalls_the_leap_puppet_over_the_emulated_b
             sync(int(Reg.GOAL_CURRENT), 2, {i: s.current_limit_ma or 0
                                             for i, s in settings.items()})
             cal = next(c for c in rig.servos if c.joint == "mf_mcp")
-            goals = {c.id: c.deg_to_ticks(10.0) for c in rig.servos}
-            goals[cal.id] = round(cal.deg_to_ticks_exact(170.0))  # past the 127.8 deg stop
+            goals = {c.id: deg_to_ticks(c, 10.0) for c in rig.servos}
+            goals[cal.id] = round(deg_to_ticks_exact(cal, 170.0))  # past the 127.8 deg stop
             sync(int(Reg.GOAL_POSITION), 4, goals)
             deadline = time.monotonic() + 10.0  # simulated time follows a busy wall clock
             current = 0
@@ -203,6 +204,6 @@ def test_the_real_sdk_commissions_and_stalls_the_leap_puppet_over_the_emulated_b
             assert bus.puppet is not None
             moved = next(c for c in rig.servos if c.joint == "if_pip")
             ticks, result, _ = ph.read4ByteTxRx(port, moved.id, int(Reg.PRESENT_POSITION))
-            assert moved.ticks_to_deg(ticks) == pytest.approx(10.0, abs=3.0)
+            assert ticks_to_deg(moved, ticks) == pytest.approx(10.0, abs=3.0)
         finally:
             port.closePort()

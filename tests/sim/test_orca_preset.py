@@ -14,8 +14,7 @@ import pytest
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
 from firmware_protocol.dynamixel import ErrorCode, Reg
-from handrig.config.rig import resolve_servo_settings
-from handrig.devices.servo.models import current_limit_units
+from handrig.devices.servo.models import current_limit_units, resolve_servo_settings
 from handrig.pose.robot_rig import RobotRigConfig, load_rig, robot_retarget
 from sim.dxl_bus import SimBus
 

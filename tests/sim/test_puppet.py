@@ -8,6 +8,7 @@ import pytest
 
 from firmware_protocol.dynamixel import Reg
 from handrig.config.rig import RigConfig, ServoCalibration, load_rig_config
+from handrig.devices.servo.positions import deg_to_ticks, ticks_to_deg
 from sim.dxl_bus import servos_from_rig
 from sim.dxl_servo import EmulatedServo
 from sim.puppet import Puppet, kp_from_p_gain
@@ -30,16 +31,16 @@ def test_joints_follow_goals_and_present_state_comes_from_physics() -> None:
     puppet, servos = _setup(rig)
     goals = {}
     for cal in rig.servos:
-        goals[cal.id] = cal.deg_to_ticks(cal.min_deg + 0.7 * (cal.max_deg - cal.min_deg))
+        goals[cal.id] = deg_to_ticks(cal, cal.min_deg + 0.7 * (cal.max_deg - cal.min_deg))
         _enable(servos[cal.id], goals[cal.id])
     puppet.step(1000)  # 1 s of simulated time
     for cal in rig.servos:
-        want = cal.ticks_to_deg(goals[cal.id])
+        want = ticks_to_deg(cal, goals[cal.id])
         got = puppet.joint_deg(cal.joint)
         tol = 12.0 if "Wrist" in cal.joint else 2.0
         assert abs(got - want) < tol, (cal.joint, want, got)
         # Present Position is the simulated angle mapped back through the calibration
-        assert abs(cal.ticks_to_deg(servos[cal.id].present) - got) < 0.1
+        assert abs(ticks_to_deg(cal, servos[cal.id].present) - got) < 0.1
     # holding a finger against gravity takes current; the drooping wrist takes more
     wrist = next(c for c in rig.servos if c.joint == "riWristFlexion")
     held = servos[wrist.id]
@@ -51,7 +52,7 @@ def test_speed_limit_from_profile_velocity() -> None:
     puppet, servos = _setup(RigConfig(servos=(cal,)))
     s = servos[1]
     assert s.write(int(Reg.PROFILE_VELOCITY), (20).to_bytes(4, "little")) == 0  # 4.58 rpm
-    _enable(s, cal.deg_to_ticks(90.0))
+    _enable(s, deg_to_ticks(cal, 90.0))
     puppet.step(200)
     deg_per_s = 20 * 0.229 * 6.0  # rpm -> deg/s
     assert puppet.joint_deg("riIndexPIPy") == pytest.approx(0.2 * deg_per_s, abs=2.0)
@@ -68,7 +69,7 @@ def test_torque_off_lets_gravity_win_and_torque_limit_holds() -> None:
     # current-based position mode with a tiny Goal Current cannot lift the hand
     assert s.write(int(Reg.OPERATING_MODE), b"\x05") == 0
     assert s.write(int(Reg.GOAL_CURRENT), (30).to_bytes(2, "little")) == 0
-    _enable(s, cal.deg_to_ticks(0.0))
+    _enable(s, deg_to_ticks(cal, 0.0))
     puppet.step(500)
     assert puppet.joint_deg("riWristFlexion") > 20.0
     assert abs(s.get(Reg.PRESENT_CURRENT)) <= 31
@@ -124,7 +125,7 @@ def test_held_at_torque_limit_reports_overload_only_when_enabled() -> None:
         assert s.write(int(Reg.OPERATING_MODE), b"\x05") == 0
         assert s.write(int(Reg.GOAL_CURRENT), (20).to_bytes(2, "little")) == 0
         puppet.step(300)
-        _enable(s, cal.deg_to_ticks(-50.0))
+        _enable(s, deg_to_ticks(cal, -50.0))
         puppet.step(600)
         assert s.hardware_error == expect
         assert s.torque_enabled == (expect == 0)

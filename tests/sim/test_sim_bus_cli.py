@@ -19,6 +19,7 @@ from dynamixel_sdk import (
 
 from handrig.config.rig import load_rig_config
 from handrig.devices.servo.models import MODEL_NUMBERS, servo_model
+from handrig.devices.servo.positions import deg_to_ticks, ticks_to_deg
 from tests.helpers.emulator import SimBusProcess, start_sim_bus
 
 ADDR_TORQUE, ADDR_GOAL, ADDR_PRESENT, ADDR_RDT = 64, 116, 132, 9
@@ -55,7 +56,7 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: SimBusProcess) -> None:
             assert ph.write1ByteTxRx(port, i, ADDR_RDT, 0) == (COMM_SUCCESS, 0)
             assert ph.write1ByteTxRx(port, i, ADDR_TORQUE, 1) == (COMM_SUCCESS, 0)
         # goals: three quarters of the way into each servo's range
-        goals = {s.id: s.deg_to_ticks(s.min_deg + 0.75 * (s.max_deg - s.min_deg))
+        goals = {s.id: deg_to_ticks(s, s.min_deg + 0.75 * (s.max_deg - s.min_deg))
                  for s in rig.servos}
         sw = GroupSyncWrite(port, ph, ADDR_GOAL, 4)
         for i, g in goals.items():
@@ -66,7 +67,7 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: SimBusProcess) -> None:
         tol = {s.id: 12.0 if "Wrist" in s.joint else 2.0 for s in rig.servos}
 
         def there(present: dict[int, int]) -> bool:
-            return all(abs(s.ticks_to_deg(present[s.id]) - s.ticks_to_deg(goals[s.id]))
+            return all(abs(ticks_to_deg(s, present[s.id]) - ticks_to_deg(s, goals[s.id]))
                        < tol[s.id] for s in rig.servos)
 
         # until every joint is there (a few tenths of a second at the servos' speed
@@ -90,11 +91,11 @@ def test_plain_sdk_client_drives_the_puppet(sim_bus: SimBusProcess) -> None:
         bulk = {i: _signed32(br.getData(i, ADDR_PRESENT, 4)) for i in ids}
 
         for s in rig.servos:
-            want_deg = s.ticks_to_deg(goals[s.id])
-            got_deg = s.ticks_to_deg(fast[s.id])
+            want_deg = ticks_to_deg(s, goals[s.id])
+            got_deg = ticks_to_deg(s, fast[s.id])
             assert abs(got_deg - want_deg) < tol[s.id], (s.joint, want_deg, got_deg)
             # the joint moved there: it started at least 5 deg away
-            assert abs(s.ticks_to_deg(start[s.id]) - want_deg) > 5.0, s.joint
+            assert abs(ticks_to_deg(s, start[s.id]) - want_deg) > 5.0, s.joint
             for other in (plain, bulk):
                 assert abs(other[s.id] - fast[s.id]) <= 20  # read a few ms apart, still settling
     finally:

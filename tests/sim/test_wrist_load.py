@@ -12,6 +12,7 @@ import pytest
 
 from firmware_protocol.dynamixel import MODELS, ErrorCode, Reg
 from handrig.config.rig import RigConfig, ServoCalibration, load_rig_config
+from handrig.devices.servo.positions import deg_to_ticks
 from sim.dxl_bus import servos_from_rig
 from sim.dxl_thermal import steady_temperature_c
 from sim.hand_model import REFERENCE_HAND_LENGTH_M, hand_model_xml
@@ -62,7 +63,7 @@ def test_goal_pwm_caps_the_effort_so_the_wrist_gives_way_to_the_load() -> None:
     s = servos[0]
     assert s.get(Reg.GOAL_PWM) == s.get(Reg.PWM_LIMIT) == 885  # full effort at power-on
     assert s.write(int(Reg.TORQUE_ENABLE), b"\x01") == 0
-    assert s.write(int(Reg.GOAL_POSITION), cal.deg_to_ticks(0.0).to_bytes(4, "little")) == 0
+    assert s.write(int(Reg.GOAL_POSITION), deg_to_ticks(cal, 0.0).to_bytes(4, "little")) == 0
     puppet.step(1000)
     held = puppet.joint_deg("riWristFlexion")
     assert abs(held) < 5.0  # full effort: the hand is held level

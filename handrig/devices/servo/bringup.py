@@ -25,7 +25,7 @@ from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 from dynamixel_sdk.robotis_def import COMM_RX_CORRUPT, COMM_RX_TIMEOUT
 
 from handrig.config.rig import RigConfig
-from handrig.devices.servo.models import BAUD_RATES, MODEL_NAMES, servo_model
+from handrig.devices.servo.models import BAUD_RATES, MODEL_NAMES, OPERATING_MODES, servo_model
 from handrig.devices.servo.registers import Reg, describe_hardware_error
 from handrig.errors import DeviceError
 
@@ -387,7 +387,7 @@ def check(port: str, rig: RigConfig, *, baud: int | None = None) -> tuple[list[F
         found = [sp.describe(i, m, fw) for i, (m, fw) in sorted(found_ids.items())]
     by_id = {s.id: s for s in found}
     wanted = {s.id: s for s in rig.servos}
-    mode = rig.servo_settings.operating_mode_value
+    mode = OPERATING_MODES[rig.servo_settings.operating_mode]
     findings: list[Finding] = []
     if collided:
         findings.append(Finding(-1, "collision", f"garbled replies at {baud} bps",

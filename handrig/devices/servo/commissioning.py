@@ -16,13 +16,19 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from handrig.clock import Clock
-from handrig.config.rig import RETURN_DELAY_UNIT_US, RigConfig
+from handrig.config.rig import RigConfig
 from handrig.devices.servo.bus import ServoState
 from handrig.devices.servo.codec import INST_PING, INST_WRITE, build_instruction, u16
 from handrig.devices.servo.fast_read import FastSyncRead
 from handrig.devices.servo.faults import FaultHandler
 from handrig.devices.servo.link import COMMAND_ATTEMPTS, COMMAND_TIMEOUT_S, Link
-from handrig.devices.servo.models import MODEL_NAMES, current_limit_units, servo_model
+from handrig.devices.servo.models import (
+    MODEL_NAMES,
+    RETURN_DELAY_UNIT_US,
+    current_limit_units,
+    servo_model,
+    servo_settings_for,
+)
 from handrig.devices.servo.readings import ReadPlan
 from handrig.devices.servo.registers import (
     OPERATING_MODE_CURRENT_BASED_POSITION,
@@ -45,7 +51,7 @@ def servo_settings(rig: RigConfig, index: int) -> tuple[tuple[Reg, int, str], ..
     """What commissioning writes to the servo at rig index ``index``, in order:
     ``(register, value, why)``; EEPROM items first (written with torque off)."""
     servo = rig.servos[index]
-    s = rig.servo_settings_for(servo.id)
+    s = servo_settings_for(rig, servo.id)
     delay = s.return_delay_us // RETURN_DELAY_UNIT_US
     out: list[tuple[Reg, int, str]] = [
         (Reg.RETURN_DELAY_TIME, delay, f"return delay {s.return_delay_us} us"),
@@ -186,7 +192,7 @@ class Commissioner:
     def settings_note(self) -> str:
         """The one line saying what every servo was set to."""
         rig = self.roster.rig
-        first = rig.servo_settings_for(rig.servos[0].id) if rig.servos else None
+        first = servo_settings_for(rig, rig.servos[0].id) if rig.servos else None
         mode = (MODE_NAMES.get(first.operating_mode, "position control mode")
                 .replace(" control", "") if first else "")
         delay = first.return_delay_us if first else 0

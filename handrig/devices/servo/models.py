@@ -11,13 +11,15 @@ before it opens the bus, the driver when it is built), so nothing above
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol
 
-from handrig.config.rig import (
-    OPERATING_MODES,
-    RigConfig,
-    ServoSettings,
-    resolve_servo_settings,
+from handrig.config.rig import RigConfig, ServoSettings
+from handrig.devices.servo.positions import check_positions
+from handrig.devices.servo.registers import (
+    OPERATING_MODE_CURRENT_BASED_POSITION,
+    OPERATING_MODE_EXTENDED_POSITION,
+    OPERATING_MODE_POSITION,
 )
 from handrig.errors import ConfigError
 
@@ -49,6 +51,45 @@ CURRENT_UNIT_MA: dict[str, float] = {
     "XL330-M077": 1.0,
 }
 RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
+RETURN_DELAY_MAX_US = 254 * RETURN_DELAY_UNIT_US
+GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
+# Operating Mode (11) values of the modes a rig may name (REFERENCE.md section 2).
+OPERATING_MODES: dict[str, int] = {
+    "position": OPERATING_MODE_POSITION,
+    "extended_position": OPERATING_MODE_EXTENDED_POSITION,
+    "current_based_position": OPERATING_MODE_CURRENT_BASED_POSITION,
+}
+
+
+@dataclass(frozen=True)
+class ResolvedServoSettings:
+    """The settings of one servo, groups applied (what commissioning writes and checks)."""
+
+    servo_id: int
+    operating_mode: int  # Operating Mode (11) value
+    current_limit_ma: int | None
+    position_p_gain: int | None
+    position_d_gain: int | None
+    return_delay_us: int
+
+
+def resolve_servo_settings(settings: ServoSettings, servo_id: int) -> ResolvedServoSettings:
+    """``[servo_settings]`` for one servo, with its group's values where it has one."""
+    current, p_gain, d_gain = (settings.current_limit_ma, settings.position_p_gain,
+                               settings.position_d_gain)
+    for group in settings.groups:
+        if servo_id in group.ids:
+            current = group.current_limit_ma if group.current_limit_ma is not None else current
+            p_gain = group.position_p_gain if group.position_p_gain is not None else p_gain
+            d_gain = group.position_d_gain if group.position_d_gain is not None else d_gain
+    return ResolvedServoSettings(servo_id, OPERATING_MODES[settings.mode_for(servo_id)],
+                                 current, p_gain, d_gain, settings.return_delay_us)
+
+
+def servo_settings_for(rig: RigConfig, servo_id: int) -> ResolvedServoSettings:
+    """What commissioning writes to servo ``servo_id`` of ``rig`` ([servo_settings],
+    groups applied)."""
+    return resolve_servo_settings(rig.servo_settings, servo_id)
 
 
 class HasModel(Protocol):
@@ -79,6 +120,7 @@ def check_rig(rig: RigConfig, file: str | None = None) -> None:
     ``[heat] action_c`` below each one's Temperature Limit, current limits within each
     model's and current-based position only on models that sense current.
     ConfigError naming the key (and ``file`` when given)."""
+    check_positions(rig.servos, file)
     for key, bus in (("bus", rig.bus), ("left_bus", rig.left_bus)):
         if bus is not None and bus.baud not in BAUD_RATES:
             raise ConfigError("unsupported baud rate", file=file, key=f"{key}.baud",
@@ -98,7 +140,25 @@ def check_rig(rig: RigConfig, file: str | None = None) -> None:
     _check_settings(rig, rig.servo_settings, file)
 
 
+def _check_registers(settings: ServoSettings, file: str | None) -> None:
+    tables = [("servo_settings", settings.position_p_gain, settings.position_d_gain)] + [
+        (f"servo_settings.groups[{g}]", group.position_p_gain, group.position_d_gain)
+        for g, group in enumerate(settings.groups)]
+    for where, p_gain, d_gain in tables:
+        for key, value in (("position_p_gain", p_gain), ("position_d_gain", d_gain)):
+            if value is not None and not 0 <= value <= GAIN_MAX:
+                raise ConfigError("gain out of range", file=file, key=f"{where}.{key}",
+                                  value=value, allowed=f"0..{GAIN_MAX}")
+    delay = settings.return_delay_us
+    if not 0 <= delay <= RETURN_DELAY_MAX_US or delay % RETURN_DELAY_UNIT_US:
+        raise ConfigError("return delay out of range", file=file,
+                          key="servo_settings.return_delay_us", value=delay,
+                          allowed=f"0..{RETURN_DELAY_MAX_US} us in steps of "
+                          f"{RETURN_DELAY_UNIT_US} (0 is what a fast loop wants)")
+
+
 def _check_settings(rig: RigConfig, settings: ServoSettings, file: str | None) -> None:
+    _check_registers(settings, file)
     top_any = max(CURRENT_LIMIT_MAX_MA.values())
     for key, value in [("servo_settings.current_limit_ma", settings.current_limit_ma)] + [
             (f"servo_settings.groups[{g}].current_limit_ma", group.current_limit_ma)

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from handrig.config.rig import POSITION_TICKS_MAX, TICKS_PER_DEG, RigConfig
+from handrig.config.rig import RigConfig
 from handrig.devices.servo.models import MODEL_NUMBERS, check_rig, servo_model
+from handrig.devices.servo.positions import POSITION_TICKS_MAX, TICKS_PER_DEG
 from handrig.devices.servo.registers import CURRENT_MA_PER_UNIT, VELOCITY_DPS_PER_UNIT
 from handrig.errors import DeviceError
 

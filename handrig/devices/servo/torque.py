@@ -19,11 +19,11 @@ from typing import Generic, TypeVar
 import numpy as np
 
 from handrig.clock import Clock
-from handrig.config.rig import TICKS_PER_DEG
 from handrig.devices.servo.bus import ServoState
 from handrig.devices.servo.faults import FaultHandler
 from handrig.devices.servo.goals import GoalWriter
 from handrig.devices.servo.link import Link
+from handrig.devices.servo.positions import TICKS_PER_DEG
 from handrig.devices.servo.registers import VELOCITY_DPS_PER_UNIT, Reg
 from handrig.devices.servo.roster import Roster
 from handrig.errors import DeviceError, SafetyStop

@@ -12,7 +12,13 @@ from handrig.config.loading import REPO_ROOT, build
 from handrig.config.rig import RigConfig, ServoSettings, load_rig_config
 from handrig.config.rig_files import RIGS_DIR
 from handrig.config.rig_files import rig_file_path as rig_path
-from handrig.devices.servo.models import check_rig, current_limit_units
+from handrig.devices.servo.models import (
+    OPERATING_MODES,
+    check_rig,
+    current_limit_units,
+    servo_settings_for,
+)
+from handrig.devices.servo.positions import deg_to_ticks
 from handrig.errors import ConfigError
 from handrig.pose.mjcf import read_joints
 from handrig.pose.robot_rig import (
@@ -47,7 +53,7 @@ def test_leap_preset_is_sixteen_xc330s_at_4_mbps_with_sag_off() -> None:
 def test_leap_servo_settings_are_the_leap_api_values() -> None:
     rig = load_rig("leap")
     for s in rig.servos:
-        st = rig.servo_settings_for(s.id)
+        st = servo_settings_for(rig, s.id)
         assert st.operating_mode == 5  # current-based position
         assert st.current_limit_ma == 350
         assert current_limit_units(st.current_limit_ma, s.model) == 350
@@ -55,7 +61,7 @@ def test_leap_servo_settings_are_the_leap_api_values() -> None:
         side = s.joint.endswith("_rot")
         assert (st.position_p_gain, st.position_d_gain) == ((450, 150) if side else (600, 200))
     # a human rig writes position mode and leaves current and gains alone
-    st = load_rig_config().servo_settings_for(1)
+    st = servo_settings_for(load_rig_config(), 1)
     assert (st.operating_mode, st.current_limit_ma, st.position_p_gain) == (3, None, None)
 
 
@@ -77,7 +83,7 @@ def test_leap_rig_and_retarget_table_agree_with_the_model_joints_and_ranges() ->
     for s in rig.servos:
         low, high = compiled[s.joint]
         assert low <= s.min_deg < low + 0.1 and high - 0.1 < s.max_deg <= high, s.joint
-        assert 0 <= s.deg_to_ticks(s.min_deg) < s.deg_to_ticks(s.max_deg) <= 4095
+        assert 0 <= deg_to_ticks(s, s.min_deg) < deg_to_ticks(s, s.max_deg) <= 4095
     rt = robot_retarget(rig)
     assert set(rt.joint_names) == set(compiled)
     for k, name in enumerate(rt.joint_names):
@@ -135,8 +141,8 @@ def test_a_copy_of_the_preset_loads_with_paths_relative_to_it(tmp_path: Path) ->
 def test_bad_robot_rigs_name_file_key_value(tmp_path: Path, old: str, new: str,
                                            match: str) -> None:
     p = _write_rig(tmp_path, new, old)
-    with pytest.raises(ConfigError, match=match):
-        load_rig(p)
+    with pytest.raises(ConfigError, match=match):  # on load, or by the driver's check
+        check_rig(load_rig(p), str(p))
 
 
 def test_a_current_limit_above_the_models_is_refused_by_the_drivers_check(
@@ -170,7 +176,7 @@ def test_presets_by_name_and_unknown_names(tmp_path: Path) -> None:
 
 def test_servo_settings_parse_with_defaults_and_groups() -> None:
     s = build(ServoSettings, {})
-    assert (s.operating_mode_value, s.return_delay_us, s.groups) == (3, 0, ())
+    assert (OPERATING_MODES[s.operating_mode], s.return_delay_us, s.groups) == (3, 0, ())
     with pytest.raises(ConfigError, match=re.escape("groups[1].ids") + r".*in two groups"):
         build(ServoSettings, {"groups": [{"ids": [1, 2]}, {"ids": [2]}]})
     with pytest.raises(ConfigError, match=r"groups\[0\].ids.*at least one"):

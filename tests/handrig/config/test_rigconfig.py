@@ -3,6 +3,7 @@ import pytest
 from handrig.config.loading import build
 from handrig.config.rig import RigConfig, ServoCalibration, load_rig_config
 from handrig.devices.servo.models import check_rig
+from handrig.devices.servo.positions import deg_to_ticks, ticks_to_deg
 from handrig.errors import ConfigError
 
 
@@ -18,13 +19,13 @@ def test_degrees_to_ticks_and_back_with_signs(direction, gear):
     s = ServoCalibration(id=1, joint="riIndexPIPy", zero_ticks=2000, direction=direction,
                          gear_ratio=gear, min_deg=0.0, max_deg=60.0)
     s.check()
-    assert s.deg_to_ticks(0.0) == 2000
-    t = s.deg_to_ticks(45.0)
+    assert deg_to_ticks(s, 0.0) == 2000
+    t = deg_to_ticks(s, 45.0)
     assert t == 2000 + direction * round(45.0 * gear * 4096 / 360)
-    assert s.ticks_to_deg(t) == pytest.approx(45.0, abs=360 / 4096 / gear)
+    assert ticks_to_deg(s, t) == pytest.approx(45.0, abs=360 / 4096 / gear)
     # Outside the limits: clamped before conversion, whatever the caller asks
-    assert s.deg_to_ticks(500.0) == s.deg_to_ticks(60.0)
-    assert s.deg_to_ticks(-30.0) == s.deg_to_ticks(0.0)
+    assert deg_to_ticks(s, 500.0) == deg_to_ticks(s, 60.0)
+    assert deg_to_ticks(s, -30.0) == deg_to_ticks(s, 0.0)
 
 
 def test_bad_servo_entries_are_named():
@@ -41,9 +42,18 @@ def test_bad_servo_entries_are_named():
         check_rig(build(RigConfig, {"servos": one, "bus": {"baud": 4_500_000}}))
     with pytest.raises(ConfigError, match=r"bus.baud.*positive"):
         build(RigConfig, {"bus": {"baud": 0}})
-    with pytest.raises(ConfigError, match="outside the servo's range"):
-        build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0,
-                                      "gear_ratio": 10.0}]})
+    # what a tick is, and which IDs a bus takes, is the driver's to check
+    far = build(RigConfig, {"servos": [{"id": 1, "joint": "riIndexPIPy", "min_deg": 0,
+                                        "gear_ratio": 10.0}]})
+    with pytest.raises(ConfigError, match=r"servos\[0\]\.max_deg.*outside the servo's range"):
+        check_rig(far, "rig.toml")
+    for key, value, msg in (("zero_ticks", 4096, "zero outside the position range"),
+                            ("id", 253, "servo ID out of range")):
+        bad = build(RigConfig, {"servos": [{**one[0], key: value}]})
+        with pytest.raises(ConfigError, match=rf"rig.toml.*servos\[0\]\.{key}.*{msg}"):
+            check_rig(bad, "rig.toml")
+    with pytest.raises(ConfigError, match=r"servos\[0\]\.id.*out of range"):
+        build(RigConfig, {"servos": [{**one[0], "id": -1}]})
 
 
 def test_silence_tiers_are_read_and_checked():

@@ -13,6 +13,7 @@ import pytest
 
 from handrig.config.rig import SilenceConfig
 from handrig.devices.servo import DynamixelBus, FaultPolicy
+from handrig.devices.servo.positions import deg_to_ticks
 from handrig.errors import DeviceTimeoutError
 from handrig.loop.silence import SilenceWatch
 from tests.helpers.servos import make_bus, small_rig
@@ -96,7 +97,7 @@ def test_a_held_servo_keeps_its_goal_the_others_continue_and_it_comes_back_at_th
         loop.until(0.4, goals)  # past action_s: continue
         sent = bus.last_goals_deg
         assert sent[2] == 0.0 and (np.delete(sent, 2) == 10.0).all()
-        assert peer.servo(3).goal == rig.servos[2].deg_to_ticks(0.0)
+        assert peer.servo(3).goal == deg_to_ticks(rig.servos[2], 0.0)
         events = loop.watch.drain_events()
         assert any("stays held, the others continue" in e for e in events)
         assert loop.watch.relax_reason is None
@@ -223,12 +224,12 @@ def test_a_rebooted_servo_comes_back_where_it_is_and_eases_to_its_goals() -> Non
         loop.write(goals)
         servo = peer.servo(5)
         servo.inject_hardware_error(dx.HardwareError.OVERLOAD)  # torque off in it
-        servo.set_motion(float(cal.deg_to_ticks(cal.min_deg)), 0.0, 0.0)  # sagged to its stop
+        servo.set_motion(float(deg_to_ticks(cal, cal.min_deg)), 0.0, 0.0)  # sagged to its stop
         bus.clock.advance(0.01)  # type: ignore[attr-defined]
         loop.read()  # the Alert: read its error, reboot it
         assert bus.stats.reboots[4] == 1 and servo.torque_enabled
         # torque came back where it is, not at the goal it had
-        assert servo.goal == cal.deg_to_ticks(cal.min_deg)
+        assert servo.goal == deg_to_ticks(cal, cal.min_deg)
         events = bus.drain_events()
         assert any("hardware error 0x20" in e and "rebooting it" in e for e in events)
         assert any(e.startswith("servo 5 (riThumbIPz) rebooted: torque on where it is")

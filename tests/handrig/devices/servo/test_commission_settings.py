@@ -13,6 +13,7 @@ from handrig.clock import FakeClock
 from handrig.config.rig import RigConfig, ServoSettings, load_rig_config
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.commissioning import servo_settings
+from handrig.devices.servo.models import servo_settings_for
 from handrig.errors import DeviceError
 from handrig.pose.robot_rig import RobotRigConfig, load_rig
 from sim.dxl_servo import EmulatedServo
@@ -41,7 +42,7 @@ def test_leap_commissioning_sets_every_servo_setting() -> None:
     bus, _, peer = _bus(rig)
     bus.connect()
     for s in rig.servos:
-        servo, want = peer.servo(s.id), rig.servo_settings_for(s.id)
+        servo, want = peer.servo(s.id), servo_settings_for(rig, s.id)
         side = s.id in (0, 4, 8)
         assert servo.get(dx.Reg.OPERATING_MODE) == 5
         assert servo.get(dx.Reg.RETURN_DELAY_TIME) == 0

@@ -29,6 +29,7 @@ from firmware_protocol.dynamixel import Reg as SimReg
 from handrig.clock import FakeClock
 from handrig.config.rig import SilenceConfig
 from handrig.devices.servo import DynamixelBus, FaultPolicy, ServoBus
+from handrig.devices.servo.positions import deg_to_ticks
 from handrig.devices.servo.transport import SerialTransport
 from handrig.errors import DeviceError, DeviceTimeoutError, SafetyStop, ServoFault
 from handrig.loop.silence import SilenceWatch
@@ -101,7 +102,7 @@ def test_goals_clamped_whatever_the_caller_asks(sim: SimBus, bus: DynamixelBus) 
     # an in-range goal goes through exactly (to the tick)
     inside = np.array([0.5 * (s.min_deg + s.max_deg) for s in rig.servos])
     assert bus.write_goals_deg(inside) == 0
-    expected = [s.deg_to_ticks(float(d)) for s, d in zip(rig.servos, inside, strict=True)]
+    expected = [deg_to_ticks(s, float(d)) for s, d in zip(rig.servos, inside, strict=True)]
     for _ in range(100):  # the emulator thread may not have handled the write yet
         if goals_received(sim, rig).tolist() == expected:
             break

@@ -16,6 +16,7 @@ import pytest
 
 from firmware_protocol.dynamixel import Reg as SimReg
 from handrig.devices.servo import DynamixelBus, FaultPolicy
+from handrig.devices.servo.positions import deg_to_ticks, ticks_to_deg
 from handrig.errors import DeviceTimeoutError
 from sim.dxl_bus import FaultSpec, SimBus
 from tests.helpers.servos import RIG, goals_received, small_rig, tick_limits
@@ -114,7 +115,7 @@ def test_fresh_readings_are_true_under_faults() -> None:
             fresh = 0
             for _ in range(200):
                 state = b.read_state(b.clock.now() + 0.02)
-                true = np.array([s.ticks_to_deg(sim.servo(s.id).present) for s in rig.servos])
+                true = np.array([ticks_to_deg(s, sim.servo(s.id).present) for s in rig.servos])
                 ok = ~state.stale
                 np.testing.assert_allclose(state.positions_deg[ok], true[ok], atol=1e-9)
                 fresh += int(ok.sum())
@@ -137,7 +138,7 @@ def test_tripped_watchdog_found_and_rearmed(sim: SimBus) -> None:
             assert all(sim.servo(s.id).get(SimReg.BUS_WATCHDOG) == 5 for s in rig.servos)
             goals = np.array([0.5 * s.max_deg for s in rig.servos])
             b.write_goals_deg(goals)
-            want = [s.deg_to_ticks(float(g)) for s, g in zip(rig.servos, goals, strict=True)]
+            want = [deg_to_ticks(s, float(g)) for s, g in zip(rig.servos, goals, strict=True)]
             for _ in range(100):
                 if goals_received(sim, rig).tolist() == want:
                     break
@@ -159,7 +160,7 @@ def test_goals_after_a_silence_rearm_the_watchdog_first(sim: SimBus) -> None:
             assert all(sim.servo(s.id).get(SimReg.BUS_WATCHDOG) in (-1, 0xFF) for s in rig.servos)
             goals = np.array([0.5 * s.max_deg for s in rig.servos])
             b.write_goals_deg(goals)  # no read in between: the write alone must recover
-            want = [s.deg_to_ticks(float(g)) for s, g in zip(rig.servos, goals, strict=True)]
+            want = [deg_to_ticks(s, float(g)) for s, g in zip(rig.servos, goals, strict=True)]
             for _ in range(100):
                 if goals_received(sim, rig).tolist() == want:
                     break
@@ -191,7 +192,7 @@ def test_late_replies_are_never_taken_for_a_later_read() -> None:
                     for j, s in enumerate(rig.servos):
                         sim.servo(s.id).set_motion(s.zero_ticks + 5.0 * j + (k % 40), 0.0, 0.0)
                 state = b.read_state(b.clock.now() + 0.004)
-                true = np.array([s.ticks_to_deg(sim.servo(s.id).present) for s in rig.servos])
+                true = np.array([ticks_to_deg(s, sim.servo(s.id).present) for s in rig.servos])
                 ok = ~state.stale
                 np.testing.assert_allclose(state.positions_deg[ok], true[ok], atol=1e-9)
                 fresh += int(ok.any())
@@ -243,7 +244,7 @@ def test_whole_reads_return_their_own_snapshot(sim: SimBus, bus: DynamixelBus) -
     states[0].stale[:] = True
     states[0].stats.reads = -1
     nxt = bus.read_state()
-    true = np.array([s.ticks_to_deg(sim.servo(s.id).present) for s in rig.servos])
+    true = np.array([ticks_to_deg(s, sim.servo(s.id).present) for s in rig.servos])
     np.testing.assert_allclose(nxt.positions_deg, true, atol=1e-9)
     assert not nxt.stale.any() and bus.stats.reads == nxt.stats.reads > 0
     for a, b in zip(vars(states[-1]).values(), vars(nxt).values(), strict=True):
@@ -286,7 +287,7 @@ def test_servos_move_while_the_bus_is_busy_with_wire_timing(read: bool) -> None:
                     k += 1
                     if k % 50 == 0:
                         with sim.lock:
-                            true = np.array([s.ticks_to_deg(sim.servo(s.id).present)
+                            true = np.array([ticks_to_deg(s, sim.servo(s.id).present)
                                              for s in rig.servos])
                         if np.allclose(true, goals, atol=0.2):
                             break

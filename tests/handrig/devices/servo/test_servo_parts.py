@@ -16,6 +16,7 @@ import pytest
 from firmware_protocol import dynamixel as dx
 from handrig.config.rig import RigConfig
 from handrig.devices.servo import FaultPolicy
+from handrig.devices.servo.positions import deg_to_ticks, ticks_to_deg
 from handrig.devices.servo.transport import Transport
 from handrig.devices.servo.wire import WireBudget, cycle_bytes, read_bytes, wire_time_s
 from handrig.errors import SafetyStop, ServoFault
@@ -25,7 +26,7 @@ from tests.helpers.servos import BAUD, make_bus, small_rig
 
 
 def ticks(rig: RigConfig, goals: np.ndarray) -> list[int]:
-    return [s.deg_to_ticks(float(g)) for s, g in zip(rig.servos, goals, strict=True)]
+    return [deg_to_ticks(s, float(g)) for s, g in zip(rig.servos, goals, strict=True)]
 
 
 def sync_write_golden(rig: RigConfig, goal_ticks: list[int]) -> bytes:
@@ -87,7 +88,7 @@ def test_whole_read_decodes_the_emulated_servos() -> None:
         peer.servo(s.id).set_motion(s.zero_ticks + 37.0 * j - 50.0, 3.0 * j - 7.0, 20.0 * j)
     state = bus.read_state()
     assert bus.last_read_whole and state.all_fresh and (state.age_s == 0).all()
-    want = [s.ticks_to_deg(peer.servo(s.id).present) for s in rig.servos]
+    want = [ticks_to_deg(s, peer.servo(s.id).present) for s in rig.servos]
     np.testing.assert_allclose(state.positions_deg, want, atol=1e-9)
     assert np.isfinite(state.velocities_dps).all() and np.isfinite(state.currents_ma).all()
     assert state.timestamp_s == bus.clock.now()
@@ -104,7 +105,7 @@ def test_a_late_reply_is_recognised_and_dropped() -> None:
     state = bus.read_state(bus.clock.now() + 0.02)
     assert bus.stats.late_replies == 1 and state.stats.late_replies == 1
     assert state.all_fresh
-    want = [s.ticks_to_deg(peer.servo(s.id).present) for s in rig.servos]
+    want = [ticks_to_deg(s, peer.servo(s.id).present) for s in rig.servos]
     np.testing.assert_allclose(state.positions_deg, want, atol=1e-9)
 
 
