@@ -31,7 +31,10 @@ def test_sim_imports_nothing_from_the_app_or_the_cli() -> None:
     assert not wrong, "\n".join(wrong)
 
 
-VENDOR_WORDS = re.compile(r"dynamixel|\bX[LCMH]\d{3}-[A-Z]\d{3}\b|x-series", re.IGNORECASE)
+VENDOR_WORDS = re.compile(r"dynamixel|\bX[LCMH]\d{3}-[A-Z]\d{3}\b|x-series"
+                          # what a tick is and the servos' register values: the driver's
+                          r"|deg_to_ticks|ticks_to_deg|TICKS_PER_|POSITION_TICKS|OPERATING_MODES\b",
+                          re.IGNORECASE)
 ABOVE_THE_DRIVER = ("app", "loop", "config", "pose", "outputs")
 VENDOR_BRANCH = {
     # the one place a vendor is chosen: servo_bus builds the driver, read_fields_for asks
