@@ -111,8 +111,11 @@ class OpenXrSender(Output):
         self._period_s = 1.0 / self.rate_hz
         self._next_s = -np.inf
         poses = {**DEFAULT_FOREARMS, **(forearms or {})}
-        self._hands = [(h, OpenXrHand(h, hand_length_m), poses[h], hand_slice(h),
-                        list(WRIST_SLOTS[h])) for h in hands]
+        self._hands = []
+        for h in hands:
+            fk = OpenXrHand(h, hand_length_m)
+            self._hands.append((h, fk, fk.root(poses[h]), hand_slice(h),
+                                np.array(WRIST_SLOTS[h], dtype=np.intp)))
         self._buffers = []
         for h, fk, *_ in self._hands:
             buf = bytearray(DATAGRAM_BYTES)
@@ -141,9 +144,9 @@ class OpenXrSender(Output):
         """The datagrams of one frame (views of internal buffers; copy to keep them).
         ``pose_deg``: the full pose, 50 curves then the 4 wrist DOFs, degrees."""
         out = []
-        for (_, fk, forearm, curves, wrist), (buf, floats) in zip(
+        for (_, fk, root, curves, wrist), (buf, floats) in zip(
                 self._hands, self._buffers, strict=True):
-            fk.compute(pose_deg[curves], pose_deg[wrist], forearm, out=self._poses)
+            fk.compute(pose_deg[curves], pose_deg[wrist], out=self._poses, root=root)
             floats[:, :7] = self._poses
             struct.pack_into("<I", buf, 8, self.frames_sent & 0xFFFFFFFF)
             struct.pack_into("<d", buf, 16, t_s)

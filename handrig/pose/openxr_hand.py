@@ -46,6 +46,7 @@ from scipy.spatial.transform import Rotation
 from handrig import hand as vocab
 from handrig.errors import DataError
 from handrig.hand import FINGERS, Hand
+from handrig.pose import chain_kernel
 from handrig.pose.hand_geometry import (
     CARPUS_FRAC,
     JOINT_AXES_RI,
@@ -73,7 +74,7 @@ JOINT_NAMES: tuple[str, ...] = (
 XR_JOINT_NAMES: tuple[str, ...] = tuple(f"XR_HAND_JOINT_{n}_EXT" for n in JOINT_NAMES)
 """The enumerant names of ``XrHandJointEXT``, index = value."""
 PALM, WRIST = 0, 1
-THUMB_FIRST = 2
+THUMB_FIRST = 2  # THUMB_METACARPAL; then PROXIMAL, DISTAL, TIP
 FINGER_FIRST = (6, 11, 16, 21)  # each finger's METACARPAL; then PROXIMAL .. TIP
 TIPS = (5, 10, 15, 20, 25)
 """The tip joints, thumb to little finger."""
@@ -148,16 +149,13 @@ class HandJoints:
         return row
 
 
-def _cross_matrix(a: FloatArray) -> FloatArray:
-    x, y, z = a
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
 class OpenXrHand:
     """The forward kinematics of one hand (side and length fixed), reusable per frame.
 
-    :meth:`compute` writes one frame into preallocated buffers; :func:`hand_joints` is
-    the one-call form. ``hand_length_m``: HL, wrist crease to the middle fingertip.
+    :meth:`compute` writes one frame into a caller's buffer in one compiled step
+    (:func:`handrig.pose.chain_kernel.chain_poses` over this hand's body tree);
+    :func:`hand_joints` is the one-call form. ``hand_length_m``: HL, wrist crease to the
+    middle fingertip.
     """
 
     def __init__(self, hand: Hand = "ri", hand_length_m: float = REFERENCE_HAND_LENGTH_M
@@ -172,50 +170,78 @@ class OpenXrHand:
         geo = hand_geometry(hand_length_m)
         hl = hand_length_m
 
-        def axis(key: str) -> FloatArray:
-            return np.array(mirror_axis(JOINT_AXES_RI[key], hand))
+        def axis(key: str) -> tuple[float, float, float]:
+            return mirror_axis(JOINT_AXES_RI[key], hand)
 
+        # hinges: wrist 0-1, thumb 2-6 (CMC abduction, flexion, twist, MCP, IP), then per
+        # finger MCP abduction, flexion, twist, PIP, DIP
         finger_axes = [axis("FingerMCPx"), axis("FingerFlex"), axis(_FINGER_TWIST_AXIS),
                        axis("FingerFlex"), axis("FingerFlex")]
-        axes = [axis("WristFlexion"), axis("WristDeviation"), axis("ThumbCMCy"),
-                axis("ThumbCMCz"), axis("ThumbCMCx"), axis("ThumbFlex"), axis("ThumbFlex"),
-                *(finger_axes * len(FINGERS))]
-        k = np.stack([_cross_matrix(a) for a in axes])
-        self._k: FloatArray = k
-        self._k2: FloatArray = k @ k
+        self._axes = np.array([axis("WristFlexion"), axis("WristDeviation"),
+                               axis("ThumbCMCy"), axis("ThumbCMCz"), axis("ThumbCMCx"),
+                               axis("ThumbFlex"), axis("ThumbFlex"),
+                               *(finger_axes * len(FINGERS))], dtype=np.float64)
         # the 25 curves (thumb CMCx CMCy CMCz MCPz IPz; fingers MCPx MCPy MCPz PIPy DIPy)
-        # -> the model's joint order (thumb CMC abduction y, flexion z, twist x first)
+        # -> the hinges from 2 on
         self._curve_slot = np.array([1, 2, 0, 3, 4, *range(5, 25)], dtype=np.intp)
-        self._angles: FloatArray = np.zeros(_N_ANGLES)
-        self._rot: FloatArray = np.zeros((_N_ANGLES, 3, 3))
-        self._eye: FloatArray = np.eye(3)
+        # bodies: the hand, thumb CMC MCP IP, then per finger MCP PIP DIP
         thumb = geo.segments["Thumb"]
-        self._thumb_base: FloatArray = np.array(mirror_pos(geo.base_pos_m["Thumb"], hand))
-        self._thumb_len: FloatArray = np.array([s.length_m for s in thumb])
-        self._finger_mcp: FloatArray = np.array(
-            [mirror_pos(geo.base_pos_m[d], hand) for d in FINGERS])
-        self._finger_meta: FloatArray = self._finger_mcp.copy()
-        self._finger_meta[:, 0] = CARPUS_FRAC * hl
-        self._finger_len: FloatArray = np.array(
-            [[s.length_m for s in geo.segments[d]] for d in FINGERS])  # (4, 3)
+        parent: list[int] = [-1, 0, 1, 2]
+        offset: list[Sequence[float]] = [
+            (0.0, 0.0, 0.0), mirror_pos(geo.base_pos_m["Thumb"], hand),
+            (thumb[0].length_m, 0.0, 0.0), (thumb[1].length_m, 0.0, 0.0)]
+        joints: list[tuple[int, int, int]] = [(0, 1, -1), (2, 3, 4), (5, -1, -1), (6, -1, -1)]
+        # points: (body, offset in it) per OpenXR joint
         middle_meta = SEGMENT_FRAC["Middle"][0] * hl
-        self._palm: FloatArray = np.array([CARPUS_FRAC * hl + middle_meta / 2, 0.0, 0.0])
-        radii = np.empty(JOINT_COUNT)
-        radii[[PALM, WRIST]] = PALM_THICKNESS_FRAC * hl / 2
-        r = [s.radius_m for s in thumb]
-        radii[THUMB_FIRST:THUMB_FIRST + 4] = (r[0], r[1], r[2], r[2])
-        for f, d in enumerate(FINGERS):
-            r = [s.radius_m for s in geo.segments[d]]
-            radii[FINGER_FIRST[f]:FINGER_FIRST[f] + 5] = (r[0], r[0], r[1], r[2], r[2])
-        self.radii_m: FloatArray = radii
-        self._pos: FloatArray = np.zeros((JOINT_COUNT, 3))
-        self._mat: FloatArray = np.zeros((JOINT_COUNT, 3, 3))
+        points: list[tuple[int, Sequence[float]]] = [
+            (0, (CARPUS_FRAC * hl + middle_meta / 2, 0.0, 0.0)), (0, (0.0, 0.0, 0.0)),
+            (1, (0.0, 0.0, 0.0)), (2, (0.0, 0.0, 0.0)), (3, (0.0, 0.0, 0.0)),
+            (3, (thumb[2].length_m, 0.0, 0.0))]
+        radii = [PALM_THICKNESS_FRAC * hl / 2] * 2 + [thumb[0].radius_m, thumb[1].radius_m,
+                                                       thumb[2].radius_m, thumb[2].radius_m]
+        for f, digit in enumerate(FINGERS):
+            segs = geo.segments[digit]
+            mcp = mirror_pos(geo.base_pos_m[digit], hand)
+            first, hinge = len(parent), 7 + 5 * f
+            parent += [0, first, first + 1]
+            offset += [mcp, (segs[0].length_m, 0.0, 0.0), (segs[1].length_m, 0.0, 0.0)]
+            joints += [(hinge, hinge + 1, hinge + 2), (hinge + 3, -1, -1), (hinge + 4, -1, -1)]
+            points += [(0, (CARPUS_FRAC * hl, mcp[1], mcp[2])), (first, (0.0, 0.0, 0.0)),
+                       (first + 1, (0.0, 0.0, 0.0)), (first + 2, (0.0, 0.0, 0.0)),
+                       (first + 2, (segs[2].length_m, 0.0, 0.0))]
+            radii += [segs[0].radius_m, segs[0].radius_m, segs[1].radius_m, segs[2].radius_m,
+                      segs[2].radius_m]
+        self._parent = np.array(parent, dtype=np.intp)
+        self._offset = np.array(offset, dtype=np.float64)
+        self._joints = np.array(joints, dtype=np.intp)
+        self._point_body = np.array([b for b, _ in points], dtype=np.intp)
+        self._point_local = np.array([o for _, o in points], dtype=np.float64)
+        self.radii_m: FloatArray = np.array(radii, dtype=np.float64)
+        self._frame: FloatArray = np.ascontiguousarray(MODEL_TO_XR.T)
+        self._angles: FloatArray = np.zeros(_N_ANGLES)
+        self._rot: FloatArray = np.zeros((len(parent), 3, 3))
+        self._pos: FloatArray = np.zeros((len(parent), 3))
+        self._hinge: FloatArray = np.zeros((3, 3))
+        self._tmp: FloatArray = np.zeros((3, 3))
+        self._home: tuple[FloatArray, FloatArray] = (np.ascontiguousarray(MODEL_TO_XR),
+                                                     np.zeros(3))
+        chain_kernel.warm_up()
+
+    def root(self, forearm: XrPose | None) -> tuple[FloatArray, FloatArray]:
+        """The forearm frame in OpenXR space: (rotation, origin), for :meth:`compute`."""
+        if forearm is None:
+            return self._home
+        return (np.ascontiguousarray(forearm.matrix() @ MODEL_TO_XR),
+                np.array(forearm.position_m, dtype=np.float64))
 
     def compute(self, pose25_deg: FloatArray, wrist_deg: Sequence[float] | FloatArray = (0.0, 0.0),
-                forearm: XrPose | None = None, out: FloatArray | None = None) -> FloatArray:
+                forearm: XrPose | None = None, out: FloatArray | None = None, *,
+                root: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
         """One frame: this hand's 25 curves (its half of :data:`handrig.hand.CURVE_NAMES`,
         in that order, degrees) and (wrist flexion, deviation) in degrees -> the (26, 7)
-        poses (:data:`POSE_COLUMNS`), written into ``out`` if given (else a new array)."""
+        poses (:data:`POSE_COLUMNS`), written into ``out`` if given (float64, C order;
+        else a new array). ``root``: :meth:`root`'s answer, kept by a caller that sends
+        every frame from the same forearm pose (then ``forearm`` is not read)."""
         c = np.asarray(pose25_deg, dtype=np.float64)
         if c.shape != (vocab.CURVES_PER_HAND,):
             raise DataError(f"one hand's pose is {vocab.CURVES_PER_HAND} curves (thumb CMCx .."
@@ -228,51 +254,13 @@ class OpenXrHand:
         a[:2] = w
         a[2:] = c[self._curve_slot]
         np.radians(a, out=a)
-        s, cc = np.sin(a), np.cos(a)
-        rot = self._rot
-        np.multiply(self._k, s[:, None, None], out=rot)
-        rot += self._k2 * (1.0 - cc)[:, None, None]
-        rot += self._eye
-        if forearm is None:
-            world, origin = MODEL_TO_XR, np.zeros(3)
-        else:
-            world, origin = forearm.matrix() @ MODEL_TO_XR, np.asarray(forearm.position_m)
-        r_hand = world @ rot[0] @ rot[1]
-        pos, mat = self._pos, self._mat
-        pos[WRIST] = 0.0
-        mat[WRIST] = r_hand
-        pos[PALM] = r_hand @ self._palm
-        mat[PALM] = r_hand
-        # thumb: CMC (abduction, flexion, twist) -> MCP -> IP -> tip
-        t = THUMB_FIRST
-        r_cmc = r_hand @ rot[2] @ rot[3] @ rot[4]
-        r_mcp = r_cmc @ rot[5]
-        r_ip = r_mcp @ rot[6]
-        lt = self._thumb_len
-        pos[t] = r_hand @ self._thumb_base
-        pos[t + 1] = pos[t] + lt[0] * r_cmc[:, 0]
-        pos[t + 2] = pos[t + 1] + lt[1] * r_mcp[:, 0]
-        pos[t + 3] = pos[t + 2] + lt[2] * r_ip[:, 0]
-        mat[t], mat[t + 1], mat[t + 2], mat[t + 3] = r_cmc, r_mcp, r_ip, r_ip
-        # fingers, the four at once: MCP (abduction, flexion, twist) -> PIP -> DIP -> tip
-        fr = rot[7:].reshape(len(FINGERS), 5, 3, 3)
-        r_prox = r_hand @ fr[:, 0] @ fr[:, 1] @ fr[:, 2]
-        r_mid = r_prox @ fr[:, 3]
-        r_dist = r_mid @ fr[:, 4]
-        lf = self._finger_len
-        idx = np.array(FINGER_FIRST)
-        pos[idx] = self._finger_meta @ r_hand.T
-        pos[idx + 1] = self._finger_mcp @ r_hand.T
-        pos[idx + 2] = pos[idx + 1] + lf[:, 0:1] * r_prox[:, :, 0]
-        pos[idx + 3] = pos[idx + 2] + lf[:, 1:2] * r_mid[:, :, 0]
-        pos[idx + 4] = pos[idx + 3] + lf[:, 2:3] * r_dist[:, :, 0]
-        mat[idx] = r_hand
-        mat[idx + 1], mat[idx + 2], mat[idx + 3], mat[idx + 4] = r_prox, r_mid, r_dist, r_dist
+        rot, origin = root if root is not None else self.root(forearm)
         if out is None:
             out = np.empty((JOINT_COUNT, 7))
-        out[:, :3] = pos
-        out[:, :3] += origin
-        out[:, 3:] = Rotation.from_matrix(mat @ MODEL_TO_XR.T).as_quat()
+        chain_kernel.chain_poses(a, self._axes, self._parent, self._offset, self._joints,
+                                 rot, origin, self._point_body, self._point_local,
+                                 self._frame, self._rot, self._pos, self._hinge, self._tmp,
+                                 out)
         return out
 
     def joints(self, pose25_deg: FloatArray, wrist_deg: Sequence[float] | FloatArray = (0.0, 0.0),
