@@ -7,7 +7,8 @@ knows nothing of hands: bodies in parent-before-child order, each with its paren
 offset in the parent's frame and up to three hinge joints applied in order (intrinsic,
 about axes in the body's own frame, MuJoCo's convention); points are (body, offset).
 ``cache=True`` keeps the machine code in ``__pycache__``; :func:`warm_up` compiles (or
-loads) it before a loop starts.
+loads) it before a loop starts. numpy's error model: a NaN or infinite angle gives NaN
+joints, never an exception on the loop's thread.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _mat_to_quat(m: Any, out: Any) -> None:  # pragma: no cover - compiled
     """A rotation matrix -> unit quaternion (x, y, z, w) into ``out``, w >= 0 (Shepperd's
     method: the largest of the four squared components is the pivot)."""
@@ -49,7 +50,7 @@ def _mat_to_quat(m: Any, out: Any) -> None:  # pragma: no cover - compiled
     out[3] = w / n
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def chain_poses(angles_rad: Any, axes: Any, parent: Any, offset: Any, joints: Any,
                 root_rot: Any, root_pos: Any, point_body: Any, point_local: Any,
                 frame: Any, rot: Any, pos: Any, hinge: Any, tmp: Any, out: Any

@@ -38,3 +38,15 @@ def test_two_hinged_bodies() -> None:
     assert np.allclose(out[0], [0, 0, 0, 0, 0, 0, 1])
     s = math.sqrt(0.5)
     assert np.allclose(out[1], [1, 1, 0, 0, 0, s, s])
+
+
+def test_non_finite_angles_give_nan_joints_not_an_exception() -> None:
+    from handrig.pose.openxr_hand import FINGER_FIRST, hand_joints
+
+    pose = np.zeros(25)
+    pose[5 + 1] = np.nan  # the index finger's MCP flexion
+    pose[10 + 3] = np.inf  # the middle finger's PIP
+    j = hand_joints(pose).poses
+    assert np.isnan(j[FINGER_FIRST[0] + 2:FINGER_FIRST[0] + 5]).any(axis=1).all()
+    assert np.isnan(j[FINGER_FIRST[1] + 3:FINGER_FIRST[1] + 5]).any(axis=1).all()
+    assert np.isfinite(j[FINGER_FIRST[2]:]).all() and np.isfinite(j[:FINGER_FIRST[0]]).all()
