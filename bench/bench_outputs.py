@@ -1,4 +1,5 @@
-"""Outputs: VMC bundle encode/send cost per frame, recorder add/close, performance load."""
+"""Outputs: VMC bundle and OpenXR hand-joint encode/send cost per frame (side by side,
+alternated in one run), recorder add/close, performance load."""
 
 from __future__ import annotations
 
@@ -13,8 +14,9 @@ from pythonosc import osc_bundle_builder, osc_message_builder
 
 from handrig import hand
 from handrig.clock import FakeClock
-from handrig.outputs import vmc
+from handrig.outputs import openxr, vmc
 from handrig.outputs.recorder import Recorder, load_performance
+from handrig.pose.openxr_hand import OpenXrHand
 
 
 def _per_call_us(fn: Callable[[], object], n: int) -> tuple[float, float]:
@@ -36,6 +38,41 @@ def _python_osc_bundle(quats: np.ndarray, t_s: float) -> bytes:
             m.add_arg(float(x))
         b.add_content(m.build())
     return b.build().dgram
+
+
+def _openxr_beside_vmc(pose: np.ndarray, wrist: np.ndarray, n: int) -> None:
+    """One frame sent by each output (its whole work on the loop's thread: encode and
+    UDP sendto to localhost), the two alternated call by call so both see the same
+    machine; and one hand's 26 joints alone."""
+    full = np.concatenate([pose, wrist])
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:
+        sink.bind(("127.0.0.1", 0))
+        sink.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        port = sink.getsockname()[1]
+        clock = FakeClock()
+        with (vmc.VmcSender("127.0.0.1", port, rate_hz=1e9, clock=clock) as v_tx,
+              openxr.OpenXrSender("127.0.0.1", port, rate_hz=1e9, clock=clock) as x_tx):
+            hand = OpenXrHand("ri")
+            out = np.empty((26, 7))
+            dt = np.empty((3, n))
+            for i in range(n):
+                clock.advance(1.0)
+                t0 = time.perf_counter()
+                v_tx(1.0, full)
+                t1 = time.perf_counter()
+                x_tx(1.0, full)
+                t2 = time.perf_counter()
+                hand.compute(pose[:25], wrist[:2], out=out)
+                dt[:, i] = (t1 - t0, t2 - t1, time.perf_counter() - t2)
+            assert v_tx.errors == 0 and x_tx.errors == 0
+    us = dt * 1e6
+    print(f"one frame sent, alternated ({n} each): VMC {len(v_tx.encode(pose, wrist, 0.0))}"
+          f" bytes in one bundle; OpenXR 2 x {openxr.DATAGRAM_BYTES} bytes (a datagram a hand)")
+    for name, row in (("VMC send (32 bone quaternions + OSC)", us[0]),
+                      ("OpenXR send (2 hands x 26 joints)", us[1]),
+                      ("  of which one hand's 26 joints", us[2])):
+        print(f"  {name:38s} min {row.min():6.1f} us, median {np.median(row):6.1f} us,"
+              f" p99 {np.percentile(row, 99):6.1f} us")
 
 
 def main() -> None:
@@ -73,6 +110,7 @@ def main() -> None:
     print(f"  send (encode + UDP sendto localhost): median {s_med:6.1f} us, p99 {s_p99:6.1f} us")
     print(f"  send skipped by the rate limit:       median {k_med:6.2f} us")
     print(f"  (python-osc builders for the same bones: median {o_med:.0f} us)")
+    _openxr_beside_vmc(pose, wrist, n)
 
     frames = 12_000  # 60 s at 200 Hz
     with tempfile.TemporaryDirectory() as tmp:

@@ -148,9 +148,10 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
 def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
             vmc: str | None = None, record: str | None = None,
             log: Callable[[str], None] = print, glove_rate_hz: float | None = None,
-            record_rate_hz: float | None = None
+            record_rate_hz: float | None = None, openxr: str | None = None
             ) -> list[Callable[[float, FloatArray], None]]:
-    """The outputs a run feeds the full pose to: a VMC sender (``HOST:PORT``), a
+    """The outputs a run feeds the full pose to: a VMC sender (``HOST:PORT``), the
+    OpenXR hand joints (``openxr``, ``HOST:PORT``: :mod:`handrig.outputs.openxr`), a
     recorder (``.csv`` or ``.bvh``). Each is closed when ``stack`` unwinds. A BVH take
     is written at ``record_rate_hz`` if given (``--record-rate``), else at the glove's
     nominal rate (``glove_rate_hz``, ``[glove] rate_hz``) when the loop follows the
@@ -163,6 +164,12 @@ def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
         sender = VmcSender(host, port, clock=clock)
         stack.callback(sender.close)
         out.append(sender)
+    if openxr:
+        from handrig.outputs.openxr import OpenXrSender, parse_target
+
+        xr = OpenXrSender(*parse_target(openxr), clock=clock)
+        stack.callback(xr.close)
+        out.append(xr)
     if record:
         from handrig.outputs.recorder import Recorder
 

@@ -105,6 +105,8 @@ class Outputs:
     record_stopped: str = ""  # why the recording stopped during the run ("" = recording)
     glove_take_path: str = ""  # a glove take (--record-glove) being written
     glove_take_frames: int = 0
+    openxr_target: str = ""  # HOST:PORT of the OpenXR hand joints (--openxr)
+    openxr_errors: int = 0
 
 
 @dataclass(frozen=True)
@@ -239,12 +241,18 @@ def bus_line(b: BusHealth) -> Text:
 
 def outputs_line(o: Outputs) -> Text:
     text = Text.assemble(("out    ", "bold"))
+    # the OpenXR hand joints (--openxr) share VMC's place: "VMC+XR" with both (its
+    # target is in the plain line), "XR HOST:PORT" alone
+    errors = o.vmc_errors + o.openxr_errors
     if o.vmc_target:
-        text.append(f"VMC {_fit(o.vmc_target, 21)} {_num(o.vmc_rate_hz)} Hz")
-        if o.vmc_errors:
-            text.append(f" {o.vmc_errors} err", "bold red")
+        xr = "+XR" if o.openxr_target else ""
+        text.append(f"VMC{xr} {_fit(o.vmc_target, 21)} {_num(o.vmc_rate_hz)} Hz")
+    elif o.openxr_target:
+        text.append(f"XR {_fit(o.openxr_target, 21)}")
     else:
         text.append("VMC off", "dim")
+    if errors and (o.vmc_target or o.openxr_target):
+        text.append(f" {errors} err", "bold red")
     text.append("  |  ")
     if o.record_path:
         name = _fit_left(o.record_path, 20)
@@ -358,6 +366,8 @@ def plain_line(s: PanelSnapshot) -> str:
          else "rec off"),
         *([f"glove take {o.glove_take_path} {o.glove_take_frames} frames"]
           if o.glove_take_path else []),
+        *([f"openxr {o.openxr_target}" + (f" {o.openxr_errors} errors" if o.openxr_errors
+                                           else "")] if o.openxr_target else []),
     ]
     return " | ".join(parts)
 

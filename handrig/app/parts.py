@@ -185,10 +185,18 @@ def glove_spec(spec: str | None, cfg: GloveConfig, glove_file: Path | None = Non
     return spec
 
 
-def check_outputs(vmc: str | None, record: str | None) -> None:
-    """``--vmc`` and ``--record`` checked before any device is opened: ConfigError naming
-    the flag (a VMC target without its port, a recording suffix that is neither .csv nor
-    .bvh)."""
+def check_outputs(vmc: str | None, record: str | None, openxr: str | None = None) -> None:
+    """``--vmc``, ``--openxr`` and ``--record`` checked before any device is opened:
+    ConfigError naming the flag (a VMC or OpenXR target without its port, a recording
+    suffix that is neither .csv nor .bvh)."""
+    if openxr:
+        from handrig.outputs.openxr import DEFAULT_PORT as XR_PORT
+        from handrig.outputs.openxr import parse_target
+
+        if ":" not in openxr:
+            raise ConfigError("no port given", key="--openxr", value=openxr,
+                              allowed=f"HOST:PORT, e.g. {openxr}:{XR_PORT}")
+        parse_target(openxr)
     if vmc:
         from handrig.outputs.vmc import DEFAULT_PORT, parse_host_port
 

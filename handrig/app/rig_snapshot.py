@@ -124,6 +124,7 @@ class RigSnapshot:
         vmc_target, vmc_rate, vmc_err = "", NAN, 0
         rec_path, rec_bytes, rec_s, rec_stopped = "", 0, 0.0, ""
         glove_path, glove_frames = "", 0
+        xr_target, xr_err = "", 0
         for out in s.outputs:
             if out.kind == "vmc":
                 vmc_target = out.address
@@ -134,8 +135,10 @@ class RigSnapshot:
                 rec_stopped = out.stopped_reason
             elif out.kind == "glove take":
                 glove_path, glove_frames = out.path, out.frames_written
+            elif out.kind == "openxr":
+                xr_target, xr_err = out.address, out.errors
         return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped,
-                       glove_path, glove_frames)
+                       glove_path, glove_frames, xr_target, xr_err)
 
 
 HAND_LABELS = {"ri": "right", "le": "left"}

@@ -93,6 +93,7 @@ class LiveOptions:
     wire_timing: bool = True  # for the simulated bus
     viewer: bool = False
     vmc: str | None = None
+    openxr: str | None = None  # HOST:PORT: the OpenXR hand joints (outputs/openxr.py)
     record: str | None = None
     record_rate_hz: float | None = None  # a BVH take's frame rate (None: the glove's)
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
@@ -188,7 +189,7 @@ class _Session:
         try:
             # the checks that need no hardware, before a bus is opened and commissioned
             specs = self._check_gloves()
-            app_parts.check_outputs(self.opts.vmc, self.opts.record)
+            app_parts.check_outputs(self.opts.vmc, self.opts.record, self.opts.openxr)
             self._check_glove_takes()
             with contextlib.ExitStack() as stack:
                 self._open_buses(stack)
@@ -318,7 +319,7 @@ class _Session:
         self.outputs[0] = app.outputs(stack, parts.rig_config, self.clock, vmc=opts.vmc,
                                       record=opts.record, log=log,
                                       glove_rate_hz=first.glove_config.glove.rate_hz,
-                                      record_rate_hz=opts.record_rate_hz)
+                                      record_rate_hz=opts.record_rate_hz, openxr=opts.openxr)
         for i, (_, path) in self._glove_takes().items():
             take = takes.open_glove_take(path, gloves[i], parts.hands[i].glove_config,
                                          source=opts.gloves()[i] or gloves[i].name, log=log,

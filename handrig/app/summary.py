@@ -180,6 +180,12 @@ def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
     else:
         rec_text = "recording off"
     lines = [f"outputs           {vmc_text}", f"                  {rec_text}"]
+    xr = outputs.get("openxr")
+    if xr:
+        errors = f", {xr['errors']} send errors" if xr.get("errors") else ""
+        rate = f", {xr['rate_hz']} Hz" if xr.get("rate_hz") is not None else ""
+        lines.append(f"                  OpenXR hand joints to {xr['target']}: "
+                     f"{xr['frames_sent']} frames{rate}{errors}")
     if glove_take:
         stopped = f" ({glove_take['stopped_reason']})" if glove_take.get("stopped_reason") else ""
         lines.append(f"                  glove take {glove_take['path']}: {glove_take['frames']}"

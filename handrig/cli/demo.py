@@ -64,6 +64,9 @@ def register(sub: Any) -> None:
                    "(default 5 s), so the hands do not move alike")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="switch on emulated bus faults (see handrig sim-bus --help)")
+    p.add_argument("--openxr", default=None, metavar="HOST:PORT",
+                   help="also send both hands as the 26 OpenXR hand joints each, over UDP "
+                   "(docs/openxr.md; e.g. 127.0.0.1:39540)")
     add_view_flag(p)
     p.set_defaults(func=run)
 
@@ -138,6 +141,7 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
                                    glove_left=left_port,
                                    bus_left="sim" if per_hand else None,
                                    sim_faults=args.faults, wire_timing=WIRE_TIMING,
+                                   openxr=args.openxr,
                                    started=started, log=log, panel=not args.json,
                                    on_hands=view.attach_hands if view is not None else None,
                                    snapshot_every=max(1, expected // 6) if args.render else 0)

@@ -1,15 +1,18 @@
 """``handrig play TAKE``: play a take onto the servos (``--bus PORT|sim``) through the
 live loop, with the live show's safety; without ``--bus``, a performance (CSV or BVH)
-to a VMC receiver only."""
+to a VMC receiver only (and, with ``--openxr``, the OpenXR hand joints)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from handrig.app.parts import build_parts
+import numpy as np
+
+from handrig.app.parts import build_parts, check_outputs
 from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import Source, run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
@@ -22,6 +25,9 @@ from handrig.clock import MonotonicClock
 from handrig.errors import ConfigError, DataError, HandrigError
 from handrig.outputs.recorder import Playback
 from handrig.outputs.vmc import DEFAULT_PORT, VmcSender, parse_host_port
+
+if TYPE_CHECKING:
+    from handrig.outputs.openxr import OpenXrSender
 
 
 def register(sub: Any) -> None:
@@ -65,6 +71,9 @@ def register(sub: Any) -> None:
     p.add_argument("--no-wire-timing", action="store_true",
                    help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.add_argument("--openxr", default=None, metavar="HOST:PORT",
+                   help="also send both hands as the 26 OpenXR hand joints each, over UDP "
+                   "(docs/openxr.md; e.g. 127.0.0.1:39540)")
     add_view_flag(p)
     p.set_defaults(func=run)
 
@@ -118,7 +127,8 @@ def run_on_rig(args: argparse.Namespace) -> int:
             glove=f"replay:{args.file}", take=lambda clock: take.source(clock, loop=args.loop),
             bus=args.bus,
             duration_s=None if args.loop else round(take.duration_s + one_frame, 3),
-            wire_timing=not args.no_wire_timing, vmc=args.vmc, panel=not args.json,
+            wire_timing=not args.no_wire_timing, vmc=args.vmc, openxr=args.openxr,
+            panel=not args.json,
             verbose=not args.json, on_hands=view.attach_hands if view is not None else None,
             done_reason=f"the take played ({take.duration_s:.2f} s)")
         result = run_live(parts, opts)
@@ -129,6 +139,17 @@ def run_on_rig(args: argparse.Namespace) -> int:
 
 def _stderr(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
+
+
+def _openxr_sender(target: str | None, rate_hz: float, clock: MonotonicClock
+                   ) -> contextlib.AbstractContextManager[OpenXrSender | None]:
+    """``--openxr``'s sender beside VMC's (None without the flag)."""
+    from handrig.outputs.openxr import OpenXrSender, parse_target
+
+    if not target:
+        return contextlib.nullcontext()
+    check_outputs(None, None, target)
+    return OpenXrSender(*parse_target(target), rate_hz=rate_hz, clock=clock)
 
 
 def run_to_vmc(args: argparse.Namespace) -> int:
@@ -147,6 +168,7 @@ def run_to_vmc(args: argparse.Namespace) -> int:
     period_s = 1.0 / args.rate
     interrupted = False
     with (VmcSender(host, port, rate_hz=args.rate, clock=clock) as sender,
+          _openxr_sender(args.openxr, args.rate, clock) as xr,
           view_playback(args.view, str(args.file),
                         lambda text: print(text, file=sys.stderr, flush=True)) as view):
         playback.start()
@@ -155,6 +177,9 @@ def run_to_vmc(args: argparse.Namespace) -> int:
             while (frame := playback.sample()) is not None and not view.stop_requested:
                 pose, wrist = frame
                 sender.send(pose, wrist, playback.elapsed_s())
+                if xr is not None:
+                    xr(playback.elapsed_s(), np.concatenate(
+                        [pose, wrist if wrist is not None else np.zeros(4)]))
                 view.show(pose, wrist, playback.elapsed_s())
                 next_s += period_s
                 clock.sleep_until(next_s)
@@ -167,6 +192,8 @@ def run_to_vmc(args: argparse.Namespace) -> int:
             "bundles_sent": sender.bundles_sent, "errors": sender.errors,
             "wrist": playback.wrist is not None, "interrupted": interrupted,
         }
+        if xr is not None:
+            summary["openxr"] = xr.summary(playback.duration_s / args.speed)[1]
     if args.json:
         print(json.dumps(summary))
     else:

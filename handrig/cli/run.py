@@ -59,6 +59,9 @@ def register(sub: Any) -> None:
                    help="with --bus sim: show the simulated puppet (needs a display)")
     p.add_argument("--vmc", default=None, metavar="HOST:PORT",
                    help="also send the hands to a VMC receiver (VSeeFace, Unity, Blender)")
+    p.add_argument("--openxr", default=None, metavar="HOST:PORT",
+                   help="also send both hands as the 26 OpenXR hand joints each, over UDP "
+                   "(docs/openxr.md; e.g. 127.0.0.1:39540)")
     p.add_argument("--record", default=None, metavar="FILE",
                    help="record the performance (.csv or .bvh; never replaces a file)")
     p.add_argument("--record-glove", default=None, metavar="FILE.csv",
@@ -89,7 +92,7 @@ def _from_show(args: argparse.Namespace) -> ShowFile | None:
     fill = {"rig": show.show.rig, "glove": show.gloves.right, "glove_left": show.gloves.left,
             "glove_config": show.gloves.right_config,
             "glove_left_config": show.gloves.left_config, "bus": show.buses.right,
-            "bus_left": show.buses.left, "vmc": show.outputs.vmc,
+            "bus_left": show.buses.left, "vmc": show.outputs.vmc, "openxr": show.outputs.openxr,
             "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
             "view": show.outputs.view}
     filled = []
@@ -191,7 +194,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
         opts = LiveOptions(
             glove=right, bus=args.bus, frames=args.frames, duration_s=args.seconds,
             wire_timing=not args.no_wire_timing, viewer=args.viewer, vmc=args.vmc,
-            record=args.record, record_rate_hz=args.record_rate,
+            openxr=args.openxr, record=args.record, record_rate_hz=args.record_rate,
             record_glove=args.record_glove, record_glove_left=args.record_glove_left,
             panel=not args.json,
             verbose=not args.json, glove_left=left, bus_left=args.bus_left,

@@ -25,6 +25,7 @@ names the file and the key (``examples/show.toml`` is the commented example)::
 
     [outputs]
     vmc = ""                   # HOST:PORT
+    openxr = ""                # HOST:PORT: the OpenXR hand joints (docs/openxr.md)
     record = ""                # a new take, .csv or .bvh
     record_rate_hz = 0.0       # a BVH take's rate (0: the glove's)
     view = ""                  # [HOST:]PORT of the live view
@@ -68,6 +69,7 @@ class ShowBuses:
 @dataclass(frozen=True)
 class ShowOutputs:
     vmc: str = ""
+    openxr: str = ""
     record: str = ""
     record_rate_hz: float = 0.0
     view: str = ""
@@ -76,6 +78,9 @@ class ShowOutputs:
         if self.vmc and ":" not in self.vmc:
             raise ConfigError("no port given", key="vmc", value=self.vmc,
                               allowed="HOST:PORT, e.g. 127.0.0.1:39539")
+        if self.openxr and ":" not in self.openxr:
+            raise ConfigError("no port given", key="openxr", value=self.openxr,
+                              allowed="HOST:PORT, e.g. 127.0.0.1:39540")
         if self.record and Path(self.record).suffix.lower() not in (".csv", ".bvh"):
             raise ConfigError("unknown recording suffix", key="record", value=self.record,
                               allowed="a file name ending in .csv or .bvh")

@@ -15,25 +15,23 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from handrig.pose.hand_geometry import LATERAL_FRAC, SEGMENT_FRAC
+
 HAND_LENGTH_M = 0.19
 """HL, wrist crease to middle fingertip (REFERENCE.md section 4)."""
 HAND_BREADTH_M = 0.085
 """HB, across the MCP knuckles (REFERENCE.md section 4)."""
 FOREARM_LENGTH_M = 0.26  # assumed: elbow to wrist, as the reference mocap skeleton (26 cm)
 
-# digit -> (metacarpal, proximal, middle, distal) as fractions of HL; thumb has no middle.
+# digit -> (metacarpal, proximal, middle, distal) as fractions of HL; thumb has no middle
+# (0 here). The numbers are the hand model's (handrig/pose/hand_geometry.py): one table.
 SEGMENT_FRACTIONS: dict[str, tuple[float, float, float, float]] = {
-    "Thumb": (0.251, 0.196, 0.0, 0.158),
-    "Index": (0.374, 0.245, 0.143, 0.097),
-    "Middle": (0.373, 0.266, 0.170, 0.108),
-    "Ring": (0.336, 0.244, 0.165, 0.107),
-    "Pinky": (0.295, 0.204, 0.117, 0.093),
+    d: (m, p, mid if mid is not None else 0.0, dist)
+    for d, (m, p, mid, dist) in SEGMENT_FRAC.items()
 }
 # Lateral offset of the MCP (thumb: CMC) from the third metacarpal axis, fraction of HB,
 # radial positive.
-LATERAL_FRACTIONS: dict[str, float] = {
-    "Thumb": 0.196, "Index": 0.126, "Middle": 0.0, "Ring": -0.129, "Pinky": -0.223,
-}
+LATERAL_FRACTIONS: dict[str, float] = dict(LATERAL_FRAC)
 THUMB_CMC_DISTAL_FRACTION = 0.08  # assumed: CMC lies this far (x HL) distal of the wrist axis
 THUMB_CMC_PALMAR_FRACTION = 0.1  # assumed: and this far (x HB) palmar of the knuckle plane
 
