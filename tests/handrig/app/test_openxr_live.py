@@ -28,7 +28,7 @@ def test_run_streams_openxr_hand_joints(tmp_path: Path) -> None:
     port = rx.getsockname()[1]
     take = tmp_path / "take.csv"
     proc = subprocess.Popen(
-        [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--frames", "300",
+        [*CLI, "run", "--glove", f"replay:{DEMO_RECORDING}", "--bus", "sim", "--frames", "200",
          "--openxr", f"127.0.0.1:{port}", "--record", str(take), "--json"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     got = []
