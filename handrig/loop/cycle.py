@@ -90,6 +90,9 @@ class Cycle:
         self.orientation: Callable[[GloveSample], tuple[float, float]] = parts.orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
+        if parts.gravity is not None:  # what the bus gets: the goals held up against gravity
+            write, compensate = bus.write_goals_deg, parts.gravity.apply
+            self.write = lambda goals: write(compensate(goals))
         # port events of the glove, silence events of the bus: into the run's events
         self._drains: tuple[Callable[[], list[str]], ...] = (
             glove.drain_events, bus.drain_events, lambda: self.silence.drain_events(),

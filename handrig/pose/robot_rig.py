@@ -7,6 +7,8 @@ A robot rig is a rig file (see :mod:`handrig.config.rig`) with a ``[robot]`` tab
     model = "../../data/robots/leap_hand/right_hand.xml"  # MJCF, relative to this file
     retarget = "leap_retarget.toml"                        # human curves -> robot joints
     sag = false                                            # passive sag off unless true
+    gravity = true                 # goals offset against the fingers' weight (optional)
+    gravity_direction = [0, 0, -1] # gravity in the model's frame: how the hand is mounted
 
 and ``[[servos]]`` whose ``joint`` is a joint of that model (``if_mcp``), its angle
 in degrees as the model measures it, instead of a human curve. Loading checks what
@@ -22,6 +24,7 @@ Presets live in ``config/rigs/``: ``load_rig("leap")`` is ``config/rigs/leap.tom
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +45,7 @@ from handrig.pose.mjcf import MjcfJoint, read_joints
 from handrig.pose.retarget import Retarget, load_retarget
 
 _JOINT_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+STANDARD_GRAVITY_MPS2 = 9.80665
 RANGE_TOLERANCE_DEG = 0.05  # servo limits may round the model's range by this much
 
 
@@ -56,6 +60,13 @@ class RobotConfig:
     render_view: tuple[float, ...] = ()
     """Where ``--render`` looks from: distance (m), azimuth and elevation (degrees)
     around the hand; empty: the default view (each robot's palm faces another way)."""
+    gravity: bool = False
+    """Offset each servo's goal by the torque gravity puts on its joint at that goal
+    over the servo's stiffness (:mod:`handrig.pose.gravity`), so fingers reach their
+    goals instead of sagging short of them."""
+    gravity_direction: tuple[float, ...] = (0.0, 0.0, -1.0)
+    """Which way gravity points in the model's own frame (the MJCF's world): how the
+    hand is fixed on its table. The default is the model as it is drawn, its z up."""
 
     def check(self) -> None:
         for key in ("model", "retarget"):
@@ -67,6 +78,21 @@ class RobotConfig:
             raise ConfigError("not a camera view", key="render_view", value=list(view),
                               allowed="[distance m (0.05..5), azimuth deg, elevation deg "
                               "(-90..90)], e.g. [0.40, 30.0, -35.0]")
+        down = tuple(float(x) for x in self.gravity_direction)
+        if len(down) != 3 or not all(math.isfinite(x) for x in down) or math.hypot(
+                *down) < 1e-6:
+            raise ConfigError("not a direction", key="gravity_direction",
+                              value=list(self.gravity_direction),
+                              allowed="3 numbers, not all 0: which way gravity points in "
+                              "the model's frame, e.g. [0, 0, -1] (the model as drawn)")
+
+    @property
+    def gravity_mps2(self) -> tuple[float, float, float]:
+        """Gravity in the model's frame (m/s^2): :attr:`gravity_direction` scaled to g."""
+        x, y, z = (float(v) for v in self.gravity_direction)
+        norm = math.hypot(x, y, z)
+        g = STANDARD_GRAVITY_MPS2 / norm
+        return x * g, y * g, z * g
 
 
 @dataclass(frozen=True)
