@@ -71,4 +71,5 @@ def build_gravity(rig: RobotRigConfig, low_deg: np.ndarray, high_deg: np.ndarray
     return GravityCompensation(
         gravity_chain(robot.model), [s.joint for s in rig.servos],
         stiffness_nm_per_rad=stiffness, torque_limit_nm=cap, low_deg=low_deg,
-        high_deg=high_deg, gravity_mps2=robot.gravity_mps2)
+        high_deg=high_deg, gravity_mps2=robot.gravity_mps2,
+        forearm_to_model=robot.forearm_to_model if robot.gravity_from == "forearm" else None)

@@ -92,7 +92,7 @@ class Cycle:
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
         if parts.gravity is not None:  # what the bus gets: the goals held up against gravity
             write, compensate = bus.write_goals_deg, parts.gravity.apply
-            self.write = lambda goals: write(compensate(goals))
+            self.write = lambda goals: write(compensate(goals, *self.angles))
         # port events of the glove, silence events of the bus: into the run's events
         self._drains: tuple[Callable[[], list[str]], ...] = (
             glove.drain_events, bus.drain_events, lambda: self.silence.drain_events(),

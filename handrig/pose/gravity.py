@@ -209,13 +209,17 @@ class GravityCompensation:
     and ``torque_limit_nm`` per servo, at the joint; ``low_deg``/``high_deg`` the
     servos' limits (a compensated goal never leaves them); ``gravity_mps2``: gravity
     in the model's world frame (the hand's orientation), :meth:`set_gravity` to move it.
+    ``forearm_to_model`` (3x3, forearm-frame vectors into the model's frame): the hand
+    rides on the forearm, and each :meth:`apply` takes gravity from the forearm's
+    inclination and rotation (:mod:`handrig.pose.orientation`'s forearm frame: x
+    distal, z dorsal; up is ``(sin i, cos i sin r, cos i cos r)`` there) instead.
     :meth:`apply` allocates nothing.
     """
 
     def __init__(self, chain: GravityChain, servo_joints: Sequence[str], *,
                  stiffness_nm_per_rad: ArrayLike, torque_limit_nm: ArrayLike,
                  low_deg: ArrayLike, high_deg: ArrayLike,
-                 gravity_mps2: ArrayLike) -> None:
+                 gravity_mps2: ArrayLike, forearm_to_model: ArrayLike | None = None) -> None:
         chain.check()
         self.chain = chain
         n = len(servo_joints)
@@ -241,6 +245,14 @@ class GravityCompensation:
         self.low_deg, self.high_deg = arrays["low_deg"], arrays["high_deg"]
         self.gravity_mps2 = np.zeros(3)
         self.set_gravity(gravity_mps2)
+        self.g_mps2 = float(np.linalg.norm(self.gravity_mps2))
+        self.forearm_to_model: FloatArray | None = None
+        if forearm_to_model is not None:
+            rot = np.asarray(forearm_to_model, dtype=np.float64)
+            if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-3):
+                raise ConfigError("forearm_to_model must be a 3x3 rotation",
+                                  key="forearm_axes", value=rot.tolist())
+            self.forearm_to_model = rot.copy()
         nb, nj = len(chain.body_parent), len(chain.joint_names)
         self.q_rad = np.zeros(nj)  # joints no servo drives stay at 0
         self.tau_nm = np.zeros(nj)
@@ -266,10 +278,19 @@ class GravityCompensation:
                         self._joint, self._scratch, self.tau_nm)
         return self.tau_nm
 
-    def apply(self, goals_deg: FloatArray) -> FloatArray:
+    def apply(self, goals_deg: FloatArray, inclination_deg: float = 0.0,
+              rotation_deg: float = 0.0) -> FloatArray:
         """The goals to send for ``goals_deg`` (bus order, degrees): each moved by its
-        joint's holding torque over its stiffness, within the servo's limits. Returns
-        an array this object owns (overwritten by the next call)."""
+        joint's holding torque over its stiffness, within the servo's limits. The
+        forearm's angles count only with ``forearm_to_model``. Returns an array this
+        object owns (overwritten by the next call)."""
+        rot = self.forearm_to_model
+        if rot is not None and math.isfinite(inclination_deg) and math.isfinite(rotation_deg):
+            i, r = math.radians(inclination_deg), math.radians(rotation_deg)
+            up0, up1, up2 = math.sin(i), math.cos(i) * math.sin(r), math.cos(i) * math.cos(r)
+            g, grav = -self.g_mps2, self.gravity_mps2
+            for k in range(3):
+                grav[k] = g * (rot[k, 0] * up0 + rot[k, 1] * up1 + rot[k, 2] * up2)
         c = self.chain
         compensated_goals(goals_deg, self.servo_joint, self.stiffness_nm_per_rad,
                           self.torque_limit_nm, self.low_deg, self.high_deg,

@@ -67,6 +67,13 @@ class RobotConfig:
     gravity_direction: tuple[float, ...] = (0.0, 0.0, -1.0)
     """Which way gravity points in the model's own frame (the MJCF's world): how the
     hand is fixed on its table. The default is the model as it is drawn, its z up."""
+    gravity_from: str = "table"
+    """``"table"``: gravity along :attr:`gravity_direction`, fixed; ``"forearm"``: the
+    hand is mounted on an arm that follows the glove's forearm, and gravity follows the
+    forearm IMU's inclination and rotation each cycle through :attr:`forearm_axes`."""
+    forearm_axes: tuple[tuple[float, ...], ...] = ()
+    """With ``gravity_from = "forearm"``: the forearm frame's x (distal) and z (dorsal,
+    the back of the hand) axes as seen in the model's frame, ``[[x], [z]]``."""
 
     def check(self) -> None:
         for key in ("model", "retarget"):
@@ -85,6 +92,36 @@ class RobotConfig:
                               value=list(self.gravity_direction),
                               allowed="3 numbers, not all 0: which way gravity points in "
                               "the model's frame, e.g. [0, 0, -1] (the model as drawn)")
+        self._check_forearm()
+
+    def _check_forearm(self) -> None:
+        if self.gravity_from not in ("table", "forearm"):
+            raise ConfigError("unknown gravity source", key="gravity_from",
+                              value=self.gravity_from, allowed='"table" or "forearm"')
+        if self.gravity_from == "table" and not self.forearm_axes:
+            return
+        allowed = ("[[x], [z]]: the forearm's distal (x) and dorsal (z) axes in the "
+                   "model's frame, unit and at right angles, e.g. [[1, 0, 0], [0, 0, -1]]")
+        rows = [tuple(float(v) for v in row) for row in self.forearm_axes]
+        if len(rows) != 2 or any(len(r) != 3 or not all(math.isfinite(v) for v in r)
+                                 for r in rows):
+            raise ConfigError("needs two axes of 3 numbers", key="forearm_axes",
+                              value=[list(r) for r in rows], allowed=allowed)
+        x, z = rows
+        nx, nz = math.hypot(*x), math.hypot(*z)
+        if abs(nx - 1.0) > 1e-3 or abs(nz - 1.0) > 1e-3 or abs(
+                sum(a * b for a, b in zip(x, z, strict=True))) > 1e-3:
+            raise ConfigError("not two unit axes at right angles", key="forearm_axes",
+                              value=[list(r) for r in rows], allowed=allowed)
+
+    @property
+    def forearm_to_model(self) -> tuple[tuple[float, float, float], ...]:
+        """The 3x3 rotation (rows) taking forearm-frame vectors into the model's frame:
+        its columns are the forearm's x, y = z cross x and z axes (:attr:`forearm_axes`)."""
+        x = [float(v) for v in self.forearm_axes[0]]
+        z = [float(v) for v in self.forearm_axes[1]]
+        y = [z[1] * x[2] - z[2] * x[1], z[2] * x[0] - z[0] * x[2], z[0] * x[1] - z[1] * x[0]]
+        return tuple((x[i], y[i], z[i]) for i in range(3))
 
     @property
     def gravity_mps2(self) -> tuple[float, float, float]:

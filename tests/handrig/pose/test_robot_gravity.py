@@ -153,3 +153,65 @@ def test_a_bad_gravity_key_names_file_key_and_fix(tmp_path: Path, lines: str, ke
         load_rig(path)
     text = str(info.value)
     assert key in text and str(path) in text and says in text, text
+
+
+LEAP_FOREARM = ((1.0, 0.0, 0.0), (0.0, 0.0, -1.0))  # LEAP's fingers along +x, palm to +z
+
+
+@pytest.mark.parametrize(("inclination", "rotation"), [(0.0, 0.0), (30.0, 90.0),
+                                                        (-60.0, 180.0), (10.0, -45.0)])
+def test_on_an_arm_gravity_follows_the_forearm(inclination: float, rotation: float) -> None:
+    """``gravity_from = "forearm"``: each call's forearm angles give gravity in the model
+    frame, the same offsets as a hand fixed in that orientation."""
+    from sim.hand_model import gravity_in_forearm  # the puppet's own convention
+
+    rig = _leap(gravity=True, gravity_from="forearm", forearm_axes=LEAP_FOREARM)
+    low, high = _limits(rig)
+    arm = build_gravity(rig, low, high)
+    table = build_gravity(rig, low, high)
+    assert arm is not None and table is not None and arm.forearm_to_model is not None
+    assert table.forearm_to_model is not None
+    table.forearm_to_model = None  # the same servos, gravity set by hand
+    down = np.array(rig.robot.forearm_to_model) @ gravity_in_forearm(  # type: ignore[union-attr]
+        inclination, rotation, g_mps2=9.80665)
+    table.set_gravity(down)
+    goals = low + 0.3 * (high - low)
+    np.testing.assert_allclose(arm.apply(goals, inclination, rotation), table.apply(goals),
+                               atol=1e-9)
+    np.testing.assert_allclose(arm.gravity_mps2, down, atol=1e-9)
+
+
+def test_leap_level_and_palm_down_is_the_model_upside_down() -> None:
+    """The LEAP model as drawn has its palm up (gravity -z pulls the fingers toward the
+    back of the hand): a level forearm, palm down, is gravity +z in the model."""
+    from sim.hand_model import gravity_in_forearm
+
+    rig = _leap(gravity_from="forearm", forearm_axes=LEAP_FOREARM)
+    down = np.array(rig.robot.forearm_to_model) @ gravity_in_forearm(0.0, 0.0)  # type: ignore[union-attr]
+    np.testing.assert_allclose(down / np.linalg.norm(down), [0.0, 0.0, 1.0], atol=1e-12)
+
+
+@pytest.mark.parametrize(("lines", "key", "says"), [
+    ('gravity_from = "arm"', "gravity_from", '"table" or "forearm"'),
+    ('gravity_from = "forearm"', "forearm_axes", "two axes"),
+    ('gravity_from = "forearm"\nforearm_axes = [[1, 0, 0], [1, 0, 0]]', "forearm_axes",
+     "right angles"),
+    ('gravity_from = "forearm"\nforearm_axes = [[2, 0, 0], [0, 0, 1]]', "forearm_axes",
+     "unit"),
+])
+def test_a_bad_forearm_mount_names_key_and_fix(tmp_path: Path, lines: str, key: str,
+                                               says: str) -> None:
+    path = _rig_file(tmp_path, lines)
+    with pytest.raises(ConfigError) as info:
+        load_rig(path)
+    text = str(info.value)
+    assert key in text and str(path) in text and says in text, text
+
+
+def test_a_forearm_mount_loads_from_the_rig_file(tmp_path: Path) -> None:
+    parts = build_parts(_rig_file(
+        tmp_path, 'gravity = true\ngravity_from = "forearm"\n'
+                  "forearm_axes = [[1, 0, 0], [0, 0, -1]]"))
+    assert parts.gravity is not None and parts.gravity.forearm_to_model is not None
+    np.testing.assert_allclose(parts.gravity.forearm_to_model,
+                               [[1, 0, 0], [0, -1, 0], [0, 0, -1]], atol=1e-12)
