@@ -278,6 +278,28 @@ class GravityCompensation:
                         self._joint, self._scratch, self.tau_nm)
         return self.tau_nm
 
+    def loop_goals(self, sent_deg: FloatArray) -> FloatArray:
+        """The loop's goals that :meth:`apply` turned into ``sent_deg`` (what the bus
+        holds), at the gravity of the last call: the offset at a goal changes little
+        with the goal, so three fixed-point steps leave well under 0.01 deg. A new
+        array; not for the per-cycle path (a loop's start, a servo coming back)."""
+        sent = np.asarray(sent_deg, dtype=np.float64)
+        goals = sent.copy()
+        for _ in range(3):
+            goals = sent - (self._at_gravity(goals) - goals)
+        return goals
+
+    def _at_gravity(self, goals_deg: FloatArray) -> FloatArray:
+        """:meth:`apply` at the gravity set now (no forearm angles): a copy."""
+        c = self.chain
+        out = np.empty(len(goals_deg))
+        compensated_goals(np.ascontiguousarray(goals_deg), self.servo_joint,
+                          self.stiffness_nm_per_rad, self.torque_limit_nm, self.low_deg,
+                          self.high_deg, self.gravity_mps2, c.body_parent, self._body,
+                          c.body_joint_start, self._joint, self._scratch, self.q_rad.copy(),
+                          self.tau_nm.copy(), out)
+        return out
+
     def apply(self, goals_deg: FloatArray, inclination_deg: float = 0.0,
               rotation_deg: float = 0.0) -> FloatArray:
         """The goals to send for ``goals_deg`` (bus order, degrees): each moved by its

@@ -215,3 +215,20 @@ def test_a_forearm_mount_loads_from_the_rig_file(tmp_path: Path) -> None:
     assert parts.gravity is not None and parts.gravity.forearm_to_model is not None
     np.testing.assert_allclose(parts.gravity.forearm_to_model,
                                [[1, 0, 0], [0, -1, 0], [0, 0, -1]], atol=1e-12)
+
+
+def test_the_goals_a_bus_holds_give_back_the_loops_goals() -> None:
+    """A loop that starts on goals the bus holds (or eases a servo back from its last
+    goal) takes the offsets off: it does not count them twice."""
+    rig = _leap(gravity=True)
+    low, high = _limits(rig)
+    comp = build_gravity(rig, low, high)
+    assert comp is not None
+    goals = low + 0.3 * (high - low)
+    sent = comp.apply(goals).copy()
+    assert np.abs(sent - goals).max() > 0.3
+    np.testing.assert_allclose(comp.loop_goals(sent), goals, atol=0.005)
+    held = sent.copy()
+    held[3] = math.nan  # a servo the bus never sent a goal keeps its NaN
+    back = comp.loop_goals(held)
+    assert math.isnan(back[3]) and np.isfinite(np.delete(back, 3)).all()
