@@ -13,7 +13,7 @@ every body it carries times the lever of their centre of mass about its axis,
 arrays (bodies, their frames, masses and centres of mass, hinges), read from the
 robot's MJCF by :func:`handrig.app.robot_gravity.gravity_chain`; the per-cycle step
 is one compiled pass over the bodies (forward kinematics, then each body's subtree
-mass and moment), a few microseconds for a 16-joint hand. No table: the model's
+mass and moment; its cost: docs/measurements.md). No table: the model's
 own kinematics at the goal pose, at any orientation of the hand.
 
 ``k`` is the position loop's stiffness at the joint (N m/rad), ``torque_limit_nm``
