@@ -401,6 +401,8 @@ class Puppet:
         robot = rig.robot if isinstance(rig, RobotRigConfig) else None
         if robot is not None:  # a robot rig: its own model, every servo on it
             self.hands = {"ri": _RobotSim(robot.model, rig.servos, timestep_s)}
+            # the hand mounted as its rig file says: gravity along [robot].gravity_direction
+            self.hands["ri"].model.opt.gravity[:] = robot.gravity_mps2
         else:
             by_hand: dict[Hand, list[ServoCalibration]] = {}
             for cal in rig.servos:

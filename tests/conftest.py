@@ -78,6 +78,7 @@ COMPUTE_ONLY = (
     "test_boundaries.py", "handrig/app/test_second_vendor_session.py",
     "handrig/cli/test_first_hour_messages.py", "sim/test_openxr_model_agrees.py",
     "handrig/outputs/test_openxr_output.py",
+    "sim/test_robot_gravity_emulated.py",
 )
 TESTS = Path(__file__).resolve().parent
 

@@ -194,4 +194,5 @@ def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,
                            controls_from_raw=parts.controls, orientation=parts.orientation,
                            outputs=outputs, log=log, profile=profile, ease_in=ease_in,
                            raw_channels=control_channels(parts.glove_config,
-                                                         parts.pipeline.expander.controls))
+                                                         parts.pipeline.expander.controls),
+                           gravity=parts.gravity)

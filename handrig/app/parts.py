@@ -17,6 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from firmware_protocol.glove import FLAG_IMU_ABSENT
+from handrig.app.robot_gravity import build_gravity
 from handrig.config.loading import CONFIG_DIR, load_joint_limits
 from handrig.config.rig import RigConfig
 from handrig.config.rig_files import rig_file_path
@@ -31,6 +32,7 @@ from handrig.errors import ConfigError
 from handrig.loop.ports import ControlsFromRaw, OrientationLike
 from handrig.pose import robot_rig as robotrig
 from handrig.pose.expand import Expander
+from handrig.pose.gravity import GravityCompensation
 from handrig.pose.orientation import ForearmOrientation
 from handrig.pose.pipeline import PosePipeline
 from handrig.pose.sag import SagGrid, default_grid_path
@@ -69,6 +71,7 @@ class RigParts:
     glove_file: Path | None = None  # where glove_config was read from
     hand: str | None = None  # one hand's servos of a two-hand rig ("ri", "le"); None: all
     map_file: Path | None = None  # where the expander's map was read from
+    gravity: GravityCompensation | None = None  # a robot rig's [robot] gravity = true
 
 
 class ForearmAngles:
@@ -139,8 +142,10 @@ def build_parts(rig_file: str | Path | None = None, glove_file: str | Path | Non
         left_forearm_deg=loop.left_forearm_deg, retarget=retarget,
     )
     controls = GloveControls.from_config(glove_cfg, expander.controls)
+    gravity = (build_gravity(rig, pipeline.servo_low, pipeline.servo_high)
+               if isinstance(rig, robotrig.RobotRigConfig) else None)
     return RigParts(rig, rig_path, glove_cfg, expander, sag, pipeline, controls,
-                    ForearmAngles(glove_cfg), glove_path, map_file=map_path)
+                    ForearmAngles(glove_cfg), glove_path, map_file=map_path, gravity=gravity)
 
 
 def robot_model(rig: RigConfig) -> str | None:

@@ -332,7 +332,8 @@ class _Session:
                 side.rig_config, gloves[i], buses[i], side.pipeline, self.clock,
                 controls_from_raw=side.controls, orientation=side.orientation,
                 outputs=self.outputs[i], log=self._hand_log(i), profile=opts.profile,
-                ease_in=opts.ease_in, raw_channels=side_control_channels(side))
+                ease_in=opts.ease_in, raw_channels=side_control_channels(side),
+                gravity=side.gravity)
             self.rigs.append(rig)
             self.stats[i] = rig.stats
         if opts.on_hands is not None:

@@ -90,6 +90,12 @@ class Cycle:
         self.orientation: Callable[[GloveSample], tuple[float, float]] = parts.orientation
         self.targets: Callable[..., FloatArray] = pipeline.servo_targets
         self.write: Callable[[FloatArray], int] = bus.write_goals_deg
+        # what the bus holds, as the loop's goals (with gravity: before its offsets)
+        self._loop_goals: Callable[[FloatArray], FloatArray] = lambda held: held
+        if parts.gravity is not None:  # what the bus gets: the goals held up against gravity
+            write, compensate = bus.write_goals_deg, parts.gravity.apply
+            self.write = lambda goals: write(compensate(goals, *self.angles))
+            self._loop_goals = parts.gravity.loop_goals
         # port events of the glove, silence events of the bus: into the run's events
         self._drains: tuple[Callable[[], list[str]], ...] = (
             glove.drain_events, bus.drain_events, lambda: self.silence.drain_events(),
@@ -106,7 +112,8 @@ class Cycle:
         self._step = np.zeros(n)
         self._slew_deg_s = pipeline.slew_deg_s
         # the [silence] tiers for servos that stop answering: decided here, from the reads
-        self.silence = SilenceWatch(bus, settings.silence, pipeline.slew_deg_s)
+        self.silence = SilenceWatch(bus, settings.silence, pipeline.slew_deg_s,
+                                    loop_goals=self._loop_goals)
         # the [heat] tiers for servos that warm up: decided here, from the temperatures read
         self.heat = HeatWatch(bus, settings.heat)
         self.sample: GloveSample | None = None  # the newest glove sample
@@ -134,7 +141,7 @@ class Cycle:
     def seed(self) -> None:
         """Start from where the servos are: the goals the bus holds them at, else a read.
         DeviceError when neither is known (the loop must not start blind)."""
-        held = np.asarray(self.bus.last_goals_deg, dtype=np.float64)
+        held = self._loop_goals(np.asarray(self.bus.last_goals_deg, dtype=np.float64))
         pipeline = self.pipeline
         known = np.isfinite(held)
         if held.shape == (len(self.sent),) and known.all():

@@ -60,6 +60,7 @@ from handrig.loop.settings import LoopParts, RigSettings
 from handrig.loop.stats import RunStats
 from handrig.loop.telemetry import SnapshotBuilder, Telemetry
 from handrig.loop.trigger import FixedRateTrigger, GloveTrigger, Tick, Trigger
+from handrig.pose.gravity import GravityCompensation
 from handrig.pose.pipeline import PosePipeline
 
 __all__ = ["ControlsFromRaw", "GloveSource", "LoopParts", "Mode", "OrientationLike", "Rig",
@@ -87,7 +88,7 @@ class Rig:
         clock: Clock, *, controls_from_raw: ControlsFromRaw, orientation: OrientationLike,
         outputs: Sequence[Callable[[float, FloatArray], None]] = (),
         log: Callable[[str], None] = print, profile: bool = False, ease_in: bool = False,
-        raw_channels: Sequence[int] = (),
+        raw_channels: Sequence[int] = (), gravity: GravityCompensation | None = None,
     ) -> Rig:
         """The loop with the rig file's rates and safety timings (``[loop]``, ``[bus]``).
         In loop mode "glove" the ceiling is also held below the rate at which goal Sync
@@ -100,7 +101,7 @@ class Rig:
             settings = replace(settings, loop=replace(loop, ceiling_hz=ceiling_hz))
         parts = LoopParts(glove, bus, pipeline, clock, controls_from_raw=controls_from_raw,
                           orientation=orientation,
-                          raw_channels=tuple(int(i) for i in raw_channels))
+                          raw_channels=tuple(int(i) for i in raw_channels), gravity=gravity)
         return cls(parts, settings, outputs=outputs, log=log)
 
     def __init__(

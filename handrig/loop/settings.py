@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from handrig.clock import Clock
 from handrig.config.rig import BusConfig, HeatConfig, LoopConfig, RigConfig, SilenceConfig
 from handrig.loop.ports import ControlsFromRaw, GloveSource, OrientationLike, ServoBus
+from handrig.pose.gravity import GravityCompensation
 from handrig.pose.pipeline import PosePipeline
 
 __all__ = ["LoopParts", "RigSettings"]
@@ -37,6 +38,9 @@ class LoopParts:
     controls_from_raw: ControlsFromRaw
     orientation: OrientationLike
     raw_channels: tuple[int, ...] = ()
+    gravity: GravityCompensation | None = None
+    """A robot hand's goals moved against gravity's pull as they go to the bus (the
+    loop's own goals, its slew limit and easing stay the uncompensated ones)."""
 
 
 @dataclass(frozen=True)

@@ -30,12 +30,16 @@ read stays unanswered until ``action_s`` is it named and acted on.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from handrig.config.rig import SilenceConfig
 from handrig.devices.servo.bus import ServoBus, ServoState
 from handrig.errors import DeviceTimeoutError
+
+FloatArray = NDArray[np.float64]
 
 HOST_LATE_S = 0.02  # a read this much later than the usual gap: the host was late
 GAP_WARM_UP = 16  # gaps between reads learnt before any is judged late
@@ -55,8 +59,11 @@ class SilenceWatch:
     ``recoveries``, ``recovery_reads_max``; :meth:`drain_events` takes what was said.
     """
 
-    def __init__(self, bus: ServoBus, config: SilenceConfig, slew_deg_s: float) -> None:
+    def __init__(self, bus: ServoBus, config: SilenceConfig, slew_deg_s: float, *,
+                 loop_goals: Callable[[FloatArray], FloatArray] | None = None) -> None:
         self.bus = bus
+        # the bus's last goals as the loop's (a robot's gravity offsets taken off)
+        self._loop_goals = loop_goals if loop_goals is not None else (lambda held: held)
         self.config = config
         self.slew_deg_s = float(slew_deg_s)
         n = bus.n_servos
@@ -316,7 +323,8 @@ class SilenceWatch:
             return
         new = np.flatnonzero(reboots > self._reboots)
         self._reboots[:] = reboots
-        self._from[new] = self.bus.last_goals_deg[new]
+        self._from[new] = self._loop_goals(
+            np.asarray(self.bus.last_goals_deg, dtype=np.float64))[new]
         self.releasing[new] = True
         self.steering = True
 

@@ -7,6 +7,8 @@ A robot rig is a rig file (see :mod:`handrig.config.rig`) with a ``[robot]`` tab
     model = "../../data/robots/leap_hand/right_hand.xml"  # MJCF, relative to this file
     retarget = "leap_retarget.toml"                        # human curves -> robot joints
     sag = false                                            # passive sag off unless true
+    gravity = true                 # goals offset against the fingers' weight (optional)
+    gravity_direction = [0, 0, -1] # gravity in the model's frame: how the hand is mounted
 
 and ``[[servos]]`` whose ``joint`` is a joint of that model (``if_mcp``), its angle
 in degrees as the model measures it, instead of a human curve. Loading checks what
@@ -22,6 +24,7 @@ Presets live in ``config/rigs/``: ``load_rig("leap")`` is ``config/rigs/leap.tom
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +38,7 @@ from handrig.pose.mjcf import MjcfJoint, read_joints
 from handrig.pose.retarget import Retarget, load_retarget
 
 _JOINT_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+STANDARD_GRAVITY_MPS2 = 9.80665
 RANGE_TOLERANCE_DEG = 0.05  # servo limits may round the model's range by this much
 
 
@@ -49,6 +53,20 @@ class RobotConfig:
     render_view: tuple[float, ...] = ()
     """Where ``--render`` looks from: distance (m), azimuth and elevation (degrees)
     around the hand; empty: the default view (each robot's palm faces another way)."""
+    gravity: bool = False
+    """Offset each servo's goal by the torque gravity puts on its joint at that goal
+    over the servo's stiffness (:mod:`handrig.pose.gravity`), so fingers reach their
+    goals instead of sagging short of them."""
+    gravity_direction: tuple[float, ...] = (0.0, 0.0, -1.0)
+    """Which way gravity points in the model's own frame (the MJCF's world): how the
+    hand is fixed on its table. The default is the model as it is drawn, its z up."""
+    gravity_from: str = "table"
+    """``"table"``: gravity along :attr:`gravity_direction`, fixed; ``"forearm"``: the
+    hand is mounted on an arm that follows the glove's forearm, and gravity follows the
+    forearm IMU's inclination and rotation each cycle through :attr:`forearm_axes`."""
+    forearm_axes: tuple[tuple[float, ...], ...] = ()
+    """With ``gravity_from = "forearm"``: the forearm frame's x (distal) and z (dorsal,
+    the back of the hand) axes as seen in the model's frame, ``[[x], [z]]``."""
 
     def check(self) -> None:
         for key in ("model", "retarget"):
@@ -60,6 +78,51 @@ class RobotConfig:
             raise ConfigError("not a camera view", key="render_view", value=list(view),
                               allowed="[distance m (0.05..5), azimuth deg, elevation deg "
                               "(-90..90)], e.g. [0.40, 30.0, -35.0]")
+        down = tuple(float(x) for x in self.gravity_direction)
+        if len(down) != 3 or not all(math.isfinite(x) for x in down) or math.hypot(
+                *down) < 1e-6:
+            raise ConfigError("not a direction", key="gravity_direction",
+                              value=list(self.gravity_direction),
+                              allowed="3 numbers, not all 0: which way gravity points in "
+                              "the model's frame, e.g. [0, 0, -1] (the model as drawn)")
+        self._check_forearm()
+
+    def _check_forearm(self) -> None:
+        if self.gravity_from not in ("table", "forearm"):
+            raise ConfigError("unknown gravity source", key="gravity_from",
+                              value=self.gravity_from, allowed='"table" or "forearm"')
+        if self.gravity_from == "table" and not self.forearm_axes:
+            return
+        allowed = ("[[x], [z]]: the forearm's distal (x) and dorsal (z) axes in the "
+                   "model's frame, unit and at right angles, e.g. [[1, 0, 0], [0, 0, -1]]")
+        rows = [tuple(float(v) for v in row) for row in self.forearm_axes]
+        if len(rows) != 2 or any(len(r) != 3 or not all(math.isfinite(v) for v in r)
+                                 for r in rows):
+            raise ConfigError("needs two axes of 3 numbers", key="forearm_axes",
+                              value=[list(r) for r in rows], allowed=allowed)
+        x, z = rows
+        nx, nz = math.hypot(*x), math.hypot(*z)
+        if abs(nx - 1.0) > 1e-3 or abs(nz - 1.0) > 1e-3 or abs(
+                sum(a * b for a, b in zip(x, z, strict=True))) > 1e-3:
+            raise ConfigError("not two unit axes at right angles", key="forearm_axes",
+                              value=[list(r) for r in rows], allowed=allowed)
+
+    @property
+    def forearm_to_model(self) -> tuple[tuple[float, float, float], ...]:
+        """The 3x3 rotation (rows) taking forearm-frame vectors into the model's frame:
+        its columns are the forearm's x, y = z cross x and z axes (:attr:`forearm_axes`)."""
+        x = [float(v) for v in self.forearm_axes[0]]
+        z = [float(v) for v in self.forearm_axes[1]]
+        y = [z[1] * x[2] - z[2] * x[1], z[2] * x[0] - z[0] * x[2], z[0] * x[1] - z[1] * x[0]]
+        return tuple((x[i], y[i], z[i]) for i in range(3))
+
+    @property
+    def gravity_mps2(self) -> tuple[float, float, float]:
+        """Gravity in the model's frame (m/s^2): :attr:`gravity_direction` scaled to g."""
+        x, y, z = (float(v) for v in self.gravity_direction)
+        norm = math.hypot(x, y, z)
+        g = STANDARD_GRAVITY_MPS2 / norm
+        return x * g, y * g, z * g
 
 
 @dataclass(frozen=True)

@@ -50,6 +50,22 @@ CURRENT_UNIT_MA: dict[str, float] = {
     "XL330-M288": 1.0, "XC330-T288": 1.0, "XC330-M288": 1.0, "XM430-W350": 2.69,
     "XL330-M077": 1.0,
 }
+# Stall torque (N m) and stall current (A) at the recommended supply, and Position P
+# Gain's (84) initial value, per model (ROBOTIS e-manual: each model's specifications
+# and control table). The XC430s have no current sensing: their torque is not capped.
+STALL_TORQUE_NM: dict[str, float] = {
+    "XL330-M288": 0.52, "XL330-M077": 0.215, "XC330-M288": 0.93, "XC330-T288": 0.92,
+    "XM430-W350": 4.1, "XC430-W150": 1.6, "XC430-T240BB": 1.9,
+}
+STALL_CURRENT_A: dict[str, float] = {
+    "XL330-M288": 1.47, "XL330-M077": 1.47, "XC330-M288": 1.80, "XC330-T288": 0.80,
+    "XM430-W350": 2.3, "XC430-W150": 1.4, "XC430-T240BB": 1.4,
+}
+POSITION_P_GAIN_DEFAULT: dict[str, int] = {
+    "XL330-M288": 400, "XL330-M077": 400, "XC330-M288": 1100, "XC330-T288": 900,
+    "XM430-W350": 800, "XC430-W150": 460, "XC430-T240BB": 700,
+}
+PWM_LIMIT = 885  # PWM Limit (36) initial value: 100 % duty
 RETURN_DELAY_UNIT_US = 2  # Return Delay Time (9) counts 2 us, 0..254
 RETURN_DELAY_MAX_US = 254 * RETURN_DELAY_UNIT_US
 GAIN_MAX = 16383  # Position P/I/D Gain range 0..16383
@@ -182,3 +198,27 @@ def _check_settings(rig: RigConfig, settings: ServoSettings, file: str | None) -
             raise ConfigError(f"current limit above the {model}'s maximum for servo {s.id}",
                               file=file, key="servo_settings.current_limit_ma",
                               value=resolved.current_limit_ma, allowed=f"1..{top:.0f} mA")
+
+
+def holding_stiffness_nm_per_rad(servo: HasModel, position_p_gain: int | None) -> float:
+    """How hard a servo at rest pushes back per radian its horn is off its goal, N m/rad.
+
+    The e-manual's position controller turns the error in pulses into PWM through
+    KPP = Position P Gain / 128 (PWM in units of :data:`PWM_LIMIT` = 100 %); at a
+    standstill the motor's torque follows its duty, the stall torque at 100 %. None:
+    the model's initial P gain.
+    """
+    model = servo_model(servo)
+    p_gain = POSITION_P_GAIN_DEFAULT[model] if position_p_gain is None else position_p_gain
+    pulses_per_rad = 4096 / (2 * 3.141592653589793)
+    return STALL_TORQUE_NM[model] * (p_gain / 128.0) / PWM_LIMIT * pulses_per_rad
+
+
+def torque_cap_nm(servo: HasModel, current_limit_ma: int | None) -> float:
+    """The most torque a servo gives at its horn, N m: its stall torque, scaled by its
+    current cap over its stall current where it has one (current sensing, a limit)."""
+    model = servo_model(servo)
+    stall = STALL_TORQUE_NM[model]
+    if current_limit_ma is None or model not in CURRENT_LIMIT_MAX_MA:
+        return stall
+    return stall * min(1.0, current_limit_ma / 1000.0 / STALL_CURRENT_A[model])
