@@ -132,7 +132,7 @@ class GloveTeleop:
                     "the glove emulator (handrig sim-glove)")).port()
             parts = self._parts
             glove = open_glove(spec, parts.glove_config, self._clock, parts.glove_file)
-            stream = stack.enter_context(GloveStream(glove, self._pose_function(),
+            stream = stack.enter_context(GloveStream(glove, self.pose_function(),
                                                      self._clock))
             stream.wait_first(FIRST_SAMPLE_S)
         except BaseException:
@@ -146,9 +146,11 @@ class GloveTeleop:
         if stack is not None:
             stack.close()
 
-    def _pose_function(self) -> Callable[[GloveSample], FloatArray]:
-        """One sample -> the action's values: controls (calibration, map), the full pose
-        with sag, clamped to the joint limits, the curves (or the robot's joints)."""
+    def pose_function(self) -> Callable[[GloveSample], FloatArray]:
+        """One glove sample -> the action's values: controls (calibration, map, the glove
+        file's filter, whose state is this teleoperator's: one thread, every sample in
+        order), the full pose with sag, clamped to the joint limits, the curves (or the
+        robot's joints)."""
         parts = self._parts
         pipeline = parts.pipeline
         controls = np.zeros(len(parts.expander.controls))

@@ -29,6 +29,7 @@ class HandrigHand(Robot):
         self.name = config.type  # handrig_leap, handrig_orca: the dataset's robot_type
         super().__init__(config)
         self.config = config
+        self.cameras: dict[str, Any] = {}  # LeRobot's record reads it; a hand has none
         self.hand = HandRobot(config.rig or config.preset, config.port or None)
 
     @property
