@@ -95,6 +95,7 @@ class RobotHand:
         # the curves' limits the loop clamps to before it retargets (command_joints)
         self._human_low = np.asarray(self._parts.pipeline.pose_low[:len(hand.CURVE_NAMES)])
         self._human_high = np.asarray(self._parts.pipeline.pose_high[:len(hand.CURVE_NAMES)])
+        self._invertible = False  # the retarget table checked for command_joints
         self._port = port
         self._clock = clock or MonotonicClock()
         self._log = log
@@ -196,7 +197,9 @@ class RobotHand:
         that is no finite angle, is refused with a ConfigError and nothing is sent."""
         loop = self._open_loop()
         rt = self._retarget
-        check_invertible(rt.gain, rt.joint_names)
+        if not self._invertible:
+            check_invertible(rt.gain, rt.joint_names)
+            self._invertible = True
         unknown = sorted(str(k) for k in set(joints_deg) - set(self.joint_names))
         if unknown:
             raise ConfigError("not a joint of this robot: nothing was sent", key=unknown[0],
