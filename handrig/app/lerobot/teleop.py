@@ -66,6 +66,7 @@ class GloveTeleop:
         self.port = port
         self.robot = robot
         self.recording = recording
+        self._glove_config = glove_config
         self._clock = clock or MonotonicClock()
         self._parts: RigParts = build_parts(robot, glove_config)
         self._robot_hand = RobotHand(robot, port=SIM_PORT) if robot else None
@@ -89,7 +90,7 @@ class GloveTeleop:
     def is_calibrated(self) -> bool:
         """Whether the glove file is a calibration: yours (``handrig calibrate glove``,
         or one given), or the simulated glove's (the shipped file was made for it)."""
-        if self.port == SIM_PORT or self.port.startswith("replay:"):
+        if self.port == SIM_PORT or self.port.startswith("replay:") or self._glove_config:
             return True
         return not glove_file(self._parts.rig_file, self._parts.rig_config,
                               None).why.startswith("shipped")
