@@ -87,6 +87,12 @@ class GloveTeleop:
         return self._parts.glove_file or Path()
 
     @property
+    def glove_timeout_s(self) -> float:
+        """How long the glove may be silent before the action is the relaxed pose (the
+        rig's ``[loop] glove_timeout_s``)."""
+        return self._parts.rig_config.loop.glove_timeout_s
+
+    @property
     def is_calibrated(self) -> bool:
         """Whether the glove file is a calibration: yours (``handrig calibrate glove``,
         or one given), or the simulated glove's (the shipped file was made for it)."""
@@ -169,7 +175,8 @@ class GloveTeleop:
             return pose[:n_curves].copy()
         return pose_of
 
-    def _relaxed(self) -> FloatArray:
+    def relaxed(self) -> FloatArray:
+        """The action's values of the relaxed pose (a silent glove's), in :attr:`names` order."""
         pipeline = self._parts.pipeline
         forearm = self._parts.glove_config.forearm
         pose = np.clip(pipeline.relaxed_pose(forearm.inclination_deg, forearm.rotation_deg),
@@ -200,12 +207,12 @@ class GloveTeleop:
                         "timed", self.grid.max_lag_s * 1e3, 1.0 / self.grid.period_s,
                         self.grid.reanchored)
         got = stream.pose_at(t)
-        timeout_s = self._parts.rig_config.loop.glove_timeout_s
+        timeout_s = self.glove_timeout_s
         if got is None or t - got[0] > timeout_s:
             if not self._silent:
                 log.warning("no glove sample for over %g s: the relaxed pose", timeout_s)
             self._silent = True
-            values = self._relaxed()
+            values = self.relaxed()
         else:
             self._silent = False
             values = got[1]

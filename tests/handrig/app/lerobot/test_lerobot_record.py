@@ -24,9 +24,9 @@ import pytest
 
 from handrig.app.lerobot.teleop import GloveTeleop
 from handrig.clock import FakeClock
-from handrig.config.loading import CONFIG_DIR
 from handrig.devices.glove.replay import ReplayGlove
 from handrig.devices.glove_recording import read_glove_recording
+from tests.helpers.lerobot import unfiltered_glove_file, write_ramp_take
 
 for _plugin in ("lerobot", "lerobot_robot_handrig", "lerobot_teleoperator_handrig"):
     try:
@@ -40,26 +40,6 @@ FPS = 30
 ROW_S = 0.01  # the take's rows: 100 a second
 ROWS = 800
 EPISODE_S = 3
-
-
-def write_take(path: Path) -> None:
-    """The demo glove's first row held, index MCP ramping 2 counts a row."""
-    lines = ["# handrig glove recording 1", "# rate_hz: 100",
-             "t_s,riThumbCMCx,riThumbCMCy,riThumbCMCz,riIndexMCPy,riPinkyMCPy,"
-             "qx,qy,qz,qw,buttons"]
-    lines += [f"{i * ROW_S:.6f},2229,2230,1643,{1100 + 2 * i},1707,0,0,0,1,0"
-              for i in range(ROWS)]
-    path.write_text("\n".join(lines) + "\n")
-
-
-def unfiltered_glove_file(path: Path) -> Path:
-    """The shipped glove file without its One Euro filter, so a row's pose does not
-    depend on which rows came before it (the test matches actions to rows)."""
-    text = (CONFIG_DIR / "glove.toml").read_text()
-    at = text.index("[filter]")
-    assert text.index("enabled = true", at) == text.index("\n", at) + 1
-    path.write_text(text[:at] + text[at:].replace("enabled = true", "enabled = false", 1))
-    return path
 
 
 @pytest.fixture
@@ -80,7 +60,7 @@ def test_record_stamps_frames_on_the_grid_and_replay_reaches_the_bus(
     from lerobot_teleoperator_handrig import HandrigGloveConfig
 
     take = lerobot_home / "ramp.csv"
-    write_take(take)
+    write_ramp_take(take, ROWS, ROW_S, start=1100, step=2)
     glove_file = unfiltered_glove_file(lerobot_home / "glove.toml")
     root = lerobot_home / "dataset"
     teleop = HandrigGloveConfig(port=f"replay:{take}", robot="leap", fps=FPS,
