@@ -14,7 +14,6 @@ torque off. Joint values are degrees in the robot model's convention, named
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 
 from handrig.app.robot_api import RobotHand
@@ -88,7 +87,3 @@ class HandRobot:
     def torque_off_confirmed(self) -> bool | None:
         return self.hand.torque_off_confirmed
 
-
-def finite(values: Mapping[str, float]) -> bool:
-    """Whether every value is a finite number."""
-    return all(math.isfinite(v) for v in values.values())
