@@ -49,6 +49,19 @@ $(ORCA_VENV)/.installed:
 	@$(ORCA_VENV)/bin/python -m pip install --quiet '$(ORCA_CORE)'
 	@touch $@
 
+# LeRobot beside handrig in .venv (pyproject's [lerobot] extra) and the two plugin
+# distributions LeRobot discovers by name (plugins/: lerobot_teleoperator_handrig,
+# lerobot_robot_handrig; docs/lerobot.md): lerobot-record, -replay and -teleoperate then
+# find handrig_glove, handrig_leap and handrig_orca, and tests/handrig/app/lerobot run
+# instead of skipping. Downloads torch (LeRobot 0.4 allows < 2.11: PyPI's CUDA build).
+LEROBOT_STAMP := $(VENV)/.lerobot-installed
+LEROBOT_PLUGINS := plugins/lerobot_teleoperator_handrig plugins/lerobot_robot_handrig
+.PHONY: lerobot-deps
+lerobot-deps: $(LEROBOT_STAMP)
+$(LEROBOT_STAMP): $(STAMP) $(foreach p,$(LEROBOT_PLUGINS),$(p)/pyproject.toml)
+	$(BIN)/python -m pip install --quiet -e '.[dev,lerobot]' $(foreach p,$(LEROBOT_PLUGINS),-e $(p))
+	@touch $@
+
 # Offscreen rendering (handrig demo --render) needs EGL or OSMesa; Debian packages.
 render-deps:
 	apt-get install -y --no-install-recommends libegl1 libgl1-mesa-dri libosmesa6

@@ -2,7 +2,7 @@
 
 Runs the glove-triggered rig of :mod:`bench.bench_rig` (200 Hz glove, 1 Mbps bus,
 both emulators in processes of their own; the loop sleeps on the port until bytes
-arrive: the spin window that polled it went in issue 23, see docs/measurements.md),
+arrive: the spin window that polled it went in issue 23, see docs/measurements-history.md),
 and for every frame the rig decoded joins three times on CLOCK_MONOTONIC:
 
 * the glove emulator's send time (from its log, by sequence number);

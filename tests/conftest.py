@@ -79,6 +79,7 @@ COMPUTE_ONLY = (
     "handrig/cli/test_first_hour_messages.py", "sim/test_openxr_model_agrees.py",
     "handrig/outputs/test_openxr_output.py",
     "sim/test_robot_gravity_emulated.py",
+    "handrig/app/lerobot/test_frame_grid.py", "handrig/app/lerobot/test_plugin_layers.py",
 )
 TESTS = Path(__file__).resolve().parent
 

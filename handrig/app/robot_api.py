@@ -37,7 +37,7 @@ from types import TracebackType
 import numpy as np
 
 from handrig import hand
-from handrig.app.factory import servo_bus
+from handrig.app.factory import read_fields_for, servo_bus
 from handrig.app.parts import build_parts
 from handrig.app.robot_loop import RobotLoop, robot_loop_parts
 from handrig.app.session_exit import torque_is_off
@@ -46,6 +46,7 @@ from handrig.config.rig_files import rig_file_path
 from handrig.devices.servo.bus import ServoBus
 from handrig.errors import ConfigError, DeviceTimeoutError, HandrigError
 from handrig.pose.pipeline import POSE_SIZE
+from handrig.pose.retarget_inverse import check_invertible, human_for_robot
 from handrig.pose.robot_rig import RobotRigConfig, robot_retarget
 
 MAX_CURVE_DEG = 360.0
@@ -91,6 +92,10 @@ class RobotHand:
                                [s.min_deg for s in config.servos])
         self._high = np.minimum(np.asarray(self._retarget.high_deg)[self._rows],
                                 [s.max_deg for s in config.servos])
+        # the curves' limits the loop clamps to before it retargets (command_joints)
+        self._human_low = np.asarray(self._parts.pipeline.pose_low[:len(hand.CURVE_NAMES)])
+        self._human_high = np.asarray(self._parts.pipeline.pose_high[:len(hand.CURVE_NAMES)])
+        self._invertible = False  # the retarget table checked for command_joints
         self._port = port
         self._clock = clock or MonotonicClock()
         self._log = log
@@ -152,6 +157,13 @@ class RobotHand:
         return tuple(s.joint for s in self.rig.servos)
 
     @property
+    def reads_current(self) -> bool:
+        """Whether the loop reads the servos' currents too (else positions only: what a
+        goal write and a read fit into one cycle on the wire)."""
+        parts = robot_loop_parts(self._parts)
+        return read_fields_for(parts.rig_config, parts.glove_config.glove.rate_hz) == "motion"
+
+    @property
     def torque_on(self) -> bool:
         """Whether the hand is open, its loop running and its torque on."""
         loop = self._loop
@@ -171,6 +183,48 @@ class RobotHand:
         a pose is refused with a ConfigError, and the loop keeps the last good one."""
         loop = self._open_loop()
         human = self._human(curves)
+        targets = self._targets(human)
+        self._send(loop, human)
+        return targets
+
+    def command_joints(self, joints_deg: Mapping[str, float]) -> np.ndarray:
+        """:meth:`command` in the robot's own joints: a mapping of :attr:`joint_names` to
+        degrees (the robot model's convention), turned into the human curves the loop
+        retargets back to them (:mod:`handrig.pose.retarget_inverse`), so the same
+        limits, slew limit and policies apply. Joints not named keep the last command's
+        target (the first command names them all). Returns the robot joint targets
+        (bus order, degrees, clipped to the limits). A name that is no joint, or a value
+        that is no finite angle, is refused with a ConfigError and nothing is sent."""
+        loop = self._open_loop()
+        rt = self._retarget
+        if not self._invertible:
+            check_invertible(rt.gain, rt.joint_names)
+            self._invertible = True
+        unknown = sorted(str(k) for k in set(joints_deg) - set(self.joint_names))
+        if unknown:
+            raise ConfigError("not a joint of this robot: nothing was sent", key=unknown[0],
+                              allowed=", ".join(self.joint_names))
+        if self._commanded is not None:
+            robot = rt.offset_deg + rt.gain @ np.clip(self._commanded, self._human_low,
+                                                      self._human_high)
+        else:
+            missing = [j for j in self.joint_names if j not in joints_deg]
+            if missing:
+                raise ConfigError("the first joint command names every joint: nothing was "
+                                  "sent", key=missing[0], allowed=", ".join(self.joint_names))
+            robot = np.array(rt.offset_deg, dtype=np.float64)
+        for name, value in joints_deg.items():
+            try:
+                deg = float(value)
+            except (TypeError, ValueError):
+                raise ConfigError("not a number: nothing was sent", key=str(name),
+                                  value=value, allowed="degrees") from None
+            if not (math.isfinite(deg) and abs(deg) <= MAX_CURVE_DEG):
+                raise ConfigError("not a joint angle: nothing was sent", key=str(name),
+                                  value=deg, allowed=f"-{MAX_CURVE_DEG:g}..{MAX_CURVE_DEG:g}")
+            robot[rt.index(str(name))] = deg
+        human = human_for_robot(robot, rt.gain, rt.offset_deg, self._human_low,
+                                self._human_high)
         targets = self._targets(human)
         self._send(loop, human)
         return targets
@@ -257,6 +311,20 @@ class RobotHand:
         out: dict[str, float] = {}
         for i, name in enumerate(self.joint_names):
             value = pos[i] if i < len(pos) and i < len(ages) else None
+            fresh = value is not None and ages[i] <= self.rig.silence.hold_s
+            out[name] = float(value) if fresh and value is not None else math.nan
+        return out
+
+    def present_current_ma(self) -> dict[str, float]:
+        """The servos' currents (mA) as the loop last read them, by robot joint; NaN where
+        the loop reads positions only (``[bus]`` and the rate leave no time for more) or
+        no reading is fresh (as :meth:`present_deg`)."""
+        snap = self._open_loop().snapshot()
+        cur = snap.currents_ma if snap is not None else ()
+        ages = snap.reading_ages_s if snap is not None else ()
+        out: dict[str, float] = {}
+        for i, name in enumerate(self.joint_names):
+            value = cur[i] if i < len(cur) and i < len(ages) else None
             fresh = value is not None and ages[i] <= self.rig.silence.hold_s
             out[name] = float(value) if fresh and value is not None else math.nan
         return out
