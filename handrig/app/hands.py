@@ -152,6 +152,14 @@ class AllHands:
         for rig in self.rigs:
             rig.toggle_relax()
 
+    def relax(self, reason: str) -> None:
+        for rig in self.rigs:
+            rig.relax(reason)
+
+    def resume(self, reason: str) -> None:
+        for rig in self.rigs:
+            rig.resume(reason)
+
     def request_stop(self, reason: str = "stop requested") -> None:
         for rig in self.rigs:
             rig.request_stop(reason)

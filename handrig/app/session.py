@@ -41,6 +41,7 @@ import numpy as np
 from handrig.app import factory as app
 from handrig.app import parts as app_parts
 from handrig.app import takes
+from handrig.app.cues.live import CueOptions, LiveCues, open_cues
 from handrig.app.factory import OpenedBus
 from handrig.app.hands import AllHands, SessionParts, check_gloves, side_control_channels
 from handrig.app.parts import RigParts
@@ -98,6 +99,7 @@ class LiveOptions:
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
     record_glove_left: str | None = None  # with a glove per hand: the left glove's take
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
+    cues: CueOptions | None = None  # --osc-in, --midi-in: cues acting as the keys do
     # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
     # show never starts with a jump (run, demo, play); False: straight to the first goal
     ease_in: bool = True
@@ -181,6 +183,7 @@ class _Session:
         self.started = False
         self.all = AllHands(self.rigs)
         self.specs: tuple[str, ...] = ()  # each hand's glove, checked
+        self.cues: LiveCues | None = None
 
     # -- the session --------------------------------------------------------------------
     def run(self) -> LiveResult:
@@ -319,6 +322,10 @@ class _Session:
                                       record=opts.record, log=log,
                                       glove_rate_hz=first.glove_config.glove.rate_hz,
                                       record_rate_hz=opts.record_rate_hz)
+        rate_hz = app.take_rate_hz(parts.rig_config, first.glove_config.glove.rate_hz,
+                                   opts.record_rate_hz)
+        self.cues = open_cues(stack, opts.cues, self.all, self.clock, self.outputs[0],
+                              rate_hz, self._hand_log(0))
         for i, (_, path) in self._glove_takes().items():
             take = takes.open_glove_take(path, gloves[i], parts.hands[i].glove_config,
                                          source=opts.gloves()[i] or gloves[i].name, log=log,
@@ -339,6 +346,8 @@ class _Session:
         if opts.snapshot_every > 0:  # on the first hand's loop: every hand's positions
             first_rig = self.rigs[0]
             first_rig.outputs = (*first_rig.outputs, self._snapshots(opts.snapshot_every))
+        if self.cues is not None:
+            self.cues.start()
         for rig in self.rigs:
             rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
         stack.callback(_unfreeze)  # also when torque-on fails and the loop never runs
@@ -523,6 +532,8 @@ class _Session:
             summary["show"] = self.opts.show
         if self.signals.received:
             summary["signals"] = self.signals.received
+        if self.cues is not None:
+            summary["cues"] = self.cues.summary()
         if error is not None:
             summary["error"] = str(error)
         joints = tuple(s.joint for side in parts.hands for s in side.rig_config.servos)

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from handrig.app.port_processes import SIM_BUS, StartedEmulators, sim_bus_argv
 from handrig.app.view import add_view_flag
+from handrig.cli._cues import add_cue_flags, cue_options
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._ports import say_if_simulated
@@ -78,6 +79,7 @@ def register(sub: Any) -> None:
                    help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_view_flag(p)
+    add_cue_flags(p)
     p.set_defaults(func=run)
 
 
@@ -92,6 +94,7 @@ def _from_show(args: argparse.Namespace) -> ShowFile | None:
             "bus_left": show.buses.left, "vmc": show.outputs.vmc,
             "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
             "view": show.outputs.view}
+    # the cue flags ([osc], [midi], [cues]) are filled by handrig.cli._cues.cue_options
     filled = []
     for name, value in fill.items():
         if getattr(args, name) is None and value:
@@ -174,6 +177,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
                                  flag="--bus-left") if rig.left_bus is not None else "")
         if "sim" in (bus, bus_left):
             check_gl_backend("--bus sim")
+        cues = cue_options(args, show)
     except HandrigError as exc:
         if not args.json:
             raise
@@ -197,6 +201,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             verbose=not args.json, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
             on_hands=view.attach_hands if view is not None else None, started=started,
+            cues=cues,
         )
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

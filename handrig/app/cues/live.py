@@ -1,0 +1,111 @@
+"""A live session's cues: the OSC port and the MIDI input, acting on every hand as the
+show's keys do, and the takes they start (:class:`LiveCues`, built by :func:`open_cues`).
+
+The session (:mod:`handrig.app.session`) calls :func:`open_cues` once its outputs are
+built (the OSC port is bound then, so a port that is taken fails the run before torque
+goes on), adds :attr:`LiveCues.takes` to the first hand's outputs, calls
+:meth:`LiveCues.start` once the loops are built, and puts :meth:`LiveCues.summary` in the
+run's summary under ``cues``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from handrig.app.cues.dispatch import CueDispatcher, CueLog, CueTargets
+from handrig.app.cues.midi import MidiCues, MidiReceiver
+from handrig.app.cues.receiver import OscReceiver
+from handrig.app.cues.takes import CueTakes
+from handrig.app.hands import AllHands
+from handrig.clock import Clock
+from handrig.config.cues import OSC_PREFIX, ShowMidi, parse_listen_address
+
+
+@dataclass(frozen=True)
+class CueOptions:
+    """``osc_in``: ``[HOST:]PORT`` (``--osc-in``, ``[osc] in``); ``midi_in``: a MIDI input's
+    name (``--midi-in``, ``[midi] port``; ``virtual:NAME`` a port of its own) and
+    ``midi`` its table; ``takes``: the folder of the takes ``record/start`` begins (""
+    the current one); ``play``, ``layer``: the layers' controls (``LayerControl.play``
+    and ``.layer``), None when the run has none."""
+
+    osc_in: str = ""
+    midi_in: str = ""
+    midi: ShowMidi = field(default_factory=ShowMidi)
+    takes: str = ""
+    play: Callable[[str], None] | None = None
+    layer: Callable[[str, str], None] | None = None
+
+    @property
+    def wanted(self) -> bool:
+        return bool(self.osc_in or self.midi_in)
+
+
+class LiveCues:
+    """The cue side of one run. ``hands``: the session's controls of every hand;
+    ``rate_hz``: a BVH take's frame rate; ``log``: the run's event lines."""
+
+    def __init__(self, opts: CueOptions, hands: AllHands, clock: Clock, rate_hz: float,
+                 log: Callable[[str], None]) -> None:
+        self.opts = opts
+        self._log = log
+        self.log = CueLog(clock)
+        self.takes = CueTakes(opts.takes, rate_hz, log=log)
+        targets = CueTargets(relax=hands.relax, resume=hands.resume,
+                             stop=hands.request_stop, estop=hands.estop,
+                             record_start=self.takes.start, record_stop=self.takes.stop,
+                             play=opts.play, layer=opts.layer)
+        self.dispatcher = CueDispatcher(targets, self.log, on_event=log)
+        self.osc: OscReceiver | None = None
+        self.midi: MidiReceiver | None = None
+        self._midi_cues = MidiCues(opts.midi)
+        if opts.osc_in:
+            host, port = parse_listen_address(opts.osc_in)
+            self.osc = OscReceiver(host, port, self.dispatcher)
+            self.osc.on_error = lambda exc: log(f"the OSC port stopped: {exc}")
+
+    def start(self) -> None:
+        """Cues act from now on (the loops are built)."""
+        self.log.t0_s = self.log.clock.now()
+        if self.opts.midi_in and self.midi is None:
+            self.midi = MidiReceiver(self.opts.midi_in, self._midi_cues, self.dispatcher)
+        if self.osc is not None:
+            self.osc.start()
+            self._log(f"cues: OSC on {self.osc.host}:{self.osc.port} ({OSC_PREFIX}...)")
+        if self.midi is not None:
+            self._log(f"cues: MIDI from {self.midi.name}")
+
+    def close(self) -> None:
+        """The inputs closed, then the open take (as ``record/stop``)."""
+        for receiver in (self.osc, self.midi):
+            if receiver is not None:
+                with contextlib.suppress(OSError):
+                    receiver.close()
+        self.takes.close()
+
+    def recent(self) -> tuple[str, ...]:
+        """The last few cues, each naming its source (the panel, the view)."""
+        return self.log.recent()
+
+    def summary(self) -> dict[str, Any]:
+        """``cues``: the counts, by source, every cue's event, the inputs."""
+        s = self.log.summary()
+        s["osc_in"] = f"{self.osc.host}:{self.osc.port}" if self.osc is not None else ""
+        s["midi_in"] = self.opts.midi_in
+        return s
+
+
+def open_cues(stack: contextlib.ExitStack, opts: CueOptions | None, hands: AllHands,
+              clock: Clock, outputs: list[Any], rate_hz: float, log: Callable[[str], None]
+              ) -> LiveCues | None:
+    """The run's cues (None without an input asked for), closed when ``stack`` unwinds;
+    their takes appended to ``outputs`` (the first hand's loop's: the full pose)."""
+    if opts is None or not opts.wanted:
+        return None
+    cues = LiveCues(opts, hands, clock, rate_hz, log)
+    stack.callback(cues.close)
+    outputs.append(cues.takes)
+    return cues

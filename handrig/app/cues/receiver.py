@@ -1,0 +1,86 @@
+"""The OSC port: UDP datagrams received in a thread of its own, each parsed and its
+cues handed to the dispatcher (:class:`OscReceiver`)."""
+
+from __future__ import annotations
+
+import contextlib
+import select
+import socket
+import threading
+from collections.abc import Callable
+
+from handrig.app.cues.dispatch import CueDispatcher, osc_cue
+from handrig.app.cues.osc import parse_packet
+from handrig.errors import ConfigError
+
+MAX_DATAGRAM = 65535
+
+
+class OscReceiver:
+    """Listens on ``(host, port)`` (UDP; port 0: any free one, see :attr:`port`) from
+    :meth:`start` to :meth:`close`; every message goes to ``dispatcher``: a cue is acted
+    on, anything else counted. ``flag`` names the setting in an error (a port taken, a
+    host that is not this machine's)."""
+
+    def __init__(self, host: str, port: int, dispatcher: CueDispatcher, *,
+                 flag: str = "--osc-in") -> None:
+        self.dispatcher = dispatcher
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self._sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind((host, port))
+        except OSError as exc:
+            self._sock.close()
+            raise ConfigError(f"cannot listen for OSC there ({exc.strerror})", key=flag,
+                              value=f"{host}:{port}",
+                              allowed="a free UDP port on an address of this machine "
+                              "(e.g. 9000, or 0.0.0.0:9000 for every interface)") from None
+        self.host = host
+        self.port: int = self._sock.getsockname()[1]
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._thread: threading.Thread | None = None
+        self.on_error: Callable[[BaseException], None] = lambda exc: None
+
+    def start(self) -> OscReceiver:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="handrig-osc-in",
+                                            daemon=True)
+            self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        sock, wake = self._sock, self._wake_r
+        while True:
+            try:
+                ready, _, _ = select.select([sock, wake], [], [])
+                if wake in ready:
+                    return
+                data = sock.recv(MAX_DATAGRAM)
+            except OSError as exc:
+                self.on_error(exc)
+                return
+            self.handle(data)
+
+    def handle(self, data: bytes) -> None:
+        """One datagram: its messages dispatched, what is no cue counted."""
+        d = self.dispatcher
+        messages, bad = parse_packet(data)
+        d.log.count("received", "OSC", len(messages) + bad)
+        if bad:
+            d.reject("malformed", "OSC", f"{bad} message(s) not OSC 1.0 with s, i, f")
+        for msg in messages:
+            cue = osc_cue(msg)
+            if isinstance(cue, str):
+                d.reject(cue, "OSC", f"{msg.address} {' '.join(map(str, msg.args))}".strip())
+            else:
+                d.dispatch(cue)
+
+    def close(self) -> None:
+        """Stop the thread and close the port (idempotent)."""
+        thread, self._thread = self._thread, None
+        with contextlib.suppress(OSError):
+            self._wake_w.send(b"x")
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+        for s in (self._sock, self._wake_r, self._wake_w):
+            s.close()
