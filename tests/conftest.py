@@ -77,6 +77,7 @@ COMPUTE_ONLY = (
     "handrig/loop/test_rig_settings.py",
     "test_boundaries.py", "handrig/app/test_second_vendor_session.py",
     "handrig/cli/test_first_hour_messages.py", "handrig/app/cues/test_cue_parsing.py",
+    "handrig/app/cues/test_cue_show.py",
 )
 TESTS = Path(__file__).resolve().parent
 

@@ -456,6 +456,7 @@ class _Session:
             keys = KeyReader.for_show(
                 sys.stdin.fileno(), toggle_relax=self.all.toggle_relax,
                 stop=lambda: self.all.request_stop("q pressed"), estop=self.all.estop,
+                record=self.cues.record_key if self.cues is not None else None,
                 on_error=lambda exc: self._hand_log(0)(f"key failed: {exc}"))
         sources = self.opts.gloves()
         snapshot = HandsSnapshot(
@@ -463,7 +464,8 @@ class _Session:
                 rig, glove_source=sources[i] or "", keys=keys is not None,
                 show=self.opts.show, **heat_colours(self.parts.hands[i].rig_config))
              for i, rig in enumerate(self.rigs)},
-            keys=keys is not None, show=self.opts.show)
+            keys=keys is not None, show=self.opts.show,
+            cues=self.cues.recent if self.cues is not None else None)
         with show_panel(snapshot, header, keys, self.log, self._set_panel):
             yield
 
@@ -532,7 +534,7 @@ class _Session:
             summary["show"] = self.opts.show
         if self.signals.received:
             summary["signals"] = self.signals.received
-        if self.cues is not None:
+        if self.cues is not None and self.cues.used:
             summary["cues"] = self.cues.summary()
         if error is not None:
             summary["error"] = str(error)

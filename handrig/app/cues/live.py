@@ -1,11 +1,13 @@
 """A live session's cues: the OSC port and the MIDI input, acting on every hand as the
-show's keys do, and the takes they start (:class:`LiveCues`, built by :func:`open_cues`).
+show's keys do, and the takes they and the ``r`` key start (:class:`LiveCues`, built by
+:func:`open_cues`).
 
 The session (:mod:`handrig.app.session`) calls :func:`open_cues` once its outputs are
 built (the OSC port is bound then, so a port that is taken fails the run before torque
-goes on), adds :attr:`LiveCues.takes` to the first hand's outputs, calls
-:meth:`LiveCues.start` once the loops are built, and puts :meth:`LiveCues.summary` in the
-run's summary under ``cues``.
+goes on; the takes join the first hand's outputs), calls :meth:`LiveCues.start` once the
+loops are built, binds ``r`` to :meth:`LiveCues.record_key`, and puts
+:meth:`LiveCues.summary` in the run's summary under ``cues`` when there was a cue input
+or a cue (:attr:`LiveCues.used`).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from handrig.app.cues.dispatch import CueDispatcher, CueLog, CueTargets
+from handrig.app.cues.dispatch import Cue, CueDispatcher, CueLog, CueTargets
 from handrig.app.cues.midi import MidiCues, MidiReceiver
 from handrig.app.cues.receiver import OscReceiver
 from handrig.app.cues.takes import CueTakes
@@ -59,6 +61,7 @@ class LiveCues:
                              record_start=self.takes.start, record_stop=self.takes.stop,
                              play=opts.play, layer=opts.layer)
         self.dispatcher = CueDispatcher(targets, self.log, on_event=log)
+        hands.cue_source = self.log.recent  # the view shows them
         self.osc: OscReceiver | None = None
         self.midi: MidiReceiver | None = None
         self._midi_cues = MidiCues(opts.midi)
@@ -86,13 +89,25 @@ class LiveCues:
                     receiver.close()
         self.takes.close()
 
+    def record_key(self) -> None:
+        """The ``r`` key: start a take (a generated name), or stop the one recording."""
+        action = "record/stop" if self.takes.recording else "record/start"
+        self.log.count("received", "key")
+        self.dispatcher.dispatch(Cue(action, (), "key"))
+
+    @property
+    def used(self) -> bool:
+        """Whether the run had a cue input or took a cue (its summary part is wanted)."""
+        return self.opts.wanted or self.log.events_total > 0
+
     def recent(self) -> tuple[str, ...]:
         """The last few cues, each naming its source (the panel, the view)."""
         return self.log.recent()
 
     def summary(self) -> dict[str, Any]:
-        """``cues``: the counts, by source, every cue's event, the inputs."""
+        """``cues``: the counts, by source, every cue's event, the takes, the inputs."""
         s = self.log.summary()
+        s["takes"] = self.takes.summary()
         s["osc_in"] = f"{self.osc.host}:{self.osc.port}" if self.osc is not None else ""
         s["midi_in"] = self.opts.midi_in
         return s
@@ -100,12 +115,11 @@ class LiveCues:
 
 def open_cues(stack: contextlib.ExitStack, opts: CueOptions | None, hands: AllHands,
               clock: Clock, outputs: list[Any], rate_hz: float, log: Callable[[str], None]
-              ) -> LiveCues | None:
-    """The run's cues (None without an input asked for), closed when ``stack`` unwinds;
-    their takes appended to ``outputs`` (the first hand's loop's: the full pose)."""
-    if opts is None or not opts.wanted:
-        return None
-    cues = LiveCues(opts, hands, clock, rate_hz, log)
+              ) -> LiveCues:
+    """The run's cues (without an input asked for: the ``r`` key's takes only), closed
+    when ``stack`` unwinds; their takes appended to ``outputs`` (the first hand's loop's:
+    the full pose)."""
+    cues = LiveCues(opts or CueOptions(), hands, clock, rate_hz, log)
     stack.callback(cues.close)
     outputs.append(cues.takes)
     return cues

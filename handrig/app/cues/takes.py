@@ -17,16 +17,18 @@ from pathlib import Path
 from typing import Any
 
 from handrig.errors import DataError
-from handrig.outputs.base import FloatArray, Output, OutputStatus
+from handrig.outputs.base import FloatArray, OutputStatus
 from handrig.outputs.recorder import Recorder, free_path
 
 SUFFIXES = (".csv", ".bvh")
 
 
-class CueTakes(Output):
+class CueTakes:
     """The takes of a run's cues, in ``folder``, one at a time; each starts at time 0
     (its first frame's). A BVH take is written at ``rate_hz``. Closing it (the run's
-    end) closes a take still open, as ``record/stop`` does."""
+    end) closes a take still open, as ``record/stop`` does. Called as the loop's output
+    (``takes(t_s, pose_deg)``); not an :class:`~handrig.outputs.base.Output`: its part
+    of the summary is the cues' (``cues.takes``), present only when a cue was taken."""
 
     def __init__(self, folder: str | Path, rate_hz: float, *,
                  log: Callable[[str], None] | None = None) -> None:
@@ -115,6 +117,6 @@ class CueTakes(Output):
                             last_error=st.last_error, stopped_reason=st.stopped_reason,
                             duration_s=st.duration_s)
 
-    def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
-        """``cue_takes``: each take closed (path, frames, seconds ...) and the one open."""
-        return "cue_takes", {"takes": list(self.done), "recording": self.recording}
+    def summary(self) -> dict[str, Any]:
+        """Each take closed (path, frames, seconds ...) and the one open ("" none)."""
+        return {"done": list(self.done), "recording": self.recording}

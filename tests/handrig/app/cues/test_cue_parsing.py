@@ -246,4 +246,4 @@ def test_cue_takes_start_stop_and_never_replace(tmp_path: Path) -> None:
     takes.start(None)
     takes(1.0, pose)
     assert takes.close().startswith("take ")  # the run's end closes it
-    assert takes.summary(0)[1]["recording"] == "" and len(takes.done) == 2
+    assert takes.summary()["recording"] == "" and len(takes.summary()["done"]) == 2

@@ -102,8 +102,9 @@ def test_every_osc_address_on_a_live_run(tmp_path: Path) -> None:
     t_s, poses, _ = load_performance(take)
     assert len(t_s) > 50 and t_s[0] == 0.0 and poses.shape[1] == 50
     assert not (tmp_path / "act1-2.csv").exists()
-    takes = s["outputs"]["cue_takes"]
-    assert takes["recording"] == "" and takes["takes"][0]["path"] == str(take)
+    takes = cues["takes"]
+    assert takes["recording"] == "" and takes["done"][0]["path"] == str(take)
+    assert s["outputs"] == {"vmc": None, "recording": None}  # the cue takes are in cues
 
 
 def _virtual_midi() -> str:
