@@ -73,7 +73,14 @@ class CueTakes:
             if self._active is not None:
                 raise DataError(f"a take is recording already ({self._active.path}): "
                                 "record/stop it first")
-            take = Recorder(self.path_for(name), rate_hz=self.rate_hz, log=self.log)
+            path = self.path_for(name)
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise DataError(f"{path.parent}: cannot make the takes' folder "
+                                f"({exc.strerror}); name another ([cues] takes, "
+                                "--cue-takes)") from None
+            take = Recorder(path, rate_hz=self.rate_hz, log=self.log)
             with self._frame_lock:
                 self._t0_s = None
                 self._active = take

@@ -172,7 +172,7 @@ def test_without_layers_play_and_layer_are_refused_not_lost() -> None:
     assert log.counts["refused"] == 2 and "no layering" in log.summary()["events"][0]
 
 
-def test_the_osc_port_counts_what_is_no_cue(tmp_path: Path) -> None:
+def test_the_osc_port_counts_what_is_no_cue() -> None:
     rec = Recorded()
     log = CueLog(FakeClock())
     port = OscReceiver("127.0.0.1", 0, CueDispatcher(rec.targets(), log))
@@ -224,7 +224,7 @@ def test_midi_handling_counts_and_dispatches() -> None:
 
 
 def test_cue_takes_start_stop_and_never_replace(tmp_path: Path) -> None:
-    takes = CueTakes(tmp_path, 100.0)
+    takes = CueTakes(tmp_path / "takes", 100.0)  # made on the first take
     pose = np.zeros(len(POSE_NAMES))
     takes(5.0, pose)  # no take open: nothing happens
     assert "recording" in takes.start("act1")
@@ -233,7 +233,7 @@ def test_cue_takes_start_stop_and_never_replace(tmp_path: Path) -> None:
     for k in range(10):
         takes(10.0 + k / 100, pose)
     assert "10 frames" in takes.stop()
-    t_s, _, _ = load_performance(tmp_path / "act1.csv")
+    t_s, _, _ = load_performance(tmp_path / "takes" / "act1.csv")
     assert len(t_s) == 10 and t_s[0] == 0.0  # the take starts at 0
     with pytest.raises(DataError, match="never replaced"):
         takes.start("act1.csv")
@@ -242,7 +242,7 @@ def test_cue_takes_start_stop_and_never_replace(tmp_path: Path) -> None:
     with pytest.raises(DataError, match="no take is recording"):
         takes.stop()
     generated = takes.path_for(None)
-    assert generated.parent == tmp_path and generated.name.startswith("take-")
+    assert generated.parent == tmp_path / "takes" and generated.name.startswith("take-")
     takes.start(None)
     takes(1.0, pose)
     assert takes.close().startswith("take ")  # the run's end closes it
