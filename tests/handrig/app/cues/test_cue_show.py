@@ -110,3 +110,21 @@ def test_the_view_frame_carries_the_cues() -> None:
     frame = json.loads(encoder.frame(ViewHands({"": one}, ("relax (OSC)", "stop (MIDI)"))))
     assert frame["cues"] == ["relax (OSC)", "stop (MIDI)"]
     assert json.loads(encoder.frame(one))["cues"] == []
+
+
+def test_the_printed_summary_has_the_cues_part() -> None:
+    from handrig.app.summary import format_summary, summary_dict
+    from handrig.loop.stats import RunStats
+
+    log_cues = LiveCues(CueOptions(), AllHands([]), FakeClock(), 100.0, log=lambda t: None)
+    for _ in range(14):
+        log_cues.dispatcher.dispatch(Cue("relax", (), "OSC"))
+    log_cues.log.count("received", "OSC", 15)
+    log_cues.log.count("malformed", "OSC")
+    summary = summary_dict(RunStats(), None, None, None)
+    summary["cues"] = log_cues.summary()
+    text = format_summary(summary)
+    assert "cues              15 received (OSC 15): 14 acted, 0 refused; ignored 0 unknown, " \
+           "1 malformed, 0 unmapped" in text
+    assert text.count("relax (OSC)") == 12 and "... 2 more" in text
+    assert "cues" not in format_summary(summary_dict(RunStats(), None, None, None))
