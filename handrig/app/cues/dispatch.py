@@ -129,9 +129,15 @@ class CueTargets:
     layer: Callable[[str, str], None] | None = None
 
 
+IGNORED_SAID = 5
+"""Messages that are no cue said in the run's log, of each kind and source; the rest are
+counted only (a controller sending faders to a wrong address must not flood the log)."""
+
+
 class CueDispatcher:
     """Acts on cues, one at a time (OSC and MIDI arrive on threads of their own), and
-    logs each in ``log``. ``on_event``: told every event line (the session's log)."""
+    logs each in ``log``. ``on_event``: told every event line (the session's log), and
+    the first :data:`IGNORED_SAID` messages of each kind that were no cue."""
 
     def __init__(self, targets: CueTargets, log: CueLog,
                  on_event: Callable[[str], None] = lambda text: None) -> None:
@@ -139,12 +145,18 @@ class CueDispatcher:
         self.log = log
         self.on_event = on_event
         self._lock = threading.Lock()
+        self._said: dict[tuple[str, str], int] = {}
 
     def reject(self, why: Rejected, source: str, what: str) -> None:
         """A message that is no cue: counted, and ignored."""
         self.log.count(why, source)
-        if why != "released":
-            self.on_event(f"cue ignored ({source}): {why}: {what}")
+        if why == "released":
+            return
+        said = self._said[why, source] = self._said.get((why, source), 0) + 1
+        if said <= IGNORED_SAID:
+            self.on_event(f"cue ignored ({source}): {why}: {what}" + (
+                f" (further {why} {source} messages are counted only)"
+                if said == IGNORED_SAID else ""))
 
     def dispatch(self, cue: Cue) -> None:
         label = cue.label()

@@ -247,3 +247,18 @@ def test_cue_takes_start_stop_and_never_replace(tmp_path: Path) -> None:
     takes(1.0, pose)
     assert takes.close().startswith("take ")  # the run's end closes it
     assert takes.summary()["recording"] == "" and len(takes.summary()["done"]) == 2
+
+
+def test_a_flood_of_what_is_no_cue_is_said_five_times_then_counted() -> None:
+    log = CueLog(FakeClock())
+    lines: list[str] = []
+    port = OscReceiver("127.0.0.1", 0, CueDispatcher(Recorded().targets(), log,
+                                                     on_event=lines.append))
+    try:
+        for _ in range(1000):
+            port.handle(encode_message("/handrig/level", 0.5))
+        port.handle(b"junk")
+    finally:
+        port.close()
+    assert log.counts["unknown"] == 1000 and log.counts["malformed"] == 1
+    assert len(lines) == 6 and "counted only" in lines[4]
