@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from handrig.app.cues.dispatch import Cue, CueDispatcher, CueLog, CueTargets
-from handrig.app.cues.midi import MidiCues, MidiReceiver
+from handrig.app.cues.midi import MidiCues, MidiReceiver, check_midi
 from handrig.app.cues.receiver import OscReceiver
 from handrig.app.cues.takes import CueTakes
 from handrig.app.hands import AllHands
@@ -65,6 +65,8 @@ class LiveCues:
         self.osc: OscReceiver | None = None
         self.midi: MidiReceiver | None = None
         self._midi_cues = MidiCues(opts.midi)
+        if opts.midi_in:
+            check_midi()  # mido and python-rtmidi there: said before torque goes on
         if opts.osc_in:
             host, port = parse_listen_address(opts.osc_in)
             self.osc = OscReceiver(host, port, self.dispatcher)

@@ -74,6 +74,11 @@ class MidiCues:
             dispatcher.dispatch(cue)
 
 
+def check_midi() -> None:
+    """ConfigError naming ``--midi-in`` and the fix when mido or python-rtmidi is missing."""
+    _mido()
+
+
 def _mido() -> Any:
     try:
         import mido

@@ -5,6 +5,7 @@ recording stand-in of the session's controls and the layers, and the cue takes."
 from __future__ import annotations
 
 import struct
+import sys
 from pathlib import Path
 
 import mido
@@ -262,3 +263,13 @@ def test_a_flood_of_what_is_no_cue_is_said_five_times_then_counted() -> None:
         port.close()
     assert log.counts["unknown"] == 1000 and log.counts["malformed"] == 1
     assert len(lines) == 6 and "counted only" in lines[4]
+
+
+def test_without_python_rtmidi_midi_cues_say_how_to_get_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from handrig.app.cues.midi import check_midi
+
+    check_midi()  # the dev install has the show extra
+    monkeypatch.setitem(sys.modules, "rtmidi", None)  # as if not installed
+    with pytest.raises(ConfigError, match=r"--midi-in: .*pip install 'handrig\[show\]'"):
+        check_midi()
