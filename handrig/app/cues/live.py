@@ -13,6 +13,7 @@ or a cue (:attr:`LiveCues.used`).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -71,6 +72,15 @@ class LiveCues:
             host, port = parse_listen_address(opts.osc_in)
             self.osc = OscReceiver(host, port, self.dispatcher)
             self.osc.on_error = lambda exc: log(f"the OSC port stopped: {exc}")
+
+    def attach_layers(self, play: Callable[[str], None],
+                      layer: Callable[[str, str], None]) -> None:
+        """``/handrig/play`` and ``/handrig/layer`` call these from now on (the layers'
+        ``LayerControl.play`` and ``.layer``, when they are built inside the session,
+        after :func:`open_cues`; else pass them in :class:`CueOptions`). Before
+        :meth:`start`."""
+        self.dispatcher.targets = dataclasses.replace(self.dispatcher.targets, play=play,
+                                                      layer=layer)
 
     def start(self) -> None:
         """Cues act from now on (the loops are built)."""

@@ -128,3 +128,15 @@ def test_the_printed_summary_has_the_cues_part() -> None:
            "1 malformed, 0 unmapped" in text
     assert text.count("relax (OSC)") == 12 and "... 2 more" in text
     assert "cues" not in format_summary(summary_dict(RunStats(), None, None, None))
+
+
+def test_layers_attached_after_the_cues_are_built_get_play_and_layer() -> None:
+    calls: list[tuple[str, ...]] = []
+    cues = LiveCues(CueOptions(), AllHands([]), FakeClock(), 100.0, log=lambda t: None)
+    cues.dispatcher.dispatch(Cue("play", ("intro",)))  # no layers yet: refused
+    cues.attach_layers(lambda name: calls.append(("play", name)),
+                       lambda name, group: calls.append(("layer", name, group)))
+    cues.dispatcher.dispatch(Cue("play", ("intro",), "MIDI"))
+    cues.dispatcher.dispatch(Cue("layer", ("intro", "off")))
+    assert calls == [("play", "intro"), ("layer", "intro", "off")]
+    assert cues.log.counts["refused"] == 1 and cues.log.counts["acted"] == 2
