@@ -325,7 +325,7 @@ class _Session:
         rate_hz = app.take_rate_hz(parts.rig_config, first.glove_config.glove.rate_hz,
                                    opts.record_rate_hz)
         self.cues = open_cues(stack, opts.cues, self.all, self.clock, self.outputs[0],
-                              rate_hz, self._hand_log(0))
+                              rate_hz, self._hand_log(0), parts.rig_config.loop)
         for i, (_, path) in self._glove_takes().items():
             take = takes.open_glove_take(path, gloves[i], parts.hands[i].glove_config,
                                          source=opts.gloves()[i] or gloves[i].name, log=log,

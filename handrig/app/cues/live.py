@@ -25,6 +25,7 @@ from handrig.app.cues.takes import CueTakes
 from handrig.app.hands import AllHands
 from handrig.clock import Clock
 from handrig.config.cues import OSC_PREFIX, ShowMidi, parse_listen_address
+from handrig.config.rig import LoopConfig
 
 
 @dataclass(frozen=True)
@@ -49,10 +50,11 @@ class CueOptions:
 
 class LiveCues:
     """The cue side of one run. ``hands``: the session's controls of every hand;
-    ``rate_hz``: a BVH take's frame rate; ``log``: the run's event lines."""
+    ``rate_hz``: a BVH take's frame rate; ``log``: the run's event lines; ``priority``:
+    the OSC thread's SCHED_FIFO priority (0: normal; see :class:`OscReceiver`)."""
 
     def __init__(self, opts: CueOptions, hands: AllHands, clock: Clock, rate_hz: float,
-                 log: Callable[[str], None]) -> None:
+                 log: Callable[[str], None], *, priority: int = 0) -> None:
         self.opts = opts
         self._log = log
         self.log = CueLog(clock)
@@ -70,7 +72,7 @@ class LiveCues:
             check_midi()  # mido and python-rtmidi there: said before torque goes on
         if opts.osc_in:
             host, port = parse_listen_address(opts.osc_in)
-            self.osc = OscReceiver(host, port, self.dispatcher)
+            self.osc = OscReceiver(host, port, self.dispatcher, priority=priority)
             self.osc.on_error = lambda exc: log(f"the OSC port stopped: {exc}")
 
     def attach_layers(self, play: Callable[[str], None],
@@ -126,12 +128,15 @@ class LiveCues:
 
 
 def open_cues(stack: contextlib.ExitStack, opts: CueOptions | None, hands: AllHands,
-              clock: Clock, outputs: list[Any], rate_hz: float, log: Callable[[str], None]
-              ) -> LiveCues:
+              clock: Clock, outputs: list[Any], rate_hz: float, log: Callable[[str], None],
+              loop: LoopConfig | None = None) -> LiveCues:
     """The run's cues (without an input asked for: the ``r`` key's takes only), closed
     when ``stack`` unwinds; their takes appended to ``outputs`` (the first hand's loop's:
-    the full pose)."""
-    cues = LiveCues(opts or CueOptions(), hands, clock, rate_hz, log)
+    the full pose). ``loop``: the rig's loop settings (the OSC thread's priority is one
+    below the loop's)."""
+    priority = loop.realtime_priority - 1 if loop is not None else 0
+    cues = LiveCues(opts or CueOptions(), hands, clock, rate_hz, log,
+                    priority=max(priority, 0))
     stack.callback(cues.close)
     outputs.append(cues.takes)
     return cues

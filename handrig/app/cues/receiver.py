@@ -1,5 +1,13 @@
 """The OSC port: UDP datagrams received in a thread of its own, each parsed and its
-cues handed to the dispatcher (:class:`OscReceiver`)."""
+cues handed to the dispatcher (:class:`OscReceiver`).
+
+The thread shares the interpreter lock with the loop: were it preempted while holding
+the lock (a loaded machine), the loop would wait for it to be scheduled again, so where
+the loop runs under SCHED_FIFO the thread runs one priority below (as the view's
+feeder): only the loop preempts it. What it may take at that priority is bounded: at
+most :data:`MAX_RATE_HZ` datagrams a second (a token bucket); more wait in the
+socket's buffer, and what overflows the buffer the kernel drops.
+"""
 
 from __future__ import annotations
 
@@ -7,13 +15,34 @@ import contextlib
 import select
 import socket
 import threading
+import time
 from collections.abc import Callable
 
 from handrig.app.cues.dispatch import CueDispatcher, osc_cue
 from handrig.app.cues.osc import parse_packet
 from handrig.errors import ConfigError
+from handrig.realtime import realtime_priority
 
 MAX_DATAGRAM = 65535
+MAX_RATE_HZ = 4000.0
+"""Datagrams a second the thread handles at most (a show controller sends tens)."""
+BURST = 200
+
+
+class Bucket:
+    """A token bucket: :data:`BURST` datagrams at once, :data:`MAX_RATE_HZ` a second."""
+
+    def __init__(self) -> None:
+        self.tokens = float(BURST)
+        self.last_s: float | None = None
+
+    def take(self, now_s: float) -> float:
+        """One datagram handled at ``now_s``: how long to wait before the next (0: none)."""
+        if self.last_s is not None:
+            self.tokens = min(float(BURST), self.tokens + (now_s - self.last_s) * MAX_RATE_HZ)
+        self.last_s = now_s
+        self.tokens -= 1.0
+        return -self.tokens / MAX_RATE_HZ if self.tokens < 0.0 else 0.0
 
 
 class OscReceiver:
@@ -23,8 +52,9 @@ class OscReceiver:
     host that is not this machine's)."""
 
     def __init__(self, host: str, port: int, dispatcher: CueDispatcher, *,
-                 flag: str = "--osc-in") -> None:
+                 flag: str = "--osc-in", priority: int = 0) -> None:
         self.dispatcher = dispatcher
+        self.priority = priority
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._sock = socket.socket(family, socket.SOCK_DGRAM)
         try:
@@ -49,7 +79,12 @@ class OscReceiver:
         return self
 
     def _run(self) -> None:
+        with realtime_priority(self.priority):
+            self._receive()
+
+    def _receive(self) -> None:
         sock, wake = self._sock, self._wake_r
+        bucket = Bucket()
         while True:
             try:
                 ready, _, _ = select.select([sock, wake], [], [])
@@ -60,6 +95,9 @@ class OscReceiver:
                 self.on_error(exc)
                 return
             self.handle(data)
+            wait_s = bucket.take(time.monotonic())
+            if wait_s > 0.0 and select.select([wake], [], [], wait_s)[0]:
+                return  # over the rate, it waited for a token; closed meanwhile
 
     def handle(self, data: bytes) -> None:
         """One datagram: its messages dispatched, what is no cue counted."""
