@@ -18,6 +18,7 @@ from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
 
 if TYPE_CHECKING:
+    from handrig.app.cues.live import CueOptions
     from handrig.app.hands import SessionParts
     from handrig.app.sources import Source
 
@@ -126,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
     with StartedEmulators() as started:  # one the session did not take: stopped on the way
         try:
             show = _from_show(args)
+            cues = cue_options(args, show)  # said before an emulator starts
             if args.viewer:
                 check_display("--viewer")
             _start_sim_bus(args, started)
@@ -135,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
             from handrig.app.session import failed, print_result
 
             return print_result(failed(exc), as_json=True)
-        return _run(args, show, started)
+        return _run(args, show, started, cues)
 
 
 def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
@@ -155,7 +157,8 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
                                    viewer=args.viewer), SIM_BUS)
 
 
-def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulators) -> int:
+def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulators,
+         cues: CueOptions | None) -> int:
     from handrig.app.hands import build_session_parts, glove_specs
     from handrig.app.session import LiveOptions, failed, print_result, run_live
     from handrig.app.sources import run_sources, session_sources
@@ -177,7 +180,6 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
                                  flag="--bus-left") if rig.left_bus is not None else "")
         if "sim" in (bus, bus_left):
             check_gl_backend("--bus sim")
-        cues = cue_options(args, show)
     except HandrigError as exc:
         if not args.json:
             raise

@@ -284,3 +284,21 @@ def test_the_port_thread_is_held_to_its_rate() -> None:
     assert waits[:BURST] == [0.0] * BURST
     assert waits[BURST + 9] == pytest.approx(10 / MAX_RATE_HZ)
     assert bucket.take(1.0) == 0.0  # a second later the bucket is full again
+
+
+def test_a_port_in_use_and_bad_flags_are_said_before_anything_starts(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    import socket
+
+    from handrig.cli import main
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        with pytest.raises(ConfigError, match=f"--osc-in '127.0.0.1:{port}': cannot listen"):
+            OscReceiver("127.0.0.1", port, CueDispatcher(Recorded().targets(),
+                                                         CueLog(FakeClock())))
+    assert main(["play", "take.csv", "--osc-in", "9000"]) == 2
+    assert "--osc-in '9000': only with --bus" in capsys.readouterr().err
+    assert main(["run", "--bus", "sim", "--osc-in", "nine"]) == 2
+    assert "--osc-in 'nine': not an address to listen on" in capsys.readouterr().err
