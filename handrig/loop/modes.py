@@ -169,7 +169,7 @@ class ModeMachine:
                 self._toggle(reason)
             elif self.mode is not Mode.STOPPING:
                 self.event(f"{reason}: " + ("held relaxed already" if self.held
-                                            else "following the glove already"))
+                                            else "not held relaxed, nothing to resume"))
 
     def finish(self, reason: str) -> None:
         """The run's length is reached (frames or time): stop, unless already stopping."""

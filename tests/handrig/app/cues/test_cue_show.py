@@ -41,7 +41,7 @@ def test_relax_and_resume_by_cue_are_requests_not_toggles() -> None:
     m.request_resume("resume (OSC)")
     m.poll()
     assert not m.held and said[-2].startswith("resume (OSC): resuming")
-    assert said[-1] == "resume (OSC): following the glove already"
+    assert said[-1] == "resume (OSC): not held relaxed, nothing to resume"
     m.toggle_relax()  # the key still toggles
     m.poll()
     assert m.held
