@@ -20,10 +20,12 @@ from collections.abc import Callable
 
 from handrig.app.cues.dispatch import CueDispatcher, osc_cue
 from handrig.app.cues.osc import parse_packet
+from handrig.config.cues import OSC_PREFIX
 from handrig.errors import ConfigError
 from handrig.realtime import realtime_priority
 
 MAX_DATAGRAM = 65535
+_PREFIX = OSC_PREFIX.encode("ascii")
 MAX_RATE_HZ = 4000.0
 """Datagrams a second the thread handles at most (a show controller sends tens)."""
 BURST = 200
@@ -100,8 +102,14 @@ class OscReceiver:
                 return  # over the rate, it waited for a token; closed meanwhile
 
     def handle(self, data: bytes) -> None:
-        """One datagram: its messages dispatched, what is no cue counted."""
+        """One datagram: its messages dispatched, what is no cue counted. A message to an
+        address outside ``/handrig/`` is counted unknown unparsed (another program's
+        traffic on the port costs the least)."""
         d = self.dispatcher
+        if data[:1] == b"/" and not data.startswith(_PREFIX):
+            d.log.count("received", "OSC")
+            d.reject("unknown", "OSC", data[:data.find(b"\x00")].decode("ascii", "replace"))
+            return
         messages, bad = parse_packet(data)
         d.log.count("received", "OSC", len(messages) + bad)
         if bad:
