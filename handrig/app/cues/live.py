@@ -73,7 +73,7 @@ class LiveCues:
         if opts.osc_in:
             host, port = parse_listen_address(opts.osc_in)
             self.osc = OscReceiver(host, port, self.dispatcher, priority=priority)
-            self.osc.on_error = lambda exc: log(f"the OSC port stopped: {exc}")
+            self.osc.on_error = log
 
     def attach_layers(self, play: Callable[[str], None],
                       layer: Callable[[str, str], None]) -> None:

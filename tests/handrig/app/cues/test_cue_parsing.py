@@ -289,16 +289,6 @@ def test_without_python_rtmidi_midi_cues_say_how_to_get_it(
 
 
 
-def test_the_port_thread_is_held_to_its_rate() -> None:
-    from handrig.app.cues.receiver import BURST, MAX_RATE_HZ, Bucket
-
-    bucket = Bucket()
-    waits = [bucket.take(0.0) for _ in range(BURST + 10)]  # a burst at one instant
-    assert waits[:BURST] == [0.0] * BURST
-    assert waits[BURST + 9] == pytest.approx(10 / MAX_RATE_HZ)
-    assert bucket.take(1.0) == 0.0  # a second later the bucket is full again
-
-
 def test_a_port_in_use_and_bad_flags_are_said_before_anything_starts(
         capsys: pytest.CaptureFixture[str]) -> None:
     import socket

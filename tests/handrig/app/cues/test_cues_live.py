@@ -107,6 +107,35 @@ def test_every_osc_address_on_a_live_run(tmp_path: Path) -> None:
     assert s["outputs"] == {"vmc": None, "recording": None}  # the cue takes are in cues
 
 
+def test_the_relay_process_hands_over_cues_and_counts_the_rest() -> None:
+    from handrig.app.cues.dispatch import CueDispatcher, CueLog, CueTargets
+    from handrig.app.cues.receiver import OscReceiver
+    from handrig.clock import MonotonicClock
+
+    calls: list[str] = []
+    targets = CueTargets(relax=calls.append, resume=calls.append, stop=calls.append,
+                         estop=calls.append, record_start=lambda name: "",
+                         record_stop=lambda: "")
+    log = CueLog(MonotonicClock())
+    lines: list[str] = []
+    port = OscReceiver("127.0.0.1", 0, CueDispatcher(targets, log, on_event=lines.append))
+    port.start()
+    assert port.ready.wait(WAIT_S)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as client:
+        for k in range(300):
+            client.sendto(encode_message("/handrig/level", 0.5), ("127.0.0.1", port.port))
+            if k % 20 == 19:
+                time.sleep(0.002)  # within the socket's buffer
+        client.sendto(encode_message("/handrig/relax"), ("127.0.0.1", port.port))
+        deadline = time.monotonic() + WAIT_S
+        while not calls and time.monotonic() < deadline:
+            time.sleep(0.01)
+    port.close()  # the relay's last counts read before it returns
+    assert calls == ["relax (OSC)"]
+    assert (log.counts["received"], log.counts["unknown"], log.counts["acted"]) == (301, 300, 1)
+    assert len(lines) == 6 and "counted only" in lines[4]
+
+
 def _virtual_midi() -> str:
     """Why a virtual MIDI port cannot be made here ("" when it can)."""
     try:
