@@ -101,7 +101,8 @@ class OscReceiver:
             self._proc = subprocess.Popen(
                 [sys.executable, "-m", "handrig.app.cues.receiver", str(fd)],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, pass_fds=(fd,),
-                env=helper_env())
+                env=helper_env(), start_new_session=True)  # a Ctrl-C is the run's alone;
+            # the relay ends when its stdin closes (the run's end, or the run's death)
             self._thread = threading.Thread(target=self._run, name="handrig-osc-in",
                                             daemon=True)
             self._thread.start()
