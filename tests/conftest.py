@@ -80,6 +80,7 @@ COMPUTE_ONLY = (
     "handrig/outputs/test_openxr_output.py",
     "sim/test_robot_gravity_emulated.py",
     "handrig/app/lerobot/test_frame_grid.py", "handrig/app/lerobot/test_plugin_layers.py",
+    "handrig/app/cues/test_cue_parsing.py", "handrig/app/cues/test_cue_show.py",
 )
 TESTS = Path(__file__).resolve().parent
 

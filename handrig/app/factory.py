@@ -173,15 +173,22 @@ def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,
     if record:
         from handrig.outputs.recorder import Recorder
 
-        rate_hz = rig_cfg.loop.rate_hz
-        if rig_cfg.loop.mode == "glove" and glove_rate_hz:
-            rate_hz = glove_rate_hz
-        if record_rate_hz:
-            rate_hz = record_rate_hz
+        rate_hz = take_rate_hz(rig_cfg, glove_rate_hz, record_rate_hz)
         recorder = Recorder(record, rate_hz=rate_hz, log=log)
         stack.callback(lambda: log(f"recorded performance: {recorder.close()}"))
         out.append(recorder)
     return out
+
+
+def take_rate_hz(rig_cfg: RigConfig, glove_rate_hz: float | None,
+                 record_rate_hz: float | None) -> float:
+    """A BVH take's frame rate: ``--record-rate``, else the glove's nominal rate when the
+    loop follows the glove, else ``[loop] rate_hz``."""
+    if record_rate_hz:
+        return record_rate_hz
+    if rig_cfg.loop.mode == "glove" and glove_rate_hz:
+        return glove_rate_hz
+    return rig_cfg.loop.rate_hz
 
 
 def build_rig(parts: RigParts, glove: Any, bus: Any, clock: Clock, *,

@@ -20,7 +20,7 @@ pipeline where this forearm is (its sag in the full pose the outputs get).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -147,10 +147,23 @@ class AllHands:
     def __init__(self, rigs: Sequence[Rig]) -> None:
         self.rigs = rigs  # filled once the loops are built
         self.estop_reason = ""  # set before any rig is e-stopped
+        # the last few cues taken (OSC, MIDI, the r key), naming their source: the view's
+        self.cue_source: Callable[[], tuple[str, ...]] = tuple
+
+    def recent_cues(self) -> tuple[str, ...]:
+        return self.cue_source()
 
     def toggle_relax(self) -> None:
         for rig in self.rigs:
             rig.toggle_relax()
+
+    def relax(self, reason: str) -> None:
+        for rig in self.rigs:
+            rig.relax(reason)
+
+    def resume(self, reason: str) -> None:
+        for rig in self.rigs:
+            rig.resume(reason)
 
     def request_stop(self, reason: str = "stop requested") -> None:
         for rig in self.rigs:

@@ -1,7 +1,8 @@
 """The show's keys: single keys from a terminal, read without blocking.
 
 Space relaxes or resumes, ``q`` stops (ease, then torque off), ``e`` is the e-stop
-(torque off at once) (:data:`SHOW_KEYS`); the callbacks are the loop's.
+(torque off at once), ``r`` starts a take or stops it (:data:`SHOW_KEYS`); the callbacks
+are the loop's and the session's.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from typing import Any
 SHOW_KEYS: dict[str, str] = {
     " ": "relax/resume",
     "q": "stop (ease, torque off)",
-    "e": "e-stop (torque off now)",
+    "e": "e-stop",
+    "r": "record on/off",
 }
 """The show's keys and what each does (the callbacks are the loop's)."""
 
@@ -55,9 +57,14 @@ class KeyReader:
 
     @classmethod
     def for_show(cls, fd: int, *, toggle_relax: Callable[[], None], stop: Callable[[], None],
-                 estop: Callable[[], None], **kwargs: Any) -> KeyReader:
-        """The show's keys (:data:`SHOW_KEYS`): space, ``q`` and ``e``."""
-        return cls(fd, {" ": toggle_relax, "q": stop, "e": estop}, **kwargs)
+                 estop: Callable[[], None], record: Callable[[], None] | None = None,
+                 **kwargs: Any) -> KeyReader:
+        """The show's keys (:data:`SHOW_KEYS`): space, ``q``, ``e`` and (given ``record``,
+        a new take or the end of one) ``r``."""
+        keys = {" ": toggle_relax, "q": stop, "e": estop}
+        if record is not None:
+            keys["r"] = record
+        return cls(fd, keys, **kwargs)
 
     def open(self) -> KeyReader:
         """Put the terminal in cbreak mode (nothing happens if ``fd`` is no terminal)."""

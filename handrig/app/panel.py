@@ -128,6 +128,7 @@ class PanelSnapshot:
     keys: bool = True  # whether the show keys are read (a KeyReader on a terminal)
     show: str = ""  # the show running (handrig run --show), "" when none
     hands: tuple[str, ...] = ()  # a two-hand run: one line per hand (mode, glove, latency)
+    cues: tuple[str, ...] = ()  # the last few cues taken (OSC, MIDI, r), newest last
 
 
 # -- formatting -----------------------------------------------------------------------
@@ -306,6 +307,11 @@ def servo_rows(servos: Sequence[ServoLine]) -> list[Text]:
 LEGEND = "er: V voltage H overheating E encoder S shock L overload; now dimmed: stale"
 
 
+def cues_line(s: PanelSnapshot) -> Text:
+    """The last cues taken, newest first, as many as fit."""
+    return Text(_fit("cues   " + " < ".join(reversed(s.cues)), WIDTH), "cyan")
+
+
 def keys_line(s: PanelSnapshot) -> Text:
     if not s.keys:
         return Text("keys off: Ctrl-C stops (ease, then torque off)", "dim")
@@ -320,7 +326,7 @@ def render(s: PanelSnapshot, height: int = HEIGHT) -> Group:
     """One frame of the panel: at most 80 columns and ``height`` lines."""
     hands = [Text(_fit(line, WIDTH)) for line in s.hands]
     head = [mode_line(s), *(hands or [glove_line(s.glove), loop_line(s)]), bus_line(s.bus),
-            outputs_line(s.outputs)]
+            outputs_line(s.outputs), *([cues_line(s)] if s.cues else [])]
     rows = servo_rows(s.servos)
     fits = height - len(head) - 2  # the legend and the keys are always shown
     if len(rows) > fits:  # 40 servos in a short terminal: the keys stay, rows are cut
@@ -368,6 +374,7 @@ def plain_line(s: PanelSnapshot) -> str:
           if o.glove_take_path else []),
         *([f"openxr {o.openxr_target}" + (f" {o.openxr_errors} errors" if o.openxr_errors
                                            else "")] if o.openxr_target else []),
+        *([f"cues {' < '.join(reversed(s.cues[-3:]))}"] if s.cues else []),
     ]
     return " | ".join(parts)
 

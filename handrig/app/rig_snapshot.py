@@ -8,8 +8,9 @@ nothing that changes.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Protocol
 
 from handrig.app.panel import NAN, BusHealth, GloveLink, Outputs, PanelSnapshot, ServoLine
@@ -151,12 +152,17 @@ class HandsSnapshot:
     :class:`RigSnapshot`, right first."""
 
     def __init__(self, sides: Mapping[str, RigSnapshot], *, keys: bool = False,
-                 show: str = "") -> None:
+                 show: str = "", cues: Callable[[], tuple[str, ...]] | None = None) -> None:
         self.sides = dict(sides)
         self.keys = keys
         self.show = show
+        self.cues = cues  # the last few cues taken, each naming its source
 
     def __call__(self) -> PanelSnapshot:
+        snap = self._hands()
+        return snap if self.cues is None else dataclasses.replace(snap, cues=self.cues())
+
+    def _hands(self) -> PanelSnapshot:
         snaps = {h: side() for h, side in self.sides.items()}
         first = next(iter(snaps.values()))
         if len(snaps) == 1:

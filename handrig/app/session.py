@@ -41,6 +41,7 @@ import numpy as np
 from handrig.app import factory as app
 from handrig.app import parts as app_parts
 from handrig.app import takes
+from handrig.app.cues.live import CueOptions, LiveCues, open_cues
 from handrig.app.factory import OpenedBus
 from handrig.app.hands import AllHands, SessionParts, check_gloves, side_control_channels
 from handrig.app.parts import RigParts
@@ -99,6 +100,7 @@ class LiveOptions:
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
     record_glove_left: str | None = None  # with a glove per hand: the left glove's take
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
+    cues: CueOptions | None = None  # --osc-in, --midi-in: cues acting as the keys do
     # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
     # show never starts with a jump (run, demo, play); False: straight to the first goal
     ease_in: bool = True
@@ -182,6 +184,7 @@ class _Session:
         self.started = False
         self.all = AllHands(self.rigs)
         self.specs: tuple[str, ...] = ()  # each hand's glove, checked
+        self.cues: LiveCues | None = None
 
     # -- the session --------------------------------------------------------------------
     def run(self) -> LiveResult:
@@ -320,6 +323,10 @@ class _Session:
                                       record=opts.record, log=log,
                                       glove_rate_hz=first.glove_config.glove.rate_hz,
                                       record_rate_hz=opts.record_rate_hz, openxr=opts.openxr)
+        rate_hz = app.take_rate_hz(parts.rig_config, first.glove_config.glove.rate_hz,
+                                   opts.record_rate_hz)
+        self.cues = open_cues(stack, opts.cues, self.all, self.clock, self.outputs[0],
+                              rate_hz, self._hand_log(0), parts.rig_config.loop)
         for i, (_, path) in self._glove_takes().items():
             take = takes.open_glove_take(path, gloves[i], parts.hands[i].glove_config,
                                          source=opts.gloves()[i] or gloves[i].name, log=log,
@@ -341,6 +348,8 @@ class _Session:
         if opts.snapshot_every > 0:  # on the first hand's loop: every hand's positions
             first_rig = self.rigs[0]
             first_rig.outputs = (*first_rig.outputs, self._snapshots(opts.snapshot_every))
+        if self.cues is not None:
+            self.cues.start()
         for rig in self.rigs:
             rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
         stack.callback(_unfreeze)  # also when torque-on fails and the loop never runs
@@ -449,6 +458,7 @@ class _Session:
             keys = KeyReader.for_show(
                 sys.stdin.fileno(), toggle_relax=self.all.toggle_relax,
                 stop=lambda: self.all.request_stop("q pressed"), estop=self.all.estop,
+                record=self.cues.record_key if self.cues is not None else None,
                 on_error=lambda exc: self._hand_log(0)(f"key failed: {exc}"))
         sources = self.opts.gloves()
         snapshot = HandsSnapshot(
@@ -456,7 +466,8 @@ class _Session:
                 rig, glove_source=sources[i] or "", keys=keys is not None,
                 show=self.opts.show, **heat_colours(self.parts.hands[i].rig_config))
              for i, rig in enumerate(self.rigs)},
-            keys=keys is not None, show=self.opts.show)
+            keys=keys is not None, show=self.opts.show,
+            cues=self.cues.recent if self.cues is not None else None)
         with show_panel(snapshot, header, keys, self.log, self._set_panel):
             yield
 
@@ -525,6 +536,8 @@ class _Session:
             summary["show"] = self.opts.show
         if self.signals.received:
             summary["signals"] = self.signals.received
+        if self.cues is not None and self.cues.used:
+            summary["cues"] = self.cues.summary()
         if error is not None:
             summary["error"] = str(error)
         joints = tuple(s.joint for side in parts.hands for s in side.rig_config.servos)

@@ -281,6 +281,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['tracking_max_deg']} deg (present vs goal, {summary['reads']} reads, "
         f"{summary['stale_reads']} with stale servos)",
         *_outputs_lines(summary.get("outputs") or {}),
+        *cue_lines(summary.get("cues") or {}),
         *_heat_lines(summary.get("heat") or {}),
         f"safety            {summary['relax_events']} relax events (glove lost or servos "
         f"silent), {summary.get('relax_keys', 0)} by the relax key, "
@@ -304,10 +305,39 @@ def format_hands_summary(summary: dict[str, Any]) -> str:
         lines.append(f"--- {name} hand ({part.get('glove_source') or 'glove'}) ---")
         lines += [line for line in format_summary(part).splitlines()
                   if not line.startswith(("torque off", "error"))]
+    lines += cue_lines(summary.get("cues") or {})
     lines.append(f"torque off        {summary['torque_off']} (every servo of both hands)")
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
     return "\n".join(lines)
+
+
+CUE_EVENTS_SHOWN = 12
+
+
+def cue_lines(cues: dict[str, Any]) -> list[str]:
+    """The ``cues`` part (:meth:`handrig.app.cues.live.LiveCues.summary`): the counts, the
+    cues' events (the first few; all of them in ``--json``) and the takes they made."""
+    if not cues:
+        return []
+    where = " ".join(w for w in (f"OSC on {cues['osc_in']}" if cues.get("osc_in") else "",
+                                 f"MIDI from {cues['midi_in']}" if cues.get("midi_in")
+                                 else "") if w)
+    sources = ", ".join(f"{k} {v}" for k, v in (cues.get("by_source") or {}).items())
+    lines = [f"cues              {cues['received']} received ({sources or 'none'}): "
+             f"{cues['acted']} acted, {cues['refused']} refused; ignored "
+             f"{cues['unknown']} unknown, {cues['malformed']} malformed, "
+             f"{cues['unmapped']} unmapped" + (f" ({where})" if where else "")]
+    events = cues.get("events") or []
+    lines += [f"                {e}" for e in events[:CUE_EVENTS_SHOWN]]
+    more = cues.get("events_total", len(events)) - min(len(events), CUE_EVENTS_SHOWN)
+    if more > 0:
+        lines.append(f"                  ... {more} more (--json keeps the last "
+                     f"{len(events)})")
+    for take in (cues.get("takes") or {}).get("done", []):
+        lines.append(f"  take by cue     {take['path']}: {take['frames']} frames, "
+                     f"{take['duration_s']} s")
+    return lines
 
 
 def _heat_lines(heat: dict[str, Any]) -> list[str]:

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from handrig.app.port_processes import SIM_BUS, PortProcess, StartedEmulators, sim_bus_argv
 from handrig.app.view import add_view_flag
+from handrig.cli._cues import add_cue_flags, cue_options
 from handrig.cli._display import check_gl_backend, check_renderer
 from handrig.cli._numbers import positive_float, positive_int
 from handrig.cli._ports import SIMULATED_FIRST_LINE
@@ -68,6 +69,7 @@ def register(sub: Any) -> None:
                    help="also send both hands as the 26 OpenXR hand joints each, over UDP "
                    "(docs/openxr.md; e.g. 127.0.0.1:39540)")
     add_view_flag(p)
+    add_cue_flags(p)
     p.set_defaults(func=run)
 
 
@@ -144,7 +146,8 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
                                    openxr=args.openxr,
                                    started=started, log=log, panel=not args.json,
                                    on_hands=view.attach_hands if view is not None else None,
-                                   snapshot_every=max(1, expected // 6) if args.render else 0)
+                                   snapshot_every=max(1, expected // 6) if args.render else 0,
+                                   cues=cue_options(args))
                 signals.disarm()  # the session handles its own; after it: shut down, print
                 result = run_live(parts, opts)
         except HandrigError as exc:

@@ -17,6 +17,7 @@ from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import Source, run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
 from handrig.app.view import add_view_flag, view_playback, view_session
+from handrig.cli._cues import add_cue_flags, cue_options
 from handrig.cli._display import check_gl_backend
 from handrig.cli._numbers import nonnegative_float, positive_float
 from handrig.cli._ports import say_if_simulated
@@ -75,6 +76,7 @@ def register(sub: Any) -> None:
                    help="also send both hands as the 26 OpenXR hand joints each, over UDP "
                    "(docs/openxr.md; e.g. 127.0.0.1:39540)")
     add_view_flag(p)
+    add_cue_flags(p)
     p.set_defaults(func=run)
 
 
@@ -82,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
     if args.bus is not None:
         return run_on_rig(args)
     for flag, value in (("--from", args.from_s), ("--to", args.to_s),
-                        ("--glove-config", args.glove_config)):
+                        ("--glove-config", args.glove_config), ("--osc-in", args.osc_in),
+                        ("--midi-in", args.midi_in), ("--cue-takes", args.cue_takes)):
         if value is not None:
             raise ConfigError("only with --bus", key=flag, value=value,
                               allowed="add --bus PORT (or --bus sim) to play onto the rig")
@@ -103,6 +106,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
         parts = play_parts(parts, take)
         if args.bus == "sim":
             check_gl_backend("--bus sim")
+        cues = cue_options(args)
     except HandrigError as exc:
         if not args.json:
             raise
@@ -130,7 +134,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
             wire_timing=not args.no_wire_timing, vmc=args.vmc, openxr=args.openxr,
             panel=not args.json,
             verbose=not args.json, on_hands=view.attach_hands if view is not None else None,
-            done_reason=f"the take played ({take.duration_s:.2f} s)")
+            done_reason=f"the take played ({take.duration_s:.2f} s)", cues=cues)
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
         raise result.error

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from handrig.app.port_processes import SIM_BUS, StartedEmulators, sim_bus_argv
 from handrig.app.view import add_view_flag
+from handrig.cli._cues import add_cue_flags, cue_options
 from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._ports import say_if_simulated
@@ -17,6 +18,7 @@ from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
 
 if TYPE_CHECKING:
+    from handrig.app.cues.live import CueOptions
     from handrig.app.hands import SessionParts
     from handrig.app.sources import Source
 
@@ -81,6 +83,7 @@ def register(sub: Any) -> None:
                    help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_view_flag(p)
+    add_cue_flags(p)
     p.set_defaults(func=run)
 
 
@@ -95,6 +98,7 @@ def _from_show(args: argparse.Namespace) -> ShowFile | None:
             "bus_left": show.buses.left, "vmc": show.outputs.vmc, "openxr": show.outputs.openxr,
             "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
             "view": show.outputs.view}
+    # the cue flags ([osc], [midi], [cues]) are filled by handrig.cli._cues.cue_options
     filled = []
     for name, value in fill.items():
         if getattr(args, name) is None and value:
@@ -126,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
     with StartedEmulators() as started:  # one the session did not take: stopped on the way
         try:
             show = _from_show(args)
+            cues = cue_options(args, show)  # said before an emulator starts
             if args.viewer:
                 check_display("--viewer")
             _start_sim_bus(args, started)
@@ -135,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
             from handrig.app.session import failed, print_result
 
             return print_result(failed(exc), as_json=True)
-        return _run(args, show, started)
+        return _run(args, show, started, cues)
 
 
 def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
@@ -155,7 +160,8 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
                                    viewer=args.viewer), SIM_BUS)
 
 
-def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulators) -> int:
+def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulators,
+         cues: CueOptions | None) -> int:
     from handrig.app.hands import build_session_parts, glove_specs
     from handrig.app.session import LiveOptions, failed, print_result, run_live
     from handrig.app.sources import run_sources, session_sources
@@ -200,6 +206,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             verbose=not args.json, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
             on_hands=view.attach_hands if view is not None else None, started=started,
+            cues=cues,
         )
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

@@ -29,16 +29,29 @@ names the file and the key (``examples/show.toml`` is the commented example)::
     record = ""                # a new take, .csv or .bvh
     record_rate_hz = 0.0       # a BVH take's rate (0: the glove's)
     view = ""                  # [HOST:]PORT of the live view
+
+    [osc]
+    in = "9000"                # [HOST:]PORT cues arrive on, as --osc-in
+
+    [midi]
+    port = ""                  # a MIDI input, as --midi-in
+    channel = 0                # 0: every channel, else 1..16
+    note.60 = "relax"          # a note-on (or cc.N: a controller rising past 64) -> a cue
+    cc.20 = "stop"
+
+    [cues]
+    takes = "takes"            # the folder of the takes record/start begins
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from handrig.config.loading import load
+from handrig.config.cues import ShowCues, ShowMidi, ShowOsc
+from handrig.config.loading import build, load_toml
 from handrig.errors import ConfigError
 
 GLOVE_PREFIXES = ("replay:", "opengloves:")
@@ -97,6 +110,9 @@ class ShowFile:
     gloves: ShowGloves = ShowGloves()
     buses: ShowBuses = ShowBuses()
     outputs: ShowOutputs = ShowOutputs()
+    osc: ShowOsc = field(default_factory=ShowOsc)
+    midi: ShowMidi = field(default_factory=ShowMidi)
+    cues: ShowCues = field(default_factory=ShowCues)
     path: str = ""
 
     def check(self) -> None:
@@ -136,6 +152,22 @@ def _glove(base: Path, value: str, key: str, show: Path) -> str:
     return "replay:" + _file(base, value.removeprefix("replay:"), key, show)
 
 
+def _load(p: Path) -> ShowFile:
+    """The show file's tables built and checked (``[osc] in``, a Python keyword, is the
+    field ``in_``; an error names it ``osc.in``)."""
+    data = load_toml(p)
+    osc = data.get("osc")
+    if isinstance(osc, dict) and "in" in osc:
+        osc["in_"] = osc.pop("in")
+    try:
+        return build(ShowFile, data)
+    except ConfigError as exc:
+        key = "osc.in" if exc.key == "osc.in_" else exc.key
+        allowed = exc.allowed.replace("in_", "in") if exc.allowed else exc.allowed
+        raise ConfigError(exc.detail, file=str(p), key=key, value=exc.value,
+                          allowed=allowed) from None
+
+
 def load_show(path: str | Path) -> ShowFile:
     """Load and check a show file; its paths come back resolved (a rig given as a file,
     the map, grid, glove files, recordings to replay and the take to record, relative to
@@ -144,7 +176,7 @@ def load_show(path: str | Path) -> ShowFile:
     if not p.is_file():
         raise ConfigError("no such show file", key="--show", value=str(path),
                           allowed="a show file (see examples/show.toml)")
-    show = load(p, ShowFile)
+    show = _load(p)
     base = p.resolve().parent
     rig = show.show.rig
     if "/" in rig or rig.endswith(".toml"):
@@ -163,6 +195,9 @@ def load_show(path: str | Path) -> ShowFile:
             outputs=dataclasses.replace(
                 show.outputs,
                 record=_file(base, show.outputs.record, "outputs.record", p,
-                             must_exist=False)))
+                             must_exist=False)),
+            cues=dataclasses.replace(show.cues, takes=_file(base, show.cues.takes,
+                                                            "cues.takes", p,
+                                                            must_exist=False)))
     except ConfigError as exc:
         raise exc.located(str(p)) from None

@@ -84,7 +84,8 @@ class ModeMachine:
         self.mode = Mode.WAITING
         self.stop_requests = 0
         self._requested: list[str] = []  # appended by request_stop, consumed by poll
-        self._toggles: list[str] = []  # appended by toggle_relax, consumed by poll
+        # appended by toggle_relax (None), request_relax (True), request_resume (False)
+        self._toggles: list[tuple[bool | None, str]] = []
         self._estop_requested = ""  # set by request_estop, acted on by poll
         self._halt = False  # an e-stop: end at once, no easing
         self.held = False  # relaxed by the relax key: frames do not resume the puppet
@@ -125,7 +126,17 @@ class ModeMachine:
 
     def toggle_relax(self, reason: str = "relax key") -> None:
         """Relax and hold (or, when held, let the glove take over again)."""
-        self._toggles.append(reason)
+        self._toggles.append((None, reason))
+
+    def request_relax(self, reason: str) -> None:
+        """Relax and hold, as the relax key does when the puppet follows the glove; said
+        and nothing more when it is held relaxed already (a cue: ``relax``)."""
+        self._toggles.append((True, reason))
+
+    def request_resume(self, reason: str) -> None:
+        """Let the glove take over again, as the relax key does when the puppet is held
+        relaxed; said and nothing more when it is not held (a cue: ``resume``)."""
+        self._toggles.append((False, reason))
 
     def request_estop(self, reason: str = "e-stop key") -> None:
         """End the run at the next poll without easing (torque goes off at once)."""
@@ -153,7 +164,12 @@ class ModeMachine:
             reason = self._requested.pop(0)
             self._relax(Mode.STOPPING, reason)
         while self._toggles:
-            self._toggle(self._toggles.pop(0))
+            want, reason = self._toggles.pop(0)
+            if want is None or want != self.held:
+                self._toggle(reason)
+            elif self.mode is not Mode.STOPPING:
+                self.event(f"{reason}: " + ("held relaxed already" if self.held
+                                            else "not held relaxed, nothing to resume"))
 
     def finish(self, reason: str) -> None:
         """The run's length is reached (frames or time): stop, unless already stopping."""

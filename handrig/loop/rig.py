@@ -195,6 +195,14 @@ class Rig:
         back in). Safe from another thread (the keys): the loop acts on it between cycles."""
         self.machine.toggle_relax()
 
+    def relax(self, reason: str) -> None:
+        """Relax and hold, as :meth:`toggle_relax` when following (a cue); any thread."""
+        self.machine.request_relax(reason)
+
+    def resume(self, reason: str) -> None:
+        """Follow the glove again, as :meth:`toggle_relax` when held (a cue); any thread."""
+        self.machine.request_resume(reason)
+
     def estop(self, reason: str = "e-stop key") -> None:
         """End the run at the next cycle without easing: the caller's torque context then
         turns torque off at once. Safe from another thread or a signal handler."""

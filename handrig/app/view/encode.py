@@ -100,6 +100,7 @@ class FrameEncoder:
             "hands": hands,
             "outputs": [_plain(o) for one in hands_snap.hands.values() for o in one.outputs],
             "bodies": bodies, "ghost": ghosts or None, "skeleton": skeleton,
+            "cues": list(hands_snap.cues),
         }
         return json.dumps(msg, separators=(",", ":"))
 
@@ -108,9 +109,11 @@ class FrameEncoder:
 class HandsSnapshot:
     """The snapshots of a session's loops, by hand (``"ri"``, ``"le"``; ``""`` for one
     loop driving the whole rig), taken together by the view's feeder. ``seq`` changes
-    whenever any hand's does."""
+    whenever any hand's does. ``cues``: the last few cues taken (OSC, MIDI, the ``r``
+    key), each naming its source, newest last."""
 
     hands: Mapping[str, LoopSnapshot]
+    cues: tuple[str, ...] = ()
 
     @property
     def seq(self) -> int:

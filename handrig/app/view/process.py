@@ -37,7 +37,7 @@ from handrig.errors import ConfigError
 from handrig.realtime import apply_cpus_from_env, helper_env, realtime_priority
 
 if TYPE_CHECKING:
-    from handrig.app.view.server import RigControls
+    from handrig.app.view.server import HandsControls, RigControls
     from handrig.config.rig import RigConfig
     from handrig.loop.telemetry import LoopSnapshot
 
@@ -158,18 +158,19 @@ class ViewProcess:
                                             name="handrig-view-feeder", daemon=True)
             self._feeder.start()
 
-    def attach_hands(self, rigs: Mapping[str, Any], controls: RigControls) -> None:
+    def attach_hands(self, rigs: Mapping[str, Any], controls: HandsControls) -> None:
         """:meth:`attach` for a session's loops: ``rigs`` by hand (``"ri"``, ``"le"``;
         ``""`` for one loop driving the whole rig), each loop's snapshot read by the same
         feeder (a :class:`HandsSnapshot` once every hand has published one); the buttons
-        call ``controls``, which act on every hand as the keys do."""
+        call ``controls``, which act on every hand as the keys do; the cues the page
+        lists are ``controls.recent_cues()``."""
         latest = {h: rig.telemetry.latest for h, rig in rigs.items()}
 
         def every() -> HandsSnapshot | None:
             snaps = {h: read() for h, read in latest.items()}
             if any(s is None for s in snaps.values()):
                 return None
-            return HandsSnapshot(snaps)
+            return HandsSnapshot(snaps, controls.recent_cues())
         self.attach(every, controls)
 
     def feeder_priority(self) -> int:

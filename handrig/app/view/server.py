@@ -64,6 +64,13 @@ class RigControls(Protocol):
     def estop(self, reason: str = ...) -> None: ...
 
 
+class HandsControls(RigControls, Protocol):
+    """A session's controls of every hand (:class:`handrig.app.hands.AllHands`): the
+    buttons' actions, and the last few cues taken, for the page to list."""
+
+    def recent_cues(self) -> tuple[str, ...]: ...
+
+
 @dataclass
 class ViewStats:
     """Counters of the view, for the benchmark and the tests."""

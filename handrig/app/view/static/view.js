@@ -508,6 +508,17 @@ function drawTables(f) {
     title: `${h.label} hand`, rows: h.servos.ids.map((_, i) => servoRow(h.servos, i)),
   })), 6);
   drawOutputs(f);
+  drawCues(f);
+}
+
+// The last cues taken (OSC, MIDI, the r key), newest first, each naming its source.
+function drawCues(f) {
+  const list = $('cues');
+  const text = (f.cues || []).slice().reverse();
+  if (list.dataset.text !== JSON.stringify(text)) {
+    list.dataset.text = JSON.stringify(text);
+    list.replaceChildren(...(text.length ? text : ['none']).map((t) => { const li = document.createElement('li'); li.textContent = t; return li; }));
+  }
 }
 
 function drawOutputs(f) {
