@@ -126,6 +126,7 @@ class PanelSnapshot:
     keys: bool = True  # whether the show keys are read (a KeyReader on a terminal)
     show: str = ""  # the show running (handrig run --show), "" when none
     hands: tuple[str, ...] = ()  # a two-hand run: one line per hand (mode, glove, latency)
+    layers: tuple[str, ...] = ()  # takes layered under the glove: "GROUP <- TAKE (loop, on)"
 
 
 # -- formatting -----------------------------------------------------------------------
@@ -308,11 +309,16 @@ def keys_line(s: PanelSnapshot) -> Text:
     return text
 
 
+def layers_line(layers: tuple[str, ...]) -> Text:
+    """The takes layered under the glove: each its group, take and fade state."""
+    return Text(_fit("layers " + "; ".join(layers), WIDTH), "magenta")
+
+
 def render(s: PanelSnapshot, height: int = HEIGHT) -> Group:
     """One frame of the panel: at most 80 columns and ``height`` lines."""
     hands = [Text(_fit(line, WIDTH)) for line in s.hands]
     head = [mode_line(s), *(hands or [glove_line(s.glove), loop_line(s)]), bus_line(s.bus),
-            outputs_line(s.outputs)]
+            outputs_line(s.outputs), *([layers_line(s.layers)] if s.layers else [])]
     rows = servo_rows(s.servos)
     fits = height - len(head) - 2  # the legend and the keys are always shown
     if len(rows) > fits:  # 40 servos in a short terminal: the keys stay, rows are cut
@@ -358,6 +364,7 @@ def plain_line(s: PanelSnapshot) -> str:
          else "rec off"),
         *([f"glove take {o.glove_take_path} {o.glove_take_frames} frames"]
           if o.glove_take_path else []),
+        *([f"layers {'; '.join(s.layers)}"] if s.layers else []),
     ]
     return " | ".join(parts)
 

@@ -43,6 +43,7 @@ from handrig.app import parts as app_parts
 from handrig.app import takes
 from handrig.app.factory import OpenedBus
 from handrig.app.hands import AllHands, SessionParts, check_gloves, side_control_channels
+from handrig.app.layering import LayerControl, LayerOptions
 from handrig.app.parts import RigParts
 from handrig.app.session_exit import (
     READBACK_BUDGET_S,
@@ -98,6 +99,7 @@ class LiveOptions:
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
     record_glove_left: str | None = None  # with a glove per hand: the left glove's take
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
+    layering: LayerOptions | None = None  # takes layered under the glove (app/layering.py)
     # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
     # show never starts with a jump (run, demo, play); False: straight to the first goal
     ease_in: bool = True
@@ -190,6 +192,7 @@ class _Session:
             specs = self._check_gloves()
             app_parts.check_outputs(self.opts.vmc, self.opts.record)
             self._check_glove_takes()
+            self.layering = LayerControl.for_session(self.parts, self.opts.layering)
             with contextlib.ExitStack() as stack:
                 self._open_buses(stack)
                 error = self._devices_open(stack, specs)
@@ -334,6 +337,7 @@ class _Session:
                 ease_in=opts.ease_in, raw_channels=side_control_channels(side))
             self.rigs.append(rig)
             self.stats[i] = rig.stats
+        self.layering.connect(self.rigs)
         if opts.on_hands is not None:
             opts.on_hands({parts.key(i): rig for i, rig in enumerate(self.rigs)}, self.all)
         if opts.snapshot_every > 0:  # on the first hand's loop: every hand's positions

@@ -30,12 +30,14 @@ from typing import TYPE_CHECKING, Any
 from handrig.app.port_processes import SIM_BUS, PortProcess, StartedEmulators, sim_bus_argv
 from handrig.app.view import add_view_flag
 from handrig.cli._display import check_gl_backend, check_renderer
+from handrig.cli._layers import add_layer_flag, layer_options
 from handrig.cli._numbers import positive_float, positive_int
 from handrig.cli._ports import SIMULATED_FIRST_LINE
 from handrig.cli._rig import add_rig_argument
 from handrig.errors import HandrigError
 
 if TYPE_CHECKING:
+    from handrig.app.layering import LayerOptions
     from handrig.config.rig import RigConfig
 
 DEFAULT_FRAMES = 3000  # 15 s at 200 Hz
@@ -64,6 +66,7 @@ def register(sub: Any) -> None:
                    "(default 5 s), so the hands do not move alike")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="switch on emulated bus faults (see handrig sim-bus --help)")
+    add_layer_flag(p)
     add_view_flag(p)
     p.set_defaults(func=run)
 
@@ -73,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from handrig.pose.robot_rig import find_rig
 
     recording = args.recording or str(simulator.demo_recording())
+    layering = layer_options(args)  # a malformed --layer: said before anything starts
     check_gl_backend("the demo's simulated puppet")
     if args.render:
         check_renderer("--render")
@@ -86,11 +90,11 @@ def run(args: argparse.Namespace) -> int:
                                        faults=args.faults), SIM_BUS)
         with PortProcess(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
                          "the glove emulator (handrig sim-glove)") as glove:
-            return _run(args, recording, started, glove)
+            return _run(args, recording, started, glove, layering)
 
 
 def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
-         glove: PortProcess) -> int:
+         glove: PortProcess, layering: LayerOptions) -> int:
     from handrig.app import simulator
     from handrig.app.hands import build_session_parts, is_two_hand
     from handrig.app.parts import robot_model
@@ -140,7 +144,8 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
                                    sim_faults=args.faults, wire_timing=WIRE_TIMING,
                                    started=started, log=log, panel=not args.json,
                                    on_hands=view.attach_hands if view is not None else None,
-                                   snapshot_every=max(1, expected // 6) if args.render else 0)
+                                   snapshot_every=max(1, expected // 6) if args.render else 0,
+                                   layering=layering)
                 signals.disarm()  # the session handles its own; after it: shut down, print
                 result = run_live(parts, opts)
         except HandrigError as exc:

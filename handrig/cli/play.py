@@ -15,6 +15,7 @@ from handrig.app.sources import Source, run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
 from handrig.app.view import add_view_flag, view_playback, view_session
 from handrig.cli._display import check_gl_backend
+from handrig.cli._layers import add_layer_flag, layer_options
 from handrig.cli._numbers import nonnegative_float, positive_float
 from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
@@ -65,6 +66,7 @@ def register(sub: Any) -> None:
     p.add_argument("--no-wire-timing", action="store_true",
                    help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    add_layer_flag(p)
     add_view_flag(p)
     p.set_defaults(func=run)
 
@@ -73,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     if args.bus is not None:
         return run_on_rig(args)
     for flag, value in (("--from", args.from_s), ("--to", args.to_s),
-                        ("--glove-config", args.glove_config)):
+                        ("--glove-config", args.glove_config), ("--layer", args.layer)):
         if value is not None:
             raise ConfigError("only with --bus", key=flag, value=value,
                               allowed="add --bus PORT (or --bus sim) to play onto the rig")
@@ -94,6 +96,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
         parts = play_parts(parts, take)
         if args.bus == "sim":
             check_gl_backend("--bus sim")
+        layering = layer_options(args)
     except HandrigError as exc:
         if not args.json:
             raise
@@ -120,7 +123,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
             duration_s=None if args.loop else round(take.duration_s + one_frame, 3),
             wire_timing=not args.no_wire_timing, vmc=args.vmc, panel=not args.json,
             verbose=not args.json, on_hands=view.attach_hands if view is not None else None,
-            done_reason=f"the take played ({take.duration_s:.2f} s)")
+            done_reason=f"the take played ({take.duration_s:.2f} s)", layering=layering)
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
         raise result.error

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 from handrig.app.port_processes import SIM_BUS, StartedEmulators, sim_bus_argv
 from handrig.app.view import add_view_flag
 from handrig.cli._display import check_display, check_gl_backend
+from handrig.cli._layers import add_layer_flag, layer_options
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
@@ -77,6 +78,7 @@ def register(sub: Any) -> None:
     p.add_argument("--no-wire-timing", action="store_true",
                    help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    add_layer_flag(p)
     add_view_flag(p)
     p.set_defaults(func=run)
 
@@ -174,6 +176,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
                                  flag="--bus-left") if rig.left_bus is not None else "")
         if "sim" in (bus, bus_left):
             check_gl_backend("--bus sim")
+        layering = layer_options(args, show)
     except HandrigError as exc:
         if not args.json:
             raise
@@ -197,6 +200,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             verbose=not args.json, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
             on_hands=view.attach_hands if view is not None else None, started=started,
+            layering=layering,
         )
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
