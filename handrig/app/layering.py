@@ -204,7 +204,9 @@ class LayerControl:
             return take
         if not Path(name).is_file():
             names = ", ".join(sorted(self._takes)) or "none"
-            raise ConfigError("unknown take", file=file, key=key, value=name,
+            looks_a_file = "/" in name or Path(name).suffix.lower() in (".csv", ".bvh")
+            raise ConfigError("no such take" if looks_a_file else "unknown take",
+                              file=file, key=key, value=name,
                               allowed=f"a name from the show file's [takes] ({names}) or a"
                               " performance .csv/.bvh")
         take = load_layer_take(name, name, key=key, file=file)
