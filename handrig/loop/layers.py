@@ -129,8 +129,8 @@ class LayerStatus:
 class _Slot:
     """A layer playing: its plan, where its take started and its fade."""
 
-    __slots__ = ("cursor", "fade_at_s", "fade_len_s", "plan", "row", "start_s", "state",
-                 "w0", "w1", "weight")
+    __slots__ = ("cursor", "duration_s", "fade_at_s", "fade_len_s", "plan", "row", "start_s",
+                 "state", "take_s", "w0", "w1", "weight")
 
     def __init__(self) -> None:
         self.plan: LayerPlan | None = None
@@ -140,7 +140,9 @@ class _Slot:
         self.fade_at_s = 0.0
         self.fade_len_s = 0.0
         self.cursor = 0
-        self.row = np.zeros(POSE_SIZE)
+        self.duration_s = 0.0
+        self.take_s = 0.0  # the take's time this cycle
+        self.row = np.zeros(POSE_SIZE)  # the take's pose at it (once a mix computed it)
 
     def fade(self, now_s: float, to: float, length_s: float) -> None:
         self.w0, self.w1 = self.weight, to
@@ -160,6 +162,7 @@ class LayerMixer:
         self._pose_low, self._pose_high = pipeline.pose_low, pipeline.pose_high
         self._inbox: collections.deque[LayerCommand] = collections.deque()
         self._slots = tuple(_Slot() for _ in range(MAX_LAYERS))
+        self._live: tuple[_Slot, ...] = ()  # the slots in use, in the order they started
         self.active = 0  # slots in use
         self.t0_s = 0.0  # the run's start (the loop's clock)
         self.status: tuple[LayerStatus, ...] = ()
@@ -178,25 +181,24 @@ class LayerMixer:
         self.t0_s = t0_s
 
     def advance(self, now_s: float) -> None:
-        """Take the commands handed in, then each layer's pose and weight at ``now_s``."""
+        """Take the commands handed in, then each layer's take time and weight at
+        ``now_s`` (its pose is found by the mix that needs it)."""
         inbox = self._inbox
         while inbox:
             self._command(inbox.popleft(), now_s)
-        if not self.active:
-            return
-        for slot in self._slots:
+        for slot in self._live:
             plan = slot.plan
             if plan is None:
                 continue
             t = now_s - slot.start_s
-            duration = plan.duration_s
+            duration = slot.duration_s
             if plan.loop and duration > 0.0:
                 t %= duration
             elif slot.state != _OUT and t >= duration - plan.fade_s:
                 # once: fade out to end with the take (or at once past its end)
                 self._set(slot, _OUT, now_s)
                 slot.fade(now_s, 0.0, duration - t)
-            slot.cursor = lk.layer_frame(plan.times_s, plan.poses, t, slot.cursor, slot.row)
+            slot.take_s = t
             span = slot.fade_len_s
             x = 1.0 if span <= 0.0 else (now_s - slot.fade_at_s) / span
             slot.weight = slot.w0 + (slot.w1 - slot.w0) * smoothstep(x)
@@ -209,33 +211,26 @@ class LayerMixer:
     def mix_targets(self, raw: FloatArray) -> None:
         """The layers blended into ``raw`` (servo targets before the slew limit), clamped
         to the servo limits."""
-        if not self.active:
-            return
-        low, high = self._servo_low, self._servo_high
-        for slot in self._slots:
-            plan = slot.plan
-            if plan is not None and slot.weight > 0.0:
-                lk.layer_mix(raw, plan.servo_at, plan.servo_cols, slot.row, slot.weight,
-                             low, high)
+        self.mix_goals(raw, raw, raw, -1.0)
 
     def mix_goals(self, raw: FloatArray, sent: FloatArray, targets: FloatArray,
                   limit_deg: float) -> None:
         """:meth:`mix_targets`, then each layered servo's target (``targets``, the
-        pipeline's) at most ``limit_deg`` from ``sent``, the goal last written."""
-        if not self.active:
-            return
-        self.mix_targets(raw)
-        for slot in self._slots:
+        pipeline's) at most ``limit_deg`` from ``sent``, the goal last written (a
+        negative ``limit_deg``: no slew limit here). One compiled call a layer."""
+        low, high = self._servo_low, self._servo_high
+        for slot in self._live:
             plan = slot.plan
-            if plan is not None:
-                lk.layer_slew(raw, sent, targets, plan.servo_at, limit_deg)
+            if plan is not None and slot.weight > 0.0:
+                slot.cursor = lk.layer_goals(
+                    plan.times_s, plan.poses, slot.take_s, slot.cursor, slot.row, raw,
+                    plan.servo_at, plan.servo_cols, slot.weight, low, high, sent, targets,
+                    limit_deg)
 
     def mix_pose(self, pose: FloatArray) -> None:
         """The layers blended into the full pose (54), clamped to the joint limits."""
-        if not self.active:
-            return
         low, high = self._pose_low, self._pose_high
-        for slot in self._slots:
+        for slot in self._live:
             plan = slot.plan
             if plan is not None and slot.weight > 0.0:
                 lk.layer_mix(pose, plan.pose_index, plan.pose_index, slot.row, slot.weight,
@@ -273,9 +268,13 @@ class LayerMixer:
             return
         free.plan = plan
         free.start_s = self.t0_s if plan.at_start else now_s
+        free.duration_s = plan.duration_s
+        free.take_s = now_s - free.start_s
         free.cursor = 0
         free.weight = 0.0
         free.fade(now_s, 1.0, plan.fade_s)
+        self._live = (*self._live, free)
+        lk.layer_frame(plan.times_s, plan.poses, 0.0, 0, free.row)
         self.active += 1
         self._set(free, _IN, now_s)
 
@@ -286,6 +285,7 @@ class LayerMixer:
     def _free(self, slot: _Slot, now_s: float) -> None:
         plan = slot.plan
         slot.plan, slot.state, slot.weight = None, _FREE, 0.0
+        self._live = tuple(s for s in self._live if s is not slot)
         self.active -= 1
         if plan is not None:
             self._events.append(f"layer {plan.group} <- {plan.take} ended")

@@ -58,6 +58,21 @@ def layer_mix(values: Any, at: Any, cols: Any, row: Any, weight: float, low: Any
 
 
 @njit(cache=True, nogil=True)
+def layer_goals(times: Any, poses: Any, t: float, cursor: int, row: Any, values: Any, at: Any,
+                cols: Any, weight: float, low: Any, high: Any, sent: Any, targets: Any,
+                limit: float) -> int:  # pragma: no cover - compiled
+    """One layer's step before the write, in one call: :func:`layer_frame` (``row`` the
+    take's pose at ``t``; returns the cursor), :func:`layer_mix` into ``values`` (the servo
+    targets before the slew limit), then, unless ``limit`` is negative,
+    :func:`layer_slew` of the layered servos into ``targets``."""
+    cursor = layer_frame(times, poses, t, cursor, row)
+    layer_mix(values, at, cols, row, weight, low, high)
+    if limit >= 0.0:
+        layer_slew(values, sent, targets, at, limit)
+    return cursor
+
+
+@njit(cache=True, nogil=True)
 def layer_slew(raw: Any, sent: Any, targets: Any, at: Any,
                limit: float) -> None:  # pragma: no cover - compiled
     """``targets[k]`` for each ``k`` in ``at``: at most ``limit`` from ``sent[k]`` (the
@@ -77,3 +92,5 @@ def warm_up() -> None:
     layer_frame(times, poses, 0.5, 0, row)
     layer_mix(row, idx, idx, row, 0.5, row - 1.0, row + 1.0)
     layer_slew(row, row, row, idx, 1.0)
+    layer_goals(times, poses, 0.5, 0, row, row, idx, idx, 0.5, row - 1.0, row + 1.0, row, row,
+                1.0)
