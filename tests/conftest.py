@@ -76,6 +76,7 @@ COMPUTE_ONLY = (
     "sim/test_retarget_fit.py", "handrig/cli/test_retarget_fit_command.py",
     "handrig/loop/test_rig_settings.py", "handrig/loop/test_layer_mixer.py",
     "test_boundaries.py", "handrig/app/test_second_vendor_session.py",
+    "handrig/app/test_layers_shown.py",
     "handrig/cli/test_first_hour_messages.py",
 )
 TESTS = Path(__file__).resolve().parent
