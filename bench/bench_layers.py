@@ -59,7 +59,8 @@ def _mixer(pipeline: PosePipeline, takes: list[Path], count: int) -> LayerMixer:
     for take, group in list(zip(takes, GROUPS, strict=True))[:count]:
         for command in control._plans(str(take), group, loop=True, fade_s=0.5, key="bench",
                                       at_start=True):
-            mixer.post(command)
+            if command is not None:
+                mixer.post(command)
     mixer.start(0.0)
     return mixer
 

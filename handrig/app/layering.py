@@ -130,7 +130,7 @@ class LayerControl:
         self._takes = {name: load_layer_take(name, path, key=f"takes.{name}", file=file)
                        for name, path in self._paths.items()}
         self._rigs: tuple[Rig, ...] = ()
-        self._pending: list[tuple[LayerCommand, ...]] = []
+        self._pending: list[tuple[LayerCommand | None, ...]] = []
         self.on_control: Callable[[LayerControl], None] | None = None
 
     @classmethod
@@ -186,16 +186,17 @@ class LayerControl:
             self.on_control(self)
 
     # -- inside ---------------------------------------------------------------------------
-    def _post(self, commands: tuple[LayerCommand, ...]) -> None:
+    def _post(self, commands: tuple[LayerCommand | None, ...]) -> None:
         with self._lock:
             if self._rigs:
                 self._send(commands)
             else:
                 self._pending.append(commands)
 
-    def _send(self, commands: tuple[LayerCommand, ...]) -> None:
+    def _send(self, commands: tuple[LayerCommand | None, ...]) -> None:
         for rig, command in zip(self._rigs, commands, strict=True):
-            rig.cycle.layers.post(command)
+            if command is not None:
+                rig.cycle.layers.post(command)
 
     def _take(self, name: str, key: str, file: str | None) -> LayerTake:
         with self._lock:
@@ -214,9 +215,11 @@ class LayerControl:
             return self._takes.setdefault(name, take)
 
     def _plans(self, name: str, group: str, *, loop: bool, fade_s: float, key: str,
-               at_start: bool = False, file: str | None = None) -> tuple[LayerOn, ...]:
-        """One plan per hand's loop; ConfigError for an unknown take or group, a group
-        that moves no servo, a robot hand."""
+               at_start: bool = False, file: str | None = None
+               ) -> tuple[LayerOn | None, ...]:
+        """A plan per hand's loop: those whose servos the group moves, and the first
+        (whose full pose the outputs get); ConfigError for an unknown take or group, a
+        group that moves no servo, a robot hand."""
         gkey = _sub(key, "group") if file is not None else key
         if self._robot:
             raise ConfigError("a robot hand's servos follow retargeted curves: layering"
@@ -236,7 +239,8 @@ class LayerControl:
         return tuple(LayerOn(LayerPlan.build(servos, name, group, take.times_s, take.poses,
                                              index, loop=loop, fade_s=fade_s,
                                              at_start=at_start))
-                     for servos in self._servo_index)
+                     if i == 0 or np.isin(servos, index).any() else None
+                     for i, servos in enumerate(self._servo_index))
 
 
 def _fade(value: float, key: str, file: str | None) -> float:
