@@ -117,14 +117,15 @@ class LayerControl:
     """Layers onto the hands' loops (module docstring). ``pipelines``: each hand's, in
     hand order; ``takes``: the show's named takes (read and checked here)."""
 
-    def __init__(self, pipelines: Sequence[PosePipeline], takes: Mapping[str, str] = {},
-                 *, fade_s: float = DEFAULT_FADE_S, file: str | None = None) -> None:
+    def __init__(self, pipelines: Sequence[PosePipeline],
+                 takes: Mapping[str, str] | None = None, *, fade_s: float = DEFAULT_FADE_S,
+                 file: str | None = None) -> None:
         self._servo_index = [np.asarray(p.servo_index, dtype=np.intp) for p in pipelines]
         self._robot = any(p.robot_path is not None for p in pipelines)
         self.hands = frozenset(j[:2] for p in pipelines for j in p.servo_joints
                                if j[:2] in ("ri", "le"))
         self.fade_s = _fade(fade_s, "fade_s", file)
-        self._paths = dict(takes)
+        self._paths = dict(takes or {})
         self._file = file
         self._lock = threading.Lock()  # the control side's only: takes read, mixers set
         self._takes = {name: load_layer_take(name, path, key=f"takes.{name}", file=file)
