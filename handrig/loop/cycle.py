@@ -254,8 +254,9 @@ class Cycle:
         t_s = tick.now_s - self.t0_s
         if self._deferred is not None:  # the caught-up frame before this one, in order
             (t_before, angles), self._deferred = self._deferred, None
-            self._output(t_before, self._layered(pipeline.account(
-                self._deferred_controls, *angles, slewed=False)))
+            caught = pipeline.account(self._deferred_controls, *angles, slewed=False)
+            self.layers.mix_pose(caught, self.t0_s + t_before)  # the take at its time
+            self._output(t_before, caught)
         pose: FloatArray | None
         if mode is Mode.RUNNING and tick.catch_up:
             # the newest frame is waiting: its write first, this one's full pose after it

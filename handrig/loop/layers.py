@@ -168,6 +168,7 @@ class LayerMixer:
         self.status: tuple[LayerStatus, ...] = ()
         """The layers now, for any thread (replaced, never changed, when one changes)."""
         self._events: list[str] = []
+        self._row = np.zeros(POSE_SIZE)  # a take's pose at another cycle's time
         lk.warm_up()
 
     # -- any thread ---------------------------------------------------------------------
@@ -227,13 +228,22 @@ class LayerMixer:
                     plan.servo_at, plan.servo_cols, slot.weight, low, high, sent, targets,
                     limit_deg)
 
-    def mix_pose(self, pose: FloatArray) -> None:
-        """The layers blended into the full pose (54), clamped to the joint limits."""
+    def mix_pose(self, pose: FloatArray, at_s: float | None = None) -> None:
+        """The layers blended into the full pose (54), clamped to the joint limits: at
+        this cycle's take times, or (``at_s``, the loop's clock) at an earlier cycle's (a
+        caught-up frame's pose, output after the newer frame's write)."""
         low, high = self._pose_low, self._pose_high
         for slot in self._live:
             plan = slot.plan
             if plan is not None and slot.weight > 0.0:
-                lk.layer_mix(pose, plan.pose_index, plan.pose_index, slot.row, slot.weight,
+                row = slot.row
+                if at_s is not None:
+                    t = at_s - slot.start_s
+                    if plan.loop and slot.duration_s > 0.0:
+                        t %= slot.duration_s
+                    row = self._row
+                    lk.layer_frame(plan.times_s, plan.poses, t, 0, row)
+                lk.layer_mix(pose, plan.pose_index, plan.pose_index, row, slot.weight,
                              low, high)
 
     def drain_events(self) -> list[str]:

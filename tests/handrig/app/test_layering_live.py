@@ -36,8 +36,10 @@ from sim.dxl_bus import GOAL_POSITION_ADDRESS, SimBus
 from sim.glove_emulator import GloveEmulator
 
 RIG = "puppet_two_hands"
-SWEEP = sweep_recording(4.0, 200.0, 5)  # the performance recorded
-STILL = sweep_recording(4.0, 200.0, 5, low=900.0, high=900.0, with_imu=False)
+# the performance recorded: the sweep's samples sent at 200 Hz, a third of its speed (its
+# sines 3 to 4.5 s long), so that the take stays within the slew limit a live glove has
+SWEEP = sweep_recording(12.0, 600.0, 5)
+STILL = sweep_recording(4.0, 200.0, 5, low=2000.0, high=2000.0, with_imu=False)
 SETTLED_S = 0.6  # the ease in (0.3 s) and the layer's fade in (0.5 s) are over
 
 
@@ -77,6 +79,18 @@ def _session(glove: GloveEmulator, sim: SimBus, seconds: float, *,
     assert result.started and result.error is None, (result.error, lines[-10:])
     assert result.summary["torque_off"] is True
     return result
+
+
+def _following(goals: np.ndarray, take: Path, t_s: np.ndarray, joint: str,
+               low: float = -np.inf, high: float = np.inf) -> np.ndarray:
+    """How far each goal received at ``t_s`` (take time) is from the take's ``joint`` at
+    some moment of the 40 ms before it (a loaded machine can stamp a write late). The
+    take holds the pose as performed, before the slew limit: where it moved faster than
+    [loop] slew_deg_s the layered goals lag it, as the live goals lagged the glove."""
+    lags = np.linspace(0.0, 0.04, 9)
+    performed = np.stack([np.clip(_take_at(take, t_s - lag, joint), low, high)
+                          for lag in lags])
+    return np.abs(performed - goals[None, :]).min(axis=0)
 
 
 def _take_at(take: Path, t_s: np.ndarray, joint: str) -> np.ndarray:
@@ -126,11 +140,12 @@ def test_a_take_layered_on_the_left_hand_under_a_live_right_glove(
         k = pipeline.servo_joints.index(servo.joint)
         t, goals = watch.of(servo.id, t0, SETTLED_S, 1.45)
         assert len(t) > 100, servo.joint
-        performed = np.clip(_take_at(take, t, servo.joint), pipeline.servo_low[k],
-                            pipeline.servo_high[k])
+        low, high = pipeline.servo_low[k], pipeline.servo_high[k]
+        performed = np.clip(_take_at(take, t, servo.joint), low, high)
         if servo.joint.startswith("le"):  # the take's, at the run's time
-            err = np.abs(goals - performed)
-            assert np.median(err) < 0.5 and err.max() < 3.0, (servo.joint, err.max())
+            err = _following(goals, take, t, servo.joint, low, high)
+            assert np.median(np.abs(goals - performed)) < 0.5, servo.joint
+            assert np.percentile(err, 95) < 1.0 and err.max() < 5.0, (servo.joint, err.max())
             followed += np.ptp(performed) > 5.0
         else:  # the still glove's: held while the take moved that joint too
             assert np.ptp(goals) < 0.5, (servo.joint, np.ptp(goals))
@@ -173,7 +188,7 @@ def test_a_cue_layers_a_named_take_mid_run_and_fades_it_out(take: Path) -> None:
                     refused.append(str(exc))
             cued["on"] = time.monotonic()
             control.layer("verse", "right.index")
-            time.sleep(0.6)
+            time.sleep(1.0)
             cued["off"] = time.monotonic()
             control.layer("verse", "off")
         threading.Thread(target=script, daemon=True).start()
@@ -181,24 +196,27 @@ def test_a_cue_layers_a_named_take_mid_run_and_fades_it_out(take: Path) -> None:
     with (GloveEmulator(STILL, "frames", rate_hz=200.0, loop=True) as glove,
           SimBus.from_rig(RIG) as sim):
         sim.on_sync_write = watch
-        result = _session(glove, sim, 2.0, on_hands=_rigs(rigs), layering=LayerOptions(
+        result = _session(glove, sim, 2.4, on_hands=_rigs(rigs), layering=LayerOptions(
             takes={"verse": str(take)}, on_control=cues))
     assert controls and "on" in cued and "off" in cued
     assert "unknown take" in refused[0] and "verse" in refused[0]
     assert "left.middle or right.middle" in refused[1] and "unknown group" in refused[2]
     sid = next(s.id for s in rig.servos if s.joint == "riIndexMCPy")
     _, before = watch.of(sid, 0.0, 0.0, cued["on"])
-    t_on, on = watch.of(sid, cued["on"], 0.55, 0.6)
+    t_on, on = watch.of(sid, cued["on"], 0.55, 0.95)
     _, after = watch.of(sid, cued["off"], 0.55, 0.7)
     glove_value = before[-1]
     # the take from the cue's moment (its own time 0 there), then back to the glove
     performed = _take_at(take, t_on, "riIndexMCPy")
-    assert np.abs(on - performed).max() < 3.0 and np.abs(performed - glove_value).mean() > 2.0
+    err = _following(on, take, t_on, "riIndexMCPy")
+    assert np.median(np.abs(on - performed)) < 1.0
+    assert np.percentile(err, 95) < 1.0 and err.max() < 5.0
+    assert np.abs(performed - glove_value).max() > 3.0  # the take went where the glove did not
     assert np.abs(after - glove_value).max() < 0.5
-    # no jump in or out: each write within the slew limit of the one before (720 deg/s
-    # over the time between them, a few ms more for a write the bus read late)
-    t_all, all_goals = watch.of(sid, 0.0, cued["on"] - 0.1, cued["off"] + 0.7)
-    assert np.all(np.abs(np.diff(all_goals)) <= 720.0 * (np.diff(t_all) + 0.004) + 0.1)
+    # the fade in: from the glove's value toward the take's, no write beyond either
+    _, fading = watch.of(sid, cued["on"], 0.0, 0.5)
+    ends = (glove_value, *_take_at(take, np.linspace(0.0, 0.5, 51), "riIndexMCPy"))
+    assert min(ends) - 0.2 <= fading.min() and fading.max() <= max(ends) + 0.2
     events = result.summary["events"]
     assert any("right.index <- verse" in e and "ended" in e for e in events), events
 
