@@ -84,7 +84,7 @@ class Case:
 
 
 def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
-             values: np.ndarray) -> dict[str, Any]:
+             values: np.ndarray, layering: Any = None) -> dict[str, Any]:
     tag = f"{case.mode}_{case.glove_hz:g}_{case.baud}"
     rig_path = _rig_file(folder, case.mode, case.glove_hz, case.baud)
     glove_log, bus_log = folder / f"glove_{tag}.log", folder / f"bus_{tag}.log"
@@ -96,7 +96,8 @@ def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
         before = cpu_times()
         result = run_live(parts, LiveOptions(glove=glove_port, bus=bus_port,
                                              duration_s=seconds, log=lambda s: None,
-                                             profile=bool(os.environ.get("HANDRIG_BENCH_PROFILE"))))
+                                             profile=bool(os.environ.get("HANDRIG_BENCH_PROFILE")),
+                                             layering=layering))
         steal = steal_percent(before, cpu_times())
     sends = [(float(a), int(c)) for a, _, c in
              (line.split() for line in glove_log.read_text().splitlines() if line)]
@@ -114,12 +115,15 @@ def run_case(case: Case, seconds: float, folder: Path, rec_path: Path,
     return {"case": case, "summary": s, "outside_us": outside, "steal_pct": steal}
 
 
-def run_step_case(case: Case, seconds: float, folder: Path) -> dict[str, Any]:
-    """:func:`run_case` on the stepping recording, written into ``folder``."""
+def run_step_case(case: Case, seconds: float, folder: Path,
+                  layering: Any = None) -> dict[str, Any]:
+    """:func:`run_case` on the stepping recording, written into ``folder`` (``layering``:
+    takes layered under the glove, :class:`handrig.app.layering.LayerOptions`)."""
     rec = step_recording()
     rec_path = folder / "steps.csv"
     write_glove_recording(rec_path, rec)
-    return run_case(case, seconds, folder, rec_path, rec.raw[:, INDEX_CHANNEL].copy())
+    return run_case(case, seconds, folder, rec_path, rec.raw[:, INDEX_CHANNEL].copy(),
+                    layering)
 
 
 def _row(r: dict[str, Any]) -> str:

@@ -74,13 +74,14 @@ COMPUTE_ONLY = (
     "handrig/cli/test_cli_startup.py", "handrig/app/view/test_view_advice.py",
     "handrig/devices/test_glove_channel_indices.py", "handrig/test_bounded_inputs.py",
     "sim/test_retarget_fit.py", "handrig/cli/test_retarget_fit_command.py",
-    "handrig/loop/test_rig_settings.py",
+    "handrig/loop/test_rig_settings.py", "handrig/loop/test_layer_mixer.py",
     "test_boundaries.py", "handrig/app/test_second_vendor_session.py",
     "handrig/cli/test_first_hour_messages.py", "sim/test_openxr_model_agrees.py",
     "handrig/outputs/test_openxr_output.py",
     "sim/test_robot_gravity_emulated.py",
     "handrig/app/lerobot/test_frame_grid.py", "handrig/app/lerobot/test_plugin_layers.py",
     "handrig/app/cues/test_cue_parsing.py", "handrig/app/cues/test_cue_show.py",
+    "handrig/app/test_layers_shown.py",
 )
 TESTS = Path(__file__).resolve().parent
 

@@ -129,6 +129,7 @@ class PanelSnapshot:
     show: str = ""  # the show running (handrig run --show), "" when none
     hands: tuple[str, ...] = ()  # a two-hand run: one line per hand (mode, glove, latency)
     cues: tuple[str, ...] = ()  # the last few cues taken (OSC, MIDI, r), newest last
+    layers: tuple[str, ...] = ()  # takes layered under the glove: "GROUP <- TAKE (loop, on)"
 
 
 # -- formatting -----------------------------------------------------------------------
@@ -322,11 +323,17 @@ def keys_line(s: PanelSnapshot) -> Text:
     return text
 
 
+def layers_line(layers: tuple[str, ...]) -> Text:
+    """The takes layered under the glove: each its group, take and fade state."""
+    return Text(_fit("layers " + "; ".join(layers), WIDTH), "magenta")
+
+
 def render(s: PanelSnapshot, height: int = HEIGHT) -> Group:
     """One frame of the panel: at most 80 columns and ``height`` lines."""
     hands = [Text(_fit(line, WIDTH)) for line in s.hands]
     head = [mode_line(s), *(hands or [glove_line(s.glove), loop_line(s)]), bus_line(s.bus),
-            outputs_line(s.outputs), *([cues_line(s)] if s.cues else [])]
+            outputs_line(s.outputs), *([cues_line(s)] if s.cues else []),
+            *([layers_line(s.layers)] if s.layers else [])]
     rows = servo_rows(s.servos)
     fits = height - len(head) - 2  # the legend and the keys are always shown
     if len(rows) > fits:  # 40 servos in a short terminal: the keys stay, rows are cut
@@ -375,6 +382,7 @@ def plain_line(s: PanelSnapshot) -> str:
         *([f"openxr {o.openxr_target}" + (f" {o.openxr_errors} errors" if o.openxr_errors
                                            else "")] if o.openxr_target else []),
         *([f"cues {' < '.join(reversed(s.cues[-3:]))}"] if s.cues else []),
+        *([f"layers {'; '.join(s.layers)}"] if s.layers else []),
     ]
     return " | ".join(parts)
 

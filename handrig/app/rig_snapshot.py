@@ -85,7 +85,7 @@ class RigSnapshot:
             latency_p50_us=_nan(snap.latency_p50_us), latency_p99_us=_nan(snap.latency_p99_us),
             glove=self._glove(snap, since), bus=self._bus(snap, since),
             servos=self._servos(snap), outputs=self._outputs(snap), events=snap.events,
-            keys=self.keys, show=self.show)
+            keys=self.keys, show=self.show, layers=snap.layers)
 
     def _glove(self, s: LoopSnapshot, since: float) -> GloveLink:
         return GloveLink(
@@ -182,7 +182,7 @@ class HandsSnapshot:
             glove=first.glove, bus=first.bus,
             servos=tuple(sv for s in snaps.values() for sv in s.servos),
             outputs=first.outputs, events=events[-6:], keys=self.keys, show=self.show,
-            hands=lines)
+            hands=lines, layers=tuple(dict.fromkeys(x for s in snaps.values() for x in s.layers)))
 
 
 def hand_line(label: str, s: PanelSnapshot) -> str:

@@ -44,7 +44,9 @@ from handrig.app import takes
 from handrig.app.cues.live import CueOptions, LiveCues, open_cues
 from handrig.app.factory import OpenedBus
 from handrig.app.hands import AllHands, SessionParts, check_gloves, side_control_channels
+from handrig.app.layering import LayerControl, LayerOptions
 from handrig.app.parts import RigParts
+from handrig.app.result import LiveResult
 from handrig.app.session_exit import (
     READBACK_BUDGET_S,
     ExitSignals,
@@ -54,8 +56,6 @@ from handrig.app.session_exit import (
 from handrig.app.summary import (
     clamp_advice,
     clamped_joints,
-    format_hands_summary,
-    format_summary,
     outputs_summary,
     summary_dict,
 )
@@ -101,6 +101,7 @@ class LiveOptions:
     record_glove_left: str | None = None  # with a glove per hand: the left glove's take
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
     cues: CueOptions | None = None  # --osc-in, --midi-in: cues acting as the keys do
+    layering: LayerOptions | None = None  # takes layered under the glove (app/layering.py)
     # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
     # show never starts with a jump (run, demo, play); False: straight to the first goal
     ease_in: bool = True
@@ -126,23 +127,6 @@ class LiveOptions:
         """Each hand's glove take asked for: (its flag, its path or None)."""
         return ("--record-glove", self.record_glove), ("--record-glove-left",
                                                         self.record_glove_left)
-
-
-@dataclass
-class LiveResult:
-    """``summary``: the figures (:func:`handrig.app.summary.summary_dict`, plus ``error``
-    when the session ended with one); ``started``: whether the rig got as far as
-    torque-on; ``snapshots``: present positions (every hand's, in hand order) kept every
-    ``snapshot_every`` frames, taken at ``snapshot_times_s`` (seconds since the loop
-    started)."""
-
-    summary: dict[str, Any]
-    snapshots: list[np.ndarray]
-    joint_names: tuple[str, ...]
-    sim_output: str = ""
-    error: HandrigError | None = None
-    started: bool = False
-    snapshot_times_s: list[float] = field(default_factory=list)  # of each snapshot
 
 
 def run_live(parts: RigParts | SessionParts, opts: LiveOptions, clock: Clock | None = None,
@@ -194,6 +178,7 @@ class _Session:
             specs = self._check_gloves()
             app_parts.check_outputs(self.opts.vmc, self.opts.record, self.opts.openxr)
             self._check_glove_takes()
+            self.layering = LayerControl.for_session(self.parts, self.opts.layering)
             with contextlib.ExitStack() as stack:
                 self._open_buses(stack)
                 error = self._devices_open(stack, specs)
@@ -343,12 +328,14 @@ class _Session:
                 gravity=side.gravity)
             self.rigs.append(rig)
             self.stats[i] = rig.stats
+        self.layering.connect(self.rigs)
         if opts.on_hands is not None:
             opts.on_hands({parts.key(i): rig for i, rig in enumerate(self.rigs)}, self.all)
         if opts.snapshot_every > 0:  # on the first hand's loop: every hand's positions
             first_rig = self.rigs[0]
             first_rig.outputs = (*first_rig.outputs, self._snapshots(opts.snapshot_every))
-        if self.cues is not None:
+        if self.cues is not None:  # /handrig/play and /handrig/layer act on the layers
+            self.cues.attach_layers(self.layering.play, self.layering.layer)
             self.cues.start()
         for rig in self.rigs:
             rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
@@ -568,32 +555,3 @@ def _unfreeze() -> None:
     import gc
 
     gc.unfreeze()
-
-
-def failed(error: HandrigError, parts: RigParts | SessionParts | None = None) -> LiveResult:
-    """The result of a session that could not begin (a config, an emulator, a port)."""
-    summary = summary_dict(RunStats(), None, None, None)
-    summary["error"] = str(error)
-    joints = tuple(s.joint for s in parts.rig_config.servos) if parts is not None else ()
-    return LiveResult(summary, [], joints, error=error)
-
-
-def print_result(result: LiveResult, as_json: bool) -> int:
-    """Print a session's summary (one JSON object with ``as_json``) and return the exit
-    status: 0 when it ended cleanly with torque off, 1 when the run ended with an error
-    or torque may still be on, 2 when it failed before the rig started. A summary that
-    cannot be written (the terminal is gone) is not an error."""
-    import json
-
-    summary = result.summary
-    with contextlib.suppress(OSError, ValueError):
-        if as_json:
-            print(json.dumps(summary), flush=True)
-        elif result.started:
-            print(format_hands_summary(summary) if "hands" in summary
-                  else format_summary(summary), flush=True)
-        if result.error is not None and (as_json or not result.started):
-            print(f"handrig: error: {result.error}", file=sys.stderr, flush=True)
-    if result.error is not None and not result.started:
-        return 2
-    return 1 if result.error is not None or summary["torque_off"] is not True else 0

@@ -31,12 +31,14 @@ from handrig.app.port_processes import SIM_BUS, PortProcess, StartedEmulators, s
 from handrig.app.view import add_view_flag
 from handrig.cli._cues import add_cue_flags, cue_options
 from handrig.cli._display import check_gl_backend, check_renderer
+from handrig.cli._layers import add_layer_flag, layer_options
 from handrig.cli._numbers import positive_float, positive_int
 from handrig.cli._ports import SIMULATED_FIRST_LINE
 from handrig.cli._rig import add_rig_argument
 from handrig.errors import HandrigError
 
 if TYPE_CHECKING:
+    from handrig.app.layering import LayerOptions
     from handrig.config.rig import RigConfig
 
 DEFAULT_FRAMES = 3000  # 15 s at 200 Hz
@@ -68,6 +70,7 @@ def register(sub: Any) -> None:
     p.add_argument("--openxr", default=None, metavar="HOST:PORT",
                    help="also send both hands as the 26 OpenXR hand joints each, over UDP "
                    "(docs/openxr.md; e.g. 127.0.0.1:39540)")
+    add_layer_flag(p)
     add_view_flag(p)
     add_cue_flags(p)
     p.set_defaults(func=run)
@@ -78,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
     from handrig.pose.robot_rig import find_rig
 
     recording = args.recording or str(simulator.demo_recording())
+    layering = layer_options(args)  # a malformed --layer: said before anything starts
     check_gl_backend("the demo's simulated puppet")
     if args.render:
         check_renderer("--render")
@@ -91,15 +95,16 @@ def run(args: argparse.Namespace) -> int:
                                        faults=args.faults), SIM_BUS)
         with PortProcess(["sim-glove", recording, "--rate", f"{args.glove_rate:g}"],
                          "the glove emulator (handrig sim-glove)") as glove:
-            return _run(args, recording, started, glove)
+            return _run(args, recording, started, glove, layering)
 
 
 def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
-         glove: PortProcess) -> int:
+         glove: PortProcess, layering: LayerOptions) -> int:
     from handrig.app import simulator
     from handrig.app.hands import build_session_parts, is_two_hand
     from handrig.app.parts import robot_model
-    from handrig.app.session import LiveOptions, failed, print_result, run_live
+    from handrig.app.result import failed, print_result
+    from handrig.app.session import LiveOptions, run_live
     from handrig.app.session_exit import ExitSignals
     from handrig.app.sources import Source, format_sources, run_sources
     from handrig.app.view import view_session
@@ -147,7 +152,7 @@ def _run(args: argparse.Namespace, recording: str, started: StartedEmulators,
                                    started=started, log=log, panel=not args.json,
                                    on_hands=view.attach_hands if view is not None else None,
                                    snapshot_every=max(1, expected // 6) if args.render else 0,
-                                   cues=cue_options(args))
+                                   cues=cue_options(args), layering=layering)
                 signals.disarm()  # the session handles its own; after it: shut down, print
                 result = run_live(parts, opts)
         except HandrigError as exc:

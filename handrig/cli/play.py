@@ -13,12 +13,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from handrig.app.parts import build_parts, check_outputs
-from handrig.app.session import LiveOptions, failed, print_result, run_live
+from handrig.app.result import failed, print_result
+from handrig.app.session import LiveOptions, run_live
 from handrig.app.sources import Source, run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
 from handrig.app.view import add_view_flag, view_playback, view_session
 from handrig.cli._cues import add_cue_flags, cue_options
 from handrig.cli._display import check_gl_backend
+from handrig.cli._layers import add_layer_flag, layer_options
 from handrig.cli._numbers import nonnegative_float, positive_float
 from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
@@ -75,6 +77,7 @@ def register(sub: Any) -> None:
     p.add_argument("--openxr", default=None, metavar="HOST:PORT",
                    help="also send both hands as the 26 OpenXR hand joints each, over UDP "
                    "(docs/openxr.md; e.g. 127.0.0.1:39540)")
+    add_layer_flag(p)
     add_view_flag(p)
     add_cue_flags(p)
     p.set_defaults(func=run)
@@ -85,7 +88,8 @@ def run(args: argparse.Namespace) -> int:
         return run_on_rig(args)
     for flag, value in (("--from", args.from_s), ("--to", args.to_s),
                         ("--glove-config", args.glove_config), ("--osc-in", args.osc_in),
-                        ("--midi-in", args.midi_in), ("--cue-takes", args.cue_takes)):
+                        ("--midi-in", args.midi_in), ("--cue-takes", args.cue_takes),
+                        ("--layer", args.layer)):
         if value is not None:
             raise ConfigError("only with --bus", key=flag, value=value,
                               allowed="add --bus PORT (or --bus sim) to play onto the rig")
@@ -107,6 +111,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
         if args.bus == "sim":
             check_gl_backend("--bus sim")
         cues = cue_options(args)
+        layering = layer_options(args)
     except HandrigError as exc:
         if not args.json:
             raise
@@ -134,7 +139,8 @@ def run_on_rig(args: argparse.Namespace) -> int:
             wire_timing=not args.no_wire_timing, vmc=args.vmc, openxr=args.openxr,
             panel=not args.json,
             verbose=not args.json, on_hands=view.attach_hands if view is not None else None,
-            done_reason=f"the take played ({take.duration_s:.2f} s)", cues=cues)
+            done_reason=f"the take played ({take.duration_s:.2f} s)", cues=cues,
+            layering=layering)
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:
         raise result.error

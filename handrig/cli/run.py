@@ -11,6 +11,7 @@ from handrig.app.port_processes import SIM_BUS, StartedEmulators, sim_bus_argv
 from handrig.app.view import add_view_flag
 from handrig.cli._cues import add_cue_flags, cue_options
 from handrig.cli._display import check_display, check_gl_backend
+from handrig.cli._layers import add_layer_flag, layer_options
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
@@ -82,6 +83,7 @@ def register(sub: Any) -> None:
     p.add_argument("--no-wire-timing", action="store_true",
                    help="with --bus sim: answer instantly instead of at the wire's speed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    add_layer_flag(p)
     add_view_flag(p)
     add_cue_flags(p)
     p.set_defaults(func=run)
@@ -137,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         except HandrigError as exc:
             if not args.json:
                 raise
-            from handrig.app.session import failed, print_result
+            from handrig.app.result import failed, print_result
 
             return print_result(failed(exc), as_json=True)
         return _run(args, show, started, cues)
@@ -163,7 +165,8 @@ def _start_sim_bus(args: argparse.Namespace, started: StartedEmulators) -> None:
 def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulators,
          cues: CueOptions | None) -> int:
     from handrig.app.hands import build_session_parts, glove_specs
-    from handrig.app.session import LiveOptions, failed, print_result, run_live
+    from handrig.app.result import failed, print_result
+    from handrig.app.session import LiveOptions, run_live
     from handrig.app.sources import run_sources, session_sources
     from handrig.app.view import view_session
     from handrig.config.rig import require_port
@@ -183,6 +186,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
                                  flag="--bus-left") if rig.left_bus is not None else "")
         if "sim" in (bus, bus_left):
             check_gl_backend("--bus sim")
+        layering = layer_options(args, show)
     except HandrigError as exc:
         if not args.json:
             raise
@@ -207,6 +211,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             show=show.title if show is not None else "",
             on_hands=view.attach_hands if view is not None else None, started=started,
             cues=cues,
+            layering=layering,
         )
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

@@ -41,6 +41,15 @@ names the file and the key (``examples/show.toml`` is the commented example)::
 
     [cues]
     takes = "takes"            # the folder of the takes record/start begins
+
+    [takes]                    # performances to layer, by name (name = file)
+    left_verse = "takes/left_verse.csv"
+
+    [[layer]]                  # a take layered under the live glove from the start
+    take = "left_verse"        # a [takes] name or a performance file
+    group = "left"             # a hand, a finger (left.index), the wrist, or curves
+    loop = true                # false: once
+    fade_s = 0.5               # its fade in and out, seconds
 """
 
 from __future__ import annotations
@@ -51,6 +60,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from handrig.config.cues import ShowCues, ShowMidi, ShowOsc
+from handrig.config.layer_groups import DEFAULT_FADE_S, FADE_RANGE_S, group_joints
 from handrig.config.loading import build, load_toml
 from handrig.errors import ConfigError
 
@@ -103,6 +113,26 @@ class ShowOutputs:
 
 
 @dataclass(frozen=True)
+class ShowLayer:
+    """A ``[[layer]]``: a take layered under the live glove from the run's start."""
+
+    take: str = ""
+    group: str = ""
+    loop: bool = True
+    fade_s: float = DEFAULT_FADE_S
+
+    def check(self) -> None:
+        if not self.take:
+            raise ConfigError("no take named", key="take",
+                              allowed="a name from [takes], or a performance .csv/.bvh")
+        group_joints(self.group, None, key="group")  # the puppet's hands: checked at start
+        low, high = FADE_RANGE_S
+        if not low <= self.fade_s <= high:
+            raise ConfigError("out of range", key="fade_s", value=self.fade_s,
+                              allowed=f"{low:g}..{high:g} seconds")
+
+
+@dataclass(frozen=True)
 class ShowFile:
     """A show file (see the module docstring). ``path``: where it was read from."""
 
@@ -113,6 +143,8 @@ class ShowFile:
     osc: ShowOsc = field(default_factory=ShowOsc)
     midi: ShowMidi = field(default_factory=ShowMidi)
     cues: ShowCues = field(default_factory=ShowCues)
+    takes: dict[str, str] = field(default_factory=dict)
+    layer: tuple[ShowLayer, ...] = ()
     path: str = ""
 
     def check(self) -> None:
@@ -120,6 +152,11 @@ class ShowFile:
             raise ConfigError("no rig named", key="show.rig",
                               allowed="a rig preset (puppet_two_hands, leap, ...) or a rig "
                               "file, relative to the show file")
+        for name, path in self.takes.items():
+            if not name or ":" in name or name in ("*", "all") or not path:
+                raise ConfigError("a take needs a name and a file", key=f"takes.{name}",
+                                  value=path, allowed='name = "file.csv" (a name without'
+                                  ' ":", not "*" or "all"; the file a performance)')
         left = self.gloves.left
         if left and left == self.gloves.right and not left.startswith("replay:"):
             raise ConfigError("the right and the left glove are on the same port",
@@ -198,6 +235,12 @@ def load_show(path: str | Path) -> ShowFile:
                              must_exist=False)),
             cues=dataclasses.replace(show.cues, takes=_file(base, show.cues.takes,
                                                             "cues.takes", p,
-                                                            must_exist=False)))
+                                                            must_exist=False)),
+            takes={name: _file(base, path, f"takes.{name}", p)
+                   for name, path in show.takes.items()},
+            layer=tuple(dataclasses.replace(
+                layer, take=layer.take if layer.take in show.takes
+                else _file(base, layer.take, f"layer[{i}].take", p))
+                for i, layer in enumerate(show.layer)))
     except ConfigError as exc:
         raise exc.located(str(p)) from None

@@ -30,6 +30,7 @@ import numpy as np
 from handrig.errors import DeviceError
 from handrig.loop.easing import Easing
 from handrig.loop.heat import HeatWatch
+from handrig.loop.layers import LayerMixer
 from handrig.loop.modes import Mode, ModeMachine
 from handrig.loop.ports import (
     FloatArray,
@@ -96,10 +97,12 @@ class Cycle:
             write, compensate = bus.write_goals_deg, parts.gravity.apply
             self.write = lambda goals: write(compensate(goals, *self.angles))
             self._loop_goals = parts.gravity.loop_goals
+        # takes layered under the glove (handrig.loop.layers), handed in from any thread
+        self.layers = LayerMixer(pipeline)
         # port events of the glove, silence events of the bus: into the run's events
         self._drains: tuple[Callable[[], list[str]], ...] = (
             glove.drain_events, bus.drain_events, lambda: self.silence.drain_events(),
-            lambda: self.heat.drain_events())
+            lambda: self.heat.drain_events(), self.layers.drain_events)
         # the bus's upkeep (watchdogs, temperatures), midway between state reads
         self.housekeeping: Callable[[float], bool] = bus.housekeeping
         self._housekeeping_slot = self.read_every // 2 if self.read_every > 1 else -1
@@ -136,7 +139,8 @@ class Cycle:
         return CycleView(
             controls=self.controls, raw=None if sample is None else sample.raw,
             angles_deg=self.angles, pose=self._pose, goals_deg=self.sent, state=self.last_state,
-            frame_s=math.nan if sample is None else sample.host_time_s)
+            frame_s=math.nan if sample is None else sample.host_time_s,
+            layers=self.layers.status)
 
     def seed(self) -> None:
         """Start from where the servos are: the goals the bus holds them at, else a read.
@@ -177,6 +181,8 @@ class Cycle:
                 self.stats.frames_caught_up += 1
         if sample is None:
             sample = self.latest()
+        layers = self.layers
+        layers.advance(now)
         if sample is not None:
             self.controls_from_raw(sample.raw, t_sample, self.controls)
             self.angles = self.orientation(sample)
@@ -186,6 +192,9 @@ class Cycle:
         done = False
         if mode is Mode.RUNNING:
             goals = self.targets(self.controls, *self.angles, tick.dt_s)
+            if layers.active:  # blended before the slew limit, slewed from the goals sent
+                layers.mix_goals(self.pipeline.raw_targets, self.sent, goals,
+                                 self._slew_deg_s * max(tick.dt_s, 0.0))
         elif mode is Mode.WAITING:
             goals = self.sent  # hold: keeps the watchdog fed
         elif mode is Mode.RESUMING:
@@ -211,6 +220,7 @@ class Cycle:
         pipeline, sent = self.pipeline, self.sent
         pipeline.seed(sent)  # the slew limit counts from what the servos were sent
         self.targets(self.controls, *self.angles, dt_s)
+        self.layers.mix_targets(pipeline.raw_targets)
         goals, done = self.resume.goals(now, sent, self._pose, pipeline.raw_targets)
         step = self._step
         max_step = self._slew_deg_s * dt_s
@@ -251,8 +261,9 @@ class Cycle:
         t_s = tick.now_s - self.t0_s
         if self._deferred is not None:  # the caught-up frame before this one, in order
             (t_before, angles), self._deferred = self._deferred, None
-            self._output(t_before, pipeline.account(self._deferred_controls, *angles,
-                                                    slewed=False))
+            caught = pipeline.account(self._deferred_controls, *angles, slewed=False)
+            self.layers.mix_pose(caught, self.t0_s + t_before)  # the take at its time
+            self._output(t_before, caught)
         pose: FloatArray | None
         if mode is Mode.RUNNING and tick.catch_up:
             # the newest frame is waiting: its write first, this one's full pose after it
@@ -261,11 +272,12 @@ class Cycle:
             self._deferred = (t_s, self.angles)
             pose = None
         elif mode is Mode.RUNNING:
-            pose = pipeline.account(self.controls, *self.angles)
+            pose = self._layered(pipeline.account(self.controls, *self.angles))
         elif mode is Mode.WAITING:
             pose = None
         elif mode is Mode.RESUMING:
-            pose = self.resume.pose(pipeline.account(self.controls, *self.angles))
+            pose = self.resume.pose(self._layered(pipeline.account(self.controls,
+                                                                   *self.angles)))
         else:
             pose = self.relax.pose(pipeline.relaxed)  # clamped by relaxed_targets
         if pose is not None:
@@ -278,6 +290,11 @@ class Cycle:
         if mode is not Mode.RUNNING and mode is not Mode.WAITING:
             pipeline.seed(goals)  # the pipeline's targets stay what the servos were sent
         stats.frames += 1
+
+    def _layered(self, pose: FloatArray) -> FloatArray:
+        """The full pose with the layers playing blended in (what the servos get)."""
+        self.layers.mix_pose(pose)
+        return pose
 
     def _output(self, t_s: float, pose: FloatArray) -> None:
         self._pose = pose

@@ -238,6 +238,7 @@ class Rig:
         self.trigger.start(t0)
         machine.start(t0)
         cycle.t0_s = t0
+        cycle.layers.start(t0)
         tick = Tick()
         cpu0 = time.thread_time()
         last_start: float | None = None

@@ -51,6 +51,7 @@ class LoopSnapshot:
     overruns: int
     elapsed_s: float = 0.0
     events: tuple[str, ...] = ()
+    layers: tuple[str, ...] = ()  # the takes layered now: "GROUP <- TAKE (loop, on)"
     # the glove
     controls: tuple[float, ...] = ()
     raw: tuple[float, ...] = ()  # each control's channel's count (see SnapshotBuilder)
@@ -107,6 +108,7 @@ class CycleView:
     goals_deg: FloatArray
     state: ServoState | None
     frame_s: float
+    layers: tuple[Any, ...] = ()  # the LayerStatus of each layer playing (immutable)
 
 
 def _opt(values: np.ndarray | None, n: int) -> tuple[float | None, ...]:
@@ -227,6 +229,7 @@ class SnapshotBuilder:
             cycles=stats.frames, overruns=stats.overruns,
             elapsed_s=now - started if stats.frames else 0.0,
             events=tuple(stats.events[-3:]),
+            layers=tuple(layer.describe() for layer in view.layers),
             controls=tuple(np.asarray(view.controls, dtype=np.float64).tolist()),
             raw=self._raw(view.raw),
             control_names=self.control_names,

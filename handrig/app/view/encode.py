@@ -99,6 +99,8 @@ class FrameEncoder:
             "type": "frame", "seq": int(hands_snap.seq), "t_s": _num(first.t_s, 3),
             "hands": hands,
             "outputs": [_plain(o) for one in hands_snap.hands.values() for o in one.outputs],
+            "layers": list(dict.fromkeys(x for one in hands_snap.hands.values()
+                                         for x in one.layers)),
             "bodies": bodies, "ghost": ghosts or None, "skeleton": skeleton,
             "cues": list(hands_snap.cues),
         }

@@ -400,6 +400,8 @@ function drawMode(f) {
   const why = f.hands.filter((h) => h.mode_reason).map((h) => (f.hands.length > 1 ? `${h.label}: ${h.mode_reason}` : h.mode_reason)).join('; ');
   const reason = why ? `(${why})` : '';
   if ($('reason').textContent !== reason) $('reason').textContent = reason;
+  const layers = (f.layers || []).length ? `layers: ${f.layers.join('; ')}` : '';
+  if ($('layers').textContent !== layers) $('layers').textContent = layers;
 }
 
 // The figures change every frame but nobody reads them 20 times a second; redrawing
