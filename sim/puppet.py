@@ -8,7 +8,7 @@ behave like an X-series servo. A robot rig (:mod:`handrig.pose.robot_rig`, e.g.
 position actuator on that joint (or one added) is rewired the same way.
 
 - target: Goal Position (motor ticks, undoing Homing Offset and Drive Mode) ->
-  joint angle by the rig calibration (:meth:`ServoCalibration.ticks_to_deg`);
+  joint angle by the rig calibration (:func:`handrig.devices.servo.positions.ticks_to_deg`);
 - speed: the target moves toward the goal at most at the servo's Profile
   Velocity (or Velocity Limit), divided by the gear ratio;
 - torque: saturates at the stall torque times the gear ratio (in

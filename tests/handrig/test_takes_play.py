@@ -29,6 +29,7 @@ from handrig.app.glove_take_session import record_glove_take
 from handrig.cli import main
 from handrig.config.rig import RigConfig, load_rig_config
 from handrig.devices.glove_recording import read_glove_recording, sweep_recording
+from handrig.devices.servo.positions import ticks_to_deg
 from handrig.errors import ConfigError
 from handrig.outputs.recorder import Recorder
 from handrig.pose.pipeline import POSE_SIZE
@@ -54,7 +55,7 @@ class GoalWatch:
         self.writes += 1
         for sid, data in items:
             ticks = int.from_bytes(data[:4], "little", signed=True)
-            self.goals_deg[sid].append(self.rig.servo(sid).ticks_to_deg(ticks))
+            self.goals_deg[sid].append(ticks_to_deg(self.rig.servo(sid), ticks))
 
 
 def play(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:

@@ -2,7 +2,7 @@
 
 Pings each configured servo and checks its model; sets Status Return Level 2,
 then, with torque off, the rig file's ``[servo_settings]`` for that servo
-(:meth:`handrig.config.rig.RigConfig.servo_settings_for`): Return Delay Time,
+(:func:`handrig.devices.servo.models.servo_settings_for`): Return Delay Time,
 Operating Mode and Current Limit (EEPROM), then Goal Current and Position P/D
 Gain, each only when the rig sets it. Every value is read first, written when it
 differs, and read back: a servo that keeps another value is a DeviceError naming

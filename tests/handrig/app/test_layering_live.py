@@ -28,6 +28,7 @@ from handrig.app.session import LiveOptions, run_live
 from handrig.cli import main
 from handrig.config.rig import RigConfig
 from handrig.devices.glove_recording import sweep_recording
+from handrig.devices.servo.positions import ticks_to_deg
 from handrig.errors import ConfigError
 from handrig.loop.rig import Rig
 from handrig.outputs.recorder import load_performance
@@ -57,7 +58,7 @@ class GoalWatch:
         if address != GOAL_POSITION_ADDRESS:
             return
         self.times_s.append(t_s)
-        self.goals.append({sid: self.rig.servo(sid).ticks_to_deg(
+        self.goals.append({sid: ticks_to_deg(self.rig.servo(sid),
             int.from_bytes(data[:4], "little", signed=True)) for sid, data in items})
 
     def of(self, sid: int, t0_s: float, start_s: float, end_s: float
