@@ -76,7 +76,7 @@ COMPUTE_ONLY = (
     "sim/test_retarget_fit.py", "handrig/cli/test_retarget_fit_command.py",
     "handrig/loop/test_rig_settings.py",
     "test_boundaries.py", "handrig/app/test_second_vendor_session.py",
-    "handrig/cli/test_first_hour_messages.py",
+    "handrig/cli/test_first_hour_messages.py", "handrig/devices/test_ltc",
 )
 TESTS = Path(__file__).resolve().parent
 
