@@ -105,6 +105,7 @@ class Outputs:
     record_stopped: str = ""  # why the recording stopped during the run ("" = recording)
     glove_take_path: str = ""  # a glove take (--record-glove) being written
     glove_take_frames: int = 0
+    timecode: str = ""  # --ltc, --chase-ltc: the timecode and its lock ("" = none read)
 
 
 @dataclass(frozen=True)
@@ -257,6 +258,9 @@ def outputs_line(o: Outputs) -> Text:
     if o.glove_take_path:  # frames in the glove take (--record-glove)
         n = o.glove_take_frames
         text.append(f" +glove {n if n < 10000 else f'{n // 1000}k'}")
+    if o.timecode:
+        text.append("  |  ")
+        text.append(f"TC {o.timecode}", "bold" if o.timecode.endswith("locked") else "yellow")
     return text
 
 
@@ -358,6 +362,7 @@ def plain_line(s: PanelSnapshot) -> str:
          else "rec off"),
         *([f"glove take {o.glove_take_path} {o.glove_take_frames} frames"]
           if o.glove_take_path else []),
+        *([f"timecode {o.timecode}"] if o.timecode else []),
     ]
     return " | ".join(parts)
 

@@ -123,7 +123,7 @@ class RigSnapshot:
     def _outputs(self, s: LoopSnapshot) -> Outputs:
         vmc_target, vmc_rate, vmc_err = "", NAN, 0
         rec_path, rec_bytes, rec_s, rec_stopped = "", 0, 0.0, ""
-        glove_path, glove_frames = "", 0
+        glove_path, glove_frames, timecode = "", 0, ""
         for out in s.outputs:
             if out.kind == "vmc":
                 vmc_target = out.address
@@ -134,8 +134,10 @@ class RigSnapshot:
                 rec_stopped = out.stopped_reason
             elif out.kind == "glove take":
                 glove_path, glove_frames = out.path, out.frames_written
+            elif out.kind == "timecode":  # its name is the timecode and lock (app/timecode.py)
+                timecode = out.name
         return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped,
-                       glove_path, glove_frames)
+                       glove_path, glove_frames, timecode)
 
 
 HAND_LABELS = {"ri": "right", "le": "left"}

@@ -41,6 +41,7 @@ import numpy as np
 from handrig.app import factory as app
 from handrig.app import parts as app_parts
 from handrig.app import takes
+from handrig.app import timecode as app_timecode
 from handrig.app.factory import OpenedBus
 from handrig.app.hands import AllHands, SessionParts, check_gloves, side_control_channels
 from handrig.app.parts import RigParts
@@ -63,6 +64,7 @@ from handrig.config.rig import hand_of_joint
 from handrig.devices.glove import GloveSource
 from handrig.devices.servo.bus import ServoBus
 from handrig.devices.servo.shared import SharedBus
+from handrig.devices.timecode.reader import TimecodeReader
 from handrig.errors import ConfigError, DeviceError, HandrigError
 from handrig.loop.modes import Mode
 from handrig.loop.rig import Rig
@@ -98,6 +100,7 @@ class LiveOptions:
     record_glove: str | None = None  # a glove take: what the glove sent (app/takes.py)
     record_glove_left: str | None = None  # with a glove per hand: the left glove's take
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
+    timecode: TimecodeReader | None = None  # --ltc: the panel's timecode, a take's stamps
     # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
     # show never starts with a jump (run, demo, play); False: straight to the first goal
     ease_in: bool = True
@@ -319,6 +322,9 @@ class _Session:
                                       record=opts.record, log=log,
                                       glove_rate_hz=first.glove_config.glove.rate_hz,
                                       record_rate_hz=opts.record_rate_hz)
+        if opts.timecode is not None:  # app/timecode.py: started, closed by the stack
+            self.outputs[0].append(app_timecode.stamp_output(stack, opts.timecode, self.clock,
+                                                             opts.record, log))
         for i, (_, path) in self._glove_takes().items():
             take = takes.open_glove_take(path, gloves[i], parts.hands[i].glove_config,
                                          source=opts.gloves()[i] or gloves[i].name, log=log,

@@ -13,11 +13,13 @@ from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, failed, print_result, run_live
 from handrig.app.sources import Source, run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
+from handrig.app.timecode import chase_setup
 from handrig.app.view import add_view_flag, view_playback, view_session
 from handrig.cli._display import check_gl_backend
 from handrig.cli._numbers import nonnegative_float, positive_float
 from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
+from handrig.cli._timecode import add_chase
 from handrig.clock import MonotonicClock
 from handrig.errors import ConfigError, DataError, HandrigError
 from handrig.outputs.recorder import Playback
@@ -64,6 +66,7 @@ def register(sub: Any) -> None:
                    help="start over at the end, until stopped (an installation)")
     p.add_argument("--no-wire-timing", action="store_true",
                    help="with --bus sim: answer instantly instead of at the wire's speed")
+    add_chase(p)
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_view_flag(p)
     p.set_defaults(func=run)
@@ -73,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
     if args.bus is not None:
         return run_on_rig(args)
     for flag, value in (("--from", args.from_s), ("--to", args.to_s),
-                        ("--glove-config", args.glove_config)):
+                        ("--glove-config", args.glove_config),
+                        ("--chase-ltc", args.chase_ltc)):
         if value is not None:
             raise ConfigError("only with --bus", key=flag, value=value,
                               allowed="add --bus PORT (or --bus sim) to play onto the rig")
@@ -94,6 +98,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
         parts = play_parts(parts, take)
         if args.bus == "sim":
             check_gl_backend("--bus sim")
+        chase = chase_setup(args, take) if args.chase_ltc else None
     except HandrigError as exc:
         if not args.json:
             raise
@@ -113,15 +118,22 @@ def run_on_rig(args: argparse.Namespace) -> int:
               flush=True)
     rec = take.recording
     one_frame = float(rec.t_s[1] - rec.t_s[0]) if len(rec) > 1 else 0.01
+    duration_s = None if args.loop else round(take.duration_s + one_frame, 3)
+    if chase is not None:
+        duration_s = chase.duration_s
     with view_session(args.view, parts.rig_config, _stderr) as view:
         opts = LiveOptions(
-            glove=f"replay:{args.file}", take=lambda clock: take.source(clock, loop=args.loop),
-            bus=args.bus,
-            duration_s=None if args.loop else round(take.duration_s + one_frame, 3),
+            glove=f"replay:{args.file}", take=lambda clock: take.source(clock, loop=args.loop)
+            if chase is None else chase.glove(clock),
+            timecode=chase.reader if chase is not None else None,
+            bus=args.bus, duration_s=duration_s,
             wire_timing=not args.no_wire_timing, vmc=args.vmc, panel=not args.json,
             verbose=not args.json, on_hands=view.attach_hands if view is not None else None,
-            done_reason=f"the take played ({take.duration_s:.2f} s)")
+            done_reason=f"the take played ({take.duration_s:.2f} s)" if chase is None
+            else "the timecode source ended")
         result = run_live(parts, opts)
+    if chase is not None:
+        chase.report(result.summary, as_json=args.json)
     if result.error is not None and not result.started and not args.json:
         raise result.error
     return print_result(result, as_json=args.json)

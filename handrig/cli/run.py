@@ -13,6 +13,7 @@ from handrig.cli._display import check_display, check_gl_backend
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
+from handrig.cli._timecode import add_ltc
 from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
 
@@ -70,6 +71,7 @@ def register(sub: Any) -> None:
     p.add_argument("--record-rate", type=float_in(1.0, 2000.0), default=None, metavar="HZ",
                    help="a .bvh take's frames per second (default: the glove's [glove]"
                    " rate_hz; a CSV keeps each frame's own time)")
+    add_ltc(p)
     p.add_argument("--frames", type=positive_int, default=None, metavar="N",
                    help="stop after N cycles")
     p.add_argument("--seconds", type=positive_float, default=None, metavar="S",
@@ -91,7 +93,8 @@ def _from_show(args: argparse.Namespace) -> ShowFile | None:
             "glove_left_config": show.gloves.left_config, "bus": show.buses.right,
             "bus_left": show.buses.left, "vmc": show.outputs.vmc,
             "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
-            "view": show.outputs.view}
+            "view": show.outputs.view, "ltc": show.timecode.source,
+            "ltc_fps": show.timecode.fps}
     filled = []
     for name, value in fill.items():
         if getattr(args, name) is None and value:
@@ -156,7 +159,9 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
     from handrig.app.hands import build_session_parts, glove_specs
     from handrig.app.session import LiveOptions, failed, print_result, run_live
     from handrig.app.sources import run_sources, session_sources
+    from handrig.app.timecode import check_stamp_path, open_reader
     from handrig.app.view import view_session
+    from handrig.clock import MonotonicClock
     from handrig.config.rig import require_port
     from handrig.pose.robot_rig import find_rig
 
@@ -174,6 +179,10 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
                                  flag="--bus-left") if rig.left_bus is not None else "")
         if "sim" in (bus, bus_left):
             check_gl_backend("--bus sim")
+        reader = None
+        if args.ltc:  # opened now: a bad source or an existing stamps file stops us here
+            check_stamp_path(args.record)
+            reader = open_reader(args.ltc, MonotonicClock(), fps=args.ltc_fps or "auto")
     except HandrigError as exc:
         if not args.json:
             raise
@@ -197,6 +206,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             verbose=not args.json, glove_left=left, bus_left=args.bus_left,
             show=show.title if show is not None else "",
             on_hands=view.attach_hands if view is not None else None, started=started,
+            timecode=reader,
         )
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

@@ -28,6 +28,10 @@ names the file and the key (``examples/show.toml`` is the commented example)::
     record = ""                # a new take, .csv or .bvh
     record_rate_hz = 0.0       # a BVH take's rate (0: the glove's)
     view = ""                  # [HOST:]PORT of the live view
+
+    [timecode]
+    source = ""                # as --ltc: LTC from a .wav file or alsa:DEVICE
+    fps = "auto"               # as --ltc-fps: "auto", "24", "25", "29.97" or "30"
 """
 
 from __future__ import annotations
@@ -84,6 +88,26 @@ class ShowOutputs:
                               value=self.record_rate_hz, allowed="0 (the glove's) or 1..2000")
 
 
+TIMECODE_RATES = ("auto", "24", "25", "29.97", "30")
+
+
+@dataclass(frozen=True)
+class ShowTimecode:
+    source: str = ""  # as --ltc: a .wav file or alsa:DEVICE ("": no timecode)
+    fps: str = "auto"  # as --ltc-fps
+
+    def check(self) -> None:
+        src = self.source
+        if src and not (src.startswith("alsa:") or Path(src).suffix.lower() == ".wav"):
+            raise ConfigError("not an LTC source", key="timecode.source", value=src,
+                              allowed="a .wav file (relative to the show file) or"
+                              " alsa:DEVICE, e.g. alsa:default")
+        if self.fps not in TIMECODE_RATES:
+            raise ConfigError("not a timecode rate", key="timecode.fps", value=self.fps,
+                              allowed='"auto" (from the signal), "24", "25", "29.97"'
+                              ' (drop-frame) or "30"')
+
+
 @dataclass(frozen=True)
 class ShowFile:
     """A show file (see the module docstring). ``path``: where it was read from."""
@@ -92,6 +116,7 @@ class ShowFile:
     gloves: ShowGloves = ShowGloves()
     buses: ShowBuses = ShowBuses()
     outputs: ShowOutputs = ShowOutputs()
+    timecode: ShowTimecode = ShowTimecode()
     path: str = ""
 
     def check(self) -> None:
@@ -158,6 +183,10 @@ def load_show(path: str | Path) -> ShowFile:
             outputs=dataclasses.replace(
                 show.outputs,
                 record=_file(base, show.outputs.record, "outputs.record", p,
-                             must_exist=False)))
+                             must_exist=False)),
+            timecode=dataclasses.replace(
+                show.timecode, source=show.timecode.source
+                if show.timecode.source.startswith("alsa:") else
+                _file(base, show.timecode.source, "timecode.source", p)))
     except ConfigError as exc:
         raise exc.located(str(p)) from None

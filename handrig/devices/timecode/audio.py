@@ -118,12 +118,17 @@ class AlsaAudio(AudioInput):
         self.clock = clock
         self.sample_rate_hz = CARD_RATE_HZ
         self._bytes = 2 * max(1, round(block_s * CARD_RATE_HZ))
-        self._proc = subprocess.Popen(
-            [exe, "-q", "-D", device, "-t", "raw", "-f", "S16_LE", "-c", "1",
-             "-r", str(CARD_RATE_HZ), "--buffer-time=20000"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self._argv = [exe, "-q", "-D", device, "-t", "raw", "-f", "S16_LE", "-c", "1",
+                      "-r", str(CARD_RATE_HZ), "--buffer-time=20000"]
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._closed = False
 
     def read(self) -> tuple[NDArray[np.float32], float] | None:
+        if self._closed:
+            return None
+        if self._proc is None:  # started by the first read: nothing runs before the show
+            self._proc = subprocess.Popen(self._argv, stdout=subprocess.PIPE,
+                                          stderr=subprocess.PIPE)
         out = self._proc.stdout
         if out is None:
             return None
@@ -141,7 +146,8 @@ class AlsaAudio(AudioInput):
         return np.frombuffer(data, dtype="<i2").astype(np.float32) / 32768.0, now
 
     def close(self) -> None:
-        if self._proc.poll() is None:
+        self._closed = True
+        if self._proc is not None and self._proc.poll() is None:
             self._proc.terminate()
             try:
                 self._proc.wait(timeout=2.0)

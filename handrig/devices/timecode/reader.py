@@ -29,7 +29,10 @@ from handrig.devices.timecode.ltc import RATES, FrameRate, LtcDecoder, LtcFrame,
 from handrig.errors import DeviceError
 
 LOSS_FRAMES = 3.0
-"""Frame periods without a frame after which the timecode is lost (stopped)."""
+"""Frame periods of audio heard without a frame after which the timecode is lost."""
+STUCK_S = 1.0
+"""Clock time without a frame after which the timecode is lost even if the audio has not
+been heard that far (a reader starved or a card that stopped delivering)."""
 SPEED_WINDOW = 50
 """Fixes the speed is measured over (two seconds at 25 fps)."""
 CARD_DRIFT = 2e-4
@@ -90,6 +93,11 @@ class TimecodeReader(ABC):
     def stats(self) -> TimecodeStats:
         """The counters (any thread)."""
 
+    def heard_s(self) -> float:
+        """The clock time up to which the source's signal has been read (a reader behind
+        the clock has not heard the frames that came meanwhile: not a loss yet)."""
+        return -math.inf
+
     def fps(self) -> FrameRate | None:
         """The rate of the timecode read (None before the first frame)."""
         fix = self.latest()
@@ -102,7 +110,8 @@ class TimecodeReader(ABC):
         if fix is None:
             return None
         rate = fix.fps.rate_hz * fix.speed
-        if now_s - fix.arrived_s > LOSS_FRAMES / rate:
+        if (now_s - fix.arrived_s > STUCK_S
+                or self.heard_s() - fix.arrived_s > LOSS_FRAMES / rate):
             return None
         ahead = max(now_s - fix.start_s, 0.0) * rate
         cap = (fix.arrived_s - fix.start_s) * rate + 1.0  # one frame past the newest
@@ -153,6 +162,7 @@ class LtcReader(TimecodeReader):
         self._recent: deque[tuple[int, float]] = deque(maxlen=SPEED_WINDOW)
         self._anchor = math.nan  # clock time of sample 0
         self._fed = 0
+        self._heard_s = -math.inf
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._frames = self._jumps = self._losses = self._bad = 0
@@ -176,6 +186,14 @@ class LtcReader(TimecodeReader):
             self._thread.join(timeout=timeout_s)
         return self._finished
 
+    def heard_s(self) -> float:
+        return self._heard_s
+
+    @property
+    def audio_start_s(self) -> float:
+        """The clock time of the audio's first sample (NaN before any audio)."""
+        return self._anchor
+
     def latest(self) -> TimecodeFix | None:
         return self._latest
 
@@ -194,6 +212,7 @@ class LtcReader(TimecodeReader):
         except DeviceError as exc:
             self._failure = str(exc)
         finally:
+            self._heard_s = math.inf  # the source has ended: no frame is still to come
             self._finished = True
 
     def feed(self, block: NDArray[np.float32], arrived_s: float) -> None:
@@ -209,6 +228,7 @@ class LtcReader(TimecodeReader):
             self._anchor = min(self._anchor + CARD_DRIFT * x.size / sr, candidate)
         for frame in self._decoder.feed(x):
             self._publish(frame, arrived_s)
+        self._heard_s = self._anchor + self._fed / sr
 
     def _publish(self, frame: LtcFrame, arrived_s: float) -> None:
         sr = self.audio.sample_rate_hz
