@@ -71,6 +71,10 @@ class TimecodeStamp(Output):
         self.last: str = ""
         self.error = ""
         self._fd = -1
+        self._tc_frame = -1
+        self._tc_fps: FrameRate | None = None
+        self._tc = ""
+        self._tc_bytes = b""
         self._thread: threading.Thread | None = None
         if self.path is not None:
             check_new_take(self.path)
@@ -96,12 +100,16 @@ class TimecodeStamp(Output):
         if pos is None or fps is None:
             line = b"%.6f,,,\n" % t_s
         else:
-            tc = str(Timecode.from_frame_number(int(pos), fps))
-            line = b"%.6f,%s,%.3f,%s\n" % (t_s, tc.encode(), pos, fps.label.encode())
+            n = int(pos)
+            if n != self._tc_frame or fps is not self._tc_fps:  # a new frame: its words
+                self._tc_frame, self._tc_fps = n, fps
+                self._tc = str(Timecode.from_frame_number(n, fps))
+                self._tc_bytes = b"%s,%%.3f,%s\n" % (self._tc.encode(), fps.label.encode())
+            line = b"%.6f," % t_s + self._tc_bytes % pos
             self.frames_locked += 1
-            self.last = tc
+            self.last = self._tc
             if not self.first:
-                self.first = tc
+                self.first = self._tc
         with self._lock:
             self._pending.append(line)
 

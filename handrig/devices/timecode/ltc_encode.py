@@ -42,6 +42,19 @@ class Rendered:
     sample_rate_hz: int
     timecodes: tuple[Timecode, ...]
     starts_s: NDArray[np.float64]
+    stretches: tuple[tuple[float, float, int, float], ...] = ()
+    """Each run of timecode: (from_s, to_s, its first frame number, frames a second)."""
+
+    def frame_at(self, t_s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The true timecode (fractional frame number) at audio times ``t_s``: NaN before
+        the first frame, held at a stretch's end until the next begins (a stop)."""
+        t = np.asarray(t_s, dtype=np.float64)
+        out = np.full(t.shape, np.nan)
+        for k, (a, b, n0, rate) in enumerate(self.stretches):
+            end = self.stretches[k + 1][0] if k + 1 < len(self.stretches) else np.inf
+            inside = (t >= a) & (t < end)
+            out[inside] = n0 + (np.minimum(t[inside], b) - a) * rate
+        return out
 
 
 def render(segments: list[Segment], sample_rate_hz: int = 48000, *,
@@ -49,6 +62,7 @@ def render(segments: list[Segment], sample_rate_hz: int = 48000, *,
     """The audio of ``segments`` after ``lead_s`` of silence (see :class:`Segment`)."""
     edges: list[NDArray[np.float64]] = []
     bit_periods: list[float] = []
+    stretches: list[tuple[float, float, int, float]] = []
     tcs: list[Timecode] = []
     starts: list[float] = []
     t = lead_s
@@ -64,6 +78,7 @@ def render(segments: list[Segment], sample_rate_hz: int = 48000, *,
             tcs.append(tc)
             starts.append(t + k * BITS * bit_s)
             words.append(pack(tc, fps25=seg.fps.nominal == 25))
+        stretches.append((t, t + seg.frames * BITS * bit_s, first, seg.fps.rate_hz * seg.speed))
         bits = np.array([(w >> i) & 1 for w in words for i in range(BITS)], dtype=np.int64)
         at = t + np.arange(bits.size) * bit_s
         mids = at[bits == 1] + bit_s / 2
@@ -83,7 +98,7 @@ def render(segments: list[Segment], sample_rate_hz: int = 48000, *,
         quiet[int(e[0] * sample_rate_hz):int(np.ceil((e[-1] + bit_s) * sample_rate_hz))] = False
     level[quiet] = 0.0
     return Rendered((amplitude * level).astype(np.float32), sample_rate_hz, tuple(tcs),
-                    np.array(starts))
+                    np.array(starts), tuple(stretches))
 
 
 def write_wav(path: str | Path, samples: NDArray[np.floating], sample_rate_hz: int) -> None:
