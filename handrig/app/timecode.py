@@ -206,6 +206,9 @@ class ChaseGlove(GloveSource):
         self._taken = self._count
         return sample
 
+    def drain_events(self) -> list[str]:
+        return super().drain_events() + self.reader.drain_events()
+
     def stats(self) -> GloveStats:
         return GloveStats(frames_ok=self._count, time_since_last_good_s=0.0
                           if self._count else math.inf)

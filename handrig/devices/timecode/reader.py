@@ -37,6 +37,7 @@ SPEED_WINDOW = 50
 """Fixes the speed is measured over (two seconds at 25 fps)."""
 CARD_DRIFT = 2e-4
 """How fast the anchor of a sound card's sample times may follow a late card (s/s)."""
+MAX_EVENTS = 32
 DAY_FRAMES = {label: Timecode(24, 0, 0, 0, r.drop).frame_number(r.nominal)
               for label, r in RATES.items()}
 
@@ -92,6 +93,11 @@ class TimecodeReader(ABC):
     @abstractmethod
     def stats(self) -> TimecodeStats:
         """The counters (any thread)."""
+
+    def drain_events(self) -> list[str]:
+        """What happened since the last call (lost, back, jumped, ended), oldest first.
+        Any thread."""
+        return []
 
     def heard_s(self) -> float:
         """The clock time up to which the source's signal has been read (a reader behind
@@ -168,6 +174,8 @@ class LtcReader(TimecodeReader):
         self._frames = self._jumps = self._losses = self._bad = 0
         self._failure = ""
         self._finished = False
+        self._events: deque[str] = deque(maxlen=MAX_EVENTS)
+        self._said_lost = False
 
     def start(self) -> None:
         if self._thread is None:
@@ -188,6 +196,15 @@ class LtcReader(TimecodeReader):
 
     def heard_s(self) -> float:
         return self._heard_s
+
+    def drain_events(self) -> list[str]:
+        out = []
+        while self._events:
+            try:
+                out.append(self._events.popleft())
+            except IndexError:
+                break
+        return out
 
     @property
     def audio_start_s(self) -> float:
@@ -211,6 +228,7 @@ class LtcReader(TimecodeReader):
                 self.feed(*got)
         except DeviceError as exc:
             self._failure = str(exc)
+            self._events.append(f"timecode: {exc}")
         finally:
             self._heard_s = math.inf  # the source has ended: no frame is still to come
             self._finished = True
@@ -229,6 +247,11 @@ class LtcReader(TimecodeReader):
         for frame in self._decoder.feed(x):
             self._publish(frame, arrived_s)
         self._heard_s = self._anchor + self._fed / sr
+        fix = self._latest
+        if (fix is not None and not self._said_lost
+                and self._heard_s - fix.arrived_s > LOSS_FRAMES / fix.fps.rate_hz):
+            self._said_lost = True
+            self._events.append(f"timecode stopped or lost after {fix.timecode}")
 
     def _publish(self, frame: LtcFrame, arrived_s: float) -> None:
         sr = self.audio.sample_rate_hz
@@ -248,6 +271,11 @@ class LtcReader(TimecodeReader):
             self._recent.clear()
             if prev is not None and not lost:
                 self._jumps += 1
+                self._events.append(f"timecode jumped from {prev.timecode} to {frame.timecode}")
+            elif prev is None or self._said_lost:
+                self._events.append(f"timecode {'back' if prev else 'locked'} at"
+                                    f" {frame.timecode} ({fps.label} fps)")
+        self._said_lost = False
         self._recent.append((n, start_s))
         speed = 1.0
         n0, s0 = self._recent[0]

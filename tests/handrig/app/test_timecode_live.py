@@ -142,6 +142,9 @@ def test_play_chases_the_timecode_within_a_frame_through_start_jump_and_stop(
     assert abs(wav_s[0] - reached_s) < 1.0 / 25, wav_s[0] - reached_s
     assert (chase.starts, chase.jumps, chase.stops) == (1, 1, 1)
     assert chase.started_at.startswith("01:00:00:1")
+    events = " | ".join(result.summary["events"])  # the run's events say what happened
+    assert "timecode jumped from 01:00:00:14 to 01:00:02:00" in events, events
+    assert "timecode stopped or lost after 01:00:02:14" in events, events
     figures = chase.figures()
     assert figures["ltc_frames"] == 65 and figures["ltc_losses"] == 0
 

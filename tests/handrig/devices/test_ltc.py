@@ -142,6 +142,11 @@ def test_reader_on_a_wav_gives_each_frame_its_time_and_follows_jumps_and_stops(
     assert not locked[(t > stop_s + 3 / 25 + 0.011) & (t < back_s)].any()
     st = reader.stats()
     assert (st.frames, st.jumps, st.losses) == (65, 1, 1)
+    assert reader.drain_events() == [
+        "timecode locked at 01:00:00:00 (25 fps)",
+        "timecode jumped from 01:00:01:04 to 01:00:10:00",
+        "timecode stopped or lost after 01:00:10:19",
+        "timecode back at 01:00:20:00 (25 fps)"]
     assert fixes[29].speed == pytest.approx(1.001, abs=2e-4)  # the drift measured
 
 
