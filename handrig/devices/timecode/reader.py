@@ -255,8 +255,15 @@ class LtcReader(TimecodeReader):
 
     def _publish(self, frame: LtcFrame, arrived_s: float) -> None:
         sr = self.audio.sample_rate_hz
-        fps = self._fps if self._fps is not None else rate_of(frame, sr)
-        if frame.timecode.frames >= fps.nominal or frame.timecode.drop != fps.drop:
+        heard = rate_of(frame, sr)
+        fps = self._fps if self._fps is not None else heard
+        if (frame.timecode.frames >= fps.nominal or frame.timecode.drop != fps.drop
+                or heard.nominal != fps.nominal):
+            if self._bad == 0:
+                self._events.append(f"timecode at {heard.label} fps, but {fps.label} fps"
+                                    " was asked for ([timecode] fps, --ltc-fps): frames"
+                                    " dropped" if heard.nominal != fps.nominal else
+                                    f"timecode frame {frame.timecode} is not {fps.label} fps")
             self._bad += 1
             return
         n = frame.timecode.frame_number(fps.nominal)

@@ -176,3 +176,18 @@ def test_the_reader_thread_reads_a_wav_to_its_end(tmp_path: Path) -> None:
     # the file has ended: no frame is still to come, the timecode is lost at once
     assert reader.position(clock.now()) is None
     assert reader.describe(clock.now()) == "lost (last 01:00:20:14)"
+
+
+def test_a_rate_asked_for_that_the_signal_does_not_have_is_said_and_nothing_is_read(
+        tmp_path: Path) -> None:
+    r, _ = brief_signal()  # 25 fps
+    wav = tmp_path / "ltc.wav"
+    write_wav(wav, r.samples, SR)
+    clock = FakeClock()
+    audio = WavAudio(wav, clock)
+    reader = LtcReader(audio, clock, fps=RATES["30"])
+    while (got := audio.read()) is not None:
+        reader.feed(*got)
+    assert reader.latest() is None and reader.stats().bad_frames == 65
+    assert reader.drain_events() == ["timecode at 25 fps, but 30 fps was asked for"
+                                     " ([timecode] fps, --ltc-fps): frames dropped"]
