@@ -15,6 +15,7 @@ import pytest
 from handrig import hand
 from handrig.app.parts import build_parts
 from handrig.app.session import LiveOptions, run_live
+from handrig.app.summary import format_summary
 from handrig.app.takes import load_play_take, play_parts
 from handrig.app.timecode import chase_setup
 from handrig.cli import main
@@ -90,6 +91,8 @@ def test_run_stamps_every_frame_of_the_take_with_the_timecode(
     assert 90000 <= stamps.frame[ok][0] < 90000 + 30
     tl = s["outputs"]["timecode"]
     assert tl["frames_stamped"] == int(ok.sum()) and tl["jumps"] == 0
+    said = format_summary(s)  # what a person reads at the end of the run
+    assert f"timecode LTC {wav}: " in said and f"stamped in {stamp_path(take)}" in said
 
 
 def test_play_chases_the_timecode_within_a_frame_through_start_jump_and_stop(
