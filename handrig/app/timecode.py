@@ -99,7 +99,7 @@ def chase_start_frame(take: PlayTake, at: str | None) -> float | Timecode:
                           key="--chase-at", value="(none)",
                           allowed="the timecode the take starts at, HH:MM:SS:FF")
     first_s = stamps.t_s[0]
-    if format_of(take.path) == "csv":  # a CSV take's rows keep the run's time
+    if take.kind == "performance" and format_of(take.path) == "csv":  # rows keep run time
         first_s = float(load_performance(take.path)[0][0])
     return origin + (first_s + take.start_s) * stamps.fps.rate_hz
 
