@@ -134,14 +134,17 @@ class AlsaAudio(AudioInput):
             return None
         data = out.read(self._bytes)
         now = self.clock.now()
-        if not data:
-            err = b""
-            if self._proc.stderr is not None and self._proc.poll() is not None:
-                err = self._proc.stderr.read(400)
-            if err:
-                raise DeviceError(f"{self.name}: arecord stopped: "
-                                  f"{err.decode(errors='replace').strip()}")
-            return None
+        if not data:  # the card went away, or arecord could not open it
+            try:
+                code = self._proc.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                code = None
+            if self._closed or not code:
+                return None
+            err = self._proc.stderr.read(400) if self._proc.stderr is not None else b""
+            said = err.decode(errors="replace").strip() or f"exit status {code}"
+            raise DeviceError(f"{self.name}: arecord stopped: {said}; check the device"
+                              " with `arecord -l`")
         data = data[: len(data) - len(data) % 2]
         return np.frombuffer(data, dtype="<i2").astype(np.float32) / 32768.0, now
 
