@@ -161,10 +161,8 @@ class ChaseGlove(GloveSource):
         pos = self.reader.position(now)
         fps = self.reader.fps()
         state, i = "stopped", self._held
-        if pos is not None and fps is not None and math.isnan(self.start_frame):
-            at = self._start
-            assert isinstance(at, Timecode)
-            self.start_frame = (at.frame_number(fps.nominal)
+        if fps is not None and isinstance(self._start, Timecode) and math.isnan(self.start_frame):
+            self.start_frame = (self._start.frame_number(fps.nominal)
                                 + self.play_take.start_s * fps.rate_hz)
         if pos is not None and fps is not None:
             take_s = (pos - self.start_frame) / fps.rate_hz
