@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean render-deps browser-deps orca-core
+.PHONY: demo test lint bench clean render-deps browser-deps orca-core ltc-deps
 
 # Re-install only when pyproject.toml is newer than the last install.
 $(STAMP): pyproject.toml
@@ -65,6 +65,11 @@ $(LEROBOT_STAMP): $(STAMP) $(foreach p,$(LEROBOT_PLUGINS),$(p)/pyproject.toml)
 # Offscreen rendering (handrig demo --render) needs EGL or OSMesa; Debian packages.
 render-deps:
 	apt-get install -y --no-install-recommends libegl1 libgl1-mesa-dri libosmesa6
+
+# libltc, only to cross-check handrig's own LTC decoder against another encoder
+# (tests/handrig/devices/test_ltc_libltc.py, skipped without it); users need nothing.
+ltc-deps:
+	DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libltc11
 
 # The live view's browser tests (tests/handrig/app/view) and `python -m bench view` drive
 # Debian's headless chromium through chromium-driver. Needs root (CI runs as root).

@@ -82,6 +82,7 @@ COMPUTE_ONLY = (
     "handrig/app/lerobot/test_frame_grid.py", "handrig/app/lerobot/test_plugin_layers.py",
     "handrig/app/cues/test_cue_parsing.py", "handrig/app/cues/test_cue_show.py",
     "handrig/app/test_layers_shown.py",
+    "handrig/devices/test_ltc",
 )
 TESTS = Path(__file__).resolve().parent
 

@@ -107,6 +107,7 @@ class Outputs:
     glove_take_frames: int = 0
     openxr_target: str = ""  # HOST:PORT of the OpenXR hand joints (--openxr)
     openxr_errors: int = 0
+    timecode: str = ""  # --ltc, --chase-ltc: the timecode and its lock ("" = none read)
 
 
 @dataclass(frozen=True)
@@ -267,6 +268,9 @@ def outputs_line(o: Outputs) -> Text:
     if o.glove_take_path:  # frames in the glove take (--record-glove)
         n = o.glove_take_frames
         text.append(f" +glove {n if n < 10000 else f'{n // 1000}k'}")
+    if o.timecode:
+        text.append("  |  ")
+        text.append(f"TC {o.timecode}", "bold" if o.timecode.endswith("locked") else "yellow")
     return text
 
 
@@ -383,6 +387,7 @@ def plain_line(s: PanelSnapshot) -> str:
                                            else "")] if o.openxr_target else []),
         *([f"cues {' < '.join(reversed(s.cues[-3:]))}"] if s.cues else []),
         *([f"layers {'; '.join(s.layers)}"] if s.layers else []),
+        *([f"timecode {o.timecode}"] if o.timecode else []),
     ]
     return " | ".join(parts)
 

@@ -124,7 +124,7 @@ class RigSnapshot:
     def _outputs(self, s: LoopSnapshot) -> Outputs:
         vmc_target, vmc_rate, vmc_err = "", NAN, 0
         rec_path, rec_bytes, rec_s, rec_stopped = "", 0, 0.0, ""
-        glove_path, glove_frames = "", 0
+        glove_path, glove_frames, timecode = "", 0, ""
         xr_target, xr_err = "", 0
         for out in s.outputs:
             if out.kind == "vmc":
@@ -138,8 +138,10 @@ class RigSnapshot:
                 glove_path, glove_frames = out.path, out.frames_written
             elif out.kind == "openxr":
                 xr_target, xr_err = out.address, out.errors
+            elif out.kind == "timecode":  # its name is the timecode and lock (app/timecode.py)
+                timecode = out.name
         return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped,
-                       glove_path, glove_frames, xr_target, xr_err)
+                       glove_path, glove_frames, xr_target, xr_err, timecode)
 
 
 HAND_LABELS = {"ri": "right", "le": "left"}

@@ -41,6 +41,7 @@ import numpy as np
 from handrig.app import factory as app
 from handrig.app import parts as app_parts
 from handrig.app import takes
+from handrig.app import timecode as app_timecode
 from handrig.app.cues.live import CueOptions, LiveCues, open_cues
 from handrig.app.factory import OpenedBus
 from handrig.app.hands import AllHands, SessionParts, check_gloves, side_control_channels
@@ -64,6 +65,7 @@ from handrig.config.rig import hand_of_joint
 from handrig.devices.glove import GloveSource
 from handrig.devices.servo.bus import ServoBus
 from handrig.devices.servo.shared import SharedBus
+from handrig.devices.timecode.reader import TimecodeReader
 from handrig.errors import ConfigError, DeviceError, HandrigError
 from handrig.loop.modes import Mode
 from handrig.loop.rig import Rig
@@ -102,6 +104,7 @@ class LiveOptions:
     take: Callable[[Clock], GloveSource] | None = None  # handrig play: the take, as the glove
     cues: CueOptions | None = None  # --osc-in, --midi-in: cues acting as the keys do
     layering: LayerOptions | None = None  # takes layered under the glove (app/layering.py)
+    timecode: TimecodeReader | None = None  # --ltc: the panel's timecode, a take's stamps
     # the first frame eases in from where the servos rest over [loop] resume_time_s, so a
     # show never starts with a jump (run, demo, play); False: straight to the first goal
     ease_in: bool = True
@@ -312,6 +315,9 @@ class _Session:
                                    opts.record_rate_hz)
         self.cues = open_cues(stack, opts.cues, self.all, self.clock, self.outputs[0],
                               rate_hz, self._hand_log(0), parts.rig_config.loop)
+        if opts.timecode is not None:  # app/timecode.py: started, closed by the stack
+            self.outputs[0].append(app_timecode.stamp_output(stack, opts.timecode, self.clock,
+                                                             opts.record, log))
         for i, (_, path) in self._glove_takes().items():
             take = takes.open_glove_take(path, gloves[i], parts.hands[i].glove_config,
                                          source=opts.gloves()[i] or gloves[i].name, log=log,

@@ -190,6 +190,14 @@ def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
         stopped = f" ({glove_take['stopped_reason']})" if glove_take.get("stopped_reason") else ""
         lines.append(f"                  glove take {glove_take['path']}: {glove_take['frames']}"
                      f" frames, {glove_take['duration_s']:.1f} s{stopped}")
+    tc = outputs.get("timecode")
+    if tc:  # --ltc, --chase-ltc (outputs/timecode_stamp.py)
+        stamped = (f", {tc['frames_stamped']} of {tc['frames']} frames stamped in"
+                   f" {tc['stamps']}" if tc["stamps"] else "")
+        span = f", {tc['first']} .. {tc['last']}" if tc["first"] else ""
+        lines.append(f"                  timecode {tc['source']}: {tc['ltc_frames']} LTC frames,"
+                     f" {tc['jumps']} jumps, {tc['losses']} losses{stamped}{span}"
+                     + (f" ({tc['failure']})" if tc["failure"] else ""))
     return lines
 
 

@@ -17,6 +17,7 @@ from handrig.app.result import failed, print_result
 from handrig.app.session import LiveOptions, run_live
 from handrig.app.sources import Source, run_sources
 from handrig.app.takes import load_play_take, play_parts, take_kind
+from handrig.app.timecode import chase_setup
 from handrig.app.view import add_view_flag, view_playback, view_session
 from handrig.cli._cues import add_cue_flags, cue_options
 from handrig.cli._display import check_gl_backend
@@ -24,6 +25,7 @@ from handrig.cli._layers import add_layer_flag, layer_options
 from handrig.cli._numbers import nonnegative_float, positive_float
 from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
+from handrig.cli._timecode import add_chase
 from handrig.clock import MonotonicClock
 from handrig.errors import ConfigError, DataError, HandrigError
 from handrig.outputs.recorder import Playback
@@ -73,6 +75,7 @@ def register(sub: Any) -> None:
                    help="start over at the end, until stopped (an installation)")
     p.add_argument("--no-wire-timing", action="store_true",
                    help="with --bus sim: answer instantly instead of at the wire's speed")
+    add_chase(p)
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--openxr", default=None, metavar="HOST:PORT",
                    help="also send both hands as the 26 OpenXR hand joints each, over UDP "
@@ -89,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     for flag, value in (("--from", args.from_s), ("--to", args.to_s),
                         ("--glove-config", args.glove_config), ("--osc-in", args.osc_in),
                         ("--midi-in", args.midi_in), ("--cue-takes", args.cue_takes),
-                        ("--layer", args.layer)):
+                        ("--layer", args.layer), ("--chase-ltc", args.chase_ltc)):
         if value is not None:
             raise ConfigError("only with --bus", key=flag, value=value,
                               allowed="add --bus PORT (or --bus sim) to play onto the rig")
@@ -112,6 +115,7 @@ def run_on_rig(args: argparse.Namespace) -> int:
             check_gl_backend("--bus sim")
         cues = cue_options(args)
         layering = layer_options(args)
+        chase = chase_setup(args, take) if args.chase_ltc else None
     except HandrigError as exc:
         if not args.json:
             raise
@@ -131,17 +135,23 @@ def run_on_rig(args: argparse.Namespace) -> int:
               flush=True)
     rec = take.recording
     one_frame = float(rec.t_s[1] - rec.t_s[0]) if len(rec) > 1 else 0.01
+    duration_s = None if args.loop else round(take.duration_s + one_frame, 3)
+    if chase is not None:
+        duration_s = chase.duration_s
     with view_session(args.view, parts.rig_config, _stderr) as view:
         opts = LiveOptions(
-            glove=f"replay:{args.file}", take=lambda clock: take.source(clock, loop=args.loop),
-            bus=args.bus,
-            duration_s=None if args.loop else round(take.duration_s + one_frame, 3),
+            glove=f"replay:{args.file}", take=lambda clock: take.source(clock, loop=args.loop)
+            if chase is None else chase.glove(clock),
+            timecode=chase.reader if chase is not None else None,
+            bus=args.bus, duration_s=duration_s,
             wire_timing=not args.no_wire_timing, vmc=args.vmc, openxr=args.openxr,
             panel=not args.json,
             verbose=not args.json, on_hands=view.attach_hands if view is not None else None,
-            done_reason=f"the take played ({take.duration_s:.2f} s)", cues=cues,
-            layering=layering)
+            done_reason=f"the take played ({take.duration_s:.2f} s)" if chase is None
+            else "the timecode source ended", cues=cues, layering=layering)
         result = run_live(parts, opts)
+    if chase is not None:
+        chase.report(result.summary, as_json=args.json)
     if result.error is not None and not result.started and not args.json:
         raise result.error
     return print_result(result, as_json=args.json)

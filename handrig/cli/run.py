@@ -15,6 +15,7 @@ from handrig.cli._layers import add_layer_flag, layer_options
 from handrig.cli._numbers import float_in, positive_float, positive_int
 from handrig.cli._ports import say_if_simulated
 from handrig.cli._rig import add_rig_argument, print_sources
+from handrig.cli._timecode import add_ltc
 from handrig.config.show import ShowFile, load_show
 from handrig.errors import ConfigError, HandrigError
 
@@ -76,6 +77,7 @@ def register(sub: Any) -> None:
     p.add_argument("--record-rate", type=float_in(1.0, 2000.0), default=None, metavar="HZ",
                    help="a .bvh take's frames per second (default: the glove's [glove]"
                    " rate_hz; a CSV keeps each frame's own time)")
+    add_ltc(p)
     p.add_argument("--frames", type=positive_int, default=None, metavar="N",
                    help="stop after N cycles")
     p.add_argument("--seconds", type=positive_float, default=None, metavar="S",
@@ -99,7 +101,8 @@ def _from_show(args: argparse.Namespace) -> ShowFile | None:
             "glove_left_config": show.gloves.left_config, "bus": show.buses.right,
             "bus_left": show.buses.left, "vmc": show.outputs.vmc, "openxr": show.outputs.openxr,
             "record": show.outputs.record, "record_rate": show.outputs.record_rate_hz,
-            "view": show.outputs.view}
+            "view": show.outputs.view, "ltc": show.timecode.source,
+            "ltc_fps": show.timecode.fps}
     # the cue flags ([osc], [midi], [cues]) are filled by handrig.cli._cues.cue_options
     filled = []
     for name, value in fill.items():
@@ -168,7 +171,9 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
     from handrig.app.result import failed, print_result
     from handrig.app.session import LiveOptions, run_live
     from handrig.app.sources import run_sources, session_sources
+    from handrig.app.timecode import check_stamp_path, open_reader
     from handrig.app.view import view_session
+    from handrig.clock import MonotonicClock
     from handrig.config.rig import require_port
     from handrig.pose.robot_rig import find_rig
 
@@ -187,6 +192,10 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
         if "sim" in (bus, bus_left):
             check_gl_backend("--bus sim")
         layering = layer_options(args, show)
+        reader = None
+        if args.ltc:  # opened now: a bad source or an existing stamps file stops us here
+            check_stamp_path(args.record)
+            reader = open_reader(args.ltc, MonotonicClock(), fps=args.ltc_fps or "auto")
     except HandrigError as exc:
         if not args.json:
             raise
@@ -212,6 +221,7 @@ def _run(args: argparse.Namespace, show: ShowFile | None, started: StartedEmulat
             on_hands=view.attach_hands if view is not None else None, started=started,
             cues=cues,
             layering=layering,
+            timecode=reader,
         )
         result = run_live(parts, opts)
     if result.error is not None and not result.started and not args.json:

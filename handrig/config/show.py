@@ -50,6 +50,10 @@ names the file and the key (``examples/show.toml`` is the commented example)::
     group = "left"             # a hand, a finger (left.index), the wrist, or curves
     loop = true                # false: once
     fade_s = 0.5               # its fade in and out, seconds
+
+    [timecode]
+    source = ""                # as --ltc: LTC from a .wav file or alsa:DEVICE
+    fps = "auto"               # as --ltc-fps: "auto", "24", "25", "29.97" or "30"
 """
 
 from __future__ import annotations
@@ -112,6 +116,26 @@ class ShowOutputs:
                               value=self.record_rate_hz, allowed="0 (the glove's) or 1..2000")
 
 
+TIMECODE_RATES = ("auto", "24", "25", "29.97", "30")
+
+
+@dataclass(frozen=True)
+class ShowTimecode:
+    source: str = ""  # as --ltc: a .wav file or alsa:DEVICE ("": no timecode)
+    fps: str = "auto"  # as --ltc-fps
+
+    def check(self) -> None:
+        src = self.source
+        if src and not (src.startswith("alsa:") or Path(src).suffix.lower() == ".wav"):
+            raise ConfigError("not an LTC source", key="timecode.source", value=src,
+                              allowed="a .wav file (relative to the show file) or"
+                              " alsa:DEVICE, e.g. alsa:default")
+        if self.fps not in TIMECODE_RATES:
+            raise ConfigError("not a timecode rate", key="timecode.fps", value=self.fps,
+                              allowed='"auto" (from the signal), "24", "25", "29.97"'
+                              ' (drop-frame) or "30"')
+
+
 @dataclass(frozen=True)
 class ShowLayer:
     """A ``[[layer]]``: a take layered under the live glove from the run's start."""
@@ -145,6 +169,7 @@ class ShowFile:
     cues: ShowCues = field(default_factory=ShowCues)
     takes: dict[str, str] = field(default_factory=dict)
     layer: tuple[ShowLayer, ...] = ()
+    timecode: ShowTimecode = ShowTimecode()
     path: str = ""
 
     def check(self) -> None:
@@ -241,6 +266,10 @@ def load_show(path: str | Path) -> ShowFile:
             layer=tuple(dataclasses.replace(
                 layer, take=layer.take if layer.take in show.takes
                 else _file(base, layer.take, f"layer[{i}].take", p))
-                for i, layer in enumerate(show.layer)))
+                for i, layer in enumerate(show.layer)),
+            timecode=dataclasses.replace(
+                show.timecode, source=show.timecode.source
+                if show.timecode.source.startswith("alsa:") else
+                _file(base, show.timecode.source, "timecode.source", p)))
     except ConfigError as exc:
         raise exc.located(str(p)) from None
