@@ -39,12 +39,14 @@ from firmware_protocol.dynamixel import (
 )
 from handrig.clock import Clock
 from sim.dxl_fast import (
+    COMPILED,
     ReadPlan,
     WritePlan,
     answer_read,
     goals_outside,
     hear_all,
     read_plan,
+    write_goals,
     write_plan,
 )
 from sim.dxl_faults import FaultSpec, apply_faults
@@ -169,6 +171,9 @@ class Dispatcher:
     _overload_done: bool
     _started_at: float
     clock: Clock
+    compiled: bool = COMPILED
+    """The hot packets through sim/_dxl_c.c (where built); False: the same bytes from
+    pure Python (:mod:`sim.dxl_fast`)."""
 
     @property
     def faults(self) -> FaultSpec:
@@ -425,11 +430,7 @@ class Dispatcher:
         if self.on_sync_write is not None:
             self.on_sync_write(now, GOAL_POSITION_ADDRESS,
                                [(body[k], body[k + 1 : k + 5]) for k in range(0, len(body), 5)])
-        k = 1
-        for servo in plan.servos:
-            servo.last_heard = now
-            servo.write(GOAL_POSITION_ADDRESS, body[k : k + 4])
-            k += 5
+        write_goals(plan, body, now, self.compiled)
         return True
 
     def _quick_fast_read(self, params: bytes, now: float) -> list[_Reply] | None:
@@ -445,7 +446,7 @@ class Dispatcher:
             if plan is None:
                 return None
             self._read_plans[params] = plan
-        packet = answer_read(plan, now, self._baud_index())
+        packet = answer_read(plan, now, self._baud_index(), self.compiled)
         if packet is None:
             return None
         return [_Reply(packet, plan.servos[0].return_delay_s)]
