@@ -43,8 +43,7 @@ from sim.dxl_fast import (
     ReadPlan,
     WritePlan,
     answer_read,
-    goals_outside,
-    hear_all,
+    goals_heard,
     read_plan,
     write_goals,
     write_plan,
@@ -421,12 +420,13 @@ class Dispatcher:
             if plan is None:
                 return False
             self._write_plans[ids] = plan
-        if not hear_all(plan.servos, now, self._baud_index()):
+        outside = goals_heard(plan, body, now, self._baud_index(), self.compiled)
+        if outside < 0:
             return False
         stats = self.stats
         stats.goals_decoded += len(ids)
         if self.goal_limits:
-            stats.goals_outside += goals_outside(body, plan)
+            stats.goals_outside += outside
         if self.on_sync_write is not None:
             self.on_sync_write(now, GOAL_POSITION_ADDRESS,
                                [(body[k], body[k + 1 : k + 5]) for k in range(0, len(body), 5)])

@@ -151,19 +151,20 @@ def answer_read(plan: ReadPlan, now: float, baud_index: int,
     ``baud_index``: the packet's Baud Rate item value, -1 when every servo hears it;
     ``compiled``: ERR bytes, data and CRCs from sim/_dxl_c.c where built."""
     servos = plan.servos
+    a, n = plan.address, plan.length
+    reply = bytearray(plan.template)
+    if compiled and _dxl_c is not None:
+        if not _dxl_c.answer_fast_read(reply, servos, plan.mems, a, n, _REPLY_PREFIX,
+                                       _HARDWARE_ERROR_ADDRESS, ERROR_ALERT, now, baud_index):
+            return None
+        return bytes(reply)
     for s in servos:
         m = s.mem
         if s.silent_until > now or (baud_index >= 0 and m[8] != baud_index) or not m[68]:
             return None
-    reply = bytearray(plan.template)
     for s in servos:
         s.last_heard = now
         s.counters["reads"] += 1
-    a, n = plan.address, plan.length
-    if compiled and _dxl_c is not None:
-        _dxl_c.fill_fast_read(reply, plan.mems, a, n, _REPLY_PREFIX,
-                              _HARDWARE_ERROR_ADDRESS, ERROR_ALERT)
-        return bytes(reply)
     stride = n + 4
     pos = _REPLY_PREFIX
     for s in servos:
@@ -200,6 +201,19 @@ def write_goals(plan: WritePlan, body: bytes, now: float, compiled: bool = COMPI
         servo.last_heard = now
         servo.write(GOAL_POSITION_ADDRESS, body[k : k + 4])
         k += 5
+
+
+def goals_heard(plan: WritePlan, body: bytes, now: float, baud_index: int,
+                compiled: bool = COMPILED) -> int:
+    """-1 when a planned servo does not hear a Sync Write of Goal Position (``ID goal`` x
+    N) at ``baud_index`` (-1: any) now; else how many of its goals lie outside the plan's
+    limits."""
+    if compiled and _dxl_c is not None:
+        return _dxl_c.goals_heard(plan.servos, plan.mems, body, now, baud_index,
+                                  plan.low, plan.high)
+    if not hear_all(plan.servos, now, baud_index):
+        return -1
+    return goals_outside(body, plan)
 
 
 def hear_all(servos: Sequence[EmulatedServo], now: float, baud_index: int) -> bool:
