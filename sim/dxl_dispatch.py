@@ -40,6 +40,7 @@ from firmware_protocol.dynamixel import (
 from handrig.clock import Clock
 from sim.dxl_fast import (
     COMPILED,
+    PACKET_PATH,
     ReadPlan,
     WritePlan,
     answer_read,
@@ -102,10 +103,12 @@ class BusStats:
         return (OVERHEAD_BINS_US + 1) * 1e-6
 
     def overhead_line(self) -> str:
-        """The overhead figures as the closing lines print them."""
+        """The overhead figures as the closing lines print them, with which packet path
+        answered (compiled, or pure Python where sim/_dxl_c.c was not built)."""
         return (f"host overhead per packet p50 {self.overhead_quantile_s(0.5) * 1e6:.0f} us, "
                 f"p99 {self.overhead_quantile_s(0.99) * 1e6:.0f} us, "
-                f"mean {self.overhead_mean_s * 1e6:.0f} us, max {self.overhead_max_s * 1e6:.0f} us")
+                f"mean {self.overhead_mean_s * 1e6:.0f} us, max {self.overhead_max_s * 1e6:.0f} us "
+                f"({PACKET_PATH} packet path)")
 
     @property
     def overhead_mean_s(self) -> float:
