@@ -385,6 +385,41 @@ done:
     return result;
 }
 
+/* mark_heard(servos, mems, now, baud_index): a broadcast heard at ``now`` by every servo
+ * at ``baud_index`` (-1: all; any other negative value: none). */
+static PyObject *py_mark_heard(PyObject *self, PyObject *args) {
+    PyObject *servos, *mems, *now;
+    long baud_index;
+    if (!PyArg_ParseTuple(args, "OOO!l:mark_heard", &servos, &mems, &PyFloat_Type, &now,
+                          &baud_index))
+        return NULL;
+    PyObject *result = NULL;
+    PyObject *sseq = PySequence_Fast(servos, "servos must be a sequence");
+    PyObject *mseq = sseq == NULL ? NULL : PySequence_Fast(mems, "mems must be a sequence");
+    if (mseq == NULL)
+        goto done;
+    Py_ssize_t count = PySequence_Fast_GET_SIZE(sseq);
+    if (PySequence_Fast_GET_SIZE(mseq) != count) {
+        PyErr_SetString(PyExc_ValueError, "mark_heard: servos and mems disagree");
+        goto done;
+    }
+    for (Py_ssize_t k = 0; k < count; k++) {
+        Py_buffer mem;
+        if (table(PySequence_Fast_GET_ITEM(mseq, k), &mem, PyBUF_SIMPLE) < 0)
+            goto done;
+        int heard = baud_index == -1
+            || (baud_index >= 0 && ((const uint8_t *)mem.buf)[A_BAUD_RATE] == baud_index);
+        PyBuffer_Release(&mem);
+        if (heard && PyObject_SetAttr(PySequence_Fast_GET_ITEM(sseq, k), s_last_heard, now) < 0)
+            goto done;
+    }
+    result = Py_NewRef(Py_None);
+done:
+    Py_XDECREF(sseq);
+    Py_XDECREF(mseq);
+    return result;
+}
+
 /* line_baud(fd) -> int: the output speed constant (termios B...) the tty is set to. */
 static PyObject *py_line_baud(PyObject *self, PyObject *args) {
     int fd;
@@ -408,6 +443,9 @@ static PyMethodDef methods[] = {
     {"goals_heard", py_goals_heard, METH_VARARGS,
      "goals_heard(servos, mems, body, now, baud_index, low, high) -> int: -1 when a servo "
      "does not hear the Sync Write, else how many goals lie outside their limits."},
+    {"mark_heard", py_mark_heard, METH_VARARGS,
+     "mark_heard(servos, mems, now, baud_index): a broadcast heard at now by every servo at "
+     "baud_index (-1: all)."},
     {"line_baud", py_line_baud, METH_VARARGS,
      "line_baud(fd) -> int: the termios output speed constant of the tty fd."},
     {"write_goals", py_write_goals, METH_VARARGS,

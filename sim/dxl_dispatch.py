@@ -45,6 +45,7 @@ from sim.dxl_fast import (
     WritePlan,
     answer_read,
     goals_heard,
+    mark_heard,
     read_plan,
     write_goals,
     write_plan,
@@ -166,6 +167,8 @@ class Dispatcher:
     _faults: FaultSpec
     _rng: random.Random
     _by_id: dict[int, EmulatedServo]
+    _on_bus: tuple[EmulatedServo, ...]  # _by_id's servos, and their control tables
+    _on_bus_mems: tuple[bytearray, ...]
     _packet_baud: int
     _generation: int
     _read_plans: dict[bytes, ReadPlan]
@@ -200,6 +203,8 @@ class Dispatcher:
 
     def _rebuild_ids(self) -> None:
         self._by_id = {s.id: s for s in self.servos if s.id not in self.faults.missing}
+        self._on_bus = tuple(self._by_id.values())
+        self._on_bus_mems = tuple(s.mem for s in self._on_bus)
         # the quick paths' plans (sim.dxl_fast) name servos by ID: made again on next use
         self._generation += 1
         self._read_plans = {}
@@ -270,10 +275,8 @@ class Dispatcher:
         self, target: int, inst: int, params: bytes, now: float
     ) -> list[_Reply]:
         if target == BROADCAST_ID:
-            hears = self._baud_index()
-            for s in self._by_id.values():
-                if hears == -1 or s.mem[8] == hears:
-                    s.last_heard = now
+            mark_heard(self._on_bus, self._on_bus_mems, now, self._baud_index(),
+                       self.compiled)
             return self._broadcast(inst, params, now)
         servo = self._servo_for(target, now)
         if servo is None:

@@ -216,6 +216,18 @@ def goals_heard(plan: WritePlan, body: bytes, now: float, baud_index: int,
     return goals_outside(body, plan)
 
 
+def mark_heard(servos: Sequence[EmulatedServo], mems: Sequence[bytearray], now: float,
+               baud_index: int, compiled: bool = COMPILED) -> None:
+    """A broadcast heard ``now`` by every servo at ``baud_index`` (-1: every servo; -2:
+    none); ``mems`` the servos' control tables, in the same order."""
+    if compiled and _dxl_c is not None:
+        _dxl_c.mark_heard(servos, mems, now, baud_index)
+        return
+    for s in servos:
+        if baud_index == -1 or s.mem[8] == baud_index:
+            s.last_heard = now
+
+
 def hear_all(servos: Sequence[EmulatedServo], now: float, baud_index: int) -> bool:
     """Whether every servo is awake and hears a packet at ``baud_index`` (-1: any)."""
     for s in servos:
