@@ -3,9 +3,10 @@
  *
  * crc16: CRC-16/BUYPASS (polynomial 0x8005, initial value 0, no reflection), the CRC
  * of Dynamixel Protocol 2.0 (ROBOTIS e-Manual, "Protocol 2.0", CRC).
- * fill_fast_read: a Fast Sync Read reply's ERR bytes, data and running CRCs, in place.
- * answer_fast_read: the same, after checking every servo answers normally (awake, at
- * the packet's baud, Status Return Level not 0) and counting the read on each.
+ * answer_fast_read: a Fast Sync Read reply's ERR bytes, data and running CRCs, in
+ * place, after checking every servo answers normally (awake, at the packet's baud,
+ * Status Return Level not 0) and counting the read on each.
+ * mark_heard: a broadcast heard by every servo at the packet's baud.
  * goals_heard: whether every servo hears a Sync Write, and how many goals lie outside
  * their limits.
  * write_goals: a Sync Write of Goal Position, each servo as EmulatedServo.write's hot
@@ -57,11 +58,6 @@ static PyObject *py_crc16(PyObject *self, PyObject *args) {
     return PyLong_FromUnsignedLong(out);
 }
 
-/* fill_fast_read(reply, mems, address, length, prefix, error_address, alert)
- * For servo k (mems[k], a bytes-like control table) the chunk starts at
- * prefix + k * (length + 4): ERR (alert when mems[k][error_address] is set, else 0),
- * ID (left as it is), the length bytes at address, then the running CRC of the reply
- * from its first byte, little-endian. */
 static PyObject *s_last_heard, *s_counters, *s_profile_type, *s_trajectory_ticks, *s_write,
     *s_writes, *s_one, *s_silent_until, *s_reads;
 
@@ -69,23 +65,10 @@ static int fill(Py_buffer *reply, PyObject *seq, Py_ssize_t address, Py_ssize_t 
                 Py_ssize_t prefix, Py_ssize_t error_address, unsigned int alert);
 static int count_one(PyObject *servo, PyObject *key);
 
-static PyObject *py_fill_fast_read(PyObject *self, PyObject *args) {
-    Py_buffer reply;
-    PyObject *mems;
-    Py_ssize_t address, length, prefix, error_address;
-    unsigned int alert;
-    if (!PyArg_ParseTuple(args, "w*OnnnnI:fill_fast_read", &reply, &mems, &address, &length,
-                          &prefix, &error_address, &alert))
-        return NULL;
-    PyObject *seq = PySequence_Fast(mems, "mems must be a sequence");
-    int ok = seq != NULL && fill(&reply, seq, address, length, prefix, error_address, alert) == 0;
-    Py_XDECREF(seq);
-    PyBuffer_Release(&reply);
-    if (!ok)
-        return NULL;
-    Py_RETURN_NONE;
-}
-
+/* fill(reply, mems, ...): for servo k (mems[k], a bytes-like control table) the chunk
+ * starts at prefix + k * (length + 4): ERR (alert when mems[k][error_address] is set,
+ * else 0), ID (left as it is), the length bytes at address, then the running CRC of
+ * the reply from its first byte, little-endian. */
 static int fill(Py_buffer *reply, PyObject *seq, Py_ssize_t address, Py_ssize_t length,
                 Py_ssize_t prefix, Py_ssize_t error_address, unsigned int alert) {
     Py_ssize_t count = PySequence_Fast_GET_SIZE(seq);
@@ -93,7 +76,7 @@ static int fill(Py_buffer *reply, PyObject *seq, Py_ssize_t address, Py_ssize_t 
     uint8_t *out = (uint8_t *)reply->buf;
     if (address < 0 || length < 0 || prefix < 0 || error_address < 0
             || prefix + count * stride > reply->len) {
-        PyErr_SetString(PyExc_ValueError, "fill_fast_read: the reply is too short");
+        PyErr_SetString(PyExc_ValueError, "answer_fast_read: the reply is too short");
         return -1;
     }
     for (Py_ssize_t k = 0; k < count; k++) {
@@ -102,7 +85,7 @@ static int fill(Py_buffer *reply, PyObject *seq, Py_ssize_t address, Py_ssize_t 
             return -1;
         if (address + length > mem.len || error_address >= mem.len) {
             PyBuffer_Release(&mem);
-            PyErr_SetString(PyExc_ValueError, "fill_fast_read: a control table is too short");
+            PyErr_SetString(PyExc_ValueError, "answer_fast_read: a control table is too short");
             return -1;
         }
         const uint8_t *m = (const uint8_t *)mem.buf;
@@ -275,7 +258,7 @@ static int count_one(PyObject *servo, PyObject *key) {
 /* answer_fast_read(reply, servos, mems, address, length, prefix, error_address, alert,
  * now, baud_index) -> bool: False (nothing done) when a servo would not answer normally
  * (asleep, at another baud, Status Return Level 0); else each servo heard at ``now``,
- * its read counted, and the reply filled as fill_fast_read does. */
+ * its read counted, and the reply filled (fill, above). */
 static PyObject *py_answer_fast_read(PyObject *self, PyObject *args) {
     Py_buffer reply;
     PyObject *servos, *mems, *now;
@@ -434,9 +417,6 @@ static PyObject *py_line_baud(PyObject *self, PyObject *args) {
 static PyMethodDef methods[] = {
     {"crc16", py_crc16, METH_VARARGS,
      "crc16(data, crc=0) -> int: CRC-16/BUYPASS of data, continuing from crc."},
-    {"fill_fast_read", py_fill_fast_read, METH_VARARGS,
-     "fill_fast_read(reply, mems, address, length, prefix, error_address, alert): a Fast "
-     "Sync Read reply's ERR bytes, data and running CRCs, in place."},
     {"answer_fast_read", py_answer_fast_read, METH_VARARGS,
      "answer_fast_read(reply, servos, mems, address, length, prefix, error_address, alert, "
      "now, baud_index) -> bool: a Fast Sync Read reply when every servo answers normally."},
@@ -456,8 +436,9 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "sim._dxl_c",
-    "The emulated bus's compiled packet path (CRC-16/BUYPASS, Fast Sync Read replies).",
-    -1, methods,
+    "The emulated bus's compiled packet path (sim/dxl_fast.py: CRC-16/BUYPASS, the Fast "
+    "Sync Read reply, the Goal Position Sync Write).",
+    -1, methods, NULL, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC PyInit__dxl_c(void) {
