@@ -356,9 +356,6 @@ class Dispatcher:
                     self._rebuild_ids()
                 return []
             if inst == Instruction.FAST_SYNC_READ:
-                quick = self._quick_fast_read(params, now)
-                if quick is not None:
-                    return quick
                 return self._fast_read(SyncReads(params), now)
             if inst == Instruction.SYNC_READ:
                 address, length, ids = split_sync_read(params)
@@ -463,11 +460,14 @@ class Dispatcher:
     def _fast_read(
         self, requests: Sequence[tuple[int, int, int]], now: float
     ) -> list[_Reply]:
-        """One combined reply; it stops short at the first servo that does not answer
-        (a Fast Sync Read tries :meth:`_quick_fast_read` first).
+        """One combined reply; it stops short at the first servo that does not answer.
 
         A request the reply cannot carry (a range beyond the control table, a reply
         longer than a packet) gets no reply at all."""
+        if isinstance(requests, SyncReads):
+            quick = self._quick_fast_read(requests.params, now)
+            if quick is not None:
+                return quick
         total = 8 + sum(n + 4 for _, _, n in requests)
         if total > MAX_PACKET_LEN or any(n == 0 or a + n > READABLE_BYTES
                                          for _, a, n in requests):
