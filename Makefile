@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 .PHONY: demo test lint bench clean render-deps browser-deps orca-core ltc-deps
 
 # Re-install only when pyproject.toml is newer than the last install.
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml setup.py sim/_dxl_c.c
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	@$(BIN)/python -m pip install --quiet --upgrade pip
 	@$(BIN)/python -m pip install --quiet -e '.[dev]'

@@ -37,6 +37,10 @@ from sim.dxl_bus import SimBus
 which, baud = sys.argv[1], int(sys.argv[2])
 rig = load_rig("puppet_two_hands") if which == "two_hands" else bench_rig(int(which), baud)
 bus = SimBus.from_rig(rig, wire_timing=True, puppet=True)
+try:
+    from sim.dxl_fast import PACKET_PATH
+except ImportError:  # a tree from before the compiled path
+    PACKET_PATH = "pure Python"
 samples = []
 send = bus._send
 def timed(replies, frame_len, t_rx):
@@ -53,7 +57,7 @@ for line in sys.stdin:
     print(f"  emulator: {len(us)} packets, host time per packet "
           f"p50 {np.percentile(us, 50):.0f} us, "
           f"p99 {np.percentile(us, 99):.0f} us, mean {us.mean():.0f} us, max {us.max():.0f} us; "
-          f"replies late mean {s.late_mean_s * 1e6:.0f} us", flush=True)
+          f"replies late mean {s.late_mean_s * 1e6:.0f} us ({PACKET_PATH} packet path)", flush=True)
     s.late_total_s, s.replies = 0.0, 0
 bus.stop()
 """

@@ -32,13 +32,13 @@ from firmware_protocol.dynamixel import (
     HardwareError,
     PacketError,
     find_frame,
-    parse_instruction,
 )
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import RigConfig
 from handrig.errors import ConfigError
 from handrig.pose.robot_rig import load_rig
 from sim.dxl_dispatch import BusStats, Dispatcher, _Reply
+from sim.dxl_fast import parse_frame
 from sim.dxl_faults import FaultSpec
 from sim.dxl_line import BITS_PER_BYTE, SPIN_S, PtyLine, tighten_timer_slack, try_realtime
 from sim.dxl_rig import GOAL_POSITION_ADDRESS, goal_limits, servos_from_rig, with_model
@@ -381,7 +381,7 @@ class SimBus(Dispatcher):
                 finally:
                     self._in_packet = False
             try:
-                packet = parse_instruction(frame)
+                packet = parse_frame(frame, self.compiled)
             except PacketError as exc:
                 replies: list[_Reply] = []
                 if exc.kind == "crc":

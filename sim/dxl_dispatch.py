@@ -39,12 +39,15 @@ from firmware_protocol.dynamixel import (
 )
 from handrig.clock import Clock
 from sim.dxl_fast import (
+    COMPILED,
+    PACKET_PATH,
     ReadPlan,
     WritePlan,
     answer_read,
-    goals_outside,
-    hear_all,
+    goals_heard,
+    mark_heard,
     read_plan,
+    write_goals,
     write_plan,
 )
 from sim.dxl_faults import FaultSpec, apply_faults
@@ -101,10 +104,12 @@ class BusStats:
         return (OVERHEAD_BINS_US + 1) * 1e-6
 
     def overhead_line(self) -> str:
-        """The overhead figures as the closing lines print them."""
+        """The overhead figures as the closing lines print them, with which packet path
+        answered (compiled, or pure Python where sim/_dxl_c.c was not built)."""
         return (f"host overhead per packet p50 {self.overhead_quantile_s(0.5) * 1e6:.0f} us, "
                 f"p99 {self.overhead_quantile_s(0.99) * 1e6:.0f} us, "
-                f"mean {self.overhead_mean_s * 1e6:.0f} us, max {self.overhead_max_s * 1e6:.0f} us")
+                f"mean {self.overhead_mean_s * 1e6:.0f} us, max {self.overhead_max_s * 1e6:.0f} us "
+                f"({PACKET_PATH} packet path)")
 
     @property
     def overhead_mean_s(self) -> float:
@@ -162,6 +167,8 @@ class Dispatcher:
     _faults: FaultSpec
     _rng: random.Random
     _by_id: dict[int, EmulatedServo]
+    _on_bus: tuple[EmulatedServo, ...]  # _by_id's servos, and their control tables
+    _on_bus_mems: tuple[bytearray, ...]
     _packet_baud: int
     _generation: int
     _read_plans: dict[bytes, ReadPlan]
@@ -169,6 +176,9 @@ class Dispatcher:
     _overload_done: bool
     _started_at: float
     clock: Clock
+    compiled: bool = COMPILED
+    """The hot packets through sim/_dxl_c.c (where built); False: the same bytes from
+    pure Python (:mod:`sim.dxl_fast`)."""
 
     @property
     def faults(self) -> FaultSpec:
@@ -193,6 +203,8 @@ class Dispatcher:
 
     def _rebuild_ids(self) -> None:
         self._by_id = {s.id: s for s in self.servos if s.id not in self.faults.missing}
+        self._on_bus = tuple(self._by_id.values())
+        self._on_bus_mems = tuple(s.mem for s in self._on_bus)
         # the quick paths' plans (sim.dxl_fast) name servos by ID: made again on next use
         self._generation += 1
         self._read_plans = {}
@@ -263,10 +275,8 @@ class Dispatcher:
         self, target: int, inst: int, params: bytes, now: float
     ) -> list[_Reply]:
         if target == BROADCAST_ID:
-            hears = self._baud_index()
-            for s in self._by_id.values():
-                if hears == -1 or s.mem[8] == hears:
-                    s.last_heard = now
+            mark_heard(self._on_bus, self._on_bus_mems, now, self._baud_index(),
+                       self.compiled)
             return self._broadcast(inst, params, now)
         servo = self._servo_for(target, now)
         if servo is None:
@@ -416,20 +426,17 @@ class Dispatcher:
             if plan is None:
                 return False
             self._write_plans[ids] = plan
-        if not hear_all(plan.servos, now, self._baud_index()):
+        outside = goals_heard(plan, body, now, self._baud_index(), self.compiled)
+        if outside < 0:
             return False
         stats = self.stats
         stats.goals_decoded += len(ids)
         if self.goal_limits:
-            stats.goals_outside += goals_outside(body, plan)
+            stats.goals_outside += outside
         if self.on_sync_write is not None:
             self.on_sync_write(now, GOAL_POSITION_ADDRESS,
                                [(body[k], body[k + 1 : k + 5]) for k in range(0, len(body), 5)])
-        k = 1
-        for servo in plan.servos:
-            servo.last_heard = now
-            servo.write(GOAL_POSITION_ADDRESS, body[k : k + 4])
-            k += 5
+        write_goals(plan, body, now, self.compiled)
         return True
 
     def _quick_fast_read(self, params: bytes, now: float) -> list[_Reply] | None:
@@ -445,7 +452,7 @@ class Dispatcher:
             if plan is None:
                 return None
             self._read_plans[params] = plan
-        packet = answer_read(plan, now, self._baud_index())
+        packet = answer_read(plan, now, self._baud_index(), self.compiled)
         if packet is None:
             return None
         return [_Reply(packet, plan.servos[0].return_delay_s)]

@@ -13,7 +13,10 @@ know.
 
 The CRC here is the emulator's own (CRC-16/BUYPASS,
 :func:`firmware_protocol.dynamixel.crc16`), not the driver's, so a misreading
-on one side still fails a test instead of cancelling out.
+on one side still fails a test instead of cancelling out. Where the install built
+``sim/_dxl_c.c`` (setup.py; any C compiler), the instruction's CRC check and the
+reply's ERR bytes, data and running CRCs are compiled (``COMPILED``); without it the
+same bytes come from pure Python, slower (docs/measurements.md, issue 36).
 """
 
 from __future__ import annotations
@@ -27,10 +30,26 @@ from firmware_protocol.dynamixel import (
     ERROR_ALERT,
     HEADER,
     MAX_PACKET_LEN,
+    PREFIX_LEN,
     STATUS_INSTRUCTION,
+    InstructionPacket,
     crc16,
+    parse_instruction,
+    unstuff,
 )
+from sim.dxl_rig import GOAL_POSITION_ADDRESS
 from sim.dxl_servo import READABLE_BYTES, EmulatedServo
+
+try:
+    from sim import _dxl_c
+except ImportError:  # not built (no C compiler at install): pure Python, the same bytes
+    _dxl_c = None  # type: ignore[assignment]
+
+COMPILED = _dxl_c is not None
+"""Whether the compiled packet path (sim/_dxl_c.c) answers; the bus benches print it."""
+PACKET_PATH = "compiled" if COMPILED else "pure Python"
+_HARDWARE_ERROR_ADDRESS = 70  # Hardware Error Status (X-series control table)
+
 
 # Bytes before the first servo's ERR in a fast read reply: header, ID, LEN, 0x55.
 _REPLY_PREFIX = 8
@@ -55,6 +74,19 @@ def running_crcs(reply: bytearray, stride: int, count: int) -> None:
         start = end
 
 
+def parse_frame(frame: bytes, compiled: bool = COMPILED) -> InstructionPacket:
+    """:func:`firmware_protocol.dynamixel.parse_instruction`, its CRC compiled
+    (``compiled``, where built): a frame with the right header, length and CRC is taken
+    apart here; any other goes to ``parse_instruction``, which raises the same
+    :class:`PacketError` as before."""
+    if compiled and _dxl_c is not None and len(frame) >= PREFIX_LEN + 3 and frame[:4] == HEADER \
+            and len(frame) == PREFIX_LEN + (frame[5] | frame[6] << 8) \
+            and _dxl_c.crc16(memoryview(frame)[:-2]) == frame[-2] | frame[-1] << 8:
+        region = unstuff(frame[PREFIX_LEN:-2])
+        return InstructionPacket(frame[4], region[0], region[1:])
+    return parse_instruction(frame)
+
+
 def _servos(by_id: dict[int, EmulatedServo], ids: bytes) -> list[EmulatedServo] | None:
     """The servos ``ids`` address, in order; None when one is not on the bus."""
     servos = []
@@ -76,6 +108,7 @@ class ReadPlan:
     length: int
     template: bytes
     generation: int
+    mems: tuple[bytearray, ...]  # the servos' control tables, in order
 
 
 @dataclass
@@ -87,6 +120,7 @@ class WritePlan:
     high: tuple[int, ...]
     generation: int
     limits: dict[int, tuple[int, int]]
+    mems: tuple[bytearray, ...]  # the servos' control tables, in order
 
 
 def read_plan(by_id: dict[int, EmulatedServo], address: int, length: int,
@@ -106,27 +140,36 @@ def read_plan(by_id: dict[int, EmulatedServo], address: int, length: int,
     template[7] = STATUS_INSTRUCTION
     for k, i in enumerate(ids):
         template[_REPLY_PREFIX + k * (length + 4) + 1] = i
-    return ReadPlan(tuple(servos), address, length, bytes(template), generation)
+    return ReadPlan(tuple(servos), address, length, bytes(template), generation,
+                    tuple(s.mem for s in servos))
 
 
-def answer_read(plan: ReadPlan, now: float, baud_index: int) -> bytes | None:
+def answer_read(plan: ReadPlan, now: float, baud_index: int,
+                compiled: bool = COMPILED) -> bytes | None:
     """The reply to the planned Fast Sync Read now, or None when a servo would not
     answer it normally (rebooting, another baud, Status Return Level 0).
-    ``baud_index``: the packet's Baud Rate item value, -1 when every servo hears it."""
+    ``baud_index``: the packet's Baud Rate item value, -1 when every servo hears it;
+    ``compiled``: ERR bytes, data and CRCs from sim/_dxl_c.c where built."""
     servos = plan.servos
+    a, n = plan.address, plan.length
+    reply = bytearray(plan.template)
+    if compiled and _dxl_c is not None:
+        if not _dxl_c.answer_fast_read(reply, servos, plan.mems, a, n, _REPLY_PREFIX,
+                                       _HARDWARE_ERROR_ADDRESS, ERROR_ALERT, now, baud_index):
+            return None
+        return bytes(reply)
     for s in servos:
         m = s.mem
         if s.silent_until > now or (baud_index >= 0 and m[8] != baud_index) or not m[68]:
             return None
-    reply = bytearray(plan.template)
-    a, n = plan.address, plan.length
-    stride = n + 4
-    pos = _REPLY_PREFIX
     for s in servos:
         s.last_heard = now
         s.counters["reads"] += 1
+    stride = n + 4
+    pos = _REPLY_PREFIX
+    for s in servos:
         m = s.mem
-        if m[70]:
+        if m[_HARDWARE_ERROR_ADDRESS]:
             reply[pos] = ERROR_ALERT
         reply[pos + 2 : pos + 2 + n] = m[a : a + n]
         pos += stride
@@ -143,7 +186,46 @@ def write_plan(by_id: dict[int, EmulatedServo], ids: bytes,
     no_limits = (1, 0)
     low = tuple(limits.get(i, no_limits)[0] for i in ids)
     high = tuple(limits.get(i, no_limits)[1] for i in ids)
-    return WritePlan(tuple(servos), low, high, generation, limits)
+    return WritePlan(tuple(servos), low, high, generation, limits,
+                     tuple(s.mem for s in servos))
+
+
+def write_goals(plan: WritePlan, body: bytes, now: float, compiled: bool = COMPILED) -> None:
+    """Each planned servo hears the Sync Write (``ID goal`` x N) and takes its goal, as
+    :meth:`EmulatedServo.write` does it (``compiled``: in sim/_dxl_c.c where built)."""
+    if compiled and _dxl_c is not None:
+        _dxl_c.write_goals(plan.servos, plan.mems, body, now)
+        return
+    k = 1
+    for servo in plan.servos:
+        servo.last_heard = now
+        servo.write(GOAL_POSITION_ADDRESS, body[k : k + 4])
+        k += 5
+
+
+def goals_heard(plan: WritePlan, body: bytes, now: float, baud_index: int,
+                compiled: bool = COMPILED) -> int:
+    """-1 when a planned servo does not hear a Sync Write of Goal Position (``ID goal`` x
+    N) at ``baud_index`` (-1: any) now; else how many of its goals lie outside the plan's
+    limits."""
+    if compiled and _dxl_c is not None:
+        return _dxl_c.goals_heard(plan.servos, plan.mems, body, now, baud_index,
+                                  plan.low, plan.high)
+    if not hear_all(plan.servos, now, baud_index):
+        return -1
+    return goals_outside(body, plan)
+
+
+def mark_heard(servos: Sequence[EmulatedServo], mems: Sequence[bytearray], now: float,
+               baud_index: int, compiled: bool = COMPILED) -> None:
+    """A broadcast heard ``now`` by every servo at ``baud_index`` (-1: every servo; -2:
+    none); ``mems`` the servos' control tables, in the same order."""
+    if compiled and _dxl_c is not None:
+        _dxl_c.mark_heard(servos, mems, now, baud_index)
+        return
+    for s in servos:
+        if baud_index == -1 or s.mem[8] == baud_index:
+            s.last_heard = now
 
 
 def hear_all(servos: Sequence[EmulatedServo], now: float, baud_index: int) -> bool:

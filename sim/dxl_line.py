@@ -24,6 +24,11 @@ import tty
 
 from handrig.realtime import LOOP_TIMER_SLACK_NS, timer_slack_ns
 
+try:  # the termios speed without building tcgetattr's lists (sim/_dxl_c.c, where built)
+    from sim._dxl_c import line_baud as _line_speed
+except ImportError:
+    _line_speed = None  # type: ignore[assignment]
+
 BITS_PER_BYTE = 10  # start + 8 data + stop
 # Replies are timed by sleeping, then spinning for the last SPIN_S (with the thread's
 # timer slack cut to 1 us, Linux sleeps overshoot by tens of microseconds).
@@ -103,7 +108,8 @@ class PtyLine:
     def baud(self) -> int:
         """The baud rate the client set on the port (termios), 1 Mbps if unknown."""
         try:
-            speed = termios.tcgetattr(self.fd)[5]
+            speed = _line_speed(self.fd) if _line_speed is not None \
+                else termios.tcgetattr(self.fd)[5]
         except (termios.error, OSError):
             return DEFAULT_BAUD
         return BAUD_OF_SPEED.get(speed, DEFAULT_BAUD) or DEFAULT_BAUD
