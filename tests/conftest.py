@@ -83,6 +83,7 @@ COMPUTE_ONLY = (
     "handrig/test_hand.py", "handrig/devices/test_glove_status.py",
     "handrig/outputs/test_glove_take.py", "handrig/app/test_robotrig.py", "sim/test_wrist_load.py",
     "bench/test_bench_skips.py", "handrig/app/test_panel_recording.py",
+    "handrig/cli/test_servos_scan_default.py",
 )
 # Tests that start handrig's commands (imports, argument and file checks, help texts, a
 # take's repair) but no loop, no emulator and no glove: nothing in them keeps time, so
