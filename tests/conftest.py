@@ -92,6 +92,8 @@ NO_LOOP = (
     "handrig/app/test_run_messages.py", "bench/test_bench_help.py",
     "handrig/test_corrupt_files.py", "handrig/outputs/test_take_damage.py",
     "handrig/cli/test_retarget_command.py", "handrig/cli/test_cli.py",
+    # the ORCA preset's file and model checks and `retarget check` (its demos are realtime)
+    "sim/test_orca_preset.py::test_the_", "sim/test_orca_preset.py::test_retarget_check_",
 )
 TESTS = Path(__file__).resolve().parent
 
@@ -100,7 +102,7 @@ TESTS = Path(__file__).resolve().parent
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         rel = item.path.resolve().relative_to(TESTS).as_posix()
-        if rel.startswith(COMPUTE_ONLY + NO_LOOP):
+        if f"{rel}::{item.name}".startswith(COMPUTE_ONLY + NO_LOOP):
             item.add_marker(pytest.mark.compute_only)
 
 
