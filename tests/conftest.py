@@ -84,6 +84,23 @@ COMPUTE_ONLY = (
     "handrig/app/cues/test_cue_parsing.py", "handrig/app/cues/test_cue_show.py",
     "handrig/app/test_layers_shown.py",
     "handrig/devices/test_ltc",
+    # these compute too and ran in the realtime process: codecs, stats, tables, modes
+    "handrig/devices/servo/test_servo_codec.py", "handrig/devices/servo/test_servo_registers.py",
+    "handrig/loop/test_stats.py", "handrig/loop/test_modes.py", "handrig/loop/test_easing.py",
+    "handrig/test_hand.py", "handrig/devices/test_glove_status.py",
+    "handrig/outputs/test_glove_take.py", "handrig/app/test_robotrig.py", "sim/test_wrist_load.py",
+    "bench/test_bench_skips.py", "handrig/app/test_panel_recording.py",
+    "handrig/cli/test_servos_scan_default.py",
+)
+# Tests that start handrig's commands (imports, argument and file checks, help texts, a
+# take's repair) but no loop, no emulator and no glove: nothing in them keeps time, so
+# they run beside the realtime tests with the compute-only ones, one core between them.
+NO_LOOP = (
+    "handrig/app/test_run_messages.py", "bench/test_bench_help.py",
+    "handrig/test_corrupt_files.py", "handrig/outputs/test_take_damage.py",
+    "handrig/cli/test_retarget_command.py", "handrig/cli/test_cli.py",
+    # the ORCA preset's file and model checks and `retarget check` (its demos are realtime)
+    "sim/test_orca_preset.py::test_the_", "sim/test_orca_preset.py::test_retarget_check_",
 )
 TESTS = Path(__file__).resolve().parent
 
@@ -92,7 +109,7 @@ TESTS = Path(__file__).resolve().parent
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         rel = item.path.resolve().relative_to(TESTS).as_posix()
-        if rel.startswith(COMPUTE_ONLY):
+        if f"{rel}::{item.name}".startswith(COMPUTE_ONLY + NO_LOOP):
             item.add_marker(pytest.mark.compute_only)
 
 

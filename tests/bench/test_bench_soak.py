@@ -12,23 +12,25 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_a_short_soak_prints_its_figures_with_no_goal_outside_the_limits() -> None:
+    # 6 s (1200 cycles at 200 Hz, VMC at 60 Hz), a stall every 2 s; servo 4 muted from the
+    # emulator's 3 s to 6 s, about the run's 0.3 s to 3.3 s
     out = subprocess.run(
-        [sys.executable, "-m", "bench", "soak", "--seconds", "9", "--stall-every-s", "4",
+        [sys.executable, "-m", "bench", "soak", "--seconds", "6", "--stall-every-s", "2",
          "--mute", "4@3-6"],
         capture_output=True, text=True, timeout=240, cwd=ROOT)
     text = out.stdout
     assert out.returncode == 0, out.stderr[-2000:]
     cycles = re.search(r"cycles\s+(\d+) in", text)
-    assert cycles and int(cycles.group(1)) > 1000, text
+    assert cycles and int(cycles.group(1)) > 700, text
     assert re.search(r"goals outside\s+0 of [1-9]\d* decoded", text), text
-    assert re.search(r"a 50 ms host stall every 4 s \([23] made\)", text), text
+    assert re.search(r"a 50 ms host stall every 2 s \([23] made\)", text), text
     assert "bus injected    " in text and "(no count" not in text, text
     assert re.search(r"rss\s+[\d.]+ MB at the start, [\d.]+ MB at the end; growth", text), text
-    assert re.search(r"stopped\s+9 s done\n", text), text
+    assert re.search(r"stopped\s+6 s done\n", text), text
     assert "torque off      True" in text, text
     # VMC on: the bundles reached a real UDP socket
     vmc = re.search(r"vmc\s+(\d+) datagrams", text)
-    assert vmc and int(vmc.group(1)) > 500, text
+    assert vmc and int(vmc.group(1)) > 330, text
     # the hottest reading per servo, as the driver read it
     assert re.search(r"temperature\s+max \d+ C at servo \d+ \w+ X[LCM]\d+", text), text
     # the muted servo was held while it was silent, and answered again

@@ -131,7 +131,9 @@ def test_calibrate_glove_against_the_scripted_glove_in_a_terminal(tmp_path: Path
            "XDG_DATA_HOME": str(tmp_path / "data"), "PYTHONUNBUFFERED": "1"}
     before = git_status_config()
     cli = [sys.executable, "-m", "handrig.cli"]
-    glove = LineProcess([*cli, "sim-glove", "--calibration", "--cue", "--seed", "5"], env)
+    # each pose reached in 0.2 s (not the default 0.5): Enter is pressed once it is held
+    glove = LineProcess([*cli, "sim-glove", "--calibration", "--cue", "--seed", "5",
+                         "--transition-s", "0.2"], env)
     session = None
     try:
         port = glove.wait_for(r"^port: (\S+)").group(1)

@@ -91,8 +91,9 @@ def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Pat
     first = GloveEmulator(rec, "frames", rate_hz=200.0, loop=True).start()
     second: GloveEmulator | None = None
     _point(link, first.port_path)
+    # 4 s: gone 1 s into the run, back 1 s later, 2 s to reopen (as the run above)
     proc = subprocess.Popen([sys.executable, "-m", "handrig.cli", "run", "--glove", str(link),
-                             "--bus", "sim", "--seconds", "5", "--json"],
+                             "--bus", "sim", "--seconds", "4", "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert proc.stderr is not None
@@ -120,5 +121,5 @@ def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Pat
     assert g["disconnects"] == 1 and g["reconnects"] == 1, summary
     assert summary["relax_events"] >= 1, summary
     assert summary["resumes"] == summary["relax_events"], summary
-    assert summary["torque_off"] is True and summary["stop_reason"] == "5 s done"
+    assert summary["torque_off"] is True and summary["stop_reason"] == "4 s done"
     assert f"glove port {link} is back after" in err

@@ -1,4 +1,4 @@
-"""Takes keep time on the live rig: gloves at 100, 200 and 500 Hz on a pty drive the
+"""Takes keep time on the live rig: gloves at 100 and 500 Hz on a pty drive the
 glove-triggered loop and the emulated bus for 3.5 s (plus the 1 s ease to relaxed), with
 a 1 s glove silence in the middle, recorded to CSV and BVH at once. Each take lasts as
 long as the run did (from its first frame to its end) within one frame, the BVH holds
@@ -83,7 +83,9 @@ def _record_a_run(glove_hz: float, folder: Path
             events)
 
 
-@pytest.mark.parametrize("glove_hz", [100.0, 200.0, 500.0])
+# a slow glove and a fast one (200 Hz, the usual rate, lies between them; test_takes.py
+# and the live runs record at it)
+@pytest.mark.parametrize("glove_hz", [100.0, 500.0])
 def test_takes_last_as_long_as_the_run_at_any_glove_rate(tmp_path: Path,
                                                           glove_hz: float) -> None:
     run_s, given, handed, csv_path, bvh_path, events = _record_a_run(glove_hz, tmp_path)
