@@ -102,6 +102,12 @@ NO_LOOP = (
     # the ORCA preset's file and model checks and `retarget check` (its demos are realtime)
     "sim/test_orca_preset.py::test_the_", "sim/test_orca_preset.py::test_retarget_check_",
 )
+# End-to-end tests whose checks hold on a busy machine (nothing in them measures time):
+# LeRobot's record and replay stamp frames on LeRobot's own grid and compare values; most
+# of their time is LeRobot's and torch's imports. They run beside the realtime tests too.
+BESIDE = (
+    "handrig/app/lerobot/test_lerobot_record.py", "handrig/app/lerobot/test_lerobot_readme.py",
+)
 TESTS = Path(__file__).resolve().parent
 
 
@@ -109,7 +115,7 @@ TESTS = Path(__file__).resolve().parent
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         rel = item.path.resolve().relative_to(TESTS).as_posix()
-        if f"{rel}::{item.name}".startswith(COMPUTE_ONLY + NO_LOOP):
+        if f"{rel}::{item.name}".startswith(COMPUTE_ONLY + NO_LOOP + BESIDE):
             item.add_marker(pytest.mark.compute_only)
 
 
