@@ -18,7 +18,10 @@ follow the human's:
   thumb tip on the finger's (DexPilot's distance term, here fitted once offline
   rather than solved every frame);
 * **fist closure**: at the human fist (:func:`sim.grasp_poses.fist_pose`) each robot
-  finger reaches at least :data:`CLOSURE_GOAL` of its flexion range.
+  finger reaches at least :data:`CLOSURE_GOAL` of its flexion range;
+* **range**: over the capture frames, the degrees each joint's unclipped value lies
+  past its range (a table that parks a joint at a limit for half the capture, as the
+  coupled LEAP fit did with its index MCP, lets the fingers stand still).
 
 Residuals are millimetres, each group weighted by :data:`WEIGHTS` over the square
 root of its size (so a group's weight does not grow with its frame count); bounded
@@ -64,13 +67,14 @@ CLOSURE_GOAL = 0.95  # fitted for; the check's target is 0.9
 GAIN_BOUNDS = (0.2, 4.0)  # |gain| of a joint's own sources, degrees per degree
 CAPTURE_STEP = 7  # every 7th reference frame (152 of 1063) in the fit
 WEIGHTS = {"capture": 1.0, "fist": 1.0, "pinch": 10.0, "closure": 1000.0, "thumb": 0.3,
-           "gain": 3.0}
+           "gain": 3.0, "clip": 1.0}
 """Per group: mm of residual per mm (closure: mm per unit of closure short of the goal;
 thumb: a factor on the thumb tip's position terms, whose base sits elsewhere on each
 robot's palm than on the human's, so its pinches count more than its place; gain: mm
 per degree-per-degree a gain strays from 1 on its source, so a gain the tips hardly
 see, such as a side-to-side joint's, stays near a degree for a degree instead of
-wandering to a bound and amplifying the glove's noise)."""
+wandering to a bound and amplifying the glove's noise; clip: mm per degree past a
+joint's range)."""
 COUPLING_CURVES = ("riIndexMCPy", "riIndexPIPy", "riMiddleMCPy", "riMiddlePIPy")
 """The finger curves a thumb joint may read with ``couple=True``: the pinching fingers'
 MCP and PIP flexion (their DIP follows their PIP)."""
@@ -305,7 +309,10 @@ def fit_retarget(rt: Retarget, model_path: str | Path, capture_deg: FloatArray,
         return dataclasses.replace(rt, gain=gain, offset_deg=off, table=None)
 
     def residual(x: FloatArray, pinch_w: float) -> FloatArray:
-        q = table(x).apply_many(poses)
+        tab = table(x)
+        q = tab.apply_many(poses)
+        raw = tab.unclipped_many(cap)[:, rows]
+        past = np.maximum(rt.low_deg[rows] - raw, 0.0) + np.maximum(raw - rt.high_deg[rows], 0.0)
         tips = 1000.0 * gm.robot_tips(q)
         gaps = tips[n_cap + 1:, t] - tips[n_cap + 1:][np.arange(len(pinch)), f_idx]
         d = (tips - 1000.0 * human) * digit_w
@@ -316,6 +323,7 @@ def fit_retarget(rt: Retarget, model_path: str | Path, capture_deg: FloatArray,
             pinch_w * gaps.ravel() / np.sqrt(len(pinch)),
             w["closure"] * short,
             w["gain"] * (x[:len(entries)] - prior),
+            w["clip"] * past.ravel() / np.sqrt(n_cap),
         ])
 
     before = gm.grade(given)
