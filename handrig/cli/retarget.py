@@ -292,8 +292,9 @@ Fitted by `handrig retarget fit --rig {rig}{hold}` through the robot's model (Mu
 kinematics, sim/retarget_fit.py): the robot's fingertips follow the human hand
 model's over the reference capture (each tip relative to its digit's base on the
 palm, scaled by the digits' lengths), the thumb tip meets the index and middle tips
-at the hand model's pinches, and each finger closes to 0.95 of its flexion range at
-the human fist. Each joint keeps its sources and the signs of their gains.
+at the hand model's pinches, each finger closes to 0.95 of its flexion range at the
+human fist, and the degrees a joint asks past its range over the capture count
+against the fit. Each joint keeps its sources and the signs of their gains.
 `handrig retarget check --rig {rig}` prints the figures; re-run the fit after changing
 the model or the ranges.
 """
