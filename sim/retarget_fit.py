@@ -18,18 +18,27 @@ follow the human's:
   thumb tip on the finger's (DexPilot's distance term, here fitted once offline
   rather than solved every frame);
 * **fist closure**: at the human fist (:func:`sim.grasp_poses.fist_pose`) each robot
-  finger reaches at least :data:`CLOSURE_GOAL` of its flexion range.
+  finger reaches at least :data:`CLOSURE_GOAL` of its flexion range;
+* **range**: over the capture frames, the degrees each joint's unclipped value lies
+  past its range (a table that parks a joint at a limit for half the capture, as the
+  coupled LEAP fit did with its index MCP, lets the fingers stand still).
 
 Residuals are millimetres, each group weighted by :data:`WEIGHTS` over the square
 root of its size (so a group's weight does not grow with its frame count); bounded
 least squares (``scipy.optimize.least_squares``, trust region reflective) over
 each joint's gains on the sources the table already gives it (the sign kept, the
-magnitude in :data:`GAIN_BOUNDS`) and its offset (within its range). No new sources
-are added: a thumb joint that also read the other thumb curves pinched no better
-(LEAP 3.9 / 4.6 mm against 2.6 / 4.2 without) and moved against the glove channel it
-follows (LEAP's thumb base fell with the thumb's abduction channel). Joints without
-sources (ORCA's wrist) are left as they are. The clip is applied while fitting: what
-the robot does.
+magnitude in :data:`GAIN_BOUNDS`) and its offset (within its range). A thumb joint
+never reads another thumb curve (LEAP's thumb base then fell with the thumb's
+abduction channel it follows). A thumb flexion joint may read the pinching fingers'
+flexion (``couple=True``, ``handrig retarget fit --couple``: :data:`COUPLING_CURVES`),
+the DexPilot-style coupling that closes the thumb toward a finger as the finger
+closes. The thumb's base (abduction, twist) is not coupled: in real hands the fingers'
+flexion moves against it, and LEAP's base then turned against its own glove channel
+(correlation -0.8 over the demo recording). A
+**coupling** source (a thumb joint's source from a finger's curve, new or already in
+the table) has a gain of either sign within :data:`COUPLING_BOUND`, pulled toward 0.
+Joints without sources (ORCA's wrist) are left as they are. The clip is applied while
+fitting: what the robot does.
 
 :func:`grade` gives the figures ``handrig retarget check`` prints: fist closure per
 finger, pinch gaps, and the fingertip error over the whole reference capture.
@@ -58,13 +67,23 @@ CLOSURE_GOAL = 0.95  # fitted for; the check's target is 0.9
 GAIN_BOUNDS = (0.2, 4.0)  # |gain| of a joint's own sources, degrees per degree
 CAPTURE_STEP = 7  # every 7th reference frame (152 of 1063) in the fit
 WEIGHTS = {"capture": 1.0, "fist": 1.0, "pinch": 10.0, "closure": 1000.0, "thumb": 0.3,
-           "gain": 3.0}
+           "gain": 3.0, "clip": 1.0}
 """Per group: mm of residual per mm (closure: mm per unit of closure short of the goal;
 thumb: a factor on the thumb tip's position terms, whose base sits elsewhere on each
 robot's palm than on the human's, so its pinches count more than its place; gain: mm
 per degree-per-degree a gain strays from 1 on its source, so a gain the tips hardly
 see, such as a side-to-side joint's, stays near a degree for a degree instead of
-wandering to a bound and amplifying the glove's noise)."""
+wandering to a bound and amplifying the glove's noise; clip: mm per degree past a
+joint's range)."""
+COUPLING_CURVES = ("riIndexMCPy", "riIndexPIPy", "riMiddleMCPy", "riMiddlePIPy")
+"""The finger curves a thumb joint may read with ``couple=True``: the pinching fingers'
+MCP and PIP flexion (their DIP follows their PIP)."""
+THUMB_GAIN_FLOOR = 0.7
+"""With coupling, the floor of a thumb joint's |gain| on its own thumb curves (not
+:data:`GAIN_BOUNDS`'): the coupling must not buy the pinches by parking the thumb (a
+gain at 0.2 hardly follows the glove)."""
+COUPLING_BOUND = 1.5
+"""|gain| of a coupling source, degrees of thumb joint per degree of finger flexion."""
 PINCH_STAGES = (0.1, 0.3, 1.0)
 """The pinch weight rises over three fits, each from the last one's answer: first the
 tips and the fist, then the pinches pulled in (one fit at the full weight stalls in a
@@ -190,46 +209,88 @@ class FitResult:
     message: str
 
 
-def _free_entries(rt: Retarget) -> tuple[list[tuple[int, int]], FloatArray, FloatArray]:
-    """(row, column) gains the fit moves (each joint's own sources), and their bounds
-    (the sign kept)."""
+def _is_coupling(rt: Retarget, thumb: set[int], k: int, c: int) -> bool:
+    """Whether (row ``k``, curve ``c``) is a coupling source: a thumb joint's from a finger."""
+    return k in thumb and hand.CURVES[c].digit != "Thumb"
+
+
+def _free_entries(rt: Retarget, thumb: set[int], couple: bool
+                  ) -> tuple[list[tuple[int, int]], FloatArray, FloatArray, FloatArray]:
+    """(row, column) gains the fit moves (each joint's own sources and the thumb rows'
+    coupling sources), their bounds (an own source's sign kept; with ``couple`` a thumb
+    row's own sources at least :data:`THUMB_GAIN_FLOOR`) and the gain each is pulled
+    toward (its sign; 0 for a coupling source)."""
     entries: list[tuple[int, int]] = []
     lo: list[float] = []
     hi: list[float] = []
+    prior: list[float] = []
     a, b = GAIN_BOUNDS
     for k in range(len(rt.joint_names)):
         for c in np.nonzero(rt.gain[k])[0]:
             g = rt.gain[k, c]
             entries.append((k, int(c)))
-            lo.append(a if g > 0 else -b)
-            hi.append(b if g > 0 else -a)
-    return entries, np.array(lo), np.array(hi)
+            if _is_coupling(rt, thumb, k, int(c)):
+                lo.append(-COUPLING_BOUND)
+                hi.append(COUPLING_BOUND)
+                prior.append(0.0)
+            else:
+                floor = THUMB_GAIN_FLOOR if couple and k in thumb else a
+                lo.append(floor if g > 0 else -b)
+                hi.append(b if g > 0 else -floor)
+                prior.append(float(np.sign(g)))
+    return entries, np.array(lo), np.array(hi), np.array(prior)
+
+
+def _flexes(rt: Retarget, k: int) -> bool:
+    """Whether row ``k``'s sources are all flexion curves (a thumb joint that closes the
+    thumb, not one that swings or turns its base)."""
+    return all(hand.CURVES[int(c)].motion is hand.Motion.FLEXION
+               for c in np.flatnonzero(rt.gain[k]))
+
+
+def _with_coupling(rt: Retarget, thumb: set[int]) -> Retarget:
+    """``rt`` with every thumb flexion row given the :data:`COUPLING_CURVES` as sources
+    (a tiny gain marks a new one: the fit starts it from 0)."""
+    gain = rt.gain.copy()
+    for k in sorted(k for k in thumb if _flexes(rt, k)):
+        for name in COUPLING_CURVES:
+            c = hand.curve_index(name)
+            if gain[k, c] == 0.0:
+                gain[k, c] = 1e-9
+    return dataclasses.replace(rt, gain=gain)
 
 
 def fit_retarget(rt: Retarget, model_path: str | Path, capture_deg: FloatArray,
                  *, progress: Callable[[str], None] | None = None,
-                 max_evaluations: int = 60, hold: Sequence[str] = ()) -> FitResult:
+                 max_evaluations: int = 60, hold: Sequence[str] = (),
+                 couple: bool = False) -> FitResult:
     """Fit ``rt``'s gains and offsets (see the module docstring); ranges are kept.
 
     ``hold``: robot joints kept as they are. With every thumb joint held the pinch
     terms are left out (they could only bend the fingers toward a thumb that does not
-    follow)."""
+    follow). ``couple``: the free thumb joints may also read :data:`COUPLING_CURVES`
+    (a table that has coupling sources is fitted so whether asked or not)."""
     for name in hold:
         rt.index(name)  # a KeyError naming the known joints
     held = {rt.index(name) for name in hold}
     gm = GraspModel(rt, model_path, capture_deg)
-    entries, g_lo, g_hi = _free_entries(rt)
+    thumb = {rt.index(j) for j in gm.chains["Thumb"]}
+    given = rt
+    couple = couple or any(_is_coupling(rt, thumb, k, int(c))
+                           for k in thumb for c in np.flatnonzero(rt.gain[k]))
+    if couple:
+        rt = _with_coupling(rt, thumb - held)
+    entries, g_lo, g_hi, prior_all = _free_entries(rt, thumb, couple)
     free = [i for i, (k, _) in enumerate(entries) if k not in held]
     entries = [entries[i] for i in free]
-    g_lo, g_hi = g_lo[free], g_hi[free]
-    thumb_held = {rt.index(j) for j in gm.chains["Thumb"]} <= held
+    g_lo, g_hi, prior = g_lo[free], g_hi[free], prior_all[free]
+    thumb_held = thumb <= held
     rows = sorted({k for k, _ in entries})
     rr = np.array([k for k, _ in entries])
     cc = np.array([c for _, c in entries])
     lo = np.concatenate([g_lo, rt.low_deg[rows]])
     hi = np.concatenate([g_hi, rt.high_deg[rows]])
     x0 = np.clip(np.concatenate([rt.gain[rr, cc], rt.offset_deg[rows]]), lo, hi)
-    prior = np.array([np.sign(rt.gain[k, c]) for k, c in entries])
     cap = capture_deg[::CAPTURE_STEP]
     pinch = np.array([p.pose_deg for p in gm.pinches])
     poses = np.vstack([cap, gm.fist[None], pinch])
@@ -248,7 +309,10 @@ def fit_retarget(rt: Retarget, model_path: str | Path, capture_deg: FloatArray,
         return dataclasses.replace(rt, gain=gain, offset_deg=off, table=None)
 
     def residual(x: FloatArray, pinch_w: float) -> FloatArray:
-        q = table(x).apply_many(poses)
+        tab = table(x)
+        q = tab.apply_many(poses)
+        raw = tab.unclipped_many(cap)[:, rows]
+        past = np.maximum(rt.low_deg[rows] - raw, 0.0) + np.maximum(raw - rt.high_deg[rows], 0.0)
         tips = 1000.0 * gm.robot_tips(q)
         gaps = tips[n_cap + 1:, t] - tips[n_cap + 1:][np.arange(len(pinch)), f_idx]
         d = (tips - 1000.0 * human) * digit_w
@@ -259,9 +323,10 @@ def fit_retarget(rt: Retarget, model_path: str | Path, capture_deg: FloatArray,
             pinch_w * gaps.ravel() / np.sqrt(len(pinch)),
             w["closure"] * short,
             w["gain"] * (x[:len(entries)] - prior),
+            w["clip"] * past.ravel() / np.sqrt(n_cap),
         ])
 
-    before = gm.grade(rt)
+    before = gm.grade(given)
     if progress:
         progress(f"fitting {len(x0)} gains and offsets over {len(poses)} poses")
     x, nfev, message = x0, 0, ""
@@ -270,10 +335,10 @@ def fit_retarget(rt: Retarget, model_path: str | Path, capture_deg: FloatArray,
         sol = least_squares(residual, x, bounds=(lo, hi), diff_step=1e-3,
                             max_nfev=max_evaluations, kwargs={"pinch_w": pinch_w})
         x, nfev, message = sol.x, nfev + int(sol.nfev), str(sol.message)
-    fitted = dataclasses.replace(_rounded(table(x)), table=rt.table)
+    fitted = dataclasses.replace(_rounded(table(x)), table=given.table)
     keep = sorted(held)
-    fitted.gain[keep] = rt.gain[keep]  # held rows exactly as they were, not rounded
-    fitted.offset_deg[keep] = rt.offset_deg[keep]
+    fitted.gain[keep] = given.gain[keep]  # held rows exactly as they were, not rounded
+    fitted.offset_deg[keep] = given.offset_deg[keep]
     return FitResult(fitted, before, gm.grade(fitted), nfev, message)
 
 

@@ -75,6 +75,7 @@ COMPUTE_ONLY = (
     "handrig/cli/test_cli_startup.py", "handrig/app/view/test_view_advice.py",
     "handrig/devices/test_glove_channel_indices.py", "handrig/test_bounded_inputs.py",
     "sim/test_retarget_fit.py", "handrig/cli/test_retarget_fit_command.py",
+    "sim/test_leap_pinch.py",
     "handrig/loop/test_rig_settings.py", "handrig/loop/test_layer_mixer.py",
     "test_boundaries.py", "handrig/app/test_second_vendor_session.py",
     "handrig/cli/test_first_hour_messages.py", "sim/test_openxr_model_agrees.py",

@@ -84,6 +84,9 @@ def register(sub: Any) -> None:
     f.add_argument("--hold", default="", metavar="JOINT,...",
                    help="robot joints to keep as the table has them (all the thumb's: "
                    "no pinch terms)")
+    f.add_argument("--couple", action="store_true",
+                   help="let the thumb joints also read the index and middle fingers' "
+                   "flexion (the thumb closes toward a closing finger)")
     f.add_argument("--max-evaluations", type=positive_int, default=60, metavar="N",
                    help="solver evaluations per stage (default 60)")
     f.add_argument("--json", action="store_true", help="print one JSON object")
@@ -245,11 +248,14 @@ def run_fit(args: argparse.Namespace) -> int:
                               allowed=", ".join(rt.joint_names))
     result = fitter.fit_retarget(rt, rig.robot.model, load_reference().curves,
                                  progress=say, max_evaluations=args.max_evaluations,
-                                 hold=hold)
+                                 hold=hold, couple=args.couple)
     if not args.dry_run:
+        flags = (" --hold " + ",".join(hold) if hold else "") + (
+            " --couple" if args.couple else "")
         header = FIT_HEADER.format(rig=args.rig, name=rig.robot.name or args.rig,
-                                   model=Path(rig.robot.model).name,
-                                   hold=" --hold " + ",".join(hold) if hold else "")
+                                   model=Path(rig.robot.model).name, hold=flags)
+        if args.couple:
+            header += COUPLE_NOTE
         if hold:
             header += HOLD_NOTE.format(joints=", ".join(hold))
         out.write_text(table_text(result.retarget, header))
@@ -268,6 +274,12 @@ def run_fit(args: argparse.Namespace) -> int:
 HOLD_NOTE = """
 Held as they were (not fitted): {joints}.
 """
+COUPLE_NOTE = """
+The thumb's flexion joints also read the index and middle fingers' MCP and PIP
+flexion (--couple; either sign): the thumb closes toward a finger as the finger
+closes, which is how the linear table meets the pinches. Its base (abduction, twist)
+reads only its own curves, at least 0.7 deg per deg.
+"""
 FIST_TARGET = 0.9
 PINCH_TARGET_MM = 10.0
 FIT_HEADER = """\
@@ -280,8 +292,9 @@ Fitted by `handrig retarget fit --rig {rig}{hold}` through the robot's model (Mu
 kinematics, sim/retarget_fit.py): the robot's fingertips follow the human hand
 model's over the reference capture (each tip relative to its digit's base on the
 palm, scaled by the digits' lengths), the thumb tip meets the index and middle tips
-at the hand model's pinches, and each finger closes to 0.95 of its flexion range at
-the human fist. Each joint keeps its sources and the signs of their gains.
+at the hand model's pinches, each finger closes to 0.95 of its flexion range at the
+human fist, and the degrees a joint asks past its range over the capture count
+against the fit. Each joint keeps its sources and the signs of their gains.
 `handrig retarget check --rig {rig}` prints the figures; re-run the fit after changing
 the model or the ranges.
 """

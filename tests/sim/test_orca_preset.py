@@ -98,7 +98,7 @@ def test_demo_robot_tracks_within_3_degrees_and_ends_with_torque_off(
 
 @pytest.mark.parametrize("rig", ["orca", "leap"])
 def test_retarget_check_reports_fists_and_pinches_through_the_model(rig: str) -> None:
-    # issue 38: the shipped tables close the robot's fist at the human's and ORCA's bring
+    # issue 38: the shipped tables close the robot's fist at the human's and bring
     # its tips together at the human's pinches (issue 28 asked that the demo cover 60 % of
     # the index MCP's range; the fitted tables follow the human's kinematics instead)
     out = subprocess.run(
@@ -110,5 +110,4 @@ def test_retarget_check_reports_fists_and_pinches_through_the_model(rig: str) ->
     flagged = any({"demo", "capture"} & set(j["flags"]) for j in joints.values())
     assert out.returncode == (1 if flagged else 0), out.stderr[-2000:]
     assert min(report["fist_closure"].values()) >= 0.9
-    if rig == "orca":  # LEAP's thumb is held at its hand-set rows (their notes say why)
-        assert max(report["pinch_gap_mm"].values()) <= 10.0
+    assert max(report["pinch_gap_mm"].values()) <= 10.0

@@ -21,6 +21,8 @@ from handrig.loop.stats import RunStats
 pytest.importorskip("mujoco")
 FRAMES = 1600  # 8 s at 200 Hz: the recording's first index and thumb motions
 FOLLOWED = (("if_mcp", "riIndexMCPy"), ("th_cmc", "riThumbCMCy"), ("th_axl", "riThumbCMCx"))
+SETTLED_DEG = 2.0  # goal - present of every followed joint: the hand has reached its pose
+SETTLE_S = 1.0  # ... within this of the first read
 
 
 @dataclass
@@ -83,12 +85,18 @@ def _followed(run: Run, parts: app_parts.RigParts) -> dict[str, float]:
     cycle handed the outputs that read)."""
     names = list(parts.pipeline.servo_joints)
     ctl = list(parts.expander.controls)
+    cols = [names.index(joint) for joint, _ in FOLLOWED]
+    # from the first read where the joints have reached their goals: before it they
+    # travel from rest to the hand's first pose (LEAP's thumb rests turned 71 deg in)
+    err = np.abs(run.goals[:, cols] - run.present[:, cols]).max(axis=1)
+    first = int(np.argmax(err < SETTLED_DEG))
+    assert err[first] < SETTLED_DEG and run.read_times[first] - run.read_times[0] < SETTLE_S
     out = {}
     for joint, channel in FOLLOWED:
         x = run.controls[:, ctl.index(channel)]
         assert np.std(x) > 3.0, channel  # the recording moves this channel
-        at_read = np.interp(run.read_times, run.control_times, x)
-        out[joint] = float(np.corrcoef(at_read, run.present[:, names.index(joint)])[0, 1])
+        at_read = np.interp(run.read_times[first:], run.control_times, x)
+        out[joint] = float(np.corrcoef(at_read, run.present[first:, names.index(joint)])[0, 1])
     return out
 
 
