@@ -12,21 +12,23 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_a_short_soak_prints_its_figures_with_no_goal_outside_the_limits() -> None:
-    # 6 s (1200 cycles at 200 Hz, VMC at 60 Hz), a stall every 2 s; servo 4 muted from the
-    # emulator's 3 s to 6 s, about the run's 0.3 s to 3.3 s
+    # 8 s (1600 cycles at 200 Hz, VMC at 60 Hz), a stall every 2 s; servo 4 muted from the
+    # emulator's 5.5 s to 7.5 s: inside the run whether it starts 0.4 s (a quiet machine)
+    # or 4.6 s (CI, beside the compute-only tests) after the emulator; a servo silent at
+    # the start rightly stops the run before torque
     out = subprocess.run(
-        [sys.executable, "-m", "bench", "soak", "--seconds", "6", "--stall-every-s", "2",
-         "--mute", "4@3-6"],
+        [sys.executable, "-m", "bench", "soak", "--seconds", "8", "--stall-every-s", "2",
+         "--mute", "4@5.5-7.5"],
         capture_output=True, text=True, timeout=240, cwd=ROOT)
     text = out.stdout
     assert out.returncode == 0, out.stderr[-2000:]
     cycles = re.search(r"cycles\s+(\d+) in", text)
     assert cycles and int(cycles.group(1)) > 700, text
     assert re.search(r"goals outside\s+0 of [1-9]\d* decoded", text), text
-    assert re.search(r"a 50 ms host stall every 2 s \([23] made\)", text), text
+    assert re.search(r"a 50 ms host stall every 2 s \([2-4] made\)", text), text
     assert "bus injected    " in text and "(no count" not in text, text
     assert re.search(r"rss\s+[\d.]+ MB at the start, [\d.]+ MB at the end; growth", text), text
-    assert re.search(r"stopped\s+6 s done\n", text), text
+    assert re.search(r"stopped\s+8 s done\n", text), text
     assert "torque off      True" in text, text
     # VMC on: the bundles reached a real UDP socket
     vmc = re.search(r"vmc\s+(\d+) datagrams", text)
