@@ -6,14 +6,17 @@ first). A program that commands the robot's own joints (a LeRobot action, a poli
 is turned into curves here, and the loop's own retarget turns them back, so the
 servos see the same limits, slew limit and policies as from a glove.
 
-For each robot joint row with sources ``g`` (a curve is read by one row at most in
-the shipped tables; :func:`check_invertible` says so for a table), the curves are
-``h_i = clip(g_i * t, low_i, high_i)`` with the one scalar ``t`` for which
-``g @ h`` equals the target less the offset: the sum is monotone in ``t``, so a
-bisection finds it. A one-source row is the exact ``(target - offset) / g``. A
-target outside what the clamped curves can reach gets the nearest reachable angle;
-a row without sources is its offset (the loop holds it there). Curves no row reads
-are 0 (the flat hand): the robot does not see them.
+Each curve is solved for by one robot joint row, its *owner*: rows are taken fewest
+sources first (a finger's own joint before LEAP's thumb rows, which also read the
+index and middle flexion), and a row owns the curves no earlier row took
+(:func:`inverse_plan`). A row's target, less its offset and what the curves owned
+by earlier rows give it, is met by its own curves ``h_i = clip(g_i * t, low_i,
+high_i)`` with the one scalar ``t`` that makes the sum right: the sum is monotone in
+``t``, so a bisection finds it. A one-curve row is the exact division. A target
+outside what the clamped curves can reach gets the nearest reachable angle; a row
+without sources is its offset (the loop holds it there). Curves no row reads are 0
+(the flat hand): the robot does not see them. :func:`check_invertible` refuses a
+table with a row that owns no curve (its target would be set by other joints').
 """
 
 from __future__ import annotations
@@ -31,19 +34,34 @@ BISECTIONS = 60
 """Halvings of the scalar's interval: far below a microdegree for any table's gains."""
 
 
-def check_invertible(gain: FloatArray, joint_names: Sequence[str]) -> None:
-    """ConfigError when a curve is read by two robot joints: their targets could then
-    ask the one curve for two angles."""
+def inverse_plan(gain: FloatArray) -> list[tuple[int, NDArray[np.intp], NDArray[np.intp]]]:
+    """``(row, owned curves, curves owned by earlier rows)`` for each row with sources,
+    in the order they are solved (module docstring)."""
     g = np.asarray(gain, dtype=np.float64)
-    shared = np.flatnonzero(np.count_nonzero(g, axis=0) > 1)
-    if shared.size:
-        c = int(shared[0])
-        rows = [joint_names[int(r)] for r in np.flatnonzero(g[:, c])]
-        raise ConfigError("a human curve drives several robot joints: their targets "
-                          "cannot be turned back into one pose",
-                          key=f"joints.{rows[0]}.sources.{hand.CURVE_NAMES[c]}",
-                          value=", ".join(rows),
-                          allowed="each curve a source of one robot joint")
+    counts = np.count_nonzero(g, axis=1)
+    owned = np.zeros(g.shape[1], dtype=bool)
+    plan = []
+    for row in sorted(np.flatnonzero(counts).tolist(), key=lambda r: (counts[r], r)):
+        cols = np.flatnonzero(g[row])
+        mine = cols[~owned[cols]]
+        plan.append((int(row), mine, cols[owned[cols]]))
+        owned[mine] = True
+    return plan
+
+
+def check_invertible(gain: FloatArray, joint_names: Sequence[str]) -> None:
+    """ConfigError when a robot joint reads only curves other joints own: its target
+    could then ask those curves for a second angle."""
+    g = np.asarray(gain, dtype=np.float64)
+    for row, mine, _ in inverse_plan(g):
+        if mine.size == 0:
+            c = int(np.flatnonzero(g[row])[0])
+            rows = [joint_names[int(r)] for r in np.flatnonzero(g[:, c])]
+            raise ConfigError("a human curve drives several robot joints: their targets "
+                              "cannot be turned back into one pose",
+                              key=f"joints.{rows[0]}.sources.{hand.CURVE_NAMES[c]}",
+                              value=", ".join(rows),
+                              allowed="each robot joint with a curve of its own")
 
 
 def human_for_robot(robot_deg: FloatArray, gain: FloatArray, offset_deg: FloatArray,
@@ -56,20 +74,20 @@ def human_for_robot(robot_deg: FloatArray, gain: FloatArray, offset_deg: FloatAr
     lo_all = np.asarray(human_low, dtype=np.float64)
     hi_all = np.asarray(human_high, dtype=np.float64)
     out = np.zeros(g_all.shape[1])
-    for row in range(g_all.shape[0]):
-        cols = np.flatnonzero(g_all[row])
+    for row, cols, fixed in inverse_plan(g_all):
         if cols.size == 0:
             continue
+        want = target[row] - float(g_all[row, fixed] @ out[fixed])
         g, lo, hi = g_all[row, cols], lo_all[cols], hi_all[cols]
         if cols.size == 1:
-            out[cols[0]] = np.clip(target[row] / g[0], lo[0], hi[0])
+            out[cols[0]] = np.clip(want / g[0], lo[0], hi[0])
             continue
         # g_i * clip(g_i t, ...) rises with t; past this span every curve sits at a limit
         span = float(np.max(np.maximum(np.abs(lo), np.abs(hi)) / np.abs(g))) + 1.0
         a, b = -span, span
         for _ in range(BISECTIONS):
             mid = 0.5 * (a + b)
-            if float(g @ np.clip(g * mid, lo, hi)) < target[row]:
+            if float(g @ np.clip(g * mid, lo, hi)) < want:
                 a = mid
             else:
                 b = mid

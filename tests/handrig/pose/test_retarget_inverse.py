@@ -9,7 +9,7 @@ import pytest
 from handrig import hand
 from handrig.config.loading import load_joint_limits
 from handrig.errors import ConfigError
-from handrig.pose.retarget_inverse import check_invertible, human_for_robot
+from handrig.pose.retarget_inverse import check_invertible, human_for_robot, inverse_plan
 from handrig.pose.robot_rig import find_rig, robot_retarget
 
 LIMITS = load_joint_limits()
@@ -34,16 +34,21 @@ def test_targets_from_a_pose_come_back_exactly(preset: str) -> None:
         back = human_for_robot(robot, rt.gain, rt.offset_deg, LOW, HIGH)
         assert np.all(back >= LOW) and np.all(back <= HIGH)
         np.testing.assert_allclose(forward(rt, back)[read], robot[read], atol=1e-6)
-    # a two-source row (LEAP's thumb MCP) is solved, not split naively: ask for the
-    # row's extreme, where one curve alone would have to leave its limits
-    rows = np.flatnonzero(np.count_nonzero(rt.gain, axis=1) > 1)
-    for r in rows:
+    # a row of several curves (LEAP's thumb MCP) is solved, not split naively: ask for
+    # the row's extreme over the curves it owns (the others are set by the joints that
+    # own them), where one curve alone would have to leave its limits
+    zero = np.zeros(len(LOW))
+    for r, mine, fixed in inverse_plan(rt.gain):
+        if mine.size < 2:
+            continue
         g = rt.gain[r]
-        top = rt.offset_deg[r] + float(np.sum(np.where(g > 0, g * HIGH, g * LOW)))
-        robot = forward(rt, np.zeros(len(LOW)))
+        top = rt.offset_deg[r] + float(g[fixed] @ zero[fixed]) + float(
+            np.sum(np.where(g[mine] > 0, g[mine] * HIGH[mine], g[mine] * LOW[mine])))
+        robot = forward(rt, zero)
         robot[r] = top - 1e-3
         back = human_for_robot(robot, rt.gain, rt.offset_deg, LOW, HIGH)
         assert forward(rt, back)[r] == pytest.approx(top - 1e-3, abs=1e-6)
+        np.testing.assert_allclose(back[fixed], zero[fixed], atol=1e-9)  # others kept
 
 
 def test_unreachable_targets_get_the_nearest_and_shared_curves_are_refused() -> None:
