@@ -162,6 +162,22 @@ static int hot_goal(PyObject *servo, uint8_t *m, const uint8_t *data) {
     return 1;
 }
 
+/* servos and mems as fast sequences (new references in *sseq and *mseq, NULL where not
+ * made) of one length: that length, or -1 with the exception set (naming ``who``). */
+static Py_ssize_t servo_tables(PyObject *servos, PyObject *mems, const char *who,
+                               PyObject **sseq, PyObject **mseq) {
+    *sseq = PySequence_Fast(servos, "servos must be a sequence");
+    *mseq = *sseq == NULL ? NULL : PySequence_Fast(mems, "mems must be a sequence");
+    if (*mseq == NULL)
+        return -1;
+    Py_ssize_t count = PySequence_Fast_GET_SIZE(*sseq);
+    if (PySequence_Fast_GET_SIZE(*mseq) != count) {
+        PyErr_Format(PyExc_ValueError, "%s: servos and mems disagree", who);
+        return -1;
+    }
+    return count;
+}
+
 /* write_goals(servos, mems, body, now): body is the Sync Write's ``ID goal(4)`` items,
  * one per servo in order; each servo is heard (last_heard = now) and written. */
 static PyObject *py_write_goals(PyObject *self, PyObject *args) {
@@ -170,12 +186,11 @@ static PyObject *py_write_goals(PyObject *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "OOy*O!:write_goals", &servos, &mems, &body, &PyFloat_Type,
                           &now))
         return NULL;
-    PyObject *sseq = PySequence_Fast(servos, "servos must be a sequence");
-    PyObject *mseq = sseq == NULL ? NULL : PySequence_Fast(mems, "mems must be a sequence");
-    if (mseq == NULL)
+    PyObject *sseq, *mseq;
+    Py_ssize_t count = servo_tables(servos, mems, "write_goals", &sseq, &mseq);
+    if (count < 0)
         goto fail;
-    Py_ssize_t count = PySequence_Fast_GET_SIZE(sseq);
-    if (PySequence_Fast_GET_SIZE(mseq) != count || body.len != count * 5) {
+    if (body.len != count * 5) {
         PyErr_SetString(PyExc_ValueError, "write_goals: servos, mems and body disagree");
         goto fail;
     }
@@ -271,15 +286,10 @@ static PyObject *py_answer_fast_read(PyObject *self, PyObject *args) {
         return NULL;
     double t = PyFloat_AS_DOUBLE(now);
     PyObject *result = NULL;
-    PyObject *sseq = PySequence_Fast(servos, "servos must be a sequence");
-    PyObject *mseq = sseq == NULL ? NULL : PySequence_Fast(mems, "mems must be a sequence");
-    if (mseq == NULL)
+    PyObject *sseq, *mseq;
+    Py_ssize_t count = servo_tables(servos, mems, "answer_fast_read", &sseq, &mseq);
+    if (count < 0)
         goto done;
-    Py_ssize_t count = PySequence_Fast_GET_SIZE(sseq);
-    if (PySequence_Fast_GET_SIZE(mseq) != count) {
-        PyErr_SetString(PyExc_ValueError, "answer_fast_read: servos and mems disagree");
-        goto done;
-    }
     for (Py_ssize_t k = 0; k < count; k++) {
         Py_buffer mem;
         if (table(PySequence_Fast_GET_ITEM(mseq, k), &mem, PyBUF_SIMPLE) < 0)
@@ -377,15 +387,10 @@ static PyObject *py_mark_heard(PyObject *self, PyObject *args) {
                           &baud_index))
         return NULL;
     PyObject *result = NULL;
-    PyObject *sseq = PySequence_Fast(servos, "servos must be a sequence");
-    PyObject *mseq = sseq == NULL ? NULL : PySequence_Fast(mems, "mems must be a sequence");
-    if (mseq == NULL)
+    PyObject *sseq, *mseq;
+    Py_ssize_t count = servo_tables(servos, mems, "mark_heard", &sseq, &mseq);
+    if (count < 0)
         goto done;
-    Py_ssize_t count = PySequence_Fast_GET_SIZE(sseq);
-    if (PySequence_Fast_GET_SIZE(mseq) != count) {
-        PyErr_SetString(PyExc_ValueError, "mark_heard: servos and mems disagree");
-        goto done;
-    }
     for (Py_ssize_t k = 0; k < count; k++) {
         Py_buffer mem;
         if (table(PySequence_Fast_GET_ITEM(mseq, k), &mem, PyBUF_SIMPLE) < 0)

@@ -27,13 +27,12 @@ from pathlib import Path
 import numpy as np
 
 from handrig.app.hands import SessionParts
-from handrig.app.takes import take_kind
+from handrig.app.takes import performance_poses, take_kind
 from handrig.config.layer_groups import DEFAULT_FADE_S, FADE_RANGE_S, OFF, group_joints
 from handrig.errors import ConfigError, DataError
 from handrig.loop.layers import LayerCommand, LayerOff, LayerOn, LayerPlan, LayerStatus
 from handrig.loop.rig import Rig
-from handrig.outputs.recorder import load_performance
-from handrig.pose.pipeline import POSE_NAMES, POSE_SIZE, FloatArray, PosePipeline, pose_index
+from handrig.pose.pipeline import POSE_NAMES, FloatArray, PosePipeline, pose_index
 
 _WRIST = np.array([pose_index(n) for n in POSE_NAMES if "Wrist" in n], dtype=np.intp)
 
@@ -101,16 +100,10 @@ def load_layer_take(name: str, path: str | Path, *, key: str = "--layer",
         raise ConfigError(f"{p} is a glove take: a layer plays a performance (the pose)",
                           file=file, key=key, value=name,
                           allowed="a take recorded with --record (.csv or .bvh)")
-    t, poses, wrist = load_performance(p)
-    full = np.zeros((len(t), POSE_SIZE))
-    full[:, :poses.shape[1]] = poses
-    if wrist is not None:
-        full[:, poses.shape[1]:] = wrist
-    keep = np.append(np.diff(t) > 0, True)  # frames sharing a time: the last one
-    t, full = t[keep], full[keep]
+    t, full, has_wrist = performance_poses(p)
     if len(t) < 2:
         raise DataError(f"{p}: {len(t)} frame: a layer needs two frames or more")
-    return LayerTake(name, p, t - t[0], np.ascontiguousarray(full), wrist is not None)
+    return LayerTake(name, p, t - t[0], np.ascontiguousarray(full), has_wrist)
 
 
 class LayerControl:

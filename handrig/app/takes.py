@@ -97,6 +97,19 @@ def open_glove_take(path: str, glove: GloveSource, cfg: GloveConfig, *, source: 
     return take
 
 
+def performance_poses(path: Path) -> tuple[np.ndarray, np.ndarray, bool]:
+    """A performance take (``--record``, CSV or BVH) as times (s), whole poses
+    (``(N, POSE_SIZE)``: the curves, then the wrist where the take has it, else 0; of
+    frames sharing a time, the last one) and whether it has the wrist."""
+    t, poses, wrist = load_performance(path)
+    full = np.zeros((len(t), POSE_SIZE))
+    full[:, :poses.shape[1]] = poses
+    if wrist is not None:
+        full[:, poses.shape[1]:] = wrist
+    keep = np.append(np.diff(t) > 0, True)
+    return t[keep], full[keep], wrist is not None
+
+
 def take_kind(path: str | Path) -> TakeKind:
     """A glove take (the glove recording's first line) or a performance (.csv or .bvh);
     DataError naming the file when it cannot be read."""
@@ -160,13 +173,7 @@ def load_play_take(path: str | Path, cfg: GloveConfig, *, speed: float = 1.0,
         t, raw, quat, buttons = rec.t_s, rec.raw, rec.quat_xyzw, rec.buttons
         names, rate = rec.channel_names, rec.nominal_rate_hz
     else:
-        t, poses, wrist = load_performance(p)
-        raw = np.zeros((len(t), POSE_SIZE))
-        raw[:, :poses.shape[1]] = poses
-        if wrist is not None:
-            raw[:, poses.shape[1]:] = wrist
-        keep = np.append(np.diff(t) > 0, True)  # frames sharing a time: the last one
-        t, raw = t[keep], raw[keep]
+        t, raw, _ = performance_poses(p)
         quat, buttons, names, rate = None, np.zeros(len(t), dtype=np.int64), POSE_NAMES, 0.0
     if len(t) < 2:
         raise DataError(f"{p}: {len(t)} frame: a take needs two frames or more to play")

@@ -44,6 +44,7 @@ from handrig.clock import Clock, MonotonicClock
 from handrig.errors import ConfigError
 from handrig.hand import Hand
 from handrig.outputs.base import Output, OutputStatus
+from handrig.outputs.vmc import parse_host_port
 from handrig.pose.hand_geometry import REFERENCE_HAND_LENGTH_M
 from handrig.pose.openxr_hand import (
     JOINT_COUNT,
@@ -205,15 +206,4 @@ class OpenXrSender(Output):
 
 def parse_target(text: str) -> tuple[str, int]:
     """``--openxr``'s ``HOST:PORT`` (or ``HOST``, ``:PORT``) -> (host, port)."""
-    host, sep, port_text = text.rpartition(":")
-    if not sep:
-        host, port_text = text, str(DEFAULT_PORT)
-    host = host or "127.0.0.1"
-    try:
-        port = int(port_text)
-    except ValueError:
-        port = -1
-    if not 0 < port < 65536 or not host:
-        raise ConfigError("not a UDP destination", key="--openxr", value=text,
-                          allowed=f"HOST:PORT with PORT 1..65535, e.g. 127.0.0.1:{DEFAULT_PORT}")
-    return host, port
+    return parse_host_port(text, DEFAULT_PORT, key="--openxr")

@@ -255,8 +255,10 @@ class _BundleTemplate:
         return self.buffer
 
 
-def parse_host_port(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
-    """``"HOST:PORT"``, ``"HOST"`` or ``":PORT"`` -> (host, port); ConfigError otherwise."""
+def parse_host_port(text: str, default_port: int = DEFAULT_PORT, *,
+                    key: str = "--vmc") -> tuple[str, int]:
+    """``"HOST:PORT"``, ``"HOST"`` or ``":PORT"`` -> (host, port); ConfigError naming
+    ``key`` otherwise (the UDP outputs: VMC, the OpenXR hand joints)."""
     host, sep, port_text = text.rpartition(":")
     if not sep:
         host, port_text = text, str(default_port)
@@ -266,8 +268,8 @@ def parse_host_port(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, i
     except ValueError:
         port = -1
     if not 0 < port < 65536 or not host:
-        raise ConfigError("not a UDP destination", key="--vmc", value=text,
-                          allowed=f"HOST:PORT with PORT 1..65535, e.g. 127.0.0.1:{DEFAULT_PORT}")
+        raise ConfigError("not a UDP destination", key=key, value=text,
+                          allowed=f"HOST:PORT with PORT 1..65535, e.g. 127.0.0.1:{default_port}")
     return host, port
 
 
