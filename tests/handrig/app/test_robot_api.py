@@ -91,7 +91,8 @@ def test_a_sigterm_inside_the_block_turns_torque_off() -> None:
     import signal
 
     script = (
-        "import sys, time\n"
+        "import faulthandler, signal, sys, time\n"
+        "faulthandler.register(signal.SIGUSR1, all_threads=True)\n"
         "from handrig.app.robot_api import RobotHand\n"
         "robot = RobotHand('leap', port='sim')\n"
         "try:\n"
@@ -108,7 +109,14 @@ def test_a_sigterm_inside_the_block_turns_torque_off() -> None:
         first = proc.stdout.readline()
         assert first.strip() == "torque True", (first, proc.stderr.read() if proc.poll() else "")
         proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=30)
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:  # where it hangs: every thread's stack
+            proc.send_signal(signal.SIGUSR1)
+            time.sleep(1.0)
+            proc.kill()
+            out, err = proc.communicate()
+            raise AssertionError(f"no exit 30 s after SIGTERM:\n{out}\n{err[-6000:]}") from None
     finally:
         if proc.poll() is None:
             proc.kill()
