@@ -109,6 +109,7 @@ NO_LOOP = (
 # of their time is LeRobot's and torch's imports. They run beside the realtime tests too.
 BESIDE = (
     "handrig/app/lerobot/test_lerobot_record.py", "handrig/app/lerobot/test_lerobot_readme.py",
+    "handrig/app/lerobot/test_lerobot_teleoperate.py",
 )
 TESTS = Path(__file__).resolve().parent
 
