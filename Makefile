@@ -49,17 +49,18 @@ $(ORCA_VENV)/.installed:
 	@$(ORCA_VENV)/bin/python -m pip install --quiet '$(ORCA_CORE)'
 	@touch $@
 
-# LeRobot beside handrig in .venv (pyproject's [lerobot] extra) and the two plugin
-# distributions LeRobot discovers by name (plugins/: lerobot_teleoperator_handrig,
+# LeRobot beside handrig in .venv: the [lerobot] extra (setup.py), which names LeRobot and
+# the two plugin distributions LeRobot discovers by name (plugins/: lerobot_teleoperator_handrig,
 # lerobot_robot_handrig; docs/lerobot.md): lerobot-record, -replay and -teleoperate then
 # find handrig_glove, handrig_leap and handrig_orca, and tests/handrig/app/lerobot run
 # instead of skipping. Downloads torch (LeRobot 0.4 allows < 2.11: PyPI's CUDA build).
+# pip installs the plugins as copies: a change under plugins/ is installed again here.
 LEROBOT_STAMP := $(VENV)/.lerobot-installed
 LEROBOT_PLUGINS := plugins/lerobot_teleoperator_handrig plugins/lerobot_robot_handrig
 .PHONY: lerobot-deps
 lerobot-deps: $(LEROBOT_STAMP)
-$(LEROBOT_STAMP): $(STAMP) $(foreach p,$(LEROBOT_PLUGINS),$(p)/pyproject.toml)
-	$(BIN)/python -m pip install --quiet -e '.[dev,lerobot]' $(foreach p,$(LEROBOT_PLUGINS),-e $(p))
+$(LEROBOT_STAMP): $(STAMP) $(foreach p,$(LEROBOT_PLUGINS),$(p)/pyproject.toml $(wildcard $(p)/lerobot_*/*.py))
+	$(BIN)/python -m pip install --quiet -e '.[dev,lerobot]'
 	@touch $@
 
 # Offscreen rendering (handrig demo --render) needs EGL or OSMesa; Debian packages.

@@ -31,6 +31,7 @@ import contextlib
 import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 
@@ -58,6 +59,24 @@ SETTLE_S = 0.3
 :data:`SETTLE_DEG` over this long has stopped short (held by a contact)."""
 SETTLE_DEG = 0.3
 Curves = Mapping[str, float] | Sequence[float] | np.ndarray
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One read of the servos by the loop, as :meth:`RobotHand.reading` gives the newest.
+
+    ``t_s``: when the read ended, on the loop's clock (``RobotHand(clock=...)``, by
+    default :class:`~handrig.clock.MonotonicClock`: ``time.perf_counter``). By robot
+    joint: ``positions_deg`` and ``currents_ma`` (NaN where the loop reads positions
+    only) as that read left them, NaN where the servo's last valid reading was older
+    than ``[silence] hold_s`` at ``t_s``; ``ages_s``: how long before ``t_s`` each
+    value was read (0 for a servo that answered this read; the others of a read of a
+    part, ``[bus] read_parts``, answered an earlier one)."""
+
+    t_s: float
+    positions_deg: dict[str, float]
+    currents_ma: dict[str, float]
+    ages_s: dict[str, float]
 
 
 class RobotHand:
@@ -299,35 +318,43 @@ class RobotHand:
         return {name: float(goals[i]) if i < len(goals) else math.nan
                 for i, name in enumerate(self.joint_names)}
 
-    def present_deg(self) -> dict[str, float]:
-        """The robot's joint angles as the loop last read them (NaN: no reading yet, or
-        none for longer than ``[silence] hold_s``). The loop reads the servos every
-        ``[bus] read_every`` cycles (a part of them each time with ``read_parts``)."""
+    def reading(self) -> Reading | None:
+        """The loop's newest read of the servos (None before its first): taken as the
+        read ended, not the telemetry snapshot (published at most 30 times a second), and
+        never an average. The loop reads the servos every ``[bus] read_every`` cycles (a
+        part of them each time with ``read_parts``): at the rig's rate that is how old
+        the newest read can be (20 ms on the LEAP preset: 4 cycles at 200 Hz)."""
         loop = self._open_loop()
         loop.check()
-        snap = loop.snapshot()
-        pos = snap.positions_deg if snap is not None else ()
-        ages = snap.reading_ages_s if snap is not None else ()
-        out: dict[str, float] = {}
-        for i, name in enumerate(self.joint_names):
-            value = pos[i] if i < len(pos) and i < len(ages) else None
-            fresh = value is not None and ages[i] <= self.rig.silence.hold_s
-            out[name] = float(value) if fresh and value is not None else math.nan
-        return out
+        state = loop.newest_reading()
+        if state is None:
+            return None
+        ages = np.asarray(state.age_s, dtype=np.float64)
+        fresh = ages <= self.rig.silence.hold_s
+        pos = np.where(fresh, np.asarray(state.positions_deg, dtype=np.float64), math.nan)
+        cur = np.where(fresh, np.asarray(state.currents_ma, dtype=np.float64), math.nan)
+        names = self.joint_names
+        return Reading(t_s=float(state.timestamp_s),
+                       positions_deg=dict(zip(names, pos.tolist(), strict=True)),
+                       currents_ma=dict(zip(names, cur.tolist(), strict=True)),
+                       ages_s=dict(zip(names, ages.tolist(), strict=True)))
+
+    def present_deg(self) -> dict[str, float]:
+        """The robot's joint angles as the loop last read them (:meth:`reading`; NaN: no
+        reading yet, or none for longer than ``[silence] hold_s``)."""
+        reading = self.reading()
+        if reading is None:
+            return dict.fromkeys(self.joint_names, math.nan)
+        return reading.positions_deg
 
     def present_current_ma(self) -> dict[str, float]:
         """The servos' currents (mA) as the loop last read them, by robot joint; NaN where
         the loop reads positions only (``[bus]`` and the rate leave no time for more) or
         no reading is fresh (as :meth:`present_deg`)."""
-        snap = self._open_loop().snapshot()
-        cur = snap.currents_ma if snap is not None else ()
-        ages = snap.reading_ages_s if snap is not None else ()
-        out: dict[str, float] = {}
-        for i, name in enumerate(self.joint_names):
-            value = cur[i] if i < len(cur) and i < len(ages) else None
-            fresh = value is not None and ages[i] <= self.rig.silence.hold_s
-            out[name] = float(value) if fresh and value is not None else math.nan
-        return out
+        reading = self.reading()
+        if reading is None:
+            return dict.fromkeys(self.joint_names, math.nan)
+        return reading.currents_ma
 
     # ---------------------------------------------------------------- helpers
 

@@ -30,7 +30,7 @@ from handrig.app.parts import RigParts
 from handrig.app.takes import pose_parts
 from handrig.clock import Clock
 from handrig.devices.glove.source import GloveSample, GloveSource, GloveStats
-from handrig.devices.servo.bus import ServoBus
+from handrig.devices.servo.bus import ServoBus, ServoState
 from handrig.errors import HandrigError
 from handrig.loop.rig import Rig
 from handrig.loop.telemetry import LoopSnapshot
@@ -146,7 +146,14 @@ class RobotLoop:
                                f"{self.rig.machine.stop_reason or 'it ended'}")
 
     def snapshot(self) -> LoopSnapshot | None:
+        """The telemetry snapshot (published at most 30 times a second)."""
         return self.rig.telemetry.latest()
+
+    def newest_reading(self) -> ServoState | None:
+        """The newest read of the servos, whole (each read is a state of its own, swapped
+        in by one reference assignment on the loop's thread); None before the first."""
+        state: ServoState | None = self.rig.last_state
+        return state
 
     def stop(self, *, ease: bool) -> None:
         """End the loop (``ease``: to the relaxed pose first), then torque off."""

@@ -56,6 +56,10 @@ class FrameGrid:
         """Runs begun (a first call, or one after a gap)."""
         self.reanchored = 0
         """Times the caller fell more than ``max_lag_s`` behind its grid."""
+        self.early = 0
+        """Calls that came more than half a frame before their frame's time (a caller
+        asking faster than ``fps``): each is re-anchored at the call, so gets its own
+        time (the newest pose), and is counted here, not in :attr:`reanchored`."""
         self.worst_lag_s = 0.0
         """The latest a call came after its frame's time, over the current run."""
 
@@ -70,7 +74,10 @@ class FrameGrid:
         due = self._anchor + self._k * self.period_s  # type: ignore[operator]
         lag = now - due
         if lag > self.max_lag_s or lag < -0.5 * self.period_s:
-            self.reanchored += 1
+            if lag > 0.0:
+                self.reanchored += 1
+            else:
+                self.early += 1
             self._start(now)
             due, lag = now, 0.0
         self.worst_lag_s = max(self.worst_lag_s, lag)

@@ -7,16 +7,18 @@ behind the safe-torque checks, the limits, slew limit, watchdog, ``[silence]`` a
 ``[heat]`` policies of the rig file) and starts the show's realtime loop in a thread;
 :meth:`~HandRobot.send` sets the target that loop follows at the rig's rate
 (``[loop] rate_hz``), no bus write of its own; :meth:`~HandRobot.observation` is the
-loop's last reading; :meth:`~HandRobot.disconnect` eases to the relaxed pose and turns
-torque off. Joint values are degrees in the robot model's convention, named
-``<joint>.pos`` (currents ``<joint>.current``, mA, where the loop reads them).
+loop's newest read of the servos (with the time it ended);
+:meth:`~HandRobot.disconnect` eases to the relaxed pose and turns torque off. Joint
+values are degrees in the robot model's convention, named ``<joint>.pos`` (currents
+``<joint>.current``, mA, where the loop reads them).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
-from handrig.app.robot_api import RobotHand
+from handrig.app.robot_api import Reading, RobotHand
 from handrig.errors import ConfigError, HandrigError
 
 POS = ".pos"
@@ -32,6 +34,8 @@ class HandRobot:
         self.hand = RobotHand(rig, port=port)
         self.joint_names = self.hand.joint_names
         self.reads_current = self.hand.reads_current
+        self.observed: Reading | None = None
+        """The read the last :meth:`observation` gave (None before one)."""
         self._open = False
 
     @property
@@ -67,11 +71,23 @@ class HandRobot:
         return {name: float(t) for name, t in zip(self.action_names, targets, strict=True)}
 
     def observation(self) -> dict[str, float]:
-        """The loop's last reading: positions (NaN: no fresh reading) and currents."""
-        out = {j + POS: v for j, v in self.hand.present_deg().items()}
+        """The loop's newest read of the servos (:meth:`RobotHand.reading`, not a
+        snapshot, not an average): positions (NaN: no fresh reading) and currents;
+        :attr:`observed_at_s` is when that read ended."""
+        reading = self.hand.reading()
+        self.observed = reading
+        nan = dict.fromkeys(self.joint_names, math.nan)
+        out = {j + POS: v for j, v in (reading.positions_deg if reading else nan).items()}
         if self.reads_current:
-            out.update({j + CURRENT: v for j, v in self.hand.present_current_ma().items()})
+            out.update({j + CURRENT: v
+                        for j, v in (reading.currents_ma if reading else nan).items()})
         return out
+
+    @property
+    def observed_at_s(self) -> float:
+        """When the read the last :meth:`observation` gave ended, on the loop's clock
+        (``time.perf_counter``); NaN before one."""
+        return self.observed.t_s if self.observed is not None else math.nan
 
     def goals(self) -> dict[str, float]:
         """The goals the loop last sent to the servos, by ``<joint>.pos``."""

@@ -78,6 +78,7 @@ class GloveTeleop:
         self._stream: GloveStream | None = None
         self._silent = False
         self._reanchored_seen = 0
+        self._early_said = False
 
     # ------------------------------------------------------------- calibration
 
@@ -187,6 +188,21 @@ class GloveTeleop:
 
     # ------------------------------------------------------------------ action
 
+    def _say_off_grid(self, grid: FrameGrid) -> None:
+        """Log a call the grid re-anchored: each time the caller fell behind, once for
+        a caller that asks faster than the grid (each call then gets the newest pose)."""
+        if grid.reanchored > self._reanchored_seen:
+            self._reanchored_seen = grid.reanchored
+            log.warning("the caller fell more than %.0f ms behind its %g fps frame grid: "
+                        "re-anchored (%d times so far); frames around it are not evenly "
+                        "timed", grid.max_lag_s * 1e3, 1.0 / grid.period_s, grid.reanchored)
+        if grid.early and not self._early_said:
+            self._early_said = True
+            log.warning("asked more often than the %g fps frame grid: each call gets the "
+                        "newest pose; set --teleop.fps to the caller's frame rate (--fps "
+                        "of lerobot-teleoperate, --dataset.fps of lerobot-record)",
+                        1.0 / grid.period_s)
+
     def action(self) -> dict[str, float]:
         """The pose at this call's frame time (``fps`` given) or now: the newest sample
         at or before it, through the pipeline. A glove silent for longer than the rig's
@@ -200,12 +216,8 @@ class GloveTeleop:
         t = self.grid.frame_time(now) if self.grid is not None else now
         if t > now:
             clock.sleep_until(t)
-        if self.grid is not None and self.grid.reanchored > self._reanchored_seen:
-            self._reanchored_seen = self.grid.reanchored
-            log.warning("the caller fell more than %.0f ms behind its %g fps frame grid: "
-                        "re-anchored (%d times so far); frames around it are not evenly "
-                        "timed", self.grid.max_lag_s * 1e3, 1.0 / self.grid.period_s,
-                        self.grid.reanchored)
+        if self.grid is not None:
+            self._say_off_grid(self.grid)
         got = stream.pose_at(t)
         timeout_s = self.glove_timeout_s
         if got is None or t - got[0] > timeout_s:

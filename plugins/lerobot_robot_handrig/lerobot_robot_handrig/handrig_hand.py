@@ -18,7 +18,7 @@ log = logging.getLogger(__name__)
 class HandrigHand(Robot):
     """A robot-hand preset driven by handrig's realtime loop in a thread of its own:
     :meth:`send_action` sets the target the loop follows at the rig's rate (no bus write
-    per call), :meth:`get_observation` is the loop's last reading. Joint values are
+    per call), :meth:`get_observation` is the loop's newest read. Joint values are
     degrees (the robot model's convention), ``<joint>.pos``; ``<joint>.current`` (mA)
     where the loop reads currents."""
 
@@ -63,7 +63,15 @@ class HandrigHand(Robot):
         """Nothing beyond the rig file: connect() commissions the servos from it."""
 
     def get_observation(self) -> dict[str, Any]:
+        """The loop's newest read of the servos (not a snapshot, not an average); its
+        time is :attr:`observation_time_s`."""
         return dict(self.hand.observation())
+
+    @property
+    def observation_time_s(self) -> float:
+        """When the read the last :meth:`get_observation` gave ended (``time.perf_counter``,
+        LeRobot's loop clock too); NaN before one."""
+        return self.hand.observed_at_s
 
     def send_action(self, action: dict[str, Any]) -> dict[str, Any]:
         return dict(self.hand.send(action))
