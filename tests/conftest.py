@@ -124,7 +124,6 @@ BESIDE = (
     # tracking bound holds at load 11 (tests/sim/test_orca_preset.py)
     "handrig/app/test_robot_api.py", "handrig/app/test_robot_api_moves.py",
     "sim/test_orca_preset.py",
-
     "handrig/app/lerobot/test_lerobot_teleoperate.py",
 )
 TESTS = Path(__file__).resolve().parent
