@@ -6,7 +6,9 @@ seconds since the run started, ``pose_deg`` the full pose
 (:data:`handrig.pose.pipeline.POSE_NAMES` order, degrees). The call runs on the
 loop's thread and must not block (a recorder queues the frame, a network sender
 drops it). ``status()`` may be called from any thread and returns a frozen record;
-the panel and the telemetry read only that.
+the panel and the telemetry read only that. What the panel shows of an output is its
+status's :class:`PanelCell` and what the run summary says is its :meth:`Output.summary`:
+an output owns both, so a new one needs no branch in the panel or the summary.
 """
 
 from __future__ import annotations
@@ -19,6 +21,29 @@ import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class PanelCell:
+    """An output's place on the panel's outputs line, as data (the panel formats it).
+
+    ``label``: a short name ("VMC", "rec"; "" shows nothing); ``target``: its address or
+    file, shortened to fit with its end kept; then the figures it has: the recent rate
+    of its ``frames_written`` when ``rate`` (the panel fills in ``rate_hz``), its
+    ``size_bytes`` on disk, ``duration_s`` of motion, ``frames``; ``errors`` and ``alert``
+    (why it stopped) in red; ``ok`` False shows it in yellow (a timecode not locked).
+    """
+
+    label: str
+    target: str = ""
+    rate: bool = False
+    rate_hz: float = float("nan")
+    size_bytes: int | None = None
+    duration_s: float | None = None
+    frames: int | None = None
+    errors: int = 0
+    alert: str = ""
+    ok: bool = True
 
 
 @dataclass(frozen=True)
@@ -39,6 +64,15 @@ class OutputStatus:
     last_error: str = ""
     stopped_reason: str = ""
     duration_s: float = 0.0
+    panel: PanelCell | None = None  # what the panel shows (None: :meth:`cell`'s default)
+
+    def cell(self) -> PanelCell:
+        """What the panel shows of this output: its own ``panel``, else its name, its
+        file or address, its errors and why it stopped."""
+        if self.panel is not None:
+            return self.panel
+        return PanelCell(self.name, self.path or self.address, errors=self.errors,
+                         alert=self.stopped_reason)
 
 
 class Output(ABC):

@@ -33,7 +33,7 @@ import numpy as np
 from handrig.devices.glove import GloveSample
 from handrig.devices.glove_recording import MAGIC, QUAT_COLUMNS
 from handrig.errors import DataError
-from handrig.outputs.base import FloatArray, Output, OutputStatus
+from handrig.outputs.base import FloatArray, Output, OutputStatus, PanelCell
 from handrig.outputs.recorder.formats import check_new_take, datasync, partial_path
 
 TIME_STEP_S = 1e-6  # the file's time resolution (6 decimals)
@@ -220,7 +220,9 @@ class GloveTake(Output):
                             frames_written=self.frames_written,
                             bytes_written=self.bytes_written,
                             frames_dropped=self.frames_dropped, stopped_reason=self.error,
-                            duration_s=self.duration_s)
+                            duration_s=self.duration_s,
+                            panel=PanelCell("glove", str(self.path),
+                                            frames=self.frames_written, alert=self.error))
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``glove_take``: the take's path, frames, time span, bytes, why it stopped."""

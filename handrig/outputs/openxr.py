@@ -43,7 +43,7 @@ from handrig import hand as vocab
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import ConfigError
 from handrig.hand import Hand
-from handrig.outputs.base import Output, OutputStatus
+from handrig.outputs.base import Output, OutputStatus, PanelCell
 from handrig.outputs.vmc import parse_host_port
 from handrig.pose.hand_geometry import REFERENCE_HAND_LENGTH_M
 from handrig.pose.openxr_hand import (
@@ -181,7 +181,8 @@ class OpenXrSender(Output):
         return OutputStatus(
             kind="openxr", name="OpenXR hands", address=f"{self.address[0]}:{self.address[1]}",
             frames_written=self.frames_sent, bytes_written=self.bytes_sent,
-            errors=self.errors, last_error=self.last_error)
+            errors=self.errors, last_error=self.last_error,
+            panel=PanelCell("XR", f"{self.address[0]}:{self.address[1]}", errors=self.errors))
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``openxr``: the target, frames sent (a datagram per hand each), their rate over

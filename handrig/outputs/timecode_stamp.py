@@ -36,7 +36,7 @@ from handrig.config import bounded
 from handrig.devices.timecode.ltc import RATES, FrameRate, Timecode
 from handrig.devices.timecode.reader import TimecodeReader
 from handrig.errors import DataError
-from handrig.outputs.base import FloatArray, Output, OutputStatus
+from handrig.outputs.base import FloatArray, Output, OutputStatus, PanelCell
 from handrig.outputs.recorder.formats import check_new_take, datasync
 
 MAGIC = "# handrig timecode stamps 1"
@@ -130,9 +130,11 @@ class TimecodeStamp(Output):
             self.error = f"timecode stamps stopped: {exc.strerror}"
 
     def status(self) -> OutputStatus:
-        return OutputStatus("timecode", self.reader.describe(self.clock.now()),
-                            path=str(self.path or ""), frames_written=self.frames_locked,
-                            stopped_reason=self.error)
+        said = self.reader.describe(self.clock.now())  # "01:00:00:12 @25 locked", "lost ..."
+        return OutputStatus("timecode", said, path=str(self.path or ""),
+                            frames_written=self.frames_locked, stopped_reason=self.error,
+                            panel=PanelCell("TC", said, ok=said.endswith("locked"),
+                                            alert=self.error))
 
     def close(self) -> str:
         if not self._closed:

@@ -62,7 +62,7 @@ from handrig import hand
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import ConfigError
 from handrig.outputs import skeleton
-from handrig.outputs.base import Output, OutputStatus
+from handrig.outputs.base import Output, OutputStatus, PanelCell
 from handrig.outputs.skeleton import Anat
 
 DEFAULT_PORT = 39539
@@ -368,7 +368,9 @@ class VmcSender(Output):
         return OutputStatus(
             kind="vmc", name="VMC", address=f"{self.address[0]}:{self.address[1]}",
             frames_written=self.bundles_sent, bytes_written=self.bytes_sent,
-            errors=self.errors, last_error=self.last_error)
+            errors=self.errors, last_error=self.last_error,
+            panel=PanelCell("VMC", f"{self.address[0]}:{self.address[1]}", rate=True,
+                            errors=self.errors))
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``vmc``: the target, bundles sent, their rate over the run, send errors."""

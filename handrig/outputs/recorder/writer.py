@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig.errors import DataError
-from handrig.outputs.base import Output, OutputStatus
+from handrig.outputs.base import Output, OutputStatus, PanelCell
 from handrig.outputs.recorder.bvh_take import BvhTake
 from handrig.outputs.recorder.csv_take import CsvTake
 from handrig.outputs.recorder.formats import (
@@ -191,7 +191,10 @@ class Recorder(Output):
             frames_written=self.frames_written, bytes_written=self.bytes_written,
             frames_dropped=self.frames_dropped, errors=int(self.error is not None),
             last_error=error, stopped_reason=self.stopped_reason,
-            duration_s=self.duration_s)
+            duration_s=self.duration_s,
+            panel=PanelCell("rec", str(self.path), size_bytes=self.bytes_written,
+                            duration_s=self.duration_s,
+                            alert=self.stopped_reason.removeprefix("recording ")))
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``recording``: the take's path, format, frames, performance time, bytes,
