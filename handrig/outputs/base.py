@@ -23,6 +23,12 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 
+SUMMARY_KEYS_WHEN_OFF: tuple[str, ...] = ("vmc", "recording")
+"""The run summary's ``outputs`` has had these keys from the start, None when that output
+is off (``--json`` readers may count on them); every other output's key is there only
+when it ran."""
+
+
 @dataclass(frozen=True)
 class PanelCell:
     """An output's place on the panel's outputs line, as data (the panel formats it).
@@ -91,10 +97,15 @@ class Output(ABC):
         return None
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
-        """This output's part of the run summary: (its key, its figures, JSON-able).
-        ``duration_s``: how long the run lasted. Default: the status under its kind."""
+        """This output's part of the run summary: (its key, its figures, JSON-able), the
+        figures' ``said`` the line a person reads. ``duration_s``: how long the run
+        lasted. Default: the status under its kind."""
         st = self.status()
+        errors = f", {st.errors} errors" if st.errors else ""
+        stopped = f" ({st.stopped_reason})" if st.stopped_reason else ""
         return st.kind, {"name": st.name, "path": st.path, "address": st.address,
                          "frames": st.frames_written, "bytes": st.bytes_written,
                          "frames_dropped": st.frames_dropped, "errors": st.errors,
-                         "stopped_reason": st.stopped_reason}
+                         "stopped_reason": st.stopped_reason,
+                         "said": f"{st.name} {st.path or st.address}: {st.frames_written}"
+                                 f" frames{errors}{stopped}"}

@@ -227,10 +227,13 @@ class GloveTake(Output):
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``glove_take``: the take's path, frames, time span, bytes, why it stopped."""
         st = self.status()
+        stopped = f" ({st.stopped_reason})" if st.stopped_reason else ""
         return "glove_take", {
             "path": st.path, "frames": st.frames_written,
             "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
+            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason,
+            "said": f"glove take {st.path}: {st.frames_written} frames,"
+                    f" {st.duration_s:.1f} s{stopped}"}
 
     def close(self) -> str:
         """Write what is left, close the file and name it ``path`` (a file that appeared

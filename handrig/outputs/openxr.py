@@ -189,10 +189,13 @@ class OpenXrSender(Output):
         the run, send errors."""
         st = self.status()
         sent = st.frames_written
+        rate_hz = round(sent / duration_s, 1) if duration_s > 0 else None
+        said = (f"OpenXR hand joints to {st.address}: {sent} frames"
+                + (f", {rate_hz} Hz" if rate_hz is not None else "")
+                + (f", {st.errors} send errors" if st.errors else ""))
         return "openxr", {"target": st.address, "frames_sent": sent,
-                          "hands": [h for h, *_ in self._hands],
-                          "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
-                          "errors": st.errors, "last_error": st.last_error}
+                          "hands": [h for h, *_ in self._hands], "rate_hz": rate_hz,
+                          "errors": st.errors, "last_error": st.last_error, "said": said}
 
     def close(self) -> None:
         """Close the socket; further sends count as errors."""

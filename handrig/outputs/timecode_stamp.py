@@ -152,12 +152,19 @@ class TimecodeStamp(Output):
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         st = self.reader.stats()
+        stamps, failure = str(self.path or ""), st.failure or self.error
+        said = (f"timecode {self.reader.name}: {st.frames} LTC frames, {st.jumps} jumps,"
+                f" {st.losses} losses"
+                + (f", {self.frames_locked} of {self.frames} frames stamped in {stamps}"
+                   if stamps else "")
+                + (f", {self.first} .. {self.last}" if self.first else "")
+                + (f" ({failure})" if failure else ""))
         return "timecode", {
-            "source": self.reader.name, "stamps": str(self.path or ""),
+            "source": self.reader.name, "stamps": stamps,
             "frames": self.frames, "frames_stamped": self.frames_locked,
             "first": self.first, "last": self.last, "ltc_frames": st.frames,
             "jumps": st.jumps, "losses": st.losses, "bad_frames": st.bad_frames,
-            "failure": st.failure or self.error}
+            "failure": failure, "said": said}
 
 
 @dataclass(frozen=True)

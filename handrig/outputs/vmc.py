@@ -376,9 +376,12 @@ class VmcSender(Output):
         """``vmc``: the target, bundles sent, their rate over the run, send errors."""
         st = self.status()
         sent = st.frames_written
-        return "vmc", {"target": st.address, "bundles_sent": sent,
-                       "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
-                       "errors": st.errors, "last_error": st.last_error}
+        rate_hz = round(sent / duration_s, 1) if duration_s > 0 else None
+        said = (f"VMC to {st.address}: {sent} bundles"
+                + (f", {rate_hz} Hz" if rate_hz is not None else "")
+                + (f", {st.errors} send errors" if st.errors else ""))
+        return "vmc", {"target": st.address, "bundles_sent": sent, "rate_hz": rate_hz,
+                       "errors": st.errors, "last_error": st.last_error, "said": said}
 
     def close(self) -> None:
         """Close the socket; further sends count as errors."""

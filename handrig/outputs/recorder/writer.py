@@ -200,10 +200,16 @@ class Recorder(Output):
         """``recording``: the take's path, format, frames, performance time, bytes,
         frames dropped and why it stopped early (if it did)."""
         st = self.status()
+        dropped = (f", {st.frames_dropped} frames dropped (disk too slow)"
+                   if st.frames_dropped else "")
+        if st.stopped_reason:
+            dropped = f", {st.frames_dropped} frames not recorded: {st.stopped_reason}"
         return "recording", {
             "path": st.path, "format": st.name, "frames": st.frames_written,
             "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
+            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason,
+            "said": f"recording {st.path}: {st.frames_written} frames, {st.duration_s:.1f} s,"
+                    f" {st.bytes_written} bytes{dropped}"}
 
     def _writer(self) -> None:
         while True:
