@@ -7,8 +7,10 @@ seconds since the run started, ``pose_deg`` the full pose
 loop's thread and must not block (a recorder queues the frame, a network sender
 drops it). ``status()`` may be called from any thread and returns a frozen record;
 the panel and the telemetry read only that. What the panel shows of an output is its
-status's :class:`PanelCell` and what the run summary says is its :meth:`Output.summary`:
-an output owns both, so a new one needs no branch in the panel or the summary.
+status's :meth:`OutputStatus.cell` (an output's own status class overrides it, built on
+the panel's thread, not the loop's) and what the run summary says is its
+:meth:`Output.summary`: an output owns both, so a new one needs no branch in the panel
+or the summary.
 """
 
 from __future__ import annotations
@@ -70,13 +72,11 @@ class OutputStatus:
     last_error: str = ""
     stopped_reason: str = ""
     duration_s: float = 0.0
-    panel: PanelCell | None = None  # what the panel shows (None: :meth:`cell`'s default)
 
     def cell(self) -> PanelCell:
-        """What the panel shows of this output: its own ``panel``, else its name, its
-        file or address, its errors and why it stopped."""
-        if self.panel is not None:
-            return self.panel
+        """What the panel shows of this output (on the panel's thread). Default: its name,
+        its file or address, its errors and why it stopped; an output's status class
+        (a subclass with no fields of its own) says more."""
         return PanelCell(self.name, self.path or self.address, errors=self.errors,
                          alert=self.stopped_reason)
 

@@ -39,6 +39,14 @@ from handrig.outputs.recorder.formats import check_new_take, datasync, partial_p
 TIME_STEP_S = 1e-6  # the file's time resolution (6 decimals)
 
 
+class GloveTakeStatus(OutputStatus):
+    """The glove take's status; on the panel: its file, its frames, why it stopped."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("glove", self.path, frames=self.frames_written,
+                         alert=self.stopped_reason)
+
+
 class GloveTake(Output):
     """Stream the glove's frames to a glove recording (see the module docstring).
 
@@ -216,13 +224,11 @@ class GloveTake(Output):
         return max(0.0, self._t_written) if self.frames_written > 1 else 0.0
 
     def status(self) -> OutputStatus:
-        return OutputStatus(kind="glove take", name="csv", path=str(self.path),
+        return GloveTakeStatus(kind="glove take", name="csv", path=str(self.path),
                             frames_written=self.frames_written,
                             bytes_written=self.bytes_written,
                             frames_dropped=self.frames_dropped, stopped_reason=self.error,
-                            duration_s=self.duration_s,
-                            panel=PanelCell("glove", str(self.path),
-                                            frames=self.frames_written, alert=self.error))
+                            duration_s=self.duration_s)
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``glove_take``: the take's path, frames, time span, bytes, why it stopped."""

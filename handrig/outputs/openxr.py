@@ -87,6 +87,13 @@ def decode(datagram: bytes) -> tuple[Hand, int, float, NDArray[np.float32]]:
     return ("ri" if code == 0 else "le"), int(frame), float(t_s), joints
 
 
+class OpenXrStatus(OutputStatus):
+    """The OpenXR sender's status; on the panel: "XR", its target and send errors."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("XR", self.address, errors=self.errors)
+
+
 class OpenXrSender(Output):
     """Send both hands' OpenXR joints to ``host:port``, at most ``rate_hz`` frames a second.
 
@@ -178,11 +185,10 @@ class OpenXrSender(Output):
             self.frames_sent += 1
 
     def status(self) -> OutputStatus:
-        return OutputStatus(
+        return OpenXrStatus(
             kind="openxr", name="OpenXR hands", address=f"{self.address[0]}:{self.address[1]}",
             frames_written=self.frames_sent, bytes_written=self.bytes_sent,
-            errors=self.errors, last_error=self.last_error,
-            panel=PanelCell("XR", f"{self.address[0]}:{self.address[1]}", errors=self.errors))
+            errors=self.errors, last_error=self.last_error)
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``openxr``: the target, frames sent (a datagram per hand each), their rate over

@@ -50,6 +50,15 @@ def stamp_path(take: str | Path) -> Path:
     return p.with_name(f"{p.stem}.timecode.csv")
 
 
+class TimecodeStatus(OutputStatus):
+    """The stamps' status; on the panel: "TC", the timecode and its lock (yellow when
+    not locked), why the stamps stopped."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("TC", self.name, ok=self.name.endswith("locked"),
+                         alert=self.stopped_reason)
+
+
 class TimecodeStamp(Output):
     """The timecode for the panel (its :meth:`status` names it) and, with ``path``, each
     frame's timecode to the side file (module docstring). The loop's call formats a line
@@ -130,11 +139,10 @@ class TimecodeStamp(Output):
             self.error = f"timecode stamps stopped: {exc.strerror}"
 
     def status(self) -> OutputStatus:
-        said = self.reader.describe(self.clock.now())  # "01:00:00:12 @25 locked", "lost ..."
-        return OutputStatus("timecode", said, path=str(self.path or ""),
-                            frames_written=self.frames_locked, stopped_reason=self.error,
-                            panel=PanelCell("TC", said, ok=said.endswith("locked"),
-                                            alert=self.error))
+        # its name: the timecode and its lock, "01:00:00:12 @25 locked", "lost (...)"
+        return TimecodeStatus("timecode", self.reader.describe(self.clock.now()),
+                              path=str(self.path or ""), frames_written=self.frames_locked,
+                              stopped_reason=self.error)
 
     def close(self) -> str:
         if not self._closed:

@@ -273,6 +273,13 @@ def parse_host_port(text: str, default_port: int = DEFAULT_PORT, *,
     return host, port
 
 
+class VmcStatus(OutputStatus):
+    """VMC's status; on the panel: its target, its rate and its send errors."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("VMC", self.address, rate=True, errors=self.errors)
+
+
 class VmcSender(Output):
     """Send the two hands to a VMC receiver at most ``rate_hz`` times a second.
 
@@ -365,12 +372,10 @@ class VmcSender(Output):
         self.send(pose_deg[:50], pose_deg[50:54], t_s)
 
     def status(self) -> OutputStatus:
-        return OutputStatus(
+        return VmcStatus(
             kind="vmc", name="VMC", address=f"{self.address[0]}:{self.address[1]}",
             frames_written=self.bundles_sent, bytes_written=self.bytes_sent,
-            errors=self.errors, last_error=self.last_error,
-            panel=PanelCell("VMC", f"{self.address[0]}:{self.address[1]}", rate=True,
-                            errors=self.errors))
+            errors=self.errors, last_error=self.last_error)
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``vmc``: the target, bundles sent, their rate over the run, send errors."""

@@ -38,6 +38,16 @@ _WHY = {
 }
 
 
+class RecorderStatus(OutputStatus):
+    """The recorder's status; on the panel: its take, the bytes on disk, the performance
+    time, and why it stopped (if it did)."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("rec", self.path, size_bytes=self.bytes_written,
+                         duration_s=self.duration_s,
+                         alert=self.stopped_reason.removeprefix("recording "))
+
+
 class Recorder(Output):
     """Stream frames to a CSV or BVH file while the show runs.
 
@@ -186,15 +196,12 @@ class Recorder(Output):
         disk ...), "" while it records and after an orderly close; ``duration_s``: the
         performance time added (:attr:`duration_s`)."""
         error = "" if self.error is None else str(self.error)
-        return OutputStatus(
+        return RecorderStatus(
             kind="recorder", name=self.fmt, path=str(self.path),
             frames_written=self.frames_written, bytes_written=self.bytes_written,
             frames_dropped=self.frames_dropped, errors=int(self.error is not None),
             last_error=error, stopped_reason=self.stopped_reason,
-            duration_s=self.duration_s,
-            panel=PanelCell("rec", str(self.path), size_bytes=self.bytes_written,
-                            duration_s=self.duration_s,
-                            alert=self.stopped_reason.removeprefix("recording ")))
+            duration_s=self.duration_s)
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``recording``: the take's path, format, frames, performance time, bytes,

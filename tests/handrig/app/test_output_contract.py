@@ -1,6 +1,6 @@
 """An output owns what the panel and the run summary say of it (issue 35): a kind that
 nothing in ``app/`` knows, defined here, shows on the panel of a running rig (with its
-rate) and in the summary's text, through ``OutputStatus.panel`` and ``Output.summary``
+rate) and in the summary's text, through ``OutputStatus.cell`` and ``Output.summary``
 alone; and the panel, its snapshot and the summary name no output kind."""
 
 from __future__ import annotations
@@ -24,6 +24,11 @@ from tests.helpers.loop import make_rig
 ROOT = Path(__file__).resolve().parents[3]
 
 
+class BeaconStatus(OutputStatus):
+    def cell(self) -> PanelCell:
+        return PanelCell("BCN", self.address, rate=True, frames=self.frames_written)
+
+
 class Beacon(Output):
     """A new kind of output: it counts the poses it was handed."""
 
@@ -34,9 +39,8 @@ class Beacon(Output):
         self.poses += 1
 
     def status(self) -> OutputStatus:
-        return OutputStatus(kind="beacon", name="beacon", address="10.0.0.7:7000",
-                            frames_written=self.poses,
-                            panel=PanelCell("BCN", "10.0.0.7:7000", rate=True, frames=self.poses))
+        return BeaconStatus(kind="beacon", name="beacon", address="10.0.0.7:7000",
+                            frames_written=self.poses)
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         return "beacon", {"poses": self.poses, "said": f"beacon lit {self.poses} times"}
