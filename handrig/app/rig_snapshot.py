@@ -141,7 +141,8 @@ HAND_LABELS = {"ri": "right", "le": "left"}
 
 class HandsSnapshot:
     """The panel of a session's hands: with several, a line per hand (its mode, glove
-    and latency), the servos of all, the first hand's bus and outputs, the events of
+    and latency), the servos of all, the first hand's bus, every hand's outputs (the
+    shared ones run on the first hand's loop; a hand's glove take on its own), the events of
     all; with one, that hand's panel as it is. ``sides``: hand -> the hand's
     :class:`RigSnapshot`, right first."""
 
@@ -175,7 +176,8 @@ class HandsSnapshot:
             latency_p99_us=max(s.latency_p99_us for s in snaps.values()),
             glove=first.glove, bus=first.bus,
             servos=tuple(sv for s in snaps.values() for sv in s.servos),
-            outputs=first.outputs, events=events[-6:], keys=self.keys, show=self.show,
+            outputs=tuple(c for s in snaps.values() for c in s.outputs), events=events[-6:],
+            keys=self.keys, show=self.show,
             hands=lines, layers=tuple(dict.fromkeys(x for s in snaps.values() for x in s.layers)))
 
 

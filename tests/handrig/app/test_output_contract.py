@@ -10,9 +10,9 @@ import re
 from pathlib import Path
 from typing import Any
 
-from handrig.app.panel import plain_line
+from handrig.app.panel import PanelSnapshot, plain_line
 from handrig.app.parts import build_parts
-from handrig.app.rig_snapshot import RigSnapshot
+from handrig.app.rig_snapshot import HandsSnapshot, RigSnapshot
 from handrig.app.summary import format_summary, outputs_summary, summary_dict
 from handrig.clock import FakeClock
 from handrig.devices.servo.bus import BusStats
@@ -97,3 +97,25 @@ def test_the_panel_and_the_summary_name_no_output_kind() -> None:
              for n, line in enumerate((ROOT / rel).read_text().splitlines(), start=1)
              if kinds.search(line)]
     assert not found, "\n".join(found)
+
+
+class Fixed(RigSnapshot):
+    """A hand's panel as given (its rig not needed)."""
+
+    def __init__(self, snap: PanelSnapshot) -> None:
+        self.snap = snap
+
+    def __call__(self) -> PanelSnapshot:
+        return self.snap
+
+
+def test_every_hands_outputs_show_on_the_panel_of_several_hands() -> None:
+    """The shared outputs run on the first hand's loop, each hand's glove take on its own:
+    the panel of two hands shows them all."""
+    right = PanelSnapshot(outputs=(PanelCell("VMC", "127.0.0.1:39539", rate=True),
+                                   PanelCell("glove", "/t/right.csv", frames=10)))
+    left = PanelSnapshot(outputs=(PanelCell("glove", "/t/left.csv", frames=20),))
+    snap = HandsSnapshot({"ri": Fixed(right), "le": Fixed(left)})()
+    assert [(c.label, c.target) for c in snap.outputs] == [
+        ("VMC", "127.0.0.1:39539"), ("glove", "/t/right.csv"), ("glove", "/t/left.csv")]
+    assert "glove /t/right.csv 10 | glove /t/left.csv 20" in plain_line(snap)
