@@ -11,14 +11,19 @@ from handrig.config.rig_files import SHIPPED_RIG, resolve_rig_file
 
 
 def test_the_shipped_rig_is_the_default_without_yours_and_what_the_loader_loads() -> None:
-    assert resolve_rig_file(None).path == SHIPPED_RIG and SHIPPED_RIG.is_file()
     mine = user_config("rig.toml")
+    before = mine.read_bytes() if mine.is_file() else None  # another test's, kept
     mine.parent.mkdir(parents=True, exist_ok=True)
-    mine.write_text(SHIPPED_RIG.read_text().replace("[[servos]]\nid = 1\n",
-                                                    "[[servos]]\nid = 200\n", 1))
     try:
+        mine.unlink(missing_ok=True)
+        assert resolve_rig_file(None).path == SHIPPED_RIG and SHIPPED_RIG.is_file()
+        mine.write_text(SHIPPED_RIG.read_text().replace("[[servos]]\nid = 1\n",
+                                                        "[[servos]]\nid = 200\n", 1))
         assert resolve_rig_file(None).path == mine  # a run takes yours
         assert load(mine, RigConfig).servos[0].id == 200
         assert load_rig_config().servos[0].id == 1  # the loader: the shipped one
     finally:
-        mine.unlink()
+        if before is None:
+            mine.unlink(missing_ok=True)
+        else:
+            mine.write_bytes(before)
