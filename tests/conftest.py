@@ -85,7 +85,7 @@ COMPUTE_ONLY = (
     "handrig/app/lerobot/test_plugin_extra.py",
     "handrig/app/lerobot/test_frame_grid_early.py::test_calls_faster_than_the_grid_",
     "handrig/app/cues/test_cue_parsing.py", "handrig/app/cues/test_cue_show.py",
-    "handrig/app/test_layers_shown.py",
+    "handrig/app/test_layers_shown.py", "handrig/app/test_output_contract.py",
     "handrig/devices/test_ltc",
     # these compute too and ran in the realtime process: codecs, stats, tables, modes
     "handrig/devices/servo/test_servo_codec.py", "handrig/devices/servo/test_servo_registers.py",

@@ -32,6 +32,7 @@ from rich.text import Text
 from handrig.app.keys import SHOW_KEYS
 from handrig.devices.servo.models import temperature_limit_c
 from handrig.devices.servo.registers import HARDWARE_ERROR_LETTERS
+from handrig.outputs.base import PanelCell
 
 WIDTH = 80
 HEIGHT = 24
@@ -93,24 +94,6 @@ class ServoLine:
 
 
 @dataclass(frozen=True)
-class Outputs:
-    """Where the performance goes besides the servos ("" = off)."""
-
-    vmc_target: str = ""  # HOST:PORT
-    vmc_rate_hz: float = NAN  # bundles sent per second, recently
-    vmc_errors: int = 0
-    record_path: str = ""
-    record_bytes: int = 0  # on disk so far
-    record_duration_s: float = 0.0  # of performance recorded
-    record_stopped: str = ""  # why the recording stopped during the run ("" = recording)
-    glove_take_path: str = ""  # a glove take (--record-glove) being written
-    glove_take_frames: int = 0
-    openxr_target: str = ""  # HOST:PORT of the OpenXR hand joints (--openxr)
-    openxr_errors: int = 0
-    timecode: str = ""  # --ltc, --chase-ltc: the timecode and its lock ("" = none read)
-
-
-@dataclass(frozen=True)
 class PanelSnapshot:
     """Everything the panel shows, at one moment. Times in seconds, rates in Hz."""
 
@@ -124,7 +107,7 @@ class PanelSnapshot:
     glove: GloveLink = field(default_factory=GloveLink)
     bus: BusHealth = field(default_factory=BusHealth)
     servos: tuple[ServoLine, ...] = ()
-    outputs: Outputs = field(default_factory=Outputs)
+    outputs: tuple[PanelCell, ...] = ()  # each output's own cell (outputs/base.py)
     events: tuple[str, ...] = ()  # the newest last
     keys: bool = True  # whether the show keys are read (a KeyReader on a terminal)
     show: str = ""  # the show running (handrig run --show), "" when none
@@ -242,36 +225,68 @@ def bus_line(b: BusHealth) -> Text:
     )
 
 
-def outputs_line(o: Outputs) -> Text:
+OUTPUTS_WIDTH = 73  # the outputs line after "out    ", in 80 columns
+OUTPUTS_GAP = "  |  "
+ALERT_WIDTH = 34  # why an output stopped: at most this much of the line
+TARGET_MIN = 7  # a target shortened below this says nothing: left out
+
+
+def _figures(c: PanelCell) -> str:
+    bits = [*([f"{_num(c.rate_hz)} Hz"] if c.rate else []),
+            *([_size(c.size_bytes)] if c.size_bytes is not None else []),
+            *([_clock(c.duration_s)] if c.duration_s is not None else []),
+            *([str(c.frames) if c.frames < 10000 else f"{c.frames // 1000}k"]
+              if c.frames is not None else [])]
+    return " ".join(bits)
+
+
+def _widths(cells: Sequence[PanelCell], room: int) -> list[tuple[int, int]]:
+    """Each cell's (target, alert) width within ``room``: alerts first (up to
+    ALERT_WIDTH), then targets in order, a target left out rather than cut below
+    TARGET_MIN."""
+    fixed = sum(len(c.label) + len(f" {_figures(c)}" if _figures(c) else "")
+                + (len(f" {c.errors} err") if c.errors else 0) for c in cells)
+    left = room - fixed - len(OUTPUTS_GAP) * (len(cells) - 1)
+    alerts = []
+    for c in cells:
+        want = min(len(c.alert) + 1, ALERT_WIDTH + 1) if c.alert else 0
+        alerts.append(max(0, min(want, left)))
+        left -= alerts[-1]
+    targets = []
+    for c in cells:
+        want = len(c.target) + 1 if c.target else 0
+        got = min(want, left)
+        targets.append(got if got > TARGET_MIN else 0)
+        left -= targets[-1]
+    return [(max(t - 1, 0), max(a - 1, 0)) for t, a in zip(targets, alerts, strict=True)]
+
+
+def outputs_line(cells: Sequence[PanelCell]) -> Text:
+    """Each output's cell (its own :class:`~handrig.outputs.base.PanelCell`), in order,
+    fitted into 80 columns; "none" when there is none."""
     text = Text.assemble(("out    ", "bold"))
-    # the OpenXR hand joints (--openxr) share VMC's place: "VMC+XR" with both (its
-    # target is in the plain line), "XR HOST:PORT" alone
-    errors = o.vmc_errors + o.openxr_errors
-    if o.vmc_target:
-        xr = "+XR" if o.openxr_target else ""
-        text.append(f"VMC{xr} {_fit(o.vmc_target, 21)} {_num(o.vmc_rate_hz)} Hz")
-    elif o.openxr_target:
-        text.append(f"XR {_fit(o.openxr_target, 21)}")
-    else:
-        text.append("VMC off", "dim")
-    if errors and (o.vmc_target or o.openxr_target):
-        text.append(f" {errors} err", "bold red")
-    text.append("  |  ")
-    if o.record_path:
-        name = _fit_left(o.record_path, 20)
-        text.append(f"rec {name} {_size(o.record_bytes)} {_clock(o.record_duration_s)}")
-        if o.record_stopped:
-            text.append(f" {_fit(o.record_stopped.removeprefix('recording '), 34)}",
-                        "bold red")
-    else:
-        text.append("rec off", "dim")
-    if o.glove_take_path:  # frames in the glove take (--record-glove)
-        n = o.glove_take_frames
-        text.append(f" +glove {n if n < 10000 else f'{n // 1000}k'}")
-    if o.timecode:
-        text.append("  |  ")
-        text.append(f"TC {o.timecode}", "bold" if o.timecode.endswith("locked") else "yellow")
+    shown = [c for c in cells if c.label]
+    if not shown:
+        text.append("none", "dim")
+        return text
+    for i, (c, (target_w, alert_w)) in enumerate(zip(shown, _widths(shown, OUTPUTS_WIDTH),
+                                                      strict=True)):
+        if i:
+            text.append(OUTPUTS_GAP)
+        head = " ".join(x for x in (c.label, _fit_left(c.target, target_w) if target_w
+                                    else "", _figures(c)) if x)
+        text.append(head, "" if c.ok else "yellow")
+        if c.errors:
+            text.append(f" {c.errors} err", "bold red")
+        if alert_w:
+            text.append(f" {_fit(c.alert, alert_w)}", "bold red")
     return text
+
+
+def output_words(c: PanelCell) -> str:
+    """One output's cell in full, for the plain line."""
+    return " ".join(x for x in (c.label, c.target, _figures(c),
+                                f"{c.errors} errors" if c.errors else "", c.alert) if x)
 
 
 def _servo_cell(sv: ServoLine | None) -> Text:
@@ -377,17 +392,9 @@ def plain_line(s: PanelSnapshot) -> str:
         + (f" admitted {b.admitted}" if b.admitted else ""),
         f"servos max {_num(hot)} C" + (f" (past [heat] warn_c: {', '.join(warm)})"
                                        if warm else "") + f", {faults} with errors",
-        f"vmc {o.vmc_target} {_num(o.vmc_rate_hz)} Hz" if o.vmc_target else "vmc off",
-        (f"rec {o.record_path} {_size(o.record_bytes)} {_clock(o.record_duration_s)}"
-         + (f" {o.record_stopped}" if o.record_stopped else "") if o.record_path
-         else "rec off"),
-        *([f"glove take {o.glove_take_path} {o.glove_take_frames} frames"]
-          if o.glove_take_path else []),
-        *([f"openxr {o.openxr_target}" + (f" {o.openxr_errors} errors" if o.openxr_errors
-                                           else "")] if o.openxr_target else []),
+        " | ".join(output_words(c) for c in o if c.label) or "outputs none",
         *([f"cues {' < '.join(reversed(s.cues[-3:]))}"] if s.cues else []),
         *([f"layers {'; '.join(s.layers)}"] if s.layers else []),
-        *([f"timecode {o.timecode}"] if o.timecode else []),
     ]
     return " | ".join(parts)
 

@@ -13,9 +13,10 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Protocol
 
-from handrig.app.panel import NAN, BusHealth, GloveLink, Outputs, PanelSnapshot, ServoLine
+from handrig.app.panel import NAN, BusHealth, GloveLink, PanelSnapshot, ServoLine
 from handrig.clock import Clock
 from handrig.loop.telemetry import LoopSnapshot, Telemetry
+from handrig.outputs.base import PanelCell
 
 
 class Watched(Protocol):
@@ -70,7 +71,8 @@ class RigSnapshot:
         self.show = show
         self.temperature_limit_c = dict(temperature_limit_c or {})
         self.warn_c, self.act_c = heat_c
-        self._rates = {k: _Rate() for k in ("glove", "reads", "writes", "vmc")}
+        self._rates = {k: _Rate() for k in ("glove", "reads", "writes")}
+        self._output_rates: dict[int, _Rate] = {}  # by the output's place in the loop's
 
     def __call__(self) -> PanelSnapshot:
         snap = self.rig.telemetry.latest()
@@ -121,27 +123,17 @@ class RigSnapshot:
                       s.hardware_errors[i] if i < len(s.hardware_errors) else 0)
             for i, joint in enumerate(s.servo_joints[:n]))
 
-    def _outputs(self, s: LoopSnapshot) -> Outputs:
-        vmc_target, vmc_rate, vmc_err = "", NAN, 0
-        rec_path, rec_bytes, rec_s, rec_stopped = "", 0, 0.0, ""
-        glove_path, glove_frames, timecode = "", 0, ""
-        xr_target, xr_err = "", 0
-        for out in s.outputs:
-            if out.kind == "vmc":
-                vmc_target = out.address
-                vmc_rate = self._rates["vmc"].update(s.t_s, out.frames_written)
-                vmc_err = out.errors
-            elif out.kind == "recorder":
-                rec_path, rec_bytes, rec_s = out.path, out.bytes_written, out.duration_s
-                rec_stopped = out.stopped_reason
-            elif out.kind == "glove take":
-                glove_path, glove_frames = out.path, out.frames_written
-            elif out.kind == "openxr":
-                xr_target, xr_err = out.address, out.errors
-            elif out.kind == "timecode":  # its name is the timecode and lock (app/timecode.py)
-                timecode = out.name
-        return Outputs(vmc_target, vmc_rate, vmc_err, rec_path, rec_bytes, rec_s, rec_stopped,
-                       glove_path, glove_frames, xr_target, xr_err, timecode)
+    def _outputs(self, s: LoopSnapshot) -> tuple[PanelCell, ...]:
+        """Each output's own cell (:meth:`~handrig.outputs.base.OutputStatus.cell`), its
+        rate filled in when it shows one."""
+        cells = []
+        for i, out in enumerate(s.outputs):
+            cell = out.cell()
+            if cell.rate:
+                rate = self._output_rates.setdefault(i, _Rate())
+                cell = dataclasses.replace(cell, rate_hz=rate.update(s.t_s, out.frames_written))
+            cells.append(cell)
+        return tuple(cells)
 
 
 HAND_LABELS = {"ri": "right", "le": "left"}
@@ -149,7 +141,8 @@ HAND_LABELS = {"ri": "right", "le": "left"}
 
 class HandsSnapshot:
     """The panel of a session's hands: with several, a line per hand (its mode, glove
-    and latency), the servos of all, the first hand's bus and outputs, the events of
+    and latency), the servos of all, the first hand's bus, every hand's outputs (the
+    shared ones run on the first hand's loop; a hand's glove take on its own), the events of
     all; with one, that hand's panel as it is. ``sides``: hand -> the hand's
     :class:`RigSnapshot`, right first."""
 
@@ -183,7 +176,8 @@ class HandsSnapshot:
             latency_p99_us=max(s.latency_p99_us for s in snaps.values()),
             glove=first.glove, bus=first.bus,
             servos=tuple(sv for s in snaps.values() for sv in s.servos),
-            outputs=first.outputs, events=events[-6:], keys=self.keys, show=self.show,
+            outputs=tuple(c for s in snaps.values() for c in s.outputs), events=events[-6:],
+            keys=self.keys, show=self.show,
             hands=lines, layers=tuple(dict.fromkeys(x for s in snaps.values() for x in s.layers)))
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from handrig.devices.glove import GloveStats
 from handrig.loop.stats import RunStats
-from handrig.outputs.base import Output
+from handrig.outputs.base import SUMMARY_KEYS_WHEN_OFF, Output
 from handrig.pose.pipeline import PosePipeline
 
 FAULT_WORDS: dict[str, str] = {
@@ -58,8 +58,9 @@ def clamped_joints(pipeline: PosePipeline, top: int = TOP_CLAMPED) -> list[dict[
 def outputs_summary(outs: Sequence[Any], duration_s: float = 0.0) -> dict[str, Any]:
     """What a run sent besides the servos, each output's part under its own key
     (:meth:`handrig.outputs.base.Output.summary`: ``vmc``, ``recording``,
-    ``glove_take``, ...); ``vmc`` and ``recording`` None when off."""
-    out: dict[str, Any] = {"vmc": None, "recording": None}
+    ``glove_take``, ...); the keys of :data:`~handrig.outputs.base.SUMMARY_KEYS_WHEN_OFF`
+    None when off, no other key for an output that did not run."""
+    out: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS_WHEN_OFF)
     for o in outs:
         if isinstance(o, Output):
             key, figures = o.summary(duration_s)
@@ -129,7 +130,7 @@ def summary_dict(stats: RunStats, bus_stats: Any, glove_stats: GloveStats | None
         "torque_off": torque_off,
         "ease_s": num(ease_s),
         "clamped_joints": list(clamped or []),
-        "outputs": outputs if outputs is not None else {"vmc": None, "recording": None},
+        "outputs": outputs if outputs is not None else dict.fromkeys(SUMMARY_KEYS_WHEN_OFF),
         "faults": {},
     }
     if glove_stats is not None:
@@ -161,44 +162,13 @@ def _counts(items: dict[str, int]) -> str:
 
 
 def _outputs_lines(outputs: dict[str, Any]) -> list[str]:
-    vmc, rec = outputs.get("vmc"), outputs.get("recording")
-    glove_take = outputs.get("glove_take")
-    if vmc:
-        rate = f", {vmc['rate_hz']} Hz" if vmc.get("rate_hz") is not None else ""
-        errors = f", {vmc['errors']} send errors" if vmc.get("errors") else ""
-        vmc_text = f"VMC to {vmc['target']}: {vmc['bundles_sent']} bundles{rate}{errors}"
-    else:
-        vmc_text = "VMC off"
-    if rec:
-        duration = f"{rec['duration_s']:.1f} s" if rec.get("duration_s") is not None else "-"
-        dropped = (f", {rec['frames_dropped']} frames dropped (disk too slow)"
-                   if rec.get("frames_dropped") else "")
-        if rec.get("stopped_reason"):
-            dropped = f", {rec['frames_dropped']} frames not recorded: {rec['stopped_reason']}"
-        rec_text = (f"recording {rec['path']}: {rec['frames']} frames, {duration}, "
-                    f"{rec['bytes']} bytes{dropped}")
-    else:
-        rec_text = "recording off"
-    lines = [f"outputs           {vmc_text}", f"                  {rec_text}"]
-    xr = outputs.get("openxr")
-    if xr:
-        errors = f", {xr['errors']} send errors" if xr.get("errors") else ""
-        rate = f", {xr['rate_hz']} Hz" if xr.get("rate_hz") is not None else ""
-        lines.append(f"                  OpenXR hand joints to {xr['target']}: "
-                     f"{xr['frames_sent']} frames{rate}{errors}")
-    if glove_take:
-        stopped = f" ({glove_take['stopped_reason']})" if glove_take.get("stopped_reason") else ""
-        lines.append(f"                  glove take {glove_take['path']}: {glove_take['frames']}"
-                     f" frames, {glove_take['duration_s']:.1f} s{stopped}")
-    tc = outputs.get("timecode")
-    if tc:  # --ltc, --chase-ltc (outputs/timecode_stamp.py)
-        stamped = (f", {tc['frames_stamped']} of {tc['frames']} frames stamped in"
-                   f" {tc['stamps']}" if tc["stamps"] else "")
-        span = f", {tc['first']} .. {tc['last']}" if tc["first"] else ""
-        lines.append(f"                  timecode {tc['source']}: {tc['ltc_frames']} LTC frames,"
-                     f" {tc['jumps']} jumps, {tc['losses']} losses{stamped}{span}"
-                     + (f" ({tc['failure']})" if tc["failure"] else ""))
-    return lines
+    """Each output's own line (its figures' ``said``: :meth:`handrig.outputs.base.Output.
+    summary`), in the run's order; "none" when no output ran."""
+    said = [part["said"] for part in outputs.values()
+            if isinstance(part, dict) and part.get("said")]
+    if not said:
+        return ["outputs           none"]
+    return [f"outputs           {said[0]}", *(f"                  {line}" for line in said[1:])]
 
 
 CLAMP_RANGE_FRACTION = 0.05

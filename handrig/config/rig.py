@@ -19,7 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from handrig.config.loading import CONFIG_DIR, check_joint_name, load
+from handrig.config.loading import check_joint_name, load
+from handrig.config.rig_files import SHIPPED_RIG
 from handrig.errors import ConfigError
 from handrig.hand import anatomical_limits_deg
 
@@ -465,9 +466,9 @@ def hand_rig(rig: RigConfig, hand: str) -> RigConfig:
     return dataclasses.replace(rig, servos=servos, bus=bus, left_bus=None)
 
 
-DEFAULT_RIG = CONFIG_DIR / "rig.toml"
-
-
 def load_rig_config(path: str | Path | None = None) -> RigConfig:
-    """Load the rig file (default ``config/rig.toml``)."""
-    return load(path or DEFAULT_RIG, RigConfig)
+    """Load the rig file ``path``; None: the shipped one
+    (:data:`handrig.config.rig_files.SHIPPED_RIG`, what benches and tests load). Which
+    file a run's ``--rig`` means, yours or the shipped one, is
+    :func:`handrig.config.rig_files.resolve_rig_file`'s one rule."""
+    return load(path or SHIPPED_RIG, RigConfig)

@@ -13,12 +13,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from handrig.config.loading import CONFIG_DIR
-from handrig.config.paths import config_file, is_installed, user_config
+from handrig.config.paths import config_file, installed_config, is_installed, user_config
 from handrig.errors import ConfigError
 
 RIGS_DIR = CONFIG_DIR / "rigs"
 """Shipped rig presets (``config/rigs/<name>.toml``)."""
 RIG_FILE_NAME = "rig.toml"
+SHIPPED_RIG = installed_config(RIG_FILE_NAME)
+"""The shipped rig file: the default when you have no ``rig.toml``, and the fixed rig the
+benches, the emulator's examples and the tests load (:func:`handrig.config.rig.
+load_rig_config` with no path)."""
 
 
 @dataclass(frozen=True)

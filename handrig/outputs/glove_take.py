@@ -33,10 +33,18 @@ import numpy as np
 from handrig.devices.glove import GloveSample
 from handrig.devices.glove_recording import MAGIC, QUAT_COLUMNS
 from handrig.errors import DataError
-from handrig.outputs.base import FloatArray, Output, OutputStatus
+from handrig.outputs.base import FloatArray, Output, OutputStatus, PanelCell
 from handrig.outputs.recorder.formats import check_new_take, datasync, partial_path
 
 TIME_STEP_S = 1e-6  # the file's time resolution (6 decimals)
+
+
+class GloveTakeStatus(OutputStatus):
+    """The glove take's status; on the panel: its file, its frames, why it stopped."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("glove", self.path, frames=self.frames_written,
+                         alert=self.stopped_reason)
 
 
 class GloveTake(Output):
@@ -216,7 +224,7 @@ class GloveTake(Output):
         return max(0.0, self._t_written) if self.frames_written > 1 else 0.0
 
     def status(self) -> OutputStatus:
-        return OutputStatus(kind="glove take", name="csv", path=str(self.path),
+        return GloveTakeStatus(kind="glove take", name="csv", path=str(self.path),
                             frames_written=self.frames_written,
                             bytes_written=self.bytes_written,
                             frames_dropped=self.frames_dropped, stopped_reason=self.error,
@@ -225,10 +233,13 @@ class GloveTake(Output):
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         """``glove_take``: the take's path, frames, time span, bytes, why it stopped."""
         st = self.status()
+        stopped = f" ({st.stopped_reason})" if st.stopped_reason else ""
         return "glove_take", {
             "path": st.path, "frames": st.frames_written,
             "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
+            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason,
+            "said": f"glove take {st.path}: {st.frames_written} frames,"
+                    f" {st.duration_s:.1f} s{stopped}"}
 
     def close(self) -> str:
         """Write what is left, close the file and name it ``path`` (a file that appeared

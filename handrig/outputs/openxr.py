@@ -43,7 +43,7 @@ from handrig import hand as vocab
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import ConfigError
 from handrig.hand import Hand
-from handrig.outputs.base import Output, OutputStatus
+from handrig.outputs.base import Output, OutputStatus, PanelCell
 from handrig.outputs.vmc import parse_host_port
 from handrig.pose.hand_geometry import REFERENCE_HAND_LENGTH_M
 from handrig.pose.openxr_hand import (
@@ -85,6 +85,13 @@ def decode(datagram: bytes) -> tuple[Hand, int, float, NDArray[np.float32]]:
     joints = np.frombuffer(datagram, dtype="<f4", offset=HEADER.size).reshape(
         JOINT_COUNT, FLOATS_PER_JOINT)
     return ("ri" if code == 0 else "le"), int(frame), float(t_s), joints
+
+
+class OpenXrStatus(OutputStatus):
+    """The OpenXR sender's status; on the panel: "XR", its target and send errors."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("XR", self.address, errors=self.errors)
 
 
 class OpenXrSender(Output):
@@ -178,7 +185,7 @@ class OpenXrSender(Output):
             self.frames_sent += 1
 
     def status(self) -> OutputStatus:
-        return OutputStatus(
+        return OpenXrStatus(
             kind="openxr", name="OpenXR hands", address=f"{self.address[0]}:{self.address[1]}",
             frames_written=self.frames_sent, bytes_written=self.bytes_sent,
             errors=self.errors, last_error=self.last_error)
@@ -188,10 +195,13 @@ class OpenXrSender(Output):
         the run, send errors."""
         st = self.status()
         sent = st.frames_written
+        rate_hz = round(sent / duration_s, 1) if duration_s > 0 else None
+        said = (f"OpenXR hand joints to {st.address}: {sent} frames"
+                + (f", {rate_hz} Hz" if rate_hz is not None else "")
+                + (f", {st.errors} send errors" if st.errors else ""))
         return "openxr", {"target": st.address, "frames_sent": sent,
-                          "hands": [h for h, *_ in self._hands],
-                          "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
-                          "errors": st.errors, "last_error": st.last_error}
+                          "hands": [h for h, *_ in self._hands], "rate_hz": rate_hz,
+                          "errors": st.errors, "last_error": st.last_error, "said": said}
 
     def close(self) -> None:
         """Close the socket; further sends count as errors."""

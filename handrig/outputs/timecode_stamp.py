@@ -36,7 +36,7 @@ from handrig.config import bounded
 from handrig.devices.timecode.ltc import RATES, FrameRate, Timecode
 from handrig.devices.timecode.reader import TimecodeReader
 from handrig.errors import DataError
-from handrig.outputs.base import FloatArray, Output, OutputStatus
+from handrig.outputs.base import FloatArray, Output, OutputStatus, PanelCell
 from handrig.outputs.recorder.formats import check_new_take, datasync
 
 MAGIC = "# handrig timecode stamps 1"
@@ -48,6 +48,15 @@ def stamp_path(take: str | Path) -> Path:
     """The side file of a take: ``<stem>.timecode.csv`` beside it."""
     p = Path(take)
     return p.with_name(f"{p.stem}.timecode.csv")
+
+
+class TimecodeStatus(OutputStatus):
+    """The stamps' status; on the panel: "TC", the timecode and its lock (yellow when
+    not locked), why the stamps stopped."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("TC", self.name, ok=self.name.endswith("locked"),
+                         alert=self.stopped_reason)
 
 
 class TimecodeStamp(Output):
@@ -130,9 +139,10 @@ class TimecodeStamp(Output):
             self.error = f"timecode stamps stopped: {exc.strerror}"
 
     def status(self) -> OutputStatus:
-        return OutputStatus("timecode", self.reader.describe(self.clock.now()),
-                            path=str(self.path or ""), frames_written=self.frames_locked,
-                            stopped_reason=self.error)
+        # its name: the timecode and its lock, "01:00:00:12 @25 locked", "lost (...)"
+        return TimecodeStatus("timecode", self.reader.describe(self.clock.now()),
+                              path=str(self.path or ""), frames_written=self.frames_locked,
+                              stopped_reason=self.error)
 
     def close(self) -> str:
         if not self._closed:
@@ -150,12 +160,19 @@ class TimecodeStamp(Output):
 
     def summary(self, duration_s: float) -> tuple[str, dict[str, Any]]:
         st = self.reader.stats()
+        stamps, failure = str(self.path or ""), st.failure or self.error
+        said = (f"timecode {self.reader.name}: {st.frames} LTC frames, {st.jumps} jumps,"
+                f" {st.losses} losses"
+                + (f", {self.frames_locked} of {self.frames} frames stamped in {stamps}"
+                   if stamps else "")
+                + (f", {self.first} .. {self.last}" if self.first else "")
+                + (f" ({failure})" if failure else ""))
         return "timecode", {
-            "source": self.reader.name, "stamps": str(self.path or ""),
+            "source": self.reader.name, "stamps": stamps,
             "frames": self.frames, "frames_stamped": self.frames_locked,
             "first": self.first, "last": self.last, "ltc_frames": st.frames,
             "jumps": st.jumps, "losses": st.losses, "bad_frames": st.bad_frames,
-            "failure": st.failure or self.error}
+            "failure": failure, "said": said}
 
 
 @dataclass(frozen=True)

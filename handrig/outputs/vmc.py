@@ -62,7 +62,7 @@ from handrig import hand
 from handrig.clock import Clock, MonotonicClock
 from handrig.errors import ConfigError
 from handrig.outputs import skeleton
-from handrig.outputs.base import Output, OutputStatus
+from handrig.outputs.base import Output, OutputStatus, PanelCell
 from handrig.outputs.skeleton import Anat
 
 DEFAULT_PORT = 39539
@@ -273,6 +273,13 @@ def parse_host_port(text: str, default_port: int = DEFAULT_PORT, *,
     return host, port
 
 
+class VmcStatus(OutputStatus):
+    """VMC's status; on the panel: its target, its rate and its send errors."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("VMC", self.address, rate=True, errors=self.errors)
+
+
 class VmcSender(Output):
     """Send the two hands to a VMC receiver at most ``rate_hz`` times a second.
 
@@ -365,7 +372,7 @@ class VmcSender(Output):
         self.send(pose_deg[:50], pose_deg[50:54], t_s)
 
     def status(self) -> OutputStatus:
-        return OutputStatus(
+        return VmcStatus(
             kind="vmc", name="VMC", address=f"{self.address[0]}:{self.address[1]}",
             frames_written=self.bundles_sent, bytes_written=self.bytes_sent,
             errors=self.errors, last_error=self.last_error)
@@ -374,9 +381,12 @@ class VmcSender(Output):
         """``vmc``: the target, bundles sent, their rate over the run, send errors."""
         st = self.status()
         sent = st.frames_written
-        return "vmc", {"target": st.address, "bundles_sent": sent,
-                       "rate_hz": round(sent / duration_s, 1) if duration_s > 0 else None,
-                       "errors": st.errors, "last_error": st.last_error}
+        rate_hz = round(sent / duration_s, 1) if duration_s > 0 else None
+        said = (f"VMC to {st.address}: {sent} bundles"
+                + (f", {rate_hz} Hz" if rate_hz is not None else "")
+                + (f", {st.errors} send errors" if st.errors else ""))
+        return "vmc", {"target": st.address, "bundles_sent": sent, "rate_hz": rate_hz,
+                       "errors": st.errors, "last_error": st.last_error, "said": said}
 
     def close(self) -> None:
         """Close the socket; further sends count as errors."""

@@ -106,7 +106,7 @@ class FakeBus(ServoBus):
         self.torque_on = False
 
     @contextlib.contextmanager
-    def torque(self) -> Iterator[ServoBus]:
+    def torque(self, *, handle_signals: bool = True) -> Iterator[ServoBus]:
         self.torque_on = True
         try:
             yield self
@@ -122,7 +122,8 @@ class FakeBus(ServoBus):
         return 0
 
     def read_state(self, deadline_s: float | None = None,
-                   part: tuple[int, int] | None = None) -> ServoState:
+                   part: tuple[int, int] | None = None, *, patient: bool = False
+                   ) -> ServoState:
         self._stats.reads += 1
         n = len(self._names)
         if self.position_deg is not None:

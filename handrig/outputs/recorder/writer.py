@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from handrig.errors import DataError
-from handrig.outputs.base import Output, OutputStatus
+from handrig.outputs.base import Output, OutputStatus, PanelCell
 from handrig.outputs.recorder.bvh_take import BvhTake
 from handrig.outputs.recorder.csv_take import CsvTake
 from handrig.outputs.recorder.formats import (
@@ -36,6 +36,16 @@ _WHY = {
     errno.EDQUOT: "the disk quota is used up",
     errno.EIO: "the disk reported an I/O error",
 }
+
+
+class RecorderStatus(OutputStatus):
+    """The recorder's status; on the panel: its take, the bytes on disk, the performance
+    time, and why it stopped (if it did)."""
+
+    def cell(self) -> PanelCell:
+        return PanelCell("rec", self.path, size_bytes=self.bytes_written,
+                         duration_s=self.duration_s,
+                         alert=self.stopped_reason.removeprefix("recording "))
 
 
 class Recorder(Output):
@@ -186,7 +196,7 @@ class Recorder(Output):
         disk ...), "" while it records and after an orderly close; ``duration_s``: the
         performance time added (:attr:`duration_s`)."""
         error = "" if self.error is None else str(self.error)
-        return OutputStatus(
+        return RecorderStatus(
             kind="recorder", name=self.fmt, path=str(self.path),
             frames_written=self.frames_written, bytes_written=self.bytes_written,
             frames_dropped=self.frames_dropped, errors=int(self.error is not None),
@@ -197,10 +207,16 @@ class Recorder(Output):
         """``recording``: the take's path, format, frames, performance time, bytes,
         frames dropped and why it stopped early (if it did)."""
         st = self.status()
+        dropped = (f", {st.frames_dropped} frames dropped (disk too slow)"
+                   if st.frames_dropped else "")
+        if st.stopped_reason:
+            dropped = f", {st.frames_dropped} frames not recorded: {st.stopped_reason}"
         return "recording", {
             "path": st.path, "format": st.name, "frames": st.frames_written,
             "duration_s": round(st.duration_s, 3), "bytes": st.bytes_written,
-            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason}
+            "frames_dropped": st.frames_dropped, "stopped_reason": st.stopped_reason,
+            "said": f"recording {st.path}: {st.frames_written} frames, {st.duration_s:.1f} s,"
+                    f" {st.bytes_written} bytes{dropped}"}
 
     def _writer(self) -> None:
         while True:

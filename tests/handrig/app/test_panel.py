@@ -19,7 +19,6 @@ from handrig.app.panel import (
     BusHealth,
     GloveLink,
     LivePanel,
-    Outputs,
     PanelSnapshot,
     ServoLine,
     plain_line,
@@ -30,8 +29,12 @@ from handrig.app.rig_snapshot import RigSnapshot
 from handrig.clock import FakeClock
 from handrig.config.rig import load_rig_config
 from handrig.devices.glove import GloveSample, GloveSource, GloveStats
+from handrig.outputs.base import PanelCell
 from tests.helpers.fakes import FakeBus
 from tests.helpers.loop import make_rig
+
+VMC_CELL = PanelCell("VMC", "127.0.0.1:39539", rate=True, rate_hz=60.0)
+REC_CELL = PanelCell("rec", "/shows/take1.bvh", size_bytes=3_400_000, duration_s=201.0)
 
 
 def show_snapshot(**kw: object) -> PanelSnapshot:
@@ -48,7 +51,7 @@ def show_snapshot(**kw: object) -> PanelSnapshot:
         "glove": GloveLink("/dev/ttyACM0", 199.5, 150000, 3, 0.31, 1),
         "bus": BusHealth("/dev/ttyUSB0", 50.0, 200.0, 19, 1, 2, 0.12),
         "servos": servos,
-        "outputs": Outputs("127.0.0.1:39539", 60.0, 0, "/shows/take1.bvh", 3_400_000, 201.0),
+        "outputs": (VMC_CELL, REC_CELL),
         "events": ("commissioned", "glove silent for 0.25 s: easing to the relaxed pose"),
     }
     base.update(kw)
@@ -106,18 +109,18 @@ def test_forty_servos_keep_the_keys_in_24_lines_and_all_show_in_a_taller_termina
 def test_without_outputs_or_readings_it_says_so() -> None:
     snap = PanelSnapshot(servos=(ServoLine(1, "riIndexMCPy"),), keys=False)
     text = "\n".join(screen(snap))
-    assert "WAITING" in text and "VMC off" in text and "rec off" in text
+    assert "WAITING" in text and "out    none" in text
     assert "last never" in text and "stale none" in text
     assert "keys off" in text
     line = plain_line(snap)
-    assert line.startswith("0:00 waiting") and "vmc off" in line and "rec off" in line
+    assert line.startswith("0:00 waiting") and "outputs none" in line
 
 
 def test_plain_line_carries_the_same_figures() -> None:
     line = plain_line(show_snapshot())
     for part in ("12:34 relaxing (glove silent", "glove 200 Hz err 3 last 310 ms reconnects 1",
                  "latency p50 92 p99 197 us", "timeouts 19", "stale 2 (worst 120 ms)",
-                 "servos max 49 C, 1 with errors", "vmc 127.0.0.1:39539 60 Hz",
+                 "servos max 49 C, 1 with errors", "VMC 127.0.0.1:39539 60 Hz",
                  "rec /shows/take1.bvh 3.2 MB 3:21"):
         assert part in line, part
     assert "\n" not in line
@@ -324,9 +327,10 @@ def test_a_key_reader_on_a_pipe_leaves_it_alone() -> None:
 
 
 def test_a_glove_take_shows_on_the_outputs_line_within_80_columns() -> None:
-    outputs = Outputs("127.0.0.1:39539", 60.0, 0, "/shows/take1.bvh", 3_400_000, 201.0,
-                      glove_take_path="/shows/glove1.csv", glove_take_frames=40200)
-    lines = screen(show_snapshot(outputs=outputs))
+    glove = PanelCell("glove", "/shows/glove1.csv", frames=40200)
+    lines = screen(show_snapshot(outputs=(VMC_CELL, REC_CELL, glove)))
     assert max(len(line) for line in lines) <= 80
     out = next(line for line in lines if line.startswith("out"))
-    assert "rec /shows/take1.bvh" in out and out.rstrip().endswith("+glove 40k")
+    assert "rec " in out and "3.2 MB 3:21" in out and out.rstrip().endswith("glove 40k")
+    assert "glove /shows/glove1.csv 40k" in plain_line(show_snapshot(
+        outputs=(VMC_CELL, REC_CELL, glove)))

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handrig.app.panel import Outputs, outputs_line
+from handrig.app.panel import outputs_line
 from handrig.errors import DataError
 from handrig.outputs.recorder import Recorder
 
@@ -20,17 +20,11 @@ def test_a_recording_stopped_by_a_full_disk_shows_in_the_panel(tmp_path: Path) -
     os.close(rec._fd)
     rec._fd = os.open("/dev/full", os.O_WRONLY)  # every write fails: ENOSPC
     rec.add(0.0, np.zeros(50), np.zeros(4))
-    assert outputs_line(_outputs(rec)).plain.endswith("0:00")  # recording: no warning
+    assert outputs_line((rec.status().cell(),)).plain.endswith("0:00")  # no warning
     rec.flush()
     st = rec.status()
     assert st.stopped_reason.startswith("recording stopped: the disk is full")
-    line = outputs_line(_outputs(rec)).plain
+    line = outputs_line((st.cell(),)).plain
     assert "rec " in line and "stopped: the disk is full" in line
     with pytest.raises(DataError, match="record repair"):
         rec.close()
-
-
-def _outputs(rec: Recorder) -> Outputs:
-    st = rec.status()
-    return Outputs(record_path=st.path, record_bytes=st.bytes_written,
-                   record_duration_s=st.duration_s, record_stopped=st.stopped_reason)
