@@ -16,17 +16,22 @@ $(STAMP): pyproject.toml setup.py sim/_dxl_c.c
 demo: $(STAMP)
 	$(BIN)/handrig demo
 
-# Two pytest processes side by side: the compute-only tests (tests/conftest.py) beside
-# the realtime ones, which run one at a time; the second's report follows the first's.
+# Three pytest runs side by side (tests/conftest.py says which test goes where): the
+# compute-only tests at nice 19, the patient end-to-end ones two at a time at nice 5
+# (pytest-xdist, a test file per worker), and the realtime ones one at a time in the
+# foreground, first in line for the CPU; the other two reports follow the realtime one's.
 test: $(STAMP)
-	@log=$$(mktemp); \
-	$(BIN)/python -m pytest -q -p no:cacheprovider -m compute_only >"$$log" 2>&1 & pid=$$!; \
-	trap 'kill $$pid 2>/dev/null; rm -f "$$log"; exit 130' INT TERM HUP; \
-	$(BIN)/python -m pytest -q -m "not compute_only"; rt=$$?; \
-	wait $$pid; ct=$$?; \
-	echo "== the compute-only tests, run beside them (pytest -m compute_only) =="; \
-	cat "$$log"; rm -f "$$log"; \
-	test $$rt -eq 0 && test $$ct -eq 0
+	@clog=$$(mktemp); plog=$$(mktemp); \
+	nice -n 19 $(BIN)/python -m pytest -q -p no:cacheprovider -m compute_only >"$$clog" 2>&1 & cpid=$$!; \
+	nice -n 5 $(BIN)/python -m pytest -q -p no:cacheprovider -m patient -n 2 --dist loadfile >"$$plog" 2>&1 & ppid=$$!; \
+	trap 'kill $$cpid $$ppid 2>/dev/null; rm -f "$$clog" "$$plog"; exit 130' INT TERM HUP; \
+	$(BIN)/python -m pytest -q -m "not compute_only and not patient"; rt=$$?; \
+	wait $$ppid; pt=$$?; wait $$cpid; ct=$$?; \
+	echo "== the patient end-to-end tests, run beside them at nice 5 (pytest -m patient) =="; \
+	cat "$$plog"; \
+	echo "== the compute-only tests, run beside them at nice 19 (pytest -m compute_only) =="; \
+	cat "$$clog"; rm -f "$$clog" "$$plog"; \
+	test $$rt -eq 0 && test $$pt -eq 0 && test $$ct -eq 0
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

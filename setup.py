@@ -26,6 +26,9 @@ LEROBOT_PLUGINS = ("lerobot_teleoperator_handrig", "lerobot_robot_handrig")
 EXTRAS: dict[str, list[str]] = {
     "dev": [
         "pytest>=8.0",
+        # pytest-xdist: `make test` runs the patient end-to-end tests two at a time
+        # (`-n 2 --dist loadfile`); they wait for conditions, not for a time
+        "pytest-xdist>=3.6",
         "hypothesis>=6.100",
         "ruff>=0.5",
         "mypy>=1.10",
