@@ -10,7 +10,7 @@ import pytest
 from handrig.cli.calibrate_servos import calibrate, update_zero_ticks
 from handrig.config.loading import CONFIG_DIR
 from handrig.config.rig import RigConfig, load_rig_config
-from handrig.devices.servo.dynamixel_zeroing import DynamixelZeroing, propose
+from handrig.devices.servo.dynamixel_zeroing import DynamixelZeroing
 from handrig.errors import ConfigError
 from sim.dxl_bus import SimBus
 
@@ -135,6 +135,7 @@ def test_by_hand_enter_reads_then_enter_accepts_only_what_was_shown() -> None:
 def test_a_zero_whose_range_leaves_the_servos_travel_narrows_the_limits() -> None:
     rig = load_rig_config()
     wrist = rig.servo(19)  # -70..80 deg
+    propose = DynamixelZeroing("not opened", rig).propose  # nothing on the wire
     fine = propose(wrist, 2100, 20.0)
     assert fine.reasons == () and fine.limits_deg is None
     assert fine.shift_deg == pytest.approx(52 * 360 / 4096)
