@@ -50,7 +50,8 @@ CLI_VENDOR_COMMANDS = {
     # the emulator's command: it serves emulated Dynamixel servos, and its models and
     # bauds are the emulated ones' (firmware_protocol's codec)
     "handrig/cli/sim_bus.py",
-    # times the driver against the vendor's own SDK on the emulator: the vendor is its subject
+    # times the driver against the vendor's own SDK on the emulator: the vendor is its
+    # subject; an installed command (bench/ is not installed), see its docstring
     "handrig/cli/bench_bus.py",
 }
 CLI_HELP_TEXT = {
