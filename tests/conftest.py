@@ -98,6 +98,7 @@ COMPUTE_ONLY = (
     "handrig/outputs/test_glove_take.py", "handrig/app/test_robotrig.py", "sim/test_wrist_load.py",
     "bench/test_bench_skips.py", "handrig/app/test_panel_recording.py",
     "handrig/cli/test_servos_scan_default.py",
+    "handrig/cli/test_calibrate_servos_any_vendor.py",
 )
 # Tests that start handrig's commands (imports, argument and file checks, help texts, a
 # take's repair) but no loop, no emulator and no glove: nothing in them keeps time, so

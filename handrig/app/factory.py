@@ -3,8 +3,9 @@
 The parts (configs loaded and checked, the pipeline built) come from
 :mod:`handrig.app.parts`, the run summary is :mod:`handrig.app.summary`'s. Everything
 else takes its dependencies as arguments; only this module (and the commands that
-call it) decide which glove, bus and outputs a run uses: :func:`servo_bus` is the
-one place a servo vendor is chosen.
+call it) decide which glove, bus and outputs a run uses: :func:`servo_bus` (and
+:func:`zeroing_bus`, the same bus as servo calibration talks to it) is the one
+place a servo vendor is chosen.
 The simulated rig's emulators run as subprocesses (``handrig sim-bus``,
 ``handrig sim-glove``) started through :mod:`handrig.app.port_processes`, each in
 its own session so that a Ctrl-C in the terminal reaches the rig alone: the rig
@@ -36,7 +37,9 @@ from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.bus import ServoBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
+from handrig.devices.servo.dynamixel_zeroing import DynamixelZeroing
 from handrig.devices.servo.models import check_rig
+from handrig.devices.servo.zeroing import ZeroingBus
 from handrig.loop.rig import Rig
 
 FloatArray = NDArray[np.float64]
@@ -143,6 +146,21 @@ def servo_bus(spec: str | None, parts: RigParts, clock: Clock, *, wire_timing: b
                            missing_ok=rig_cfg.silence.action == "continue")
         stack.callback(bus.close)
         yield OpenedBus(bus, port, proc)
+
+
+@contextlib.contextmanager
+def zeroing_bus(spec: str, rig_cfg: RigConfig, rig_file: Path) -> Iterator[ZeroingBus]:
+    """The bus ``handrig calibrate servos`` finds the zeros on (not yet connected): on
+    the port ``spec``, or on ``handrig sim-bus`` started for ``rig_file`` when ``spec``
+    is ``"sim"`` (stopped after the bus is closed, torque off)."""
+    with contextlib.ExitStack() as stack:
+        port = spec
+        if spec == SIM_PORT:
+            _, port = stack.enter_context(
+                port_process(["sim-bus", "--rig", str(rig_file)], "the simulated servo bus"))
+        bus = DynamixelZeroing(port, rig_cfg)
+        stack.callback(bus.close)
+        yield bus
 
 
 def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,

@@ -12,6 +12,11 @@ wire-time limit for that baud and servo count (REFERENCE.md section 3), their
 ratio, the median cycle, and host CPU time
 per cycle (``time.process_time`` of this process only); then the same cycle with
 wire timing off, which is the host's share (driver, emulator, pty wake-ups).
+
+It names the vendor and its SDK on purpose (tests/test_boundaries.py lists it): the
+vendor's own way is what it measures the driver against. It stays a command, not in
+``bench/``, because ``bench/`` is not installed and users run it on their own machine
+(README); nor in ``devices/servo/``, which would then start ``sim/``'s emulator.
 """
 
 from __future__ import annotations

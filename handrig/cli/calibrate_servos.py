@@ -17,7 +17,7 @@ A confirmation (typing ``yes``) is needed, and the reason shown, when the new ze
 is further than ``[calibration] max_zero_shift_deg`` (default 20) from the current
 one (a joint hanging under gravity with torque off, or a horn a spline off, reads
 like that), or when it puts part of ``[min_deg, max_deg]`` outside the servo's
-0..4095 ticks (the limits are then narrowed to what the servo can reach).
+travel (the limits are then narrowed to what the servo can reach).
 
 After a zero is accepted the direction is checked: with ``--jog`` the servo moves
 the joint a few degrees towards flexion and asks whether it flexed; by hand you
@@ -38,7 +38,6 @@ Every write first keeps a dated copy of the file in ``backups/`` beside it;
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import math
 import sys
@@ -47,7 +46,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from handrig.app.factory import port_process
+from handrig.app.factory import zeroing_bus
 from handrig.app.sources import Source, format_sources, rig_file
 from handrig.cli._display import check_gl_backend
 from handrig.cli._ports import say_if_simulated
@@ -65,16 +64,7 @@ from handrig.config.toml_edit import (
     update_servos,
     write_with_backup,
 )
-from handrig.devices.servo import DynamixelBus
-from handrig.devices.servo.positions import (
-    POSITION_TICKS_MAX,
-    POSITION_TICKS_MIN,
-    TICKS_PER_DEG,
-    deg_to_ticks,
-    deg_to_ticks_exact,
-    ticks_to_deg,
-)
-from handrig.devices.servo.registers import Reg
+from handrig.devices.servo.zeroing import Proposal, ZeroingBus
 from handrig.errors import ConfigError, HandrigError
 from handrig.pose.robot_rig import load_rig
 
@@ -119,12 +109,6 @@ def update_zero_ticks(text: str, zeros: dict[int, int]) -> str:
     return update_servos(text, {i: {"zero_ticks": t} for i, t in zeros.items()})
 
 
-def calibration_rig(rig: RigConfig) -> RigConfig:
-    """The rig as calibration uses it: a person answers the prompts, so no Bus Watchdog
-    (it would trip between two jogs and the servo would refuse the next goal)."""
-    return dataclasses.replace(rig, bus=dataclasses.replace(rig.bus, watchdog_ms=0))
-
-
 ACCEPT_TOLERANCE_TICKS = 2  # Enter accepts the shown reading if the servo is still within this
 POLL_S = 0.02  # present position is read this often while waiting for the servo to settle
 STILL_S = 0.15  # ... and counts as settled after this long within STILL_TICKS
@@ -146,14 +130,14 @@ def _ask(prompt: str) -> str:
     return line.strip()
 
 
-def settled_position(bus: DynamixelBus, index: int, clock: Clock,
+def settled_position(bus: ZeroingBus, index: int, clock: Clock,
                      timeout_s: float = SETTLE_TIMEOUT_S) -> tuple[int, bool]:
     """Present Position of servo ``index`` once it has stopped moving: (ticks, settled).
 
     Settled: ``STILL_S`` without a change of more than ``STILL_TICKS``. After
     ``timeout_s`` the last reading is returned with ``settled`` False.
     """
-    ticks = bus.read_register(index, Reg.PRESENT_POSITION)
+    ticks = bus.position(index)
     t_end = clock.now() + timeout_s
     anchor, since = ticks, clock.now()
     while True:
@@ -163,51 +147,12 @@ def settled_position(bus: DynamixelBus, index: int, clock: Clock,
         if now >= t_end:
             return ticks, False
         clock.sleep(POLL_S)
-        ticks = bus.read_register(index, Reg.PRESENT_POSITION)
+        ticks = bus.position(index)
         if abs(ticks - anchor) > STILL_TICKS:
             anchor, since = ticks, clock.now()
 
 
-@dataclasses.dataclass(frozen=True)
-class Proposal:
-    """A reading as a new zero: its shift, what needs a confirmation, the new limits."""
-
-    zero_ticks: int
-    shift_deg: float
-    reasons: tuple[str, ...]  # why a typed confirmation is needed (empty: none)
-    limits_deg: tuple[float, float] | None  # narrowed limits, None when they fit
-    impossible: str = ""  # why this zero cannot be used at all
-
-
-def propose(cal: ServoCalibration, ticks: int, max_shift_deg: float) -> Proposal:
-    """What writing ``ticks`` as ``cal``'s zero would mean."""
-    shift = ticks_to_deg(cal, ticks)  # joint degrees from the current zero
-    reasons = []
-    if abs(shift) > max_shift_deg:
-        reasons.append(
-            f"the zero moves {shift:+.1f} deg, more than [calibration] max_zero_shift_deg = "
-            f"{max_shift_deg:g}: a joint hanging under gravity with torque off, or a horn "
-            "mounted a spline off, reads like this")
-    new = dataclasses.replace(cal, zero_ticks=ticks)
-    ends = sorted((ticks_to_deg(new, POSITION_TICKS_MIN), ticks_to_deg(new, POSITION_TICKS_MAX)))
-    low, high = max(cal.min_deg, ends[0]), min(cal.max_deg, ends[1])
-    limits: tuple[float, float] | None = None
-    if low > cal.min_deg or high < cal.max_deg:
-        low, high = math.ceil(low * 10) / 10, math.floor(high * 10) / 10
-        if low >= high:
-            return Proposal(ticks, shift, tuple(reasons), None, impossible=(
-                f"with zero_ticks {ticks} no part of [{cal.min_deg:g}, {cal.max_deg:g}] deg "
-                "lies within the servo's 0..4095 ticks"))
-        a, b = sorted((deg_to_ticks_exact(new, cal.min_deg), deg_to_ticks_exact(new, cal.max_deg)))
-        reasons.append(
-            f"with zero_ticks {ticks} the joint's range [{cal.min_deg:g}, {cal.max_deg:g}] deg "
-            f"needs ticks {a:.0f}..{b:.0f}, outside the servo's travel 0..4095: accepting "
-            f"narrows the limits to [{low:g}, {high:g}] deg")
-        limits = (low, high)
-    return Proposal(ticks, shift, tuple(reasons), limits)
-
-
-def _jog(bus: DynamixelBus, index: int, cal: ServoCalibration, start: int,
+def _jog(bus: ZeroingBus, index: int, cal: ServoCalibration, start: int,
          answer: str, say: Callable[[str], None]) -> bool:
     """Jog by ``answer`` joint degrees, at most the joint's range; False if not a jog."""
     span_deg = cal.max_deg - cal.min_deg
@@ -219,17 +164,11 @@ def _jog(bus: DynamixelBus, index: int, cal: ServoCalibration, start: int,
         say(f"not a jog: {answer!r}; type degrees between -{span_deg:g} and +{span_deg:g} "
             "(the joint's range), e.g. +2 or -30")
         return False
-    ticks_per_deg = cal.direction * cal.gear_ratio * TICKS_PER_DEG
-    base = bus.read_register(index, Reg.GOAL_POSITION)  # jogs add up
-    goal = round(base + ticks_per_deg * step_deg)
-    # never further from where it started than the joint's configured span
-    span = abs(ticks_per_deg) * span_deg
-    low, high = max(POSITION_TICKS_MIN, start - span), min(POSITION_TICKS_MAX, start + span)
-    bus.write_register(index, Reg.GOAL_POSITION, int(min(max(goal, low), high)))
+    bus.jog(index, cal, start, step_deg)
     return True
 
 
-def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog: bool,
+def check_direction(bus: ZeroingBus, index: int, cal: ServoCalibration, *, jog: bool,
                     ask: Callable[[str], str], say: Callable[[str], None],
                     clock: Clock) -> int | None:
     """Check ``cal.direction`` (``cal`` has the new zero); the direction to write if it
@@ -243,7 +182,7 @@ def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog
             say(f"{name}: its range [{cal.min_deg:g}, {cal.max_deg:g}] allows no flexion: "
                 "direction not checked")
             return None
-        bus.write_register(index, Reg.GOAL_POSITION, deg_to_ticks(cal, step))
+        bus.move_to_deg(index, cal, step)
         settled_position(bus, index, clock)
         try:
             while True:
@@ -257,7 +196,7 @@ def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog
                 if answer == "q":
                     raise Quit
         finally:
-            bus.write_register(index, Reg.GOAL_POSITION, deg_to_ticks(cal, 0.0))
+            bus.move_to_deg(index, cal, 0.0)
             settled_position(bus, index, clock)
     while True:
         answer = ask(f"{name}: direction check: flex the joint by hand (bend it the way it "
@@ -269,7 +208,7 @@ def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog
         if answer == "q":
             raise Quit
         ticks, _ = settled_position(bus, index, clock)
-        deg = ticks_to_deg(cal, ticks)
+        deg = bus.joint_deg(cal, ticks)
         if abs(deg) < DIRECTION_MIN_DEG:
             say(f"{name}: it reads {deg:+.1f} deg: flex it further (s skips the check; "
                 "with --jog the servo moves the joint and you say which way it went)")
@@ -287,7 +226,7 @@ def check_direction(bus: DynamixelBus, index: int, cal: ServoCalibration, *, jog
 
 
 def calibrate(
-    bus: DynamixelBus, rig: RigConfig, ids: list[int], *, jog: bool, yes: bool,
+    bus: ZeroingBus, rig: RigConfig, ids: list[int], *, jog: bool, yes: bool,
     ask: Callable[[str], str] = _ask, say: Callable[[str], None] = print,
     clock: Clock | None = None, direction_check: bool = True,
 ) -> dict[int, dict[str, Any]]:
@@ -297,7 +236,7 @@ def calibrate(
     Step one shows the servo's settled position; Enter reads it. Step two shows the
     reading as a new zero, with its shift; Enter accepts exactly that reading once a
     fresh read confirms the servo is still there (else the new reading is shown).
-    A zero that needs a confirmation (see :func:`propose`) is accepted only by
+    A zero that needs a confirmation (see :meth:`ZeroingBus.propose`) is accepted only by
     typing ``yes``; ``yes=True`` skips those servos.
     """
     clock = clock or MonotonicClock()
@@ -307,7 +246,7 @@ def calibrate(
         index = bus.ids.index(servo_id)
         cal = rig.servo(servo_id)
         name = bus.describe(index)
-        start = bus.read_register(index, Reg.PRESENT_POSITION)
+        start = bus.position(index)
         shown, settled = settled_position(bus, index, clock)
         reading: int | None = shown if yes else None
         hint = "+N/-N jog degrees, " if jog else "move the joint by hand, "
@@ -315,11 +254,11 @@ def calibrate(
         while accepted is None:
             if reading is None:
                 moving = "" if settled else ", still moving"
-                answer = ask(f"{name}: at {shown} ticks ({ticks_to_deg(cal, shown):+.1f} deg "
+                answer = ask(f"{name}: at {shown} ticks ({bus.joint_deg(cal, shown):+.1f} deg "
                              f"from the current zero {cal.zero_ticks}{moving}); bring it to "
                              f"0 deg [{hint}Enter reads it, s skips, q quits]: ")
             else:
-                prop = propose(cal, reading, bound)
+                prop = bus.propose(cal, reading, bound)
                 say(f"{name}: reads {reading} ticks: zero_ticks {cal.zero_ticks} -> {reading} "
                     f"({prop.shift_deg:+.1f} deg)")
                 if prop.impossible:
@@ -427,13 +366,7 @@ def run(args: argparse.Namespace) -> int:
               "emulated joint: at the direction check press s, or use --jog", flush=True)
         check_gl_backend("--port sim")
     try:
-        with contextlib.ExitStack() as stack:
-            if simulated:
-                _, bus_spec = stack.enter_context(
-                    port_process(["sim-bus", "--rig", str(rig_path)], "the simulated servo bus"))
-            bus = DynamixelBus(bus_spec, calibration_rig(rig))
-            bus.hold_outside_limits = True  # the zero is what is being found
-            stack.callback(bus.close)
+        with zeroing_bus(bus_spec, rig, rig_path) as bus:
             bus.connect()
             check = not args.no_direction_check
             if args.jog:
@@ -441,7 +374,7 @@ def run(args: argparse.Namespace) -> int:
                     changes = calibrate(bus, rig, ids, jog=True, yes=args.yes,
                                         direction_check=check)
             else:
-                bus.disable_torque()
+                bus.relax()
                 changes = calibrate(bus, rig, ids, jog=False, yes=args.yes,
                                     direction_check=check)
     except Quit:

@@ -8,7 +8,9 @@ build and parse them), ``registers`` (the X-series control table as data),
 ``bus`` (the ABC, ServoState, BusStats, FaultPolicy), then the parts of
 ``DynamixelBus``: ``roster``, ``wire``, ``link``, ``goals``, ``readings``,
 ``fast_read``, ``sync_read``, ``reader``, ``faults``, ``commissioning``,
-``torque``; ``dynamixel`` is the facade over them.
+``torque``; ``dynamixel`` is the facade over them. Beside them, ``zeroing`` (the
+``ZeroingBus`` contract ``handrig calibrate servos`` talks to) and ``dynamixel_zeroing``
+(its Dynamixel side).
 
     from handrig.devices.servo import DynamixelBus
     bus = DynamixelBus("/dev/ttyUSB0", load_rig_config())  # baud from the rig file

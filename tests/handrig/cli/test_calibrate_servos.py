@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from handrig.cli.calibrate_servos import calibrate, calibration_rig, propose, update_zero_ticks
+from handrig.cli.calibrate_servos import calibrate, update_zero_ticks
 from handrig.config.loading import CONFIG_DIR
 from handrig.config.rig import RigConfig, load_rig_config
-from handrig.devices.servo import DynamixelBus
+from handrig.devices.servo.dynamixel_zeroing import DynamixelZeroing
 from handrig.errors import ConfigError
 from sim.dxl_bus import SimBus
 
@@ -42,10 +42,10 @@ def test_update_binds_zero_ticks_to_its_block_whatever_the_line_order():
 PROMPT = re.compile(r"at (\d+) ticks \(([+-][\d.]+) deg")
 
 
-def two_servo_bus(rig: RigConfig, sim: SimBus, ids: tuple[int, int] = (7, 8)) -> DynamixelBus:
+def two_servo_bus(rig: RigConfig, sim: SimBus, ids: tuple[int, int] = (7, 8)
+                  ) -> DynamixelZeroing:
     two = rig.__class__(bus=rig.bus, loop=rig.loop, servos=tuple(rig.servo(i) for i in ids))
-    bus = DynamixelBus(sim.port_path, calibration_rig(two))
-    bus.hold_outside_limits = True
+    bus = DynamixelZeroing(sim.port_path, two)
     bus.connect()
     return bus
 
@@ -121,7 +121,7 @@ def test_by_hand_enter_reads_then_enter_accepts_only_what_was_shown() -> None:
 
         bus = two_servo_bus(rig, sim)
         try:
-            bus.disable_torque()
+            bus.relax()
             changes = calibrate(bus, rig, [7, 8], jog=False, yes=False, ask=ask,
                                 say=said.append, direction_check=False)
         finally:
@@ -135,6 +135,7 @@ def test_by_hand_enter_reads_then_enter_accepts_only_what_was_shown() -> None:
 def test_a_zero_whose_range_leaves_the_servos_travel_narrows_the_limits() -> None:
     rig = load_rig_config()
     wrist = rig.servo(19)  # -70..80 deg
+    propose = DynamixelZeroing("not opened", rig).propose  # nothing on the wire
     fine = propose(wrist, 2100, 20.0)
     assert fine.reasons == () and fine.limits_deg is None
     assert fine.shift_deg == pytest.approx(52 * 360 / 4096)
@@ -162,7 +163,7 @@ def test_direction_check_by_hand_flips_a_reversed_servo() -> None:
             return next(answers)
 
         try:
-            bus.disable_torque()
+            bus.relax()
             changes = calibrate(bus, rig, [7], jog=False, yes=False, ask=ask, say=said.append)
         finally:
             bus.close()
