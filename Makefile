@@ -17,17 +17,17 @@ demo: $(STAMP)
 	$(BIN)/handrig demo
 
 # Three pytest runs side by side (tests/conftest.py says which test goes where): the
-# compute-only tests at nice 19, the patient end-to-end ones two at a time at nice 5
+# compute-only tests at nice 19, the patient end-to-end ones two at a time at nice 10
 # (pytest-xdist, a test file per worker), and the realtime ones one at a time in the
 # foreground, first in line for the CPU; the other two reports follow the realtime one's.
 test: $(STAMP)
 	@clog=$$(mktemp); plog=$$(mktemp); \
 	nice -n 19 $(BIN)/python -m pytest -q -p no:cacheprovider -m compute_only >"$$clog" 2>&1 & cpid=$$!; \
-	nice -n 5 $(BIN)/python -m pytest -q -p no:cacheprovider -m patient -n 2 --dist loadfile >"$$plog" 2>&1 & ppid=$$!; \
+	nice -n 10 $(BIN)/python -m pytest -q -p no:cacheprovider -m patient -n 2 --dist loadfile >"$$plog" 2>&1 & ppid=$$!; \
 	trap 'kill $$cpid $$ppid 2>/dev/null; rm -f "$$clog" "$$plog"; exit 130' INT TERM HUP; \
 	$(BIN)/python -m pytest -q -m "not compute_only and not patient"; rt=$$?; \
 	wait $$ppid; pt=$$?; wait $$cpid; ct=$$?; \
-	echo "== the patient end-to-end tests, run beside them at nice 5 (pytest -m patient) =="; \
+	echo "== the patient end-to-end tests, run beside them at nice 10 (pytest -m patient) =="; \
 	cat "$$plog"; \
 	echo "== the compute-only tests, run beside them at nice 19 (pytest -m compute_only) =="; \
 	cat "$$clog"; rm -f "$$clog" "$$plog"; \

@@ -61,7 +61,7 @@ SPEC = Path(__file__).resolve().parents[1] / "firmware_protocol" / "SPEC.md"
 # - `-m compute_only`: the tests below only compute (maps, sag, baking, rendering,
 #   parsing, compiling) or start a command that keeps no time; they run at the lowest
 #   CPU priority (nice 19), on what the other two leave;
-# - `-m patient`, two at a time at nice 5: end-to-end tests against the emulators whose checks
+# - `-m patient`, two at a time at nice 10: end-to-end tests against the emulators whose checks
 #   hold on a busy machine: they check what was found, written, commissioned or recorded
 #   and wait for conditions, not for a time (PATIENT below);
 # - the rest (`-m "not compute_only and not patient"`): realtime loops whose checks are

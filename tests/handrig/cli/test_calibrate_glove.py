@@ -29,7 +29,7 @@ def main(argv: list[str]) -> int:
         return 2
 
 
-SETTLE_S, HOLD_S = 0.15, 0.25
+SETTLE_S, HOLD_S = 0.3, 0.5  # generous: the emulator thread and the command share this process
 POSES = {  # raw counts per step; channel 1 (thumb CMC abduction) reads lower when closed
     "open": [1000, 3000, 1000, 1000, 1000],
     "fist": [2500, 1200, 2600, 3100, 3000],
