@@ -2,9 +2,25 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 from pathlib import Path
 
+import pytest
+
 from handrig.config.loading import CONFIG_DIR
+
+LEROBOT_DISTRIBUTIONS = ("lerobot", "lerobot_robot_handrig", "lerobot_teleoperator_handrig")
+
+
+def skip_without_lerobot() -> None:
+    """Skip the calling test module, saying why, unless LeRobot and both of handrig's
+    plugin distributions are installed (``make lerobot-deps``)."""
+    for dist in LEROBOT_DISTRIBUTIONS:
+        try:
+            importlib.metadata.distribution(dist)
+        except importlib.metadata.PackageNotFoundError:
+            pytest.skip(f"{dist} is not installed (make lerobot-deps installs LeRobot and "
+                        "handrig's plugins for it)", allow_module_level=True)
 
 
 def write_ramp_take(path: Path, rows: int, row_s: float, start: int, step: int) -> Path:

@@ -5,7 +5,6 @@ folders point into the scratch folder, and the Hub is offline (a push would fail
 
 from __future__ import annotations
 
-import importlib.metadata
 import json
 import os
 import re
@@ -13,16 +12,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
+from tests.helpers.lerobot import skip_without_lerobot
 
 README = Path(__file__).resolve().parents[4] / "README.md"
 
-for _dist in ("lerobot", "lerobot_robot_handrig", "lerobot_teleoperator_handrig"):
-    try:
-        importlib.metadata.distribution(_dist)
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip(f"{_dist} is not installed (make lerobot-deps installs LeRobot and "
-                    "handrig's plugins for it)", allow_module_level=True)
+skip_without_lerobot()
 
 
 def example() -> str:

@@ -13,7 +13,6 @@ hand's loop writes on the emulated bus follow the recorded actions.
 
 from __future__ import annotations
 
-import importlib.metadata
 import math
 import os
 import time
@@ -26,15 +25,9 @@ from handrig.app.lerobot.teleop import GloveTeleop
 from handrig.clock import FakeClock
 from handrig.devices.glove.replay import ReplayGlove
 from handrig.devices.glove_recording import read_glove_recording
-from tests.helpers.lerobot import unfiltered_glove_file, write_ramp_take
+from tests.helpers.lerobot import skip_without_lerobot, unfiltered_glove_file, write_ramp_take
 
-for _plugin in ("lerobot", "lerobot_robot_handrig", "lerobot_teleoperator_handrig"):
-    try:
-        importlib.metadata.distribution(_plugin)
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip(f"{_plugin} is not installed (make lerobot-deps installs LeRobot and "
-                    "handrig's plugins for it)",
-                    allow_module_level=True)
+skip_without_lerobot()
 
 FPS = 30
 ROW_S = 0.01  # the take's rows: 100 a second

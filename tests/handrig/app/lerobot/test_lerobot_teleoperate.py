@@ -7,7 +7,6 @@ Torque Enable each holds after it ends. Skipped without LeRobot (`make lerobot-d
 
 from __future__ import annotations
 
-import importlib.metadata
 import os
 import subprocess
 import sys
@@ -15,7 +14,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from handrig.app.lerobot.teleop import GloveTeleop
 from handrig.app.simulator import servo_bus
@@ -24,14 +22,9 @@ from handrig.devices.glove.replay import ReplayGlove
 from handrig.devices.glove_recording import read_glove_recording
 from handrig.devices.servo.positions import ticks_to_deg
 from handrig.pose.robot_rig import load_rig
-from tests.helpers.lerobot import unfiltered_glove_file, write_ramp_take
+from tests.helpers.lerobot import skip_without_lerobot, unfiltered_glove_file, write_ramp_take
 
-for _dist in ("lerobot", "lerobot_robot_handrig", "lerobot_teleoperator_handrig"):
-    try:
-        importlib.metadata.distribution(_dist)
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip(f"{_dist} is not installed (make lerobot-deps installs LeRobot and "
-                    "handrig's plugins for it)", allow_module_level=True)
+skip_without_lerobot()
 
 RUN_S = 2.0  # --teleop_time_s
 FIST_COUNTS = 2600  # the take's index MCP channel: the index flexed, far from relaxed
