@@ -27,6 +27,7 @@ from dynamixel_sdk.robotis_def import COMM_RX_CORRUPT, COMM_RX_TIMEOUT
 from handrig.config.rig import RigConfig
 from handrig.devices.servo.models import BAUD_RATES, MODEL_NAMES, OPERATING_MODES, servo_model
 from handrig.devices.servo.registers import Reg, describe_hardware_error
+from handrig.devices.servo.transport import is_pseudo_terminal
 from handrig.errors import DeviceError
 
 PROTOCOL = 2.0
@@ -48,6 +49,10 @@ FACTORY_ID, FACTORY_BAUD = 1, 57600
 REBOOT_WAIT_S = 0.5  # a rebooted servo is silent for a moment (ORCA measures about 0.3 s)
 PING_TRIES = 3  # pings of a servo that should answer before it is taken as absent
 DESCRIBE_TRIES = 3  # reads of a found servo's registers, each tried this many times
+# Added to each SDK reply timeout (its own: twice a 16 ms latency timer + 2 ms) on a
+# pseudo-terminal, where a program answers on the host's CPUs: on a loaded machine it
+# may not run for tens of milliseconds (CI saw 3 reads in a row go unanswered in 34 ms).
+PTY_PATIENCE_MS = 250.0
 ONE_AT_A_TIME = (
     "two or more servos share an ID (new servos all come as ID 1 at 57600): connect one "
     "servo at a time and give each its own ID with `handrig servos set-id`"
@@ -97,12 +102,24 @@ class ScanResult:
         return sorted(s.id for s in self.servos if s.baud == baud)
 
 
+class _PortHandler(PortHandler):
+    """The SDK's port handler, whose reply timeouts get ``extra_ms`` more."""
+
+    extra_ms = 0.0
+
+    def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 (the SDK's name)
+        super().setPacketTimeout(packet_length)
+        self.packet_timeout += self.extra_ms
+
+
 class ServoPort:
-    """One serial port opened with the SDK; ``baud`` can change between calls."""
+    """One serial port opened with the SDK; ``baud`` can change between calls. On a
+    pseudo-terminal (an emulator, a bridge) each reply is waited for
+    :data:`PTY_PATIENCE_MS` longer: a late reply there is the host's, not the bus's."""
 
     def __init__(self, port: str, baud: int = FACTORY_BAUD) -> None:
         self.port = port
-        self.handler = PortHandler(port)
+        self.handler = _PortHandler(port)
         self.packet = PacketHandler(PROTOCOL)
         self.baud = 0
         self.set_baud(baud)
@@ -122,6 +139,8 @@ class ServoPort:
             ) from None
         if not ok:
             raise DeviceError(f"dynamixel-sdk refuses baud {baud} on {self.port}")
+        self.handler.extra_ms = (PTY_PATIENCE_MS if is_pseudo_terminal(self.handler.ser.fileno())
+                                 else 0.0)
         self.baud = baud
 
     def close(self) -> None:

@@ -449,13 +449,14 @@ class DynamixelBus(ServoBus):
     def _read_every_servo(self, purpose: str) -> ServoState:
         """Read until every servo has given a valid reading (up to COMMAND_ATTEMPTS reads).
 
-        On an emulated bus each read waits for its replies until its deadline
-        (``patient``): an emulator shares the host's CPUs, and on a busy machine its
-        replies come late, not never; the realtime loop's reads stay strict."""
+        On an emulated bus, or any pseudo-terminal (a program answers there, not a
+        UART), each read waits for its replies until its deadline (``patient``): an
+        emulator shares the host's CPUs, and on a busy machine its replies come late,
+        not never; the realtime loop's reads stay strict."""
         seen = np.zeros(self.roster.n, bool)
         for _ in range(COMMAND_ATTEMPTS):
             state = self.read_state(self.clock.now() + 4 * COMMAND_TIMEOUT_S,
-                                    patient=self.emulated)
+                                    patient=self.emulated or self.transport.pty)
             seen |= ~state.stale | self.roster.absent  # left out at start-up: not waited for
             if seen.all():
                 return state

@@ -50,6 +50,12 @@ PTY_SLAVE_MAJORS = range(136, 144)
 _SYSFS_LATENCY = "/sys/bus/usb-serial/devices/{name}/latency_timer"
 
 
+def is_pseudo_terminal(fd: int) -> bool:
+    """True when ``fd`` is a pseudo-terminal's slave: a program (an emulator, a network
+    bridge), not a UART, answers on the other side, on the host's own CPUs."""
+    return os.major(os.fstat(fd).st_rdev) in PTY_SLAVE_MAJORS
+
+
 @dataclass(frozen=True)
 class LatencyReport:
     """What was found and done about the USB adapter's latency timer."""
@@ -82,6 +88,9 @@ class Transport(ABC):
         self.wedged = False  # the port stopped draining (set by write)
         self.unanswered = 0  # waits for an answer that ended with no byte since the last byte
         self.judging_answers = False  # see judge_answers
+        # a pseudo-terminal (set by open): a program answers, on the host's CPUs, so a
+        # reply can come late by a scheduler's slice; its output queue cannot be seen
+        self.pty = False
 
     @property
     @abstractmethod
@@ -243,7 +252,6 @@ class SerialTransport(Transport):
         super().__init__(port, baud, clock)
         self._handler: PortHandler | None = None
         self._fd = -1
-        self.pty = False  # a pseudo-terminal: its queue cannot be seen (set by open)
         self.queued = 0  # bytes in the driver's output queue at the last write (TIOCOUTQ)
         self._drained_s = -np.inf  # when the queue was last seen empty or shrinking
         self._outq = bytearray(4)  # TIOCOUTQ's answer, reused
@@ -287,7 +295,7 @@ class SerialTransport(Transport):
         self.judge_answers(False)
         self.queued = 0
         self._drained_s = self.clock.now()
-        self.pty = os.major(os.fstat(fd).st_rdev) in PTY_SLAVE_MAJORS
+        self.pty = is_pseudo_terminal(fd)
 
     def close(self) -> None:
         """Close the port; after a timed-out write the bytes still queued are dropped
