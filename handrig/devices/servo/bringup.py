@@ -107,7 +107,7 @@ class _PortHandler(PortHandler):
 
     extra_ms = 0.0
 
-    def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 (the SDK's name)
+    def setPacketTimeout(self, packet_length: int) -> None:  # the SDK's name
         super().setPacketTimeout(packet_length)
         self.packet_timeout += self.extra_ms
 
