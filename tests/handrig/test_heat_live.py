@@ -54,6 +54,9 @@ def test_past_action_c_with_stop_the_run_ends_naming_it_with_torque_off(
         port = bus.port
         summary = run(port, tmp_path, "stop")
     assert summary["stop_reason"].startswith("device error")
-    assert f"{WRIST} is at 66 C ([heat] action_c 65 C)" in summary["stop_reason"]
+    # it starts at 66 C and cools as it idles: a slow start on a loaded machine reads 65 C
+    hot = re.search(re.escape(WRIST) + r" is at (\d+) C \(\[heat\] action_c 65 C\)",
+                    summary["stop_reason"])
+    assert hot is not None and int(hot.group(1)) in (65, 66), summary["stop_reason"]
     assert "[heat] action is stop" in summary["stop_reason"]
     assert summary["torque_off"] is True
