@@ -17,6 +17,7 @@ import numpy as np
 from firmware_protocol import dynamixel as dx
 from handrig.clock import MonotonicClock
 from handrig.config.rig import load_rig_config
+from handrig.config.rig_files import SHIPPED_RIG
 from handrig.devices.servo import DynamixelBus
 from handrig.devices.servo.transport import Transport
 
@@ -64,7 +65,7 @@ class InstantTransport(Transport):
 
 
 def main(repeats: int = 5) -> None:
-    rig = load_rig_config()
+    rig = load_rig_config(SHIPPED_RIG)
     n = len(rig.servos)
     rig = dataclasses.replace(rig, bus=dataclasses.replace(rig.bus, baud=4_000_000))
     clock = MonotonicClock()

@@ -120,6 +120,7 @@ def chase(folder: Path) -> None:
     from handrig.app.takes import load_play_take, play_parts
     from handrig.app.timecode import chase_setup
     from handrig.config.rig import load_rig_config
+    from handrig.config.rig_files import SHIPPED_RIG
     from handrig.outputs.recorder import Recorder
     from handrig.pose.pipeline import POSE_SIZE
     from sim.dxl_bus import SimBus
@@ -140,7 +141,7 @@ def chase(folder: Path) -> None:
     parts = play_parts(parts, played)
     setup = chase_setup(argparse.Namespace(speed=1.0, loop=False, chase_ltc=str(wav),
                                            ltc_fps=None, chase_at="01:00:00:10"), played)
-    with SimBus.from_rig(load_rig_config()) as sim:
+    with SimBus.from_rig(load_rig_config(SHIPPED_RIG)) as sim:
         result = run_live(parts, LiveOptions(
             glove=f"replay:{take}", take=setup.glove, timecode=setup.reader,
             bus=sim.port_path, duration_s=setup.duration_s, panel=False,

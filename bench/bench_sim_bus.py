@@ -21,6 +21,7 @@ import numpy as np
 
 from firmware_protocol import dynamixel as dx
 from handrig.config.rig import load_rig_config
+from handrig.config.rig_files import SHIPPED_RIG
 from handrig.devices.servo.positions import deg_to_ticks
 from sim.dxl_bus import SimBus
 from sim.dxl_servo import EmulatedServo
@@ -100,7 +101,7 @@ def round_trips() -> None:
 def wire_timed_cycles(seconds: float = 1.5) -> None:
     from dynamixel_sdk import GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
 
-    rig = load_rig_config()
+    rig = load_rig_config(SHIPPED_RIG)
     n = len(rig.servos)
     print(f"wire timing on, plain SDK Sync Write + Fast Sync Read, {n} servos, puppet on:")
     for baud in (1_000_000, 4_000_000):

@@ -54,8 +54,9 @@ def _glove(args: argparse.Namespace) -> int:
 def _bus(args: argparse.Namespace) -> int:
     from handrig.app import simulator
     from handrig.config.rig import hand_rig, load_rig_config
+    from handrig.config.rig_files import SHIPPED_RIG
 
-    rig = load_rig_config(args.rig)
+    rig = load_rig_config(args.rig or SHIPPED_RIG)
     if args.hand:  # one hand's servos of a two-hand rig, on that hand's bus
         rig = hand_rig(rig, args.hand)
     # kinematic servos: no physics thread in this process to hold up the receipt stamps

@@ -89,7 +89,7 @@ IDLE_WAIT_S = 0.01
 class SimBus(Dispatcher):
     """Emulated servos behind a pty. Use as a context manager::
 
-        with SimBus.from_rig(load_rig_config(), puppet=True, wire_timing=True) as bus:
+        with SimBus.from_rig(load_rig_config(SHIPPED_RIG), puppet=True, wire_timing=True) as bus:
             port = PortHandler(bus.port_path)
             bus.servo(3).torque_enabled, bus.fault_counts, bus.stats
 

@@ -1,5 +1,5 @@
 """Boundaries beyond the layers (tests/test_layers.py): ``sim/`` stays below the app,
-and the servo vendor's words stay in its driver."""
+and the servo vendor's words and modules stay in its driver."""
 
 from __future__ import annotations
 
@@ -95,7 +95,7 @@ def test_no_vendor_or_servo_model_is_named_above_the_driver() -> None:
 
 def test_the_commands_name_no_vendor_type() -> None:
     """``handrig/cli/`` talks to servos through the contracts the factory opens
-    (``ServoBus``, ``ZeroingBus``): but for the emulator's and the SDK benchmark's
+    (``ServoBus``, ``ZeroingBus``, ``BusBringup``): but for the emulator's and the SDK benchmark's
     commands, a vendor word is at most help text."""
     found = _vendor_lines(CLI_VENDOR_COMMANDS, ("cli",), frozenset(CLI_HELP_TEXT))
     assert not found, "vendor words in the commands:\n" + "\n".join(found)
@@ -106,3 +106,59 @@ def test_a_vendor_type_in_a_help_text_command_is_found() -> None:
     code = "x = 1\nfrom handrig.devices.servo import DynamixelBus  # Dynamixel\n"
     assert _code_lines(code) == {2}
     assert _code_lines('"""Dynamixel X-series"""\nhelp = f"XL330-M288 {n}"\n') == set()
+
+
+# The driver's own modules: its bring-up, register table, codec and tick arithmetic.
+DRIVER_MODULES = re.compile(
+    r"^handrig\.devices\.servo\.(dynamixel\w*|registers|codec|positions)(\.|$)")
+MODEL_TABLES = "handrig.devices.servo.models"  # its tables (UPPER_CASE names) stay there
+DRIVER_DOORS = VENDOR_BRANCH | CLI_VENDOR_COMMANDS  # the factory; the emulator, the SDK bench
+
+
+def _driver_imports(text: str, filename: str = "<text>") -> list[str]:
+    """The imports in ``text`` of the driver's modules, of the model table module whole,
+    or of a table (an UPPER_CASE name) from it; lazy imports in functions included."""
+    found = []
+    for node in ast.walk(ast.parse(text, filename=filename)):
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names
+                      if DRIVER_MODULES.match(a.name) or a.name == MODEL_TABLES]
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            for a in node.names:
+                full = f"{node.module}.{a.name}"
+                if (DRIVER_MODULES.match(full) or full == MODEL_TABLES
+                        or (node.module == MODEL_TABLES and a.name.isupper())):
+                    found.append(full)
+    return found
+
+
+def test_the_app_and_the_commands_import_no_driver_module_or_model_table() -> None:
+    """Above ``handrig/devices/servo/`` the app and the commands reach the servos
+    through contracts (``ServoBus``, ``ZeroingBus``, ``BusBringup``) the factory opens:
+    no bring-up, register table, codec, ticks or model table of the driver's, but for
+    the factory (the one vendor branch) and the emulator's and the SDK bench's
+    commands."""
+    found = [f"{path.relative_to(ROOT).as_posix()}: {name}"
+             for layer in ("app", "cli")
+             for path in sorted((ROOT / "handrig" / layer).rglob("*.py"))
+             if path.relative_to(ROOT).as_posix() not in DRIVER_DOORS
+             for name in _driver_imports(path.read_text(), str(path))]
+    assert not found, "driver modules imported above the driver:\n" + "\n".join(found)
+
+
+def test_a_driver_import_is_found() -> None:
+    """The check above sees each way back in, and lets the contracts through."""
+    code = """
+from handrig.devices.servo import bringup, dynamixel_bringup
+from handrig.devices.servo.bringup import BusBringup
+from handrig.devices.servo.bus import ServoBus, fault_letters
+from handrig.devices.servo.models import BAUD_RATES, temperature_limit_c
+import handrig.devices.servo.models
+def later():
+    from handrig.devices.servo.registers import Reg
+    from handrig.devices.servo.dynamixel_bringup import scan
+"""
+    assert _driver_imports(code) == [
+        "handrig.devices.servo.dynamixel_bringup", "handrig.devices.servo.models.BAUD_RATES",
+        "handrig.devices.servo.models", "handrig.devices.servo.registers.Reg",
+        "handrig.devices.servo.dynamixel_bringup.scan"]

@@ -3,9 +3,10 @@
 The parts (configs loaded and checked, the pipeline built) come from
 :mod:`handrig.app.parts`, the run summary is :mod:`handrig.app.summary`'s. Everything
 else takes its dependencies as arguments; only this module (and the commands that
-call it) decide which glove, bus and outputs a run uses: :func:`servo_bus` (and
-:func:`zeroing_bus`, the same bus as servo calibration talks to it) is the one
-place a servo vendor is chosen.
+call it) decide which glove, bus and outputs a run uses: :func:`servo_bus` (with
+:func:`zeroing_bus`, the same bus as servo calibration talks to it, and
+:func:`servo_bringup`, the servos as ``handrig servos`` and ``handrig setup`` bring
+them up) is the one place a servo vendor is chosen.
 The simulated rig's emulators run as subprocesses (``handrig sim-bus``,
 ``handrig sim-glove``) started through :mod:`handrig.app.port_processes`, each in
 its own session so that a Ctrl-C in the terminal reaches the rig alone: the rig
@@ -35,8 +36,10 @@ from handrig.devices.glove_calibration import (
 )
 from handrig.devices.glove_recording import check_channels, read_glove_recording
 from handrig.devices.servo import DynamixelBus
+from handrig.devices.servo.bringup import BusBringup
 from handrig.devices.servo.bus import ServoBus
 from handrig.devices.servo.dynamixel import ReadFields, cycle_bytes, wire_time_s
+from handrig.devices.servo.dynamixel_bringup import DynamixelBringup
 from handrig.devices.servo.dynamixel_zeroing import DynamixelZeroing
 from handrig.devices.servo.models import check_rig
 from handrig.devices.servo.zeroing import ZeroingBus
@@ -161,6 +164,13 @@ def zeroing_bus(spec: str, rig_cfg: RigConfig, rig_file: Path) -> Iterator[Zeroi
         bus = DynamixelZeroing(port, rig_cfg)
         stack.callback(bus.close)
         yield bus
+
+
+def servo_bringup() -> type[BusBringup]:
+    """The bring-up of the servos' vendor (``handrig servos``, ``handrig setup``): a
+    class, as its bauds are known before a port is (the command line checks ``--baud``
+    against them); ``servo_bringup()(port)`` works on one port."""
+    return DynamixelBringup
 
 
 def outputs(stack: contextlib.ExitStack, rig_cfg: RigConfig, clock: Clock, *,

@@ -30,8 +30,8 @@ from rich.live import Live
 from rich.text import Text
 
 from handrig.app.keys import SHOW_KEYS
+from handrig.devices.servo.bus import fault_letters
 from handrig.devices.servo.models import temperature_limit_c
-from handrig.devices.servo.registers import HARDWARE_ERROR_LETTERS
 from handrig.outputs.base import PanelCell
 
 WIDTH = 80
@@ -90,7 +90,7 @@ class ServoLine:
     warn_c: float = NAN  # [heat] warn_c: yellow from here
     act_c: float = NAN  # [heat] act_c: red from here (its effort is capped)
     current_ma: float = NAN  # Present Current (or load, as mA equivalent)
-    hardware_error: int = 0  # Hardware Error Status bits, 0 = none
+    hardware_error: int = 0  # ServoFault bits (the bus contract's), 0 = none
 
 
 @dataclass(frozen=True)
@@ -163,11 +163,6 @@ def short_joint(name: str) -> str:
     stem = name[2:] if name[:2] in ("ri", "le") else name
     stem = stem.replace("Flexion", "Flex").replace("Deviation", "Dev")
     return _fit(stem, 10)
-
-
-def error_letters(bits: int) -> str:
-    """Hardware Error Status as letters (:data:`HARDWARE_ERROR_LETTERS`), "" for none."""
-    return "".join(letter for bit, letter in HARDWARE_ERROR_LETTERS if bits & bit)
 
 
 def _deg(value: float) -> str:
@@ -299,7 +294,7 @@ def _servo_cell(sv: ServoLine | None) -> Text:
             else sv.temperature_limit_c
         yellow = sv.warn_c if math.isfinite(sv.warn_c) else sv.temperature_limit_c - 10
         hot = "bold red" if t >= red else "yellow" if t >= yellow else ""
-    err = error_letters(sv.hardware_error)
+    err = fault_letters(sv.hardware_error)
     current = abs(sv.current_ma) if math.isfinite(sv.current_ma) else NAN
     return Text.assemble(
         f"{sv.id:>2} {short_joint(sv.joint):<10} {_deg(sv.goal_deg):>5} ",

@@ -11,8 +11,11 @@
    and baud it has (a factory-new servo: ID 1 at the factory baud the driver knows),
    given the rig's next ID and the rig's baud, torque off, next.
 
-Every question goes through ``ask`` and every line through ``say``, and the port
-list through ``list_ports``, so a test drives the steps against the emulated bus.
+The servos are reached through a :class:`~handrig.devices.servo.bringup.BusBringup`
+on the adapter's port (the factory's :func:`~handrig.app.factory.servo_bringup`), so
+nothing here knows their vendor. Every question goes through ``ask`` and every line
+through ``say``, and the port list through ``list_ports``, so a test drives the steps
+against the emulated bus.
 """
 
 from __future__ import annotations
@@ -24,8 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from handrig.config.rig import RigConfig
-from handrig.devices.servo import bringup
-from handrig.devices.servo.registers import Reg
+from handrig.devices.servo.bringup import BusBringup
 from handrig.errors import DeviceError, HandrigError
 
 Ask = Callable[[str], str]
@@ -105,67 +107,61 @@ class NewServo:
     id: int
     baud: int
     model_number: int
-
-    @property
-    def model(self) -> str:
-        return bringup.MODEL_NAMES.get(self.model_number, f"model {self.model_number}")
+    model: str  # the vendor's name for it
 
 
-def find_new_servo(port: str, bauds: Sequence[int], ready: dict[int, int]) -> NewServo | None:
-    """The one servo on ``port`` that is not among ``ready`` ({ID: baud} of servos made
-    ready before, still chained), looking at ``bauds`` in order and stopping at the first
-    baud where one answers; None if none does. DeviceError when replies collide (two
-    servos with one ID) or more than one new servo answers."""
-    with bringup.open_port(port, bauds[0]) as sp:
-        for baud in bauds:
-            sp.set_baud(baud)
-            found, collided = sp.broadcast_ping()
-            if collided:
-                raise DeviceError(f"replies collide at {baud} bps: {bringup.ONE_AT_A_TIME}")
-            new = {i: m for i, (m, _fw) in found.items() if ready.get(i) != baud}
-            if len(new) > 1:
-                raise DeviceError(f"{len(new)} new servos answer at {baud} bps (IDs "
-                                  f"{', '.join(map(str, sorted(new)))}): plug in one new "
-                                  "servo at a time")
-            if new:
-                (servo_id, model), = new.items()
-                return NewServo(servo_id, baud, model)
+def find_new_servo(servos: BusBringup, bauds: Sequence[int],
+                   ready: dict[int, int]) -> NewServo | None:
+    """The one servo on the port of ``servos`` that is not among ``ready`` ({ID: baud} of
+    servos made ready before, still chained), looking at ``bauds`` in order and stopping
+    at the first baud where one answers; None if none does. DeviceError when replies
+    collide (two servos with one ID) or more than one new servo answers."""
+    for baud in bauds:
+        found, collided = servos.ping_all(baud)
+        if collided:
+            raise DeviceError(f"replies collide at {baud} bps: {servos.one_at_a_time}")
+        new = {i: m for i, m in found.items() if ready.get(i) != baud}
+        if len(new) > 1:
+            raise DeviceError(f"{len(new)} new servos answer at {baud} bps (IDs "
+                              f"{', '.join(map(str, sorted(new)))}): plug in one new "
+                              "servo at a time")
+        if new:
+            (servo_id, model), = new.items()
+            return NewServo(servo_id, baud, model, servos.model_name(model))
     return None
 
 
-def make_ready(port: str, servo: NewServo, new_id: int, baud: int) -> list[str]:
+def make_ready(servos: BusBringup, servo: NewServo, new_id: int, baud: int) -> list[str]:
     """Give ``servo`` the ID ``new_id`` and the baud ``baud`` (each only if it differs),
     confirm it answers there and leave its torque off. Returns what was done."""
     notes: list[str] = []
     if (servo.id, servo.baud) != (new_id, baud):
-        with bringup.open_port(port, baud) as sp:
-            taken = sp.ping_confirmed(new_id)
+        taken = servos.ping(baud, new_id)
         if taken is not None:
             raise DeviceError(
                 f"ID {new_id} is taken at {baud} bps by another servo on the bus (a "
-                f"{bringup.MODEL_NAMES.get(taken, taken)}): two servos with one ID garble "
+                f"{servos.model_name(taken)}): two servos with one ID garble "
                 "every reply. Unplug the others and plug in this new servo alone")
     if servo.id != new_id:
-        notes += bringup.set_id(port, servo.baud, servo.id, new_id)
+        notes += servos.set_id(servo.baud, servo.id, new_id)
     if servo.baud != baud:
-        notes += bringup.set_baud(port, servo.baud, new_id, baud)
-    with bringup.open_port(port, baud) as sp:
-        if sp.ping_confirmed(new_id) is None:
-            raise DeviceError(f"servo {new_id} does not answer at {baud} bps after the "
-                              "changes: run `handrig servos scan`")
-        if sp.read(new_id, Reg.TORQUE_ENABLE):
-            sp.write(new_id, Reg.TORQUE_ENABLE, 0)
+        notes += servos.set_baud(servo.baud, new_id, baud)
+    if servos.ping(baud, new_id) is None:
+        raise DeviceError(f"servo {new_id} does not answer at {baud} bps after the "
+                          "changes: run `handrig servos scan`")
+    servos.torque_off(baud, new_id)
     return notes
 
 
-def commission_servos(port: str, rig: RigConfig, ids: Sequence[int], ask: Ask, say: Say, *,
-                      bauds: Sequence[int] | None = None) -> Commissioned:
+def commission_servos(servos: BusBringup, rig: RigConfig, ids: Sequence[int], ask: Ask,
+                      say: Say, *, bauds: Sequence[int] | None = None) -> Commissioned:
     """For each of ``ids`` (the rig's servo IDs, in order): ask for one servo to be
-    plugged in, find it at any baud (``bauds``: :func:`bringup.search_order` with the
-    rig's first), give it the ID and the rig's baud, torque off. ``s`` skips a servo,
-    ``q`` stops (:class:`Quit`); a servo not found, or a collision, says what to do and
-    asks again."""
-    order = list(bauds) if bauds else bringup.search_order([rig.bus.baud])
+    plugged in on the port of ``servos``, find it at any baud (``bauds``, else
+    :meth:`~handrig.devices.servo.bringup.BusBringup.search_order` with the rig's
+    first), give it the ID and the rig's baud, torque off. ``s`` skips a servo, ``q``
+    stops (:class:`Quit`); a servo not found, or a collision, says what to do and asks
+    again."""
+    order = list(bauds) if bauds else servos.search_order([rig.bus.baud])
     done = Commissioned()
     ready: dict[int, int] = {}
     joints = {s.id: s.joint for s in rig.servos}
@@ -182,14 +178,14 @@ def commission_servos(port: str, rig: RigConfig, ids: Sequence[int], ask: Ask, s
                 done.skipped.append(target)
                 break
             try:
-                found = find_new_servo(port, order, ready)
+                found = find_new_servo(servos, order, ready)
                 if found is None:
                     say(f"no new servo answers at any of {', '.join(map(str, order))} bps: "
                         "check its power (its LED blinks once at power-on) and cable, then "
                         "press Enter again")
                     continue
                 say(f"found a {found.model} as ID {found.id} at {found.baud} bps")
-                for line in make_ready(port, found, target, rig.bus.baud):
+                for line in make_ready(servos, found, target, rig.bus.baud):
                     say(f"  {line}")
             except DeviceError as exc:
                 say(f"servo {target}: {exc}")

@@ -33,6 +33,7 @@ import numpy as np
 
 from handrig.cli._numbers import positive_float, positive_int
 from handrig.config.rig import RigConfig, load_rig_config
+from handrig.config.rig_files import SHIPPED_RIG
 from handrig.devices.servo.models import BAUD_RATES
 from handrig.devices.servo.positions import deg_to_ticks
 from handrig.devices.servo.wire import goal_write_bytes, read_bytes
@@ -45,7 +46,7 @@ TARGET_RATIO = 0.85  # the driver's target: at least 85 % of the wire-limited ra
 
 def bench_rig(n_servos: int, baud: int, base: RigConfig | None = None) -> RigConfig:
     """The first ``n_servos`` servos of the rig file (at most as many as it has)."""
-    rig = base or load_rig_config()
+    rig = base or load_rig_config(SHIPPED_RIG)
     if not 1 <= n_servos <= len(rig.servos):
         raise ConfigError(
             "servo count out of range", key="--servos", value=n_servos,

@@ -21,26 +21,27 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from handrig.app.factory import port_process
+from handrig.app.factory import port_process, servo_bringup
 from handrig.app.sources import format_sources, rig_file
 from handrig.cli._numbers import whole_int
 from handrig.cli._ports import by_id_for, say_if_simulated
 from handrig.cli._rig import add_rig_argument
 from handrig.config.rig import RigConfig, require_port
-from handrig.devices.servo import bringup
-from handrig.devices.servo.models import BAUD_RATES
+from handrig.devices.servo.bringup import BusBringup, FoundServo
 from handrig.errors import ConfigError
 from handrig.pose.robot_rig import load_rig
 
 
 def _baud(text: str) -> int:
+    kind = servo_bringup()
     try:
         value = int(text)
     except ValueError:
         value = -1
-    if value not in BAUD_RATES:
+    if value not in kind.bauds:
         raise argparse.ArgumentTypeError(
-            f"{text!r} is not a baud the X series supports ({', '.join(map(str, BAUD_RATES))})")
+            f"{text!r} is not a baud {kind.family} supports "
+            f"({', '.join(map(str, kind.bauds))})")
     return value
 
 
@@ -49,6 +50,7 @@ def _bauds(text: str) -> list[int]:
 
 
 def register(sub: Any) -> None:
+    bauds = servo_bringup().bauds
     p: argparse.ArgumentParser = sub.add_parser(
         "servos", help="servo bring-up: scan, set-id, set-baud, reboot, check",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -74,8 +76,8 @@ def register(sub: Any) -> None:
                          "model, firmware, baud, operating mode, input voltage, temperature "
                          "and hardware errors. A full scan takes about 10 s (9600 bps is slow).")
     common(s, baud=False)
-    s.add_argument("--bauds", type=_bauds, default=list(BAUD_RATES), metavar="LIST",
-                   help=f"only these bauds (default all: {','.join(map(str, BAUD_RATES))})")
+    s.add_argument("--bauds", type=_bauds, default=list(bauds), metavar="LIST",
+                   help=f"only these bauds (default all: {','.join(map(str, bauds))})")
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=run_scan)
 
@@ -148,7 +150,12 @@ def _rig(args: argparse.Namespace) -> tuple[RigConfig, Path]:
     return load_rig(source.path), source.path
 
 
-def _row(s: bringup.FoundServo) -> str:
+def _servos(port: str) -> BusBringup:
+    """Bring-up on ``port`` (the factory's, for the servos' vendor)."""
+    return servo_bringup()(port)
+
+
+def _row(s: FoundServo) -> str:
     volts = "?" if s.voltage_v is None else f"{s.voltage_v:.1f} V"
     temp = "?" if s.temperature_c is None else f"{s.temperature_c} C"
     return (f"{s.id:>4}  {s.model:<11} {s.firmware:>3}  {s.baud:>8}  {s.mode_name:<22} "
@@ -159,7 +166,7 @@ HEADER = f"{'ID':>4}  {'model':<11} {'fw':>3}  {'baud':>8}  {'mode':<22} {'volta
          f"{'temp':>5}  hardware errors"
 
 
-def _as_dict(s: bringup.FoundServo) -> dict[str, Any]:
+def _as_dict(s: FoundServo) -> dict[str, Any]:
     return {"id": s.id, "baud": s.baud, "model": s.model, "model_number": s.model_number,
             "firmware": s.firmware, "operating_mode": s.operating_mode,
             "voltage_v": s.voltage_v, "temperature_c": s.temperature_c,
@@ -171,7 +178,7 @@ def run_scan(args: argparse.Namespace) -> int:
     with _port(args, rig, rig_path) as port:
         if not args.json:
             print(f"scanning {port} at {', '.join(map(str, args.bauds))} bps ...", flush=True)
-        result = bringup.scan(port, args.bauds)
+        result = _servos(port).scan(args.bauds)
     if args.json:
         print(json.dumps({"port": port, "bauds": result.tried, "collisions": result.collisions,
                           "servos": [_as_dict(s) for s in result.servos]}))
@@ -184,11 +191,12 @@ def run_scan(args: argparse.Namespace) -> int:
         print("no servo answered at any of these bauds: check power (the servos' LEDs "
               "blink once at power-on), the cable and the adapter's TTL/RS-485 setting "
               "(docs/hardware.md)")
-        if set(args.bauds) != set(BAUD_RATES):
+        kind = servo_bringup()
+        if set(args.bauds) != set(kind.bauds):
             print("only the bauds of --bauds were looked at: without it, scan tries every "
-                  "baud the X series supports (about 10 s)")
+                  f"baud {kind.family} supports (about 10 s)")
     for baud in result.collisions:
-        print(f"at {baud} bps replies were garbled: {bringup.ONE_AT_A_TIME}")
+        print(f"at {baud} bps replies were garbled: {servo_bringup().one_at_a_time}")
     counts = {b: len(result.ids_at(b)) for b in result.tried if result.ids_at(b)}
     if len(counts) > 1:
         print("servos answer at more than one baud: a rig runs all of them at one "
@@ -204,7 +212,8 @@ def _found_baud(args: argparse.Namespace, rig: RigConfig, port: str, servo_id: i
     """``--baud``, else the baud servo ``servo_id`` answers at (the rig's first)."""
     if args.baud:
         return int(args.baud)
-    baud = bringup.find_baud(port, servo_id, bringup.search_order([rig.bus.baud]))
+    servos = _servos(port)
+    baud = servos.find_baud(servo_id, servos.search_order([rig.bus.baud]))
     print(f"servo {servo_id} answers at {baud} bps", flush=True)
     return baud
 
@@ -213,7 +222,7 @@ def run_set_id(args: argparse.Namespace) -> int:
     rig, rig_path = _rig(args)
     with _port(args, rig, rig_path) as port:
         baud = _found_baud(args, rig, port, args.old_id)
-        for line in bringup.set_id(port, baud, args.old_id, args.new_id):
+        for line in _servos(port).set_id(baud, args.old_id, args.new_id):
             print(line)
     return 0
 
@@ -222,7 +231,7 @@ def run_set_baud(args: argparse.Namespace) -> int:
     rig, rig_path = _rig(args)
     with _port(args, rig, rig_path) as port:
         baud = _found_baud(args, rig, port, args.id)
-        for line in bringup.set_baud(port, baud, args.id, args.new_baud):
+        for line in _servos(port).set_baud(baud, args.id, args.new_baud):
             print(line)
     if args.new_baud != rig.bus.baud:
         print(f"note: the rig file runs the bus at {rig.bus.baud} bps ([bus] baud in "
@@ -233,7 +242,7 @@ def run_set_baud(args: argparse.Namespace) -> int:
 def run_reboot(args: argparse.Namespace) -> int:
     rig, rig_path = _rig(args)
     with _port(args, rig, rig_path) as port:
-        after = bringup.reboot(port, _baud_of(args, rig), args.id)
+        after = _servos(port).reboot(_baud_of(args, rig), args.id)
     print(f"servo {args.id} rebooted; hardware errors now: {after.errors_text}")
     if after.hardware_error:
         print("  the cause is still there (e.g. overheating, or a supply outside the "
@@ -247,7 +256,7 @@ def run_check(args: argparse.Namespace) -> int:
     with _port(args, rig, rig_path) as port:
         if not args.json:
             print(format_sources([rig_file(args.rig)]), flush=True)
-        found, findings = bringup.check(port, rig, baud=args.baud)
+        found, findings = _servos(port).check(rig, baud=args.baud)
     simulated = say_if_simulated(args.port or rig.bus.port, out=False)
     if args.json:
         print(json.dumps({"port": port, "simulated": simulated,

@@ -32,7 +32,6 @@ from handrig.cli.calibrate_servos import default_out
 from handrig.config.paths import user_config
 from handrig.config.rig import RigConfig
 from handrig.config.toml_edit import edit, write_with_backup
-from handrig.devices.servo.models import BAUD_RATES
 from handrig.errors import ConfigError
 from handrig.pose.robot_rig import RobotRigConfig, load_rig
 
@@ -73,8 +72,9 @@ def run(args: argparse.Namespace, *, ask: Callable[[str], str] = _ask,
     lister of step 1, default :func:`~handrig.app.setup_wizard.serial_ports`) are the
     person and the machine; a test passes its own."""
     from handrig.app import setup_wizard as wizard
-    from handrig.devices.servo import bringup
+    from handrig.app.factory import servo_bringup
 
+    kind = servo_bringup()
     source = rig_file(args.rig)
     rig = load_rig(source.path)
     ids = _ids(args.ids, [s.id for s in rig.servos])
@@ -83,6 +83,7 @@ def run(args: argparse.Namespace, *, ask: Callable[[str], str] = _ask,
                           "needs none", key="--port", value="sim",
                           allowed="the adapter's port, or none to find it by unplugging; "
                           "give --port sim to each command to use the simulated rig")
+    bauds = _bauds(args.bauds, kind.bauds, kind.family)  # before anything is written
     try:
         say("step 1: the servo adapter's port")
         if args.port:
@@ -98,15 +99,15 @@ def run(args: argparse.Namespace, *, ask: Callable[[str], str] = _ask,
             return 0
         say(f"step 3: the servos, one at a time: {len(ids)} to do, each given its ID and "
             f"{rig.bus.baud} bps")
-        done = wizard.commission_servos(port, rig, ids, ask, say,
-                                        bauds=_bauds(args.bauds))
+        servos = kind(port)
+        done = wizard.commission_servos(servos, rig, ids, ask, say, bauds=bauds)
     except wizard.Quit:
         say("setup stopped: what was done stays done (the rig file, servos made ready)")
         return 1
     say(f"{len(done.ready)} servo(s) made ready" +
         (f", skipped: {', '.join(map(str, done.skipped))}" if done.skipped else ""))
     say("with all of them chained: `handrig servos check` ...")
-    found, findings = bringup.check(port, load_rig(out))
+    found, findings = servos.check(load_rig(out))
     say(f"{len(found)} servo(s) answered on {port} at {rig.bus.baud} bps; the rig file has "
         f"{len(rig.servos)}")
     for f in findings:
@@ -118,16 +119,17 @@ def run(args: argparse.Namespace, *, ask: Callable[[str], str] = _ask,
     return 0
 
 
-def _bauds(text: str | None) -> list[int] | None:
+def _bauds(text: str | None, supported: Sequence[int], family: str) -> list[int] | None:
+    """``--bauds``: each one of ``supported`` (the bauds ``family`` takes), else None."""
     if not text:
         return None
     try:
         bauds = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
         bauds = [-1]
-    if not bauds or any(b not in BAUD_RATES for b in bauds):
-        raise ConfigError("not a list of bauds the X series supports", key="--bauds",
-                          value=text, allowed=", ".join(map(str, BAUD_RATES)))
+    if not bauds or any(b not in supported for b in bauds):
+        raise ConfigError(f"not a list of bauds {family} supports", key="--bauds",
+                          value=text, allowed=", ".join(map(str, supported)))
     return bauds
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Literal
 
 from handrig.config.loading import check_joint_name, load
-from handrig.config.rig_files import SHIPPED_RIG
+from handrig.config.rig_files import resolve_rig_file
 from handrig.errors import ConfigError
 from handrig.hand import anatomical_limits_deg
 
@@ -467,8 +467,9 @@ def hand_rig(rig: RigConfig, hand: str) -> RigConfig:
 
 
 def load_rig_config(path: str | Path | None = None) -> RigConfig:
-    """Load the rig file ``path``; None: the shipped one
-    (:data:`handrig.config.rig_files.SHIPPED_RIG`, what benches and tests load). Which
-    file a run's ``--rig`` means, yours or the shipped one, is
-    :func:`handrig.config.rig_files.resolve_rig_file`'s one rule."""
-    return load(path or SHIPPED_RIG, RigConfig)
+    """Load the rig file ``path``; None: the default rig file, the one a run without
+    ``--rig`` reads (:func:`handrig.config.rig_files.resolve_rig_file`'s one rule:
+    your ``rig.toml``, else the shipped one). A bench or test that wants the fixed
+    shipped rig whatever is in your home names it
+    (:data:`handrig.config.rig_files.SHIPPED_RIG`)."""
+    return load(path or resolve_rig_file(None).path, RigConfig)

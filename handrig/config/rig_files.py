@@ -20,9 +20,9 @@ RIGS_DIR = CONFIG_DIR / "rigs"
 """Shipped rig presets (``config/rigs/<name>.toml``)."""
 RIG_FILE_NAME = "rig.toml"
 SHIPPED_RIG = installed_config(RIG_FILE_NAME)
-"""The shipped rig file: the default when you have no ``rig.toml``, and the fixed rig the
-benches, the emulator's examples and the tests load (:func:`handrig.config.rig.
-load_rig_config` with no path)."""
+"""The shipped rig file: the default when you have no ``rig.toml`` (the only default is
+:func:`resolve_rig_file`'s, which :func:`handrig.config.rig.load_rig_config` with no path
+follows too), and the fixed rig the benches and the emulator's examples name."""
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,8 @@ build and parse them), ``registers`` (the X-series control table as data),
 ``fast_read``, ``sync_read``, ``reader``, ``faults``, ``commissioning``,
 ``torque``; ``dynamixel`` is the facade over them. Beside them, ``zeroing`` (the
 ``ZeroingBus`` contract ``handrig calibrate servos`` talks to) and ``dynamixel_zeroing``
-(its Dynamixel side).
+(its Dynamixel side), ``bringup`` (the ``BusBringup`` contract ``handrig servos`` and
+``handrig setup`` talk to) and ``dynamixel_bringup`` (its Dynamixel side).
 
     from handrig.devices.servo import DynamixelBus
     bus = DynamixelBus("/dev/ttyUSB0", load_rig_config())  # baud from the rig file

@@ -12,9 +12,34 @@ from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field, fields
+from enum import IntFlag
 from typing import Literal
 
 import numpy as np
+
+
+class ServoFault(IntFlag):
+    """What a servo says is wrong with it, as :attr:`ServoState.hardware_errors` carries
+    it: one bit each. A driver whose servos number these otherwise maps its own bits
+    onto these in the driver; the panel and the summary read only these."""
+
+    INPUT_VOLTAGE = 1 << 0
+    OVERHEATING = 1 << 2
+    ENCODER = 1 << 3
+    ELECTRICAL_SHOCK = 1 << 4
+    OVERLOAD = 1 << 5
+
+
+FAULT_LETTERS: tuple[tuple[ServoFault, str], ...] = (
+    (ServoFault.INPUT_VOLTAGE, "V"), (ServoFault.OVERHEATING, "H"), (ServoFault.ENCODER, "E"),
+    (ServoFault.ELECTRICAL_SHOCK, "S"), (ServoFault.OVERLOAD, "L"),
+)
+"""Each :class:`ServoFault` as the one letter the panel shows (its legend names them)."""
+
+
+def fault_letters(bits: int) -> str:
+    """:class:`ServoFault` bits as letters (:data:`FAULT_LETTERS`), "" for none."""
+    return "".join(letter for fault, letter in FAULT_LETTERS if bits & fault)
 
 
 @dataclass
@@ -32,7 +57,7 @@ class ServoState:
     currents_ma: np.ndarray  # (n,) float64, motor current (signed)
     temperatures_c: np.ndarray  # (n,) float64, last temperature read (NaN if never)
     status_errors: np.ndarray  # (n,) uint8, ERR byte of the servo's last status
-    hardware_errors: np.ndarray  # (n,) uint8, Hardware Error Status read in this read (0 = none)
+    hardware_errors: np.ndarray  # (n,) uint8, ServoFault bits read in this read (0 = none)
     stale: np.ndarray  # (n,) bool
     age_s: np.ndarray  # (n,) float64, time since that servo's reading was taken (inf: never)
     timestamp_s: float  # clock time of this read

@@ -80,7 +80,8 @@ class Readings:
         self.hw_err[:] = 0
 
     def note_hardware_error(self, index: int, bits: int) -> None:
-        """Servo ``index`` reported Hardware Error Status ``bits`` in this read."""
+        """Servo ``index`` reported Hardware Error Status ``bits`` in this read (its bits
+        are the bus contract's :class:`~handrig.devices.servo.bus.ServoFault` as they are)."""
         self.hw_err[index] = bits
 
     def mark(self, now: float, asked: np.ndarray | None = None) -> np.ndarray:

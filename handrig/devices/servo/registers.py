@@ -101,11 +101,9 @@ HARDWARE_ERROR_BITS: dict[int, str] = {
     4: "electrical shock",
     5: "overload",
 }
-HARDWARE_ERROR_LETTERS: tuple[tuple[int, str], ...] = (
-    (1 << 0, "V"), (1 << 2, "H"), (1 << 3, "E"), (1 << 4, "S"), (1 << 5, "L"),
-)
-"""Hardware Error Status bits as one letter each (input voltage, overheating, motor
-encoder, electrical shock, overload), as the panel shows them (its legend says so)."""
+# These bits are the bus contract's ServoFault bits as they are (handrig.devices.servo.bus:
+# the driver passes Hardware Error Status on unmapped; test_fault_vocabulary.py holds the
+# two tables equal).
 
 
 def describe_status_error(err: int) -> str:

@@ -141,7 +141,7 @@ def test_a_servo_whose_registers_do_not_answer_is_a_finding_not_a_pass(
     broke meanwhile: muted here from the start, the ping's answer given by hand) is not
     'fine': its fields are unknown, each read tried DESCRIBE_TRIES times, and the check
     says which registers were not checked."""
-    from handrig.devices.servo import bringup
+    from handrig.devices.servo import dynamixel_bringup as bringup
     from sim.dxl_faults import FaultSpec
 
     servo = EmulatedServo(5)

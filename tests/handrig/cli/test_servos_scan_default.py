@@ -7,7 +7,7 @@ from __future__ import annotations
 import inspect
 
 from handrig.cli import build_parser
-from handrig.devices.servo import bringup
+from handrig.devices.servo import dynamixel_bringup as bringup
 from handrig.devices.servo.models import BAUD_RATES
 
 

@@ -15,7 +15,7 @@ import os
 
 from handrig.config.rig import RigConfig, load_rig_config
 from handrig.devices.servo import DynamixelBus
-from handrig.devices.servo.bringup import PTY_PATIENCE_MS, scan
+from handrig.devices.servo.dynamixel_bringup import PTY_PATIENCE_MS, scan
 from handrig.devices.servo.transport import is_pseudo_terminal
 from sim.dxl_bus import FaultSpec, SimBus
 from sim.dxl_servo import EmulatedServo
