@@ -106,7 +106,7 @@ def run_once(tree: Path, seconds: float, folder: Path, tag: str) -> dict[str, An
               for f in (line.split() for line in bus_log.read_text().splitlines()) if f]
     lat = np.array(outside_latencies(sends, rec.raw[:, INDEX_CHANNEL].copy(), writes)) * 1e6
     inside = summary.get("latency_us", {})
-    faults = summary.get("faults", {})
+    bus = summary.get("bus", {})
     return {
         "tree": str(tree), "n": len(lat),
         "p50": float(np.percentile(lat, 50)) if len(lat) else None,
@@ -114,7 +114,8 @@ def run_once(tree: Path, seconds: float, folder: Path, tag: str) -> dict[str, An
         "p99": float(np.percentile(lat, 99)) if len(lat) else None,
         "cpu_pct": 100.0 * (c1 - c0) / (t1 - t0),
         "inside_p50": inside.get("p50"), "inside_p99": inside.get("p99"),
-        "timeouts": faults.get("read timeouts"), "stale": faults.get("stale servo readings"),
+        "timeouts": bus.get("timeouts"), "stale": bus.get("stale_readings"),
+        "delayed": summary.get("writes_delayed_by_reads"),
     }
 
 
@@ -130,8 +131,9 @@ def main() -> None:
     print(f"handrig run from outside: glove {GLOVE_HZ:g} Hz, {BAUD} bps, 20 servos, "
           f"{seconds:g} s steady x {rounds} rounds (load {os.getloadavg()[0]:.1f})")
     print("| tree | round | felt p50 / p90 / p99 (us), steps | CPU (% of a core) | "
-          "in process p50 / p99 (us) | read timeouts | stale readings | load |")
-    print("|---|---|---|---|---|---|---|---|")
+          "in process p50 / p99 (us) | writes delayed by reads | read timeouts | "
+          "stale readings | load |")
+    print("|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory(prefix="bench_felt_") as tmp:
         for r in range(rounds):
             for k, tree in enumerate(trees):
@@ -139,7 +141,8 @@ def main() -> None:
                 print(f"| {tree} | {r + 1} | {_fmt(res['p50'])} / {_fmt(res['p90'])} / "
                       f"{_fmt(res['p99'])}, {res['n']} | {res['cpu_pct']:.1f} | "
                       f"{_fmt(res['inside_p50'])} / {_fmt(res['inside_p99'])} | "
-                      f"{res['timeouts']} | {res['stale']} | {os.getloadavg()[0]:.1f} |",
+                      f"{res['delayed']} | {res['timeouts']} | {res['stale']} | "
+                      f"{os.getloadavg()[0]:.1f} |",
                       flush=True)
 
 
