@@ -116,6 +116,7 @@ LOOP_RANGES: tuple[tuple[str, float, float, str], ...] = (
     ("resume_frames", 1, 1000, "frames"),
     ("resume_time_s", 0.01, 10.0, "s"),
     ("slew_deg_s", 1.0, 10000.0, "deg/s"),
+    ("glove_poll_us", 0.0, 2000.0, "us"),
 )
 """[loop] keys checked against a sane range: (key, lowest, highest, unit)."""
 
@@ -134,6 +135,9 @@ class LoopConfig:
     floor_hz: float = 100.0  # mode "glove": a write at least this often, frame or not
     ceiling_hz: float = 1000.0  # mode "glove": at most this many writes per second
     catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
+    # mode "glove": poll the glove's port from this long before the frame is expected
+    # until this long after, instead of sleeping on it (0: always sleep); see GloveTrigger
+    glove_poll_us: float = 0.0
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
     resume_frames: int = 3  # good glove frames in a row after a loss before following again

@@ -124,7 +124,8 @@ class Rig:
         if trigger is None:
             if loop.mode == "glove":
                 trigger = GloveTrigger(clock, glove, floor_hz=loop.floor_hz,
-                                       ceiling_hz=loop.ceiling_hz, catch_up=loop.catch_up)
+                                       ceiling_hz=loop.ceiling_hz, catch_up=loop.catch_up,
+                                       poll_s=loop.glove_poll_us * 1e-6)
             elif loop.mode == "fixed":
                 trigger = FixedRateTrigger(clock, loop.rate_hz, glove=glove)
             else:

@@ -223,6 +223,13 @@ class GloveTrigger(Trigger):
     deviations), and forced (ending before the floor deadline) when no gap fitted for
     ``FORCED_READ_FACTOR * read_every`` cycles.
 
+    ``poll_s`` (``[loop] glove_poll_us``): from ``poll_s`` before the next frame is
+    expected (:attr:`predicted_frame_s`) until ``poll_s`` after it, the trigger polls
+    the glove's port instead of sleeping on it: a sleeping thread is woken some tens of
+    microseconds after the bytes are readable, a polling one finds them at once, at the
+    cost of the window's CPU every frame (0: always sleep; the trade-off, measured with
+    ``python -m bench felt``, is in docs/measurements.md).
+
     ``catch_up`` (a glove that keeps the frames behind the newest it never handed out,
     ``has_behind()`` and ``take_behind()``): a frame superseded before its cycle (left
     waiting by a busy loop, or sent together with the next) gets a cycle of its own
@@ -232,11 +239,15 @@ class GloveTrigger(Trigger):
     """
 
     def __init__(self, clock: Clock, glove: GloveSource, *, floor_hz: float, ceiling_hz: float,
-                 catch_up: bool = LoopConfig.catch_up) -> None:
+                 catch_up: bool = LoopConfig.catch_up, poll_s: float = 0.0) -> None:
         if not 0.0 < floor_hz <= ceiling_hz:
             raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
+        if not poll_s >= 0.0:
+            raise ValueError(f"need poll_s >= 0, got {poll_s}")
         self.clock = clock
         self.glove = glove
+        self.poll_s = poll_s
+        self.polls_found = 0  # frames found by polling in the window (not by a wake-up)
         self.period_s = 1.0 / floor_hz
         self.min_gap_s = 1.0 / ceiling_hz
         self.burst_frames = 0  # frames superseded on arrival by a newer one in the same read
@@ -309,7 +320,7 @@ class GloveTrigger(Trigger):
                     break
                 idle = not _readable(fd, 0.0)  # else bytes were waiting: the loop was busy
                 empty_s = clock.now()  # idle: the port was empty now
-                if idle and not _readable(fd, left):
+                if idle and not self._readable_by(fd, until_s):
                     break
                 self._pump(idle, empty_s)
                 if self._new_frame():
@@ -324,6 +335,24 @@ class GloveTrigger(Trigger):
             return due
         clock.sleep_until(until_s)
         return None
+
+    def _readable_by(self, fd: int, until_s: float) -> bool:
+        """Whether bytes come on ``fd`` before ``until_s``: slept for, but polled for
+        within ``poll_s`` of the predicted frame (class docstring)."""
+        clock, window = self.clock, self.poll_s
+        predicted = self.predicted_frame_s
+        now = clock.now()
+        if window > 0.0 and predicted == predicted and now < predicted + window:
+            opens = min(predicted - window, until_s)
+            if opens > now and _readable(fd, opens - now):
+                return True
+            closes = min(predicted + window, until_s)
+            while clock.now() < closes:
+                if _readable(fd, 0.0):
+                    self.polls_found += 1
+                    return True
+        left = until_s - clock.now()
+        return left > 0.0 and _readable(fd, left)
 
     def _next_frame_after(self, now: float) -> float:
         """When the next frame is expected after ``now``: the predicted frame; when it is

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from handrig.clock import FakeClock, MonotonicClock
-from handrig.devices.glove import GloveSample, GloveSource, GloveStats, ReplayGlove
+from handrig.devices.glove import GloveSource, GloveStats, ReplayGlove
 from handrig.devices.glove_recording import GloveRecording
 from handrig.loop.trigger import (
     FORCED_READ_FACTOR,
@@ -21,6 +21,7 @@ from handrig.loop.trigger import (
     GloveTrigger,
     Tick,
 )
+from tests.helpers.pipe_glove import PipeGlove
 
 
 def recording(rate_hz: float, n: int) -> GloveRecording:
@@ -35,68 +36,6 @@ class QuietGlove(GloveSource):
 
     def stats(self) -> GloveStats:
         return GloveStats()
-
-
-class PipeGlove(GloveSource):
-    """A glove on a pipe: ``pump()`` decodes each byte as one frame stamped now."""
-
-    def __init__(self, clock: MonotonicClock) -> None:
-        super().__init__()
-        self.clock = clock
-        self.r, self.w = os.pipe()
-        os.set_blocking(self.r, False)
-        self.count = 0
-        self.taken = 0
-        self.newest: GloveSample | None = None
-        self.pumps = 0
-
-    def fileno(self) -> int:
-        return self.r
-
-    def pump(self) -> int:
-        self.pumps += 1
-        try:
-            data = os.read(self.r, 4096)
-        except BlockingIOError:
-            return 0
-        now = self.clock.now()
-        for _ in data:
-            self.count += 1
-            self.newest = GloveSample(np.zeros(5), None, 0, False, self.count, 0, now,
-                                      self.count)
-        return 0
-
-    def stats(self) -> GloveStats:
-        return GloveStats(frames_ok=self.count)
-
-    def has_new(self) -> bool:
-        return self.newest is not None and self.count != self.taken
-
-    def peek(self) -> GloveSample | None:
-        return self.newest
-
-    def latest(self) -> GloveSample | None:
-        self.pump()
-        if not self.has_new():
-            return None
-        self.taken = self.count
-        return self.newest
-
-    def send(self, n: int = 1) -> float:
-        t = self.clock.now()
-        os.write(self.w, b"x" * n)
-        return t
-
-    def close(self) -> None:
-        os.close(self.r)
-        os.close(self.w)
-
-
-@pytest.fixture
-def pipe_glove():
-    g = PipeGlove(MonotonicClock(spin_s=0.0))
-    yield g
-    g.close()
 
 
 def test_a_replay_triggers_a_cycle_when_each_sample_comes_due() -> None:
