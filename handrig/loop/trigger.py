@@ -320,7 +320,8 @@ class GloveTrigger(Trigger):
                     break
                 idle = not _readable(fd, 0.0)  # else bytes were waiting: the loop was busy
                 empty_s = clock.now()  # idle: the port was empty now
-                if idle and not self._readable_by(fd, until_s):
+                if idle and not (self._polled(fd, until_s) if self.poll_s > 0.0
+                                 else _readable(fd, left)):
                     break
                 self._pump(idle, empty_s)
                 if self._new_frame():
@@ -336,13 +337,13 @@ class GloveTrigger(Trigger):
         clock.sleep_until(until_s)
         return None
 
-    def _readable_by(self, fd: int, until_s: float) -> bool:
-        """Whether bytes come on ``fd`` before ``until_s``: slept for, but polled for
-        within ``poll_s`` of the predicted frame (class docstring)."""
+    def _polled(self, fd: int, until_s: float) -> bool:
+        """Whether bytes come on ``fd`` before ``until_s`` with a poll window: polled for
+        within ``poll_s`` of the predicted frame, slept for otherwise (class docstring)."""
         clock, window = self.clock, self.poll_s
         predicted = self.predicted_frame_s
         now = clock.now()
-        if window > 0.0 and predicted == predicted and now < predicted + window:
+        if predicted == predicted and now < predicted + window:
             opens = min(predicted - window, until_s)
             if opens > now and _readable(fd, opens - now):
                 return True
