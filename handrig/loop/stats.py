@@ -4,8 +4,10 @@
 than the one below), so a percentile read from it is within ``ratio - 1`` of the
 true value (relative) whatever the distribution; the exact minimum, maximum, mean
 and standard deviation are kept beside the buckets. :class:`Ring` keeps the newest
-``size`` items (recent values for a live display). :class:`RunStats` holds the
-loop's histograms and counters.
+``size`` items (recent events for a live display), :class:`SampleRing` the newest
+``size`` numbers in one float array (recent latencies, whose percentiles a live
+display reads 30 times a second). :class:`RunStats` holds the loop's histograms
+and counters.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar, overload
+
+import numpy as np
 
 T = TypeVar("T")
 
@@ -140,6 +144,57 @@ class Ring(Generic[T]):
         return self._list()[index]
 
 
+class SampleRing:
+    """The newest ``size`` numbers appended, in one float64 array: appending costs a
+    store, and the percentiles of the newest ``k`` read the array where it lies (no
+    list is built: a percentile does not care about order)."""
+
+    def __init__(self, size: int) -> None:
+        self.size = int(size)
+        self._values = np.zeros(self.size)
+        self._n = 0  # values ever appended
+
+    def append(self, value: float) -> None:
+        self._values[self._n % self.size] = value
+        self._n += 1
+
+    @property
+    def total(self) -> int:
+        """How many values were ever appended (older ones are gone)."""
+        return self._n
+
+    def __len__(self) -> int:
+        return min(self._n, self.size)
+
+    def newest(self, k: int) -> np.ndarray:
+        """The newest ``min(k, len(self))`` values, oldest first (a copy)."""
+        k = min(int(k), len(self))
+        end = self._n % self.size
+        if k == self.size:
+            return np.concatenate((self._values[end:], self._values[:end]))
+        if k <= end:
+            return self._values[end - k:end].copy()
+        return np.concatenate((self._values[self.size - (k - end):], self._values[:end]))
+
+    def percentiles(self, qs: tuple[float, ...], k: int | None = None) -> tuple[float, ...]:
+        """The ``qs``-th percentiles (0..100, ``numpy.percentile``'s linear method) of the
+        newest ``k`` values (default all kept); NaNs before any value."""
+        n = len(self) if k is None else min(int(k), len(self))
+        if not n:
+            return (math.nan,) * len(qs)
+        part = self.newest(n)
+        ranks = [q / 100.0 * (n - 1) for q in qs]
+        kth = sorted({min(int(r), n - 1) for r in ranks} | {min(int(r) + 1, n - 1) for r in ranks})
+        part.partition(kth)
+        out = []
+        for r in ranks:
+            lo = min(int(r), n - 1)
+            hi = min(lo + 1, n - 1)
+            a, b = float(part[lo]), float(part[hi])
+            out.append(a + (b - a) * (r - lo))
+        return tuple(out)
+
+
 RECENT_LATENCIES = 2048  # what a live display shows: about 10 s at 200 Hz
 KEPT_EVENTS = 200
 
@@ -165,7 +220,7 @@ class RunStats:
     latency: LogHistogram = field(default_factory=LogHistogram)
     compute: LogHistogram = field(default_factory=LogHistogram)
     period: LogHistogram = field(default_factory=LogHistogram)
-    latencies_s: Ring[float] = field(default_factory=lambda: Ring(RECENT_LATENCIES))
+    latencies_s: SampleRing = field(default_factory=lambda: SampleRing(RECENT_LATENCIES))
     overruns: int = 0
     overrun_max_s: float = 0.0
     missed_cycles: int = 0

@@ -205,11 +205,10 @@ class SnapshotBuilder:
 
     def __call__(self, now: float, seq: int) -> LoopSnapshot:
         stats = self.stats
-        recent = stats.latencies_s[-RECENT_LATENCIES:]
         p50 = p99 = None
-        if recent:
-            q = np.percentile(np.asarray(recent, dtype=np.float64), [50, 99]) * 1e6
-            p50, p99 = float(q[0]), float(q[1])
+        if len(stats.latencies_s):
+            q50, q99 = stats.latencies_s.percentiles((50.0, 99.0), RECENT_LATENCIES)
+            p50, p99 = q50 * 1e6, q99 * 1e6
         mode, reason = self._mode()
         view = self.view()
         n = len(self.servo_joints)

@@ -315,6 +315,92 @@ def forearm_angles(quat: Any, scalar_first: bool, up_sign: float, mount_t: Any,
     return inc, rot, status
 
 
+@njit(cache=True, nogil=True)
+def _sag_into(pose: Any, idx: Any, absolute: bool, inc_axis: Any, rot_axis: Any, rot0: float,
+              cells: Any, rest: Any, gain: float, inclination: float,
+              rotation: float) -> None:  # pragma: no cover - compiled
+    """One hand's sag at this forearm orientation into ``pose[idx]``: added to what is
+    there (``absolute``: put on the rest pose instead)."""
+    i, j, w0, w1, w2, w3 = _sag_weights(True, inc_axis, rot_axis, rot0, inclination, rotation)
+    for d in range(idx.shape[0]):
+        off = gain * (w0 * cells[i, j, 0, d] + w1 * cells[i, j, 1, d]
+                      + w2 * cells[i, j, 2, d] + w3 * cells[i, j, 3, d])
+        if absolute:
+            pose[idx[d]] = rest[d] + off
+        else:
+            pose[idx[d]] += off
+
+
+@njit(cache=True, nogil=True)
+def pose_from_curves(
+    curves: Any, mirror: bool, pose: Any, idx_a: Any, inc_a: float, rot_a: float, abs_a: bool,
+    idx_b: Any, inc_b: float, rot_b: float, abs_b: bool, inc_axis: Any, rot_axis: Any,
+    rot0: float, cells: Any, rest: Any, gain: float,
+) -> None:  # pragma: no cover - compiled
+    """The full pose (:meth:`handrig.pose.pipeline.PosePipeline.full_pose`): ``pose``
+    becomes the 50 ``curves`` (the right hand's copied onto the left with ``mirror``)
+    and a zero wrist, plus each hand's sag, ``idx_a`` at ``inc_a``/``rot_a`` then
+    ``idx_b`` at ``inc_b``/``rot_b`` (``cells``: the grid's corner offsets, empty for
+    no sag; ``abs_*``: on ``rest`` instead of on the curves)."""
+    n_curves = curves.shape[0]
+    for k in range(n_curves):
+        pose[k] = curves[k]
+    for k in range(n_curves, pose.shape[0]):
+        pose[k] = 0.0
+    if mirror:
+        half = n_curves // 2
+        for k in range(half):
+            pose[half + k] = pose[k]
+    if cells.shape[0] > 0:
+        _sag_into(pose, idx_a, abs_a, inc_axis, rot_axis, rot0, cells, rest, gain, inc_a, rot_a)
+        _sag_into(pose, idx_b, abs_b, inc_axis, rot_axis, rot0, cells, rest, gain, inc_b, rot_b)
+
+
+@njit(cache=True, nogil=True)
+def account_pose(
+    pose: Any, pose_low: Any, pose_high: Any, clamped: Any, robot: bool, full_gain: Any,
+    offset: Any, servo_index: Any, servo_low: Any, servo_high: Any, step: Any,
+    clamps_by_servo: Any, raw_targets: Any, targets: Any, count_slewed: bool,
+) -> tuple[int, int, int]:  # pragma: no cover - compiled
+    """A full pose's counters after a write, and the pose clamped in place
+    (:meth:`handrig.pose.pipeline.PosePipeline.account`): ``clamped`` gets
+    ``pose`` clamped to ``pose_low``/``pose_high``; ``step`` the servos' values of the
+    unclamped pose (``robot``: ``full_gain`` @ the clamped curves + ``offset``).
+    Returns (pose values clamped, servo values outside ``servo_low``/``servo_high``,
+    targets the slew limit held back when ``count_slewed``); ``clamps_by_servo`` adds
+    the servo ones; ``pose`` ends clamped."""
+    clamps = 0
+    for k in range(pose.shape[0]):
+        v = pose[k]
+        c = v
+        if v < pose_low[k]:
+            c = pose_low[k]
+        elif v > pose_high[k]:
+            c = pose_high[k]
+        clamped[k] = c
+        if c != v:  # a NaN counts, as numpy's clip leaves it and NaN != NaN
+            clamps += 1
+    servo_clamps = 0
+    for s in range(step.shape[0]):
+        if robot:
+            v = offset[s]
+            for m in range(full_gain.shape[1]):
+                v += full_gain[s, m] * clamped[m]
+        else:
+            v = pose[servo_index[s]]
+        step[s] = v
+        if v < servo_low[s] or v > servo_high[s]:
+            servo_clamps += 1
+            clamps_by_servo[s] += 1
+    slewed = 0
+    if count_slewed:
+        for s in range(targets.shape[0]):
+            if abs(raw_targets[s] - targets[s]) > 1e-9:
+                slewed += 1
+    for k in range(pose.shape[0]):
+        pose[k] = clamped[k]
+    return clamps, servo_clamps, slewed
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel with the types the loop uses."""
     f = np.zeros(2)
@@ -333,6 +419,13 @@ def warm_up() -> None:
                         np.arange(2, dtype=np.int64), f + 1.0, f, f - 1.0, f + 1.0,
                         np.zeros(2), 1.0, False, np.zeros(2))
     forearm_angles(np.array([0.0, 0.0, 0.0, 1.0]), False, 1.0, np.eye(3), 1.0, 1e-6, 0.5, 1.5)
+    i2 = np.zeros(2, np.intp)
+    pose_from_curves(f, False, np.zeros(3), i2, 0.5, 0.5, False, i2, 0.5, 0.5, True,
+                     np.array([0.0, 1.0]), np.array([0.0, 1.0]), 0.0, np.zeros((1, 1, 4, 2)),
+                     f, 1.0)
+    account_pose(np.zeros(3), np.zeros(3) - 1.0, np.zeros(3) + 1.0, np.zeros(3), False,
+                 np.zeros((2, 2)), f, i2, f - 1.0, f + 1.0, np.zeros(2),
+                 np.zeros(2, np.int64), f, f, True)
     idx = np.zeros(2, np.intp)
     one_euro_step(f, 0.01, np.zeros(2), np.zeros(2), f + 1.0, f, f + 1.0)
     glove_controls(f, idx, f + 1.0, f, f - 1.0, f + 1.0, np.zeros(2), np.zeros(2), True,

@@ -91,6 +91,11 @@ class SagLike(Protocol):
     def kernel_tables(self) -> SagTables: ...
 
 
+SagSide = tuple[NDArray[np.intp], float, float, bool]
+"""One hand's sag in the full pose: its pose indices, forearm inclination and rotation
+(degrees), and whether it goes on the rest pose (else on the map's curves)."""
+
+
 @dataclass(frozen=True)
 class ServoPath:
     """The servo step precomposed (:meth:`PosePipeline.servo_targets`): the targets before
@@ -270,6 +275,13 @@ class PosePipeline:
             self.robot_path = self._build_robot_path(retarget)
             self.servo_path = self.robot_path.human
             self._human = np.zeros(len(self.robot_path.curves))
+        grid = self._grids.get("ri")
+        self._sag_tables = grid.kernel_tables() if grid is not None else SagTables.empty()
+        self._sag_rest = (np.asarray(grid.rest_deg, dtype=np.float64) if grid is not None
+                          else np.zeros(hand.DOFS_PER_HAND))
+        robot = self.robot_path
+        self._full_gain = robot.full_gain if robot is not None else np.zeros((0, 50))
+        self._offset = robot.offset if robot is not None else np.zeros(0)
         kernels.warm_up()
 
     def _allocate_work(self) -> None:
@@ -383,25 +395,38 @@ class PosePipeline:
         """The 54-vector pose (the map's active pose plus passive sag), not yet clamped.
 
         The glove's forearm orientation gives the right hand's sag; the left forearm
-        has no IMU, so the left hand sags as at ``left_forearm_deg``.
+        has no IMU, so the left hand sags as at ``left_forearm_deg``. One compiled pass
+        after the map (:func:`handrig.pose.kernels.pose_from_curves`).
         """
         self.expander.expand(controls_deg, out=self.curves)
-        pose = self.pose
-        pose[:50] = self.curves
-        pose[50:] = 0.0  # no active wrist sensor: the wrist is the passive model's
-        if self.left_hand == "mirror":
-            pose[25:50] = pose[0:25]
-        if self.glove_hand == "le":  # the left hand's loop of a two-glove rig
-            self._add_sag(pose, "le", inclination_deg, rotation_deg, absolute=False)
-            self._add_sag(pose, "ri", *self.other_forearm_deg, absolute=False)
-            return pose
-        self._add_sag(pose, "ri", inclination_deg, rotation_deg, absolute=False)
-        left_incl, left_rot = (
-            (inclination_deg, rotation_deg) if self.left_hand == "mirror"
-            else self.other_forearm_deg
-        )
-        self._add_sag(pose, "le", left_incl, left_rot, absolute=self.left_hand == "relaxed")
-        return pose
+        (ia, inc_a, rot_a, abs_a), (ib, inc_b, rot_b, abs_b) = self._sag_sides(
+            inclination_deg, rotation_deg)
+        t = self._sag_tables
+        kernels.pose_from_curves(
+            self.curves, self.left_hand == "mirror", self.pose, ia, inc_a, rot_a, abs_a,
+            ib, inc_b, rot_b, abs_b, t.inclination_axis_deg, t.rotation_axis_deg,
+            t.rotation0_deg, t.cell_offsets_deg, self._sag_rest, self.sag_gain)
+        return self.pose
+
+    def _sag_sides(self, inclination_deg: float, rotation_deg: float
+                   ) -> tuple[SagSide, SagSide]:
+        """The two hands' sag in the full pose: (pose indices, inclination, rotation, on
+        the rest pose) for the glove's hand, then the other, whose forearm is
+        ``other_forearm_deg`` (the glove's with a mirrored left hand), on the rest pose
+        for a relaxed left hand. Checked as a grid lookup checks them (DataError for NaN)."""
+        if not self._has_sag:
+            none = np.zeros(0, dtype=np.intp)
+            return (none, 0.0, 0.0, False), (none, 0.0, 0.0, False)
+        live, other = ("le", "ri") if self.glove_hand == "le" else ("ri", "le")
+        inc_b, rot_b = ((inclination_deg, rotation_deg)
+                        if self.left_hand == "mirror" and live == "ri"
+                        else self.other_forearm_deg)
+        absolute = live == "ri" and self.left_hand == "relaxed"
+        return ((self.sag_index[live],
+                 SagGrid.checked_inclination(inclination_deg, rotation_deg),
+                 float(rotation_deg), False),
+                (self.sag_index[other], SagGrid.checked_inclination(inc_b, rot_b), float(rot_b),
+                 absolute))
 
     def relaxed_pose(self, inclination_deg: float, rotation_deg: float) -> FloatArray:
         """The relaxed hands at this orientation: the passive model's pose for every DOF,
@@ -475,20 +500,19 @@ class PosePipeline:
     ) -> FloatArray:
         """After the write: the full 54-vector pose, clamped (for outputs), and the
         clamp and slew counters for this cycle (``slewed=False``: the slew counter was
-        counted already, :meth:`count_slewed`, and the targets are another cycle's)."""
+        counted already, :meth:`count_slewed`, and the targets are another cycle's).
+
+        :meth:`full_pose`, then its clamp and the counters in one compiled pass
+        (:func:`handrig.pose.kernels.account_pose`): a robot's joints are retargeted
+        from the clamped curves, a human rig's servos take the pose as it is."""
         pose = self.full_pose(controls_deg, inclination_deg, rotation_deg)
-        np.clip(pose, self.pose_low, self.pose_high, out=self._clamped_pose)
-        # a robot's joints are retargeted from the clamped curves, a human rig's servos
-        # take the pose as it is
-        self._servo_values(pose if self.robot_path is None else self._clamped_pose,
-                           self._step)
-        over = (self._step < self.servo_low) | (self._step > self.servo_high)
-        self.servo_clamps += int(np.count_nonzero(over))
-        self.servo_clamps_by_servo += over
-        self.clamps += int(np.count_nonzero(self._clamped_pose != pose))
-        if slewed:
-            self.count_slewed()
-        pose[:] = self._clamped_pose
+        clamps, servo_clamps, slew = kernels.account_pose(
+            pose, self.pose_low, self.pose_high, self._clamped_pose, self.robot_path is not None,
+            self._full_gain, self._offset, self.servo_index, self.servo_low, self.servo_high,
+            self._step, self.servo_clamps_by_servo, self._raw_targets, self.targets, slewed)
+        self.clamps += clamps
+        self.servo_clamps += servo_clamps
+        self.slewed += slew
         return pose
 
     def count_slewed(self) -> None:
