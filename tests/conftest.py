@@ -93,7 +93,7 @@ COMPUTE_ONLY = (
     "handrig/devices/test_ltc",
     # these compute too and ran in the realtime process: codecs, stats, tables, modes
     "handrig/devices/servo/test_servo_codec.py", "handrig/devices/servo/test_servo_registers.py",
-    "handrig/loop/test_stats.py", "handrig/loop/test_sample_ring.py", "handrig/loop/test_modes.py",
+    "handrig/loop/test_stats.py", "handrig/loop/test_rings.py", "handrig/loop/test_modes.py",
     "handrig/loop/test_easing.py",
     "handrig/test_hand.py", "handrig/devices/test_glove_status.py",
     "handrig/outputs/test_glove_take.py", "handrig/app/test_robotrig.py", "sim/test_wrist_load.py",

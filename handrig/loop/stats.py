@@ -141,6 +141,17 @@ class Ring(Generic[T]):
     def __getitem__(self, index: slice) -> list[T]: ...
 
     def __getitem__(self, index: int | slice) -> T | list[T]:
+        n = min(self._n, self.size)
+        if isinstance(index, int):  # one item, without building the list
+            if not -n <= index < n:
+                raise IndexError("ring index out of range")
+            k = index + n if index < 0 else index
+            return self._items[(self._n - n + k) % self.size]  # type: ignore[return-value]
+        if index.step is None and index.stop is None and index.start is not None \
+                and -n <= index.start < 0:  # the newest few (a display's last events)
+            k = -index.start
+            return [self._items[(self._n - k + i) % self.size]  # type: ignore[misc]
+                    for i in range(k)]
         return self._list()[index]
 
 

@@ -217,7 +217,7 @@ class FastSyncRead:
             self.roster.scale, r.latest, r.status_err, r.fresh, self._valid)
         if complete == 0:
             return False
-        bad = complete - int(self._valid[:complete].sum())
+        bad = complete - int(np.count_nonzero(self._valid[:complete]))
         self.stats.crc_errors += bad  # a bad CRC or a block naming the wrong servo
         self.stats.status_errors += refused
         return taken > 0

@@ -151,6 +151,10 @@ class StateReader:
                     break
                 self.stats.retries += 1
             self._attempt(pending, None, deadline_s)
+            if self.readings.fresh[pending].all():  # every servo asked answered
+                if self._suspects:
+                    self._blame(pending)
+                break
             if not self._blame(pending) and not attempt:
                 self._shift[part] = (shift + 1) % len(indices)
             left = self._retry_chain(pending)
