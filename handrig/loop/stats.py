@@ -150,7 +150,7 @@ class Ring(Generic[T]):
         if index.step is None and index.stop is None and index.start is not None \
                 and -n <= index.start < 0:  # the newest few (a display's last events)
             k = -index.start
-            return [self._items[(self._n - k + i) % self.size]  # type: ignore[misc]
+            return [self._items[(self._n - k + i) % self.size]
                     for i in range(k)]
         return self._list()[index]
 
