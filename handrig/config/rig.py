@@ -135,8 +135,8 @@ class LoopConfig:
     floor_hz: float = 100.0  # mode "glove": a write at least this often, frame or not
     ceiling_hz: float = 1000.0  # mode "glove": at most this many writes per second
     catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
-    # mode "glove": poll the glove's port from just before the frame is expected until
-    # this long after, instead of sleeping on it (0: always sleep); see GloveTrigger
+    # mode "glove": poll the glove's port from this long before the frame is expected
+    # until this long after, instead of sleeping on it (0: always sleep); see GloveTrigger
     glove_poll_us: float = 0.0
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes

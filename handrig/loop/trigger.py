@@ -51,7 +51,6 @@ STALL_PERIODS = 3.0  # the port unread this many frame periods: the host stalled
 BACKLOG_QUIET_S = 0.0005  # at the start, the port is read until quiet this long
 BACKLOG_MAX_S = 0.05  # ... but no longer than this (a glove that never pauses)
 BACKLOG_PUMPS_MAX = 256
-POLL_LEAD_S = 30e-6  # a poll window opens this long before the predicted frame
 
 
 @dataclass
@@ -224,14 +223,12 @@ class GloveTrigger(Trigger):
     deviations), and forced (ending before the floor deadline) when no gap fitted for
     ``FORCED_READ_FACTOR * read_every`` cycles.
 
-    ``poll_s`` (``[loop] glove_poll_us``): from ``POLL_LEAD_S`` before the next frame
-    is expected (:attr:`predicted_frame_s`) until ``poll_s`` after it, the trigger polls
+    ``poll_s`` (``[loop] glove_poll_us``): from ``poll_s`` before the next frame is
+    expected (:attr:`predicted_frame_s`) until ``poll_s`` after it, the trigger polls
     the glove's port instead of sleeping on it: a sleeping thread is woken some tens of
     microseconds after the bytes are readable, a polling one finds them at once, at the
     cost of the window's CPU every frame (0: always sleep; the trade-off, measured with
-    ``python -m bench felt``, is in docs/measurements.md). The window opens only a
-    little before the prediction: that is the early edge of the arrivals (a frame is
-    only ever delayed on its way), so polling earlier would mostly spin.
+    ``python -m bench felt``, is in docs/measurements.md).
 
     ``catch_up`` (a glove that keeps the frames behind the newest it never handed out,
     ``has_behind()`` and ``take_behind()``): a frame superseded before its cycle (left
@@ -342,13 +339,12 @@ class GloveTrigger(Trigger):
 
     def _polled(self, fd: int, until_s: float) -> bool:
         """Whether bytes come on ``fd`` before ``until_s`` with a poll window: polled for
-        from ``POLL_LEAD_S`` before the predicted frame to ``poll_s`` after it, slept for
-        otherwise (class docstring)."""
+        within ``poll_s`` of the predicted frame, slept for otherwise (class docstring)."""
         clock, window = self.clock, self.poll_s
         predicted = self.predicted_frame_s
         now = clock.now()
         if predicted == predicted and now < predicted + window:
-            opens = min(predicted - POLL_LEAD_S, until_s)
+            opens = min(predicted - window, until_s)
             if opens > now and _readable(fd, opens - now):
                 return True
             closes = min(predicted + window, until_s)

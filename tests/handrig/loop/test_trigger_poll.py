@@ -1,8 +1,8 @@
 """``[loop] glove_poll_us``: the glove trigger polls the port around the expected frame.
 
 A glove sends on its own clock, so once the trigger knows the period it knows when
-the next frame is due; with a poll window it polls the port from just before that
-until the window's length after instead of sleeping on it (the trade-off: ``python -m bench
+the next frame is due; with a poll window it polls the port from that long before
+until that long after instead of sleeping on it (the trade-off: ``python -m bench
 felt``). Here a thread plays a glove at 200 Hz into a pipe; every frame must still
 get its tick, and with a window some are found by polling, without one none.
 """
