@@ -161,6 +161,18 @@ uint8_t board_burst_final(uint16_t *out) {
     return n;
 }
 
+/* Polls UDRE0 rather than queueing for Serial's interrupt: at 1 Mbps a byte is 160
+ * cycles, and an interrupt a byte (entry, ring buffer, exit) spends half of them; the
+ * loop has nothing else to do while a frame's tail goes out. Serial's own buffer is
+ * never used (the sketch sends everything here), so nothing can interleave. */
+void board_uart_send(const uint8_t *p, uint8_t n) {
+    while (n--) {
+        while (!(UCSR0A & _BV(UDRE0))) {
+        }
+        UDR0 = *p++;
+    }
+}
+
 uint8_t board_button_pressed(void) { return !(PIND & _BV(PD2)); }
 void board_led(uint8_t on) {
     if (on) PORTB |= _BV(PB5);

@@ -61,9 +61,10 @@ typedef struct {
 size_t gc_frame_head(gc_stream *s, uint8_t wire[GC_MAX_WIRE], const gc_frame *f);
 size_t gc_frame_tail(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels);
 /* gc_frame_tail in pieces, for channels that become final one after another: add n more
- * channels (in order; f->n in all), then gc_frame_end adds the CRC and the delimiter and
- * returns the frame's length. */
-void gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels);
+ * channels (in order; f->n in all) and return how many wire bytes are final now (as
+ * gc_frame_head: more only when these channels hold a zero byte), then gc_frame_end adds
+ * the CRC and the delimiter and returns the frame's length. */
+size_t gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels);
 size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]);
 
 /* Oversampling: n channel sums of 2^os_log2 samples of a 10-bit ADC each, scaled to
