@@ -17,9 +17,10 @@ uint8_t board_imu_due(void);
  * micros() clock; *missed: ticks skipped since the last burst. */
 uint8_t board_burst_started(uint32_t *mid_us, uint8_t *missed);
 /* How many channels of the burst are final, their sums (2^GLOVE_OVERSAMPLE_LOG2 10-bit
- * samples each) copied to sums[0..k): channels become final in order during the burst's
- * last round; GLOVE_N_CHANNELS once the burst is complete, returned once (the burst is
- * then over); 0 while none is. */
+ * samples each) in sums[0..k) (each copied once, when it becomes final: pass the same
+ * array every time): channels become final in order during the burst's last round;
+ * GLOVE_N_CHANNELS once the burst is complete, returned once (the burst is then over);
+ * 0 while none is. */
 uint8_t board_burst_final(uint16_t *sums);
 /* I2C at 400 kHz (board_i2c_wire.cpp, every core); register access returns 0 on NACK
  * or timeout (never hangs). */

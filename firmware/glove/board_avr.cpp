@@ -149,14 +149,18 @@ uint8_t board_burst_started(uint32_t *mid_us, uint8_t *skipped) {
     return got;
 }
 
+static uint8_t copied; /* channels of this burst copied out */
+
 uint8_t board_burst_final(uint16_t *out) {
     uint8_t n = final_n; /* the interrupt no longer adds to sums[0..n) in this burst */
-    for (uint8_t i = 0; i < n; i++) out[i] = sums[i];
+    for (uint8_t i = copied; i < n; i++) out[i] = sums[i];
+    copied = n;
     if (n == GLOVE_N_CHANNELS) {
         noInterrupts();
         burst_done = 0;
         final_n = 0;
         interrupts();
+        copied = 0;
     }
     return n;
 }
