@@ -117,7 +117,9 @@ size_t gc_frame_head(gc_stream *s, uint8_t wire[GC_MAX_WIRE], const gc_frame *f)
     return s->code_at;
 }
 
-size_t gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
+/* gc_frame_channels' and gc_frame_end's steps, inlined into each of them and into
+ * gc_frame_tail (one call between the last sample and the send) */
+GC_INLINE size_t put_channels(gc_stream *s, uint8_t *wire, uint8_t n, const uint16_t *channels) {
     cobs_state c = {s->out, s->code_at, s->code};
     uint16_t crc = s->crc;
     if (n > GC_MAX_CHANNELS) n = GC_MAX_CHANNELS;
@@ -134,7 +136,7 @@ size_t gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, con
     return c.code_at;
 }
 
-size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]) {
+GC_INLINE size_t put_end(gc_stream *s, uint8_t *wire) {
     cobs_state c = {s->out, s->code_at, s->code};
     /* little-endian, not itself part of the CRC */
     stuff_byte(wire, &c, (uint8_t)(s->crc & 0xFF));
@@ -147,22 +149,21 @@ size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]) {
     return c.out;
 }
 
+size_t gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
+    return put_channels(s, wire, n, channels);
+}
+
+size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]) { return put_end(s, wire); }
+
 size_t gc_frame_tail(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
-    gc_frame_channels(s, wire, n, channels);
-    return gc_frame_end(s, wire);
+    put_channels(s, wire, n, channels);
+    return put_end(s, wire);
 }
 
 size_t gc_frame_build(uint8_t wire[GC_MAX_WIRE], const gc_frame *f) {
     gc_stream s;
     gc_frame_head(&s, wire, f);
     return gc_frame_tail(&s, wire, f->n, f->channels);
-}
-
-void gc_decimate(const uint16_t *sums, uint8_t n, uint8_t os_log2, uint16_t *out) {
-    for (uint8_t i = 0; i < n; i++) {
-        uint16_t s = sums[i]; /* at most 16 x 1023 */
-        out[i] = os_log2 >= 2 ? (uint16_t)(s >> (os_log2 - 2)) : (uint16_t)(s << (2 - os_log2));
-    }
 }
 
 uint8_t gc_debounce_update(gc_debounce *d, uint8_t level, uint8_t need) {
