@@ -30,7 +30,8 @@ uint8_t board_i2c_read(uint8_t addr, uint8_t reg, uint8_t *buf, uint8_t n);
 /* Hands the UART n bytes, in order, and returns when the last one is handed over. On
  * the ATmega328P it writes the data register itself as soon as the register is empty
  * (no interrupt a byte: the bytes follow each other with no gap); elsewhere it is
- * Serial.write. Nothing else may write to Serial then. */
+ * Serial.write. The sketch sends every byte through it (a byte left in Serial's buffer
+ * could go out after the ones written here). */
 void board_uart_send(const uint8_t *p, uint8_t n);
 uint8_t board_button_pressed(void);
 void board_led(uint8_t on);
