@@ -14,8 +14,8 @@ firmware and rate:
 * end to end, from the burst's middle (and from the tick) of the first frame that saw a
   step to the bus emulator's receipt of the first Sync Write whose goals moved: the
   firmware's part (chip time) plus the host's part (the last byte handed to the pty to
-  the receipt, both CLOCK_MONOTONIC), so the emulator's own pacing jitter on a busy
-  machine does not count;
+  the receipt, both CLOCK_MONOTONIC, also printed on its own), so the emulator's own
+  pacing jitter on a busy machine does not count;
 * the fraction of the chip's cycles spent awake, the rig's in-process latency (frame
   arrival to Sync Write handed to the OS), flash and RAM.
 
@@ -77,6 +77,7 @@ class Run:
     tick_wire: list[float]
     mid_e2e: list[float]
     tick_e2e: list[float]
+    host: list[float]
     early_bytes: list[float]
     cpu_busy: list[float]
     behind_s: list[float]
@@ -140,6 +141,7 @@ def run_once(run: Run, elf: Path, seconds: float) -> None:
             if host:
                 run.mid_e2e.append(float(frames[k][5]) + host[0] * 1e6)
                 run.tick_e2e.append(float(frames[k][3]) + host[0] * 1e6)
+                run.host.append(host[0] * 1e6)
     steady = [f for f in frames if float(f[4]) >= 1.0]
     run.tick_wire += [float(f[3]) for f in steady]
     run.mid_wire += [float(f[5]) for f in steady]
@@ -164,6 +166,7 @@ def report(runs: list[Run]) -> None:
               f"median {np.median(r.early_bytes) if r.early_bytes else 0:.0f}")
         print(f"   END TO END burst middle to Sync Write received: {_pct(r.mid_e2e)} us")
         print(f"   end to end sample tick to Sync Write received:  {_pct(r.tick_e2e)} us")
+        print(f"   of which the host's (last bit to Sync Write received): {_pct(r.host)} us")
         print(f"   CPU awake {100 * float(np.mean(r.cpu_busy)):.1f} %; rig in process p50 "
               f"{np.median(r.rig_p50):.0f}, p99 {np.median(r.rig_p99):.0f} us; glove frames ok "
               f"{r.frames_ok}, CRC errors {r.crc_errors}")
@@ -199,8 +202,8 @@ def main() -> None:
     rates = [int(r) for r in args.rates.split(",") if r]
     sources: list[tuple[str, Path | None, list[str]]] = [("this firmware", None, [])]
     if args.base:
-        src, sha = base_source(args.base)
-        sources.insert(0, (f"base {sha}", src, []))
+        base_src, sha = base_source(args.base)
+        sources.insert(0, (f"base {sha}", base_src, []))
     sources += [(f"this firmware {v}", None, v.split()) for v in args.variant]
     runs: dict[tuple[int, int], Run] = {}
     elves: dict[tuple[int, int], Path] = {}
@@ -209,7 +212,7 @@ def main() -> None:
             folder = f"build/fwbench/{re.sub(r'[^A-Za-z0-9_=.-]+', '-', label)}-{rate}"
             elves[i, rate], size = build_variant(folder, [f"-DGLOVE_RATE_HZ={rate}", *defines],
                                                  source=src)
-            runs[i, rate] = Run(label, rate, size, [], [], [], [], [], [], [], [], [], [])
+            runs[i, rate] = Run(label, rate, size, [], [], [], [], [], [], [], [], [], [], [])
     print(f"date {datetime.date.today().isoformat()}, {seconds:g} s a run, {args.rounds} "
           f"round(s), alternated; load {os.getloadavg()[0]:.1f}", flush=True)
     for _ in range(args.rounds):

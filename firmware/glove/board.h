@@ -1,6 +1,7 @@
 /* handrig glove firmware: the board layer (pins, ADC, I2C, timer, watchdog).
  * board_avr.cpp drives an ATmega328P's registers; board_arduino.cpp uses only the
- * Arduino API, for other cores (ESP32, RP2040). The UART is Arduino's Serial. */
+ * Arduino API, for other cores (ESP32, RP2040). The UART is Arduino's Serial (begun by
+ * the sketch); frames go out through board_uart_send. */
 #ifndef GLOVE_BOARD_H
 #define GLOVE_BOARD_H
 
@@ -16,15 +17,22 @@ uint8_t board_imu_due(void);
  * micros() clock; *missed: ticks skipped since the last burst. */
 uint8_t board_burst_started(uint32_t *mid_us, uint8_t *missed);
 /* How many channels of the burst are final, their sums (2^GLOVE_OVERSAMPLE_LOG2 10-bit
- * samples each) copied to sums[0..k): channels become final in order during the burst's
- * last round; GLOVE_N_CHANNELS once the burst is complete, returned once (the burst is
- * then over); 0 while none is. */
+ * samples each) in sums[0..k) (each copied once, when it becomes final: pass the same
+ * array every time): channels become final in order during the burst's last round;
+ * GLOVE_N_CHANNELS once the burst is complete, returned once (the burst is then over);
+ * 0 while none is. */
 uint8_t board_burst_final(uint16_t *sums);
 /* I2C at 400 kHz (board_i2c_wire.cpp, every core); register access returns 0 on NACK
  * or timeout (never hangs). */
 void board_i2c_begin(void);
 uint8_t board_i2c_write(uint8_t addr, uint8_t reg, uint8_t value);
 uint8_t board_i2c_read(uint8_t addr, uint8_t reg, uint8_t *buf, uint8_t n);
+/* Hands the UART n bytes, in order, and returns when the last one is handed over. On
+ * the ATmega328P it writes the data register itself as soon as the register is empty
+ * (no interrupt a byte: the bytes follow each other with no gap); elsewhere it is
+ * Serial.write. The sketch sends every byte through it (a byte left in Serial's buffer
+ * could go out after the ones written here). */
+void board_uart_send(const uint8_t *p, uint8_t n);
 uint8_t board_button_pressed(void);
 void board_led(uint8_t on);
 void board_test_point(uint8_t on);

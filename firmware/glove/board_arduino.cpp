@@ -62,6 +62,7 @@ uint8_t board_burst_final(uint16_t *sums) {
     return GLOVE_N_CHANNELS;
 }
 
+void board_uart_send(const uint8_t *p, uint8_t n) { Serial.write(p, n); }
 uint8_t board_button_pressed(void) { return digitalRead(GLOVE_BUTTON_PIN) == LOW; }
 void board_led(uint8_t on) { digitalWrite(GLOVE_LED_PIN, on ? HIGH : LOW); }
 void board_test_point(uint8_t on) { digitalWrite(GLOVE_TEST_POINT_PIN, on ? HIGH : LOW); }

@@ -149,16 +149,32 @@ uint8_t board_burst_started(uint32_t *mid_us, uint8_t *skipped) {
     return got;
 }
 
+static uint8_t copied; /* channels of this burst copied out */
+
 uint8_t board_burst_final(uint16_t *out) {
     uint8_t n = final_n; /* the interrupt no longer adds to sums[0..n) in this burst */
-    for (uint8_t i = 0; i < n; i++) out[i] = sums[i];
+    for (uint8_t i = copied; i < n; i++) out[i] = sums[i];
+    copied = n;
     if (n == GLOVE_N_CHANNELS) {
         noInterrupts();
         burst_done = 0;
         final_n = 0;
         interrupts();
+        copied = 0;
     }
     return n;
+}
+
+/* Polls UDRE0 rather than queueing for Serial's interrupt: at 1 Mbps a byte is 160
+ * cycles, and an interrupt a byte (entry, ring buffer, exit) spends half of them; the
+ * loop has nothing else to do while a frame's tail goes out. Serial's own buffer is
+ * never used (the sketch sends everything here), so nothing can interleave. */
+void board_uart_send(const uint8_t *p, uint8_t n) {
+    while (n--) {
+        while (!(UCSR0A & _BV(UDRE0))) {
+        }
+        UDR0 = *p++;
+    }
 }
 
 uint8_t board_button_pressed(void) { return !(PIND & _BV(PD2)); }

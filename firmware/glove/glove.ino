@@ -85,17 +85,19 @@ void setup() {
     board_init(GLOVE_RATE_HZ);
     base_flags = board_reset_by_watchdog() ? GC_FLAG_WATCHDOG_RESET : 0;
     board_led(1);
-    Serial.write((uint8_t)0x00); /* SPEC.md section 2: delimit the first frame */
+    const uint8_t delimiter = 0x00; /* SPEC.md section 2: delimit the first frame */
+    board_uart_send(&delimiter, 1);
     board_watchdog_start();
 }
 
 /* Per period: the IMU is read GLOVE_IMU_LEAD_US before the tick; the tick starts the ADC
  * burst and the frame's head (everything before the channels, stamped with the burst's
  * middle) goes on the wire while the burst runs; each channel is added to the frame as
- * its samples are complete, so when the burst ends only the last channel, the CRC and
- * the delimiter are left to build. */
+ * its sample is complete (and any bytes it makes final are sent), so when the burst ends
+ * only the last channel, the CRC and the delimiter are left to build, and the rest of the
+ * frame follows on the wire byte after byte (board_uart_send). */
 static gc_stream stream;
-static size_t head_len;
+static uint8_t sent; /* wire bytes of this frame handed to the UART */
 static uint8_t channels_added;
 static uint8_t frame_flags;
 static uint16_t pinned_mask; /* from the last frame's channels */
@@ -113,8 +115,8 @@ void loop() {
         uint8_t buttons = gc_debounce_update(&button, board_button_pressed(), GLOVE_DEBOUNCE_FRAMES);
         gc_frame f = {flags, seq++, mid_us, buttons, GLOVE_N_CHANNELS, channels,
                       quat_ok ? quat : (const int16_t *)0};
-        head_len = gc_frame_head(&stream, wire, &f);
-        Serial.write(wire, head_len);
+        sent = (uint8_t)gc_frame_head(&stream, wire, &f);
+        board_uart_send(wire, sent);
         frame_flags = flags;
         channels_added = 0;
     }
@@ -122,18 +124,22 @@ void loop() {
     if (final > channels_added) {
         uint8_t k = (uint8_t)(final - channels_added);
         gc_decimate(sums + channels_added, k, GLOVE_OVERSAMPLE_LOG2, channels + channels_added);
-        gc_frame_channels(&stream, wire, k, channels + channels_added);
         channels_added = final;
+        if (final < GLOVE_N_CHANNELS) {
+            /* a zero byte in these channels makes the bytes before it final: send them */
+            uint8_t ready = (uint8_t)gc_frame_channels(&stream, wire, k, channels + final - k);
+            board_uart_send(wire + sent, (uint8_t)(ready - sent));
+            sent = ready;
+        } else {
+            uint8_t n = (uint8_t)gc_frame_tail(&stream, wire, k, channels + final - k);
+            board_uart_send(wire + sent, (uint8_t)(n - sent));
+            board_test_point(0);
+            pinned_mask = gc_rails_update(&rails, channels, GLOVE_N_CHANNELS, 4095, GLOVE_RAIL_FRAMES);
+            board_led(gc_led_level(frame_flags, frames, GLOVE_RATE_HZ));
+            frames++;
+            board_watchdog_feed();
+            return;
+        }
     }
-    if (final < GLOVE_N_CHANNELS) {
-        board_idle();
-        return;
-    }
-    size_t n = gc_frame_end(&stream, wire);
-    Serial.write(wire + head_len, n - head_len);
-    board_test_point(0);
-    pinned_mask = gc_rails_update(&rails, channels, GLOVE_N_CHANNELS, 4095, GLOVE_RAIL_FRAMES);
-    board_led(gc_led_level(frame_flags, frames, GLOVE_RATE_HZ));
-    frames++;
-    board_watchdog_feed();
+    board_idle();
 }

@@ -5,8 +5,16 @@
 #include <util/crc16.h>
 #endif
 
+/* The frame's last bytes are built between the last sample and the send: the steps a
+ * byte takes are inlined where gcc would otherwise call them (-Os). */
+#if defined(__GNUC__)
+#define GC_INLINE static inline __attribute__((always_inline))
+#else
+#define GC_INLINE static inline
+#endif
+
 /* One CRC-16/CCITT-FALSE step: poly 0x1021, MSB first (SPEC.md section 4) */
-static uint16_t crc_step(uint16_t crc, uint8_t b) {
+GC_INLINE uint16_t crc_step(uint16_t crc, uint8_t b) {
 #if defined(__AVR__)
     /* avr-libc's XMODEM step is this CRC's step (same polynomial, MSB first) */
     return _crc_xmodem_update(crc, b);
@@ -46,34 +54,41 @@ size_t gc_cobs_encode(const uint8_t *src, size_t n, uint8_t *dst) {
     return out;
 }
 
-/* Stuffs n payload bytes onto the stream (gc_cobs_encode's steps, resumable): the wire
- * bytes before the open group's code byte are final. The state is kept in locals while
- * the loop runs (a store through `wire` could otherwise alias it, on every byte). */
-static void stream_stuff(gc_stream *s, uint8_t *wire, const uint8_t *src, uint8_t n) {
-    uint8_t out = s->out, code_at = s->code_at, code = s->code;
-    for (uint8_t i = 0; i < n; i++) {
-        uint8_t b = src[i];
-        if (b == 0) {
-            wire[code_at] = code;
-            code_at = out++;
-            code = 1;
-            continue;
-        }
-        wire[out++] = b;
-        if (++code == 0xFF) { /* never for a version 1 payload (at most 52 bytes) */
-            wire[code_at] = code;
-            code_at = out++;
-            code = 1;
-        }
+/* The COBS stream's state while bytes are stuffed, kept in a caller's locals (a store
+ * through `wire` could otherwise alias gc_stream's fields, on every byte). */
+typedef struct {
+    uint8_t out, code_at, code;
+} cobs_state;
+
+/* gc_cobs_encode's step for one byte, resumable: the wire bytes before the open group's
+ * code byte are final. */
+GC_INLINE void stuff_byte(uint8_t *wire, cobs_state *c, uint8_t b) {
+    if (b == 0) {
+        wire[c->code_at] = c->code;
+        c->code_at = c->out++;
+        c->code = 1;
+        return;
     }
-    s->out = out;
-    s->code_at = code_at;
-    s->code = code;
+    wire[c->out++] = b;
+    if (++c->code == 0xFF) { /* never for a version 1 payload (at most 52 bytes) */
+        wire[c->code_at] = c->code;
+        c->code_at = c->out++;
+        c->code = 1;
+    }
 }
 
-static uint16_t crc_bytes(uint16_t crc, const uint8_t *p, uint8_t n) {
-    while (n--) crc = crc_step(crc, *p++);
-    return crc;
+/* n payload bytes onto the stream, the CRC running over them */
+static void stream_put(gc_stream *s, uint8_t *wire, const uint8_t *src, uint8_t n) {
+    cobs_state c = {s->out, s->code_at, s->code};
+    uint16_t crc = s->crc;
+    for (uint8_t i = 0; i < n; i++) {
+        crc = crc_step(crc, src[i]);
+        stuff_byte(wire, &c, src[i]);
+    }
+    s->out = c.out;
+    s->code_at = c.code_at;
+    s->code = c.code;
+    s->crc = crc;
 }
 
 static void put_u16(uint8_t *p, uint16_t v) {
@@ -97,45 +112,58 @@ size_t gc_frame_head(gc_stream *s, uint8_t wire[GC_MAX_WIRE], const gc_frame *f)
     s->out = 1;
     s->code_at = 0;
     s->code = 1;
-    s->crc = crc_bytes(0xFFFF, head, sizeof head);
-    stream_stuff(s, wire, head, sizeof head);
+    s->crc = 0xFFFF;
+    stream_put(s, wire, head, sizeof head);
     return s->code_at;
 }
 
-void gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
-    uint8_t bytes[2 * GC_MAX_CHANNELS];
+/* gc_frame_channels' and gc_frame_end's steps, inlined into each of them and into
+ * gc_frame_tail (one call between the last sample and the send) */
+GC_INLINE size_t put_channels(gc_stream *s, uint8_t *wire, uint8_t n, const uint16_t *channels) {
+    cobs_state c = {s->out, s->code_at, s->code};
+    uint16_t crc = s->crc;
     if (n > GC_MAX_CHANNELS) n = GC_MAX_CHANNELS;
-    for (uint8_t i = 0; i < n; i++) put_u16(bytes + 2 * i, channels[i]);
-    s->crc = crc_bytes(s->crc, bytes, (uint8_t)(2 * n));
-    stream_stuff(s, wire, bytes, (uint8_t)(2 * n));
+    for (uint8_t i = 0; i < n; i++) { /* uint16 little-endian */
+        uint8_t lo = (uint8_t)(channels[i] & 0xFF), hi = (uint8_t)(channels[i] >> 8);
+        crc = crc_step(crc_step(crc, lo), hi);
+        stuff_byte(wire, &c, lo);
+        stuff_byte(wire, &c, hi);
+    }
+    s->out = c.out;
+    s->code_at = c.code_at;
+    s->code = c.code;
+    s->crc = crc;
+    return c.code_at;
 }
 
-size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]) {
-    uint8_t crc[2];
-    put_u16(crc, s->crc); /* little-endian, not itself part of the CRC */
-    stream_stuff(s, wire, crc, 2);
-    wire[s->code_at] = s->code;
-    wire[s->out] = 0x00;
-    s->out++;
-    return s->out;
+GC_INLINE size_t put_end(gc_stream *s, uint8_t *wire) {
+    cobs_state c = {s->out, s->code_at, s->code};
+    /* little-endian, not itself part of the CRC */
+    stuff_byte(wire, &c, (uint8_t)(s->crc & 0xFF));
+    stuff_byte(wire, &c, (uint8_t)(s->crc >> 8));
+    wire[c.code_at] = c.code;
+    wire[c.out++] = 0x00;
+    s->out = c.out;
+    s->code_at = c.code_at;
+    s->code = c.code;
+    return c.out;
 }
+
+size_t gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
+    return put_channels(s, wire, n, channels);
+}
+
+size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]) { return put_end(s, wire); }
 
 size_t gc_frame_tail(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels) {
-    gc_frame_channels(s, wire, n, channels);
-    return gc_frame_end(s, wire);
+    put_channels(s, wire, n, channels);
+    return put_end(s, wire);
 }
 
 size_t gc_frame_build(uint8_t wire[GC_MAX_WIRE], const gc_frame *f) {
     gc_stream s;
     gc_frame_head(&s, wire, f);
     return gc_frame_tail(&s, wire, f->n, f->channels);
-}
-
-void gc_decimate(const uint16_t *sums, uint8_t n, uint8_t os_log2, uint16_t *out) {
-    for (uint8_t i = 0; i < n; i++) {
-        uint16_t s = sums[i]; /* at most 16 x 1023 */
-        out[i] = os_log2 >= 2 ? (uint16_t)(s >> (os_log2 - 2)) : (uint16_t)(s << (2 - os_log2));
-    }
 }
 
 uint8_t gc_debounce_update(gc_debounce *d, uint8_t level, uint8_t need) {

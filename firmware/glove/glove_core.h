@@ -61,14 +61,21 @@ typedef struct {
 size_t gc_frame_head(gc_stream *s, uint8_t wire[GC_MAX_WIRE], const gc_frame *f);
 size_t gc_frame_tail(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels);
 /* gc_frame_tail in pieces, for channels that become final one after another: add n more
- * channels (in order; f->n in all), then gc_frame_end adds the CRC and the delimiter and
- * returns the frame's length. */
-void gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels);
+ * channels (in order; f->n in all) and return how many wire bytes are final now (as
+ * gc_frame_head: more only when these channels hold a zero byte), then gc_frame_end adds
+ * the CRC and the delimiter and returns the frame's length. */
+size_t gc_frame_channels(gc_stream *s, uint8_t wire[GC_MAX_WIRE], uint8_t n, const uint16_t *channels);
 size_t gc_frame_end(gc_stream *s, uint8_t wire[GC_MAX_WIRE]);
 
 /* Oversampling: n channel sums of 2^os_log2 samples of a 10-bit ADC each, scaled to
- * 12 bits (0..4092). os_log2 is 0..4. */
-void gc_decimate(const uint16_t *sums, uint8_t n, uint8_t os_log2, uint16_t *out);
+ * 12 bits (0..4092). os_log2 is 0..4. Inline: with a constant os_log2 (the sketch's) the
+ * shift is one instruction pair, not a loop, between the last sample and the send. */
+static inline void gc_decimate(const uint16_t *sums, uint8_t n, uint8_t os_log2, uint16_t *out) {
+    for (uint8_t i = 0; i < n; i++) {
+        uint16_t s = sums[i]; /* at most 16 x 1023 */
+        out[i] = os_log2 >= 2 ? (uint16_t)(s >> (os_log2 - 2)) : (uint16_t)(s << (2 - os_log2));
+    }
+}
 
 /* A level that must hold for `need` calls in a row before it counts (button debounce). */
 typedef struct {

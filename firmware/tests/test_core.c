@@ -84,9 +84,17 @@ static void check_split_build(void) {
         } else { /* the channels in two pieces, as they become final */
             uint8_t n_ch = f.n > GC_MAX_CHANNELS ? GC_MAX_CHANNELS : f.n;
             uint8_t first = (uint8_t)(next_random() % (n_ch + 1u));
-            gc_frame_channels(&s, wire, first, f.channels);
-            gc_frame_channels(&s, wire, (uint8_t)(n_ch - first), f.channels + first);
+            /* the bytes each piece makes final go on the wire at once: they must be the
+             * reference frame's and never be rewritten */
+            size_t k1 = gc_frame_channels(&s, wire, first, f.channels);
+            uint8_t early1[GC_MAX_WIRE];
+            memcpy(early1, wire, k1);
+            size_t k2 = gc_frame_channels(&s, wire, (uint8_t)(n_ch - first), f.channels + first);
+            uint8_t early2[GC_MAX_WIRE];
+            memcpy(early2, wire, k2);
             n = gc_frame_end(&s, wire);
+            CHECK(k <= k1 && k1 <= k2 && k2 < n);
+            CHECK(memcmp(early1, want, k1) == 0 && memcmp(early2, want, k2) == 0);
         }
         CHECK(n == n_want && k < n);
         CHECK(memcmp(wire, want, n_want) == 0);

@@ -315,6 +315,20 @@ static void test_point(struct avr_irq_t *irq, uint32_t value, void *param) {
     test_point_high = value;
 }
 
+/* UCSR0B written: when the transmitter is enabled again, its data register is empty
+ * (UDRE0 set), as on the chip. simavr 1.6 clears UDRE0 when TXEN0 falls (the Arduino
+ * core's init() writes UCSR0B = 0) and sets it again only after a byte has gone out, so a
+ * firmware that polls UDRE0 before its first byte (board_uart_send) would wait forever.
+ * Runs after simavr's own handler for the register. */
+static void uart_control_written(struct avr_t *a, avr_io_addr_t addr, uint8_t v, void *param) {
+    (void)addr;
+    (void)param;
+    static uint8_t txen = 1; /* simavr's reset leaves the transmitter on */
+    uint8_t now = (v >> 3) & 1; /* TXEN0 */
+    if (now && !txen) a->data[0xC0] |= 1u << 5; /* UCSR0A's UDRE0 */
+    txen = now;
+}
+
 /* TCCR0B written: the first non-zero write starts timer 0, micros()'s clock. */
 static void timer0_started(struct avr_t *a, avr_io_addr_t addr, uint8_t v, void *param) {
     (void)addr;
@@ -472,6 +486,7 @@ int main(int argc, char **argv) {
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_OUT_TRIGGER), adc_trigger, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), 0), test_point, NULL);
     avr_register_io_write(avr, 0x45 /* TCCR0B */, timer0_started, NULL); /* beside the timer's own */
+    avr_register_io_write(avr, 0xC1 /* UCSR0B */, uart_control_written, NULL); /* after the UART's */
 
     static const char *twi_names[2] = {"8>bno055.out", "32<bno055.in"};
     bno_irq = avr_alloc_irq(&avr->irq_pool, 0, 2, twi_names);
