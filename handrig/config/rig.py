@@ -24,6 +24,9 @@ from handrig.config.rig_files import resolve_rig_file
 from handrig.errors import ConfigError
 from handrig.hand import anatomical_limits_deg
 
+READ_PARTS_MAX = 8
+"""The most parts a present-state read is split into (``[bus] read_parts``, and the
+loop's own splitting when reads find no room between the glove's frames)."""
 
 @dataclass(frozen=True)
 class ServoCalibration:
@@ -69,7 +72,8 @@ class BusConfig:
     port: str = ""
     baud: int = 1_000_000
     read_every: int = 4  # read present state every N cycles (Fast Sync Read)
-    read_parts: int = 1  # each read asks 1/N of the servos, in turn (shorter reads)
+    read_parts: int = 1  # each read asks 1/N of the servos, in turn (shorter reads); the
+    # loop splits reads further (up to READ_PARTS_MAX) when they find no gap between frames
     watchdog_ms: int = 100  # Bus Watchdog (units of 20 ms on the wire); 0 disables
 
     def check(self) -> None:
@@ -78,9 +82,9 @@ class BusConfig:
                               allowed="a positive number of bits per second")
         if self.read_every < 1:
             raise ConfigError("must be at least 1", key="read_every", value=self.read_every)
-        if not 1 <= self.read_parts <= 8:
+        if not 1 <= self.read_parts <= READ_PARTS_MAX:
             raise ConfigError("out of range", key="read_parts", value=self.read_parts,
-                              allowed="1 (every servo in each read) to 8")
+                              allowed=f"1 (every servo in each read) to {READ_PARTS_MAX}")
         if not 0 <= self.watchdog_ms <= 127 * 20:
             raise ConfigError(
                 "watchdog out of range", key="watchdog_ms", value=self.watchdog_ms,

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from handrig.config.rig import READ_PARTS_MAX
 from handrig.errors import DeviceError
 from handrig.loop.easing import Easing
 from handrig.loop.heat import HeatWatch
@@ -324,6 +325,28 @@ class Cycle:
         serial wire)."""
         return bus.read_wire_s(n) + bus.write_wire_s()
 
+    def _split_reads(self) -> None:
+        """A read forced past the next frame, whose wire time alone is more than the
+        gap, delays that frame's write by the read's length: from now on each read asks
+        half as many servos (to ``READ_PARTS_MAX``
+        parts), so it is shorter and may fit the gaps between the glove's frames. Said
+        once per split; the servos are each read less often."""
+        n = len(self.pipeline.servo_joints)
+        most = min(READ_PARTS_MAX, n)
+        if self.read_parts >= most:
+            return
+        before = -(-n // self.read_parts)
+        self.read_parts = min(most, 2 * self.read_parts)
+        self._part %= self.read_parts
+        each = -(-n // self.read_parts)
+        self.read_wire_s = self._wire_floor(self.bus, each)
+        self.read_s = 0.0  # what reads took was the longer reads' time
+        self.stats.read_splits += 1
+        self.machine.event(
+            f"reads of {before} servos found no room between the glove's frames (each "
+            f"one delayed a write): each read now asks {each} servos, in "
+            f"{self.read_parts} parts")
+
     def _read(self, tick: Tick) -> None:
         """The present-state read, if the trigger finds room for one in this cycle."""
         self._reads_due += 1
@@ -337,6 +360,8 @@ class Cycle:
                 self.housekeeping(tick.next_s - READ_MARGIN_S)
             return
         due, self._reads_due = self._reads_due, 0
+        if deadline > tick.next_s and start + self.read_wire_s > tick.next_s - READ_MARGIN_S:
+            self._split_reads()  # forced, and the read's own wire time is more than a gap
         parts = self.read_parts
         silence = self.silence
         silence.note_read(start, late=deadline <= start)

@@ -243,6 +243,7 @@ class RunStats:
     reads: int = 0
     stale_reads: int = 0
     writes_delayed: int = 0
+    read_splits: int = 0  # times reads were split in more parts to fit between frames
     frames_skipped: int = 0  # glove frames superseded while the loop was busy
     frames_in_bursts: int = 0  # glove frames superseded on arrival (sent back to back)
     frames_in_host_stalls: int = 0  # frames left waiting while the host read nothing

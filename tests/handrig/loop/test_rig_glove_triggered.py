@@ -72,25 +72,65 @@ def test_the_glove_triggered_loop_keeps_the_floor_and_relaxes_and_resumes(parts_
 
 
 class WiredBus(FakeBus):
-    """A bus that says its baud rate and a read's wire time (Fast Sync Read, 4 bytes)."""
+    """A bus that says its baud rate and a read's wire time (Fast Sync Read, 4 bytes),
+    and keeps each read's (part, time left to its deadline)."""
 
     baud = 1_000_000
+
+    def __init__(self, *a, **k):
+        super().__init__(*a, **k)
+        self.reads: list[tuple[tuple[int, int] | None, float]] = []
 
     def read_wire_s(self, n: int) -> float:
         return ((14 + n) + (8 + 8 * n)) * 10 / self.baud
 
+    def read_state(self, deadline_s=None, part=None, *, patient=False):
+        if deadline_s is not None:  # (the start-up read has none)
+            self.reads.append((part, deadline_s - self.clock.now()))
+        return super().read_state(deadline_s, part, patient=patient)
+
 
 def test_no_gap_read_is_offered_that_the_wire_cannot_carry(parts_factory):
+    """At 500 Hz the gaps are 2 ms: a read of the 20 servos needs 2.0 ms of wire, so
+    the loop first gets only its forced reads (one per FORCED_READ_FACTOR * read_every
+    cycles, each delaying a write); the first one is split in two (it asks 10 servos),
+    and reads of 10 servos (1.1 ms) then fit the gaps."""
     parts = parts_factory()
     clock = FakeClock(0.0)
-    glove = _replay(500.0, 2.0, clock)  # 2 ms gaps: the write and a read need 3.2 ms of wire
+    glove = _replay(500.0, 2.0, clock)
     bus = WiredBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=100.0,
                    ceiling_hz=1000.0)
     stats = rig.run(duration_s=1.0)
-    # only the forced reads, one per FORCED_READ_FACTOR * read_every cycles
-    assert 0 < stats.reads <= stats.frames / 16 + 1
+    forced, halves = bus.reads[0], bus.reads[1:]
+    assert forced == ((0, 2), pytest.approx(forced[1])) and forced[1] > 0.002  # split first
+    assert stats.read_splits == 1
+    assert [e for e in stats.events if "found no room" in e] == [
+        "reads of 20 servos found no room between the glove's frames (each one delayed "
+        "a write): each read now asks 10 servos, in 2 parts"]
+    assert {p for p, _ in halves} == {(0, 2), (1, 2)}
+    assert all(left >= bus.read_wire_s(10) for _, left in halves)  # the wire carries them
+    assert all(left < 0.002 for _, left in halves)  # in the gaps: no write delayed
+    assert len(halves) >= 0.9 * stats.frames / 4  # about every read_every-th gap has one
 
+
+def test_reads_split_no_further_than_read_parts_max(parts_factory):
+    """A wire too slow for even the smallest read: the reads are split to 8 parts (3
+    servos each) and then forced as before."""
+    parts = parts_factory()
+    clock = FakeClock(0.0)
+    glove = _replay(500.0, 2.0, clock)
+
+    class SlowBus(WiredBus):
+        baud = 100_000
+
+    bus = SlowBus(tuple(s.joint for s in parts.rig_config.servos), clock)
+    rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=100.0,
+                   ceiling_hz=1000.0)
+    stats = rig.run(duration_s=1.0)
+    assert stats.read_splits == 3  # 1 -> 2 -> 4 -> 8 parts
+    assert bus.reads[-1][0] is not None and bus.reads[-1][0][1] == 8
+    assert 0 < stats.reads <= stats.frames / 16 + 4
 
 
 def test_no_gap_read_is_offered_while_the_line_must_go_quiet(parts_factory):
