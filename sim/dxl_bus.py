@@ -40,7 +40,14 @@ from handrig.pose.robot_rig import load_rig
 from sim.dxl_dispatch import BusStats, Dispatcher, _Reply
 from sim.dxl_fast import parse_frame
 from sim.dxl_faults import FaultSpec
-from sim.dxl_line import BITS_PER_BYTE, SPIN_S, PtyLine, tighten_timer_slack, try_realtime
+from sim.dxl_line import (
+    BITS_PER_BYTE,
+    REQUEST_POLL_S,
+    SPIN_S,
+    PtyLine,
+    tighten_timer_slack,
+    try_realtime,
+)
 from sim.dxl_rig import GOAL_POSITION_ADDRESS, goal_limits, servos_from_rig, with_model
 from sim.dxl_servo import EmulatedServo
 
@@ -153,6 +160,14 @@ class SimBus(Dispatcher):
         self._started_at = 0.0
         self._overload_done = False
         self._bus_free_at = 0.0
+        # when the last reply was written (wire timing), and whether the request after
+        # the one before came within REQUEST_POLL_S of it: then the next is polled for
+        self._replied_at = -1.0
+        self._back_to_back = False
+        self.request_polls = 0
+        """Times the line was polled after a reply for a client's next request."""
+        self.request_poll_hits = 0
+        """Requests found by those polls (the others were waited for asleep)."""
         self._last_advance = 0.0
         self._last_exchange = 0.0  # when the puppet last exchanged state with the servos
         self._in_packet = False  # housekeeping runs in a packet's path (no slot)
@@ -286,11 +301,25 @@ class SimBus(Dispatcher):
         clock = self.clock
         # the physics waits for its exchanges (housekeeping): an idle line wakes for them
         idle_s = KINEMATIC_STEP_S if self.puppet is not None else IDLE_WAIT_S
+        # a client cycling back to back is polled for after each reply (the real clock only)
+        poll_s = REQUEST_POLL_S if isinstance(clock, MonotonicClock) else 0.0
         try:
             while not self._stop.is_set():
-                chunk, closed = line.wait(idle_s)
+                chunk: bytes | None = b""
+                closed = False
+                replied = self._replied_at
+                if replied >= 0.0:
+                    self._replied_at = -1.0
+                    if self._back_to_back and poll_s:
+                        chunk = line.poll_for(replied + poll_s)
+                        self.request_polls += 1
+                        self.request_poll_hits += bool(chunk)
+                if not chunk:
+                    chunk, closed = line.wait(idle_s)
                 # Arrivals are time-stamped before anything else.
                 now = clock.now()
+                if chunk and replied >= 0.0:
+                    self._back_to_back = now - replied < poll_s
                 if closed:  # the client let the port go: what it left half-sent is noise
                     self.stats.noise_bytes += len(buf)
                     buf.clear()
@@ -423,6 +452,7 @@ class SimBus(Dispatcher):
                 self.stats.replies += 1
                 self.stats.late_total_s += late
                 self.stats.late_max_s = max(self.stats.late_max_s, late)
+                self._replied_at = t + late
         self._bus_free_at = t
 
     def _emit(self, data: bytes) -> None:
