@@ -36,6 +36,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -87,6 +88,15 @@ class Run:
     reads: list[tuple[float, int]]
     events: list[list[float]]
     polls: int  # requests the emulator found polling after a reply (-1: a tree without)
+
+
+def tree_root() -> str:
+    """The tree whose ``handrig`` this process imported: the emulator's child runs there
+    (``python -c`` puts its working directory first on ``sys.path``, ahead of
+    ``PYTHONPATH``: run from another tree, the child would import that tree's ``sim``)."""
+    import handrig
+
+    return str(Path(handrig.__file__).resolve().parents[1])
 
 
 def _cpu_s(pid: int) -> float:
@@ -214,7 +224,8 @@ def main() -> None:
         spin_s = None if spin.strip() == "default" else float(spin) * 1e-6
         proc = subprocess.Popen([sys.executable, "-c", _CHILD, str(n), str(baud),
                                  str(int(puppet))], stdin=subprocess.PIPE,
-                                stdout=subprocess.PIPE, text=True, env=helper_env())
+                                stdout=subprocess.PIPE, text=True, env=helper_env(),
+                                cwd=tree_root())
         assert proc.stdout is not None and proc.stdin is not None
         line = proc.stdout.readline()
         if not line.startswith("port:"):
