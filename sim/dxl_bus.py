@@ -43,6 +43,7 @@ from sim.dxl_faults import FaultSpec
 from sim.dxl_line import (
     BITS_PER_BYTE,
     REQUEST_POLL_S,
+    REQUEST_POLL_STREAK,
     SPIN_S,
     PtyLine,
     tighten_timer_slack,
@@ -160,10 +161,11 @@ class SimBus(Dispatcher):
         self._started_at = 0.0
         self._overload_done = False
         self._bus_free_at = 0.0
-        # when the last reply was written (wire timing), and whether the request after
-        # the one before came within REQUEST_POLL_S of it: then the next is polled for
+        # when the last reply was written (wire timing), and how many requests in a row
+        # came within REQUEST_POLL_S of the reply before: from REQUEST_POLL_STREAK on,
+        # the next is polled for
         self._replied_at = -1.0
-        self._back_to_back = False
+        self._quick_requests = 0
         self.request_polls = 0
         """Times the line was polled after a reply for a client's next request."""
         self.request_poll_hits = 0
@@ -310,7 +312,7 @@ class SimBus(Dispatcher):
                 replied = self._replied_at
                 if replied >= 0.0:
                     self._replied_at = -1.0
-                    if self._back_to_back and poll_s:
+                    if self._quick_requests >= REQUEST_POLL_STREAK and poll_s:
                         chunk = line.poll_for(replied + poll_s)
                         self.request_polls += 1
                         self.request_poll_hits += bool(chunk)
@@ -319,7 +321,8 @@ class SimBus(Dispatcher):
                 # Arrivals are time-stamped before anything else.
                 now = clock.now()
                 if chunk and replied >= 0.0:
-                    self._back_to_back = now - replied < poll_s
+                    self._quick_requests = (self._quick_requests + 1 if now - replied < poll_s
+                                            else 0)
                 if closed:  # the client let the port go: what it left half-sent is noise
                     self.stats.noise_bytes += len(buf)
                     buf.clear()

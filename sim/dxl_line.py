@@ -45,10 +45,13 @@ PHYSICS_PRIORITY = 5
 # a VM above all, wakes tens to hundreds of microseconds after the bytes are readable).
 # It first sleeps HANDOVER_S: the kernel worker that carries the reply over to the
 # client may be queued on this CPU, and a SCHED_FIFO thread that kept polling would hold
-# the reply back (and the client's next request with it). Only while the last request
-# came within the window: a client that pauses between cycles (the realtime loop at
-# 200 Hz) is waited for asleep, at no CPU.
+# the reply back (and the client's next request with it). Only once REQUEST_POLL_STREAK
+# requests in a row came within the window: a client that pauses between cycles (the
+# realtime loop at 200 Hz; two hands' loops sharing a bus, whose requests now and then
+# follow each other's replies) is waited for asleep, at no CPU, and does not find the
+# bus thread spinning on the CPU its glove emulator and physics share.
 REQUEST_POLL_S = 150e-6
+REQUEST_POLL_STREAK = 8
 HANDOVER_S = 30e-6
 # While no client holds the port, the line looks again this often.
 NO_CLIENT_POLL_S = 0.005

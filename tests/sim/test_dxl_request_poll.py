@@ -1,8 +1,9 @@
 """The emulated bus polls for a back-to-back client's next request, and only for it.
 
-After a reply, a client that sent its last request within ``REQUEST_POLL_S`` of the
-reply before is polled for (the bus thread does not go to sleep on the line); one that
-pauses between requests is waited for asleep, at no CPU. Either way a reply leaves no
+After a reply, a client whose last ``REQUEST_POLL_STREAK`` requests each came within
+``REQUEST_POLL_S`` of the reply before is polled for (the bus thread does not go to
+sleep on the line); one that pauses between requests, or every few, is waited for
+asleep, at no CPU. Either way a reply leaves no
 earlier than the wire could carry the request and the reply.
 """
 
@@ -63,3 +64,17 @@ def test_a_client_that_pauses_between_requests_is_waited_for_asleep(bus: SimBus)
         port.closePort()
     assert bus.request_polls == 0
     assert bus.request_poll_hits == 0
+
+
+def test_quick_requests_that_pause_every_few_are_not_polled_for(bus: SimBus) -> None:
+    """Two hands' loops on one bus: a request now and then follows the other hand's
+    reply at once, but every cycle has a pause; the bus thread never spins for them."""
+    port, ph = _open(bus)
+    try:
+        for _ in range(10):
+            for _ in range(4):  # fewer than REQUEST_POLL_STREAK in a row
+                assert ph.ping(port, 1)[1] == COMM_SUCCESS
+            time.sleep(0.003)
+    finally:
+        port.closePort()
+    assert bus.request_polls == 0
