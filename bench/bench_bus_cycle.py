@@ -71,8 +71,7 @@ bus.start()
 print("port:", bus.port_path, flush=True)
 signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
 for line in sys.stdin:
-    hits = getattr(bus, "request_poll_hits", -1)
-    print(json.dumps({"events": events, "polls": hits}), flush=True)
+    print(json.dumps(events), flush=True)
     events.clear()
 bus.stop()
 """
@@ -87,7 +86,6 @@ class Run:
     writes: list[tuple[float, int]]
     reads: list[tuple[float, int]]
     events: list[list[float]]
-    polls: int  # requests the emulator found polling after a reply (-1: a tree without)
 
 
 def tree_root() -> str:
@@ -158,10 +156,10 @@ def _run(port: str, proc: subprocess.Popen[str], n: int, baud: int, seconds: flo
             c_me, c_emu = time.process_time() - c_me, _cpu_s(proc.pid) - c_emu
         proc.stdin.write("\n")
         proc.stdin.flush()
-        said = json.loads(proc.stdout.readline())
+        events = json.loads(proc.stdout.readline())
     finally:
         bus.close()
-    return Run(cycles, wall, c_me, c_emu, writes, reads, said["events"], said["polls"])
+    return Run(cycles, wall, c_me, c_emu, writes, reads, events)
 
 
 def _breakdown(run: Run, sw_len: int) -> dict[str, np.ndarray]:
@@ -243,9 +241,7 @@ def main() -> None:
             for k, v in parts.items())
         print(f"{spin:<18} {hz:>8.0f} {hz / limit:>7.2f} | {cells} | "
               f"{run.cpu_driver_s / run.cycles * 1e6:.0f}, "
-              f"{run.cpu_emulator_s / run.cycles * 1e6:.0f}"
-              + (f"; {run.polls / run.cycles:.0%} of requests polled for" if run.polls >= 0
-                 else ""))
+              f"{run.cpu_emulator_s / run.cycles * 1e6:.0f}")
 
 
 if __name__ == "__main__":

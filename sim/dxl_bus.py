@@ -40,15 +40,7 @@ from handrig.pose.robot_rig import load_rig
 from sim.dxl_dispatch import BusStats, Dispatcher, _Reply
 from sim.dxl_fast import parse_frame
 from sim.dxl_faults import FaultSpec
-from sim.dxl_line import (
-    BITS_PER_BYTE,
-    REQUEST_POLL_S,
-    REQUEST_POLL_STREAK,
-    SPIN_S,
-    PtyLine,
-    tighten_timer_slack,
-    try_realtime,
-)
+from sim.dxl_line import BITS_PER_BYTE, SPIN_S, PtyLine, tighten_timer_slack, try_realtime
 from sim.dxl_rig import GOAL_POSITION_ADDRESS, goal_limits, servos_from_rig, with_model
 from sim.dxl_servo import EmulatedServo
 
@@ -161,15 +153,6 @@ class SimBus(Dispatcher):
         self._started_at = 0.0
         self._overload_done = False
         self._bus_free_at = 0.0
-        # when the last reply was written (wire timing), and how many requests in a row
-        # came within REQUEST_POLL_S of the reply before: from REQUEST_POLL_STREAK on,
-        # the next is polled for
-        self._replied_at = -1.0
-        self._quick_requests = 0
-        self.request_polls = 0
-        """Times the line was polled after a reply for a client's next request."""
-        self.request_poll_hits = 0
-        """Requests found by those polls (the others were waited for asleep)."""
         self._last_advance = 0.0
         self._last_exchange = 0.0  # when the puppet last exchanged state with the servos
         self._in_packet = False  # housekeeping runs in a packet's path (no slot)
@@ -303,26 +286,11 @@ class SimBus(Dispatcher):
         clock = self.clock
         # the physics waits for its exchanges (housekeeping): an idle line wakes for them
         idle_s = KINEMATIC_STEP_S if self.puppet is not None else IDLE_WAIT_S
-        # a client cycling back to back is polled for after each reply (the real clock only)
-        poll_s = REQUEST_POLL_S if isinstance(clock, MonotonicClock) else 0.0
         try:
             while not self._stop.is_set():
-                chunk: bytes | None = b""
-                closed = False
-                replied = self._replied_at
-                if replied >= 0.0:
-                    self._replied_at = -1.0
-                    if self._quick_requests >= REQUEST_POLL_STREAK and poll_s:
-                        chunk = line.poll_for(replied + poll_s)
-                        self.request_polls += 1
-                        self.request_poll_hits += bool(chunk)
-                if not chunk:
-                    chunk, closed = line.wait(idle_s)
+                chunk, closed = line.wait(idle_s)
                 # Arrivals are time-stamped before anything else.
                 now = clock.now()
-                if chunk and replied >= 0.0:
-                    self._quick_requests = (self._quick_requests + 1 if now - replied < poll_s
-                                            else 0)
                 if closed:  # the client let the port go: what it left half-sent is noise
                     self.stats.noise_bytes += len(buf)
                     buf.clear()
@@ -455,7 +423,6 @@ class SimBus(Dispatcher):
                 self.stats.replies += 1
                 self.stats.late_total_s += late
                 self.stats.late_max_s = max(self.stats.late_max_s, late)
-                self._replied_at = t + late
         self._bus_free_at = t
 
     def _emit(self, data: bytes) -> None:

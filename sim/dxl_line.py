@@ -39,20 +39,6 @@ REALTIME_PRIORITY = 10
 # interpreter must not be preempted by ordinary work while it holds the GIL (the bus
 # thread would wait for it: a priority inversion of milliseconds on a loaded machine).
 PHYSICS_PRIORITY = 5
-# After a reply, a client cycling back to back (a benchmark, a tight SDK loop) sends its
-# next request within tens of microseconds: the bus thread polls the line for it until
-# REQUEST_POLL_S after the reply instead of sleeping (a thread asleep on an idle CPU, in
-# a VM above all, wakes tens to hundreds of microseconds after the bytes are readable).
-# It first sleeps HANDOVER_S: the kernel worker that carries the reply over to the
-# client may be queued on this CPU, and a SCHED_FIFO thread that kept polling would hold
-# the reply back (and the client's next request with it). Only once REQUEST_POLL_STREAK
-# requests in a row came within the window: a client that pauses between cycles (the
-# realtime loop at 200 Hz; two hands' loops sharing a bus, whose requests now and then
-# follow each other's replies) is waited for asleep, at no CPU, and does not find the
-# bus thread spinning on the CPU its glove emulator and physics share.
-REQUEST_POLL_S = 150e-6
-REQUEST_POLL_STREAK = 8
-HANDOVER_S = 30e-6
 # While no client holds the port, the line looks again this often.
 NO_CLIENT_POLL_S = 0.005
 DEFAULT_BAUD = 1_000_000
@@ -158,23 +144,6 @@ class PtyLine:
             time.sleep(NO_CLIENT_POLL_S)  # poll reports HUP at once while no client holds it
             return None, was_open
         return None, False
-
-    def poll_for(self, until_s: float) -> bytes:
-        """Bytes that come before ``until_s`` (``time.perf_counter``): asleep for
-        ``HANDOVER_S``, then read without sleeping; b"" when none came (or no client
-        holds the port: then ``wait`` says so)."""
-        fd, clock = self.fd, time.perf_counter
-        try:
-            select.select([fd], [], [], HANDOVER_S)
-            while True:
-                try:
-                    data = os.read(fd, 65536)
-                except BlockingIOError:
-                    data = b""
-                if data or clock() >= until_s:
-                    return data
-        except OSError:
-            return b""  # EIO: no client; ``wait`` handles it
 
     def _opened(self) -> None:
         if not self.client_open:
