@@ -26,6 +26,13 @@ per event on both sides.
 HANDRIG_BENCH_SECONDS (default 3) seconds a way; HANDRIG_BENCH_SPIN_US: the
 driver's reply poll leads to run (default ``default,0``); HANDRIG_BENCH_PUPPET=1:
 the MuJoCo puppet drives the servos (default: kinematic).
+
+Then one pty hop alone (``HANDRIG_BENCH_HOPS``, default 3000; 0: skipped): a writer
+process (the emulator's place: the other CPU, SCHED_FIFO where allowed) writes 168
+bytes every 0.8 ms; the reader (the driver's place, this CPU) either sleeps in
+``select`` until they are readable or polls with non-blocking reads; printed: write ->
+read p50 / p90 / p99 for each. (A poll does not starve the kernel worker that carries
+the bytes over: n_tty's read waits for it when it is queued.)
 """
 
 from __future__ import annotations
@@ -203,6 +210,65 @@ def _breakdown(run: Run, sw_len: int) -> dict[str, np.ndarray]:
     return {k: np.array(v) * 1e6 for k, v in parts.items()}
 
 
+def _hop(polled: bool, count: int) -> np.ndarray:
+    """Write -> read of one pty hop, ``count`` times, microseconds (see the module doc)."""
+    import select
+    import tty
+
+    from handrig.realtime import cpu_split
+    from sim.dxl_line import REALTIME_PRIORITY, try_realtime
+
+    loop_cpu, others = cpu_split()
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    os.set_blocking(slave, False)
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the writer: the emulator's place
+        try:
+            if others:
+                os.sched_setaffinity(0, others)
+            try_realtime(REALTIME_PRIORITY)
+            stamps = np.zeros(count)
+            for i in range(count):
+                t_next = time.perf_counter() + 0.0008
+                while time.perf_counter() < t_next:
+                    pass
+                stamps[i] = time.perf_counter()
+                os.write(master, bytes(168))
+                select.select([master], [], [], 0.1)  # the reader's acknowledgement
+                os.read(master, 64)
+            os.write(w, stamps.tobytes())
+        finally:
+            os._exit(0)
+    before = os.sched_getaffinity(0)
+    if loop_cpu is not None:
+        os.sched_setaffinity(0, {loop_cpu})
+    got = np.zeros(count)
+    try:
+        for i in range(count):
+            while True:
+                if not polled:
+                    select.select([slave], [], [], 1.0)
+                try:
+                    if os.read(slave, 4096):
+                        break
+                except BlockingIOError:
+                    pass
+            got[i] = time.perf_counter()
+            os.write(slave, b"a")
+        raw = b""
+        while len(raw) < 8 * count:
+            raw += os.read(r, 1 << 20)
+    finally:
+        os.waitpid(pid, 0)
+        os.sched_setaffinity(0, before)
+        for fd in (master, slave, r, w):
+            os.close(fd)
+    return (got - np.frombuffer(raw, np.float64)) * 1e6
+
+
 def main() -> None:
     from handrig.cli.bench_bus import wire_limit_hz
     from handrig.devices.servo.wire import goal_write_bytes
@@ -242,6 +308,12 @@ def main() -> None:
         print(f"{spin:<18} {hz:>8.0f} {hz / limit:>7.2f} | {cells} | "
               f"{run.cpu_driver_s / run.cycles * 1e6:.0f}, "
               f"{run.cpu_emulator_s / run.cycles * 1e6:.0f}")
+    hops = int(os.environ.get("HANDRIG_BENCH_HOPS", "3000"))
+    for polled in (False, True) if hops else ():
+        us = _hop(polled, hops)
+        print(f"one pty hop, the reader {'polling' if polled else 'asleep in select'}: "
+              f"p50 {np.median(us):.0f} us, p90 {np.percentile(us, 90):.0f} us, "
+              f"p99 {np.percentile(us, 99):.0f} us")
 
 
 if __name__ == "__main__":
