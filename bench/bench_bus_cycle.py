@@ -21,7 +21,9 @@ and the CPU each process spent per cycle (``/proc/PID/stat``: utime + stime). Th
 timing wraps methods every version has (``SimBus._send``, ``SimBus._emit``, the
 transport's ``write`` and ``_receive``), so ``PYTHONPATH=/tmp/base python
 bench/bench_bus_cycle.py`` traces an older tree. Tracing adds a few microseconds
-per event on both sides.
+per event on both sides; it logs into arrays allocated once, so the garbage collector
+does not run in the timed loop (printed: ``gc``), as it does not in ``handrig bench
+bus``'s (a first version logged tuples to lists: 7 collections, 32 ms, in 1.5 s).
 
 HANDRIG_BENCH_SECONDS (default 3) seconds a way; HANDRIG_BENCH_SPIN_US: the
 driver's reply poll leads to run (default ``default,0``); HANDRIG_BENCH_PUPPET=1:
@@ -37,6 +39,7 @@ the bytes over: n_tty's read waits for it when it is queued.)
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import subprocess
@@ -49,6 +52,7 @@ import numpy as np
 
 _CHILD = """
 import json, signal, sys, time
+import numpy as np
 from handrig.realtime import apply_cpus_from_env
 apply_cpus_from_env()
 from handrig.cli.bench_bus import bench_rig
@@ -56,12 +60,15 @@ from sim.dxl_bus import SimBus
 from sim.dxl_line import BITS_PER_BYTE
 n, baud, puppet = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3] == "1"
 bus = SimBus.from_rig(bench_rig(n, baud), wire_timing=True, puppet=puppet)
-events = []  # (t_rx, frame_len, wire instant of the first reply or 0, emitted or 0)
+# (t_rx, frame_len, wire instant of the first reply or 0, emitted or 0), in an array
+# allocated once: a list of tuples would wake the garbage collector for pauses of ms
+events = np.zeros((400_000, 4))
+count = [0]
 send, emit = bus._send, bus._emit
-emitted = []
+emitted = [0.0]
 def traced_send(replies, frame_len, t_rx):
     free = bus._bus_free_at
-    emitted.clear()
+    emitted[0] = 0.0
     send(replies, frame_len, t_rx)
     byte_s = BITS_PER_BYTE / (bus._line_baud or bus.baud())
     wire = 0.0
@@ -69,17 +76,20 @@ def traced_send(replies, frame_len, t_rx):
         r = replies[0]
         wire = (max(t_rx, free) + frame_len * byte_s + r.return_delay_s + r.fault_delay_s
                 + len(r.data) * byte_s)
-    events.append((t_rx, frame_len, wire, emitted[0] if emitted else 0.0))
+    k = count[0] % len(events)
+    events[k, 0], events[k, 1], events[k, 2], events[k, 3] = t_rx, frame_len, wire, emitted[0]
+    count[0] += 1
 def traced_emit(data):
     emit(data)
-    emitted.append(time.perf_counter())
+    if not emitted[0]:
+        emitted[0] = time.perf_counter()
 bus._send, bus._emit = traced_send, traced_emit
 bus.start()
 print("port:", bus.port_path, flush=True)
 signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
 for line in sys.stdin:
-    print(json.dumps(events), flush=True)
-    events.clear()
+    print(json.dumps(events[: min(count[0], len(events))].tolist()), flush=True)
+    count[0] = 0
 bus.stop()
 """
 
@@ -90,9 +100,10 @@ class Run:
     wall_s: float
     cpu_driver_s: float
     cpu_emulator_s: float
-    writes: list[tuple[float, int]]
-    reads: list[tuple[float, int]]
+    writes: np.ndarray  # (written at, bytes)
+    reads: np.ndarray  # (read at, bytes)
     events: list[list[float]]
+    collections: int  # garbage collections in the driver's timed loop
 
 
 def tree_root() -> str:
@@ -110,21 +121,37 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _trace_driver(bus: object) -> tuple[list[tuple[float, int]], list[tuple[float, int]]]:
-    """Wrap the driver's transport: (written at, bytes) and (read at, bytes) lists."""
+class _Log:
+    """(clock time, bytes) rows in an array allocated once (no garbage to collect)."""
+
+    def __init__(self, rows: int) -> None:
+        self.rows = np.zeros((rows, 2))
+        self.n = 0
+
+    def add(self, t: float, nbytes: int) -> None:
+        if self.n < len(self.rows):
+            self.rows[self.n, 0] = t
+            self.rows[self.n, 1] = nbytes
+            self.n += 1
+
+    def taken(self) -> np.ndarray:
+        return self.rows[: self.n]
+
+
+def _trace_driver(bus: object, rows: int) -> tuple[_Log, _Log]:
+    """Wrap the driver's transport: its writes and reads, logged."""
     t = bus.transport  # type: ignore[attr-defined]
-    writes: list[tuple[float, int]] = []
-    reads: list[tuple[float, int]] = []
+    writes, reads = _Log(rows), _Log(rows)
     write, receive = t.write, t._receive
     clock = time.perf_counter
 
     def traced_write(data: bytes) -> None:
         write(data)
-        writes.append((clock(), len(data)))
+        writes.add(clock(), len(data))
 
     def traced_receive(*args: object, **kw: object) -> bytes:
         chunk = receive(*args, **kw)
-        reads.append((clock(), len(chunk)))
+        reads.add(clock(), len(chunk))
         return chunk
 
     t.write, t._receive = traced_write, traced_receive
@@ -147,8 +174,14 @@ def _run(port: str, proc: subprocess.Popen[str], n: int, baud: int, seconds: flo
         proc.stdin.write("\n")  # drop commissioning's events
         proc.stdin.flush()
         proc.stdout.readline()
-        writes, reads = _trace_driver(bus)
+        writes, reads = _trace_driver(bus, int(seconds * 8000) + 1000)
         cycles = 0
+        collections = [0]  # the garbage collector's runs in the timed loop (this process)
+
+        def counted(phase: str, info: dict[str, int]) -> None:
+            collections[0] += phase == "stop"
+
+        gc.callbacks.append(counted)
         with pinned_loop():
             c_me, c_emu = time.process_time(), _cpu_s(proc.pid)
             t0 = time.perf_counter()
@@ -161,18 +194,19 @@ def _run(port: str, proc: subprocess.Popen[str], n: int, baud: int, seconds: flo
                     break
             wall = time.perf_counter() - t0
             c_me, c_emu = time.process_time() - c_me, _cpu_s(proc.pid) - c_emu
+        gc.callbacks.remove(counted)
         proc.stdin.write("\n")
         proc.stdin.flush()
         events = json.loads(proc.stdout.readline())
     finally:
         bus.close()
-    return Run(cycles, wall, c_me, c_emu, writes, reads, events)
+    return Run(cycles, wall, c_me, c_emu, writes.taken(), reads.taken(), events,
+               collections[0])
 
 
 def _breakdown(run: Run, sw_len: int) -> dict[str, np.ndarray]:
     """Per cycle: the five parts, microseconds (cycles whose events all matched)."""
-    writes = np.array(run.writes)
-    reads = np.array(run.reads)
+    writes, reads = run.writes, run.reads
     ev = np.array(run.events)
     sw_w = writes[writes[:, 1] == sw_len, 0]  # the goal Sync Writes, written at
     sw_rx = ev[(ev[:, 1] == sw_len) & (ev[:, 2] == 0), 0]
@@ -307,7 +341,7 @@ def main() -> None:
             for k, v in parts.items())
         print(f"{spin:<18} {hz:>8.0f} {hz / limit:>7.2f} | {cells} | "
               f"{run.cpu_driver_s / run.cycles * 1e6:.0f}, "
-              f"{run.cpu_emulator_s / run.cycles * 1e6:.0f}")
+              f"{run.cpu_emulator_s / run.cycles * 1e6:.0f}; gc {run.collections}")
     hops = int(os.environ.get("HANDRIG_BENCH_HOPS", "3000"))
     for polled in (False, True) if hops else ():
         us = _hop(polled, hops)
