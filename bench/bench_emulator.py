@@ -23,6 +23,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -63,12 +64,21 @@ bus.stop()
 """
 
 
+def tree_root() -> str:
+    """The tree whose ``handrig`` this process imported: the emulator's child runs there
+    (``python -c`` puts its working directory first on ``sys.path``, ahead of
+    ``PYTHONPATH``: run from another tree, the child would import that tree's ``sim``)."""
+    import handrig
+
+    return str(Path(handrig.__file__).resolve().parents[1])
+
+
 def _child(which: str, baud: int) -> tuple[subprocess.Popen[str], str]:
     from handrig.realtime import helper_env
 
     proc = subprocess.Popen([sys.executable, "-c", _CHILD, which, str(baud)],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                            env=helper_env())
+                            env=helper_env(), cwd=tree_root())
     assert proc.stdout is not None
     line = proc.stdout.readline()
     if not line.startswith("port:"):
