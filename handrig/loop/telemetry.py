@@ -114,7 +114,10 @@ class CycleView:
 def _opt(values: np.ndarray | None, n: int) -> tuple[float | None, ...]:
     if values is None:
         return (None,) * n
-    return tuple(float(v) if v == v else None for v in values.tolist())
+    out = values.tolist()  # Python floats, in C
+    if np.isnan(values).any():
+        return tuple(v if v == v else None for v in out)
+    return tuple(out)
 
 
 class Telemetry:
@@ -280,7 +283,7 @@ class SnapshotBuilder:
             positions_deg=_opt(state.positions_deg, n),
             temperatures_c=_opt(state.temperatures_c, n),
             currents_ma=_opt(state.currents_ma, n),
-            hardware_errors=tuple(int(v) for v in state.hardware_errors.tolist()),
-            stale=tuple(bool(v) for v in state.stale.tolist()),
-            reading_ages_s=tuple(float(a) + since for a in state.age_s.tolist()))
+            hardware_errors=tuple(np.asarray(state.hardware_errors, dtype=np.int64).tolist()),
+            stale=tuple(np.asarray(state.stale, dtype=bool).tolist()),
+            reading_ages_s=tuple((np.asarray(state.age_s, dtype=np.float64) + since).tolist()))
         return out
