@@ -28,6 +28,7 @@ READ_PARTS_MAX = 8
 """The most parts a present-state read is split into (``[bus] read_parts``, and the
 loop's own splitting when reads find no room between the glove's frames)."""
 
+
 @dataclass(frozen=True)
 class ServoCalibration:
     """One servo: its bus ID, the joint it drives, and the mapping between them."""

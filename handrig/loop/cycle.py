@@ -326,11 +326,12 @@ class Cycle:
         return bus.read_wire_s(n) + bus.write_wire_s()
 
     def _split_reads(self) -> None:
-        """A read forced past the next frame, whose wire time alone is more than the
-        gap, delays that frame's write by the read's length: from now on each read asks
-        half as many servos (to ``READ_PARTS_MAX``
-        parts), so it is shorter and may fit the gaps between the glove's frames. Said
-        once per split; the servos are each read less often."""
+        """A forced read whose wire time (the goals' write still on the wire, then the
+        read) is more than the gap from the cycle's start to the next frame delays that
+        frame's write by the read's length, and no gap will ever fit it: from now on
+        each read asks half as many servos (at most ``READ_PARTS_MAX`` parts), so it is
+        shorter and may fit. Said once per split; each servo is then read less often.
+        A host that came late, or a line that must go quiet, does not split reads."""
         n = len(self.pipeline.servo_joints)
         most = min(READ_PARTS_MAX, n)
         if self.read_parts >= most:
@@ -360,8 +361,8 @@ class Cycle:
                 self.housekeeping(tick.next_s - READ_MARGIN_S)
             return
         due, self._reads_due = self._reads_due, 0
-        if deadline > tick.next_s and start + self.read_wire_s > tick.next_s - READ_MARGIN_S:
-            self._split_reads()  # forced, and the read's own wire time is more than a gap
+        if deadline > tick.next_s and self.read_wire_s > tick.next_s - tick.now_s - READ_MARGIN_S:
+            self._split_reads()  # forced, and the wire alone needs more than the gap
         parts = self.read_parts
         silence = self.silence
         silence.note_read(start, late=deadline <= start)

@@ -401,6 +401,7 @@ def account_pose(
         pose[k] = clamped[k]
     return clamps, servo_clamps, slewed
 
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel with the types the loop uses."""
     f = np.zeros(2)

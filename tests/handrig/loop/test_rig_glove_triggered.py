@@ -157,7 +157,8 @@ def test_no_gap_read_is_offered_while_the_line_must_go_quiet(parts_factory):
     bus = QuietingBus(tuple(s.joint for s in parts.rig_config.servos), clock)
     rig = make_rig(parts, glove, bus, clock, loop_mode="glove", floor_hz=100.0,
                    ceiling_hz=1000.0)
-    rig.run(duration_s=0.9)
+    stats = rig.run(duration_s=0.9)
+    assert stats.read_splits == 0  # the quiet, not the wire, left no room: no split
     asked = np.array(bus.asked)
     quiet = np.sum((asked >= 0.2) & (asked < 0.6))  # 80 cycles: 20 gap reads otherwise
     assert 0 < quiet <= 80 / 16 + 1  # one forced read per FORCED_READ_FACTOR * read_every
