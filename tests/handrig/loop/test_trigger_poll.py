@@ -68,3 +68,41 @@ def test_the_window_is_checked_in_the_rig_file() -> None:
         LoopConfig(glove_poll_us=-1.0).check()
     with pytest.raises(ConfigError, match="glove_poll_us"):
         LoopConfig(glove_poll_us=5000.0).check()
+
+
+def test_a_poll_window_is_bounded_under_a_clock_that_does_not_move() -> None:
+    """A fake clock stands still while the trigger polls: the window still ends (after
+    POLLS_MAX looks at the port), and the wait goes on as a sleep to its end."""
+    import handrig.loop.trigger as trigger_module
+    from handrig.clock import FakeClock
+    from handrig.loop.trigger import POLLS_MAX
+
+    clock = FakeClock(10.0)
+    glove = PipeGlove(clock)  # type: ignore[arg-type]
+    try:
+        trig = GloveTrigger(clock, glove, floor_hz=20.0, ceiling_hz=1000.0, poll_s=150e-6)
+        trig.start(clock.now())
+        for k in range(4):  # frames on a 5 ms grid: the period and the prediction are known
+            if k:
+                clock.advance(PERIOD_S)
+            glove.send()
+            trig.wait(Tick())
+            glove.latest()
+        clock.advance(PERIOD_S)  # now at the predicted frame: the window is open
+        assert abs(trig.predicted_frame_s - clock.now()) < 1e-9
+        looks: list[float] = []
+        real = trigger_module._readable
+
+        def counted(fd: int, timeout_s: float) -> bool:
+            looks.append(timeout_s)
+            return real(fd, min(timeout_s, 0.01))
+
+        trigger_module._readable = counted
+        try:
+            assert not trig._polled(glove.fileno(), clock.now() + 0.005)
+        finally:
+            trigger_module._readable = real
+        polls = [t for t in looks if t == 0.0]
+        assert len(polls) == POLLS_MAX and looks[-1] > 0.0  # then a sleep to the end
+    finally:
+        glove.close()
