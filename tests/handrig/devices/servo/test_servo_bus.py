@@ -308,7 +308,8 @@ def test_overload_that_stays_stops_after_max_reboots(sim: SimBus) -> None:
 
 def test_sync_read_path(sim: SimBus, bus: DynamixelBus) -> None:
     bus.use_fast_sync_read = False
-    state = bus.read_state()
+    # patient: this checks the Sync Read path, not how soon a loaded machine answers
+    state = bus.read_state(bus.clock.now() + 0.5, patient=True)
     assert state.all_fresh
     assert sim.stats.by_instruction[0x82] >= 1
     sim.faults = FaultSpec(drop=0.5, seed=9)
