@@ -142,7 +142,7 @@ class LoopConfig:
     catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
     # mode "glove": poll the glove's port from this long before the frame is expected
     # until this long after, instead of sleeping on it (0: always sleep); see GloveTrigger
-    glove_poll_us: float = 150.0
+    glove_poll_us: float = 0.0
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
     resume_frames: int = 3  # good glove frames in a row after a loss before following again
