@@ -181,8 +181,6 @@ class SampleRing:
         """The newest ``min(k, len(self))`` values, oldest first (a copy)."""
         k = min(int(k), len(self))
         end = self._n % self.size
-        if k == self.size:
-            return np.concatenate((self._values[end:], self._values[:end]))
         if k <= end:
             return self._values[end - k:end].copy()
         return np.concatenate((self._values[self.size - (k - end):], self._values[:end]))
