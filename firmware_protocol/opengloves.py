@@ -223,6 +223,11 @@ class LineDecoder:
         self._buf = bytearray()
         self._discarding = False
 
+    def reset(self) -> None:
+        """Forget a partial line (counters are kept)."""
+        self._buf.clear()
+        self._discarding = False
+
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[OpenGlovesLine]:
         """Lines completed by ``chunk`` (possibly none)."""
         out: list[OpenGlovesLine] = []

@@ -94,7 +94,7 @@ COMPUTE_ONLY = (
     # these compute too and ran in the realtime process: codecs, stats, tables, modes
     "handrig/devices/servo/test_servo_codec.py", "handrig/devices/servo/test_servo_registers.py",
     "handrig/loop/test_stats.py", "handrig/loop/test_rings.py", "handrig/loop/test_modes.py",
-    "handrig/loop/test_easing.py",
+    "handrig/loop/test_easing.py", "handrig/loop/test_warm_up.py",
     "handrig/test_hand.py", "handrig/devices/test_glove_status.py",
     "handrig/outputs/test_glove_take.py", "handrig/app/test_robotrig.py", "sim/test_wrist_load.py",
     "bench/test_bench_skips.py", "handrig/app/test_panel_recording.py",

@@ -122,6 +122,7 @@ LOOP_RANGES: tuple[tuple[str, float, float, str], ...] = (
     ("resume_time_s", 0.01, 10.0, "s"),
     ("slew_deg_s", 1.0, 10000.0, "deg/s"),
     ("glove_poll_us", 0.0, 2000.0, "us"),
+    ("warm_up_us", 0.0, 2000.0, "us"),
 )
 """[loop] keys checked against a sane range: (key, lowest, highest, unit)."""
 
@@ -143,6 +144,10 @@ class LoopConfig:
     # mode "glove": poll the glove's port from this long before the frame is expected
     # until this long after, instead of sleeping on it (0: always sleep); see GloveTrigger
     glove_poll_us: float = 0.0
+    # mode "glove": this long before the frame is expected, the loop runs the frame's
+    # path once on scratch data, so that its code is in the CPU's caches when the
+    # frame comes (0: no warm-up); see GloveTrigger
+    warm_up_us: float = 150.0
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes
     resume_frames: int = 3  # good glove frames in a row after a loss before following again

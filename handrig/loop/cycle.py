@@ -143,6 +143,16 @@ class Cycle:
             frame_s=math.nan if sample is None else sample.host_time_s,
             layers=self.layers.status)
 
+    def rehearse(self) -> None:
+        """The next frame's path once on scratch data, changing nothing the loop reads
+        (the trigger's warm-up, :class:`~handrig.loop.trigger.GloveTrigger`): the glove
+        decodes its last bytes again, the pipeline's compiled step and the bus's goal
+        write are built into scratch and dropped. Nothing before the first frame."""
+        if self.sample is None:
+            return
+        self.glove.rehearse()
+        self.bus.rehearse_write(self.pipeline.rehearse(self.controls, *self.angles))
+
     def seed(self) -> None:
         """Start from where the servos are: the goals the bus holds them at, else a read.
         DeviceError when neither is known (the loop must not start blind)."""

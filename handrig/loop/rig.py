@@ -125,7 +125,8 @@ class Rig:
             if loop.mode == "glove":
                 trigger = GloveTrigger(clock, glove, floor_hz=loop.floor_hz,
                                        ceiling_hz=loop.ceiling_hz, catch_up=loop.catch_up,
-                                       poll_s=loop.glove_poll_us * 1e-6)
+                                       poll_s=loop.glove_poll_us * 1e-6,
+                                       warm_up_s=loop.warm_up_us * 1e-6)
             elif loop.mode == "fixed":
                 trigger = FixedRateTrigger(clock, loop.rate_hz, glove=glove)
             else:
@@ -146,6 +147,8 @@ class Rig:
         )
         self.cycle = Cycle(parts, settings, self.machine, self.stats, self.trigger,
                            outputs=outputs)
+        if isinstance(self.trigger, GloveTrigger):  # the warm-up before each expected frame
+            self.trigger.warm_up.rehearse_with(self.cycle.rehearse)
         self.machine.on_relax = self.cycle.relax.restart
         self.machine.on_resume = self.cycle.resume.restart
         self.telemetry = Telemetry()

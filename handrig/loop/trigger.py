@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import LoopConfig
 from handrig.devices.glove.source import GloveSource
+from handrig.loop.warm_up import WarmUp
 
 READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the next tick
 PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's period estimate
@@ -232,6 +233,9 @@ class GloveTrigger(Trigger):
     ``python -m bench felt``, is in docs/measurements.md: 150 us takes about 2 % of a
     core at 200 Hz and saves 50-100 us of felt latency at p50).
 
+    ``warm_up_s`` (``[loop] warm_up_us``): that long before each expected frame the
+    trigger runs the cycle's rehearsal (:mod:`handrig.loop.warm_up`, :attr:`warm_up`).
+
     ``catch_up`` (a glove that keeps the frames behind the newest it never handed out,
     ``has_behind()`` and ``take_behind()``): a frame superseded before its cycle (left
     waiting by a busy loop, or sent together with the next) gets a cycle of its own
@@ -241,7 +245,8 @@ class GloveTrigger(Trigger):
     """
 
     def __init__(self, clock: Clock, glove: GloveSource, *, floor_hz: float, ceiling_hz: float,
-                 catch_up: bool = LoopConfig.catch_up, poll_s: float = 0.0) -> None:
+                 catch_up: bool = LoopConfig.catch_up, poll_s: float = 0.0,
+                 warm_up_s: float = 0.0) -> None:
         if not 0.0 < floor_hz <= ceiling_hz:
             raise ValueError(f"need 0 < floor_hz <= ceiling_hz, got {floor_hz}, {ceiling_hz}")
         if not poll_s >= 0.0:
@@ -249,6 +254,7 @@ class GloveTrigger(Trigger):
         self.clock = clock
         self.glove = glove
         self.poll_s = poll_s
+        self.warm_up = WarmUp(warm_up_s)
         self.polls_found = 0  # frames found by polling in the window (not by a wake-up)
         self.period_s = 1.0 / floor_hz
         self.min_gap_s = 1.0 / ceiling_hz
@@ -322,8 +328,7 @@ class GloveTrigger(Trigger):
                     break
                 idle = not _readable(fd, 0.0)  # else bytes were waiting: the loop was busy
                 empty_s = clock.now()  # idle: the port was empty now
-                if idle and not (self._polled(fd, until_s) if self.poll_s > 0.0
-                                 else _readable(fd, left)):
+                if idle and not self._idle_wait(fd, until_s, left):
                     break
                 self._pump(idle, empty_s)
                 if self._new_frame():
@@ -338,6 +343,20 @@ class GloveTrigger(Trigger):
             return due
         clock.sleep_until(until_s)
         return None
+
+    def _idle_wait(self, fd: int, until_s: float, left: float) -> bool:
+        """Whether bytes come on ``fd`` before ``until_s`` (``left`` from now): after the
+        warm-up's rehearsal when one is due, polled within the window, else slept for."""
+        at = self.warm_up.at(self.predicted_frame_s, until_s)
+        if at is not None:
+            now = self.clock.now()
+            if at > now and _readable(fd, at - now):
+                return True  # the frame (or bytes of it) came first
+            self.warm_up.run(self.predicted_frame_s, self.clock.now())
+            left = until_s - self.clock.now()
+        if self.poll_s > 0.0:
+            return self._polled(fd, until_s)
+        return left > 0.0 and _readable(fd, left)
 
     def _polled(self, fd: int, until_s: float) -> bool:
         """Whether bytes come on ``fd`` before ``until_s`` with a poll window: polled for

@@ -22,6 +22,7 @@ This module imports no device code (no serial port, no servo SDK, no mujoco).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal, Protocol
@@ -275,6 +276,9 @@ class PosePipeline:
             self.robot_path = self._build_robot_path(retarget)
             self.servo_path = self.robot_path.human
             self._human = np.zeros(len(self.robot_path.curves))
+        # :meth:`rehearse`'s own targets, features, raw targets and robot curves
+        self._rehearsal = (np.zeros_like(self.targets), np.zeros_like(self._features),
+                           np.zeros_like(self._raw_targets), np.zeros_like(self._human))
         grid = self._grids.get("ri")
         self._sag_tables = grid.kernel_tables() if grid is not None else SagTables.empty()
         self._sag_rest = (np.asarray(grid.rest_deg, dtype=np.float64) if grid is not None
@@ -297,6 +301,7 @@ class PosePipeline:
         self._clamped_pose = np.zeros(POSE_SIZE)
         self._raw_targets = np.zeros(n)
         self._step = np.zeros(n)
+        self._human = np.zeros(0)  # a robot rig's human curves (its retarget's input)
         _, _, knots = self.expander.map.feature_gains()  # the servo step's scratch
         self._features = np.zeros(len(self.expander.controls) + len(knots))
 
@@ -449,35 +454,53 @@ class PosePipeline:
         A non-finite target holds the previous one (counted in ``rejected``); targets
         move at most ``slew_deg_s * dt_s`` from the previous ones. Call :meth:`account`
         afterwards for the full pose (outputs) and the statistics."""
-        path = self.servo_path
-        tables = path.sag
         if self._has_sag:
             inclination_deg = SagGrid.checked_inclination(inclination_deg, rotation_deg)
-        first = not self._has_targets
+        self.rejected += self._step_into(
+            controls_deg, inclination_deg, rotation_deg, self.slew_deg_s * max(dt_s, 0.0),
+            not self._has_targets, self.targets, self._features, self._raw_targets, self._human)
+        self._has_targets = True
+        return self.targets
+
+    def rehearse(self, controls_deg: FloatArray, inclination_deg: float,
+                 rotation_deg: float) -> FloatArray:
+        """:meth:`servo_targets`' compiled step once into scratch arrays (the loop's
+        warm-up before an expected glove frame: its code and tables are then in the CPU's
+        caches): the targets, the slew limit's memory and the counters stay as they were.
+        Returns the scratch targets (for the bus's own rehearsal)."""
+        scratch = self._rehearsal
+        scratch[0][:] = self.targets  # the slew limit starts from the targets sent
+        if not (-90.0 <= inclination_deg <= 90.0 and math.isfinite(rotation_deg)):
+            inclination_deg = rotation_deg = 0.0  # what the real step would refuse
+        self._step_into(controls_deg, inclination_deg, rotation_deg, 0.0,
+                        not self._has_targets, *scratch)
+        return scratch[0]
+
+    def _step_into(self, controls_deg: FloatArray, inclination_deg: float, rotation_deg: float,
+                   max_step_deg: float, first: bool, targets: FloatArray, features: FloatArray,
+                   raw_targets: FloatArray, human: FloatArray) -> int:
+        """The compiled step on the arrays given; returns the targets it rejected."""
+        path = self.servo_path
+        tables = path.sag
         robot = self.robot_path
         controls = np.ascontiguousarray(controls_deg, dtype=np.float64)
         if robot is not None:
-            self.rejected += kernels.robot_servo_targets(
-                controls, path.knots, self._features, path.a, path.b,
+            return int(kernels.robot_servo_targets(
+                controls, path.knots, features, path.a, path.b,
                 tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
                 tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
                 path.map_low, path.map_high,
                 float(inclination_deg), float(rotation_deg), robot.human_low,
-                robot.human_high, self._human, robot.gain_start, robot.gain_curve,
+                robot.human_high, human, robot.gain_start, robot.gain_curve,
                 robot.gain_value, robot.offset, self.servo_low,
-                self.servo_high, self.targets, float(self.slew_deg_s * max(dt_s, 0.0)), first,
-                self._raw_targets)
-            self._has_targets = True
-            return self.targets
-        self.rejected += kernels.servo_targets(
-            controls, path.knots, self._features, path.a, path.b,
+                self.servo_high, targets, float(max_step_deg), first, raw_targets))
+        return int(kernels.servo_targets(
+            controls, path.knots, features, path.a, path.b,
             tables.inclination_axis_deg, tables.rotation_axis_deg, tables.rotation0_deg,
             tables.cell_offsets_deg, path.sag_slot, float(path.sag_gain),
             path.map_low, path.map_high,
             float(inclination_deg), float(rotation_deg), self.servo_low, self.servo_high,
-            self.targets, float(self.slew_deg_s * max(dt_s, 0.0)), first, self._raw_targets)
-        self._has_targets = True
-        return self.targets
+            targets, float(max_step_deg), first, raw_targets))
 
     @property
     def raw_targets(self) -> FloatArray:

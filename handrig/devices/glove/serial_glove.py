@@ -104,6 +104,10 @@ class SerialGlove(GloveSource):
         self._estop_bit = 1 << BUTTON_LETTERS.index(estop_letter)
         self._frames = FrameDecoder()
         self._lines = LineDecoder(analog_max)
+        # the warm-up's own decoders (:meth:`rehearse`) and the last bytes fed
+        self._rehearsal_frames = FrameDecoder()
+        self._rehearsal_lines = LineDecoder(analog_max)
+        self._last_chunk = b""
         self._serial: Any = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -208,6 +212,7 @@ class SerialGlove(GloveSource):
         """Decode ``data`` as bytes read from the port at clock time ``now`` (the reader
         thread and :meth:`latest` with ``reader="poll"`` call this; tests may too)."""
         with self._lock:
+            self._last_chunk = data
             self._bytes += len(data)
             if self.fmt == "frames":
                 self._feed_frames(data, now)
@@ -366,6 +371,23 @@ class SerialGlove(GloveSource):
             self._expected = n
             return True
         return False
+
+    def rehearse(self) -> None:
+        """The last bytes read, through decoders of the warm-up's own and into samples
+        that are dropped (:meth:`GloveSource.rehearse`): this glove's counters, events,
+        channel count and newest sample stay as they were."""
+        data = self._last_chunk  # one read: at most 32 KiB (:meth:`_poll`)
+        if not data:
+            return
+        # a partial frame left over is not kept (reset): the next rehearsal starts clean
+        if self.fmt == "frames":
+            for fr in self._rehearsal_frames.feed(data):
+                self._frame_sample(fr, 0.0, 0)
+            self._rehearsal_frames.reset()
+        else:
+            for line in self._rehearsal_lines.feed(data):
+                self._line_sample(line, 0.0, 0)
+            self._rehearsal_lines.reset()
 
     def _feed_frames(self, data: bytes, now: float) -> None:
         for fr in self._frames.feed(data):

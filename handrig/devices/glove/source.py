@@ -190,6 +190,12 @@ class GloveSource(ABC):
         Returns how many good frames that gave (see :attr:`pump_counts`)."""
         return 0
 
+    def rehearse(self) -> None:  # noqa: B027 - optional hook
+        """Decode the bytes of the newest frame again, into nothing: the decode's code and
+        tables are then in the CPU's caches when the next frame comes (the loop calls it
+        shortly before a frame is expected, :class:`handrig.loop.trigger.GloveTrigger`'s
+        warm-up). Changes nothing a caller can see; default: nothing to rehearse."""
+
     def next_due_s(self) -> float | None:
         """When the next sample not yet returned comes due, clock time (a replay);
         None (the default): the source does not know."""

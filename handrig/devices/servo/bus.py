@@ -285,6 +285,12 @@ class ServoBus(ABC):
         loop's latency figure ends (default: when the loop's write call returned)."""
         return float("nan")
 
+    def rehearse_write(self, goals_deg: np.ndarray) -> None:  # noqa: B027 - optional hook
+        """Build the goal write for ``goals_deg`` into scratch, sending nothing: its code
+        and tables are then in the CPU's caches for the next :meth:`write_goals_deg` (the
+        loop's warm-up before an expected glove frame). Changes nothing a caller can see:
+        no write, no counter, no goal remembered; default: nothing to rehearse."""
+
     def read_wire_s(self, n: int) -> float:
         """Wire time of a present-state read of ``n`` servos, request and replies
         (0: no wire to wait for)."""

@@ -376,6 +376,11 @@ class DynamixelBus(ServoBus):
             self.writer.send_built()
         return clamped
 
+    def rehearse_write(self, goals_deg: np.ndarray) -> None:
+        """:meth:`ServoBus.rehearse_write`: the goal Sync Write built into the writer's
+        scratch packet (no lock: it reads the goals last sent and writes only scratch)."""
+        self.writer.rehearse(goals_deg)
+
     def write_and_read(
         self, goals_deg: np.ndarray, deadline_s: float | None = None
     ) -> tuple[int, ServoState]:

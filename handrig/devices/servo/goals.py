@@ -31,6 +31,9 @@ class GoalWriter:
         servo left out)."""
         self.left_out = np.zeros(n, bool)
         self._build_packet()
+        # what :meth:`rehearse` builds into: never sent
+        self._scratch_goal = np.zeros(n, np.float64)
+        self._scratch_packet = self.packet.copy()
 
     def leave_out(self, indices: np.ndarray) -> None:
         """Never send servos ``indices`` a goal (absent at start-up, not commissioned):
@@ -71,6 +74,18 @@ class GoalWriter:
         clamped = self._clamp_into(goals_deg, self._goal_deg, self.packet)
         self.stats.clamps += clamped
         return clamped
+
+    def rehearse(self, goals_deg: np.ndarray) -> None:
+        """Build ``goals_deg`` into a scratch packet with the same compiled loop as
+        :meth:`build` (the loop's warm-up): nothing is sent or counted, and the goals
+        last sent stay as they are. With servos left out, nothing (the packet then has
+        another shape: the first real build warms it)."""
+        r = self.roster
+        if self._keep is not None or goals_deg.shape != (r.n,):
+            return
+        codec.goal_packet(np.ascontiguousarray(goals_deg, dtype=np.float64), r.min_deg,
+                          r.max_deg, self.last_goal_deg, r.hold_deg, r.ticks_per_deg,
+                          r.zero_ticks, self._scratch_goal, self._scratch_packet)
 
     def send_built(self) -> None:
         """Send the Sync Write :meth:`build` built."""

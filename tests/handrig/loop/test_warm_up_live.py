@@ -1,0 +1,62 @@
+"""The glove trigger's warm-up, live: a thread plays a glove at 200 Hz into a pipe, and
+the trigger runs the rehearsal it was given before each expected frame, once per frame,
+while every frame still gets its tick (see handrig/loop/warm_up.py)."""
+
+from __future__ import annotations
+
+import threading
+
+from handrig.loop.trigger import GloveTrigger, Tick
+from tests.helpers.pipe_glove import PipeGlove
+
+PERIOD_S = 0.005
+FRAMES = 60
+LEAD_S = 0.0005
+
+
+def _run(glove: PipeGlove, warm_up_s: float) -> tuple[GloveTrigger, int, list[tuple[float, int]]]:
+    """Play FRAMES frames; returns the trigger, the frame ticks, and each rehearsal's
+    (clock time, frames sent by then)."""
+    clock = glove.clock
+    trig = GloveTrigger(clock, glove, floor_hz=20.0, ceiling_hz=1000.0, warm_up_s=warm_up_s)
+    rehearsals: list[tuple[float, int]] = []
+    trig.warm_up.rehearse_with(lambda: rehearsals.append((clock.now(), glove.count)))
+    stop = threading.Event()
+
+    def play() -> None:
+        start = clock.now() + 0.02
+        for k in range(FRAMES):
+            clock.sleep_until(start + k * PERIOD_S)
+            glove.send()
+        stop.set()
+
+    player = threading.Thread(target=play, daemon=True)
+    trig.start(clock.now())
+    tick = Tick()
+    player.start()
+    frames = 0
+    while not (stop.is_set() and not glove.has_new()):
+        trig.wait(tick)
+        if tick.frame:
+            frames += 1
+            glove.latest()
+    player.join(5.0)
+    return trig, frames, rehearsals
+
+
+def test_a_rehearsal_before_each_expected_frame_and_every_frame_gets_its_tick(
+        pipe_glove: PipeGlove) -> None:
+    trig, frames, rehearsals = _run(pipe_glove, LEAD_S)
+    assert pipe_glove.count == FRAMES and frames >= FRAMES - 3
+    assert trig.warm_up.count == len(rehearsals)
+    # once per expected frame at most (the first frames teach the trigger the period)
+    assert FRAMES // 2 <= len(rehearsals) <= FRAMES
+    # each between two frames, never two for one gap
+    seen = [sent for _, sent in rehearsals]
+    assert len(set(seen)) == len(seen)
+
+
+def test_no_warm_up_without_a_lead(pipe_glove: PipeGlove) -> None:
+    trig, frames, rehearsals = _run(pipe_glove, 0.0)
+    assert pipe_glove.count == FRAMES and frames >= FRAMES - 3
+    assert rehearsals == [] and trig.warm_up.count == 0
