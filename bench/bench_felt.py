@@ -80,7 +80,8 @@ def run_once(tree: Path, seconds: float, folder: Path, tag: str,
     rec = step_recording()
     rec_path = folder / "steps.csv"
     write_glove_recording(rec_path, rec)
-    rig_path = _rig_file(folder, "glove", GLOVE_HZ, BAUD)
+    # the tree's own rig file: an older tree may not know a newer key
+    rig_path = _rig_file(folder, "glove", GLOVE_HZ, BAUD, tree / "config" / "rig.toml")
     if poll_us is not None:
         text = re.sub(r"(?m)^glove_poll_us = .*$", "", rig_path.read_text(encoding="utf-8"))
         text = text.replace("[loop]\n", f"[loop]\nglove_poll_us = {poll_us:g}\n", 1)
