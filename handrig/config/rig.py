@@ -143,7 +143,7 @@ class LoopConfig:
     catch_up: bool = True  # mode "glove": a frame superseded before its cycle still gets one
     # mode "glove": poll the glove's port from this long before the frame is expected
     # until this long after, instead of sleeping on it (0: always sleep); see GloveTrigger
-    glove_poll_us: float = 0.0
+    glove_poll_us: float = 150.0
     # mode "glove": this long before the frame is expected, the loop runs the frame's
     # path once on scratch data, so that its code is in the CPU's caches when the
     # frame comes (0: no warm-up); see GloveTrigger

@@ -230,8 +230,8 @@ class GloveTrigger(Trigger):
     the glove's port instead of sleeping on it: a sleeping thread is woken some tens of
     microseconds after the bytes are readable, a polling one finds them at once, at the
     cost of the window's CPU every frame (0: always sleep; the trade-off, measured with
-    ``python -m bench felt``, is in docs/measurements.md: 150 us takes about 2 % of a
-    core at 200 Hz and saves 50-100 us of felt latency at p50).
+    ``python -m bench felt``, is in docs/measurements.md: the rig file's 150 us takes
+    about 1-2 % of a core at 200 Hz and saves 20-100 us of felt latency at p50).
 
     ``warm_up_s`` (``[loop] warm_up_us``): that long before each expected frame the
     trigger runs the cycle's rehearsal (:mod:`handrig.loop.warm_up`, :attr:`warm_up`).
