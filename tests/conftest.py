@@ -131,6 +131,7 @@ PATIENT = (
     # the robot API's blocks (torque, signals, moves) and the presets' demos, whose
     # tracking bound holds at load 11 (tests/sim/test_orca_preset.py)
     "handrig/app/test_robot_api.py", "handrig/app/test_robot_api_moves.py",
+    "handrig/app/test_robot_api_signals.py",
     "sim/test_orca_preset.py",
     "handrig/app/lerobot/test_lerobot_teleoperate.py",
     "handrig/app/test_robot_gravity_live.py",
