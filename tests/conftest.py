@@ -123,6 +123,7 @@ PATIENT = (
     "handrig/cli/test_servos_command.py", "handrig/cli/test_setup_command.py",
     "handrig/cli/test_calibrate_servos.py", "handrig/cli/test_calibrate_servos_pty.py",
     "handrig/cli/test_calibrate_glove_session.py", "handrig/cli/test_files_in_use.py",
+    "handrig/cli/test_calibrate_glove_imu.py",
     "handrig/cli/test_simulated_says_so.py", "handrig/test_servo_missing_at_start.py",
     "handrig/test_servo_readmitted.py", "handrig/test_heat_live.py",
     "handrig/test_glove_faults_live.py", "handrig/test_readme_takes.py",
@@ -131,6 +132,7 @@ PATIENT = (
     # the robot API's blocks (torque, signals, moves) and the presets' demos, whose
     # tracking bound holds at load 11 (tests/sim/test_orca_preset.py)
     "handrig/app/test_robot_api.py", "handrig/app/test_robot_api_moves.py",
+    "handrig/app/test_robot_api_signals.py",
     "sim/test_orca_preset.py",
     "handrig/app/lerobot/test_lerobot_teleoperate.py",
     "handrig/app/test_robot_gravity_live.py",
@@ -142,6 +144,10 @@ PATIENT = (
     "handrig/app/test_show_keys.py", "handrig/app/test_layering_live.py",
     "handrig/app/view/test_view_server.py", "handrig/app/test_openxr_live.py",
     "handrig/app/test_hands_summary.py",
+    # live runs inside folders that compute (the longest entry wins: lane_of): a show
+    # and the demo on the emulated bus, their checks what was run, counted and written
+    "handrig/config/test_show.py::test_run_show_starts_",
+    "handrig/app/test_demo_render.py::test_demo_render_",
 )
 TESTS = Path(__file__).resolve().parent
 
@@ -150,11 +156,25 @@ TESTS = Path(__file__).resolve().parent
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         rel = item.path.resolve().relative_to(TESTS).as_posix()
-        name = f"{rel}::{item.name}"
-        if name.startswith(COMPUTE_ONLY + NO_LOOP):
+        lane = lane_of(f"{rel}::{item.name}")
+        if lane == "compute_only":
             item.add_marker(pytest.mark.compute_only)
-        elif name.startswith(PATIENT):
+        elif lane == "patient":
             item.add_marker(pytest.mark.patient)
+
+
+def lane_of(name: str) -> str:
+    """The lane of a test (``path::name`` under tests/): the list with the longest entry
+    it starts with, so a file or test named in one list wins over its directory in
+    another (``handrig/config/`` computes, its ``test_show.py::test_run_show_`` runs a
+    show on the emulated bus); "realtime" when no list names it."""
+    lanes = (("compute_only", COMPUTE_ONLY + NO_LOOP), ("patient", PATIENT))
+    best, lane = -1, "realtime"
+    for candidate, entries in lanes:
+        for entry in entries:
+            if name.startswith(entry) and len(entry) > best:
+                best, lane = len(entry), candidate
+    return lane
 
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from handrig.app import factory as app
 from handrig.app.parts import RigParts
+from handrig.app.robot_signals import StopSignalWake, signals_blocked
 from handrig.app.takes import pose_parts
 from handrig.clock import Clock
 from handrig.devices.glove.source import GloveSample, GloveSource, GloveStats
@@ -111,18 +112,27 @@ class RobotLoop:
         self._log = log
         self._thread: threading.Thread | None = None
         self._stack = contextlib.ExitStack()
+        self._closing = threading.Event()  # stop() has begun
+        self._wake = StopSignalWake(self._closing, log)
         self.error: BaseException | None = None
         """What ended the loop early (a device error), raised to the program by
         :meth:`check`."""
 
     def start(self, *, handle_signals: bool) -> None:
         self.rig.prepare()  # the garbage collected before torque (and its watchdog) goes on
-        # SIGTERM, SIGINT, SIGHUP (handle_signals: the caller's main thread) end the
-        # program's block with an exception: torque goes off on the way out
-        self._stack.enter_context(self.bus.torque(handle_signals=handle_signals))
-        self._thread = threading.Thread(target=self._run, name="handrig-robot-loop",
-                                        daemon=True)
-        self._thread.start()
+        try:
+            # SIGTERM, SIGINT, SIGHUP (handle_signals: the caller's main thread) end the
+            # program's block with an exception: torque goes off on the way out
+            self._stack.enter_context(self.bus.torque(handle_signals=handle_signals))
+            if handle_signals:  # a stop signal that left the main thread blocked wakes it
+                self._wake.start()  # (handrig.app.robot_signals)
+            self._thread = threading.Thread(target=self._run, name="handrig-robot-loop",
+                                            daemon=True)
+            with signals_blocked():  # the kernel hands them to the program's threads
+                self._thread.start()
+        except BaseException:
+            self.stop(ease=False)
+            raise
 
     def _run(self) -> None:
         loop = self._loop_cfg
@@ -157,6 +167,7 @@ class RobotLoop:
 
     def stop(self, *, ease: bool) -> None:
         """End the loop (``ease``: to the relaxed pose first), then torque off."""
+        self._closing.set()
         try:
             if self._thread is not None:
                 if ease:
@@ -168,4 +179,7 @@ class RobotLoop:
                     self.rig.estop("the loop did not end in time")
                     self._thread.join(timeout=2.0)
         finally:
-            self._stack.close()
+            try:
+                self._stack.close()
+            finally:
+                self._wake.stop()

@@ -1,19 +1,13 @@
-"""The IMU's mounting from two held poses (handrig/imu_mount.py), alone and through
-``handrig calibrate glove`` against an emulated glove whose IMU sits askew."""
+"""The IMU's mounting from two held poses (handrig/imu_mount.py); through ``handrig
+calibrate glove`` against an emulated glove: tests/handrig/cli/test_calibrate_glove_imu.py."""
 
 from __future__ import annotations
-
-import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from handrig.cli import calibrate_glove
-from handrig.devices.glove_calibration import load_glove_config
-from handrig.errors import DataError, HandrigError
+from handrig.errors import DataError
 from handrig.pose.imu_mount import (
     angle_between_deg,
     askew_mount,
@@ -22,10 +16,6 @@ from handrig.pose.imu_mount import (
     up_in_imu,
 )
 from handrig.pose.orientation import ForearmOrientation
-from sim.calibration_motion import ScriptedSensors, timed_recording
-from sim.glove_emulator import GloveEmulator
-
-SETTLE_S, HOLD_S = 0.25, 0.35
 
 
 def held(forearm_roll_deg: float, mount: Rotation, rng: np.random.Generator) -> np.ndarray:
@@ -53,29 +43,3 @@ def test_poses_not_a_quarter_turn_apart_are_refused():
     m = askew_mount(0.0, 0.0)
     with pytest.raises(DataError, match="not about 90"):
         mount_from_poses(up_in_imu(held(0.0, m, rng)), up_in_imu(held(10.0, m, rng)))
-
-
-def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="handrig")
-    calibrate_glove.register(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args))
-    except HandrigError as exc:
-        print(f"handrig: error: {exc}", file=sys.stderr)
-        return 2
-
-
-def test_calibrate_glove_finds_an_imu_mounted_askew(tmp_path: Path, capsys):  # type: ignore[no-untyped-def]
-    true = askew_mount(30.0, 15.0)
-    sensors = ScriptedSensors.from_config(load_glove_config())
-    rec = timed_recording(sensors, pose_s=SETTLE_S + HOLD_S, transition_s=0.15, imu_mount=true)
-    out = tmp_path / "glove.toml"
-    with GloveEmulator(rec, "frames", rate_hz=200.0) as emu:
-        status = main(["calibrate", "glove", "--glove", emu.port_path, "--yes", "--settle",
-                       str(SETTLE_S), "--hold", str(HOLD_S), "--out", str(out)])
-    text = capsys.readouterr().out
-    assert status == 0, text
-    assert "palm to vertical" in text and "IMU mount_xyzw" in text, text.splitlines()
-    found = Rotation.from_quat(load_glove_config(out).imu.mount_xyzw)
-    assert angle_between_deg(found, true) < 2.0, (found.as_quat(), true.as_quat())
