@@ -47,6 +47,7 @@ class SharedBus:
         self.clock = clock
         self.lock = threading.Lock()
         self._goals = np.full(bus.n_servos, np.nan)
+        self._rehearsal_goals = np.full(bus.n_servos, np.nan)  # :meth:`rehearse`'s own
         self._events_to: BusPart | None = None  # the part the bus's own events go to
         self.reader: BusPart | None = None  # the part whose loop reads the servos back
         self.latest: ServoState | None = None  # the reader's newest read
@@ -79,6 +80,16 @@ class SharedBus:
             if missing.any():
                 clamps -= int(np.count_nonzero(missing))
             return max(clamps, 0), bus.last_write_s
+
+    def rehearse(self, index: np.ndarray, goals_deg: np.ndarray) -> None:
+        """:meth:`write`'s goal vector put together in scratch and the bus's goal write
+        rehearsed (:meth:`ServoBus.rehearse_write`); without the lock: it reads the goals
+        last sent and writes only scratch, so a loop's warm-up never waits for the other's
+        write."""
+        goals = self._rehearsal_goals
+        goals[:] = self.bus.last_goals_deg
+        goals[index] = goals_deg
+        self.bus.rehearse_write(goals)
 
     def read(self, deadline_s: float | None, part: tuple[int, int] | None) -> ServoState:
         n = self.bus.n_servos if part is None else -(-self.bus.n_servos // part[1])
@@ -153,6 +164,9 @@ class BusPart(ServoBus):
         clamps, when = self.shared.write(self.index, goals_deg)
         self._last_write_s = when
         return clamps
+
+    def rehearse_write(self, goals_deg: np.ndarray) -> None:
+        self.shared.rehearse(self.index, goals_deg)
 
     def read_state(self, deadline_s: float | None = None,
                    part: tuple[int, int] | None = None, *, patient: bool = False

@@ -142,3 +142,24 @@ def test_the_bus_rehearsal_builds_the_real_packet_and_sends_nothing() -> None:
     rehearsed = writer._scratch_packet.copy()
     writer.build(goals)
     np.testing.assert_array_equal(rehearsed, writer.packet)  # byte for byte, CRC too
+
+
+def test_a_hand_on_a_shared_bus_rehearses_the_whole_bus_write() -> None:
+    from handrig.devices.servo.shared import SharedBus
+
+    rig = build_parts().rig_config
+    bus = DynamixelBus("/dev/not-opened", rig)
+    n = len(rig.servos)
+    shared = SharedBus(bus, bus.clock)
+    left = shared.part(range(n // 2, n))
+    shared.part(range(n // 2))
+    goals = np.linspace(10.0, 40.0, n - n // 2)
+    packet = bus.writer.packet.copy()
+    left.rehearse_write(goals)
+    np.testing.assert_array_equal(bus.writer.packet, packet)
+    assert np.isnan(bus.last_goals_deg).all()  # nothing sent, nothing remembered
+    whole = np.full(n, np.nan)
+    whole[n // 2:] = goals  # the other hand's goals: not sent yet (held by the kernel)
+    rehearsed = bus.writer._scratch_packet.copy()
+    bus.writer.build(whole)
+    np.testing.assert_array_equal(rehearsed, bus.writer.packet)
