@@ -266,7 +266,8 @@ def _motion_matrix(
             if done + bad >= n_frames:
                 raise DataError(
                     f"{source}: MOTION frame {n_frames} (0-based) is more than the header"
-                    f" declares ({n_frames} frames of {n_channels} channels)")
+                    f" declares ({n_frames} frames of {n_channels} channels): fix 'Frames:',"
+                    f" or {UNFINISHED_HINT}")
             if not ends or bad < len(counts) - 1:
                 raise DataError(
                     f"{source}: MOTION frame {done + bad} (0-based) has {counts[bad]} values,"
