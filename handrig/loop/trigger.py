@@ -274,6 +274,7 @@ class GloveTrigger(Trigger):
         self._unsettled: Tick | None = None  # a tick whose bookkeeping waits for settle()
         self._unsettled_arrival: float | None = None
         self._drained_s = math.nan  # when a pump last emptied the port
+        self._stall_since = math.nan  # the start of the host stall the last pump met
 
     def start(self, t0_s: float) -> None:
         self._unsettled = self._unsettled_arrival = None
@@ -418,15 +419,22 @@ class GloveTrigger(Trigger):
             got = self._count() - before
         now = self.clock.now()
         self._drained_s = now
+        stall_since, self._stall_since = self._stall_since, math.nan
         if got <= 1:
             return
         since = empty_s if idle else drained
         period = self.frame_period_s
         if period == period and period > 0.0 and since == since:
+            if stall_since == stall_since and now - drained < period:
+                # the rest of a stall's backlog, which the port (a pty, a USB adapter)
+                # handed over in pieces: a glove cannot send these one by one in less
+                # than a period after the last pump, but they came one by one in the stall
+                since = stall_since
             one_by_one = min(got - 1, int((now - since) / period))
             self.burst_frames += got - 1 - one_by_one
             if now - since >= STALL_PERIODS * period:
                 self.stall_frames += one_by_one
+                self._stall_since = since
         elif idle:
             self.burst_frames += got - 1
 

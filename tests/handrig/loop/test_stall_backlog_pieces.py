@@ -1,0 +1,63 @@
+"""A host stall's backlog handed over in pieces is still the host's backlog.
+
+A pty or a USB adapter may hand the frames that waited during a stall to the reader in
+pieces: the first pump after the stall gets some, a second, less than a glove period
+later, the rest. Both pieces came one by one while the host was stopped; the second
+must not be taken for the glove's own burst (a clean-clone CI run at 01:43 on
+2026-12-06 counted 25 frames as the stall's and 71 as bursts after a SIGSTOP)."""
+
+from __future__ import annotations
+
+import time
+
+from handrig.clock import MonotonicClock
+from handrig.loop.trigger import GloveTrigger, Tick
+from tests.handrig.loop.test_trigger import CountingPipeGlove
+
+PERIOD_S = 0.02  # a 50 Hz glove
+
+
+def _learned(glove: CountingPipeGlove) -> tuple[GloveTrigger, Tick]:
+    clock = glove.clock
+    trig = GloveTrigger(clock, glove, floor_hz=5.0, ceiling_hz=5000.0)
+    trig.start(clock.now())
+    tick = Tick()
+    trig.wait(tick)
+    for _ in range(6):  # the trigger learns the period
+        time.sleep(PERIOD_S)
+        glove.send()
+        trig.wait(tick)
+        glove.latest()
+    trig.take_bursts()
+    trig.take_stalled()
+    return trig, tick
+
+
+def test_the_second_piece_of_a_stalls_backlog_is_the_hosts_not_a_burst() -> None:
+    glove = CountingPipeGlove(MonotonicClock(spin_s=0.0))
+    try:
+        trig, tick = _learned(glove)
+        for _ in range(6):  # the host stalls 120 ms while the glove sends one by one
+            glove.send()
+            time.sleep(PERIOD_S)
+        trig.wait(tick)  # the first piece
+        glove.latest()
+        first = trig.take_stalled()
+        assert first == 5 and trig.take_bursts() == 0
+        glove.send(4)  # the rest, handed over at once, right after
+        trig.wait(tick)
+        glove.latest()
+        assert trig.take_stalled() == 3  # the stall's too (the newest gets its cycle)
+        assert trig.take_bursts() == 0
+        time.sleep(2 * PERIOD_S)  # back to normal: a real burst is still a burst
+        glove.send()
+        trig.wait(tick)
+        glove.latest()
+        time.sleep(PERIOD_S / 4)
+        glove.send(3)
+        time.sleep(0.003)
+        trig.wait(tick)
+        glove.latest()
+        assert trig.take_bursts() == 2 and trig.take_stalled() == 0
+    finally:
+        glove.close()
