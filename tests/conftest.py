@@ -101,7 +101,7 @@ COMPUTE_ONLY = (
     "bench/test_bench_skips.py", "handrig/app/test_panel_recording.py",
     "handrig/cli/test_servos_scan_default.py",
     "handrig/cli/test_calibrate_servos_any_vendor.py",
-    "handrig/devices/servo/test_fault_vocabulary.py", "handrig/devices/servo/test_bus_warm_up.py",
+    "handrig/devices/servo/test_fault_vocabulary.py",
     "handrig/app/test_setup_any_vendor.py",
 )
 # Tests that start handrig's commands (imports, argument and file checks, help texts, a

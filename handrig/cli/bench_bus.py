@@ -2,10 +2,9 @@
 
 Runs the emulated bus (``sim.dxl_bus.SimBus``, wire timing on) in a separate
 process, so its host time does not share this process's interpreter, then runs
-the same cycle six ways on it: :class:`~handrig.devices.servo.DynamixelBus` as the loop
+the same cycle five ways on it: :class:`~handrig.devices.servo.DynamixelBus` as the loop
 calls it (``write_goals_deg`` + ``read_state``), with ``write_and_read``, and
-without its reply poll (``spin_s=0``: always asleep until the reply), and without
-its warm-up (``warm_up=False``: no rehearsal while the reply is on the wire); the plain way
+without its reply poll (``spin_s=0``: always asleep until the reply); the plain way
 most projects write it
 (dynamixel-sdk ``GroupSyncWrite`` + ``GroupSyncRead`` with the SDK's default
 timeouts); and the SDK's own Fast Sync Read. Prints cycles per second, the
@@ -137,17 +136,15 @@ def _goals(rig: RigConfig, k: int) -> np.ndarray:
 
 def run_ours(
     port: str, rig: RigConfig, baud: int, seconds: float, combined: bool = False,
-    spin_s: float | None = None, warm_up: bool = True,
+    spin_s: float | None = None,
 ) -> Result:
     """``write_goals_deg`` + ``read_state`` per cycle (``combined``: ``write_and_read``);
     ``spin_s``: the driver's reply poll lead (:class:`~handrig.devices.servo.DynamixelBus`;
-    None: its default); ``warm_up``: the driver's rehearsal while a reply is on the wire."""
+    None: its default)."""
     from handrig.devices.servo import DynamixelBus
 
-    bus = (DynamixelBus(port, rig, baud=baud, read_fields="position", warm_up=warm_up)
-           if spin_s is None else
-           DynamixelBus(port, rig, baud=baud, read_fields="position", spin_s=spin_s,
-                        warm_up=warm_up))
+    bus = (DynamixelBus(port, rig, baud=baud, read_fields="position") if spin_s is None
+           else DynamixelBus(port, rig, baud=baud, read_fields="position", spin_s=spin_s))
     bus.connect()
     try:
         goals = [_goals(rig, k) for k in range(64)]
@@ -177,8 +174,6 @@ def run_ours(
     if spin_s is not None:
         name = ("handrig write_goals_deg + read_state, no poll" if not spin_s
                 else f"handrig write_goals_deg + read_state, poll {spin_s * 1e6:.0f} us")
-    if not warm_up:
-        name += ", no warm-up"
     return Result(name, cycles, wall, cpu, failed,
                   float(np.median(np.diff(stamps[:cycles]))))
 
@@ -261,7 +256,6 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
             results.append(run_ours(emu.port, rig, baud, seconds))
             results.append(run_ours(emu.port, rig, baud, seconds, combined=True))
             results.append(run_ours(emu.port, rig, baud, seconds, spin_s=0.0))
-            results.append(run_ours(emu.port, rig, baud, seconds, warm_up=False))
             if plain:
                 results.append(run_sdk(emu.port, rig, baud, seconds, fast=False))
                 results.append(run_sdk(emu.port, rig, baud, seconds, fast=True))

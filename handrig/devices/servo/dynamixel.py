@@ -90,10 +90,7 @@ class DynamixelBus(ServoBus):
     poll costs about ``spin_s`` plus the reply's lateness in CPU per read
     (``handrig bench bus`` measures both ways). Pass 0 from a SCHED_FIFO thread
     that shares its CPU with the kernel's workers: while it polls, the worker
-    that would deliver the reply cannot run there. ``warm_up``: while a read's
-    reply is on the wire, rehearse the reply's decode and the next goal write on
-    scratch data (:mod:`handrig.devices.servo.fast_read`; :meth:`rehearse_write` is the
-    loop's own rehearsal before a glove frame).
+    that would deliver the reply cannot run there.
     """
 
     def __init__(
@@ -112,7 +109,6 @@ class DynamixelBus(ServoBus):
         transport: Transport | None = None,
         emulated: bool = False,
         missing_ok: bool = False,
-        warm_up: bool = True,
     ) -> None:
         self.port = port
         self.emulated = bool(emulated)
@@ -133,13 +129,12 @@ class DynamixelBus(ServoBus):
         self._lock = threading.RLock()
         self._effort_events: list[str] = []  # limit_effort failures, for drain_events
         self._connected = False
-        self._build_parts(transport, reply_timeout_s, reply_gap_s, spin_s, temperature_every,
-                          warm_up)
+        self._build_parts(transport, reply_timeout_s, reply_gap_s, spin_s, temperature_every)
         self.commissioner.missing_ok = bool(missing_ok)
 
     def _build_parts(
         self, transport: Transport | None, reply_timeout_s: float | None,
-        reply_gap_s: float | None, spin_s: float, temperature_every: int, warm_up: bool,
+        reply_gap_s: float | None, spin_s: float, temperature_every: int,
     ) -> None:
         roster, own, clock, plan = self.roster, self._ledgers, self.clock, self.plan
         if reply_timeout_s is None:
@@ -156,10 +151,8 @@ class DynamixelBus(ServoBus):
         self.sweep = RegisterSweep(roster, self.link, plan, own["sweep"])
         self.faults = FaultHandler(roster, self.link, self.writer, self.sweep, self.readings,
                                    self.policy, own["faults"], clock)
-        writer = self.writer
-        self.fast = FastSyncRead(
-            roster, self.link, self.readings, plan, own["fast"], float(spin_s),
-            (lambda: writer.rehearse(writer.last_goal_deg)) if warm_up else None)
+        self.fast = FastSyncRead(roster, self.link, self.readings, plan, own["fast"],
+                                 float(spin_s))
         self.reader = StateReader(
             self.link, self.readings, plan, self.fast, SyncRead(roster, self.link, self.readings,
                                                                 plan, own["sync"]),

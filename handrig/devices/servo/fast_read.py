@@ -10,18 +10,10 @@ The usual reply (every servo, intact, no error) is checked and decoded in one
 compiled pass (:func:`handrig.devices.servo.codec.fast_sync_whole`) into a state allocated
 while the request and reply were on the wire; a damaged or partial one yields
 the servos whose running CRCs check (:func:`handrig.devices.servo.codec.fast_sync_take`).
-
-The warm-up (``rehearse_goals`` given): while a whole read's request and reply are on
-the wire, the last whole reply is decoded again into scratch arrays and the bus
-builds its last goals into a scratch Sync Write, so that the reply's decode and the
-next goal write, the bus cycle's critical path, find their code and tables in the
-caches (on a machine shared with other work a wait of some hundred microseconds is
-enough for them to go cold; ``handrig bench bus`` shows the cycle with and without).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,7 +72,7 @@ class FastSyncRead:
 
     def __init__(
         self, roster: Roster, link: Link, readings: Readings, plan: ReadPlan, stats: BusStats,
-        spin_s: float, rehearse_goals: Callable[[], None] | None = None,
+        spin_s: float,
     ) -> None:
         self.roster = roster
         self.link = link
@@ -93,14 +85,6 @@ class FastSyncRead:
         self._valid = np.zeros(roster.n, np.bool_)
         self._orders_of: dict[bytes, Order] = {}  # see _order_of
         self.whole_at = 0.0  # when the last whole reply was decoded
-        # the warm-up (module docstring): the last whole reply and its order, and the
-        # arrays its rehearsal decodes into (latest, status, stale runs, fresh, out, out_u8)
-        self._rehearse_goals = rehearse_goals
-        self._last_whole: tuple[bytes, Order] | None = None
-        n = roster.n
-        self._scratch = (np.zeros((5, n)), np.zeros(n, np.uint8), np.zeros(n, np.int64),
-                         np.zeros(n, np.bool_), np.zeros((5, n)), np.zeros((3, n), np.uint8))
-        self.rehearsals = 0
 
     def read(self, indices: np.ndarray, deadline: float, order: Order | None = None) -> int:
         """One Fast Sync Read of ``indices`` (``order``: every servo, as that order asks).
@@ -119,8 +103,6 @@ class FastSyncRead:
         self.link.quiet_line(deadline)
         self.link.send(order.request)
         out = self.readings.prepare_whole() if whole_ok else None
-        if whole_ok and self._rehearse_goals is not None:
-            self._rehearse()
         raw = self._receive(expected, deadline)
         if raw is None:
             return NONE
@@ -200,21 +182,7 @@ class FastSyncRead:
         if alerts >= 0:
             self.whole_at = now
             self.link.budget.reply_in(now)  # the reply is in: the wire is quiet
-            self._last_whole = (raw, order)
         return int(alerts)
-
-    def _rehearse(self) -> None:
-        """The warm-up (module docstring): the last whole reply decoded again into
-        scratch, then the bus's goal write rehearsed; nothing the bus reads changes."""
-        last = self._last_whole
-        if last is not None:
-            raw, order = last
-            codec.fast_sync_whole(np.frombuffer(raw, np.uint8), self.plan.data_len,
-                                  order.indices, order.ids, self.roster.scale, *self._scratch[:4],
-                                  0.0, *self._scratch[4:])
-        assert self._rehearse_goals is not None
-        self._rehearse_goals()
-        self.rehearsals += 1
 
     def _drop_late(
         self, raw: bytes, order: Order, expected: int, deadline: float
