@@ -112,8 +112,7 @@ class RobotLoop:
         self._log = log
         self._thread: threading.Thread | None = None
         self._stack = contextlib.ExitStack()
-        self._closing = threading.Event()  # stop() has begun
-        self._wake = StopSignalWake(self._closing, log)
+        self._wake = StopSignalWake(log)
         self.error: BaseException | None = None
         """What ended the loop early (a device error), raised to the program by
         :meth:`check`."""
@@ -167,7 +166,6 @@ class RobotLoop:
 
     def stop(self, *, ease: bool) -> None:
         """End the loop (``ease``: to the relaxed pose first), then torque off."""
-        self._closing.set()
         try:
             if self._thread is not None:
                 if ease:

@@ -36,9 +36,13 @@ GAP_FRAMES = 3.0
 """:class:`FrameGrid`: a call this many frame periods after the last one starts a new run."""
 WAKE_S = 0.005
 """:class:`GloveStream`: the longest its thread sleeps without looking at the glove."""
-CATCH_UP_S = 0.05
+CATCH_UP_S = 0.5
 """:meth:`GloveStream.pose_at`: how long it waits for the thread to have looked at the
-glove up to the asked time (a busy machine) before answering from what it has."""
+glove up to the asked time before answering from what it has (counted in
+:attr:`GloveStream.late_answers`). The wait is only ever long when the thread has not
+run: a machine busy enough to starve it (at nice 10 beside two busy cores it went
+more than the 50 ms this was before without running, and a frame of LeRobot's record
+got a row from 10 ms before its time)."""
 
 
 class FrameGrid:
@@ -111,6 +115,14 @@ class GloveStream:
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
         self.samples = 0
+        self.lost = 0
+        """Samples the glove superseded before the thread took them (a gap in their
+        counts: the thread had not run for longer than the glove keeps samples behind
+        its newest, ``BEHIND_KEPT``): a pose asked for their time gets an older one."""
+        self.late_answers = 0
+        """:meth:`pose_at` calls answered before the thread had looked at the glove up
+        to the asked time (it had not run for :data:`CATCH_UP_S`): the pose may be older."""
+        self._last_count: int | None = None
 
     def __enter__(self) -> GloveStream:
         self.glove.start()
@@ -141,9 +153,15 @@ class GloveStream:
                 if (s := self.glove.latest()) is not None:
                     batch.append(s)
                 posed = [(s.host_time_s, self._pose_of(s)) for s in batch]
+                lost = 0
+                for s in batch:
+                    if self._last_count is not None and s.count > self._last_count + 1:
+                        lost += s.count - self._last_count - 1
+                    self._last_count = s.count
                 with self._cond:
                     self._ring.extend(posed)
                     self.samples += len(posed)
+                    self.lost += lost
                     self._looked_until = looked
                     self._cond.notify_all()
         except BaseException as exc:  # handed to the caller by check()
@@ -179,6 +197,7 @@ class GloveStream:
             while self._looked_until < t_s and self.error is None:
                 left = deadline - self._clock.now()
                 if left <= 0.0:
+                    self.late_answers += 1
                     break
                 self._cond.wait(left)
             for t, pose in reversed(self._ring):

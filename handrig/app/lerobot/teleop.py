@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import subprocess
 import sys
 from collections.abc import Callable
@@ -79,6 +80,8 @@ class GloveTeleop:
         self._silent = False
         self._reanchored_seen = 0
         self._early_said = False
+        self._behind_seen = (0, 0)  # the stream's (lost, late_answers) last said
+        self._behind_said_s = -math.inf  # ... and when
 
     # ------------------------------------------------------------- calibration
 
@@ -203,6 +206,19 @@ class GloveTeleop:
                         "of lerobot-teleoperate, --dataset.fps of lerobot-record)",
                         1.0 / grid.period_s)
 
+    def _say_behind(self, stream: GloveStream) -> None:
+        """Log when the glove's thread fell behind since the last call (a machine busy
+        enough to starve it): samples lost, or a pose answered before the thread had
+        looked up to the frame's time; either may give a frame an older pose."""
+        now = (stream.lost, stream.late_answers)
+        if now == self._behind_seen or self._clock.now() < self._behind_said_s + 1.0:
+            return  # at most once a second
+        self._behind_seen, self._behind_said_s = now, self._clock.now()
+        log.warning("the glove's thread did not keep up (the host is busy): %d glove "
+                    "samples lost, %d poses answered before the thread had read up to "
+                    "their frame's time, so far; frames around them may carry an older "
+                    "pose", *now)
+
     def action(self) -> dict[str, float]:
         """The pose at this call's frame time (``fps`` given) or now: the newest sample
         at or before it, through the pipeline. A glove silent for longer than the rig's
@@ -219,6 +235,7 @@ class GloveTeleop:
         if self.grid is not None:
             self._say_off_grid(self.grid)
         got = stream.pose_at(t)
+        self._say_behind(stream)
         timeout_s = self.glove_timeout_s
         if got is None or t - got[0] > timeout_s:
             if not self._silent:

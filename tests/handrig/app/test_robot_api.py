@@ -54,7 +54,6 @@ def test_the_loop_follows_the_command_within_limits_and_slew() -> None:
         assert want[i] > flat[i] + 20.0
         t0 = time.monotonic()
         np.testing.assert_allclose(robot.command({"riIndexMCPy": 30.0}), want)
-        assert time.monotonic() - t0 < 0.05  # returns at once: the loop does the moving
         while robot.goals_deg()["right_i-mcp"] < want[i] - 1e-6:
             assert time.monotonic() - t0 < 5.0, "the loop never took the command"
             time.sleep(0.005)
@@ -73,6 +72,15 @@ def test_the_loop_follows_the_command_within_limits_and_slew() -> None:
             robot.command({"indexMCP": 10.0})
         present = robot.move_to(np.zeros(len(hand.CURVE_NAMES)), seconds=0.2)  # all 50
         assert abs(present["right_i-mcp"] - flat[i]) < 3.0
+        # command returns at once, the loop does the moving: sooner than the move it
+        # asks for can be done at the slew limit (0.31 s here; a wall-clock bound of
+        # 50 ms was at the mercy of a loaded machine)
+        far = robot.targets_deg({"riIndexMCPy": 90.0})
+        move_s = (far[i] - flat[i]) / robot.rig.loop.slew_deg_s
+        assert move_s > 0.25
+        t0 = time.monotonic()
+        robot.command({"riIndexMCPy": 90.0})
+        assert time.monotonic() - t0 < move_s
     assert robot.torque_off_confirmed is True
     assert not robot.torque_on
     with pytest.raises(HandrigError, match="not open"):

@@ -3,8 +3,10 @@
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -77,3 +79,44 @@ def test_a_sigterm_that_finds_the_main_thread_asleep_still_ends_the_block() -> N
     assert rest.splitlines() == ["confirmed True"], (rest, err[-3000:])
     assert "SIGTERM came while the program's main thread was blocked" in err
     assert "SafetyStop: SIGTERM received: stopping the servos with torque off" in err
+
+
+CLEANUP = """\
+import sys, time
+from handrig.app.robot_api import RobotHand
+robot = RobotHand("leap", port="sim", log=lambda line: print(line, file=sys.stderr))
+try:
+    with robot:
+        print("torque", robot.torque_on, flush=True)
+        try:
+            time.sleep(600)
+        finally:
+            time.sleep(1.5)  # the program's own cleanup, longer than WAKE_GRACE_S
+            print("cleanup done", flush=True)
+finally:
+    print("confirmed", robot.torque_off_confirmed, flush=True)
+"""
+
+
+@pytest.mark.skipif(not _wchan_works(), reason="no /proc/PID/wchan to see a thread asleep")
+def test_a_sigterm_the_program_took_is_not_sent_again_during_its_cleanup() -> None:
+    proc = subprocess.Popen([sys.executable, "-c", CLEANUP], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first == "torque True\n", (first, proc.stderr.read() if proc.poll() else "")
+        wchan = Path(f"/proc/{proc.pid}/task/{proc.pid}/wchan")
+        end = time.monotonic() + 30.0
+        while "nanosleep" not in wchan.read_text():  # its main thread asleep: it takes it
+            assert time.monotonic() < end, "the program's main thread never slept"
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGTERM)
+        rest, err = proc.communicate(timeout=EXIT_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert rest.splitlines() == ["cleanup done", "confirmed True"], (rest, err[-3000:])
+    assert "main thread was blocked" not in err, err[-3000:]
+    assert err.count("SafetyStop: SIGTERM received") == 1, err[-3000:]

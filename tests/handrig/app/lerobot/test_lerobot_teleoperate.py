@@ -8,6 +8,7 @@ Torque Enable each holds after it ends. Skipped without LeRobot (`make lerobot-d
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -26,7 +27,8 @@ from tests.helpers.lerobot import skip_without_lerobot, unfiltered_glove_file, w
 
 skip_without_lerobot()
 
-RUN_S = 2.0  # --teleop_time_s
+RUN_S = 120.0  # --teleop_time_s: a bound; the test ends the run with Ctrl-C (SIGINT) once
+HELD_S = 1.0  # the goals have held the glove's pose this long, as seen from outside
 FIST_COUNTS = 2600  # the take's index MCP channel: the index flexed, far from relaxed
 GRAVITY_DEG = 1.5
 """How far a goal on the bus may be from the glove's target: the LEAP rig's gravity
@@ -48,8 +50,8 @@ def held_pose(glove: GloveTeleop, take: Path) -> np.ndarray:
 
 def test_lerobot_teleoperate_drives_the_emulated_hand_from_the_glove_and_ends_torque_off(
         tmp_path: Path) -> None:
-    take = write_ramp_take(tmp_path / "held.csv", rows=3000, row_s=0.01, start=FIST_COUNTS,
-                           step=0)  # 30 s: the glove never falls silent during the run
+    take = write_ramp_take(tmp_path / "held.csv", rows=round(RUN_S * 100), row_s=0.01,
+                           start=FIST_COUNTS, step=0)  # the glove never falls silent
     glove_file = unfiltered_glove_file(tmp_path / "glove.toml")
     glove = GloveTeleop(port=f"replay:{take}", robot="leap", glove_config=str(glove_file))
     expected = held_pose(glove, take)
@@ -72,11 +74,22 @@ def test_lerobot_teleoperate_drives_the_emulated_hand_from_the_glove_and_ends_to
              "--teleop.robot=leap", f"--teleop.glove_config={glove_file}",
              "--teleop.fps=30", "--fps=30", f"--teleop_time_s={RUN_S:g}"],
             cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        interrupted = False
+        held_since: float | None = None
         try:
             while proc.poll() is None:  # the goals each emulated servo holds, as it runs
-                goals_seen.append(np.array([ticks_to_deg(s, sim.servo(s.id).goal)
-                                            for s in rig.servos]))
-                seen_at.append(time.monotonic())
+                goals = np.array([ticks_to_deg(s, sim.servo(s.id).goal) for s in rig.servos])
+                now = time.monotonic()
+                goals_seen.append(goals)
+                seen_at.append(now)
+                if np.all(np.abs(goals - expected) <= GRAVITY_DEG):
+                    held_since = now if held_since is None else held_since
+                else:
+                    held_since = None
+                if (not interrupted and held_since is not None
+                        and now - held_since >= HELD_S):
+                    proc.send_signal(signal.SIGINT)  # Ctrl-C, as a user ends it
+                    interrupted = True
                 time.sleep(0.01)
             out, err = proc.communicate(timeout=60)
         finally:
@@ -84,6 +97,9 @@ def test_lerobot_teleoperate_drives_the_emulated_hand_from_the_glove_and_ends_to
                 proc.kill()
                 proc.communicate()
         torque = {s.id: sim.servo(s.id).torque_enabled for s in rig.servos}
+    assert interrupted, (  # the run's whole 120 s went by without the pose held 1 s
+        "the goals never held the glove's pose for 1 s: the closest was "
+        f"{np.abs(np.array(goals_seen) - expected).max(axis=1).min():.2f} deg off")
     assert proc.returncode == 0, err[-3000:]
     assert "Teleop loop time" in out  # LeRobot's own loop ran
     assert "Traceback" not in err, err[-3000:]
@@ -99,8 +115,9 @@ def test_lerobot_teleoperate_drives_the_emulated_hand_from_the_glove_and_ends_to
         f"{np.abs(goals - expected).max(axis=1).min():.2f} deg off")
     first = int(np.argmax(at_pose))
     assert np.any(np.abs(goals[:first, moved] - expected[moved]) > 5.0)
-    # ... and was there while LeRobot's loop ran (2 s; the ease to rest comes after)
+    # ... and stayed there while LeRobot's loop ran, until Ctrl-C (the ease to rest and
+    # torque off come after)
     held = np.asarray(seen_at)[at_pose]
-    assert held[-1] - held[0] >= 0.5 * RUN_S, held[-1] - held[0]
+    assert held[-1] - held[0] >= HELD_S, held[-1] - held[0]
     assert not os.listdir(home / "hf" / "lerobot" / "calibration" / "robots" /
                           "handrig_leap")  # LeRobot kept no calibration of its own
