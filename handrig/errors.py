@@ -11,11 +11,13 @@ _SHOWN_CHARS = 80
 
 
 def _shown(value: object) -> str:
-    """``value``'s repr, cut to a line (a value read from a file may be any size)."""
+    """``value``'s repr, cut to a line (a value read from a file may be any size): its
+    start and its end, where a path's file name is."""
     text = repr(value)
     if len(text) <= _SHOWN_CHARS:
         return text
-    return f"{text[:_SHOWN_CHARS - 20]}... ({len(text)} characters)"
+    half = (_SHOWN_CHARS - 20) // 2
+    return f"{text[:half]}...{text[-half:]} ({len(text)} characters)"
 
 
 class HandrigError(Exception):

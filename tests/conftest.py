@@ -97,7 +97,7 @@ COMPUTE_ONLY = (
     "handrig/loop/test_easing.py", "handrig/loop/test_warm_up.py",
     "handrig/test_hand.py", "handrig/devices/test_glove_status.py",
     "handrig/outputs/test_glove_take.py", "handrig/app/test_robotrig.py", "sim/test_wrist_load.py",
-    "handrig/outputs/test_take_frames_beyond_header.py",
+    "handrig/outputs/test_take_frames_beyond_header.py", "handrig/test_error_values_shown.py",
     "bench/test_bench_skips.py", "handrig/app/test_panel_recording.py",
     "handrig/cli/test_servos_scan_default.py",
     "handrig/cli/test_calibrate_servos_any_vendor.py",
