@@ -132,11 +132,14 @@ def test_handrig_run_reopens_a_glove_that_comes_back_and_counts_it(tmp_path: Pat
         time.sleep(1.0)
         second = GloveEmulator(rec, "frames", rate_hz=200.0, loop=True).start()
         _point(link, second.port_path)
-        back = False
-        for line in proc.stderr:  # reopened, then the loop follows the glove again
+        back = following = False
+        for line in proc.stderr:  # reopened, and the loop follows the glove again
             lines.append(line)
             back = back or "is back after" in line
-            if back and "glove is back: following it again" in line:
+            # in either order: the port's line is drained a cycle or more after it
+            # reopened, the loop's as soon as enough frames came in a row
+            following = following or "glove is back: following it again" in line
+            if back and following:
                 proc.send_signal(signal.SIGINT)
                 break
         out, err = proc.communicate(timeout=120)
