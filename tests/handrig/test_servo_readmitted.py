@@ -91,7 +91,16 @@ def _run(rig: RigConfig, sim: SimBus, tmp_path: Path,
             assert proc.poll() is None, err.read_text()
             assert time.monotonic() < deadline, "the rig never commissioned the servos"
             time.sleep(0.05)
-        time.sleep(0.5)  # the servos follow the glove
+        # torque on (the other servos' at least: servo 7 may be the one left out), then
+        # the servos follow the glove; a loaded machine's torque-on can take longer than
+        # the 0.5 s after "commissioned" this once waited (a CI run rebooted servo 7 inside
+        # it: "cannot enable torque")
+        others = [sim.servo(s.id) for s in rig.servos if s.id != ID]
+        while not all(o.torque_enabled for o in others):
+            assert proc.poll() is None, err.read_text()
+            assert time.monotonic() < deadline, "the rig never turned torque on"
+            time.sleep(0.01)
+        time.sleep(0.5)
         with sim.lock:
             midway(emulated)
             before = len(seen)
