@@ -420,23 +420,27 @@ class GloveTrigger(Trigger):
         now = self.clock.now()
         self._drained_s = now
         stall_since, self._stall_since = self._stall_since, math.nan
-        if got <= 1:
-            return
         since = empty_s if idle else drained
         period = self.frame_period_s
-        if period == period and period > 0.0 and since == since:
-            if stall_since == stall_since and now - drained < period:
-                # the rest of a stall's backlog, which the port (a pty, a USB adapter)
-                # handed over in pieces: a glove cannot send these one by one in less
-                # than a period after the last pump, but they came one by one in the stall
-                since = stall_since
-            one_by_one = min(got - 1, int((now - since) / period))
-            self.burst_frames += got - 1 - one_by_one
-            if now - since >= STALL_PERIODS * period:
-                self.stall_frames += one_by_one
-                self._stall_since = since
-        elif idle:
-            self.burst_frames += got - 1
+        if not (period == period and period > 0.0 and since == since):
+            if idle and got > 1:
+                self.burst_frames += got - 1
+            return
+        if stall_since == stall_since and now - drained < period:
+            # the rest of a stall's backlog, which the port (a pty, a USB adapter) handed
+            # over in pieces (the first may hold one frame, or none): a glove cannot send
+            # these one by one in less than a period after the last pump, but they came
+            # one by one in the stall
+            since = stall_since
+        stalled = now - since >= STALL_PERIODS * period
+        if stalled:
+            self._stall_since = since
+        if got <= 1:
+            return
+        one_by_one = min(got - 1, int((now - since) / period))
+        self.burst_frames += got - 1 - one_by_one
+        if stalled:
+            self.stall_frames += one_by_one
 
     def take_bursts(self) -> int:
         """Frames superseded in bursts since the last call (see :meth:`_pump`)."""

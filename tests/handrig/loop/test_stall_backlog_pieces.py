@@ -33,6 +33,25 @@ def _learned(glove: CountingPipeGlove) -> tuple[GloveTrigger, Tick]:
     return trig, tick
 
 
+def test_a_backlog_whose_first_piece_is_one_frame_is_still_the_hosts() -> None:
+    """The first pump after the stall got one frame (nothing superseded, nothing to
+    count), the rest came right after: still the stall's (a CI run: 0 and 76 bursts)."""
+    glove = CountingPipeGlove(MonotonicClock(spin_s=0.0))
+    try:
+        trig, tick = _learned(glove)
+        time.sleep(6 * PERIOD_S)  # the host stalls (no frame meanwhile in this piece)
+        glove.send()
+        trig.wait(tick)  # the first piece: one frame
+        glove.latest()
+        assert trig.take_stalled() == 0 and trig.take_bursts() == 0
+        glove.send(5)  # the rest, right after
+        trig.wait(tick)
+        glove.latest()
+        assert trig.take_stalled() == 4 and trig.take_bursts() == 0
+    finally:
+        glove.close()
+
+
 def test_the_second_piece_of_a_stalls_backlog_is_the_hosts_not_a_burst() -> None:
     glove = CountingPipeGlove(MonotonicClock(spin_s=0.0))
     try:
