@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import os
+import threading
 
 import numpy as np
 
 from handrig.clock import MonotonicClock
 from handrig.devices.glove import GloveSample, GloveSource, GloveStats
+from handrig.loop.trigger import GloveTrigger, Tick
 
 
 class PipeGlove(GloveSource):
@@ -63,3 +65,30 @@ class PipeGlove(GloveSource):
     def close(self) -> None:
         os.close(self.r)
         os.close(self.w)
+
+
+def play_and_tick(glove: PipeGlove, trig: GloveTrigger, frames: int, period_s: float) -> int:
+    """A thread plays ``frames`` frames every ``period_s`` into ``glove`` while this one
+    waits on ``trig`` (started here) until the last is taken; returns the frame ticks."""
+    clock = glove.clock
+    stop = threading.Event()
+
+    def play() -> None:
+        start = clock.now() + 0.02
+        for k in range(frames):
+            clock.sleep_until(start + k * period_s)
+            glove.send()
+        stop.set()
+
+    player = threading.Thread(target=play, daemon=True)
+    trig.start(clock.now())
+    tick = Tick()
+    player.start()
+    ticks = 0
+    while not (stop.is_set() and not glove.has_new()):
+        trig.wait(tick)
+        if tick.frame:
+            ticks += 1
+            glove.latest()
+    player.join(5.0)
+    return ticks

@@ -55,14 +55,23 @@ def _wchan_works() -> bool:
         return False
 
 
+def _started(script: str) -> subprocess.Popen[str]:
+    """The child running ``script``, once it has said its torque is on."""
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    assert proc.stdout is not None
+    first = proc.stdout.readline()
+    if first != "torque True\n":
+        proc.kill()
+        raise AssertionError((first, proc.communicate()[1][-3000:]))
+    return proc
+
+
 @pytest.mark.skipif(not _wchan_works(), reason="no /proc/PID/wchan to see a thread asleep")
 def test_a_sigterm_that_finds_the_main_thread_asleep_still_ends_the_block() -> None:
-    proc = subprocess.Popen([sys.executable, "-c", SCRIPT], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    proc = _started(SCRIPT)
     try:
         assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first == "torque True\n", (first, proc.stderr.read() if proc.poll() else "")
         tripped = proc.stdout.readline()
         assert tripped == "tripping\n", tripped
         try:
@@ -100,12 +109,8 @@ finally:
 
 @pytest.mark.skipif(not _wchan_works(), reason="no /proc/PID/wchan to see a thread asleep")
 def test_a_sigterm_the_program_took_is_not_sent_again_during_its_cleanup() -> None:
-    proc = subprocess.Popen([sys.executable, "-c", CLEANUP], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    proc = _started(CLEANUP)
     try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()
-        assert first == "torque True\n", (first, proc.stderr.read() if proc.poll() else "")
         wchan = Path(f"/proc/{proc.pid}/task/{proc.pid}/wchan")
         end = time.monotonic() + 30.0
         while "nanosleep" not in wchan.read_text():  # its main thread asleep: it takes it

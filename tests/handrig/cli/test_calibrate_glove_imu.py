@@ -6,34 +6,20 @@ apart and a pose's hold caught the move into the next one)."""
 
 from __future__ import annotations
 
-import argparse
-import sys
 import time
 from pathlib import Path
 
 import pytest
 from scipy.spatial.transform import Rotation
 
-from handrig.cli import calibrate_glove
 from handrig.devices.glove_calibration import load_glove_config
-from handrig.errors import HandrigError
 from handrig.pose.imu_mount import angle_between_deg, askew_mount
 from sim.calibration_motion import ScriptedSensors, move_recording, pose_names
 from sim.glove_emulator import GloveEmulator
+from tests.handrig.cli.test_calibrate_glove import main
 
 SETTLE_S, HOLD_S = 0.25, 0.35
 POSE_WAIT_S = 30.0  # for the emulator's thread to send the new pose (a busy machine)
-
-
-def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="handrig")
-    calibrate_glove.register(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args))
-    except HandrigError as exc:
-        print(f"handrig: error: {exc}", file=sys.stderr)
-        return 2
 
 
 class Puppeteer:

@@ -9,43 +9,20 @@ get its tick, and with a window some are found by polling, without one none.
 
 from __future__ import annotations
 
-import threading
-
 import pytest
 
 from handrig.config.rig import LoopConfig
 from handrig.errors import ConfigError
 from handrig.loop.trigger import GloveTrigger, Tick
-from tests.helpers.pipe_glove import PipeGlove
+from tests.helpers.pipe_glove import PipeGlove, play_and_tick
 
 PERIOD_S = 0.005
 FRAMES = 60
 
 
 def _run(glove: PipeGlove, poll_s: float) -> tuple[GloveTrigger, int]:
-    clock = glove.clock
-    trig = GloveTrigger(clock, glove, floor_hz=20.0, ceiling_hz=1000.0, poll_s=poll_s)
-    stop = threading.Event()
-
-    def play() -> None:
-        start = clock.now() + 0.02
-        for k in range(FRAMES):
-            clock.sleep_until(start + k * PERIOD_S)
-            glove.send()
-        stop.set()
-
-    player = threading.Thread(target=play, daemon=True)
-    trig.start(clock.now())
-    tick = Tick()
-    player.start()
-    frames = 0
-    while not (stop.is_set() and not glove.has_new()):
-        trig.wait(tick)
-        if tick.frame:
-            frames += 1
-            glove.latest()
-    player.join(5.0)
-    return trig, frames
+    trig = GloveTrigger(glove.clock, glove, floor_hz=20.0, ceiling_hz=1000.0, poll_s=poll_s)
+    return trig, play_and_tick(glove, trig, FRAMES, PERIOD_S)
 
 
 def test_a_poll_window_finds_frames_by_polling_and_every_frame_gets_its_tick(

@@ -4,10 +4,8 @@ while every frame still gets its tick (see handrig/loop/warm_up.py)."""
 
 from __future__ import annotations
 
-import threading
-
-from handrig.loop.trigger import GloveTrigger, Tick
-from tests.helpers.pipe_glove import PipeGlove
+from handrig.loop.trigger import GloveTrigger
+from tests.helpers.pipe_glove import PipeGlove, play_and_tick
 
 PERIOD_S = 0.005
 FRAMES = 60
@@ -17,31 +15,11 @@ LEAD_S = 0.0005
 def _run(glove: PipeGlove, warm_up_s: float) -> tuple[GloveTrigger, int, list[tuple[float, int]]]:
     """Play FRAMES frames; returns the trigger, the frame ticks, and each rehearsal's
     (clock time, frames sent by then)."""
-    clock = glove.clock
-    trig = GloveTrigger(clock, glove, floor_hz=20.0, ceiling_hz=1000.0, warm_up_s=warm_up_s)
+    trig = GloveTrigger(glove.clock, glove, floor_hz=20.0, ceiling_hz=1000.0,
+                        warm_up_s=warm_up_s)
     rehearsals: list[tuple[float, int]] = []
-    trig.warm_up.rehearse_with(lambda: rehearsals.append((clock.now(), glove.count)))
-    stop = threading.Event()
-
-    def play() -> None:
-        start = clock.now() + 0.02
-        for k in range(FRAMES):
-            clock.sleep_until(start + k * PERIOD_S)
-            glove.send()
-        stop.set()
-
-    player = threading.Thread(target=play, daemon=True)
-    trig.start(clock.now())
-    tick = Tick()
-    player.start()
-    frames = 0
-    while not (stop.is_set() and not glove.has_new()):
-        trig.wait(tick)
-        if tick.frame:
-            frames += 1
-            glove.latest()
-    player.join(5.0)
-    return trig, frames, rehearsals
+    trig.warm_up.rehearse_with(lambda: rehearsals.append((glove.clock.now(), glove.count)))
+    return trig, play_and_tick(glove, trig, FRAMES, PERIOD_S), rehearsals
 
 
 def test_a_rehearsal_before_each_expected_frame_and_the_frames_still_get_their_ticks(
