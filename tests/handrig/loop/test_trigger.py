@@ -375,6 +375,26 @@ def _pty_frames_glove():
     return master, glove, send
 
 
+def _on_the_port(glove, n_frames: int, timeout_s: float = 2.0) -> None:
+    """Wait until ``n_frames`` frames' bytes wait on the glove's port (FIONREAD). A pty
+    hands each write to the reader's side later, on a kernel worker: on a loaded host two
+    frames written one after the other can otherwise be read one pump apart."""
+    import fcntl
+    import struct
+    import termios
+
+    from firmware_protocol.glove import GloveFrame, encode_frame
+
+    size = len(encode_frame(GloveFrame(0, 0, (2000,) * 5)))
+    end = time.monotonic() + timeout_s
+    while True:
+        waiting = struct.unpack("i", fcntl.ioctl(glove.fileno(), termios.FIONREAD, b"\0" * 4))[0]
+        if waiting >= n_frames * size:
+            return
+        assert time.monotonic() < end, f"{waiting} bytes on the port, {n_frames * size} sent"
+        time.sleep(0.0005)
+
+
 @pytest.mark.parametrize("catch_up", [True, False])
 def test_a_frame_the_loop_was_late_for_gets_its_cycle_just_before_the_newest(catch_up) -> None:
     """Two frames one period apart came while the loop was busy: with catch_up the first
@@ -402,7 +422,7 @@ def test_a_frame_the_loop_was_late_for_gets_its_cycle_just_before_the_newest(cat
         send()  # the loop is busy for two periods: a frame, then the next one
         time.sleep(0.02)
         send()
-        time.sleep(0.003)
+        _on_the_port(glove, 2)
         period = trig.frame_period_s
         trig.wait(tick)
         assert tick.frame and tick.catch_up is catch_up
@@ -423,6 +443,7 @@ def test_a_frame_the_loop_was_late_for_gets_its_cycle_just_before_the_newest(cat
             newest_tick = tick.now_s
             send()
             send()
+            _on_the_port(glove, 2)
             trig.wait(tick)
             assert tick.frame
             extra = int(tick.catch_up)
