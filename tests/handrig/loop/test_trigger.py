@@ -522,7 +522,7 @@ def test_after_a_catch_up_the_newest_is_not_held_back() -> None:
         send()
         time.sleep(0.02)
         send()
-        time.sleep(0.003)
+        _on_the_port(glove, 2)
         trig.wait(tick)
         assert tick.catch_up and glove.take_behind() is not None
         begun = clock.now()
