@@ -20,11 +20,13 @@ servos with wire timing that log each Sync Write's receipt. It prints:
 (default 2) the rounds; ``HANDRIG_BENCH_TREES``: checkouts whose ``handrig`` is run,
 alternated in each round (colon-separated; default this one), to compare old and
 new side by side in one run; ``HANDRIG_BENCH_POLL_US``: ``[loop] glove_poll_us`` values
-(comma-separated; default the rig's own), each alternated too (trees that know the key)::
+(comma-separated; default the rig's own), each alternated too (trees that know the key);
+``HANDRIG_BENCH_WARM_UP_US`` the same for ``[loop] warm_up_us``::
 
     git worktree add /tmp/base 22013e1
     HANDRIG_BENCH_TREES=/tmp/base:. python -m bench felt
     HANDRIG_BENCH_POLL_US=0,150 python -m bench felt
+    HANDRIG_BENCH_WARM_UP_US=150,300 python -m bench felt
 """
 
 from __future__ import annotations
@@ -75,18 +77,25 @@ def _wait_for_lines(path: Path, proc: subprocess.Popen[str], timeout_s: float) -
     raise RuntimeError(f"no goal reached the bus emulator in {timeout_s:.0f} s")
 
 
+def _loop_key(rig_path: Path, key: str, value: float, out: Path) -> Path:
+    """``rig_path`` with ``[loop] key = value``, written to ``out``."""
+    text = re.sub(rf"(?m)^{key} = .*$", "", rig_path.read_text(encoding="utf-8"))
+    out.write_text(text.replace("[loop]\n", f"[loop]\n{key} = {value:g}\n", 1),
+                   encoding="utf-8")
+    return out
+
+
 def run_once(tree: Path, seconds: float, folder: Path, tag: str,
-             poll_us: float | None = None) -> dict[str, Any]:
+             poll_us: float | None = None, warm_up_us: float | None = None) -> dict[str, Any]:
     rec = step_recording()
     rec_path = folder / "steps.csv"
     write_glove_recording(rec_path, rec)
     # the tree's own rig file: an older tree may not know a newer key
     rig_path = _rig_file(folder, "glove", GLOVE_HZ, BAUD, tree / "config" / "rig.toml")
     if poll_us is not None:
-        text = re.sub(r"(?m)^glove_poll_us = .*$", "", rig_path.read_text(encoding="utf-8"))
-        text = text.replace("[loop]\n", f"[loop]\nglove_poll_us = {poll_us:g}\n", 1)
-        rig_path = folder / f"rig_poll_{tag}.toml"
-        rig_path.write_text(text, encoding="utf-8")
+        rig_path = _loop_key(rig_path, "glove_poll_us", poll_us, folder / f"rig_poll_{tag}.toml")
+    if warm_up_us is not None:
+        rig_path = _loop_key(rig_path, "warm_up_us", warm_up_us, folder / f"rig_warm_{tag}.toml")
     glove_log, bus_log = folder / f"glove_{tag}.log", folder / f"bus_{tag}.log"
     env = dict(os.environ, PYTHONPATH=str(tree))
     with (emulator(["bus", "--rig", str(rig_path), "--log", str(bus_log)],
@@ -140,19 +149,23 @@ def main() -> None:
              os.environ.get("HANDRIG_BENCH_TREES", str(ROOT)).split(":") if t]
     polls: list[float | None] = [float(v) for v in
                                  os.environ.get("HANDRIG_BENCH_POLL_US", "").split(",") if v]
-    variants = [(tree, poll) for tree in trees for poll in (polls or [None])]
+    warm_ups: list[float | None] = [float(v) for v in
+                                    os.environ.get("HANDRIG_BENCH_WARM_UP_US", "").split(",") if v]
+    variants = [(tree, poll, warm) for tree in trees for poll in (polls or [None])
+                for warm in (warm_ups or [None])]
     print(f"handrig run from outside: glove {GLOVE_HZ:g} Hz, {BAUD} bps, 20 servos, "
           f"{seconds:g} s steady x {rounds} rounds (load {os.getloadavg()[0]:.1f})")
-    print("| tree | glove_poll_us | round | felt p50 / p90 / p99 (us), steps | CPU (% of a core) | "
+    print("| tree | glove_poll_us | warm_up_us | round | felt p50 / p90 / p99 (us), steps | CPU (% of a core) | "
           "in process p50 / p99 (us) | writes delayed by reads | read timeouts | "
           "stale readings | load |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory(prefix="bench_felt_") as tmp:
         for r in range(rounds):
-            for k, (tree, poll) in enumerate(variants):
-                res = run_once(tree, seconds, Path(tmp), f"{r}_{k}", poll)
+            for k, (tree, poll, warm) in enumerate(variants):
+                res = run_once(tree, seconds, Path(tmp), f"{r}_{k}", poll, warm)
                 label = "rig's" if poll is None else f"{poll:g}"
-                print(f"| {tree} | {label} | {r + 1} | {_fmt(res['p50'])} / {_fmt(res['p90'])} / "
+                warm_label = "rig's" if warm is None else f"{warm:g}"
+                print(f"| {tree} | {label} | {warm_label} | {r + 1} | {_fmt(res['p50'])} / {_fmt(res['p90'])} / "
                       f"{_fmt(res['p99'])}, {res['n']} | {res['cpu_pct']:.1f} | "
                       f"{_fmt(res['inside_p50'])} / {_fmt(res['inside_p99'])} | "
                       f"{res['delayed']} | {res['timeouts']} | {res['stale']} | "
