@@ -155,7 +155,8 @@ def main() -> None:
                 for warm in (warm_ups or [None])]
     print(f"handrig run from outside: glove {GLOVE_HZ:g} Hz, {BAUD} bps, 20 servos, "
           f"{seconds:g} s steady x {rounds} rounds (load {os.getloadavg()[0]:.1f})")
-    print("| tree | glove_poll_us | warm_up_us | round | felt p50 / p90 / p99 (us), steps | CPU (% of a core) | "
+    print("| tree | glove_poll_us | warm_up_us | round | felt p50 / p90 / p99 (us), steps | "
+          "CPU (% of a core) | "
           "in process p50 / p99 (us) | writes delayed by reads | read timeouts | "
           "stale readings | load |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -165,7 +166,8 @@ def main() -> None:
                 res = run_once(tree, seconds, Path(tmp), f"{r}_{k}", poll, warm)
                 label = "rig's" if poll is None else f"{poll:g}"
                 warm_label = "rig's" if warm is None else f"{warm:g}"
-                print(f"| {tree} | {label} | {warm_label} | {r + 1} | {_fmt(res['p50'])} / {_fmt(res['p90'])} / "
+                print(f"| {tree} | {label} | {warm_label} | {r + 1} | {_fmt(res['p50'])} / "
+                      f"{_fmt(res['p90'])} / "
                       f"{_fmt(res['p99'])}, {res['n']} | {res['cpu_pct']:.1f} | "
                       f"{_fmt(res['inside_p50'])} / {_fmt(res['inside_p99'])} | "
                       f"{res['delayed']} | {res['timeouts']} | {res['stale']} | "
