@@ -44,3 +44,10 @@ def test_bench_bus_runs_every_way_and_none_beats_the_wire(puppet: bool) -> None:
         assert r.hz <= 1.02 * limit, (r.name, r.hz, limit)
     assert ("drive the MuJoCo puppet" if puppet else "move kinematically") in text
     assert "host round trip, wire timing off" in text
+    # the comparison with the SDK names the wire's cap on it (its own figures, printed)
+    sdk = results[-1].hz
+    said = re.search(r"SDK's Fast Sync Read: ([\d.]+)x the cycles/s \(the wire caps it at "
+                     r"([\d.]+)x", text)
+    assert said is not None, text
+    assert float(said[1]) == pytest.approx(max(r.hz for r in results[:3]) / sdk, abs=0.006)
+    assert float(said[2]) == pytest.approx(limit / sdk, abs=0.006)
