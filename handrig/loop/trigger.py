@@ -53,8 +53,6 @@ BACKLOG_QUIET_S = 0.0005  # at the start, the port is read until quiet this long
 BACKLOG_MAX_S = 0.05  # ... but no longer than this (a glove that never pauses)
 BACKLOG_PUMPS_MAX = 256
 POLLS_MAX = 20_000  # a poll window's looks at the port (a look takes about a microsecond)
-WAKE_LATE_GAIN = 0.125  # weight of the newest timed wake-up in how late they come
-WAKE_LATE_MAX_S = 0.0003  # one wake-up counts for at most this late (a host stall is not news)
 
 
 @dataclass
@@ -238,12 +236,6 @@ class GloveTrigger(Trigger):
     ``warm_up_s`` (``[loop] warm_up_us``): that long before each expected frame the
     trigger runs the cycle's rehearsal (:mod:`handrig.loop.warm_up`, :attr:`warm_up`).
 
-    The warm-up's wake-up is asked for early by what the trigger has learnt of how late
-    such wake-ups come (:attr:`wake_late_s`): on a machine whose idle CPUs halt (a
-    virtual machine), a sleep of a few milliseconds ends 15-180 us late (p50 50 us on
-    the 2-core VM of docs/measurements.md), which left no room for the rehearsal
-    before more than half of the frames.
-
     ``catch_up`` (a glove that keeps the frames behind the newest it never handed out,
     ``has_behind()`` and ``take_behind()``): a frame superseded before its cycle (left
     waiting by a busy loop, or sent together with the next) gets a cycle of its own
@@ -264,7 +256,6 @@ class GloveTrigger(Trigger):
         self.poll_s = poll_s
         self.warm_up = WarmUp(warm_up_s)
         self.polls_found = 0  # frames found by polling in the window (not by a wake-up)
-        self.wake_late_s = 0.0  # how late a timed wake-up before a frame comes (learnt)
         self.period_s = 1.0 / floor_hz
         self.min_gap_s = 1.0 / ceiling_hz
         self.burst_frames = 0  # frames superseded on arrival by a newer one in the same read
@@ -359,29 +350,16 @@ class GloveTrigger(Trigger):
         warm-up's rehearsal when one is due, polled within the window, else slept for."""
         at = self.warm_up.at(self.predicted_frame_s, until_s)
         if at is not None:
-            if self._bytes_before(fd, at):
-                return True  # the frame (or bytes of it) came first
+            now = self.clock.now()
+            if at > now:
+                if _readable(fd, at - now):
+                    return True  # the frame (or bytes of it) came first
+                self.warm_up.woke(at, self.clock.now())
             self.warm_up.run(self.predicted_frame_s, self.clock.now())
             left = until_s - self.clock.now()
         if self.poll_s > 0.0:
             return self._polled(fd, until_s)
         return left > 0.0 and _readable(fd, left)
-
-    def _bytes_before(self, fd: int, t_s: float) -> bool:
-        """Whether bytes come on ``fd`` before the thread wakes for clock time ``t_s``:
-        it sleeps until :attr:`wake_late_s` before it, learning from how late it woke."""
-        clock = self.clock
-        wake = t_s - self.wake_late_s
-        now = clock.now()
-        if wake <= now:
-            return False
-        if _readable(fd, wake - now):
-            return True
-        woke = clock.now()
-        if woke >= wake:  # (a test's clock may not move with the sleep)
-            late = min(woke - wake, WAKE_LATE_MAX_S)
-            self.wake_late_s += WAKE_LATE_GAIN * (late - self.wake_late_s)
-        return False
 
     def _polled(self, fd: int, until_s: float) -> bool:
         """Whether bytes come on ``fd`` before ``until_s`` with a poll window: polled for

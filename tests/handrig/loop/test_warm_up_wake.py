@@ -1,7 +1,7 @@
 """The warm-up's wake-up is asked for early by how late such wake-ups came
-(handrig/loop/trigger.py, ``GloveTrigger.wake_late_s``): on a virtual machine whose idle
-CPUs halt, a sleep of a few milliseconds ended 15-180 us late and left the rehearsal no
-room before more than half of the frames.
+(handrig/loop/warm_up.py, ``WarmUp.wake_late_s``, through the glove trigger's wait): on a
+virtual machine whose idle CPUs halt, a sleep of a few milliseconds ended 15-180 us late
+and left the rehearsal no room before more than half of the frames.
 
 A scripted clock stands for the host: each sleep on the glove's (silent) pipe "wakes"
 as late as the script says. Nothing keeps real time: the compute-only lane.
@@ -12,7 +12,8 @@ from __future__ import annotations
 import pytest
 
 from handrig.clock import Clock
-from handrig.loop.trigger import WAKE_LATE_GAIN, WAKE_LATE_MAX_S, GloveTrigger
+from handrig.loop.trigger import GloveTrigger
+from handrig.loop.warm_up import WAKE_LATE_GAIN, WAKE_LATE_MAX_S
 from tests.helpers.pipe_glove import PipeGlove
 
 
@@ -66,14 +67,14 @@ def _one_frame(trig: GloveTrigger, clock: LateWakeClock, frame_s: float) -> None
 def test_the_warm_up_wakes_earlier_by_what_it_learnt_and_then_has_room(trigger) -> None:
     trig, clock, rehearsals = trigger
     clock.late_s = 80e-6  # each sleep ends 80 us after the time asked
-    assert trig.wake_late_s == 0.0
+    assert trig.warm_up.wake_late_s == 0.0
     # the first frame: asked for 150 us before it, woke 70 us before it: no room left
     # for the rehearsal (it needs 100 us: it would delay the frame)
     frame = clock.t + 0.005
     _one_frame(trig, clock, frame)
     assert clock.asked[0] == pytest.approx(frame - 150e-6)
     assert rehearsals == []
-    assert trig.wake_late_s == pytest.approx(WAKE_LATE_GAIN * 80e-6)
+    assert trig.warm_up.wake_late_s == pytest.approx(WAKE_LATE_GAIN * 80e-6)
     # frame after frame the wake-up is asked for earlier, converging on the lateness
     for _ in range(40):
         clock.t += 0.004
@@ -81,8 +82,8 @@ def test_the_warm_up_wakes_earlier_by_what_it_learnt_and_then_has_room(trigger) 
         asked_before = len(clock.asked)
         _one_frame(trig, clock, frame)
         asked = clock.asked[asked_before]
-        assert asked == pytest.approx(frame - 150e-6 - trig.wake_late_s, abs=20e-6)
-    assert trig.wake_late_s == pytest.approx(80e-6, rel=0.02)
+        assert asked == pytest.approx(frame - 150e-6 - trig.warm_up.wake_late_s, abs=20e-6)
+    assert trig.warm_up.wake_late_s == pytest.approx(80e-6, rel=0.02)
     # woken 150 us before the frame again: the rehearsal ran, with its room
     assert rehearsals and rehearsals[-1] == pytest.approx(frame - 150e-6, abs=3e-6)
 
@@ -91,12 +92,12 @@ def test_a_stalled_wake_up_counts_as_no_later_than_the_bound(trigger) -> None:
     trig, clock, _ = trigger
     clock.late_s = 0.050  # the host stalled 50 ms inside the sleep
     _one_frame(trig, clock, clock.t + 0.005)
-    assert trig.wake_late_s == pytest.approx(WAKE_LATE_GAIN * WAKE_LATE_MAX_S)
+    assert trig.warm_up.wake_late_s == pytest.approx(WAKE_LATE_GAIN * WAKE_LATE_MAX_S)
 
 
 def test_a_clock_that_does_not_move_with_the_sleep_teaches_nothing(trigger) -> None:
     trig, clock, rehearsals = trigger
     clock.late_s = -0.001  # "woke" before the time asked: a test's clock, not a host's
     _one_frame(trig, clock, clock.t + 0.005)
-    assert trig.wake_late_s == 0.0
+    assert trig.warm_up.wake_late_s == 0.0
     assert len(rehearsals) == 1  # and the rehearsal still ran, at the time asked
