@@ -18,9 +18,9 @@ from tests.helpers.pipe_glove import PipeGlove
 
 
 class LateWakeClock(Clock):
-    """A clock whose time moves only in ``sleep_until`` and in :meth:`woke_late`: the
-    trigger's port sleeps (a real ``select`` on an empty pipe, a few microseconds here)
-    are followed by a jump to the wake-up asked for plus ``late_s``."""
+    """A clock whose time moves only in ``sleep_until`` and in the trigger's port sleeps
+    (patched by the fixture: a real ``select`` on the empty pipe that does not wait, then
+    a jump to the wake-up asked for plus ``late_s``)."""
 
     def __init__(self) -> None:
         self.t = 100.0
@@ -79,10 +79,9 @@ def test_the_warm_up_wakes_earlier_by_what_it_learnt_and_then_has_room(trigger) 
     for _ in range(40):
         clock.t += 0.004
         frame = clock.t + 0.005
-        asked_before = len(clock.asked)
+        asked_before, learnt = len(clock.asked), trig.warm_up.wake_late_s
         _one_frame(trig, clock, frame)
-        asked = clock.asked[asked_before]
-        assert asked == pytest.approx(frame - 150e-6 - trig.warm_up.wake_late_s, abs=20e-6)
+        assert clock.asked[asked_before] == pytest.approx(frame - 150e-6 - learnt, abs=1e-9)
     assert trig.warm_up.wake_late_s == pytest.approx(80e-6, rel=0.02)
     # woken 150 us before the frame again: the rehearsal ran, with its room
     assert rehearsals and rehearsals[-1] == pytest.approx(frame - 150e-6, abs=3e-6)
