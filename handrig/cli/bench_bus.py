@@ -269,12 +269,13 @@ def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
     if plain:
         write("(plain ways run after handrig commissioned the servos: Return Delay Time 0; "
               f"{PLAIN_TIMEOUT_NOTE}; Sync Read's replies are 15N bytes, not in the limit)\n")
-        best, sdk = max(r.hz for r in results[:3]), results[-1].hz
-        if sdk > 0:
-            cpu = results[-1].cpu_us / results[0].cpu_us
-            write(f"handrig's best way against the SDK's Fast Sync Read: {best / sdk:.2f}x the "
-                  f"cycles/s (the wire caps it at {limit / sdk:.2f}x: the SDK reaches "
-                  f"{sdk / limit:.2f} of the wire) and {cpu:.1f}x less CPU a cycle\n")
+        best = max(results[:3], key=lambda r: r.hz)
+        sdk = results[-1]
+        if sdk.hz > 0 and best.cpu_us > 0:
+            write(f"handrig's best way against the SDK's Fast Sync Read: {best.hz / sdk.hz:.2f}x "
+                  f"the cycles/s (the wire caps it at {limit / sdk.hz:.2f}x: the SDK reaches "
+                  f"{sdk.hz / limit:.2f} of the wire) and {sdk.cpu_us / best.cpu_us:.1f}x less "
+                  "CPU a cycle\n")
     if closing:
         write(closing + "\n")
     wire_us = 1e6 / limit

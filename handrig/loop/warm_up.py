@@ -26,7 +26,7 @@ class WarmUp:
 
     The wake-up for it is asked for early by how late such wake-ups came
     (:attr:`wake_late_s`, learnt through :meth:`woke`): on a machine whose idle CPUs halt
-    (a virtual machine), a sleep of a few milliseconds ends 15-180 us late (p50 50 us on
+    (a virtual machine), a sleep of a few milliseconds ends 14-176 us late (p50 50 us on
     the 2-core VM of docs/measurements.md), which left no room for the rehearsal before
     more than half of the frames."""
 
@@ -57,7 +57,9 @@ class WarmUp:
 
     def woke(self, asked_s: float, now_s: float) -> None:
         """A sleep until ``asked_s`` (from :meth:`at`) ended at ``now_s``: learnt from (a
-        clock that did not move with the sleep, a test's, teaches nothing)."""
+        clock that did not move with the sleep, a test's, teaches nothing). Only waits
+        that begin before ``asked_s`` sleep and learn: at 200 Hz they begin milliseconds
+        early; a glove so fast that they never do keeps the lateness last learnt."""
         if now_s >= asked_s:
             late = min(now_s - asked_s, WAKE_LATE_MAX_S)
             self.wake_late_s += WAKE_LATE_GAIN * (late - self.wake_late_s)
