@@ -222,7 +222,10 @@ def test_one_late_reply_does_not_make_every_later_read_late() -> None:
                 failed += int(b.read_state().stale.any())
             sim.faults = FaultSpec()
             assert sim.fault_counts["delayed"] >= 2
-            assert failed < 50, (failed, b.stats.summary())
+            # piling up makes nearly every read after the first late reply late (~245 of
+            # 250); the injected delays alone cost about 10. A starved in-process emulator
+            # costs more: 79 in a clean-clone CI run beside a busy core (2026-12-06 05:00)
+            assert failed < 125, (failed, b.stats.summary())
         finally:
             b.close()
 
@@ -464,15 +467,25 @@ def test_a_read_of_one_part_asks_only_those_servos_and_marks_only_them(
     assert first.all_fresh and first.asked is None
     sim.servo(5).silent_until = math.inf  # rig index 4: in part 0 of 2 (indices 0, 2, 4)
     time.sleep(0.01)
-    odd = bus.read_state(part=(1, 2))  # indices 1, 3, 5: servo 5 is not asked
+    # a read the in-process emulator answered too late (its thread starved on a loaded
+    # machine, as in a CI run beside a busy core) is read again, up to 5 times
+    for _ in range(5):
+        odd = bus.read_state(part=(1, 2))  # indices 1, 3, 5: servo 5 is not asked
+        if not odd.stale.any():
+            break
     assert odd.asked.tolist() == [False, True, False, True, False, True]
     assert not odd.stale.any()
     assert odd.age_s[[1, 3, 5]].max() < odd.age_s[[0, 2, 4]].min()  # the others are older
-    even = bus.read_state(part=(0, 2))
+    for _ in range(5):
+        before = bus.stats.stale_readings.copy()
+        even = bus.read_state(part=(0, 2))
+        if even.stale.tolist() == [False, False, False, False, True, False]:
+            break
     assert even.asked.tolist() == [True, False, True, False, True, False]
     assert even.stale.tolist() == [False, False, False, False, True, False]
     assert even.positions_deg[4] == first.positions_deg[4]  # the last good value
-    assert bus.stats.stale_readings.tolist() == [0, 0, 0, 0, 1, 0]
+    # that read counted a stale reading for servo 5 alone
+    assert (bus.stats.stale_readings - before).tolist() == [0, 0, 0, 0, 1, 0]
     sim.servo(5).silent_until = 0.0
     # a part read is shorter on the wire than a whole one
     reader = bus.reader
