@@ -75,7 +75,10 @@ def test_a_spec_only_glove_drives_the_puppet(firmware: Path):
     assert s["glove"]["frames_ok"] > 500 and s["glove"]["crc_errors"] == 0
     idx = result.joint_names.index("riIndexMCPy")
     positions = np.array([snap[idx] for snap in result.snapshots])  # every 20 cycles
-    opened, fist = positions[2], positions[600 // 20 - 1]  # cycle 60 and cycle 600
+    # the glove holds the hand open for its first 100 frames: the puppet's most open at
+    # cycles 60-100 (a loaded machine's physics may still be on its way there at 60: 24.6
+    # deg in a CI run beside a busy core), and the fist at cycle 600
+    opened, fist = positions[2:5].min(), positions[600 // 20 - 1]
     # open hand at the start, fist before the end: the simulated index MCP follows the glove
     # (the relaxed pose the run ends in has it near 50 deg, so neither figure comes from it)
     assert opened < 20.0 and fist > 65.0, (opened, fist)
