@@ -21,12 +21,17 @@ servos with wire timing that log each Sync Write's receipt. It prints:
 alternated in each round (colon-separated; default this one), to compare old and
 new side by side in one run; ``HANDRIG_BENCH_POLL_US``: ``[loop] glove_poll_us`` values
 (comma-separated; default the rig's own), each alternated too (trees that know the key);
-``HANDRIG_BENCH_WARM_UP_US`` the same for ``[loop] warm_up_us``::
+``HANDRIG_BENCH_WARM_UP_US`` the same for ``[loop] warm_up_us``, ``HANDRIG_BENCH_AWAKE``
+(``false,true``) for ``[loop] keep_cpus_awake``. The CPUs' idle polling (the kernel's
+POLL idle state, from ``/sys/devices/system/cpu/cpu*/cpuidle/state0/time``: what keeping
+them awake costs, in power, not in any process's CPU) is printed as a share of all CPUs'
+time over the same steady part::
 
     git worktree add /tmp/base 22013e1
     HANDRIG_BENCH_TREES=/tmp/base:. python -m bench felt
     HANDRIG_BENCH_POLL_US=0,150 python -m bench felt
     HANDRIG_BENCH_WARM_UP_US=150,300 python -m bench felt
+    HANDRIG_BENCH_AWAKE=false,true python -m bench felt
 """
 
 from __future__ import annotations
@@ -77,16 +82,30 @@ def _wait_for_lines(path: Path, proc: subprocess.Popen[str], timeout_s: float) -
     raise RuntimeError(f"no goal reached the bus emulator in {timeout_s:.0f} s")
 
 
-def _loop_key(rig_path: Path, key: str, value: float, out: Path) -> Path:
+def idle_poll_s() -> float:
+    """Seconds all CPUs spent in the kernel's POLL idle state (0 where not reported)."""
+    total = 0
+    for f in Path("/sys/devices/system/cpu").glob("cpu[0-9]*/cpuidle/state0/time"):
+        try:
+            if f.with_name("name").read_text().strip() == "POLL":
+                total += int(f.read_text())
+        except (OSError, ValueError):
+            continue
+    return total * 1e-6
+
+
+def _loop_key(rig_path: Path, key: str, value: float | str, out: Path) -> Path:
     """``rig_path`` with ``[loop] key = value``, written to ``out``."""
     text = re.sub(rf"(?m)^{key} = .*$", "", rig_path.read_text(encoding="utf-8"))
-    out.write_text(text.replace("[loop]\n", f"[loop]\n{key} = {value:g}\n", 1),
+    shown = f"{value:g}" if isinstance(value, float) else value
+    out.write_text(text.replace("[loop]\n", f"[loop]\n{key} = {shown}\n", 1),
                    encoding="utf-8")
     return out
 
 
 def run_once(tree: Path, seconds: float, folder: Path, tag: str,
-             poll_us: float | None = None, warm_up_us: float | None = None) -> dict[str, Any]:
+             poll_us: float | None = None, warm_up_us: float | None = None,
+             awake: str | None = None) -> dict[str, Any]:
     rec = step_recording()
     rec_path = folder / "steps.csv"
     write_glove_recording(rec_path, rec)
@@ -96,6 +115,8 @@ def run_once(tree: Path, seconds: float, folder: Path, tag: str,
         rig_path = _loop_key(rig_path, "glove_poll_us", poll_us, folder / f"rig_poll_{tag}.toml")
     if warm_up_us is not None:
         rig_path = _loop_key(rig_path, "warm_up_us", warm_up_us, folder / f"rig_warm_{tag}.toml")
+    if awake is not None:
+        rig_path = _loop_key(rig_path, "keep_cpus_awake", awake, folder / f"rig_awake_{tag}.toml")
     glove_log, bus_log = folder / f"glove_{tag}.log", folder / f"bus_{tag}.log"
     env = dict(os.environ, PYTHONPATH=str(tree))
     with (emulator(["bus", "--rig", str(rig_path), "--log", str(bus_log)],
@@ -110,9 +131,9 @@ def run_once(tree: Path, seconds: float, folder: Path, tag: str,
         try:
             _wait_for_lines(bus_log, proc, 60.0)
             time.sleep(WARM_S)
-            t0, c0 = time.monotonic(), process_cpu_s(proc.pid)
+            t0, c0, p0 = time.monotonic(), process_cpu_s(proc.pid), idle_poll_s()
             time.sleep(seconds)
-            t1, c1 = time.monotonic(), process_cpu_s(proc.pid)
+            t1, c1, p1 = time.monotonic(), process_cpu_s(proc.pid), idle_poll_s()
             out, _ = proc.communicate(timeout=60)
         finally:
             if proc.poll() is None:
@@ -132,6 +153,7 @@ def run_once(tree: Path, seconds: float, folder: Path, tag: str,
         "p90": float(np.percentile(lat, 90)) if len(lat) else None,
         "p99": float(np.percentile(lat, 99)) if len(lat) else None,
         "cpu_pct": 100.0 * (c1 - c0) / (t1 - t0),
+        "idle_poll_pct": 100.0 * (p1 - p0) / ((t1 - t0) * (os.cpu_count() or 1)),
         "inside_p50": inside.get("p50"), "inside_p99": inside.get("p99"),
         "timeouts": bus.get("timeouts"), "stale": bus.get("stale_readings"),
         "delayed": summary.get("writes_delayed_by_reads"),
@@ -151,24 +173,29 @@ def main() -> None:
                                  os.environ.get("HANDRIG_BENCH_POLL_US", "").split(",") if v]
     warm_ups: list[float | None] = [float(v) for v in
                                     os.environ.get("HANDRIG_BENCH_WARM_UP_US", "").split(",") if v]
-    variants = [(tree, poll, warm) for tree in trees for poll in (polls or [None])
-                for warm in (warm_ups or [None])]
+    awakes: list[str | None] = [v.strip() for v in
+                                os.environ.get("HANDRIG_BENCH_AWAKE", "").split(",") if v]
+    variants = [(tree, poll, warm, awake) for tree in trees for poll in (polls or [None])
+                for warm in (warm_ups or [None]) for awake in (awakes or [None])]
     print(f"handrig run from outside: glove {GLOVE_HZ:g} Hz, {BAUD} bps, 20 servos, "
           f"{seconds:g} s steady x {rounds} rounds (load {os.getloadavg()[0]:.1f})")
-    print("| tree | glove_poll_us | warm_up_us | round | felt p50 / p90 / p99 (us), steps | "
-          "CPU (% of a core) | "
+    print("| tree | glove_poll_us | warm_up_us | keep_cpus_awake | round | "
+          "felt p50 / p90 / p99 (us), steps | CPU (% of a core) | CPUs idle polling (%) | "
           "in process p50 / p99 (us) | writes delayed by reads | read timeouts | "
           "stale readings | load |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory(prefix="bench_felt_") as tmp:
         for r in range(rounds):
-            for k, (tree, poll, warm) in enumerate(variants):
-                res = run_once(tree, seconds, Path(tmp), f"{r}_{k}", poll, warm)
+            for k, (tree, poll, warm, awake) in enumerate(variants):
+                res = run_once(tree, seconds, Path(tmp), f"{r}_{k}", poll, warm, awake)
                 label = "rig's" if poll is None else f"{poll:g}"
                 warm_label = "rig's" if warm is None else f"{warm:g}"
-                print(f"| {tree} | {label} | {warm_label} | {r + 1} | {_fmt(res['p50'])} / "
+                awake_label = "rig's" if awake is None else awake
+                print(f"| {tree} | {label} | {warm_label} | {awake_label} | "
+                      f"{r + 1} | {_fmt(res['p50'])} / "
                       f"{_fmt(res['p90'])} / "
                       f"{_fmt(res['p99'])}, {res['n']} | {res['cpu_pct']:.1f} | "
+                      f"{res['idle_poll_pct']:.1f} | "
                       f"{_fmt(res['inside_p50'])} / {_fmt(res['inside_p99'])} | "
                       f"{res['delayed']} | {res['timeouts']} | {res['stale']} | "
                       f"{os.getloadavg()[0]:.1f} |",

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import struct
 from collections.abc import Callable, Iterator
 
 CPUS_ENV = "HANDRIG_CPUS"
@@ -149,3 +150,81 @@ def realtime_priority(
     finally:
         with contextlib.suppress(OSError):
             os.sched_setscheduler(0, old_policy, old_param)
+
+
+CPU_LATENCY_DEVICE = "/dev/cpu_dma_latency"
+_AWAKE = struct.pack("i", 0)  # no wake-up latency allowed: idle CPUs poll
+_ASLEEP = struct.pack("i", 2_000_000_000)  # the kernel's default: idle CPUs may halt
+
+
+class CpuWake:
+    """A request that idle CPUs poll instead of halting, held only around each frame
+    (:meth:`hold`, :meth:`release`); a no-op without the device (``fd`` None).
+
+    A halted CPU (a virtual machine's idle vCPU goes back to the host; a laptop's core
+    goes to a deep sleep state) takes tens to hundreds of microseconds to wake: the pty
+    or USB write of the frame and of its Sync Write each wake one, and that time is
+    felt. Linux's CPU latency request (PM QoS, :data:`CPU_LATENCY_DEVICE`) of 0 makes
+    every idle CPU poll instead, and the kernel wakes the halted ones when it is made;
+    held from the warm-up before each expected frame until the frame's cycle is done
+    (``[loop] keep_cpus_awake``), the CPUs poll for that share of the time only. The
+    polling is the kernel's idle loop, not this process's CPU, and gives way to any
+    work at once; it costs power (``python -m bench felt`` prints the share of time the
+    CPUs spent polling). Writes that fail turn the request off (:attr:`error`)."""
+
+    def __init__(self, fd: int | None = None) -> None:
+        self.fd = fd
+        self.held = False
+        self.holds = 0  # times the request was made
+        self.error = ""
+
+    def hold(self) -> None:
+        if self.fd is None or self.held:
+            return
+        self._write(_AWAKE)
+        self.held = self.fd is not None
+        self.holds += 1
+
+    def release(self) -> None:
+        if self.held:
+            self.held = False
+            self._write(_ASLEEP)
+
+    def _write(self, value: bytes) -> None:
+        try:
+            os.write(self.fd, value)  # type: ignore[arg-type]
+        except OSError as exc:
+            self.error = exc.strerror or str(exc)
+            self.close()
+
+    def close(self) -> None:
+        fd, self.fd, self.held = self.fd, None, False
+        if fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(fd)  # closing drops the request
+
+
+@contextlib.contextmanager
+def cpus_awake_around_frames(
+    enabled: bool = True, log: Callable[[str], None] | None = None,
+    device: str = CPU_LATENCY_DEVICE,
+) -> Iterator[CpuWake]:
+    """A :class:`CpuWake` on ``device`` for the block (closed after it); one that does
+    nothing when off, or when the device is missing or not writable (said in ``log``)."""
+    if not enabled:
+        yield CpuWake()
+        return
+    try:
+        fd = os.open(device, os.O_WRONLY | os.O_CLOEXEC)
+    except OSError as exc:
+        if log is not None and os.path.exists(device):
+            log(f"cannot keep the CPUs awake around frames ({device}: "
+                f"{exc.strerror or exc}): each frame may wait for a CPU to wake "
+                "(see docs/hardware.md, or set [loop] keep_cpus_awake = false)")
+        yield CpuWake()
+        return
+    wake = CpuWake(fd)
+    try:
+        yield wake
+    finally:
+        wake.close()

@@ -70,7 +70,7 @@ from handrig.errors import ConfigError, DeviceError, HandrigError
 from handrig.loop.modes import Mode
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
-from handrig.realtime import pinned_loop, realtime_priority
+from handrig.realtime import cpus_awake_around_frames, pinned_loop, realtime_priority
 
 SWITCH_INTERVAL_S = 0.0005
 """The interpreter's thread switch interval while several loops run: a loop woken by
@@ -407,7 +407,9 @@ class _Session:
         log = self._hand_log(i)
         try:
             with (pinned_loop(loop.pin_cpu, log),
-                  realtime_priority(loop.realtime_priority, log)):
+                  realtime_priority(loop.realtime_priority, log),
+                  cpus_awake_around_frames(loop.keep_cpus_awake, log) as wake):
+                rig.keep_awake(wake)
                 rig.run(frames=opts.frames, duration_s=opts.duration_s,
                         done_reason=opts.done_reason)
             self.ease_s[i] = 0.0 if rig.machine.stop_now else rig.relax_time_s

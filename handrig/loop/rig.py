@@ -62,6 +62,7 @@ from handrig.loop.telemetry import SnapshotBuilder, Telemetry
 from handrig.loop.trigger import FixedRateTrigger, GloveTrigger, Tick, Trigger
 from handrig.pose.gravity import GravityCompensation
 from handrig.pose.pipeline import PosePipeline
+from handrig.realtime import CpuWake
 
 __all__ = ["ControlsFromRaw", "GloveSource", "LoopParts", "Mode", "OrientationLike", "Rig",
            "RigSettings", "RunStats", "ServoBus"]
@@ -188,6 +189,12 @@ class Rig:
         gc.collect()
         gc.freeze()
         self._prepared = True
+
+    def keep_awake(self, wake: CpuWake) -> None:
+        """Hold ``wake`` (idle CPUs poll) from the warm-up before each expected glove
+        frame until its cycle is done (``[loop] keep_cpus_awake``; see
+        :class:`~handrig.realtime.CpuWake`)."""
+        self.trigger.keep_awake(wake)
 
     def request_stop(self, reason: str = "stop requested") -> None:
         """Ease to the relaxed pose, then end the run. A second request ends it at once.

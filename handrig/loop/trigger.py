@@ -38,6 +38,7 @@ from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import LoopConfig
 from handrig.devices.glove.source import GloveSource
 from handrig.loop.warm_up import WarmUp
+from handrig.realtime import CpuWake
 
 READ_MARGIN_S = 0.0003  # a read (and its retries) ends this long before the next tick
 PERIOD_SMOOTHING = 1.0 / 16.0  # weight of the newest interval in the glove's period estimate
@@ -126,6 +127,9 @@ class Trigger(ABC):
 
     def settle(self, tick: Tick) -> None:  # noqa: B027 - a hook most triggers need not fill
         """Finish the bookkeeping a ``wait(settle=False)`` left (nothing to do here)."""
+
+    def keep_awake(self, wake: CpuWake) -> None:  # noqa: B027 - only a glove trigger uses it
+        """Hold ``wake`` around each expected frame (a trigger that expects none: unused)."""
 
     def read_deadline(self, tick: Tick, now_s: float, reads_due: int, read_every: int,
                       read_s: float) -> float | None:
@@ -454,7 +458,11 @@ class GloveTrigger(Trigger):
         n, self.stall_frames = self.stall_frames, 0
         return n
 
+    def keep_awake(self, wake: CpuWake) -> None:
+        self.warm_up.keep_awake = wake  # held from the warm-up until the next wait
+
     def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
+        self.warm_up.done()
         if self._unsettled is not None:
             self.settle(self._unsettled)
         clock = self.clock

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from handrig.realtime import CpuWake
+
 REHEARSAL_ROOM_S = 0.0001
 """A rehearsal takes 30-60 us with the caches cold: it is left out when less than this
 is left before the frame, which it would otherwise delay."""
@@ -38,6 +40,7 @@ class WarmUp:
         self._rehearse: Callable[[], None] | None = None
         self._done_for = float("nan")  # the expected frame the last rehearsal was for
         self.wake_late_s = 0.0  # how late a wake-up asked for by :meth:`at` comes (learnt)
+        self.keep_awake = CpuWake()  # held from each rehearsal until the frame's cycle is done
 
     def rehearse_with(self, rehearse: Callable[[], None]) -> None:
         """Run ``rehearse`` before each expected frame; it must change nothing the loop
@@ -66,8 +69,14 @@ class WarmUp:
 
     def run(self, expected_s: float, now_s: float) -> None:
         """The rehearsal for the frame expected at ``expected_s``, unless too little time
-        is left before it at ``now_s``; either way, none more for that frame."""
+        is left before it at ``now_s``; either way, none more for that frame. The CPUs
+        are kept awake from here (:attr:`keep_awake`) until :meth:`done`."""
         self._done_for = expected_s
+        self.keep_awake.hold()
         if self._rehearse is not None and now_s < expected_s - REHEARSAL_ROOM_S:
             self._rehearse()
             self.count += 1
+
+    def done(self) -> None:
+        """The frame's cycle is over (the next wait begins): the CPUs may halt again."""
+        self.keep_awake.release()
