@@ -235,7 +235,8 @@ class GloveTrigger(Trigger):
     microseconds after the bytes are readable, a polling one finds them at once, at the
     cost of the window's CPU every frame (0: always sleep; the trade-off, measured with
     ``python -m bench felt``, is in docs/measurements.md: the rig file's 150 us takes
-    about 1-2 % of a core at 200 Hz and saves 20-100 us of felt latency at p50).
+    about 1-2 % of a core at 200 Hz and saves 20-100 us of felt latency at p50); left
+    out while the CPUs are kept awake (:meth:`keep_awake`): a wake-up is then quick.
 
     ``warm_up_s`` (``[loop] warm_up_us``): that long before each expected frame the
     trigger runs the cycle's rehearsal (:mod:`handrig.loop.warm_up`, :attr:`warm_up`).
@@ -361,7 +362,7 @@ class GloveTrigger(Trigger):
                 self.warm_up.woke(at, self.clock.now())
             self.warm_up.run(self.predicted_frame_s, self.clock.now())
             left = until_s - self.clock.now()
-        if self.poll_s > 0.0:
+        if self.poll_s > 0.0 and not self.warm_up.keep_awake.held:  # awake: a wake-up is quick
             return self._polled(fd, until_s)
         return left > 0.0 and _readable(fd, left)
 
@@ -519,6 +520,7 @@ class GloveTrigger(Trigger):
     def settle(self, tick: Tick) -> None:
         """The arrival into the glove's period and grid, and ``tick.next_s`` (the next
         frame expected, at most the floor): off the frame's path with ``wait(settle=False)``."""
+        self.warm_up.done()
         if tick is not self._unsettled:
             return
         arrival, self._unsettled = self._unsettled_arrival, None
