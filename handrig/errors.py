@@ -88,6 +88,12 @@ class DeviceTimeoutError(DeviceError):
     """A device did not answer before its deadline, after the stated number of attempts."""
 
 
+class TorqueOffError(DeviceError):
+    """Servos did not acknowledge the torque-off writes at exit (named in the message).
+    The broadcast went out first: a read-back may still find their torque off, and then
+    it was the acknowledgement that was lost (a starved host), not the torque-off."""
+
+
 class ServoFault(DeviceError):
     """A servo reported a hardware error (overload, overheating, ...) or a protocol error."""
 

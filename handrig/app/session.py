@@ -66,7 +66,7 @@ from handrig.devices.glove import GloveSource
 from handrig.devices.servo.bus import ServoBus
 from handrig.devices.servo.shared import SharedBus
 from handrig.devices.timecode.reader import TimecodeReader
-from handrig.errors import ConfigError, DeviceError, HandrigError
+from handrig.errors import ConfigError, DeviceError, HandrigError, TorqueOffError
 from handrig.loop.modes import Mode
 from handrig.loop.rig import Rig
 from handrig.loop.stats import RunStats
@@ -356,6 +356,7 @@ class _Session:
     def _under_torque(self, header: list[str]) -> HandrigError | None:
         """Torque on for every bus, the loops run, torque off on every way out."""
         old_switch = sys.getswitchinterval()
+        unacknowledged: TorqueOffError | None = None
         try:
             # each Rig starts from its bus's last_goals_deg: where torque-on holds it
             with contextlib.ExitStack() as torque:
@@ -370,6 +371,8 @@ class _Session:
                 finally:
                     sys.setswitchinterval(old_switch)
                     self.signals.disarm()  # from here on: torque off, then shut down
+        except TorqueOffError as exc:  # after the hands' own errors; the read-back judges it
+            unacknowledged = exc
         except HandrigError as exc:
             return exc
         finally:
@@ -383,7 +386,7 @@ class _Session:
                 if isinstance(failure, HandrigError):
                     return failure
                 raise failure
-        return None
+        return unacknowledged
 
     def _run_hands(self) -> None:
         """The first hand's loop in this thread, every other in a thread of its own."""
@@ -408,7 +411,8 @@ class _Session:
         try:
             with (pinned_loop(loop.pin_cpu, log),
                   realtime_priority(loop.realtime_priority, log),
-                  cpus_awake_around_frames(loop.keep_cpus_awake, log) as wake):
+                  cpus_awake_around_frames(loop.keep_cpus_awake and loop.mode == "glove",
+                                           log) as wake):
                 rig.keep_awake(wake)
                 rig.run(frames=opts.frames, duration_s=opts.duration_s,
                         done_reason=opts.done_reason)
@@ -533,6 +537,12 @@ class _Session:
             summary["signals"] = self.signals.received
         if self.cues is not None and self.cues.used:
             summary["cues"] = self.cues.summary()
+        if isinstance(error, TorqueOffError) and summary["torque_off"] is True:
+            # the torque-off writes went unacknowledged, yet every servo read Torque
+            # Enable 0 back: the acknowledgements were lost (a starved host), torque is off
+            summary["torque_off_note"] = (f"{error}; read back at exit, every servo's "
+                                          "torque is off: only the acknowledgements were lost")
+            error = None
         if error is not None:
             summary["error"] = str(error)
         joints = tuple(s.joint for side in parts.hands for s in side.rig_config.servos)

@@ -268,6 +268,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"torque off        {summary['torque_off']}",
         *([f"  not confirmed   {'; '.join(summary['torque_off_unconfirmed'])}"]
           if summary.get("torque_off_unconfirmed") else []),
+        *([f"  note            {summary['torque_off_note']}"]
+          if summary.get("torque_off_note") else []),
     ]
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
@@ -285,6 +287,8 @@ def format_hands_summary(summary: dict[str, Any]) -> str:
                   if not line.startswith(("torque off", "error"))]
     lines += cue_lines(summary.get("cues") or {})
     lines.append(f"torque off        {summary['torque_off']} (every servo of both hands)")
+    if summary.get("torque_off_note"):
+        lines.append(f"  note            {summary['torque_off_note']}")
     if "error" in summary:
         lines.append(f"error             {summary['error']}")
     return "\n".join(lines)

@@ -26,7 +26,7 @@ from handrig.devices.servo.link import Link
 from handrig.devices.servo.positions import TICKS_PER_DEG
 from handrig.devices.servo.registers import VELOCITY_DPS_PER_UNIT, Reg
 from handrig.devices.servo.roster import Roster
-from handrig.errors import DeviceError, SafetyStop
+from handrig.errors import DeviceError, SafetyStop, TorqueOffError
 
 log = logging.getLogger("handrig.devices.servo")
 
@@ -272,4 +272,4 @@ class TorqueContext(Generic[T]):
     ) -> None:
         self._off()
         if self.failed and exc_type is None:
-            raise DeviceError("torque off failed: " + "; ".join(self.failed))
+            raise TorqueOffError("torque off failed: " + "; ".join(self.failed))
