@@ -38,7 +38,7 @@ from handrig.devices.servo.models import BAUD_RATES
 from handrig.devices.servo.positions import deg_to_ticks
 from handrig.devices.servo.wire import goal_write_bytes, read_bytes
 from handrig.errors import ConfigError, DeviceError
-from handrig.realtime import helper_env, pinned_loop
+from handrig.realtime import cpus_awake_around_frames, helper_env, pinned_loop
 
 PLAIN_TIMEOUT_NOTE = "SDK default timeouts"
 TARGET_RATIO = 0.92  # the driver's target (issue 36): at least 92 % of the wire-limited rate
@@ -236,9 +236,23 @@ def wire_limit_hz(n_servos: int, baud: int) -> tuple[int, float]:
 
 
 def bench(n_servos: int, baud: int, seconds: float, *, plain: bool = True,
-          puppet: bool = False, out: Any = None) -> list[Result]:
-    """Run the comparison and print a table; returns the results (ours first)."""
+          puppet: bool = False, out: Any = None, keep_cpus_awake: bool = True) -> list[Result]:
+    """Run the comparison and print a table; returns the results (ours first).
+    ``keep_cpus_awake``: idle CPUs poll instead of halting for the whole bench (the
+    request the rig holds around each frame, :class:`handrig.realtime.CpuWake`): every
+    way, handrig's and the SDK's, gets it alike."""
     write = (out or sys.stdout).write
+    said: list[str] = []
+    with cpus_awake_around_frames(keep_cpus_awake, said.append) as wake:
+        wake.hold()
+        write("CPUs kept awake for every way (a CPU latency request of 0, as the rig holds "
+              "around each frame): " + ("yes" if wake.held else
+                                        "no" + (f" ({said[0]})" if said else "")) + "\n")
+        return _bench(n_servos, baud, seconds, plain=plain, puppet=puppet, write=write)
+
+
+def _bench(n_servos: int, baud: int, seconds: float, *, plain: bool, puppet: bool,
+           write: Any) -> list[Result]:
     rig = bench_rig(n_servos, baud)
     nbytes, limit = wire_limit_hz(n_servos, baud)
     write(
@@ -318,6 +332,9 @@ def register(sub: Any) -> None:
     p.add_argument("--no-plain", action="store_true", help="skip the plain SDK ways")
     p.add_argument("--puppet", action="store_true",
                    help="servos drive the MuJoCo puppet (default: they move kinematically)")
+    p.add_argument("--keep-cpus-awake", action=argparse.BooleanOptionalAction, default=True,
+                   help="idle CPUs poll instead of halting during the bench, as the rig "
+                        "keeps them around each frame (default: on)")
     p.set_defaults(func=run)
 
 
@@ -328,5 +345,6 @@ def run(args: argparse.Namespace) -> int:
     if not 0.1 <= args.seconds <= 600:
         raise ConfigError("out of range", key="--seconds", value=args.seconds,
                           allowed="0.1..600")
-    bench(args.servos, args.baud, args.seconds, plain=not args.no_plain, puppet=args.puppet)
+    bench(args.servos, args.baud, args.seconds, plain=not args.no_plain, puppet=args.puppet,
+          keep_cpus_awake=args.keep_cpus_awake)
     return 0

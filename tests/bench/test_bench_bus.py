@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import os
 import re
 
 import pytest
@@ -44,6 +45,10 @@ def test_bench_bus_runs_every_way_and_none_beats_the_wire(puppet: bool) -> None:
         assert r.hz <= 1.02 * limit, (r.name, r.hz, limit)
     assert ("drive the MuJoCo puppet" if puppet else "move kinematically") in text
     assert "host round trip, wire timing off" in text
+    # whether the CPUs were kept awake is said (yes where the request may be made)
+    awake = re.search(r"CPUs kept awake for every way \(.*\): (yes|no)", text)
+    assert awake is not None, text
+    assert (awake.group(1) == "yes") == os.access("/dev/cpu_dma_latency", os.W_OK), text
     # the comparison with the SDK names the wire's cap on it (its own figures, printed)
     sdk = results[-1].hz
     said = re.search(r"SDK's Fast Sync Read: ([\d.]+)x the cycles/s \(the wire caps it at "
