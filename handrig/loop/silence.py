@@ -99,6 +99,10 @@ class SilenceWatch:
         # servos whose last read asked 2+ servos and had no answer at all (a read part
         # that went quiet as a whole, not each servo's cable)
         self._quiet_together = np.zeros(n, bool)
+        # servos where the bus saw a reply stop (ServoState.stopped): their own silence;
+        # the others of a read cut short went unanswered with them. None: the bus cannot
+        # tell, and a read unanswered as a whole is what tells the read's trouble apart
+        self._stopped: np.ndarray | None = None
         self._outage = np.zeros(n, bool)  # silent because their reads went unanswered whole
         self._missed = np.zeros(n, np.int64)  # reads since each servo was last heard
         self.read_outages = 0  # times a read's servos went past warn_s together
@@ -154,6 +158,10 @@ class SilenceWatch:
             self._quiet_together[asked] = together
             missed[asked & answered] = 0
             missed[asked & ~answered] += 1
+            if state.stopped is not None:
+                self._stopped = np.asarray(state.stopped, dtype=bool) & ~answered
+            elif self._stopped is not None:  # a whole read's short way: all answered
+                self._stopped &= ~answered
         else:  # the read could not be sent: nobody was heard
             missed += 1
         since_ref = now - self._t_ref if np.isfinite(self._t_ref) else 0.0
@@ -173,7 +181,7 @@ class SilenceWatch:
             silent &= ~self._left_out
         self.waiting = bool(self._left_out.any())
         self._reads[silent] += 1
-        alone = self._outage & silent & ~self._quiet_together
+        alone = self._outage & silent & self._own()
         if alone.any():  # its read answers now, it does not: its own silence, named
             self._outage[alone] = False
             self.tier[alone] = ANSWERING
@@ -212,11 +220,20 @@ class SilenceWatch:
             self.acted_by[acting] += 1
             self._act(acting, float(silent_s[acting].max()))
 
+    def _own(self) -> np.ndarray:
+        """(n,) bool: the servos whose silence is their own. Where the bus says where
+        replies stopped, those (the others went unanswered with them or with their
+        read); else those whose last read had other servos answering."""
+        if self._stopped is not None:
+            return self._stopped
+        return ~self._quiet_together
+
     def _warn(self, warned: np.ndarray, seconds: float) -> None:
-        """Servos just past ``warn_s``: those whose reads went unanswered as a whole (not
+        """Servos just past ``warn_s``: those whose silence is not their own (their reads
+        went unanswered as a whole, or were cut short at a silent servo before them; not
         every servo) are the read's trouble, said once; the others are named."""
         everyone = len(warned) == self.n or bool((self.tier > ANSWERING).all())
-        whole = self._quiet_together[warned]
+        whole = ~self._own()[warned]
         if everyone and whole.all():
             # every servo, reads unanswered whole: the host's, the emulator's or the
             # bus's (its power, the adapter), said once with the cause; later times are
@@ -229,7 +246,7 @@ class SilenceWatch:
                 self._say(f"{what}; {why}; every servo is held until it answers (said once;"
                           " the summary counts such reads)")
             return
-        if whole.sum() >= 2 and not everyone:
+        if (whole.sum() >= 2 or (whole.any() and self._stopped is not None)) and not everyone:
             self._outage[warned[whole]] = True
             self.read_outages += 1
             own = warned[~whole]
@@ -241,10 +258,19 @@ class SilenceWatch:
                          if self.bus.emulated else
                          "the host or the USB adapter was late, or the bus's power dipped")
                 group = warned[whole]
-                self._say(f"a read of {len(group)} servos ({self._names(group)}) went "
-                          f"unanswered as a whole for {seconds:.2f} s while other reads "
-                          f"answer: {cause}, not these servos; they are held until it "
-                          "answers (said once; the summary counts such reads)")
+                stopped_at = (np.flatnonzero(self._stopped) if self._stopped is not None
+                              else np.zeros(0, np.intp))
+                if self._quiet_together[group].all() or not stopped_at.size:
+                    self._say(f"a read of {len(group)} servos ({self._names(group)}) went "
+                              f"unanswered as a whole for {seconds:.2f} s while other reads "
+                              f"answer: {cause}, not these servos; they are held until it "
+                              "answers (said once; the summary counts such reads)")
+                else:
+                    self._say(f"{self._names(group)} went unanswered for {seconds:.2f} s "
+                              f"in reads whose reply stopped at {self._names(stopped_at)} "
+                              f"before them, or when {cause}: not these servos; they are "
+                              "held until they answer (said once; the summary counts such "
+                              "reads)")
             self._say_host_late()
             return
         self._name_silent(warned, seconds, everyone)

@@ -70,6 +70,11 @@ class ServoState:
     """Whether the read went on the wire. False: the bus declined it (its request and
     replies could not both be on the wire by the deadline, or the caller came after
     the deadline); every servo is then stale with its last reading."""
+    stopped: np.ndarray | None = None
+    """(n,) bool: the servos where a reply stopped while servos before them answered, not
+    heard since (a Fast Sync Read's chain ends at a silent servo, and the servos after it
+    go unanswered with it): their own silence, where the others' is not. None: the bus
+    cannot tell (it has no chain, or did not look)."""
 
     @property
     def all_fresh(self) -> bool:

@@ -295,7 +295,9 @@ class StateReader:
         if self._housekeeping_due() and self._housekeeping_fits(deadline_s):
             self._next_temperature_read = self.stats.reads + self.temperature_every
             self._housekeeping(deadline_s)
-        return r.snapshot(now, stale, r.hw_err.copy(), asked)
+        # where a chain stopped (Fast Sync Read): the servos blamed and not heard since
+        stopped = self.suspect > 0 if self.plan.fast else None
+        return r.snapshot(now, stale, r.hw_err.copy(), asked, stopped)
 
     def housekeeping(self, deadline_s: float) -> bool:
         """The housekeeping reads in a cycle without a state read, when due and when the

@@ -111,9 +111,11 @@ class Readings:
         return stale
 
     def snapshot(self, now: float, stale: np.ndarray, hardware_errors: np.ndarray,
-                 asked: np.ndarray | None = None) -> ServoState:
+                 asked: np.ndarray | None = None,
+                 stopped: np.ndarray | None = None) -> ServoState:
         """A state of copies of the latest readings and counters, marked ``stale``
-        (``asked``: the indices a read of a part asked for)."""
+        (``asked``: the indices a read of a part asked for; ``stopped``: see
+        :attr:`ServoState.stopped`)."""
         mask = None
         if asked is not None:
             mask = np.zeros(self.n, bool)
@@ -130,6 +132,7 @@ class Readings:
             timestamp_s=now,
             stats=self._totals(),
             asked=mask,
+            stopped=stopped,
         )
 
     def unread(self, now: float) -> ServoState:

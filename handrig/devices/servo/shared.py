@@ -212,7 +212,8 @@ class BusPart(ServoBus):
         return ServoState(
             st.positions_deg[ix], st.velocities_dps[ix], st.currents_ma[ix],
             st.temperatures_c[ix], st.status_errors[ix], st.hardware_errors[ix],
-            st.stale[ix], st.age_s[ix], st.timestamp_s, stats, asked, st.sent)
+            st.stale[ix], st.age_s[ix], st.timestamp_s, stats, asked, st.sent,
+            None if st.stopped is None else st.stopped[ix])
 
     # -- hooks ------------------------------------------------------------------------------
     @property
