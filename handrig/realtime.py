@@ -155,6 +155,7 @@ def realtime_priority(
 CPU_LATENCY_DEVICE = "/dev/cpu_dma_latency"
 _AWAKE = struct.pack("i", 0)  # no wake-up latency allowed: idle CPUs poll
 _ASLEEP = struct.pack("i", 2_000_000_000)  # the kernel's default: idle CPUs may halt
+_REFUSED: set[str] = set()  # devices this process was refused (said once)
 
 
 class CpuWake:
@@ -166,7 +167,7 @@ class CpuWake:
     or USB write of the frame and of its Sync Write each wake one, and that time is
     felt. Linux's CPU latency request (PM QoS, :data:`CPU_LATENCY_DEVICE`) of 0 makes
     every idle CPU poll instead, and the kernel wakes the halted ones when it is made;
-    held from the warm-up before each expected frame until the frame's cycle is done
+    held from the warm-up before each expected frame until its Sync Write is out
     (``[loop] keep_cpus_awake``), the CPUs poll for that share of the time only. The
     polling is the kernel's idle loop, not this process's CPU, and gives way to any
     work at once; it costs power (``python -m bench felt`` prints the share of time the
@@ -217,7 +218,8 @@ def cpus_awake_around_frames(
     try:
         fd = os.open(device, os.O_WRONLY | os.O_CLOEXEC)
     except OSError as exc:
-        if log is not None and os.path.exists(device):
+        if log is not None and os.path.exists(device) and device not in _REFUSED:
+            _REFUSED.add(device)  # said once in a process (each hand asks)
             log(f"cannot keep the CPUs awake around frames ({device}: "
                 f"{exc.strerror or exc}): each frame may wait for a CPU to wake "
                 "(see docs/hardware.md, or set [loop] keep_cpus_awake = false)")

@@ -185,10 +185,11 @@ class _Session:
             with contextlib.ExitStack() as stack:
                 self._open_buses(stack)
                 error = self._devices_open(stack, specs)
-        except HandrigError as exc:
-            error = error or exc
+        except HandrigError as exc:  # a later failure outranks a lost acknowledgement
+            error = exc if error is None or isinstance(error, TorqueOffError) else error
         except OSError as exc:  # a device call the driver did not wrap: still a summary
-            error = error or DeviceError(f"{type(exc).__name__}: {exc}")
+            if error is None or isinstance(error, TorqueOffError):
+                error = DeviceError(f"{type(exc).__name__}: {exc}")
         return self._result(error)
 
     def _check_gloves(self) -> tuple[str, ...]:
@@ -411,11 +412,16 @@ class _Session:
         try:
             with (pinned_loop(loop.pin_cpu, log),
                   realtime_priority(loop.realtime_priority, log),
-                  cpus_awake_around_frames(loop.keep_cpus_awake and loop.mode == "glove",
-                                           log) as wake):
+                  cpus_awake_around_frames(loop.keep_cpus_awake and loop.mode == "glove"
+                                           and loop.warm_up_us > 0, log) as wake):
                 rig.keep_awake(wake)
-                rig.run(frames=opts.frames, duration_s=opts.duration_s,
-                        done_reason=opts.done_reason)
+                try:
+                    rig.run(frames=opts.frames, duration_s=opts.duration_s,
+                            done_reason=opts.done_reason)
+                finally:
+                    if wake.error:
+                        log(f"the request to keep the CPUs awake failed after {wake.holds} "
+                            f"frames ({wake.error}): not kept awake from then on")
             self.ease_s[i] = 0.0 if rig.machine.stop_now else rig.relax_time_s
         except BaseException as exc:  # handed to the session; the other hands stop at once
             self.errors[i] = exc

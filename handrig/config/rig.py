@@ -148,9 +148,9 @@ class LoopConfig:
     # path once on scratch data, so that its code is in the CPU's caches when the
     # frame comes (0: no warm-up); see GloveTrigger
     warm_up_us: float = 150.0
-    # mode "glove": from the warm-up until the frame's cycle is done, idle CPUs poll
-    # instead of halting (a CPU latency request; needs write access to
-    # /dev/cpu_dma_latency, see docs/hardware.md); see handrig.realtime.CpuWake
+    # mode "glove", with warm_up_us > 0: from the warm-up until the frame's Sync Write is
+    # out, idle CPUs poll instead of halting (a CPU latency request; needs write access
+    # to /dev/cpu_dma_latency, see docs/hardware.md); see handrig.realtime.CpuWake
     keep_cpus_awake: bool = True
     glove_timeout_s: float = 0.25  # silence or garbage longer than this: ease to relaxed
     relax_time_s: float = 1.0  # how long easing to the relaxed pose takes

@@ -103,6 +103,9 @@ class SilenceWatch:
         # the others of a read cut short went unanswered with them. None: the bus cannot
         # tell, and a read unanswered as a whole is what tells the read's trouble apart
         self._stopped: np.ndarray | None = None
+        # servos a read left unanswered while others in it answered and the bus saw the
+        # reply stop before them (cut off with a silent servo): not their own silence
+        self._cut = np.zeros(n, bool)
         self._outage = np.zeros(n, bool)  # silent because their reads went unanswered whole
         self._missed = np.zeros(n, np.int64)  # reads since each servo was last heard
         self.read_outages = 0  # times a read's servos went past warn_s together
@@ -159,9 +162,12 @@ class SilenceWatch:
             missed[asked & answered] = 0
             missed[asked & ~answered] += 1
             if state.stopped is not None:
-                self._stopped = np.asarray(state.stopped, dtype=bool) & ~answered
-            elif self._stopped is not None:  # a whole read's short way: all answered
-                self._stopped &= ~answered
+                stopped = np.asarray(state.stopped, dtype=bool) & ~answered
+                self._stopped = stopped
+                self._cut[asked] = (bool(answered.any()) & ~answered & ~stopped)[asked]
+            else:  # the bus cannot tell (a Sync Read, a whole read's short way)
+                self._stopped = None
+                self._cut[asked] = False
         else:  # the read could not be sent: nobody was heard
             missed += 1
         since_ref = now - self._t_ref if np.isfinite(self._t_ref) else 0.0
@@ -221,12 +227,13 @@ class SilenceWatch:
             self._act(acting, float(silent_s[acting].max()))
 
     def _own(self) -> np.ndarray:
-        """(n,) bool: the servos whose silence is their own. Where the bus says where
-        replies stopped, those (the others went unanswered with them or with their
-        read); else those whose last read had other servos answering."""
+        """(n,) bool: the servos whose silence is their own: those whose last read had
+        other servos answering (or asked them alone), less those the bus saw a reply cut
+        off before; and those the bus saw a reply stop at, whatever their last read."""
+        own = ~(self._quiet_together | self._cut)
         if self._stopped is not None:
-            return self._stopped
-        return ~self._quiet_together
+            own |= self._stopped
+        return own
 
     def _warn(self, warned: np.ndarray, seconds: float) -> None:
         """Servos just past ``warn_s``: those whose silence is not their own (their reads
@@ -246,7 +253,7 @@ class SilenceWatch:
                 self._say(f"{what}; {why}; every servo is held until it answers (said once;"
                           " the summary counts such reads)")
             return
-        if (whole.sum() >= 2 or (whole.any() and self._stopped is not None)) and not everyone:
+        if (whole.sum() >= 2 or self._cut[warned].any()) and not everyone:
             self._outage[warned[whole]] = True
             self.read_outages += 1
             own = warned[~whole]

@@ -460,7 +460,7 @@ class GloveTrigger(Trigger):
         return n
 
     def keep_awake(self, wake: CpuWake) -> None:
-        self.warm_up.keep_awake = wake  # held from the warm-up until the next wait
+        self.warm_up.keep_awake = wake  # held from the warm-up until the write is out
 
     def wait(self, tick: Tick, *, settle: bool = True) -> Tick:
         self.warm_up.done()

@@ -40,7 +40,7 @@ class WarmUp:
         self._rehearse: Callable[[], None] | None = None
         self._done_for = float("nan")  # the expected frame the last rehearsal was for
         self.wake_late_s = 0.0  # how late a wake-up asked for by :meth:`at` comes (learnt)
-        self.keep_awake = CpuWake()  # held from each rehearsal until the frame's cycle is done
+        self.keep_awake = CpuWake()  # held from each rehearsal until the frame's write is out
 
     def rehearse_with(self, rehearse: Callable[[], None]) -> None:
         """Run ``rehearse`` before each expected frame; it must change nothing the loop
@@ -78,5 +78,6 @@ class WarmUp:
             self.count += 1
 
     def done(self) -> None:
-        """The frame's cycle is over (the next wait begins): the CPUs may halt again."""
+        """The frame's Sync Write is out (the trigger settles its tick, or the next wait
+        begins): the CPUs may halt again."""
         self.keep_awake.release()

@@ -74,7 +74,8 @@ class ServoState:
     """(n,) bool: the servos where a reply stopped while servos before them answered, not
     heard since (a Fast Sync Read's chain ends at a silent servo, and the servos after it
     go unanswered with it): their own silence, where the others' is not. None: the bus
-    cannot tell (it has no chain, or did not look)."""
+    cannot tell (it has no chain, it fell back to Sync Read, or a whole read every servo
+    answered took the short way)."""
 
     @property
     def all_fresh(self) -> bool:

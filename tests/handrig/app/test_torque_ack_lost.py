@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from handrig.app.result import LiveResult, print_result
 from handrig.clock import FakeClock
 from handrig.devices.servo.bus import ServoBus
-from handrig.errors import TorqueOffError
+from handrig.errors import DeviceError, TorqueOffError
 from tests.handrig.app.test_second_vendor_session import ToyVendorBus, _session
 
 LOST = "torque off failed: servo 7 (riIndexMCPy): no status after 3 attempts"
@@ -62,3 +62,20 @@ def test_lost_acknowledgements_the_read_back_cannot_confirm_are_an_error() -> No
     assert summary["torque_off"] is None and "torque_off_note" not in summary
     assert print_result(LiveResult(summary, [], (), error=TorqueOffError(LOST),
                                    started=True), as_json=True) == 1
+
+
+class FailsMidRunBus(AcksLostBus):
+    """The run ends on a device error of its own; then the torque-off acknowledgements
+    are lost as well."""
+
+    def write_goals_deg(self, goals_deg):  # type: ignore[no-untyped-def]
+        if len(self.goals) >= 100:
+            raise DeviceError("servo port went away")
+        return super().write_goals_deg(goals_deg)
+
+
+def test_the_runs_own_error_is_not_hidden_by_lost_acknowledgements() -> None:
+    summary, _, _, started = _session(FailsMidRunBus, FakeClock(10.0), script=False)
+    assert started
+    assert "servo port went away" in summary["error"], summary["error"]
+    assert "torque off failed" not in summary["error"]

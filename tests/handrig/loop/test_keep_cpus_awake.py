@@ -94,6 +94,10 @@ def test_without_the_device_or_switched_off_the_rig_runs_as_before(tmp_path: Pat
         assert wake.fd is None
     assert len(said) == 1 and "cannot keep the CPUs awake" in said[0], said
     assert "keep_cpus_awake = false" in said[0]
+    # said once in a process: a second hand's loop asks too
+    with cpus_awake_around_frames(True, said.append, device=str(tmp_path)) as wake:
+        assert wake.fd is None
+    assert len(said) == 1, said
 
 
 def test_the_device_is_held_for_the_block_and_closed_after_it(tmp_path: Path) -> None:

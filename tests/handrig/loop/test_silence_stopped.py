@@ -37,7 +37,7 @@ def _watch() -> tuple[DynamixelBus, SilenceWatch]:
 
 def _feed(watch: SilenceWatch, bus: DynamixelBus, reads: int, t0: float,
           unanswered: set[int], stopped: set[int], heard: np.ndarray,
-          tell_stopped: bool = True) -> list[str]:
+          tell_stopped: bool = True, parts: tuple[np.ndarray, ...] = PART) -> list[str]:
     """``reads`` reads from ``t0``: the servos in ``unanswered`` give nothing, those in
     ``stopped`` are where the bus saw the reply stop; ``heard`` (last reading times) is
     kept up to date."""
@@ -46,7 +46,7 @@ def _feed(watch: SilenceWatch, bus: DynamixelBus, reads: int, t0: float,
     for k in range(reads):
         now = t0 + k * STEP_S
         asked = np.zeros(n, bool)
-        asked[PART[k % 2]] = True
+        asked[parts[k % len(parts)]] = True
         answered = asked.copy()
         answered[list(unanswered)] = False
         heard[answered] = now
@@ -118,3 +118,27 @@ def test_the_driver_marks_where_a_fast_sync_read_reply_stopped() -> None:
     for _ in range(3):
         state = bus.read_state(part=(0, 2))
     assert state.answered[[0, 2, 4]].all() and not state.stopped.any()
+
+
+def test_after_a_fall_back_to_sync_read_a_silent_servo_is_named() -> None:
+    """Fast Sync Read said where replies stopped, then the bus fell back to Sync Read
+    (no chain: it cannot say): a servo that goes silent then is named, as before."""
+    bus, watch = _watch()
+    heard = np.full(bus.n_servos, 100.0)
+    _feed(watch, bus, 10, 100.0, set(), set(), heard)
+    _feed(watch, bus, 4, 100.2, {2, 4}, {2}, heard)  # a cut chain, told
+    _feed(watch, bus, 6, 100.28, set(), set(), heard)  # all back
+    said = _feed(watch, bus, 16, 100.4, {3}, set(), heard, tell_stopped=False)
+    assert _named_silent(said) == {"servo 4 (riThumbMCPz)"}, said
+    assert "the other servos answer: check its cable" in " | ".join(said)
+
+
+def test_a_servo_read_alone_that_gives_nothing_is_its_own_silence() -> None:
+    """Parts of one servo (a small rig): a read that asks one servo and gets nothing has
+    nobody to cut off and nobody else to blame: the servo is named."""
+    bus, watch = _watch()
+    heard = np.full(bus.n_servos, 100.0)
+    ones = tuple(np.array([i]) for i in range(bus.n_servos))
+    _feed(watch, bus, 12, 100.0, set(), set(), heard, parts=ones)
+    said = _feed(watch, bus, 60, 100.24, {2}, set(), heard, parts=ones)
+    assert _named_silent(said) == {"servo 3 (riThumbCMCz)"}, said
