@@ -241,12 +241,20 @@ def test_servo_gone_at_runtime_is_stale_then_a_fault(sim: SimBus) -> None:
         first = b.read_state()
         assert first.all_fresh
         sim.servo(3).silent_until = math.inf  # unplugged
+        reads = 0
         for _ in range(4):
-            state = b.read_state()
+            # the servos after it in the chain come in the read's retry; on a loaded
+            # machine that retry's reply can come after its deadline (they are stale
+            # then, and said so): such a read is taken once more, up to 5 times
+            for _ in range(5):
+                state = b.read_state()
+                reads += 1
+                if not np.delete(state.stale, 2).any():
+                    break
             assert state.stale.tolist() == [False, False, True, False, False, False]
             assert state.positions_deg[2] == first.positions_deg[2]  # the last good value
             assert state.age_s[2] > 0
-        assert b.stats.stale_readings[2] == 4
+        assert b.stats.stale_readings[2] == reads
         with pytest.raises(DeviceTimeoutError, match=r"no valid reply from servo 3 "
                            r"\(riThumbCMCz\) for .* check its cable, power and ID"):
             for _ in range(100):
