@@ -96,7 +96,7 @@ COMPUTE_ONLY = (
     "handrig/loop/test_stats.py", "handrig/loop/test_rings.py", "handrig/loop/test_modes.py",
     "handrig/loop/test_easing.py", "handrig/loop/test_warm_up.py",
     "handrig/loop/test_warm_up_wake.py", "handrig/loop/test_keep_cpus_awake.py",
-    "handrig/loop/test_silence_stopped.py",
+    "handrig/loop/test_silence_stopped.py", "handrig/devices/servo/test_host_timeouts.py",
     "handrig/test_hand.py", "handrig/devices/test_glove_status.py",
     "handrig/outputs/test_glove_take.py", "handrig/app/test_robotrig.py", "sim/test_wrist_load.py",
     "handrig/outputs/test_take_frames_beyond_header.py", "handrig/test_error_values_shown.py",

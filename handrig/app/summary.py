@@ -22,6 +22,7 @@ from handrig.pose.pipeline import PosePipeline
 
 FAULT_WORDS: dict[str, str] = {
     "timeouts": "read timeouts",
+    "host_timeouts": "of them the host's (this process woke 1 ms or more after the deadline)",
     "retries": "read retries",
     "crc_errors": "replies with a bad CRC",
     "malformed": "malformed replies",

@@ -100,6 +100,7 @@ class BusStats:
     reads: int = 0  # present-state reads attempted
     retries: int = 0  # extra read attempts within a cycle
     timeouts: int = 0  # replies (or parts of replies) missing at the deadline
+    host_timeouts: int = 0  # of those, the host's: this process woke HOST_STALL_S after it
     crc_errors: int = 0  # replies or per-servo blocks failing their CRC
     malformed: int = 0  # replies with a wrong id, length or header
     status_errors: int = 0  # readings refused with an error number (range, access, ...)
@@ -153,7 +154,8 @@ class BusStats:
         """One line for logs."""
         return (
             f"writes {self.writes}, reads {self.reads}, retries {self.retries}, "
-            f"timeouts {self.timeouts}, crc errors {self.crc_errors}, malformed "
+            f"timeouts {self.timeouts} (the host's {self.host_timeouts}), crc errors "
+            f"{self.crc_errors}, malformed "
             f"{self.malformed}, status errors {self.status_errors}, clamps {self.clamps}, "
             f"fallbacks {self.fallbacks}, watchdog trips {self.watchdog_trips}, late replies "
             f"{self.late_replies}, watchdog gaps {self.watchdog_gaps}, skipped reads "

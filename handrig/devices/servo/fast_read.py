@@ -143,8 +143,7 @@ class FastSyncRead:
             spin_until = arrival + REPLY_POLL_AFTER_S
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until, answer=True)
         if len(head) < 7:
-            self.stats.timeouts += 1
-            self.link.failed()
+            self.link.timed_out(deadline)
             return None
         if head[:4] != codec.HEADER:
             self.stats.malformed += 1

@@ -33,6 +33,7 @@ COMMAND_TIMEOUT_S = 0.05  # a single command's reply: RDT 0.5 ms + a 16 ms laten
 # Commissioning sends ~6 commands per servo: with 20 servos and one reply in five
 # lost, 3 attempts would fail a connect more often than not; 8 make it rare.
 COMMAND_ATTEMPTS = 8
+HOST_STALL_S = 0.001  # a reply waited for ends this late after its deadline: the host held us
 
 
 class Link:
@@ -102,6 +103,16 @@ class Link:
         """The reply being read failed now."""
         self.budget.failed(self.clock.now())
 
+    def timed_out(self, deadline: float) -> None:
+        """No (whole) reply by ``deadline``: a timeout, and the host's when this process
+        only woke ``HOST_STALL_S`` or more after the deadline (the host held it, and the
+        reply's writer likely with it: not the bus). The line is marked failed."""
+        now = self.clock.now()
+        self.stats.timeouts += 1
+        if now - deadline >= HOST_STALL_S:
+            self.stats.host_timeouts += 1
+        self.budget.failed(now)
+
     def sync_write(self, reg: Reg, values: list[int]) -> None:
         """One broadcast Sync Write of ``reg`` (one value per servo, rig order)."""
         params = u16(reg.address) + u16(reg.size) + b"".join(
@@ -117,8 +128,7 @@ class Link:
         while True:
             raw = self.transport.read_packet(deadline, answer=answer)
             if raw is None:
-                self.stats.timeouts += 1
-                self.failed()
+                self.timed_out(deadline)
                 return None
             try:
                 return parse_status(raw)

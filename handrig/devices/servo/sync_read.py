@@ -88,8 +88,7 @@ class RegisterSweep:
         link.quiet_line(deadline)
         out = self._fast(reg, deadline) if self.plan.fast else self._sync(reg, deadline)
         if None in out:
-            self.stats.timeouts += 1
-            link.failed()
+            link.timed_out(deadline)
         return out
 
     def _fast(self, reg: Reg, deadline: float) -> list[int | None]:
