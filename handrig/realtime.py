@@ -153,6 +153,7 @@ def realtime_priority(
 
 
 CPU_LATENCY_DEVICE = "/dev/cpu_dma_latency"
+CPU_LATENCY_ENV = "HANDRIG_CPU_LATENCY_DEVICE"  # another device path; empty: never (tests)
 _AWAKE = struct.pack("i", 0)  # no wake-up latency allowed: idle CPUs poll
 _ASLEEP = struct.pack("i", 2_000_000_000)  # the kernel's default: idle CPUs may halt
 _REFUSED: set[str] = set()  # devices this process was refused (said once)
@@ -208,11 +209,15 @@ class CpuWake:
 @contextlib.contextmanager
 def cpus_awake_around_frames(
     enabled: bool = True, log: Callable[[str], None] | None = None,
-    device: str = CPU_LATENCY_DEVICE,
+    device: str | None = None,
 ) -> Iterator[CpuWake]:
-    """A :class:`CpuWake` on ``device`` for the block (closed after it); one that does
-    nothing when off, or when the device is missing or not writable (said in ``log``)."""
-    if not enabled:
+    """A :class:`CpuWake` on ``device`` (default: ``HANDRIG_CPU_LATENCY_DEVICE`` if set,
+    else :data:`CPU_LATENCY_DEVICE`) for the block (closed after it); one that does
+    nothing when off or the path is empty, or when the device is missing or not
+    writable (said in ``log``)."""
+    if device is None:
+        device = os.environ.get(CPU_LATENCY_ENV, CPU_LATENCY_DEVICE)
+    if not enabled or not device:
         yield CpuWake()
         return
     try:

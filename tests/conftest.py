@@ -44,6 +44,9 @@ def pytest_configure(config: pytest.Config) -> None:
     os.environ["XDG_DATA_HOME"] = os.path.join(home, ".local", "share")
     os.environ["XDG_CACHE_HOME"] = os.path.join(home, ".cache")
     os.environ["XDG_STATE_HOME"] = os.path.join(home, ".local", "state")
+    # no host-wide CPU latency request from the tests' runs (CI runs as root): the
+    # request's writes are tested on a pipe (tests/handrig/loop/test_keep_cpus_awake.py)
+    os.environ["HANDRIG_CPU_LATENCY_DEVICE"] = ""
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
