@@ -187,10 +187,11 @@ class SilenceWatch:
             silent &= ~self._left_out
         self.waiting = bool(self._left_out.any())
         self._reads[silent] += 1
-        alone = self._outage & silent & self._own()
-        if alone.any():  # its read answers now, it does not: its own silence, named
-            self._outage[alone] = False
-            self.tier[alone] = ANSWERING
+        if self._outage.any():  # (the usual read has none: no arrays built for it)
+            alone = self._outage & silent & self._own()
+            if alone.any():  # its read answers now, it does not: its own silence, named
+                self._outage[alone] = False
+                self.tier[alone] = ANSWERING
         back = np.flatnonzero((self.tier > ANSWERING) & ~silent)
         if back.size:
             self._recover(back)
