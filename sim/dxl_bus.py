@@ -260,6 +260,12 @@ class SimBus(Dispatcher):
         return self.line.baud()
 
     @property
+    def uptime_s(self) -> float:
+        """Seconds since :meth:`start` on the bus's clock: where fault windows (``mute``,
+        ``overload``) are counted from."""
+        return self.clock.now() - self._started_at
+
+    @property
     def client_open(self) -> bool:
         """Whether a client holds the port now."""
         return self.line.client_open

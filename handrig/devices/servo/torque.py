@@ -26,7 +26,7 @@ from handrig.devices.servo.link import Link
 from handrig.devices.servo.positions import TICKS_PER_DEG
 from handrig.devices.servo.registers import VELOCITY_DPS_PER_UNIT, Reg
 from handrig.devices.servo.roster import Roster
-from handrig.errors import DeviceError, SafetyStop, TorqueOffError
+from handrig.errors import DeviceError, DeviceTimeoutError, SafetyStop, TorqueOffError
 
 log = logging.getLogger("handrig.devices.servo")
 
@@ -35,6 +35,8 @@ MAX_APPROACH_DEG = 20.0  # further out than this at torque-on: refuse (likely a 
 APPROACH_DPS = 30.0  # joint speed that brings a servo resting outside its limits back in
 CONFIRM_ATTEMPTS = 3  # torque-off: attempts per servo to confirm it
 CONFIRM_BUDGET_S = 1.0  # torque-off: time for all the confirmations
+CONFIRM_PASSES = 3  # torque-off: rounds over the servos that have not answered yet (once
+#                     another has: a stall of the bus or the host passes, a dead bus does not)
 # Caught inside a torque context: the loop's graceful stop (on_signal), else an exception.
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT)
 
@@ -148,7 +150,11 @@ class TorqueControl:
         The broadcast reaches every servo that hears the bus; each is then asked to
         confirm, ``CONFIRM_ATTEMPTS`` times at most and within ``CONFIRM_BUDGET_S`` in
         all (a bus that stopped answering must not hold the exit for 8 attempts of
-        every servo): the servos left are listed as not confirmed. After the port
+        every servo): the servos left are listed as not confirmed. A servo that did
+        not answer is asked again after the others, up to ``CONFIRM_PASSES`` rounds in
+        all, once some servo has answered (a stall of the bus, or of an emulator on a
+        busy host, passes; a bus where nobody answers gets no second round); one that
+        answered with an error is not asked again. After the port
         stopped draining (``transport.wedged``) only the broadcast is tried: nothing
         could be read back, and every servo given torque is named as not confirmed."""
         r = self.roster
@@ -172,26 +178,41 @@ class TorqueControl:
             return [f"{every}: not confirmed: servo port {r.port} stopped draining (the "
                     "torque-off broadcast is queued behind the bytes it holds)"]
         end = self.clock.now() + CONFIRM_BUDGET_S
-        for i in range(r.n):
-            if r.absent[i]:  # left out at start-up: never given torque (the broadcast
-                continue     # above reaches it anyway if it came back)
-            if self.clock.now() >= end:
-                rest = ", ".join(r.describe(j) for j in given if j >= i)
-                failed.append(f"{rest}: not confirmed (the {CONFIRM_BUDGET_S:g} s for "
-                              "confirmations went on the servos before)")
-                break
-            try:
-                self.link.write_register(i, Reg.TORQUE_ENABLE, 0, attempts=CONFIRM_ATTEMPTS)
-                self.link.write_register(i, Reg.BUS_WATCHDOG, 0, attempts=CONFIRM_ATTEMPTS)
-            except DeviceError as exc:
-                t = self.link.transport
-                if t.wedged or not t.is_open:  # the port failed: nobody else can be asked
-                    rest = ", ".join(r.describe(j) for j in given if j >= i)
-                    failed.append(f"{rest}: not confirmed: {exc}")
+        pending, alive = list(given), False
+        for _ in range(CONFIRM_PASSES):  # a servo that did not answer is asked again
+            unanswered: list[tuple[int, str]] = []   # after the others, while time remains
+            for k, i in enumerate(pending):
+                if self.clock.now() >= end:
+                    rest = pending[k:] + [j for j, _ in unanswered]
+                    failed.append(f"{', '.join(r.describe(j) for j in sorted(rest))}: not "
+                                  f"confirmed (the {CONFIRM_BUDGET_S:g} s for "
+                                  "confirmations went on the servos before)")
+                    unanswered = []
                     break
-                text = str(exc)
-                failed.append(text if text.startswith(r.describe(i)) else
-                              f"{r.describe(i)}: {text}")
+                try:
+                    self.link.write_register(i, Reg.TORQUE_ENABLE, 0,
+                                             attempts=CONFIRM_ATTEMPTS)
+                    self.link.write_register(i, Reg.BUS_WATCHDOG, 0,
+                                             attempts=CONFIRM_ATTEMPTS)
+                except DeviceError as exc:
+                    if t.wedged or not t.is_open:  # the port failed: nobody else can be asked
+                        rest = pending[k:] + [j for j, _ in unanswered]
+                        failed.append(f"{', '.join(r.describe(j) for j in sorted(rest))}: "
+                                      f"not confirmed: {exc}")
+                        unanswered = []
+                        break
+                    if isinstance(exc, DeviceTimeoutError):
+                        unanswered.append((i, str(exc)))
+                        continue
+                    text = str(exc)  # answered with an error: asking again won't help
+                    failed.append(text if text.startswith(r.describe(i)) else
+                                  f"{r.describe(i)}: {text}")
+            alive = alive or len(unanswered) < len(pending)  # someone answered
+            pending = [i for i, _ in unanswered]
+            if not pending or not alive:
+                break
+        failed += [text if text.startswith(r.describe(i)) else f"{r.describe(i)}: {text}"
+                   for i, text in unanswered]
         self.faults.note_torque(False)
         return failed
 
