@@ -8,7 +8,9 @@ import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
@@ -58,18 +60,33 @@ def test_the_model_ships_its_meshes_licence_and_notice() -> None:
     assert m.nmesh == len(files) and m.nu == 17
 
 
+def _answered(call: Callable[[], tuple[Any, ...]], at: int) -> tuple[Any, ...]:
+    """An SDK call's result, asked again (up to 5 times) while its communication result
+    (item ``at``) is not a success: the SDK waits a latency timer's worth for a reply,
+    and this file's tests run at nice 10 beside others, where the in-process emulator's
+    reply can come later than that. What the servos answer is checked, not how fast."""
+    for _ in range(4):
+        out = call()
+        if out[at] == COMM_SUCCESS:
+            return out
+    return call()
+
+
 def test_a_plain_sdk_client_sees_the_orca_servos() -> None:
     with SimBus.from_rig("orca") as bus:
         port = PortHandler(bus.port_path)
         assert port.openPort() and port.setBaudRate(1_000_000)
         ph = PacketHandler(2.0)
         try:
-            found, result = ph.broadcastPing(port)
+            found, result = _answered(lambda: ph.broadcastPing(port), 1)
             assert result == COMM_SUCCESS and sorted(found) == list(range(1, 18))
             assert found[1][0] == 1080 and {found[i][0] for i in range(2, 18)} == {1220}
-            err = ph.write2ByteTxRx(port, 1, Reg.CURRENT_LIMIT, 300)[1]
+            result, err = _answered(
+                lambda: ph.write2ByteTxRx(port, 1, Reg.CURRENT_LIMIT, 300), 0)
+            assert result == COMM_SUCCESS
             assert err & 0x7F == ErrorCode.ACCESS  # the XC430 has no Current Limit
-            assert ph.write2ByteTxRx(port, 2, Reg.CURRENT_LIMIT, 300) == (COMM_SUCCESS, 0)
+            assert _answered(lambda: ph.write2ByteTxRx(port, 2, Reg.CURRENT_LIMIT, 300),
+                             0) == (COMM_SUCCESS, 0)
         finally:
             port.closePort()
         # at 57600 nobody answers: the hand is at 1 Mbps
