@@ -86,6 +86,70 @@ def timer_slack_ns(new_ns: int | None = None) -> int | None:
         return None
 
 
+# sched_setattr / sched_getattr by machine (Linux): a normal thread's slice is set there
+_SCHED_ATTR_SYSCALLS = {"x86_64": (314, 315), "aarch64": (274, 275)}
+SHORT_SLICE_NS = 100_000
+"""The slice a normal (not SCHED_FIFO) timing thread asks for: the shortest Linux grants
+(0.1 ms; the default is 0.7-3 ms). Since Linux 6.12 the fair scheduler (EEVDF) gives a
+woken thread with a short slice an early deadline, so it runs at once rather than after
+a busy thread's slice on its CPU: without root, a loop or an emulator beside a process
+that keeps a core busy woke up to 3.7 ms late, with the short slice 0.37 ms at most
+(``docs/measurements.md``). Older kernels take the request and ignore it."""
+
+
+def _sched_attr() -> type:
+    import ctypes
+
+    class SchedAttr(ctypes.Structure):  # struct sched_attr, version 1 (56 bytes)
+        _fields_ = [("size", ctypes.c_uint32), ("sched_policy", ctypes.c_uint32),
+                    ("sched_flags", ctypes.c_uint64), ("sched_nice", ctypes.c_int32),
+                    ("sched_priority", ctypes.c_uint32), ("sched_runtime", ctypes.c_uint64),
+                    ("sched_deadline", ctypes.c_uint64), ("sched_period", ctypes.c_uint64),
+                    ("sched_util_min", ctypes.c_uint32), ("sched_util_max", ctypes.c_uint32)]
+    return SchedAttr
+
+
+def fair_slice_ns(new_ns: int | None = None) -> int | None:
+    """The calling thread's slice under the fair scheduler (``sched_runtime`` of
+    ``sched_getattr``, ns), set to ``new_ns`` if given (its nice and policy kept);
+    returns the value before, or None where there is no such thing (not Linux, an
+    unknown machine, refused). A SCHED_FIFO thread ignores it."""
+    import platform
+
+    calls = _SCHED_ATTR_SYSCALLS.get(platform.machine())
+    if calls is None:
+        return None
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        attr = _sched_attr()()
+        if libc.syscall(calls[1], 0, ctypes.byref(attr), ctypes.sizeof(attr), 0) != 0:
+            return None
+        before = int(attr.sched_runtime)
+        if new_ns is not None and new_ns != before:
+            attr.size = ctypes.sizeof(attr)
+            attr.sched_flags = 0
+            attr.sched_runtime = int(new_ns)
+            if libc.syscall(calls[0], 0, ctypes.byref(attr), 0) != 0:
+                return None
+        return before
+    except (OSError, AttributeError):
+        return None
+
+
+@contextlib.contextmanager
+def short_slice() -> Iterator[bool]:
+    """Run the block with the calling thread's fair-scheduler slice at
+    :data:`SHORT_SLICE_NS` (restored after); yields whether the kernel took it."""
+    before = fair_slice_ns(SHORT_SLICE_NS)
+    try:
+        yield before is not None and fair_slice_ns() == SHORT_SLICE_NS
+    finally:
+        if before is not None:
+            fair_slice_ns(before)
+
+
 @contextlib.contextmanager
 def pinned_loop(
     enabled: bool = True, log: Callable[[str], None] | None = None
@@ -131,7 +195,9 @@ def _pinned(enabled: bool, log: Callable[[str], None] | None) -> Iterator[int | 
 def realtime_priority(
     priority: int = 20, log: Callable[[str], None] | None = None
 ) -> Iterator[bool]:
-    """Run the block at SCHED_FIFO ``priority`` (1..99); yields whether it worked."""
+    """Run the block at SCHED_FIFO ``priority`` (1..99); yields whether it worked.
+    Where it is refused (no root, no CAP_SYS_NICE, no rtprio limit) the block runs
+    with a short fair-scheduler slice instead (:func:`short_slice`)."""
     if not hasattr(os, "sched_setscheduler") or priority <= 0:
         yield False
         return
@@ -140,10 +206,12 @@ def realtime_priority(
         old_param = os.sched_getparam(0)
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (PermissionError, OSError) as exc:
-        if log is not None:
-            log(f"realtime priority unavailable ({exc.strerror or exc}): "
-                "the loop runs at normal priority")
-        yield False
+        with short_slice() as short:
+            if log is not None:
+                log(f"realtime priority unavailable ({exc.strerror or exc}): the loop runs "
+                    "at normal priority" + (f" with a {SHORT_SLICE_NS / 1e6:g} ms slice (woken, "
+                                            "it runs ahead of busy threads)" if short else ""))
+            yield False
         return
     try:
         yield True

@@ -37,6 +37,7 @@ from handrig.clock import Clock, MonotonicClock
 from handrig.config.rig import RigConfig
 from handrig.errors import ConfigError
 from handrig.pose.robot_rig import load_rig
+from handrig.realtime import SHORT_SLICE_NS, fair_slice_ns
 from sim.dxl_dispatch import BusStats, Dispatcher, _Reply
 from sim.dxl_fast import parse_frame
 from sim.dxl_faults import FaultSpec
@@ -286,6 +287,8 @@ class SimBus(Dispatcher):
         tighten_timer_slack()
         if self.realtime:
             self.realtime_granted = try_realtime()
+            if not self.realtime_granted:  # woken by a packet, run ahead of busy threads
+                fair_slice_ns(SHORT_SLICE_NS)  # (the physics' among them; best effort)
         buf = bytearray()
         last_rx = 0.0
         line = self.line
