@@ -138,6 +138,44 @@ def fair_slice_ns(new_ns: int | None = None) -> int | None:
         return None
 
 
+PSI_CPU = "/proc/pressure/cpu"
+
+
+class CpuPressure:
+    """The host's CPU pressure (Linux PSI): :meth:`total_us` is how long, in all, some
+    task has waited for a CPU (the ``some`` line's ``total``, microseconds). Read with
+    one ``pread`` on a kept descriptor (about 1 us). Where there is no PSI (not Linux,
+    ``psi=0``) every reading is None."""
+
+    def __init__(self, path: str = PSI_CPU) -> None:
+        try:
+            self._fd: int | None = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+        except OSError:
+            self._fd = None
+
+    def total_us(self) -> int | None:
+        if self._fd is None:
+            return None
+        try:
+            text = os.pread(self._fd, 256, 0)
+            at = text.index(b"total=") + 6
+            return int(text[at:text.index(b"\n", at)])
+        except (OSError, ValueError):
+            return None
+
+
+
+_HOST_PRESSURE: list[CpuPressure] = []
+
+
+def host_cpu_pressure() -> CpuPressure:
+    """This process's one :class:`CpuPressure` (a descriptor kept open for the process's
+    life; ``pread`` on it is safe from any thread)."""
+    if not _HOST_PRESSURE:
+        _HOST_PRESSURE.append(CpuPressure())
+    return _HOST_PRESSURE[0]
+
+
 @contextlib.contextmanager
 def short_slice() -> Iterator[bool]:
     """Run the block with the calling thread's fair-scheduler slice at

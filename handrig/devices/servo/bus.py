@@ -100,7 +100,7 @@ class BusStats:
     reads: int = 0  # present-state reads attempted
     retries: int = 0  # extra read attempts within a cycle
     timeouts: int = 0  # replies (or parts of replies) missing at the deadline
-    host_timeouts: int = 0  # of those, the host's: this process woke HOST_STALL_S after it
+    host_timeouts: int = 0  # of those, the host's: woke HOST_STALL_S late, or tasks waited as long
     crc_errors: int = 0  # replies or per-servo blocks failing their CRC
     malformed: int = 0  # replies with a wrong id, length or header
     status_errors: int = 0  # readings refused with an error number (range, access, ...)

@@ -55,6 +55,7 @@ from handrig.devices.servo.wire import (
     wire_time_s,
 )
 from handrig.errors import DeviceError, HandrigError
+from handrig.realtime import host_cpu_pressure
 
 __all__ = ["DynamixelBus", "ReadFields", "cycle_bytes", "wire_time_s"]
 
@@ -145,8 +146,12 @@ class DynamixelBus(ServoBus):
         self.budget = WireBudget(self.baud, float(reply_gap_s), float(reply_timeout_s))
         self.transport = transport or SerialTransport(self.port, self.baud, clock)
         self.readings = Readings(roster.n, own["readings"], self._total_stats)
+        # the host's CPU pressure tells a host-held reply from a silent bus; looked at on
+        # the real clock and port only (a fake clock's time is not the host's)
+        real = transport is None and isinstance(clock, MonotonicClock)
+        pressure = host_cpu_pressure() if real else None
         self.link = Link(self.transport, self.budget, roster, clock, own["link"],
-                         self.readings.status_err)
+                         self.readings.status_err, pressure)
         self.writer = GoalWriter(roster, self.link, own["writer"])
         self.sweep = RegisterSweep(roster, self.link, plan, own["sweep"])
         self.faults = FaultHandler(roster, self.link, self.writer, self.sweep, self.readings,

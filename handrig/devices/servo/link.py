@@ -28,12 +28,15 @@ from handrig.devices.servo.roster import Roster
 from handrig.devices.servo.transport import Transport
 from handrig.devices.servo.wire import WireBudget
 from handrig.errors import DeviceTimeoutError, ProtocolError, ServoFault
+from handrig.realtime import CpuPressure
 
 COMMAND_TIMEOUT_S = 0.05  # a single command's reply: RDT 0.5 ms + a 16 ms latency timer, ample
 # Commissioning sends ~6 commands per servo: with 20 servos and one reply in five
 # lost, 3 attempts would fail a connect more often than not; 8 make it rare.
 COMMAND_ATTEMPTS = 8
-HOST_STALL_S = 0.001  # a reply waited for ends this late after its deadline: the host held us
+HOST_STALL_S = 0.001  # a reply waited for ends this late after its deadline, or the host's
+# tasks waited this long for a CPU since the request went out: the host held us or the
+# reply's writer (an emulator, a USB adapter's driver)
 
 
 class Link:
@@ -45,7 +48,7 @@ class Link:
 
     def __init__(
         self, transport: Transport, budget: WireBudget, roster: Roster, clock: Clock,
-        stats: BusStats, alerts: np.ndarray,
+        stats: BusStats, alerts: np.ndarray, pressure: CpuPressure | None = None,
     ) -> None:
         self.transport = transport
         self.budget = budget
@@ -55,6 +58,9 @@ class Link:
         self.alerts = alerts
         self.held = b""  # a goal Sync Write to send with the next request
         self.sent_s = float("nan")  # when the last write was handed to the OS
+        # the host's CPU pressure (None: not looked at; a fake clock's tests)
+        self.pressure = pressure
+        self._pressure_sent: int | None = None  # its total when the last write went out
 
     # ------------------------------------------------------------------ sending
     def hold(self, packet: bytes) -> None:
@@ -73,6 +79,8 @@ class Link:
         self.transport.write(data)
         self.sent_s = now = self.clock.now()
         self.budget.sent(len(data), now)
+        if self.pressure is not None:  # after the write: nothing added before it goes out
+            self._pressure_sent = self.pressure.total_us()
 
     def quiet_line(self, deadline_s: float | None = None) -> None:
         """Before a request: drop old input; after a failed reply, wait for the line to
@@ -106,12 +114,21 @@ class Link:
     def timed_out(self, deadline: float) -> None:
         """No (whole) reply by ``deadline``: a timeout, and the host's when this process
         only woke ``HOST_STALL_S`` or more after the deadline (the host held it, and the
-        reply's writer likely with it: not the bus). The line is marked failed."""
+        reply's writer likely with it: not the bus), or when the host's tasks waited
+        ``HOST_STALL_S`` in all for a CPU since the request went out (``pressure``: the
+        reply's writer, an emulator or a driver's work, may have been the one held).
+        The line is marked failed."""
         now = self.clock.now()
         self.stats.timeouts += 1
-        if now - deadline >= HOST_STALL_S:
+        if now - deadline >= HOST_STALL_S or self._host_pressed():
             self.stats.host_timeouts += 1
         self.budget.failed(now)
+
+    def _host_pressed(self) -> bool:
+        if self.pressure is None or self._pressure_sent is None:
+            return False
+        total = self.pressure.total_us()
+        return total is not None and total - self._pressure_sent >= HOST_STALL_S * 1e6
 
     def sync_write(self, reg: Reg, values: list[int]) -> None:
         """One broadcast Sync Write of ``reg`` (one value per servo, rig order)."""
