@@ -164,7 +164,6 @@ class CpuPressure:
             return None
 
 
-
 _HOST_PRESSURE: list[CpuPressure] = []
 
 
