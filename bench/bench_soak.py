@@ -328,7 +328,8 @@ def soak(seconds: float, stall_every_s: float, seed: int, record: str,
             try:
                 with bus.torque(handle_signals=False), \
                         pinned_loop(rig_cfg.loop.pin_cpu, lines.append), \
-                        realtime_priority(rig_cfg.loop.realtime_priority, lines.append):
+                        realtime_priority(rig_cfg.loop.realtime_priority, lines.append,
+                                          short_slice_instead=True):
                     rig.run(duration_s=seconds)
             except HandrigError as exc:
                 out["error"] = str(exc)

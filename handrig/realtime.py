@@ -88,6 +88,8 @@ def timer_slack_ns(new_ns: int | None = None) -> int | None:
 
 # sched_setattr / sched_getattr by machine (Linux): a normal thread's slice is set there
 _SCHED_ATTR_SYSCALLS = {"x86_64": (314, 315), "aarch64": (274, 275)}
+_FAIR_POLICIES = (0, 3, 5)  # SCHED_OTHER, SCHED_BATCH, SCHED_IDLE
+_SCHED_FLAG_RESET_ON_FORK = 1
 SHORT_SLICE_NS = 100_000
 """The slice a normal (not SCHED_FIFO) timing thread asks for: the shortest Linux grants
 (0.1 ms; the default is 0.7-3 ms). Since Linux 6.12 the fair scheduler (EEVDF) gives a
@@ -113,7 +115,8 @@ def fair_slice_ns(new_ns: int | None = None) -> int | None:
     """The calling thread's slice under the fair scheduler (``sched_runtime`` of
     ``sched_getattr``, ns), set to ``new_ns`` if given (its nice and policy kept);
     returns the value before, or None where there is no such thing (not Linux, an
-    unknown machine, refused). A SCHED_FIFO thread ignores it."""
+    unknown machine, refused, or a thread that is not under the fair scheduler: its
+    settings are left alone). Threads it starts afterwards inherit the slice."""
     import platform
 
     calls = _SCHED_ATTR_SYSCALLS.get(platform.machine())
@@ -127,9 +130,11 @@ def fair_slice_ns(new_ns: int | None = None) -> int | None:
         if libc.syscall(calls[1], 0, ctypes.byref(attr), ctypes.sizeof(attr), 0) != 0:
             return None
         before = int(attr.sched_runtime)
+        if attr.sched_policy not in _FAIR_POLICIES:  # SCHED_FIFO, RR, DEADLINE: not ours
+            return None
         if new_ns is not None and new_ns != before:
             attr.size = ctypes.sizeof(attr)
-            attr.sched_flags = 0
+            attr.sched_flags &= _SCHED_FLAG_RESET_ON_FORK  # kept; no clamp or keep flags
             attr.sched_runtime = int(new_ns)
             if libc.syscall(calls[0], 0, ctypes.byref(attr), 0) != 0:
                 return None
@@ -162,6 +167,12 @@ class CpuPressure:
             return int(text[at:text.index(b"\n", at)])
         except (OSError, ValueError):
             return None
+
+    def close(self) -> None:
+        if self._fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(self._fd)
+            self._fd = None
 
 
 _HOST_PRESSURE: list[CpuPressure] = []
@@ -230,11 +241,13 @@ def _pinned(enabled: bool, log: Callable[[str], None] | None) -> Iterator[int | 
 
 @contextlib.contextmanager
 def realtime_priority(
-    priority: int = 20, log: Callable[[str], None] | None = None
+    priority: int = 20, log: Callable[[str], None] | None = None, *,
+    short_slice_instead: bool = False,
 ) -> Iterator[bool]:
     """Run the block at SCHED_FIFO ``priority`` (1..99); yields whether it worked.
-    Where it is refused (no root, no CAP_SYS_NICE, no rtprio limit) the block runs
-    with a short fair-scheduler slice instead (:func:`short_slice`)."""
+    ``short_slice_instead`` (the loops): where it is refused (no root, no
+    CAP_SYS_NICE, no rtprio limit) the block runs with a short fair-scheduler slice
+    (:func:`short_slice`) and the log line says so."""
     if not hasattr(os, "sched_setscheduler") or priority <= 0:
         yield False
         return
@@ -243,7 +256,7 @@ def realtime_priority(
         old_param = os.sched_getparam(0)
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (PermissionError, OSError) as exc:
-        with short_slice() as short:
+        with short_slice() if short_slice_instead else contextlib.nullcontext(False) as short:
             if log is not None:
                 log(f"realtime priority unavailable ({exc.strerror or exc}): the loop runs "
                     "at normal priority" + (f" with a {SHORT_SLICE_NS / 1e6:g} ms slice (woken, "

@@ -137,7 +137,8 @@ class RobotLoop:
         loop = self._loop_cfg
         try:
             with (pinned_loop(loop.pin_cpu, self._log),
-                  realtime_priority(loop.realtime_priority, self._log)):
+                  realtime_priority(loop.realtime_priority, self._log,
+                                    short_slice_instead=True)):
                 self.rig.run()
         except BaseException as exc:  # handed to the program's thread by check()
             self.error = exc

@@ -411,7 +411,7 @@ class _Session:
         log = self._hand_log(i)
         try:
             with (pinned_loop(loop.pin_cpu, log),
-                  realtime_priority(loop.realtime_priority, log),
+                  realtime_priority(loop.realtime_priority, log, short_slice_instead=True),
                   cpus_awake_around_frames(loop.keep_cpus_awake and loop.mode == "glove"
                                            and loop.warm_up_us > 0, log) as wake):
                 rig.keep_awake(wake)

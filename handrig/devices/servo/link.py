@@ -115,8 +115,9 @@ class Link:
         """No (whole) reply by ``deadline``: a timeout, and the host's when this process
         only woke ``HOST_STALL_S`` or more after the deadline (the host held it, and the
         reply's writer likely with it: not the bus), or when the host's tasks waited
-        ``HOST_STALL_S`` in all for a CPU since the request went out (``pressure``: the
-        reply's writer, an emulator or a driver's work, may have been the one held).
+        ``HOST_STALL_S`` in all for a CPU since the request went out, and a quarter of
+        the wait (``pressure``: the reply's writer, an emulator or a driver's work, may
+        have been the one held).
         The line is marked failed."""
         now = self.clock.now()
         self.stats.timeouts += 1
@@ -125,10 +126,17 @@ class Link:
         self.budget.failed(now)
 
     def _host_pressed(self) -> bool:
+        """Whether the host's tasks waited for a CPU, since the request went out, at
+        least ``HOST_STALL_S`` and a quarter of the wait (a command's 50 ms wait on a
+        busy host always sees some: that alone does not make an unplugged servo the
+        host's)."""
         if self.pressure is None or self._pressure_sent is None:
             return False
         total = self.pressure.total_us()
-        return total is not None and total - self._pressure_sent >= HOST_STALL_S * 1e6
+        if total is None:
+            return False
+        waited_s = self.clock.now() - self.sent_s
+        return total - self._pressure_sent >= max(HOST_STALL_S, 0.25 * waited_s) * 1e6
 
     def sync_write(self, reg: Reg, values: list[int]) -> None:
         """One broadcast Sync Write of ``reg`` (one value per servo, rig order)."""

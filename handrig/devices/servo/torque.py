@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import signal
 import threading
 from collections.abc import Callable
@@ -22,7 +23,7 @@ from handrig.clock import Clock
 from handrig.devices.servo.bus import ServoState
 from handrig.devices.servo.faults import FaultHandler
 from handrig.devices.servo.goals import GoalWriter
-from handrig.devices.servo.link import Link
+from handrig.devices.servo.link import COMMAND_TIMEOUT_S, Link
 from handrig.devices.servo.positions import TICKS_PER_DEG
 from handrig.devices.servo.registers import VELOCITY_DPS_PER_UNIT, Reg
 from handrig.devices.servo.roster import Roster
@@ -158,7 +159,6 @@ class TorqueControl:
         stopped draining (``transport.wedged``) only the broadcast is tried: nothing
         could be read back, and every servo given torque is named as not confirmed."""
         r = self.roster
-        failed: list[str] = []
         given = [i for i in range(r.n) if not r.absent[i]]  # left out: never given torque
         every = ", ".join(r.describe(i) for i in given)
         t = self.link.transport
@@ -177,44 +177,66 @@ class TorqueControl:
             self.faults.note_torque(False)
             return [f"{every}: not confirmed: servo port {r.port} stopped draining (the "
                     "torque-off broadcast is queued behind the bytes it holds)"]
-        end = self.clock.now() + CONFIRM_BUDGET_S
-        pending, alive = list(given), False
-        for _ in range(CONFIRM_PASSES):  # a servo that did not answer is asked again
-            unanswered: list[tuple[int, str]] = []   # after the others, while time remains
-            for k, i in enumerate(pending):
-                if self.clock.now() >= end:
-                    rest = pending[k:] + [j for j, _ in unanswered]
-                    failed.append(f"{', '.join(r.describe(j) for j in sorted(rest))}: not "
-                                  f"confirmed (the {CONFIRM_BUDGET_S:g} s for "
-                                  "confirmations went on the servos before)")
-                    unanswered = []
-                    break
-                try:
-                    self.link.write_register(i, Reg.TORQUE_ENABLE, 0,
-                                             attempts=CONFIRM_ATTEMPTS)
-                    self.link.write_register(i, Reg.BUS_WATCHDOG, 0,
-                                             attempts=CONFIRM_ATTEMPTS)
-                except DeviceError as exc:
-                    if t.wedged or not t.is_open:  # the port failed: nobody else can be asked
-                        rest = pending[k:] + [j for j, _ in unanswered]
-                        failed.append(f"{', '.join(r.describe(j) for j in sorted(rest))}: "
-                                      f"not confirmed: {exc}")
-                        unanswered = []
-                        break
-                    if isinstance(exc, DeviceTimeoutError):
-                        unanswered.append((i, str(exc)))
-                        continue
-                    text = str(exc)  # answered with an error: asking again won't help
-                    failed.append(text if text.startswith(r.describe(i)) else
-                                  f"{r.describe(i)}: {text}")
-            alive = alive or len(unanswered) < len(pending)  # someone answered
-            pending = [i for i, _ in unanswered]
-            if not pending or not alive:
-                break
-        failed += [text if text.startswith(r.describe(i)) else f"{r.describe(i)}: {text}"
-                   for i, text in unanswered]
+        failed = self._confirm_off(given)
         self.faults.note_torque(False)
         return failed
+
+    def _confirm_off(self, given: list[int]) -> list[str]:
+        """Ask each servo of ``given`` to confirm torque off and its watchdog cleared (see
+        :meth:`disable`); returns what failed, a servo at most once."""
+        r, t = self.roster, self.link.transport
+        failed: list[str] = []
+        end = self.clock.now() + CONFIRM_BUDGET_S
+        to_write = {i: [Reg.TORQUE_ENABLE, Reg.BUS_WATCHDOG] for i in given}  # unconfirmed
+        silent: dict[int, str] = {}  # a servo's last timeout, while it is asked again
+        rounds = dict.fromkeys(given, 0)
+        pending, alive = list(given), False
+        for _ in range(CONFIRM_PASSES):
+            unanswered: list[int] = []  # asked again after the others, while time remains
+            for k, i in enumerate(pending):
+                rounds[i] += 1
+                try:
+                    while to_write[i]:
+                        left = end - self.clock.now()
+                        if left <= 0:
+                            return failed + self._out_of_time(pending[k:] + unanswered, silent)
+                        # no attempt may outlast the budget by more than one reply's wait
+                        attempts = max(1, min(CONFIRM_ATTEMPTS,
+                                              math.ceil(left / COMMAND_TIMEOUT_S)))
+                        self.link.write_register(i, to_write[i][0], 0, attempts=attempts)
+                        to_write[i].pop(0)
+                        alive = True
+                except DeviceError as exc:
+                    if t.wedged or not t.is_open:  # the port failed: nobody else can be asked
+                        rest = sorted(pending[k:] + unanswered)
+                        names = ", ".join(r.describe(j) for j in rest)
+                        return [*failed, f"{names}: not confirmed: {exc}"]
+                    if isinstance(exc, DeviceTimeoutError):
+                        silent[i] = str(exc)
+                        unanswered.append(i)
+                        continue
+                    alive = True  # answered with an error: asking again won't help
+                    failed.append(self._named(i, str(exc)))
+            pending = unanswered
+            if not pending or not alive:
+                break
+        return failed + [self._named(i, silent[i]) + (
+            f" (asked in {rounds[i]} rounds)" if rounds[i] > 1 else "") for i in pending]
+
+    def _named(self, i: int, text: str) -> str:
+        name = self.roster.describe(i)
+        return text if text.startswith(name) else f"{name}: {text}"
+
+    def _out_of_time(self, rest: list[int], silent: dict[int, str]) -> list[str]:
+        """The budget ran out: a servo that had gone silent says so, the others that
+        they were not asked in time."""
+        out = [self._named(i, silent[i]) + f" (asked again until the {CONFIRM_BUDGET_S:g} s "
+               "for confirmations ran out)" for i in sorted(rest) if i in silent]
+        unasked = [self.roster.describe(i) for i in sorted(rest) if i not in silent]
+        if unasked:
+            out.append(f"{', '.join(unasked)}: not confirmed (the {CONFIRM_BUDGET_S:g} s for "
+                       "confirmations went on the servos before)")
+        return out
 
 
 T = TypeVar("T")

@@ -45,7 +45,7 @@ def test_a_servo_that_stays_silent_is_named_and_the_exit_stays_bounded(
         started = time.monotonic()
     took = time.monotonic() - started
     text = str(info.value)
-    assert f"servo {first.id} ({first.joint})" in text
+    assert f"servo {first.id} ({first.joint})" in text and "rounds)" in text
     assert not any(f"servo {s.id} ({s.joint})" in text for s in small_rig().servos[1:])
     # asked again after the others (three rounds of three attempts, fewer where a
     # loaded host used up the budget first), and the exit stayed within the budget
