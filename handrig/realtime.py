@@ -20,6 +20,7 @@ loop's CPU it runs inside the loop's ``os.write`` (figures in
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import struct
 from collections.abc import Callable, Iterator
@@ -99,6 +100,7 @@ that keeps a core busy woke up to 3.7 ms late, with the short slice 0.37 ms at m
 (``docs/measurements.md``). Older kernels take the request and ignore it."""
 
 
+@functools.cache
 def _sched_attr() -> type:
     import ctypes
 

@@ -89,7 +89,7 @@ class GoalWriter:
 
     def send_built(self) -> None:
         """Send the Sync Write :meth:`build` built."""
-        self.link.send(self._view)
+        self.link.send(self._view, answered=False)
         self.stats.writes += 1
         self.last_goal_deg[:] = self._goal_deg
 
@@ -102,7 +102,7 @@ class GoalWriter:
     def send_held(self) -> None:
         """Send a held Sync Write that no request took along."""
         if self.link.holding:
-            self.link.send(b"")
+            self.link.send(b"", answered=False)
 
     def remember(self, goal_deg: np.ndarray) -> None:
         """Take ``goal_deg`` as the goals last sent (a torque-on that wrote them servo by

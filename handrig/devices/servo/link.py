@@ -72,14 +72,16 @@ class Link:
         """Whether a held packet is waiting for a request to take it along."""
         return bool(self.held)
 
-    def send(self, packet: bytes | memoryview) -> None:
-        """Write ``packet`` after any held goal Sync Write, in one port write."""
+    def send(self, packet: bytes | memoryview, *, answered: bool = True) -> None:
+        """Write ``packet`` after any held goal Sync Write, in one port write.
+        ``answered=False``: nothing replies to it (a goal Sync Write, a broadcast
+        write), so the host's CPU pressure is not looked at for it."""
         data = self.held + bytes(packet) if self.held else packet
         self.held = b""
         self.transport.write(data)
         self.sent_s = now = self.clock.now()
         self.budget.sent(len(data), now)
-        if self.pressure is not None:  # after the write: nothing added before it goes out
+        if answered and self.pressure is not None:  # after the write: it is out already
             self._pressure_sent = self.pressure.total_us()
 
     def quiet_line(self, deadline_s: float | None = None) -> None:
@@ -142,7 +144,7 @@ class Link:
         """One broadcast Sync Write of ``reg`` (one value per servo, rig order)."""
         params = u16(reg.address) + u16(reg.size) + b"".join(
             bytes((sid,)) + reg.encode(v) for sid, v in zip(self.roster.ids, values, strict=True))
-        self.send(build_instruction(BROADCAST_ID, INST_SYNC_WRITE, params))
+        self.send(build_instruction(BROADCAST_ID, INST_SYNC_WRITE, params), answered=False)
 
     # ------------------------------------------------------------------ replies
     def next_status(self, deadline: float, *, answer: bool = False) -> StatusPacket | None:
