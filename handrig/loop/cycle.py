@@ -121,6 +121,7 @@ class Cycle:
         # the [heat] tiers for servos that warm up: decided here, from the temperatures read
         self.heat = HeatWatch(bus, settings.heat)
         self.sample: GloveSample | None = None  # the newest glove sample
+        self._filtered_s = float("-inf")  # the filter time of the last frame given it
         self.last_state: ServoState | None = None  # the newest ServoState read back
         self.t0_s = 0.0
         self._pose: FloatArray | None = None  # the full pose last output
@@ -185,16 +186,20 @@ class Cycle:
         sample, t_sample = None, now
         if tick.catch_up:  # the frame behind the newest (see Tick.catch_up)
             sample = self.glove.take_behind()
-            if sample is not None:  # its filter time: a period per frame before the newest
-                newest = self.glove.peek()
+            if sample is not None:  # its filter time: a period per frame before the newest,
+                newest = self.glove.peek()  # and never back before the frame filtered last
                 behind = max(1, (0 if newest is None else newest.count) - sample.count)
                 t_sample = now - behind * tick.behind_s
+                last = self._filtered_s  # a backlog that came in a bunch: spread up to now
+                if t_sample <= last:
+                    t_sample = last + (now - last) / (behind + 1)
                 self.stats.frames_caught_up += 1
         if sample is None:
             sample = self.latest()
         layers = self.layers
         layers.advance(now)
         if sample is not None:
+            self._filtered_s = t_sample
             self.controls_from_raw(sample.raw, t_sample, self.controls)
             self.angles = self.orientation(sample)
             mode = machine.frame(now, sample.estop)
