@@ -23,7 +23,8 @@ from handrig.pose.pipeline import PosePipeline
 FAULT_WORDS: dict[str, str] = {
     "timeouts": "read timeouts",
     "host_timeouts": ("of them the host's (this process woke 1 ms or more after the "
-                      "deadline, or the host's tasks waited 1 ms for a CPU meanwhile)"),
+                      "deadline, the host's tasks waited 1 ms for a CPU meanwhile, or the "
+                      "reply came in whole later: held on its way, not lost on the bus)"),
     "retries": "read retries",
     "crc_errors": "replies with a bad CRC",
     "malformed": "malformed replies",

@@ -100,7 +100,8 @@ class BusStats:
     reads: int = 0  # present-state reads attempted
     retries: int = 0  # extra read attempts within a cycle
     timeouts: int = 0  # replies (or parts of replies) missing at the deadline
-    host_timeouts: int = 0  # of those, the host's: woke HOST_STALL_S late, or tasks waited as long
+    host_timeouts: int = 0  # of those, the host's: woke HOST_STALL_S late, tasks waited as
+    # long, or the reply came in whole later (held on its way: the host, an emulator, an adapter)
     crc_errors: int = 0  # replies or per-servo blocks failing their CRC
     malformed: int = 0  # replies with a wrong id, length or header
     status_errors: int = 0  # readings refused with an error number (range, access, ...)

@@ -14,6 +14,7 @@ the servos whose running CRCs check (:func:`handrig.devices.servo.codec.fast_syn
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,7 +104,7 @@ class FastSyncRead:
         self.link.quiet_line(deadline)
         self.link.send(order.request)
         out = self.readings.prepare_whole() if whole_ok else None
-        raw = self._receive(expected, deadline)
+        raw = self._receive(expected, deadline, order.ids.tobytes())
         if raw is None:
             return NONE
         if out is not None and (alerts := self._take_whole(raw, order, out)) >= 0:
@@ -129,9 +130,11 @@ class FastSyncRead:
                 self._orders_of[key] = order
         return order
 
-    def _receive(self, expected: int, deadline: float) -> bytes | None:
-        """The reply (up to ``expected`` bytes), or None when it is not a Fast Sync Read
-        reply at all (counted; a single servo's error status may switch to Sync Read)."""
+    def _receive(self, expected: int, deadline: float, ids: bytes) -> bytes | None:
+        """The reply (up to ``expected`` bytes) of the servos ``ids``, or None when none
+        came (a timeout: its reply is looked for in what comes in late) or it is not a
+        Fast Sync Read reply at all (counted; a single servo's error status may switch to
+        Sync Read)."""
         t = self.link.transport
         spin_from = None
         spin_until = np.inf
@@ -143,7 +146,7 @@ class FastSyncRead:
             spin_until = arrival + REPLY_POLL_AFTER_S
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until, answer=True)
         if len(head) < 7:
-            self.link.timed_out(deadline)
+            self.link.timed_out(deadline, None if head else self._whole_reply(ids, expected))
             return None
         if head[:4] != codec.HEADER:
             self.stats.malformed += 1
@@ -157,6 +160,24 @@ class FastSyncRead:
             self.stats.malformed += 1
         return head + t.read_exact(min(total, expected) - 7, deadline, spin_from,
                                    self.link.budget.reply_gap_s, spin_until)
+
+    def _whole_reply(self, ids: bytes, expected: int) -> Callable[[bytes], bool]:
+        """A test for bytes that hold the whole, intact reply of the servos ``ids``."""
+        data_len = self.plan.data_len
+        valid = np.zeros(len(ids), np.bool_)
+
+        def found(data: bytes) -> bool:
+            at = data.find(codec.HEADER)
+            while at >= 0:
+                raw = data[at: at + expected]
+                if (len(raw) == expected and raw[4] == codec.BROADCAST_ID
+                        and codec.fast_reply_ids(raw, data_len, len(ids)) == ids
+                        and codec.fast_sync_intact(raw, ids, data_len, valid)):
+                    return True
+                at = data.find(codec.HEADER, at + 1)
+            return False
+
+        return found
 
     def _single_status(self, head: bytes, total: int, deadline: float) -> None:
         """A single servo's status instead of the reply: an error report or a wrong reply."""
@@ -197,6 +218,7 @@ class FastSyncRead:
             if sorted(named) == sorted(ids) and codec.fast_sync_intact(
                     raw, named, self.plan.data_len, self._valid):
                 self.stats.late_replies += 1
+                self.link.late_reply_came()  # held on its way, if it is the one that timed out
                 raw = self.link.read_reply(expected, deadline)
                 late = True
                 continue

@@ -8,6 +8,8 @@ retried a bounded number of times and must be answered by the servo asked.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from handrig.clock import Clock
@@ -37,6 +39,7 @@ COMMAND_ATTEMPTS = 8
 HOST_STALL_S = 0.001  # a reply waited for ends this late after its deadline, or the host's
 # tasks waited this long for a CPU since the request went out: the host held us or the
 # reply's writer (an emulator, a USB adapter's driver)
+LATE_LOOK_BYTES = 8192  # how much of what comes in after a timeout is looked at for its reply
 
 
 class Link:
@@ -61,6 +64,11 @@ class Link:
         # the host's CPU pressure (None: not looked at; a fake clock's tests)
         self.pressure = pressure
         self._pressure_sent: int | None = None  # its total when the last write went out
+        # the request that last timed out with nothing heard (see timed_out): a test its
+        # reply passes, what came in since (bounded), and requests sent since
+        self._awaited: Callable[[bytes], bool] | None = None
+        self._late = bytearray()
+        self._sent_since = 0
 
     # ------------------------------------------------------------------ sending
     def hold(self, packet: bytes) -> None:
@@ -83,18 +91,27 @@ class Link:
         self.budget.sent(len(data), now)
         if answered and self.pressure is not None:  # after the write: it is out already
             self._pressure_sent = self.pressure.total_us()
+        if answered and self._awaited is not None:
+            self._sent_since += 1
+            if self._sent_since > 1:  # the next request's reply has come or failed since
+                self._forget_awaited()
 
     def quiet_line(self, deadline_s: float | None = None) -> None:
         """Before a request: drop old input; after a failed reply, wait for the line to
         have been quiet ``reply_gap_s`` (at most ``reply_timeout_s``, not past
         ``deadline_s``)."""
         if self.budget.failed_at is None:
-            self.transport.discard_input()
+            self._drop_input()
             return
         wait = self.budget.take_quiet_wait(self.clock.now(), deadline_s)
         assert wait is not None
         since, most = wait
-        self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since)
+        if self._awaited is None:
+            self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since)
+            return
+        self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since,
+                                  into=self._late, keep=LATE_LOOK_BYTES)
+        self._look_at_late()
 
     def quiet_wait_s(self) -> float:
         """What the quiet after a failed reply adds to a request's wait for the wire
@@ -102,7 +119,7 @@ class Link:
         meanwhile: they are taken in first, and the quiet runs from them."""
         if self.budget.failed_at is None:
             return 0.0
-        self.transport.discard_input()
+        self._drop_input()
         return self.budget.quiet_wait_s(self.clock.now(), self.transport.last_rx_s)
 
     def request_start(self, now: float) -> float:
@@ -113,19 +130,55 @@ class Link:
         """The reply being read failed now."""
         self.budget.failed(self.clock.now())
 
-    def timed_out(self, deadline: float) -> None:
+    def timed_out(self, deadline: float, awaited: Callable[[bytes], bool] | None = None
+                  ) -> None:
         """No (whole) reply by ``deadline``: a timeout, and the host's when this process
         only woke ``HOST_STALL_S`` or more after the deadline (the host held it, and the
         reply's writer likely with it: not the bus), or when the host's tasks waited
         ``HOST_STALL_S`` in all for a CPU since the request went out, and a quarter of
         the wait (``pressure``: the reply's writer, an emulator or a driver's work, may
         have been the one held).
+
+        ``awaited``: a test the reply passes (intact, for this request). If it is not
+        the host's by then and that reply still comes in whole before the next request's
+        reply is done with (:meth:`late_reply_came`), it was held on its way (by the
+        host, an emulator or a USB adapter): a servo answers within its Return Delay
+        Time or not at all, so the timeout becomes the host's then.
         The line is marked failed."""
         now = self.clock.now()
         self.stats.timeouts += 1
         if now - deadline >= HOST_STALL_S or self._host_pressed():
             self.stats.host_timeouts += 1
+            self._forget_awaited()
+        elif awaited is not None:
+            self._forget_awaited()
+            self._awaited = awaited
         self.budget.failed(now)
+
+    def late_reply_came(self) -> None:
+        """The reply to the request that last timed out came in whole after all (a
+        reader recognised it): that timeout is the host's (see :meth:`timed_out`)."""
+        if self._awaited is not None:
+            self.stats.host_timeouts += 1
+            self._forget_awaited()
+
+    def _forget_awaited(self) -> None:
+        self._awaited = None
+        self._late.clear()
+        self._sent_since = 0
+
+    def _drop_input(self) -> None:
+        """Drop what came in, looking in it for an awaited reply first."""
+        if self._awaited is None:
+            self.transport.discard_input()
+            return
+        self.transport.discard_input(self._late, LATE_LOOK_BYTES)
+        self._look_at_late()
+
+    def _look_at_late(self) -> None:
+        if self._awaited is not None and self._late and self._awaited(bytes(self._late)):
+            self.stats.late_replies += 1  # recognised and dropped
+            self.late_reply_came()
 
     def _host_pressed(self) -> bool:
         """Whether the host's tasks waited for a CPU, since the request went out, at

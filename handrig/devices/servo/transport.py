@@ -155,26 +155,35 @@ class Transport(ABC):
         self._buf += chunk
         return True
 
-    def discard_input(self) -> int:
-        """Drop everything already received (buffered and pending); return how many bytes."""
+    def discard_input(self, into: bytearray | None = None, keep: int = 0) -> int:
+        """Drop everything already received (buffered and pending); return how many bytes.
+        ``into``: the dropped bytes are appended there too, while it holds fewer than
+        ``keep`` (a bounded look at what came late)."""
         self._check_open()
-        n = len(self._buf)
-        self._buf.clear()
+        buf = self._buf
+        n = len(buf)
+        if into is not None and len(into) < keep:
+            into += buf[: keep - len(into)]
+        buf.clear()
         while chunk := self._take_pending():
             n += len(chunk)
             self.last_rx_s = self.clock.now()
             self.unanswered = 0
+            if into is not None and len(into) < keep:
+                into += chunk[: keep - len(into)]
         return n
 
-    def wait_quiet(self, quiet_s: float, max_s: float, since_s: float = -np.inf) -> int:
+    def wait_quiet(self, quiet_s: float, max_s: float, since_s: float = -np.inf,
+                   into: bytearray | None = None, keep: int = 0) -> int:
         """Discard input until none has come for ``quiet_s``, counting from ``since_s``
         or the last byte received, whichever is later (at most ``max_s``); return bytes.
+        ``into`` and ``keep``: as :meth:`discard_input`.
 
         The bus is half duplex: a request sent while a late reply is still coming
         would collide with it on a real bus (and queue behind it in the emulator).
         """
         self._check_open()
-        n = self.discard_input()
+        n = self.discard_input(into, keep)
         end = self.clock.now() + max_s
         while True:
             now = self.clock.now()
@@ -183,8 +192,7 @@ class Transport(ABC):
                 return n
             if not self._fill(min(end, quiet_until)):
                 return n
-            n += len(self._buf)
-            self._buf.clear()
+            n += self.discard_input(into, keep)
 
     def read_exact(
         self, n: int, deadline_s: float, spin_from_s: float | None = None,
