@@ -74,6 +74,7 @@ class BusHealth:
     stale_worst_age_s: float = 0.0  # age of the oldest of those readings
     left_out: int = 0  # servos left out at start-up, not (yet) admitted
     admitted: int = 0  # of those, admitted when they answered
+    host_timeouts: int = 0  # of the timeouts, the host's: it held a reply, not the bus
 
 
 @dataclass(frozen=True)
@@ -213,7 +214,8 @@ def bus_line(b: BusHealth) -> Text:
     return Text.assemble(
         ("bus    ", "bold"), _fit_left(b.port or "-", 14),
         f"  reads {_num(b.read_rate_hz)}/s  timeouts ",
-        (str(b.timeouts), "yellow" if b.timeouts else ""), "  errors ",
+        (str(b.timeouts), "yellow" if b.timeouts > b.host_timeouts else ""),
+        *([(f" (host {b.host_timeouts})", "")] if b.host_timeouts else []), "  errors ",
         (str(b.errors), "bold red" if b.errors else ""), "  stale ", stale,
         *([("  out ", ""), (str(b.left_out), "bold yellow")] if b.left_out else []),
         *([("  admitted ", ""), (str(b.admitted), "green")] if b.admitted else []),
@@ -380,7 +382,9 @@ def plain_line(s: PanelSnapshot) -> str:
         f"glove {_num(g.rate_hz, '.0f')} Hz err {g.errors} last {_age(g.last_frame_age_s)}"
         f" reconnects {g.reconnects}",
         f"latency p50 {_num(s.latency_p50_us)} p99 {_num(s.latency_p99_us)} us",
-        f"bus {_num(b.read_rate_hz)} reads/s timeouts {b.timeouts} errors {b.errors} stale "
+        f"bus {_num(b.read_rate_hz)} reads/s timeouts {b.timeouts}"
+        + (f" (host {b.host_timeouts})" if b.host_timeouts else "")
+        + f" errors {b.errors} stale "
         + (f"{b.stale_servos} (worst {_age(b.stale_worst_age_s)})" if b.stale_servos
            else "none")
         + (f" left out {b.left_out}" if b.left_out else "")

@@ -103,7 +103,8 @@ class RigSnapshot:
         return BusHealth(
             port=s.bus_port, read_rate_hz=self._rates["reads"].update(s.t_s, s.bus_reads),
             write_rate_hz=self._rates["writes"].update(s.t_s, s.bus_writes),
-            timeouts=s.bus_timeouts, errors=s.bus_errors, stale_servos=len(ages),
+            timeouts=s.bus_timeouts, host_timeouts=s.bus_host_timeouts, errors=s.bus_errors,
+            stale_servos=len(ages),
             stale_worst_age_s=worst if math.isfinite(worst) else 0.0,
             left_out=s.bus_left_out, admitted=s.bus_admitted)
 

@@ -82,6 +82,7 @@ class LoopSnapshot:
     bus_reads: int = 0
     bus_writes: int = 0
     bus_timeouts: int = 0
+    bus_host_timeouts: int = 0  # of those, the host's (BusStats.host_timeouts)
     bus_errors: int = 0
     bus_left_out: int = 0  # servos left out at connect, not (yet) admitted
     bus_admitted: int = 0  # servos left out at connect, admitted when they answered
@@ -270,7 +271,7 @@ class SnapshotBuilder:
         if bus is not None:
             b = bus.stats
             out.update(bus_port=bus.port, bus_reads=b.reads, bus_writes=b.writes,
-                       bus_timeouts=b.timeouts,
+                       bus_timeouts=b.timeouts, bus_host_timeouts=b.host_timeouts,
                        bus_errors=b.crc_errors + b.malformed + b.status_errors,
                        bus_left_out=len(bus.left_out), bus_admitted=b.admissions)
         if state is None:
