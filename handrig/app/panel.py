@@ -209,14 +209,16 @@ def loop_line(s: PanelSnapshot) -> Text:
 
 
 def bus_line(b: BusHealth) -> Text:
-    stale = (Text(f"{b.stale_servos} (worst {_age(b.stale_worst_age_s)})", "bold yellow")
+    # the host's timeouts take the room of the spacing and of "worst" (80 columns)
+    sep, worst = (" ", "") if b.host_timeouts else ("  ", "worst ")
+    stale = (Text(f"{b.stale_servos} ({worst}{_age(b.stale_worst_age_s)})", "bold yellow")
              if b.stale_servos else Text("none"))
     return Text.assemble(
         ("bus    ", "bold"), _fit_left(b.port or "-", 14),
-        f"  reads {_num(b.read_rate_hz)}/s  timeouts ",
-        (str(b.timeouts), "yellow" if b.timeouts > b.host_timeouts else ""),
-        *([(f" (host {b.host_timeouts})", "")] if b.host_timeouts else []), "  errors ",
-        (str(b.errors), "bold red" if b.errors else ""), "  stale ", stale,
+        f"{sep}reads {_num(b.read_rate_hz)}/s{sep}timeouts ",
+        (str(b.timeouts), "yellow" if b.timeouts else ""),
+        *([(f" (host {b.host_timeouts})", "")] if b.host_timeouts else []), f"{sep}errors ",
+        (str(b.errors), "bold red" if b.errors else ""), f"{sep}stale ", stale,
         *([("  out ", ""), (str(b.left_out), "bold yellow")] if b.left_out else []),
         *([("  admitted ", ""), (str(b.admitted), "green")] if b.admitted else []),
     )

@@ -21,7 +21,8 @@ import numpy as np
 
 from handrig.devices.servo import codec
 from handrig.devices.servo.bus import BusStats
-from handrig.devices.servo.link import Link
+from handrig.devices.servo.link import HOST_STALL_S, Link
+from handrig.devices.servo.models import RETURN_DELAY_UNIT_US
 from handrig.devices.servo.readings import Readings, ReadPlan
 from handrig.devices.servo.roster import Roster
 from handrig.errors import ProtocolError
@@ -34,6 +35,9 @@ ORDERS_KEPT = 256  # orders of parts and retries kept once built
 REPLY_POLL_AFTER_S = 300e-6
 INSTRUCTION_ERROR = 2  # ERR number: the servo does not know the instruction
 LATE_REPLIES_MAX = 4  # late replies dropped within one read before giving up
+# The longest Return Delay Time a servo can be set to (254 x 2 us): a reply not begun this
+# long after its wire instant does not come from a servo's timing
+MAX_RETURN_DELAY_S = 254 * RETURN_DELAY_UNIT_US * 1e-6
 NONE, SOME, WHOLE = 0, 1, 2  # what a read got: nothing, some servos, every servo at once
 
 
@@ -138,15 +142,18 @@ class FastSyncRead:
         t = self.link.transport
         spin_from = None
         spin_until = np.inf
+        # the reply cannot end before the wire has carried the request and the reply
+        budget = self.link.budget
+        arrival = budget.free_at + expected * budget.byte_s
         if self.spin_s > 0:
-            # the reply cannot end before the wire has carried the request and the reply
-            budget = self.link.budget
-            arrival = budget.free_at + expected * budget.byte_s
             spin_from = arrival - self.spin_s
             spin_until = arrival + REPLY_POLL_AFTER_S
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until, answer=True)
         if len(head) < 7:
-            self.link.timed_out(deadline, None if head else self._whole_reply(ids, expected))
+            # nothing heard this long after any servo would have answered: if the reply
+            # still comes whole, it was held on its way (Link.timed_out)
+            held = not head and deadline - arrival >= MAX_RETURN_DELAY_S + HOST_STALL_S
+            self.link.timed_out(deadline, self._whole_reply(ids, expected) if held else None)
             return None
         if head[:4] != codec.HEADER:
             self.stats.malformed += 1
@@ -218,7 +225,7 @@ class FastSyncRead:
             if sorted(named) == sorted(ids) and codec.fast_sync_intact(
                     raw, named, self.plan.data_len, self._valid):
                 self.stats.late_replies += 1
-                self.link.late_reply_came()  # held on its way, if it is the one that timed out
+                self.link.late_reply_came(raw)  # held on its way, if the one that timed out
                 raw = self.link.read_reply(expected, deadline)
                 late = True
                 continue

@@ -139,11 +139,13 @@ class Link:
         the wait (``pressure``: the reply's writer, an emulator or a driver's work, may
         have been the one held).
 
-        ``awaited``: a test the reply passes (intact, for this request). If it is not
-        the host's by then and that reply still comes in whole before the next request's
+        ``awaited``: a test the reply passes (intact, for this request), given only when
+        the wait lasted ``HOST_STALL_S`` past the latest instant a servo could have
+        sent it (its wire time and the longest Return Delay Time). If it is not the
+        host's by then and that reply still comes in whole before the next request's
         reply is done with (:meth:`late_reply_came`), it was held on its way (by the
-        host, an emulator or a USB adapter): a servo answers within its Return Delay
-        Time or not at all, so the timeout becomes the host's then.
+        host, an emulator or a USB adapter's latency timer): a servo answers within its
+        Return Delay Time or not at all, so the timeout becomes the host's then.
         The line is marked failed."""
         now = self.clock.now()
         self.stats.timeouts += 1
@@ -155,10 +157,10 @@ class Link:
             self._awaited = awaited
         self.budget.failed(now)
 
-    def late_reply_came(self) -> None:
-        """The reply to the request that last timed out came in whole after all (a
-        reader recognised it): that timeout is the host's (see :meth:`timed_out`)."""
-        if self._awaited is not None:
+    def late_reply_came(self, reply: bytes) -> None:
+        """A reader recognised ``reply`` as an intact reply to an earlier request: if it
+        is the awaited one (see :meth:`timed_out`), that timeout is the host's."""
+        if self._awaited is not None and self._awaited(reply):
             self.stats.host_timeouts += 1
             self._forget_awaited()
 
@@ -176,9 +178,11 @@ class Link:
         self._look_at_late()
 
     def _look_at_late(self) -> None:
-        if self._awaited is not None and self._late and self._awaited(bytes(self._late)):
-            self.stats.late_replies += 1  # recognised and dropped
-            self.late_reply_came()
+        if self._awaited is not None and self._late:
+            late = bytes(self._late)
+            if self._awaited(late):
+                self.stats.late_replies += 1  # recognised and dropped
+                self.late_reply_came(late)
 
     def _host_pressed(self) -> bool:
         """Whether the host's tasks waited for a CPU, since the request went out, at

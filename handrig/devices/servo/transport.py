@@ -160,17 +160,22 @@ class Transport(ABC):
         ``into``: the dropped bytes are appended there too, while it holds fewer than
         ``keep`` (a bounded look at what came late)."""
         self._check_open()
-        buf = self._buf
-        n = len(buf)
-        if into is not None and len(into) < keep:
-            into += buf[: keep - len(into)]
-        buf.clear()
+        n = self._drop_buffered(into, keep)
         while chunk := self._take_pending():
             n += len(chunk)
             self.last_rx_s = self.clock.now()
             self.unanswered = 0
             if into is not None and len(into) < keep:
                 into += chunk[: keep - len(into)]
+        return n
+
+    def _drop_buffered(self, into: bytearray | None, keep: int) -> int:
+        """Drop the buffered bytes (copied to ``into`` up to ``keep``); return how many."""
+        buf = self._buf
+        n = len(buf)
+        if into is not None and len(into) < keep:
+            into += buf[: keep - len(into)]
+        buf.clear()
         return n
 
     def wait_quiet(self, quiet_s: float, max_s: float, since_s: float = -np.inf,
@@ -192,7 +197,7 @@ class Transport(ABC):
                 return n
             if not self._fill(min(end, quiet_until)):
                 return n
-            n += self.discard_input(into, keep)
+            n += self._drop_buffered(into, keep)
 
     def read_exact(
         self, n: int, deadline_s: float, spin_from_s: float | None = None,

@@ -13,6 +13,7 @@ import math
 
 from handrig.devices.servo import DynamixelBus, FaultPolicy
 from handrig.devices.servo.link import LATE_LOOK_BYTES
+from handrig.realtime import CpuPressure
 from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
 from tests.helpers.servos import make_bus, small_rig
 
@@ -66,6 +67,72 @@ def test_silence_and_a_reply_that_never_comes_stay_the_buss() -> None:
     assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 1)
 
 
+def test_a_reply_a_servo_could_still_have_sent_stays_the_buss() -> None:
+    """The caller's deadline came before the latest instant a servo could answer (its
+    wire time and the longest Return Delay Time): a reply after it is no sign of the host."""
+    bus, transport, peer = _held_bus()
+    wire = bus.reader.read_wire_s(len(peer.servos))
+    transport.extra_delay_s = 0.0005  # what a servo's 500 us Return Delay Time adds
+    state = bus.read_state(bus.clock.now() + wire + 0.0002)
+    assert state.sent and state.stale.all() and bus.stats.timeouts == 1
+    bus.clock.sleep(0.005)
+    assert bus.read_state(bus.clock.now() + 0.02).all_fresh
+    assert bus.stats.host_timeouts == 0
+
+
+class _Pressure(CpuPressure):
+    """The host's CPU pressure, growing by ``step`` at each look."""
+
+    def __init__(self) -> None:
+        super().__init__("/nonexistent/pressure")
+        self.step = 0
+        self.total = 0
+
+    def total_us(self) -> int | None:
+        self.total += self.step
+        return self.total
+
+
+def test_a_held_reply_of_another_request_does_not_make_a_silence_the_hosts() -> None:
+    bus, transport, peer = _held_bus()
+    pressure = _Pressure()
+    bus.link.pressure = pressure
+    pressure.step = 10_000_000  # the host's tasks waited: this timeout is the host's at once
+    transport.extra_delay_s = 0.015  # and its reply comes much later
+    assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (1, 1)
+    pressure.step = 0
+    for servo in peer.servos:
+        servo.silent_until = math.inf  # the next read is lost on the bus
+    assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    for servo in peer.servos:
+        servo.silent_until = 0.0
+    # the first read's reply comes ahead of the third's: not the silent read's
+    assert bus.read_state(bus.clock.now() + 0.3).all_fresh
+    assert bus.stats.late_replies == 1
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 1)
+
+
+def test_the_awaited_reply_is_looked_for_until_the_next_requests_reply_only() -> None:
+    bus, _, _ = _held_bus()
+    link = bus.link
+    reply = b"the reply"
+    link.timed_out(bus.clock.now(), lambda data: reply in data)
+    link.send(b"\xff\xff\xfd\x00next", answered=False)  # a goal write: no reply, no count
+    link.send(b"\xff\xff\xfd\x00next")  # the next request: the reply may come ahead of it
+    link.late_reply_came(b"another")
+    assert bus.stats.host_timeouts == 0
+    link.late_reply_came(reply)
+    assert bus.stats.host_timeouts == 1
+    link.late_reply_came(reply)  # once only
+    assert bus.stats.host_timeouts == 1
+    link.timed_out(bus.clock.now(), lambda data: reply in data)
+    link.send(b"\xff\xff\xfd\x00next")
+    link.send(b"\xff\xff\xfd\x00next")  # a second request: the first's reply is done with
+    link.late_reply_came(reply)
+    assert bus.stats.host_timeouts == 1
+
+
 def test_a_reply_to_another_request_or_a_damaged_one_does_not_count() -> None:
     bus, transport, _ = _held_bus()
     transport.extra_delay_s = HELD_S
@@ -78,7 +145,18 @@ def test_a_reply_to_another_request_or_a_damaged_one_does_not_count() -> None:
     damaged[len(good) // 2] ^= 0x40  # a flipped bit in one servo's block: its CRC fails
     assert not link._awaited(bytes(damaged))
     assert not link._awaited(good[:-3])  # cut short
-    assert len(good) < LATE_LOOK_BYTES
-    # a read of other servos: the same reply is not theirs
-    other = bus.reader.fast._whole_reply(bytes([1, 2]), len(good))
-    assert not other(good)
+    # the same servos asked in another order: the same reply is not theirs
+    fast = bus.reader.fast
+    asked = transport.writes[-1]
+    orders = [o.ids.tobytes() for o in fast.orders]
+    ids = next(o for o in orders if o in asked)
+    other = next(o for o in orders if o != ids and sorted(o) == sorted(ids))
+    assert fast._whole_reply(ids, len(good))(good)
+    assert not fast._whole_reply(other, len(good))(good)
+    # what came late is kept up to a bound: past it, nothing more is kept or looked at
+    link._late += bytes(LATE_LOOK_BYTES)
+    bus.clock.sleep(0.02)
+    assert bus.read_state(bus.clock.now() + 0.02).all_fresh
+    assert len(link._late) == LATE_LOOK_BYTES and bus.stats.host_timeouts == 0
+    assert bus.read_state(bus.clock.now() + 0.02).all_fresh
+    assert not link._late and link._awaited is None  # done with at the second request
