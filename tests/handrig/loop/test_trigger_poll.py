@@ -24,9 +24,11 @@ FRAMES = 60
 def _run(poll_s: float) -> tuple[GloveTrigger, int, int]:
     """The trigger's run over FRAMES frames played at 200 Hz: (trigger, frame ticks,
     frames sent). Played again (three runs at most) while frames share ticks beyond
-    what a descheduled thread explains (3): on a machine loaded by other test runs the
-    player and the waiter are both held off the CPU now and then, and two frames land
-    in one wake-up; a trigger that misses frames does so in every run."""
+    what a descheduled thread explains (3), or a window found no frame by polling: on a
+    machine loaded by other test runs the player and the waiter are both held off the
+    CPU now and then, two frames land in one wake-up, and a waiter that wakes late
+    finds each frame already there (a clean-clone CI run beside a busy core: none of 60
+    found by polling); a trigger that misses frames or never polls does so in every run."""
     for _ in range(3):
         glove = PipeGlove(MonotonicClock(spin_s=0.0))
         try:
@@ -35,7 +37,7 @@ def _run(poll_s: float) -> tuple[GloveTrigger, int, int]:
             frames = play_and_tick(glove, trig, FRAMES, PERIOD_S)
         finally:
             glove.close()
-        if frames >= FRAMES - 3:
+        if frames >= FRAMES - 3 and (trig.polls_found or not poll_s):
             break
     return trig, frames, glove.count
 
