@@ -21,8 +21,8 @@ import numpy as np
 
 from handrig.devices.servo import codec
 from handrig.devices.servo.bus import BusStats
-from handrig.devices.servo.link import HOST_STALL_S, Link
-from handrig.devices.servo.models import RETURN_DELAY_UNIT_US
+from handrig.devices.servo.link import Link
+from handrig.devices.servo.models import servo_settings_for
 from handrig.devices.servo.readings import Readings, ReadPlan
 from handrig.devices.servo.roster import Roster
 from handrig.errors import ProtocolError
@@ -35,9 +35,10 @@ ORDERS_KEPT = 256  # orders of parts and retries kept once built
 REPLY_POLL_AFTER_S = 300e-6
 INSTRUCTION_ERROR = 2  # ERR number: the servo does not know the instruction
 LATE_REPLIES_MAX = 4  # late replies dropped within one read before giving up
-# The longest Return Delay Time a servo can be set to (254 x 2 us): a reply not begun this
-# long after its wire instant does not come from a servo's timing
-MAX_RETURN_DELAY_S = 254 * RETURN_DELAY_UNIT_US * 1e-6
+# A servo begins its reply within microseconds of its Return Delay Time, and a Fast Sync
+# Read's blocks follow each other as closely: a reply still not begun this long after the
+# latest instant it could have (its wire time and that delay) is not a servo's timing.
+HELD_MARGIN_S = 250e-6
 NONE, SOME, WHOLE = 0, 1, 2  # what a read got: nothing, some servos, every servo at once
 
 
@@ -90,6 +91,10 @@ class FastSyncRead:
         self._valid = np.zeros(roster.n, np.bool_)
         self._orders_of: dict[bytes, Order] = {}  # see _order_of
         self.whole_at = 0.0  # when the last whole reply was decoded
+        # the longest Return Delay Time commissioning gave the servos (see HELD_MARGIN_S)
+        self._return_delay_s = max(
+            (servo_settings_for(roster.rig, int(i)).return_delay_us for i in roster.ids),
+            default=0) * 1e-6
 
     def read(self, indices: np.ndarray, deadline: float, order: Order | None = None) -> int:
         """One Fast Sync Read of ``indices`` (``order``: every servo, as that order asks).
@@ -152,7 +157,7 @@ class FastSyncRead:
         if len(head) < 7:
             # nothing heard this long after any servo would have answered: if the reply
             # still comes whole, it was held on its way (Link.timed_out)
-            held = not head and deadline - arrival >= MAX_RETURN_DELAY_S + HOST_STALL_S
+            held = not head and deadline - arrival >= self._return_delay_s + HELD_MARGIN_S
             self.link.timed_out(deadline, self._whole_reply(ids, expected) if held else None)
             return None
         if head[:4] != codec.HEADER:

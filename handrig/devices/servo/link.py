@@ -140,8 +140,8 @@ class Link:
         have been the one held).
 
         ``awaited``: a test the reply passes (intact, for this request), given only when
-        the wait lasted ``HOST_STALL_S`` past the latest instant a servo could have
-        sent it (its wire time and the longest Return Delay Time). If it is not the
+        the wait lasted past the latest instant a servo could have sent it (its wire
+        time and the Return Delay Time commissioning set, and a margin). If it is not the
         host's by then and that reply still comes in whole before the next request's
         reply is done with (:meth:`late_reply_came`), it was held on its way (by the
         host, an emulator or a USB adapter's latency timer): a servo answers within its

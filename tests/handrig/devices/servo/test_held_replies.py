@@ -9,9 +9,11 @@ process never wakes late and no CPU pressure is looked at): the compute-only lan
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from handrig.devices.servo import DynamixelBus, FaultPolicy
+from handrig.devices.servo.fast_read import HELD_MARGIN_S
 from handrig.devices.servo.link import LATE_LOOK_BYTES
 from handrig.realtime import CpuPressure
 from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
@@ -67,17 +69,33 @@ def test_silence_and_a_reply_that_never_comes_stay_the_buss() -> None:
     assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 1)
 
 
-def test_a_reply_a_servo_could_still_have_sent_stays_the_buss() -> None:
-    """The caller's deadline came before the latest instant a servo could answer (its
-    wire time and the longest Return Delay Time): a reply after it is no sign of the host."""
-    bus, transport, peer = _held_bus()
+def _late_by(return_delay_us: int, room_s: float, late_s: float) -> int:
+    """The host's timeouts after a read whose deadline leaves ``room_s`` past the reply's
+    wire time, on servos commissioned with ``return_delay_us``, when the reply comes
+    ``late_s`` after its wire time (and then in whole)."""
+    rig = small_rig()
+    rig = dataclasses.replace(rig, servo_settings=dataclasses.replace(
+        rig.servo_settings, return_delay_us=return_delay_us))
+    bus, transport, peer = make_bus(rig, temperature_every=0, reply_timeout_s=0.01,
+                                    fault_policy=FaultPolicy(read_retries=0))
     wire = bus.reader.read_wire_s(len(peer.servos))
-    transport.extra_delay_s = 0.0005  # what a servo's 500 us Return Delay Time adds
-    state = bus.read_state(bus.clock.now() + wire + 0.0002)
+    transport.extra_delay_s = late_s
+    state = bus.read_state(bus.clock.now() + wire + room_s)
     assert state.sent and state.stale.all() and bus.stats.timeouts == 1
     bus.clock.sleep(0.005)
     assert bus.read_state(bus.clock.now() + 0.02).all_fresh
-    assert bus.stats.host_timeouts == 0
+    return bus.stats.host_timeouts
+
+
+def test_a_reply_a_servo_could_still_have_sent_stays_the_buss() -> None:
+    """A deadline before the latest instant a servo could answer (its wire time, the Return
+    Delay Time commissioning gave it, and HELD_MARGIN_S): a reply after it is no sign of
+    the host; past that instant it is."""
+    assert _late_by(0, 0.5 * HELD_MARGIN_S, HELD_MARGIN_S) == 0
+    assert _late_by(0, 2 * HELD_MARGIN_S, 3 * HELD_MARGIN_S) == 1
+    # servos set to answer 500 us late: the same wait is too short to tell
+    assert _late_by(500, 2 * HELD_MARGIN_S, 3 * HELD_MARGIN_S) == 0
+    assert _late_by(500, 0.0005 + 2 * HELD_MARGIN_S, 0.0005 + 3 * HELD_MARGIN_S) == 1
 
 
 class _Pressure(CpuPressure):
