@@ -24,8 +24,8 @@ FAULT_WORDS: dict[str, str] = {
     "timeouts": "read timeouts",
     "host_timeouts": ("of them the host's (this process woke 1 ms or more after the "
                       "deadline, the host's tasks waited 1 ms for a CPU meanwhile, or the "
-                      "reply came in whole 1 ms or more after any servo would have sent it: "
-                      "held on its way, not lost on the bus)"),
+                      "reply came in whole after the latest a servo could have sent it: held "
+                      "on its way, not lost on the bus)"),
     "retries": "read retries",
     "crc_errors": "replies with a bad CRC",
     "malformed": "malformed replies",

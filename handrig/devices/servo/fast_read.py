@@ -113,7 +113,7 @@ class FastSyncRead:
         self.link.quiet_line(deadline)
         self.link.send(order.request)
         out = self.readings.prepare_whole() if whole_ok else None
-        raw = self._receive(expected, deadline, order.ids.tobytes())
+        raw = self._receive(expected, deadline, order)
         if raw is None:
             return NONE
         if out is not None and (alerts := self._take_whole(raw, order, out)) >= 0:
@@ -139,8 +139,8 @@ class FastSyncRead:
                 self._orders_of[key] = order
         return order
 
-    def _receive(self, expected: int, deadline: float, ids: bytes) -> bytes | None:
-        """The reply (up to ``expected`` bytes) of the servos ``ids``, or None when none
+    def _receive(self, expected: int, deadline: float, order: Order) -> bytes | None:
+        """The reply (up to ``expected`` bytes) of the servos ``order`` asks, or None when none
         came (a timeout: its reply is looked for in what comes in late) or it is not a
         Fast Sync Read reply at all (counted; a single servo's error status may switch to
         Sync Read)."""
@@ -158,7 +158,8 @@ class FastSyncRead:
             # nothing heard this long after any servo would have answered: if the reply
             # still comes whole, it was held on its way (Link.timed_out)
             held = not head and deadline - arrival >= self._return_delay_s + HELD_MARGIN_S
-            self.link.timed_out(deadline, self._whole_reply(ids, expected) if held else None)
+            self.link.timed_out(
+                deadline, self._whole_reply(order.ids.tobytes(), expected) if held else None)
             return None
         if head[:4] != codec.HEADER:
             self.stats.malformed += 1

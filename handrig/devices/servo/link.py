@@ -149,11 +149,10 @@ class Link:
         The line is marked failed."""
         now = self.clock.now()
         self.stats.timeouts += 1
+        self._forget_awaited()  # a newer timeout: an older one's reply is no longer sought
         if now - deadline >= HOST_STALL_S or self._host_pressed():
             self.stats.host_timeouts += 1
-            self._forget_awaited()
-        elif awaited is not None:
-            self._forget_awaited()
+        else:
             self._awaited = awaited
         self.budget.failed(now)
 

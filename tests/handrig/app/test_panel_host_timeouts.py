@@ -9,7 +9,11 @@ import io
 from rich.console import Console
 
 from handrig.app.panel import BusHealth, bus_line, plain_line
-from tests.handrig.app.test_panel import screen, show_snapshot
+from handrig.app.parts import build_parts
+from handrig.app.rig_snapshot import RigSnapshot
+from handrig.clock import FakeClock
+from tests.handrig.app.test_panel import SteadyGlove, screen, show_snapshot, warm_bus
+from tests.helpers.loop import make_rig
 
 
 def _wide(text: object) -> str:
@@ -30,3 +34,16 @@ def test_the_hosts_timeouts_are_named_beside_the_count() -> None:
     assert "(host" not in "\n".join(screen(plain)) and "(host" not in plain_line(plain)
     line = _wide(bus_line(plain.bus))
     assert len(line) <= 80 and "timeouts 19  errors 1  stale 2 (worst 120 ms)" in line
+
+
+def test_a_running_rigs_snapshot_carries_the_hosts_timeouts() -> None:
+    parts = build_parts()
+    clock = FakeClock()
+    bus = warm_bus(tuple(parts.pipeline.servo_joints), clock)
+    bus.stats.host_timeouts = 3  # of its 4
+    rig = make_rig(parts, SteadyGlove(clock), bus, clock)
+    snapshot = RigSnapshot(rig, glove_source="/dev/ttyACM0")
+    rig.run(frames=20)
+    snap = snapshot()
+    assert (snap.bus.timeouts, snap.bus.host_timeouts) == (4, 3)
+    assert "timeouts 4 (host 3)" in plain_line(snap)

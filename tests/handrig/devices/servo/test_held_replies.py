@@ -14,7 +14,7 @@ import math
 
 from handrig.devices.servo import DynamixelBus, FaultPolicy
 from handrig.devices.servo.fast_read import HELD_MARGIN_S
-from handrig.devices.servo.link import LATE_LOOK_BYTES
+from handrig.devices.servo.link import HOST_STALL_S, LATE_LOOK_BYTES
 from handrig.realtime import CpuPressure
 from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
 from tests.helpers.servos import make_bus, small_rig
@@ -98,6 +98,34 @@ def test_a_reply_a_servo_could_still_have_sent_stays_the_buss() -> None:
     assert _late_by(500, 0.0005 + 2 * HELD_MARGIN_S, 0.0005 + 3 * HELD_MARGIN_S) == 1
 
 
+def test_the_loops_look_at_the_line_before_a_read_finds_a_held_reply() -> None:
+    """The loop asks for the quiet wait before each read (``bus.quiet_wait_s()``), which
+    drops what came late: a held reply is found there."""
+    bus, transport, _ = _held_bus()
+    transport.extra_delay_s = HELD_S
+    assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    bus.clock.sleep(0.01)
+    bus.quiet_wait_s()
+    assert (bus.stats.timeouts, bus.stats.host_timeouts, bus.stats.late_replies) == (1, 1, 1)
+
+
+def test_a_newer_timeout_ends_the_look_for_an_older_ones_reply() -> None:
+    """One servo: every read asks the same order. A silence, then a read whose deadline
+    left a servo no room to be late: its reply, a little late, makes nothing the host's."""
+    bus, transport, peer = make_bus(small_rig(1), temperature_every=0, reply_timeout_s=0.01,
+                                    fault_policy=FaultPolicy(read_retries=0))
+    peer.servos[0].silent_until = math.inf
+    assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    peer.servos[0].silent_until = 0.0
+    bus.clock.sleep(0.01)
+    wire = bus.reader.read_wire_s(1)
+    transport.extra_delay_s = 0.5 * HELD_MARGIN_S
+    assert bus.read_state(bus.clock.now() + wire + 0.25 * HELD_MARGIN_S).stale.all()
+    bus.clock.sleep(0.01)
+    assert bus.read_state(bus.clock.now() + 0.02).all_fresh
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 0)
+
+
 class _Pressure(CpuPressure):
     """The host's CPU pressure, growing by ``step`` at each look."""
 
@@ -131,6 +159,20 @@ def test_a_held_reply_of_another_request_does_not_make_a_silence_the_hosts() -> 
     assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 1)
 
 
+def test_a_timeout_the_host_made_at_once_is_counted_once_when_its_reply_comes() -> None:
+    bus, transport, _ = _held_bus()
+    pressure = _Pressure()
+    bus.link.pressure = pressure
+    pressure.step = 10_000_000
+    transport.extra_delay_s = HELD_S
+    assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    pressure.step = 0
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (1, 1)
+    bus.clock.sleep(0.01)
+    assert bus.read_state(bus.clock.now() + 0.02).all_fresh
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (1, 1)
+
+
 def test_the_awaited_reply_is_looked_for_until_the_next_requests_reply_only() -> None:
     bus, _, _ = _held_bus()
     link = bus.link
@@ -149,6 +191,15 @@ def test_the_awaited_reply_is_looked_for_until_the_next_requests_reply_only() ->
     link.send(b"\xff\xff\xfd\x00next")  # a second request: the first's reply is done with
     link.late_reply_came(reply)
     assert bus.stats.host_timeouts == 1
+    link.timed_out(bus.clock.now(), lambda data: reply in data)
+    link.timed_out(bus.clock.now(), None)  # a newer timeout, its reply no sign of the host
+    link.late_reply_came(reply)  # (a reply like the older one's: one servo, one order)
+    assert bus.stats.host_timeouts == 1
+    link.timed_out(bus.clock.now(), lambda data: reply in data)
+    link.timed_out(bus.clock.now() - 2 * HOST_STALL_S)  # the host's at once: woke late
+    assert bus.stats.host_timeouts == 2
+    link.late_reply_came(reply)  # the older one is no longer looked for either
+    assert bus.stats.host_timeouts == 2
 
 
 def test_a_reply_to_another_request_or_a_damaged_one_does_not_count() -> None:
