@@ -138,17 +138,24 @@ def test_one_silent_servo_mid_chain_costs_that_servo_only(parts: int) -> None:
             while sim_servo.status_return_level != 0:
                 assert time.monotonic() < deadline
                 time.sleep(0.001)
-            stale = np.zeros(len(rig.servos), np.int64)
-            its_reads = 0
-            for k in range(10, 10 + 40 * parts):
-                state = read(k)
-                # a read the host was too late to send (a loaded machine) asks nobody
-                asked = state.stale if state.asked is None else state.stale[state.asked]
-                # a read whose reply came after its deadline (a loaded machine) got
-                # nobody: the host's lateness, not the silent servo's
-                if k >= 10 + 4 * parts and state.sent and not asked.all():
-                    stale += state.stale
-                    its_reads += bool(state.asked is None or state.asked[silent])
+            # 40 reads a part, measured again (three times at most) while the host was
+            # too late for more than a third of them (a clean-clone CI run beside a busy
+            # core: 23 of 36 counted): a loaded machine's lateness voids a read either way
+            for block in range(3):
+                stale = np.zeros(len(rig.servos), np.int64)
+                its_reads = 0
+                first = 10 + block * 40 * parts
+                for k in range(first, first + 40 * parts):
+                    state = read(k)
+                    # a read the host was too late to send (a loaded machine) asks nobody
+                    asked = state.stale if state.asked is None else state.stale[state.asked]
+                    # a read whose reply came after its deadline (a loaded machine) got
+                    # nobody: the host's lateness, not the silent servo's
+                    if k >= first + 4 * parts and state.sent and not asked.all():
+                        stale += state.stale
+                        its_reads += bool(state.asked is None or state.asked[silent])
+                if its_reads >= 25:
+                    break
             others = np.delete(stale, silent)
             assert its_reads >= 25 and stale[silent] == its_reads
             assert not others.any(), f"servos after it starved: {others.tolist()}"
