@@ -56,8 +56,8 @@ def _stalled_first_piece() -> tuple[CountingPipeGlove, GloveTrigger, Tick, int]:
     """The trigger after a 120 ms stall's first piece (6 frames sent one by one): the
     glove, the trigger, its tick and the frames it counted as the stall's. Played again
     (three times at most) when the test's own sleeps (learning or stall) overslept by a
-    quarter period or more (a loaded machine: a clean-clone CI run beside a busy core counted 4, not 5):
-    then the frames were not sent on the glove's period the trigger learnt."""
+    quarter period or more (a loaded machine: a clean-clone CI run beside a busy core
+    counted 4, not 5): then the frames were not sent on the period the trigger learnt."""
     for attempt in range(3):
         glove = CountingPipeGlove(MonotonicClock(spin_s=0.0))
         t = time.monotonic()
