@@ -177,15 +177,11 @@ class CpuPressure:
             self._fd = None
 
 
-_HOST_PRESSURE: list[CpuPressure] = []
-
-
+@functools.cache
 def host_cpu_pressure() -> CpuPressure:
     """This process's one :class:`CpuPressure` (a descriptor kept open for the process's
     life; ``pread`` on it is safe from any thread)."""
-    if not _HOST_PRESSURE:
-        _HOST_PRESSURE.append(CpuPressure())
-    return _HOST_PRESSURE[0]
+    return CpuPressure()
 
 
 @contextlib.contextmanager

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from handrig.config.rig import RigConfig
 from handrig.devices.servo import DynamixelBus, FaultPolicy
 from handrig.devices.servo.fast_read import HELD_MARGIN_S
 from handrig.devices.servo.link import HOST_STALL_S, LATE_LOOK_BYTES
@@ -22,8 +23,9 @@ from tests.helpers.servos import make_bus, small_rig
 HELD_S = 0.006  # the reply comes this long after its wire time: after its read gave up
 
 
-def _held_bus() -> tuple[DynamixelBus, EmulatorTransport, PeerBus]:
-    return make_bus(small_rig(), temperature_every=0, reply_timeout_s=0.01,
+def _held_bus(rig: RigConfig | None = None) -> tuple[DynamixelBus, EmulatorTransport, PeerBus]:
+    """The driver on ``rig`` (six servos), a 10 ms reply timeout and no retry."""
+    return make_bus(rig or small_rig(), temperature_every=0, reply_timeout_s=0.01,
                     fault_policy=FaultPolicy(read_retries=0))
 
 
@@ -76,8 +78,7 @@ def _late_by(return_delay_us: int, room_s: float, late_s: float) -> int:
     rig = small_rig()
     rig = dataclasses.replace(rig, servo_settings=dataclasses.replace(
         rig.servo_settings, return_delay_us=return_delay_us))
-    bus, transport, peer = make_bus(rig, temperature_every=0, reply_timeout_s=0.01,
-                                    fault_policy=FaultPolicy(read_retries=0))
+    bus, transport, peer = _held_bus(rig)
     wire = bus.reader.read_wire_s(len(peer.servos))
     transport.extra_delay_s = late_s
     state = bus.read_state(bus.clock.now() + wire + room_s)
@@ -112,8 +113,7 @@ def test_the_loops_look_at_the_line_before_a_read_finds_a_held_reply() -> None:
 def test_a_newer_timeout_ends_the_look_for_an_older_ones_reply() -> None:
     """One servo: every read asks the same order. A silence, then a read whose deadline
     left a servo no room to be late: its reply, a little late, makes nothing the host's."""
-    bus, transport, peer = make_bus(small_rig(1), temperature_every=0, reply_timeout_s=0.01,
-                                    fault_policy=FaultPolicy(read_retries=0))
+    bus, transport, peer = _held_bus(small_rig(1))
     peer.servos[0].silent_until = math.inf
     assert bus.read_state(bus.clock.now() + 0.004).stale.all()
     peer.servos[0].silent_until = 0.0
