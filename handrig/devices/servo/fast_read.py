@@ -22,7 +22,7 @@ import numpy as np
 from handrig.devices.servo import codec
 from handrig.devices.servo.bus import BusStats
 from handrig.devices.servo.link import Link
-from handrig.devices.servo.models import servo_settings_for
+from handrig.devices.servo.models import RETURN_DELAY_MAX_US, servo_settings_for
 from handrig.devices.servo.readings import Readings, ReadPlan
 from handrig.devices.servo.roster import Roster
 from handrig.errors import ProtocolError
@@ -157,7 +157,7 @@ class FastSyncRead:
         if len(head) < 7:
             # nothing heard this long after any servo would have answered: if the reply
             # still comes whole, it was held on its way (Link.timed_out)
-            held = not head and deadline - arrival >= self._return_delay_s + HELD_MARGIN_S
+            held = not head and deadline - arrival >= self._latest_delay_s(order) + HELD_MARGIN_S
             self.link.timed_out(
                 deadline, self._whole_reply(order.ids.tobytes(), expected) if held else None)
             return None
@@ -173,6 +173,14 @@ class FastSyncRead:
             self.stats.malformed += 1
         return head + t.read_exact(min(total, expected) - 7, deadline, spin_from,
                                    self.link.budget.reply_gap_s, spin_until)
+
+    def _latest_delay_s(self, order: Order) -> float:
+        """The longest Return Delay Time a servo ``order`` asks may answer after: the one
+        commissioning set, or the protocol's longest for a servo left out at start-up (not
+        commissioned yet: it may still have the factory's 500 us)."""
+        if self.roster.absent[order.indices].any():
+            return max(self._return_delay_s, RETURN_DELAY_MAX_US * 1e-6)
+        return self._return_delay_s
 
     def _whole_reply(self, ids: bytes, expected: int) -> Callable[[bytes], bool]:
         """A test for bytes that hold the whole, intact reply of the servos ``ids``."""

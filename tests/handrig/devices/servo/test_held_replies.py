@@ -12,9 +12,11 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
+
 from handrig.config.rig import RigConfig
 from handrig.devices.servo import DynamixelBus, FaultPolicy
-from handrig.devices.servo.fast_read import HELD_MARGIN_S
+from handrig.devices.servo.fast_read import HELD_MARGIN_S, NONE
 from handrig.devices.servo.link import HOST_STALL_S, LATE_LOOK_BYTES
 from handrig.realtime import CpuPressure
 from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
@@ -229,3 +231,34 @@ def test_a_reply_to_another_request_or_a_damaged_one_does_not_count() -> None:
     assert len(link._late) == LATE_LOOK_BYTES and bus.stats.host_timeouts == 0
     assert bus.read_state(bus.clock.now() + 0.02).all_fresh
     assert not link._late and link._awaited is None  # done with at the second request
+
+
+def test_a_servo_left_out_at_start_up_may_still_answer_at_the_factorys_delay() -> None:
+    """A servo left out at connect (silent then) is not commissioned until it is admitted,
+    so it may still answer 500 us late (the factory's Return Delay Time): a read asking
+    only it, whose deadline falls before the protocol's longest delay, does not make its
+    normal reply the host's. A commissioned servo (delay 0) read so is the host's."""
+    rig = small_rig()
+    peer = PeerBus(rig)
+    late = peer.servos[-1]
+    late.silent_until = math.inf
+    bus, transport, _ = make_bus(rig, peer=peer, temperature_every=0, reply_timeout_s=0.01,
+                                 fault_policy=FaultPolicy(read_retries=0), missing_ok=True)
+    assert bus.left_out == (len(peer.servos) - 1,)
+    late.silent_until = 0.0  # plugged back in, still at the factory's delay (the fake
+    # transport delivers at wire time: extra_delay_s below stands for that delay)
+    fast = bus.reader.fast
+
+    def host_after(index: int, held_s: float) -> int:
+        before = bus.stats.host_timeouts
+        order = fast._order_of(np.array([index]))
+        transport.extra_delay_s = held_s
+        # 0.4 ms past the reply's wire time, from when the line lets the request out
+        start = bus.link.request_start(bus.clock.now())
+        assert fast.read(order.indices, start + bus.reader.read_wire_s(1) + 0.4e-3) == NONE
+        bus.clock.sleep(0.01)  # the reply has come in whole
+        bus.quiet_wait_s()
+        return bus.stats.host_timeouts - before
+
+    assert host_after(len(peer.servos) - 1, 0.5e-3) == 0  # its own 500 us: a servo's timing
+    assert host_after(0, 0.5e-3) == 1  # a commissioned servo's reply held as long: the host's
