@@ -208,19 +208,41 @@ def loop_line(s: PanelSnapshot) -> Text:
     )
 
 
+def _count(n: int, compact: bool) -> str:
+    """A count; ``compact``: 10,000 and up in thousands ("12k"), at most 4 characters
+    below a million."""
+    return str(n) if not compact or n < 10_000 else f"{n // 1000}k"
+
+
+BUS_LINE_TIGHTER = 4  # ways to make the bus line tighter, tried in turn until it fits
+
+
 def bus_line(b: BusHealth) -> Text:
-    # the host's timeouts take the room of the spacing and of "worst" (80 columns)
-    sep, worst = (" ", "") if b.host_timeouts else ("  ", "worst ")
+    """The bus's line, within WIDTH columns: as roomy as fits, tightened step by step (one
+    space between fields and no "worst", counts of 10,000 and up in thousands, then the
+    port's name cut to its last 7 characters), then cut."""
+    for tight in range(BUS_LINE_TIGHTER):
+        line = _bus_line(b, tight)
+        if len(line.plain) <= WIDTH:
+            return line
+    line.truncate(WIDTH, overflow="ellipsis")
+    return line
+
+
+def _bus_line(b: BusHealth, tight: int) -> Text:
+    sep, worst = ("  ", "worst ") if tight == 0 else (" ", "")
+    compact = tight >= 2
     stale = (Text(f"{b.stale_servos} ({worst}{_age(b.stale_worst_age_s)})", "bold yellow")
              if b.stale_servos else Text("none"))
     return Text.assemble(
-        ("bus    ", "bold"), _fit_left(b.port or "-", 14),
+        ("bus    ", "bold"), _fit_left(b.port or "-", 14 if tight < 3 else 7),
         f"{sep}reads {_num(b.read_rate_hz)}/s{sep}timeouts ",
-        (str(b.timeouts), "yellow" if b.timeouts else ""),
-        *([(f" (host {b.host_timeouts})", "")] if b.host_timeouts else []), f"{sep}errors ",
-        (str(b.errors), "bold red" if b.errors else ""), f"{sep}stale ", stale,
-        *([("  out ", ""), (str(b.left_out), "bold yellow")] if b.left_out else []),
-        *([("  admitted ", ""), (str(b.admitted), "green")] if b.admitted else []),
+        (_count(b.timeouts, compact), "yellow" if b.timeouts else ""),
+        *([(f" (host {_count(b.host_timeouts, compact)})", "")] if b.host_timeouts else []),
+        f"{sep}errors ", (_count(b.errors, compact), "bold red" if b.errors else ""),
+        f"{sep}stale ", stale,
+        *([(f"{sep}out ", ""), (str(b.left_out), "bold yellow")] if b.left_out else []),
+        *([(f"{sep}admitted ", ""), (str(b.admitted), "green")] if b.admitted else []),
     )
 
 

@@ -47,3 +47,26 @@ def test_a_running_rigs_snapshot_carries_the_hosts_timeouts() -> None:
     snap = snapshot()
     assert (snap.bus.timeouts, snap.bus.host_timeouts) == (4, 3)
     assert "timeouts 4 (host 3)" in plain_line(snap)
+
+
+def test_the_bus_line_fits_80_columns_after_hours_of_timeouts() -> None:
+    """A show of hours may count thousands of timeouts: the bus line tightens step by step
+    (one space, no "worst", then counts in thousands, then a shorter port) and stays
+    within 80 columns, the counts still readable."""
+    def line(timeouts: int, host: int, errors: int, **kw: int) -> str:
+        b = BusHealth("/dev/ttyUSB0", 50.0, 1266.0, timeouts, errors, 20, 0.12,
+                      host_timeouts=host, **kw)
+        text = _wide(bus_line(b))
+        assert len(text) <= 80, text
+        return text
+
+    assert "/dev/ttyUSB0 reads 50/s timeouts 1234 errors 5 stale 20 (120 ms)" in line(
+        1234, 0, 5)
+    assert "…tyUSB0 reads 50/s timeouts 1234 (host 1200) errors 5 stale 20" in line(
+        1234, 1200, 5)
+    assert "timeouts 12k (host 11k) errors 123 stale 20 (120 ms)" in line(12345, 11999, 123)
+    # everything at once: cut at the end, never wider
+    assert line(123456, 120000, 12345, left_out=2, admitted=1).endswith("…")
+    for timeouts in (0, 9, 99, 999, 9999, 99999, 999999):
+        line(timeouts, timeouts // 2, timeouts)
+        line(timeouts, 0, 0, left_out=1, admitted=1)
