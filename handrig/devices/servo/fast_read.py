@@ -14,7 +14,6 @@ the servos whose running CRCs check (:func:`handrig.devices.servo.codec.fast_syn
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +21,6 @@ import numpy as np
 from handrig.devices.servo import codec
 from handrig.devices.servo.bus import BusStats
 from handrig.devices.servo.link import Link
-from handrig.devices.servo.models import RETURN_DELAY_MAX_US, servo_settings_for
 from handrig.devices.servo.readings import Readings, ReadPlan
 from handrig.devices.servo.roster import Roster
 from handrig.errors import ProtocolError
@@ -35,10 +33,6 @@ ORDERS_KEPT = 256  # orders of parts and retries kept once built
 REPLY_POLL_AFTER_S = 300e-6
 INSTRUCTION_ERROR = 2  # ERR number: the servo does not know the instruction
 LATE_REPLIES_MAX = 4  # late replies dropped within one read before giving up
-# A servo begins its reply within microseconds of its Return Delay Time, and a Fast Sync
-# Read's blocks follow each other as closely: a reply still not begun this long after the
-# latest instant it could have (its wire time and that delay) is not a servo's timing.
-HELD_MARGIN_S = 250e-6
 NONE, SOME, WHOLE = 0, 1, 2  # what a read got: nothing, some servos, every servo at once
 
 
@@ -91,10 +85,6 @@ class FastSyncRead:
         self._valid = np.zeros(roster.n, np.bool_)
         self._orders_of: dict[bytes, Order] = {}  # see _order_of
         self.whole_at = 0.0  # when the last whole reply was decoded
-        # the longest Return Delay Time commissioning gave the servos (see HELD_MARGIN_S)
-        self._return_delay_s = max(
-            (servo_settings_for(roster.rig, int(i)).return_delay_us for i in roster.ids),
-            default=0) * 1e-6
 
     def read(self, indices: np.ndarray, deadline: float, order: Order | None = None) -> int:
         """One Fast Sync Read of ``indices`` (``order``: every servo, as that order asks).
@@ -155,11 +145,11 @@ class FastSyncRead:
             spin_until = arrival + REPLY_POLL_AFTER_S
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until, answer=True)
         if len(head) < 7:
-            # nothing heard this long after any servo would have answered: if the reply
-            # still comes whole, it was held on its way (Link.timed_out)
-            held = not head and deadline - arrival >= self._latest_delay_s(order) + HELD_MARGIN_S
-            self.link.timed_out(
-                deadline, self._whole_reply(order.ids.tobytes(), expected) if held else None)
+            # nothing heard: if the reply still comes whole, late enough, it was held on
+            # its way (Link.held_test, Link.timed_out)
+            held = None if head else self.link.held_test(
+                order.indices, order.ids.tobytes(), self.plan.data_len, expected, deadline)
+            self.link.timed_out(deadline, held)
             return None
         if head[:4] != codec.HEADER:
             self.stats.malformed += 1
@@ -173,32 +163,6 @@ class FastSyncRead:
             self.stats.malformed += 1
         return head + t.read_exact(min(total, expected) - 7, deadline, spin_from,
                                    self.link.budget.reply_gap_s, spin_until)
-
-    def _latest_delay_s(self, order: Order) -> float:
-        """The longest Return Delay Time a servo ``order`` asks may answer after: the one
-        commissioning set, or the protocol's longest for a servo left out at start-up (not
-        commissioned yet: it may still have the factory's 500 us)."""
-        if self.roster.absent[order.indices].any():
-            return max(self._return_delay_s, RETURN_DELAY_MAX_US * 1e-6)
-        return self._return_delay_s
-
-    def _whole_reply(self, ids: bytes, expected: int) -> Callable[[bytes], bool]:
-        """A test for bytes that hold the whole, intact reply of the servos ``ids``."""
-        data_len = self.plan.data_len
-        valid = np.zeros(len(ids), np.bool_)
-
-        def found(data: bytes) -> bool:
-            at = data.find(codec.HEADER)
-            while at >= 0:
-                raw = data[at: at + expected]
-                if (len(raw) == expected and raw[4] == codec.BROADCAST_ID
-                        and codec.fast_reply_ids(raw, data_len, len(ids)) == ids
-                        and codec.fast_sync_intact(raw, ids, data_len, valid)):
-                    return True
-                at = data.find(codec.HEADER, at + 1)
-            return False
-
-        return found
 
     def _single_status(self, head: bytes, total: int, deadline: float) -> None:
         """A single servo's status instead of the reply: an error report or a wrong reply."""

@@ -16,12 +16,15 @@ from handrig.clock import Clock
 from handrig.devices.servo.bus import BusStats
 from handrig.devices.servo.codec import (
     BROADCAST_ID,
+    HEADER,
     INST_PING,
     INST_READ,
     INST_SYNC_WRITE,
     INST_WRITE,
     StatusPacket,
     build_instruction,
+    fast_reply_ids,
+    fast_sync_intact,
     parse_status,
     u16,
 )
@@ -40,6 +43,10 @@ HOST_STALL_S = 0.001  # a reply waited for ends this late after its deadline, or
 # tasks waited this long for a CPU since the request went out: the host held us or the
 # reply's writer (an emulator, a USB adapter's driver)
 LATE_LOOK_BYTES = 8192  # how much of what comes in after a timeout is looked at for its reply
+# A servo begins its reply within microseconds of its Return Delay Time, and a Fast Sync
+# Read's blocks follow each other as closely: a reply still not begun this long after the
+# latest instant it could have (its wire time and that delay) is not a servo's timing.
+HELD_MARGIN_S = 250e-6
 
 
 class Link:
@@ -155,6 +162,32 @@ class Link:
         else:
             self._awaited = awaited
         self.budget.failed(now)
+
+    def held_test(self, indices: np.ndarray, ids: bytes, data_len: int, expected: int,
+                  deadline: float) -> Callable[[bytes], bool] | None:
+        """For a Fast Sync Read of the servos ``indices`` (IDs ``ids``, ``data_len`` bytes
+        each, ``expected`` bytes in all) of which nothing was heard by ``deadline``: the
+        test its whole reply passes (for :meth:`timed_out`), or None when the wait did not
+        last ``HELD_MARGIN_S`` past the latest instant a servo could have ended it (the
+        request's and the reply's wire time and the servos' Return Delay Time). Asked
+        before the timeout marks the line failed."""
+        arrival = self.budget.free_at + expected * self.budget.byte_s
+        if deadline - arrival < self.roster.latest_reply_delay_s(indices) + HELD_MARGIN_S:
+            return None
+        valid = np.zeros(len(ids), np.bool_)
+
+        def found(data: bytes) -> bool:
+            at = data.find(HEADER)
+            while at >= 0:
+                raw = data[at: at + expected]
+                if (len(raw) == expected and raw[4] == BROADCAST_ID
+                        and fast_reply_ids(raw, data_len, len(ids)) == ids
+                        and fast_sync_intact(raw, ids, data_len, valid)):
+                    return True
+                at = data.find(HEADER, at + 1)
+            return False
+
+        return found
 
     def late_reply_came(self, reply: bytes) -> None:
         """A reader recognised ``reply`` as an intact reply to an earlier request: if it

@@ -10,7 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 from handrig.config.rig import RigConfig
-from handrig.devices.servo.models import MODEL_NUMBERS, check_rig, servo_model
+from handrig.devices.servo.models import (
+    MODEL_NUMBERS,
+    RETURN_DELAY_MAX_US,
+    check_rig,
+    servo_model,
+    servo_settings_for,
+)
 from handrig.devices.servo.positions import POSITION_TICKS_MAX, TICKS_PER_DEG
 from handrig.devices.servo.registers import CURRENT_MA_PER_UNIT, VELOCITY_DPS_PER_UNIT
 from handrig.errors import DeviceError
@@ -51,6 +57,17 @@ class Roster:
         """Servos that did not answer at start-up, left out for the run (commissioning
         sets it when ``[silence] action`` is ``"continue"``): not commissioned, never
         sent a goal or torque."""
+        # the Return Delay Time commissioning gives each servo
+        self.return_delay_s = np.array(
+            [servo_settings_for(rig, s.id).return_delay_us for s in servos], np.float64) * 1e-6
+
+    def latest_reply_delay_s(self, indices: np.ndarray) -> float:
+        """The longest a servo of ``indices`` may wait before its reply (its Return Delay
+        Time): the one commissioning set, or the protocol's longest for a servo left out
+        at start-up (not commissioned yet: it may still have the factory's 500 us)."""
+        delay = np.where(self.absent[indices], RETURN_DELAY_MAX_US * 1e-6,
+                         self.return_delay_s[indices])
+        return float(delay.max(initial=0.0))
 
     def describe(self, index: int) -> str:
         """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""

@@ -6,6 +6,8 @@ does not answer leaves the others' replies intact.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from handrig.devices.servo import codec
@@ -72,6 +74,7 @@ class RegisterSweep:
         # Sync Read reply stops at a servo that does not answer, and those after it
         # would go unread too
         self.last = np.zeros(roster.n, np.bool_)
+        self._held: Callable[[bytes], bool] | None = None  # the last read's, if nothing came
 
     def _order(self) -> tuple[np.ndarray, bytes]:
         """Rig indices in the order asked, and their IDs."""
@@ -86,16 +89,20 @@ class RegisterSweep:
         link = self.link
         deadline = min(deadline_s, link.budget.reply_deadline(link.clock.now()))
         link.quiet_line(deadline)
+        self._held = None
         out = self._fast(reg, deadline) if self.plan.fast else self._sync(reg, deadline)
         if None in out:
-            link.timed_out(deadline)
+            link.timed_out(deadline, self._held)
         return out
 
     def _fast(self, reg: Reg, deadline: float) -> list[int | None]:
         r = self.roster
         order, ids = self._order()
+        expected = codec.fast_reply_len(1, r.n)
         self.link.send(codec.read_request(codec.INST_FAST_SYNC_READ, reg.address, 1, ids))
-        raw = self.link.read_reply(codec.fast_reply_len(1, r.n), deadline)
+        raw = self.link.read_reply(expected, deadline)
+        if not raw:  # nothing heard: held on its way if it still comes whole (Link.held_test)
+            self._held = self.link.held_test(order, ids, 1, expected, deadline)
         codec.fast_sync_check(np.frombuffer(raw, np.uint8), np.frombuffer(ids, np.uint8),
                               1, self._valid)
         out: list[int | None] = [None] * r.n

@@ -11,13 +11,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from handrig.config.rig import RigConfig
 from handrig.devices.servo import DynamixelBus, FaultPolicy
-from handrig.devices.servo.fast_read import HELD_MARGIN_S, NONE
-from handrig.devices.servo.link import HOST_STALL_S, LATE_LOOK_BYTES
+from handrig.devices.servo.fast_read import NONE, Order
+from handrig.devices.servo.link import HELD_MARGIN_S, HOST_STALL_S, LATE_LOOK_BYTES
+from handrig.devices.servo.registers import Reg
 from handrig.realtime import CpuPressure
 from tests.handrig.devices.servo.servo_fakes import EmulatorTransport, PeerBus
 from tests.helpers.servos import make_bus, small_rig
@@ -219,11 +221,17 @@ def test_a_reply_to_another_request_or_a_damaged_one_does_not_count() -> None:
     # the same servos asked in another order: the same reply is not theirs
     fast = bus.reader.fast
     asked = transport.writes[-1]
-    orders = [o.ids.tobytes() for o in fast.orders]
-    ids = next(o for o in orders if o in asked)
-    other = next(o for o in orders if o != ids and sorted(o) == sorted(ids))
-    assert fast._whole_reply(ids, len(good))(good)
-    assert not fast._whole_reply(other, len(good))(good)
+    mine = next(o for o in fast.orders if o.ids.tobytes() in asked)
+    other = next(o for o in fast.orders if o is not mine and sorted(o.ids) == sorted(mine.ids))
+
+    def test_of(order: Order) -> Callable[[bytes], bool]:
+        held = link.held_test(order.indices, order.ids.tobytes(), fast.plan.data_len,
+                              len(good), math.inf)
+        assert held is not None
+        return held
+
+    assert test_of(mine)(good)
+    assert not test_of(other)(good)
     # what came late is kept up to a bound: past it, nothing more is kept or looked at
     link._late += bytes(LATE_LOOK_BYTES)
     bus.clock.sleep(0.02)
@@ -262,3 +270,29 @@ def test_a_servo_left_out_at_start_up_may_still_answer_at_the_factorys_delay() -
 
     assert host_after(len(peer.servos) - 1, 0.5e-3) == 0  # its own 500 us: a servo's timing
     assert host_after(0, 0.5e-3) == 1  # a commissioned servo's reply held as long: the host's
+
+
+def test_a_register_sweeps_held_reply_is_the_hosts_too() -> None:
+    """The housekeeping reads (temperatures, Bus Watchdogs: one byte of every servo in one
+    Fast Sync Read) follow the same rule as the state reads."""
+    bus, transport, peer = _held_bus()
+    transport.extra_delay_s = HELD_S
+    assert all(v is None for v in bus.sweep.read(Reg.PRESENT_TEMPERATURE,
+                                                 bus.clock.now() + 0.004))
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (1, 0)
+    bus.clock.sleep(0.01)
+    bus.quiet_wait_s()
+    assert (bus.stats.timeouts, bus.stats.host_timeouts, bus.stats.late_replies) == (1, 1, 1)
+    # nobody answering stays the bus's
+    for servo in peer.servos:
+        servo.silent_until = math.inf
+    assert all(v is None for v in bus.sweep.read(Reg.PRESENT_TEMPERATURE,
+                                                 bus.clock.now() + 0.004))
+    bus.clock.sleep(0.01)
+    bus.quiet_wait_s()
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 1)
+    # and a reply that comes in time counts nothing
+    for servo in peer.servos:
+        servo.silent_until = 0.0
+    assert None not in bus.sweep.read(Reg.PRESENT_TEMPERATURE, bus.clock.now() + 0.004)
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 1)
