@@ -214,13 +214,14 @@ def _count(n: int, compact: bool) -> str:
     return str(n) if not compact or n < 10_000 else f"{n // 1000}k"
 
 
-BUS_LINE_TIGHTER = 4  # ways to make the bus line tighter, tried in turn until it fits
+BUS_LINE_TIGHTER = 6  # ways to make the bus line tighter, tried in turn until it fits
 
 
 def bus_line(b: BusHealth) -> Text:
     """The bus's line, within WIDTH columns: as roomy as fits, tightened step by step (one
-    space between fields and no "worst", counts of 10,000 and up in thousands, then the
-    port's name cut to its last 7 characters), then cut."""
+    space between fields and no "worst"; the port's name cut to its last 7 characters;
+    counts of 10,000 and up in thousands; no age of the stale readings; no port), then
+    cut. The servos left out and admitted, at the end, are the last to go."""
     for tight in range(BUS_LINE_TIGHTER):
         line = _bus_line(b, tight)
         if len(line.plain) <= WIDTH:
@@ -231,12 +232,13 @@ def bus_line(b: BusHealth) -> Text:
 
 def _bus_line(b: BusHealth, tight: int) -> Text:
     sep, worst = ("  ", "worst ") if tight == 0 else (" ", "")
-    compact = tight >= 2
-    stale = (Text(f"{b.stale_servos} ({worst}{_age(b.stale_worst_age_s)})", "bold yellow")
-             if b.stale_servos else Text("none"))
+    compact = tight >= 3
+    age = f" ({worst}{_age(b.stale_worst_age_s)})" if tight < 4 else ""
+    stale = (Text(f"{b.stale_servos}{age}", "bold yellow") if b.stale_servos
+             else Text("none"))
+    port = [] if tight >= 5 else [_fit_left(b.port or "-", 14 if tight < 2 else 7), sep]
     return Text.assemble(
-        ("bus    ", "bold"), _fit_left(b.port or "-", 14 if tight < 3 else 7),
-        f"{sep}reads {_num(b.read_rate_hz)}/s{sep}timeouts ",
+        ("bus    ", "bold"), *port, f"reads {_num(b.read_rate_hz)}/s{sep}timeouts ",
         (_count(b.timeouts, compact), "yellow" if b.timeouts else ""),
         *([(f" (host {_count(b.host_timeouts, compact)})", "")] if b.host_timeouts else []),
         f"{sep}errors ", (_count(b.errors, compact), "bold red" if b.errors else ""),

@@ -75,13 +75,20 @@ class RegisterSweep:
         # would go unread too
         self.last = np.zeros(roster.n, np.bool_)
         self._held: Callable[[bytes], bool] | None = None  # the last read's, if nothing came
+        self._turn = 0  # sweeps asked: turns their order (_order)
+        self._last_ids = b""  # the order the last sweep asked
 
     def _order(self) -> tuple[np.ndarray, bytes]:
-        """Rig indices in the order asked, and their IDs."""
+        """Rig indices in the order asked, and their IDs: turned by one servo at each
+        sweep (those in ``last`` stay last). A one-byte reply does not say which item it
+        holds, so the order is what tells one sweep's late reply from the next's (the
+        Bus Watchdog sweep and the temperature sweep run back to back)."""
         r = self.roster
-        if not self.last.any():
-            return np.arange(r.n), r.ids_bytes
-        order = np.concatenate((np.flatnonzero(~self.last), np.flatnonzero(self.last)))
+        first = np.flatnonzero(~self.last)
+        self._turn += 1
+        if first.size > 1:
+            first = np.roll(first, -(self._turn % first.size))
+        order = np.concatenate((first, np.flatnonzero(self.last)))
         return order, bytes(r.ids[int(i)] for i in order)
 
     def read(self, reg: Reg, deadline_s: float) -> list[int | None]:
@@ -101,8 +108,11 @@ class RegisterSweep:
         expected = codec.fast_reply_len(1, r.n)
         self.link.send(codec.read_request(codec.INST_FAST_SYNC_READ, reg.address, 1, ids))
         raw = self.link.read_reply(expected, deadline)
-        if not raw:  # nothing heard: held on its way if it still comes whole (Link.held_test)
+        # nothing heard: held on its way if it still comes whole (Link.held_test), unless
+        # the sweep before asked the same order (one servo to turn): its reply would pass
+        if not raw and ids != self._last_ids:
             self._held = self.link.held_test(order, ids, 1, expected, deadline)
+        self._last_ids = ids
         codec.fast_sync_check(np.frombuffer(raw, np.uint8), np.frombuffer(ids, np.uint8),
                               1, self._valid)
         out: list[int | None] = [None] * r.n

@@ -5,6 +5,7 @@ The panel's bus line still fits 80 columns with it, its stale servos shown whole
 from __future__ import annotations
 
 import io
+import math
 
 from rich.console import Console
 
@@ -51,10 +52,12 @@ def test_a_running_rigs_snapshot_carries_the_hosts_timeouts() -> None:
 
 def test_the_bus_line_fits_80_columns_after_hours_of_timeouts() -> None:
     """A show of hours may count thousands of timeouts: the bus line tightens step by step
-    (one space, no "worst", then counts in thousands, then a shorter port) and stays
-    within 80 columns, the counts still readable."""
-    def line(timeouts: int, host: int, errors: int, **kw: int) -> str:
-        b = BusHealth("/dev/ttyUSB0", 50.0, 1266.0, timeouts, errors, 20, 0.12,
+    (one space, no "worst", a shorter port, counts in thousands, no stale age, no port)
+    and stays within 80 columns, the counts still readable and the servos left out and
+    admitted the last to go."""
+    def line(timeouts: int, host: int, errors: int, rate: float = 50.0, age: float = 0.12,
+             **kw: int) -> str:
+        b = BusHealth("/dev/ttyUSB0", rate, 200.0, timeouts, errors, 20, age,
                       host_timeouts=host, **kw)
         text = _wide(bus_line(b))
         assert len(text) <= 80, text
@@ -65,8 +68,13 @@ def test_the_bus_line_fits_80_columns_after_hours_of_timeouts() -> None:
     assert "…tyUSB0 reads 50/s timeouts 1234 (host 1200) errors 5 stale 20" in line(
         1234, 1200, 5)
     assert "timeouts 12k (host 11k) errors 123 stale 20 (120 ms)" in line(12345, 11999, 123)
+    # the servos left out and admitted outlast the port and the stale readings' age
+    assert line(40, 2, 0, rate=1266.0, left_out=1, admitted=1).endswith(
+        "timeouts 40 (host 2) errors 0 stale 20 out 1 admitted 1")
+    assert line(1234, 1200, 5, rate=1266.0, age=math.inf, left_out=1).endswith(
+        "(host 1200) errors 5 stale 20 out 1")
     # everything at once: cut at the end, never wider
-    assert line(123456, 120000, 12345, left_out=2, admitted=1).endswith("…")
+    assert line(123456, 120000, 12345, rate=1266.0, left_out=2, admitted=1).endswith("…")
     for timeouts in (0, 9, 99, 999, 9999, 99999, 999999):
         line(timeouts, timeouts // 2, timeouts)
         line(timeouts, 0, 0, left_out=1, admitted=1)

@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 
 from handrig.config.rig import RigConfig
-from handrig.devices.servo import DynamixelBus, FaultPolicy
+from handrig.devices.servo import DynamixelBus, FaultPolicy, codec
 from handrig.devices.servo.fast_read import NONE, Order
 from handrig.devices.servo.link import HELD_MARGIN_S, HOST_STALL_S, LATE_LOOK_BYTES
 from handrig.devices.servo.registers import Reg
@@ -296,3 +296,67 @@ def test_a_register_sweeps_held_reply_is_the_hosts_too() -> None:
         servo.silent_until = 0.0
     assert None not in bus.sweep.read(Reg.PRESENT_TEMPERATURE, bus.clock.now() + 0.004)
     assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 1)
+
+
+def test_one_sweeps_held_reply_does_not_make_the_next_sweeps_silence_the_hosts() -> None:
+    """The Bus Watchdog sweep and the temperature sweep run back to back and their one-byte
+    replies do not say which item they hold: each sweep asks the servos in another order,
+    so a late reply of the one before is not taken for the next one's (neither as its
+    values nor as its held reply)."""
+    bus, transport, peer = _held_bus()
+    transport.extra_delay_s = 0.012  # the watchdog sweep's reply, held past the next sweep
+    assert all(v is None for v in bus.sweep.read(Reg.BUS_WATCHDOG, bus.clock.now() + 0.004))
+    for servo in peer.servos:
+        servo.silent_until = math.inf  # the temperature sweep's own reply is lost on the bus
+    assert all(v is None for v in bus.sweep.read(Reg.PRESENT_TEMPERATURE,
+                                                 bus.clock.now() + 0.004))
+    bus.clock.sleep(0.03)
+    bus.quiet_wait_s()
+    # the second timeout is the bus's; the first one's look ended with it (undercount)
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 0)
+    asked = [w for w in transport.writes if w[7] == 0x8A][-2:]  # the two sweeps' requests
+    assert asked[0][12:-2] != asked[1][12:-2]  # (their IDs, in another order)
+    # a watchdog sweep's reply that comes within the temperature sweep's wait is not read
+    # as temperatures
+    for servo in peer.servos:
+        servo.silent_until = 0.0
+    transport.extra_delay_s = 0.006
+    assert all(v is None for v in bus.sweep.read(Reg.BUS_WATCHDOG, bus.clock.now() + 0.004))
+    for servo in peer.servos:
+        servo.silent_until = math.inf
+    assert all(v is None for v in bus.sweep.read(Reg.PRESENT_TEMPERATURE,
+                                                 bus.clock.now() + 0.02))
+
+
+def test_a_sweeps_deadline_before_a_servos_latest_answer_leaves_its_timeout_the_buss() -> None:
+    def host_after(room_s: float, late_s: float) -> int:
+        bus, transport, peer = _held_bus()
+        n = len(peer.servos)
+        wire = (codec.fast_reply_len(1, n) + 14 + n) * bus.link.budget.byte_s
+        transport.extra_delay_s = late_s
+        start = bus.link.request_start(bus.clock.now())
+        assert None in bus.sweep.read(Reg.PRESENT_TEMPERATURE, start + wire + room_s)
+        bus.clock.sleep(0.01)
+        bus.quiet_wait_s()
+        assert bus.stats.timeouts == 1
+        return bus.stats.host_timeouts
+
+    assert host_after(0.5 * HELD_MARGIN_S, HELD_MARGIN_S) == 0
+    assert host_after(2 * HELD_MARGIN_S, 3 * HELD_MARGIN_S) == 1
+
+
+def test_a_sweep_that_heard_part_of_its_reply_gives_no_held_test() -> None:
+    """A sweep that heard nothing leaves its held test; the next sweep, cut short (some
+    servo answered), must not hand that test on with its own timeout."""
+    bus, transport, peer = _held_bus()
+    transport.extra_delay_s = HELD_S
+    assert all(v is None for v in bus.sweep.read(Reg.PRESENT_TEMPERATURE,
+                                                 bus.clock.now() + 0.004))
+    assert bus.link._awaited is not None
+    bus.clock.sleep(0.01)
+    bus.quiet_wait_s()
+    assert bus.stats.host_timeouts == 1
+    peer.servos[-1].silent_until = math.inf  # a reply cut short at one servo
+    values = bus.sweep.read(Reg.PRESENT_TEMPERATURE, bus.clock.now() + 0.004)
+    assert None in values and any(v is not None for v in values)
+    assert bus.stats.timeouts == 2 and bus.link._awaited is None
