@@ -110,6 +110,7 @@ COMPUTE_ONLY = (
     "handrig/app/test_setup_any_vendor.py", "handrig/test_short_slice.py",
     "handrig/devices/servo/test_host_pressure.py", "handrig/devices/servo/test_held_replies.py",
     "handrig/app/test_panel_host_timeouts.py",
+    "handrig/devices/servo/test_reboot_return_delay.py",
 )
 # Tests that start handrig's commands (imports, argument and file checks, help texts, a
 # take's repair) but no loop, no emulator and no glove: nothing in them keeps time, so

@@ -24,6 +24,7 @@ from handrig.devices.servo.bus import BusStats, FaultPolicy
 from handrig.devices.servo.codec import INST_PING, INST_REBOOT, build_instruction
 from handrig.devices.servo.goals import GoalWriter
 from handrig.devices.servo.link import COMMAND_ATTEMPTS, COMMAND_TIMEOUT_S, Link
+from handrig.devices.servo.models import RETURN_DELAY_UNIT_US
 from handrig.devices.servo.readings import Readings
 from handrig.devices.servo.registers import (
     BUS_WATCHDOG_TRIPPED,
@@ -157,7 +158,9 @@ class FaultHandler:
         if remaining:
             self._say(f"{r.describe(index)} still reports hardware error 0x{remaining:02x} "
                       f"after a reboot: {describe_hardware_error(remaining)}")
-        self.link.write_register(index, Reg.RETURN_DELAY_TIME, 0)
+        # the rig's Return Delay Time, as commissioning set it (not 0 whatever the rig says)
+        self.link.write_register(index, Reg.RETURN_DELAY_TIME,
+                                 r.return_delay_us[index] // RETURN_DELAY_UNIT_US)
         self.link.write_register(index, Reg.STATUS_RETURN_LEVEL, STATUS_RETURN_ALL)
         if not self.torque_on:
             self._say(f"{r.describe(index)} rebooted: back, torque off")

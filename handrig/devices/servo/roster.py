@@ -58,8 +58,9 @@ class Roster:
         sets it when ``[silence] action`` is ``"continue"``): not commissioned, never
         sent a goal or torque."""
         # the Return Delay Time commissioning gives each servo
-        self.return_delay_s = np.array(
-            [servo_settings_for(rig, s.id).return_delay_us for s in servos], np.float64) * 1e-6
+        self.return_delay_us = tuple(servo_settings_for(rig, s.id).return_delay_us
+                                     for s in servos)
+        self.return_delay_s = np.array(self.return_delay_us, np.float64) * 1e-6
 
     def latest_reply_delay_s(self, indices: np.ndarray) -> float:
         """The longest a servo of ``indices`` may wait before its reply (its Return Delay
