@@ -214,14 +214,15 @@ def _count(n: int, compact: bool) -> str:
     return str(n) if not compact or n < 10_000 else f"{n // 1000}k"
 
 
-BUS_LINE_TIGHTER = 6  # ways to make the bus line tighter, tried in turn until it fits
+BUS_LINE_TIGHTER = 7  # ways to make the bus line tighter, tried in turn until it fits
 
 
 def bus_line(b: BusHealth) -> Text:
     """The bus's line, within WIDTH columns: as roomy as fits, tightened step by step (one
     space between fields and no "worst"; the port's name cut to its last 7 characters;
-    counts of 10,000 and up in thousands; no age of the stale readings; no port), then
-    cut. The servos left out and admitted, at the end, are the last to go."""
+    counts of 10,000 and up in thousands; no age of the stale readings; no port; the
+    servos left out and admitted first, after a shorter label), then cut at the end: the
+    servos left out and admitted are the last to go."""
     for tight in range(BUS_LINE_TIGHTER):
         line = _bus_line(b, tight)
         if len(line.plain) <= WIDTH:
@@ -237,14 +238,19 @@ def _bus_line(b: BusHealth, tight: int) -> Text:
     stale = (Text(f"{b.stale_servos}{age}", "bold yellow") if b.stale_servos
              else Text("none"))
     port = [] if tight >= 5 else [_fit_left(b.port or "-", 14 if tight < 2 else 7), sep]
+    servos: list[str | tuple[str, str]] = []
+    if b.left_out:
+        servos += [("out ", ""), (str(b.left_out), "bold yellow"), sep]
+    if b.admitted:
+        servos += [("admitted ", ""), (str(b.admitted), "green"), sep]
+    first = tight >= 6  # at the tightest, ahead of the counts (the cut takes the end)
     return Text.assemble(
-        ("bus    ", "bold"), *port, f"reads {_num(b.read_rate_hz)}/s{sep}timeouts ",
+        ("bus " if first else "bus    ", "bold"), *port, *(servos if first else []),
+        f"reads {_num(b.read_rate_hz)}/s{sep}timeouts ",
         (_count(b.timeouts, compact), "yellow" if b.timeouts else ""),
         *([(f" (host {_count(b.host_timeouts, compact)})", "")] if b.host_timeouts else []),
         f"{sep}errors ", (_count(b.errors, compact), "bold red" if b.errors else ""),
-        f"{sep}stale ", stale,
-        *([(f"{sep}out ", ""), (str(b.left_out), "bold yellow")] if b.left_out else []),
-        *([(f"{sep}admitted ", ""), (str(b.admitted), "green")] if b.admitted else []),
+        f"{sep}stale ", stale, *([sep, *servos[:-1]] if servos and not first else []),
     )
 
 

@@ -187,6 +187,7 @@ class FastSyncRead:
         if alerts >= 0:
             self.whole_at = now
             self.link.budget.reply_in(now)  # the reply is in: the wire is quiet
+            self.link.all_heard()
         return int(alerts)
 
     def _drop_late(

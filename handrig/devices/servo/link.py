@@ -47,6 +47,7 @@ LATE_LOOK_BYTES = 8192  # how much of what comes in after a timeout is looked at
 # Read's blocks follow each other as closely: a reply still not begun this long after the
 # latest instant it could have (its wire time and that delay) is not a servo's timing.
 HELD_MARGIN_S = 250e-6
+UNHEARD_MAX = 256  # unheard requests remembered (see held_test); past it, no held test
 
 
 class Link:
@@ -76,6 +77,9 @@ class Link:
         self._awaited: Callable[[bytes], bool] | None = None
         self._late = bytearray()
         self._sent_since = 0
+        # requests (servo IDs in order, reply length) that heard nothing since the last
+        # whole reply: a late reply of one would pass a later ask's test (see held_test)
+        self._unheard: set[tuple[bytes, int]] = set()
 
     # ------------------------------------------------------------------ sending
     def hold(self, packet: bytes) -> None:
@@ -169,8 +173,15 @@ class Link:
         each, ``expected`` bytes in all) of which nothing was heard by ``deadline``: the
         test its whole reply passes (for :meth:`timed_out`), or None when the wait did not
         last ``HELD_MARGIN_S`` past the latest instant a servo could have ended it (the
-        request's and the reply's wire time and the servos' Return Delay Time). Asked
-        before the timeout marks the line failed."""
+        request's and the reply's wire time and the servos' Return Delay Time), or when
+        the same servos were asked in the same order since the last whole reply and
+        heard nothing either (that reply, late, would pass this test too). Asked before
+        the timeout marks the line failed."""
+        key = (ids, expected)
+        asked_before = key in self._unheard or len(self._unheard) >= UNHEARD_MAX
+        self._unheard.add(key)
+        if asked_before:  # the same servos in the same order, unheard since: undecidable
+            return None
         arrival = self.budget.free_at + expected * self.budget.byte_s
         if deadline - arrival < self.roster.latest_reply_delay_s(indices) + HELD_MARGIN_S:
             return None
@@ -188,6 +199,11 @@ class Link:
             return False
 
         return found
+
+    def all_heard(self) -> None:
+        """A whole reply came in time: replies come in the order asked, so no earlier
+        request's reply can still be on its way (see held_test)."""
+        self._unheard.clear()
 
     def late_reply_came(self, reply: bytes) -> None:
         """A reader recognised ``reply`` as an intact reply to an earlier request: if it

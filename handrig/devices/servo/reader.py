@@ -289,6 +289,7 @@ class StateReader:
         whole = self.last_whole
         if whole or (r.fresh.all() if asked is None else r.fresh[asked].all()):
             self.link.budget.reply_in(now)
+            self.link.all_heard()
         stale = r.mark(now, asked)
         if not whole and r.status_err.any():
             self.faults.alerts_raised()

@@ -76,7 +76,6 @@ class RegisterSweep:
         self.last = np.zeros(roster.n, np.bool_)
         self._held: Callable[[bytes], bool] | None = None  # the last read's, if nothing came
         self._turn = 0  # sweeps asked: turns their order (_order)
-        self._last_ids = b""  # the order the last sweep asked
 
     def _order(self) -> tuple[np.ndarray, bytes]:
         """Rig indices in the order asked, and their IDs: turned by one servo at each
@@ -100,6 +99,8 @@ class RegisterSweep:
         out = self._fast(reg, deadline) if self.plan.fast else self._sync(reg, deadline)
         if None in out:
             link.timed_out(deadline, self._held)
+        else:
+            link.all_heard()
         return out
 
     def _fast(self, reg: Reg, deadline: float) -> list[int | None]:
@@ -108,11 +109,8 @@ class RegisterSweep:
         expected = codec.fast_reply_len(1, r.n)
         self.link.send(codec.read_request(codec.INST_FAST_SYNC_READ, reg.address, 1, ids))
         raw = self.link.read_reply(expected, deadline)
-        # nothing heard: held on its way if it still comes whole (Link.held_test), unless
-        # the sweep before asked the same order (one servo to turn): its reply would pass
-        if not raw and ids != self._last_ids:
+        if not raw:  # nothing heard: held on its way if it still comes whole (Link.held_test)
             self._held = self.link.held_test(order, ids, 1, expected, deadline)
-        self._last_ids = ids
         codec.fast_sync_check(np.frombuffer(raw, np.uint8), np.frombuffer(ids, np.uint8),
                               1, self._valid)
         out: list[int | None] = [None] * r.n

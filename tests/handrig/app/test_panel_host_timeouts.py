@@ -52,7 +52,8 @@ def test_a_running_rigs_snapshot_carries_the_hosts_timeouts() -> None:
 
 def test_the_bus_line_fits_80_columns_after_hours_of_timeouts() -> None:
     """A show of hours may count thousands of timeouts: the bus line tightens step by step
-    (one space, no "worst", a shorter port, counts in thousands, no stale age, no port)
+    (one space, no "worst", a shorter port, counts in thousands, no stale age, no port,
+    the servos left out and admitted first)
     and stays within 80 columns, the counts still readable and the servos left out and
     admitted the last to go."""
     def line(timeouts: int, host: int, errors: int, rate: float = 50.0, age: float = 0.12,
@@ -73,8 +74,11 @@ def test_the_bus_line_fits_80_columns_after_hours_of_timeouts() -> None:
         "timeouts 40 (host 2) errors 0 stale 20 out 1 admitted 1")
     assert line(1234, 1200, 5, rate=1266.0, age=math.inf, left_out=1).endswith(
         "(host 1200) errors 5 stale 20 out 1")
-    # everything at once: cut at the end, never wider
-    assert line(123456, 120000, 12345, rate=1266.0, left_out=2, admitted=1).endswith("…")
+    # at the tightest the servos left out and admitted come first: the cut takes the end
+    assert line(1234, 1200, 1234, rate=1266.0, left_out=1, admitted=1) == (
+        "bus out 1 admitted 1 reads 1266/s timeouts 1234 (host 1200) errors 1234 stale 20")
+    cut = line(999999, 999999, 999999, rate=1266.0, age=12.0, left_out=20, admitted=20)
+    assert cut.startswith("bus out 20 admitted 20 reads 1266/s") and cut.endswith("…")
     for timeouts in (0, 9, 99, 999, 9999, 99999, 999999):
         line(timeouts, timeouts // 2, timeouts)
         line(timeouts, 0, 0, left_out=1, admitted=1)

@@ -225,6 +225,7 @@ def test_a_reply_to_another_request_or_a_damaged_one_does_not_count() -> None:
     other = next(o for o in fast.orders if o is not mine and sorted(o.ids) == sorted(mine.ids))
 
     def test_of(order: Order) -> Callable[[bytes], bool]:
+        link.all_heard()  # (a request already asked and unheard gets no test)
         held = link.held_test(order.indices, order.ids.tobytes(), fast.plan.data_len,
                               len(good), math.inf)
         assert held is not None
@@ -294,8 +295,10 @@ def test_a_register_sweeps_held_reply_is_the_hosts_too() -> None:
     # and a reply that comes in time counts nothing
     for servo in peer.servos:
         servo.silent_until = 0.0
+    assert bus.link._unheard  # (the silent sweep's request: not to be credited again)
     assert None not in bus.sweep.read(Reg.PRESENT_TEMPERATURE, bus.clock.now() + 0.004)
     assert (bus.stats.timeouts, bus.stats.host_timeouts) == (2, 1)
+    assert not bus.link._unheard  # a whole reply: no earlier one can still be on its way
 
 
 def test_one_sweeps_held_reply_does_not_make_the_next_sweeps_silence_the_hosts() -> None:
@@ -360,3 +363,58 @@ def test_a_sweep_that_heard_part_of_its_reply_gives_no_held_test() -> None:
     values = bus.sweep.read(Reg.PRESENT_TEMPERATURE, bus.clock.now() + 0.004)
     assert None in values and any(v is not None for v in values)
     assert bus.stats.timeouts == 2 and bus.link._awaited is None
+
+
+def _two_servo_bus() -> tuple[DynamixelBus, EmulatorTransport, PeerBus]:
+    return make_bus(small_rig(2), temperature_every=0, reply_timeout_s=0.01,
+                    fault_policy=FaultPolicy(read_retries=0))
+
+
+def test_a_request_asked_again_while_unheard_gets_no_held_test() -> None:
+    """Two servos have two orders: sweeps (and state reads) go A, B, A. When A's reply is
+    held past B and A again, and those two heard nothing because the servos stopped
+    answering, A's late reply would pass the second A's test: the second ask of the
+    same servos in the same order, unheard since the last whole reply, gets none."""
+    bus, transport, peer = _two_servo_bus()
+    transport.extra_delay_s = 0.02
+    bus.sweep.read(Reg.BUS_WATCHDOG, bus.clock.now() + 0.004)
+    for servo in peer.servos:
+        servo.silent_until = math.inf
+    for _ in range(2):
+        bus.sweep.read(Reg.BUS_WATCHDOG, bus.clock.now() + 0.004)
+    bus.clock.sleep(0.05)
+    bus.quiet_wait_s()
+    assert (bus.stats.timeouts, bus.stats.host_timeouts) == (3, 0)
+
+    bus, transport, peer = _two_servo_bus()
+    transport.extra_delay_s = 0.02
+    assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    for servo in peer.servos:
+        servo.silent_until = math.inf
+    for _ in range(2):
+        bus.clock.sleep(0.001)
+        assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    bus.clock.sleep(0.05)
+    bus.quiet_wait_s()
+    assert bus.stats.timeouts == 3 and bus.stats.host_timeouts == 0
+    # a whole reply in time clears what was unheard: the rule applies again after it
+    for servo in peer.servos:
+        servo.silent_until = 0.0
+    assert bus.read_state(bus.clock.now() + 0.02).all_fresh
+    transport.extra_delay_s = HELD_S
+    assert bus.read_state(bus.clock.now() + 0.004).stale.all()
+    bus.clock.sleep(0.01)
+    bus.quiet_wait_s()
+    assert bus.stats.host_timeouts == 1
+
+
+def test_a_turned_sweep_still_gives_each_servos_value_at_its_rig_index() -> None:
+    bus, transport, peer = _held_bus()
+    for k, servo in enumerate(peer.servos):
+        servo.warm_to(30 + k)
+    want = [30 + k for k in range(len(peer.servos))]
+    asked = set()
+    for _ in range(8):
+        assert bus.sweep.read(Reg.PRESENT_TEMPERATURE, bus.clock.now() + 0.004) == want
+        asked.add(transport.writes[-1][12:-2])
+    assert len(asked) == len(peer.servos)  # every turn of the order was asked
