@@ -53,9 +53,8 @@ def test_a_running_rigs_snapshot_carries_the_hosts_timeouts() -> None:
 def test_the_bus_line_fits_80_columns_after_hours_of_timeouts() -> None:
     """A show of hours may count thousands of timeouts: the bus line tightens step by step
     (one space, no "worst", a shorter port, counts in thousands, no stale age, no port,
-    the servos left out and admitted first)
-    and stays within 80 columns, the counts still readable and the servos left out and
-    admitted the last to go."""
+    the servos left out and admitted first) and stays within 80 columns, the counts still
+    readable and the servos left out and admitted the last to go."""
     def line(timeouts: int, host: int, errors: int, rate: float = 50.0, age: float = 0.12,
              **kw: int) -> str:
         b = BusHealth("/dev/ttyUSB0", rate, 200.0, timeouts, errors, 20, age,
