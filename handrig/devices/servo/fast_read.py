@@ -137,10 +137,10 @@ class FastSyncRead:
         t = self.link.transport
         spin_from = None
         spin_until = np.inf
-        # the reply cannot end before the wire has carried the request and the reply
-        budget = self.link.budget
-        arrival = budget.free_at + expected * budget.byte_s
         if self.spin_s > 0:
+            # the reply cannot end before the wire has carried the request and the reply
+            budget = self.link.budget
+            arrival = budget.free_at + expected * budget.byte_s
             spin_from = arrival - self.spin_s
             spin_until = arrival + REPLY_POLL_AFTER_S
         head = t.read_exact(7, deadline, spin_from, spin_until_s=spin_until, answer=True)

@@ -160,7 +160,7 @@ class FaultHandler:
                       f"after a reboot: {describe_hardware_error(remaining)}")
         # the rig's Return Delay Time, as commissioning set it (not 0 whatever the rig says)
         self.link.write_register(index, Reg.RETURN_DELAY_TIME,
-                                 r.return_delay_us[index] // RETURN_DELAY_UNIT_US)
+                                 int(r.return_delay_us[index]) // RETURN_DELAY_UNIT_US)
         self.link.write_register(index, Reg.STATUS_RETURN_LEVEL, STATUS_RETURN_ALL)
         if not self.torque_on:
             self._say(f"{r.describe(index)} rebooted: back, torque off")

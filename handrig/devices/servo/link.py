@@ -117,11 +117,8 @@ class Link:
         wait = self.budget.take_quiet_wait(self.clock.now(), deadline_s)
         assert wait is not None
         since, most = wait
-        if self._awaited is None:
-            self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since)
-            return
         self.transport.wait_quiet(self.budget.reply_gap_s, most, since_s=since,
-                                  into=self._late, keep=LATE_LOOK_BYTES)
+                                  into=self._late_into(), keep=LATE_LOOK_BYTES)
         self._look_at_late()
 
     def quiet_wait_s(self) -> float:
@@ -205,12 +202,14 @@ class Link:
         request's reply can still be on its way (see held_test)."""
         self._unheard.clear()
 
-    def late_reply_came(self, reply: bytes) -> None:
+    def late_reply_came(self, reply: bytes) -> bool:
         """A reader recognised ``reply`` as an intact reply to an earlier request: if it
-        is the awaited one (see :meth:`timed_out`), that timeout is the host's."""
-        if self._awaited is not None and self._awaited(reply):
-            self.stats.host_timeouts += 1
-            self._forget_awaited()
+        is the awaited one (see :meth:`timed_out`), that timeout is the host's (True)."""
+        if self._awaited is None or not self._awaited(reply):
+            return False
+        self.stats.host_timeouts += 1
+        self._forget_awaited()
+        return True
 
     def _forget_awaited(self) -> None:
         self._awaited = None
@@ -219,18 +218,16 @@ class Link:
 
     def _drop_input(self) -> None:
         """Drop what came in, looking in it for an awaited reply first."""
-        if self._awaited is None:
-            self.transport.discard_input()
-            return
-        self.transport.discard_input(self._late, LATE_LOOK_BYTES)
+        self.transport.discard_input(self._late_into(), LATE_LOOK_BYTES)
         self._look_at_late()
 
+    def _late_into(self) -> bytearray | None:
+        """Where dropped input is kept to be looked at: only while a reply is awaited."""
+        return None if self._awaited is None else self._late
+
     def _look_at_late(self) -> None:
-        if self._awaited is not None and self._late:
-            late = bytes(self._late)
-            if self._awaited(late):
-                self.stats.late_replies += 1  # recognised and dropped
-                self.late_reply_came(late)
+        if self._late and self.late_reply_came(bytes(self._late)):
+            self.stats.late_replies += 1  # recognised and dropped
 
     def _host_pressed(self) -> bool:
         """Whether the host's tasks waited for a CPU, since the request went out, at

@@ -58,17 +58,16 @@ class Roster:
         sets it when ``[silence] action`` is ``"continue"``): not commissioned, never
         sent a goal or torque."""
         # the Return Delay Time commissioning gives each servo
-        self.return_delay_us = tuple(servo_settings_for(rig, s.id).return_delay_us
-                                     for s in servos)
-        self.return_delay_s = np.array(self.return_delay_us, np.float64) * 1e-6
+        self.return_delay_us = np.array(
+            [servo_settings_for(rig, s.id).return_delay_us for s in servos], np.int64)
 
     def latest_reply_delay_s(self, indices: np.ndarray) -> float:
         """The longest a servo of ``indices`` may wait before its reply (its Return Delay
         Time): the one commissioning set, or the protocol's longest for a servo left out
         at start-up (not commissioned yet: it may still have the factory's 500 us)."""
-        delay = np.where(self.absent[indices], RETURN_DELAY_MAX_US * 1e-6,
-                         self.return_delay_s[indices])
-        return float(delay.max(initial=0.0))
+        delay_us = np.where(self.absent[indices], RETURN_DELAY_MAX_US,
+                            self.return_delay_us[indices])
+        return float(delay_us.max(initial=0)) * 1e-6
 
     def describe(self, index: int) -> str:
         """``"servo 7 (riRingPIPy)"`` for the servo at rig index ``index``."""

@@ -74,7 +74,6 @@ class RegisterSweep:
         # Sync Read reply stops at a servo that does not answer, and those after it
         # would go unread too
         self.last = np.zeros(roster.n, np.bool_)
-        self._held: Callable[[bytes], bool] | None = None  # the last read's, if nothing came
         self._turn = 0  # sweeps asked: turns their order (_order)
 
     def _order(self) -> tuple[np.ndarray, bytes]:
@@ -95,22 +94,27 @@ class RegisterSweep:
         link = self.link
         deadline = min(deadline_s, link.budget.reply_deadline(link.clock.now()))
         link.quiet_line(deadline)
-        self._held = None
-        out = self._fast(reg, deadline) if self.plan.fast else self._sync(reg, deadline)
+        held: Callable[[bytes], bool] | None = None  # a test of its reply, if nothing came
+        if self.plan.fast:
+            out, held = self._fast(reg, deadline)
+        else:
+            out = self._sync(reg, deadline)
         if None in out:
-            link.timed_out(deadline, self._held)
+            link.timed_out(deadline, held)
         else:
             link.all_heard()
         return out
 
-    def _fast(self, reg: Reg, deadline: float) -> list[int | None]:
+    def _fast(self, reg: Reg, deadline: float
+              ) -> tuple[list[int | None], Callable[[bytes], bool] | None]:
+        """The values, and the test of the reply's late arrival when nothing was heard
+        (Link.held_test)."""
         r = self.roster
         order, ids = self._order()
         expected = codec.fast_reply_len(1, r.n)
         self.link.send(codec.read_request(codec.INST_FAST_SYNC_READ, reg.address, 1, ids))
         raw = self.link.read_reply(expected, deadline)
-        if not raw:  # nothing heard: held on its way if it still comes whole (Link.held_test)
-            self._held = self.link.held_test(order, ids, 1, expected, deadline)
+        held = None if raw else self.link.held_test(order, ids, 1, expected, deadline)
         codec.fast_sync_check(np.frombuffer(raw, np.uint8), np.frombuffer(ids, np.uint8),
                               1, self._valid)
         out: list[int | None] = [None] * r.n
@@ -118,7 +122,7 @@ class RegisterSweep:
             err, _, data = codec.fast_block(raw, k, 1)
             if not err & 0x7F:
                 out[int(order[k])] = reg.decode(data)
-        return out
+        return out, held
 
     def _sync(self, reg: Reg, deadline: float) -> list[int | None]:
         r = self.roster
